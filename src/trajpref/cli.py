@@ -1,0 +1,253 @@
+"""The ``trajpref`` command line: ``data stats``, ``evaluate``, ``predict``, ``plot``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+import numpy as np
+
+from trajpref import __version__
+from trajpref.errors import TrajprefError
+
+
+def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> None:
+    p.add_argument(
+        "--dataset",
+        required=True,
+        help="eth hotel univ zara1 zara2 sdd nba robo robo-sim, or a folder of "
+        "'frame agent x y' text files (with train/val/test sub-folders when present)",
+    )
+    p.add_argument("--split", default=split_default, choices=["train", "val", "test"])
+    p.add_argument("--data-root", default=None, help="data folder (default: $TRAJPREF_DATA)")
+    p.add_argument(
+        "--frame-interval",
+        type=float,
+        default=0.4,
+        help="seconds between frames, for a folder dataset (default 0.4)",
+    )
+    p.add_argument("--units", default="unknown", help="coordinate units, for a folder dataset")
+
+
+def _add_model_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--model", default="cv", help="'cv' (constant velocity) or a checkpoint path")
+    p.add_argument("--samples", type=int, default=20, help="K, samples per agent (default 20)")
+    p.add_argument("--seed", type=int, default=0, help="random seed for sampling (default 0)")
+    p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
+    p.add_argument(
+        "--max-agents",
+        type=int,
+        default=1024,
+        help="agents per batch (default 1024; lower it to save memory)",
+    )
+    p.add_argument("--no-progress", action="store_true", help="hide progress bars")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="trajpref",
+        description="Human trajectory prediction with a diffusion model refined by RLHF.",
+    )
+    parser.add_argument("--version", action="version", version=f"trajpref {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    data = sub.add_parser("data", help="inspect datasets")
+    data_sub = data.add_subparsers(dest="data_command", required=True)
+    stats = data_sub.add_parser("stats", help="counts and basic statistics of one split")
+    _add_data_args(stats)
+    stats.add_argument("--json", action="store_true", help="print JSON")
+    stats.set_defaults(func=cmd_data_stats)
+
+    ev = sub.add_parser("evaluate", help="minADE/minFDE (per agent and joint) of a model")
+    _add_data_args(ev)
+    _add_model_args(ev)
+    ev.add_argument("--json", action="store_true", help="print JSON")
+    ev.add_argument("--out", default=None, help="also write the JSON result to this file")
+    ev.set_defaults(func=cmd_evaluate)
+
+    pr = sub.add_parser("predict", help="save sampled futures of a split to .npz")
+    _add_data_args(pr)
+    _add_model_args(pr)
+    pr.add_argument("--out", required=True, help="output .npz file")
+    pr.add_argument("--json", action="store_true", help="print a JSON summary")
+    pr.set_defaults(func=cmd_predict)
+
+    pl = sub.add_parser("plot", help="PNG of one scene: histories, ground truth, samples")
+    _add_data_args(pl)
+    _add_model_args(pl)
+    pl.add_argument("--scene", type=int, default=0, help="scene index in the split (default 0)")
+    pl.add_argument("--out", required=True, help="output .png file")
+    pl.set_defaults(func=cmd_plot)
+    return parser
+
+
+def _load(args):
+    from trajpref.data import load_dataset
+
+    return load_dataset(
+        args.dataset,
+        args.split,
+        args.data_root,
+        frame_interval=args.frame_interval,
+        units=args.units,
+    )
+
+
+def _check_model_args(args) -> None:
+    if args.samples < 1:
+        raise TrajprefError("--samples must be >= 1")
+    if args.max_agents < 1:
+        raise TrajprefError("--max-agents must be >= 1")
+
+
+def cmd_data_stats(args) -> int:
+    ds = _load(args)
+    sizes = np.array([s.num_agents for s in ds.scenes])
+    fut = np.concatenate([s.future for s in ds.scenes])  # [N, T_f, 2]
+    hist = np.concatenate([s.history for s in ds.scenes])  # [N, T_h, 2]
+    track = np.concatenate([hist, fut], 1)  # [N, T, 2]
+    speed = np.linalg.norm(np.diff(track, axis=1), axis=-1) / ds.info.frame_interval  # [N, T-1]
+    out = {
+        "dataset": ds.info.name,
+        "split": ds.info.split,
+        "scenes": len(ds),
+        "agents": int(sizes.sum()),
+        "agents_per_scene": {
+            "min": int(sizes.min()),
+            "mean": float(sizes.mean()),
+            "max": int(sizes.max()),
+        },
+        "units": ds.info.units,
+        "frame_interval": ds.info.frame_interval,
+        "t_hist": ds.info.t_hist,
+        "t_fut": ds.info.t_fut,
+        "mean_speed": float(speed.mean()),
+        "source": ds.info.source,
+    }
+    if args.json:
+        print(json.dumps(out))
+    else:
+        for key, value in out.items():
+            print(f"{key:>16}: {value}")
+    return 0
+
+
+def _predictor(args):
+    from trajpref.models.registry import load_predictor
+    from trajpref.train.device import resolve_device
+
+    _check_model_args(args)
+    device = resolve_device(args.device)
+    return load_predictor(args.model, device), device
+
+
+def cmd_evaluate(args) -> int:
+    from trajpref.train.evaluate import evaluate
+
+    model, device = _predictor(args)
+    ds = _load(args)
+    start = time.perf_counter()
+    result = evaluate(
+        model, ds, args.samples, args.seed, device, args.max_agents, progress=not args.no_progress
+    )
+    seconds = time.perf_counter() - start
+    out = {
+        "dataset": ds.info.name,
+        "split": ds.info.split,
+        "model": args.model,
+        "samples": args.samples,
+        "seed": args.seed,
+        **result,
+        "units": ds.info.units,
+        "seconds": round(seconds, 3),
+    }
+    if args.out:
+        from trajpref.io import write_json
+
+        write_json(args.out, out)
+    if args.json:
+        print(json.dumps(out))
+    else:
+        print(
+            f"{ds.info.name}/{ds.info.split}  model={args.model}  K={args.samples}  "
+            f"({out['agents']} agents, {out['scenes']} scenes, units {ds.info.units})"
+        )
+        print(
+            f"  minADE {out['min_ade']:.4f}  minFDE {out['min_fde']:.4f}   "
+            f"joint minADE {out['joint_min_ade']:.4f}  joint minFDE {out['joint_min_fde']:.4f}"
+        )
+    return 0
+
+
+def cmd_predict(args) -> int:
+    from trajpref.io import atomic_path
+    from trajpref.train.evaluate import predict_dataset
+
+    if not args.out.endswith(".npz"):
+        raise TrajprefError(f"--out {args.out}: the output must be a .npz file")
+    model, device = _predictor(args)
+    ds = _load(args)
+    arrays = predict_dataset(
+        model, ds, args.samples, args.seed, device, args.max_agents, progress=not args.no_progress
+    )
+    with atomic_path(args.out) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+    summary = {
+        "out": args.out,
+        "agents": int(arrays["future"].shape[0]),
+        "scenes": len(ds),
+        "samples": args.samples,
+        "pred_shape": list(arrays["pred"].shape),
+    }
+    print(
+        json.dumps(summary)
+        if args.json
+        else f"wrote {args.out}: pred {tuple(arrays['pred'].shape)} [K, N, T_f, 2]"
+    )
+    return 0
+
+
+def cmd_plot(args) -> int:
+    import torch
+
+    from trajpref.types import collate
+    from trajpref.viz.plot import plot_scene
+
+    if not args.out.endswith(".png"):
+        raise TrajprefError(f"--out {args.out}: the output must be a .png file")
+    model, device = _predictor(args)
+    ds = _load(args)
+    if not 0 <= args.scene < len(ds):
+        raise TrajprefError(f"--scene {args.scene}: the split has scenes 0..{len(ds) - 1}")
+    scene = ds[args.scene]
+    gen = torch.Generator()
+    gen.manual_seed(args.seed)
+    batch = collate([scene]).to(device)
+    pred = model.predict(batch, args.samples, gen).cpu().numpy()  # [K, P, T_f, 2]
+    title = (
+        f"{ds.info.name}/{ds.info.split} scene {args.scene} ({scene.scene_id}), "
+        f"{args.model}, K={args.samples}"
+    )
+    plot_scene(scene.history, scene.future, pred, args.out, ds.info.units, title, scene.agent_type)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except TrajprefError as exc:
+        print(f"trajpref: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("trajpref: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

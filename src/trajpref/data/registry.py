@@ -1,0 +1,202 @@
+"""One entry point for every dataset: ``load_dataset(name, split, root)``.
+
+Names: ``eth hotel univ zara1 zara2 sdd nba robo robo-sim``, or a path to a folder of
+``frame agent x y`` text files (with ``train/val/test`` sub-folders when present).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from trajpref.data import arrays, text
+from trajpref.errors import DataError, TrajprefError
+from trajpref.types import DatasetInfo, Scene, TrajectoryDataset
+
+ETH_UCY = ("eth", "hotel", "univ", "zara1", "zara2")
+"""The five ETH/UCY leave-one-out folds."""
+NAMES = (*ETH_UCY, "sdd", "nba", "robo", "robo-sim")
+"""Built-in dataset names."""
+SPLITS = ("train", "val", "test")
+
+FEET_TO_METRES = 0.3048
+
+
+@dataclass(frozen=True)
+class SourceSpec:
+    """Fixed facts about one data source (units, timing, how val is made)."""
+
+    units: str
+    """Coordinate units after loading."""
+    frame_interval: float
+    """Seconds between consecutive frames of a window."""
+    t_hist: int = 8
+    """Observed frames per window."""
+    t_fut: int = 12
+    """Future frames per window."""
+
+
+SPECS = {
+    **{name: SourceSpec("m", 0.4) for name in ETH_UCY},
+    "sdd": SourceSpec("px", 0.4),
+    "nba": SourceSpec("m", 0.48),
+    "robo": SourceSpec("m", 0.5),
+    "robo-sim": SourceSpec("m", 0.5),
+}
+
+VAL_FRACTION = 0.1
+"""SDD and NBA ship train/test only: this fraction of train (whole scenes for SDD, whole files
+for NBA), drawn with ``VAL_SEED``, becomes the validation split."""
+VAL_SEED = 0
+
+ROBO_SIM_EPISODES = {"train": 10_000, "val": 1_000, "test": 1_000}
+"""Episodes per robo-sim split; each split has its own seed (``ROBO_SIM_SEEDS``)."""
+ROBO_SIM_SEEDS = {"train": 0, "val": 1, "test": 2}
+
+
+def resolve_data_root(root: str | Path | None = None) -> Path:
+    """The data root: the argument, else ``$TRAJPREF_DATA``. Raises if neither is usable."""
+    value = root if root is not None else os.environ.get("TRAJPREF_DATA")
+    if not value:
+        raise TrajprefError("no data root: pass --data-root or set TRAJPREF_DATA")
+    path = Path(value).expanduser()
+    if not path.is_dir():
+        raise DataError("data root is not a folder", path)
+    return path
+
+
+def _check_split(split: str) -> None:
+    if split not in SPLITS:
+        raise TrajprefError(f"unknown split {split!r}; choose one of {', '.join(SPLITS)}")
+
+
+def load_dataset(
+    name: str,
+    split: str = "test",
+    root: str | Path | None = None,
+    frame_interval: float = 0.4,
+    units: str = "unknown",
+) -> TrajectoryDataset:
+    """Load one split of a dataset as a list of scenes in absolute coordinates.
+
+    ``frame_interval`` and ``units`` describe user folders (a path ``name``) only; built-in
+    datasets know their own.
+    """
+    _check_split(split)
+    if name == "robo-sim":
+        return _robo_sim(split)
+    if name in NAMES:
+        base = resolve_data_root(root)
+        spec = SPECS[name]
+        if name in ETH_UCY:
+            folder = base / "eth_ucy" / name / split
+            scenes = text.read_folder(folder, spec.t_hist, spec.t_fut)
+            source = folder
+        elif name == "sdd":
+            scenes, source = _sdd(base, split)
+        elif name == "nba":
+            scenes, source = _nba(base, split, spec)
+        else:  # robo
+            scenes, source = _robo(base, split)
+        info = DatasetInfo(
+            name, split, spec.units, spec.frame_interval, spec.t_hist, spec.t_fut, str(source)
+        )
+        return TrajectoryDataset(scenes, info)
+    path = Path(name).expanduser()
+    if path.exists() or os.sep in name or name.startswith("."):
+        return _user_folder(path, split, frame_interval, units)
+    raise TrajprefError(
+        f"unknown dataset {name!r}; choose one of {', '.join(NAMES)} or pass a folder path"
+    )
+
+
+def _user_folder(path: Path, split: str, frame_interval: float, units: str) -> TrajectoryDataset:
+    if not path.is_dir():
+        raise DataError("no such folder", path)
+    has_splits = any((path / s).is_dir() for s in SPLITS)
+    folder = path / split if has_splits else path
+    if has_splits and not folder.is_dir():
+        present = [s for s in SPLITS if (path / s).is_dir()]
+        raise DataError(f"no {split}/ sub-folder (found {', '.join(present)})", path)
+    scenes = text.read_folder(folder, 8, 12)
+    info = DatasetInfo(str(path), split, units, frame_interval, 8, 12, str(folder))
+    return TrajectoryDataset(scenes, info)
+
+
+def _carve_val(n: int) -> np.ndarray:
+    """Boolean [n] mask of items that form the validation split (fixed seed)."""
+    rng = np.random.default_rng(VAL_SEED)
+    n_val = max(1, round(VAL_FRACTION * n))
+    mask = np.zeros(n, bool)
+    mask[rng.permutation(n)[:n_val]] = True
+    return mask
+
+
+def _sdd(base: Path, split: str) -> tuple[list[Scene], Path]:
+    path = base / "sdd" / ("test.npz" if split == "test" else "train.npz")
+    data = arrays.load_npz(path, ("traj", "seq_start_end"))
+    traj = data["traj"]  # [N, 20, 2]
+    if traj.ndim != 3 or traj.shape[1] != 20:
+        raise DataError(f"traj must be [N, 20, 2], got {traj.shape}", path)
+    scenes = arrays.scenes_from_arrays(traj[:, :8], traj[:, 8:], data["seq_start_end"], path)
+    if split != "test":
+        is_val = _carve_val(len(scenes))
+        scenes = [s for s, v in zip(scenes, is_val, strict=True) if v == (split == "val")]
+    return scenes, path
+
+
+def _nba(base: Path, split: str, spec: SourceSpec) -> tuple[list[Scene], Path]:
+    folder = base / "nba" / "rebound" / ("test" if split == "test" else "train")
+    if not folder.is_dir():
+        raise DataError("no such folder", folder)
+    files = sorted(folder.glob("*.txt"))
+    if not files:
+        raise DataError("no *.txt files in folder", folder)
+    if split != "test":
+        is_val = _carve_val(len(files))
+        files = [f for f, v in zip(files, is_val, strict=True) if v == (split == "val")]
+    scenes: list[Scene] = []
+    for path in files:
+        tracks = text.read_tracks(path, with_type=True)
+        scenes.extend(
+            text.window_scenes(tracks, spec.t_hist, spec.t_fut, stride=1, scale=FEET_TO_METRES)
+        )
+    return scenes, folder
+
+
+def _robo(base: Path, split: str) -> tuple[list[Scene], Path]:
+    if split == "train":
+        raise TrajprefError(
+            "the official Robo set has no public training split; train on 'robo-sim'"
+        )
+    path = base / "robo" / f"{split}.npz"
+    data = arrays.load_npz(path, ("obs_traj", "pred_traj", "seq_start_end"))
+    scenes = arrays.scenes_from_arrays(
+        data["obs_traj"], data["pred_traj"], data["seq_start_end"], path
+    )
+    return scenes, path
+
+
+def _robo_sim(split: str) -> TrajectoryDataset:
+    from trajpref.data.robo_sim import simulate
+
+    episodes, seed = ROBO_SIM_EPISODES[split], ROBO_SIM_SEEDS[split]
+    history, future = simulate(episodes, seed=seed)  # [E, 3, 8, 2], [E, 3, 12, 2]
+    scenes = [
+        Scene(history[e], future[e], np.zeros(history.shape[1], np.int64), f"robo-sim#{seed}:{e}")
+        for e in range(episodes)
+    ]
+    spec = SPECS["robo-sim"]
+    info = DatasetInfo(
+        "robo-sim",
+        split,
+        spec.units,
+        spec.frame_interval,
+        spec.t_hist,
+        spec.t_fut,
+        f"simulated: {episodes} episodes, seed {seed}",
+    )
+    return TrajectoryDataset(scenes, info)

@@ -1,0 +1,76 @@
+"""Coordinate frames, leak-free velocities and training augmentation."""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from trajpref.types import Batch
+
+
+def backward_velocity(positions: torch.Tensor) -> torch.Tensor:
+    """Backward differences v_t = x_t - x_{t-1} with v_0 = 0, so no feature sees the future.
+
+    positions [..., T, 2] -> velocities [..., T, 2] (per frame, in the data's units).
+    """
+    vel = torch.zeros_like(positions)
+    vel[..., 1:, :] = positions[..., 1:, :] - positions[..., :-1, :]
+    return vel
+
+
+def to_relative(batch: Batch) -> tuple[torch.Tensor, torch.Tensor]:
+    """History and future relative to each agent's last observed position.
+
+    Returns hist_rel [N, T_h, 2] (last row is zero) and fut_rel [N, T_f, 2].
+    """
+    origin = batch.origin[:, None, :]  # [N, 1, 2]
+    return batch.history - origin, batch.future - origin
+
+
+def from_relative(pred_rel: torch.Tensor, batch: Batch) -> torch.Tensor:
+    """Absolute positions from relative ones: [..., N, T_f, 2] -> same shape."""
+    return pred_rel + batch.origin[:, None, :]
+
+
+def augment(
+    batch: Batch,
+    generator: torch.Generator | None = None,
+    rotate: bool = True,
+    flip: bool = False,
+    scale_range: tuple[float, float] | None = None,
+) -> Batch:
+    """Random rigid transform per scene (all agents of a scene move together).
+
+    Each scene is rotated by a uniform angle about its mean last observed position, optionally
+    mirrored (x -> -x) with probability 1/2, and optionally scaled by a factor drawn uniformly
+    from ``scale_range``. Relative geometry between agents is kept (up to the scale).
+    """
+    device = batch.history.device
+    b = batch.num_scenes
+    angle = (torch.rand(b, generator=generator) * 2 * math.pi if rotate else torch.zeros(b)).to(
+        device
+    )  # [B]
+    cos, sin = torch.cos(angle), torch.sin(angle)
+    rot = torch.stack([torch.stack([cos, -sin], -1), torch.stack([sin, cos], -1)], -2)  # [B,2,2]
+    if flip:
+        mirror = (torch.rand(b, generator=generator) < 0.5).to(device)  # [B]
+        sign = torch.where(mirror, -1.0, 1.0)  # [B]
+        rot = rot * torch.stack([sign, torch.ones_like(sign)], -1)[:, None, :]  # scale x column
+    if scale_range is not None:
+        lo, hi = scale_range
+        factor = (lo + (hi - lo) * torch.rand(b, generator=generator)).to(device)  # [B]
+        rot = rot * factor[:, None, None]
+    sizes = batch.scene_sizes().clamp(min=1).to(batch.history.dtype)  # [B]
+    centre = torch.zeros(b, 2, device=device).index_add_(0, batch.scene, batch.origin)  # [B, 2]
+    centre = centre / sizes[:, None]
+    c = centre[batch.scene][:, None, :]  # [N, 1, 2]
+    r = rot[batch.scene]  # [N, 2, 2]
+    return Batch(
+        history=(batch.history - c) @ r.transpose(1, 2) + c,
+        future=(batch.future - c) @ r.transpose(1, 2) + c,
+        scene=batch.scene,
+        agent_type=batch.agent_type,
+        num_scenes=batch.num_scenes,
+        scene_ids=batch.scene_ids,
+    )

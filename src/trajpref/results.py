@@ -1,0 +1,111 @@
+"""Benchmark result rows (the schema in DESIGN.md) and the README tables made from them."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import shlex
+import sys
+from datetime import date
+from pathlib import Path
+from typing import Any
+
+import torch
+
+FIELDS = (
+    "dataset", "split", "method", "seed", "samples", "min_ade", "min_fde", "joint_min_ade",
+    "joint_min_fde", "max_ats", "max_fts", "top1_recall_ats", "top5_recall_ats",
+    "train_seconds", "ms_per_scene", "checkpoint", "command", "date", "machine",
+)  # fmt: skip
+"""Every row has exactly these keys (null where not measured)."""
+
+METHODS = ("cv", "full-sampler", "pretrained", "rlhf", "rlhf-res")
+"""Known methods, in the order tables list them."""
+
+
+def machine() -> str:
+    """A short description of where a number was measured."""
+    cpu = platform.processor() or platform.machine()
+    gpu = f", {torch.cuda.get_device_name(0)}" if torch.cuda.is_available() else ""
+    return (
+        f"{platform.system()} {platform.machine()} ({cpu}), {os.cpu_count()} CPU cores{gpu}, "
+        f"torch {torch.__version__}, {torch.get_num_threads()} threads"
+    )
+
+
+def command_line() -> str:
+    """The command that is running, for the ``command`` field."""
+    return " ".join(shlex.quote(a) for a in ["python", *sys.argv])
+
+
+def make_row(**values: Any) -> dict[str, Any]:
+    """A full row: unknown keys are an error, missing ones are null; date and machine filled."""
+    unknown = set(values) - set(FIELDS)
+    if unknown:
+        raise KeyError(f"unknown result fields: {sorted(unknown)}")
+    row = {k: values.get(k) for k in FIELDS}
+    row["date"] = row["date"] or date.today().isoformat()
+    row["machine"] = row["machine"] or machine()
+    row["command"] = row["command"] or command_line()
+    return row
+
+
+def write_rows(path: str | Path, rows: list[dict[str, Any]]) -> None:
+    from trajpref.io import write_json
+
+    for row in rows:
+        if set(row) != set(FIELDS):
+            raise KeyError(f"row does not follow the schema: {sorted(set(row) ^ set(FIELDS))}")
+    write_json(path, rows)
+
+
+def read_rows(folder: str | Path) -> list[dict[str, Any]]:
+    rows = []
+    for path in sorted(Path(folder).glob("*.json")):
+        rows.extend(json.loads(path.read_text()))
+    return rows
+
+
+def _fmt(x: Any, digits: int = 3) -> str:
+    if x is None:
+        return "–"
+    if isinstance(x, float):
+        return f"{x:.{digits}f}"
+    return str(x)
+
+
+def accuracy_table(rows: list[dict[str, Any]], split: str = "test") -> str:
+    """Markdown table: one line per (dataset, method, samples), mean over seeds."""
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for r in rows:
+        if r["split"] == split:
+            groups.setdefault((r["dataset"], r["method"], r["samples"]), []).append(r)
+    order = {m: i for i, m in enumerate(METHODS)}
+    keys = sorted(groups, key=lambda k: (k[0], order.get(k[1], 99), k[2]))
+    cols = ("min_ade", "min_fde", "joint_min_ade", "joint_min_fde", "max_ats", "max_fts")
+    lines = [
+        "| dataset | method | K | seeds | minADE | minFDE | joint minADE | joint minFDE "
+        "| maxATS | maxFTS |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for key in keys:
+        g = groups[key]
+        vals = []
+        for c in cols:
+            xs = [r[c] for r in g if r[c] is not None]
+            vals.append(_fmt(sum(xs) / len(xs)) if xs else "–")
+        lines.append(f"| {key[0]} | {key[1]} | {key[2]} | {len(g)} | " + " | ".join(vals) + " |")
+    return "\n".join(lines)
+
+
+def update_readme(readme: str | Path, marker: str, content: str) -> None:
+    """Replace the text between ``<!-- marker:start -->`` and ``<!-- marker:end -->``."""
+    path = Path(readme)
+    text = path.read_text()
+    start, end = f"<!-- {marker}:start -->", f"<!-- {marker}:end -->"
+    if start not in text or end not in text:
+        raise ValueError(f"{path} has no {start} ... {end} block")
+    head, rest = text.split(start, 1)
+    _, tail = rest.split(end, 1)
+    path.write_text(f"{head}{start}\n{content}\n{end}{tail}")

@@ -1,0 +1,87 @@
+"""The one evaluation loop, shared by every model and every stage."""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from trajpref.data.loader import SceneLoader
+from trajpref.metrics import MetricAccumulator
+from trajpref.types import Batch, TrajectoryDataset
+
+
+class Predictor(Protocol):
+    """Anything that samples futures: ``predict(batch, K, generator) -> [K, N, T_f, 2]``
+    in absolute coordinates."""
+
+    name: str
+
+    def predict(
+        self, batch: Batch, num_samples: int, generator: torch.Generator | None = None
+    ) -> torch.Tensor: ...
+
+
+def _generator(seed: int) -> torch.Generator:
+    # a CPU generator: draws are identical on every device, and models move them
+    g = torch.Generator()
+    g.manual_seed(seed)
+    return g
+
+
+def _batches(dataset: TrajectoryDataset, max_agents: int, progress: bool, desc: str):
+    loader = SceneLoader(dataset, max_agents=max_agents, shuffle=False)
+    return tqdm(loader, desc=desc, unit="batch", disable=not progress, leave=False)
+
+
+@torch.no_grad()
+def evaluate(
+    model: Predictor,
+    dataset: TrajectoryDataset,
+    num_samples: int = 20,
+    seed: int = 0,
+    device: torch.device | str = "cpu",
+    max_agents: int = 1024,
+    progress: bool = True,
+) -> dict[str, float | int]:
+    """minADE_K / minFDE_K per agent and joint, over a whole split."""
+    gen = _generator(seed)
+    acc = MetricAccumulator()
+    for batch in _batches(dataset, max_agents, progress, f"evaluate {dataset.info.name}"):
+        batch = batch.to(device)
+        pred = model.predict(batch, num_samples, gen)  # [K, N, T_f, 2]
+        acc.update(pred, batch.future, batch.scene, batch.num_scenes)
+    return acc.compute()
+
+
+@torch.no_grad()
+def predict_dataset(
+    model: Predictor,
+    dataset: TrajectoryDataset,
+    num_samples: int = 20,
+    seed: int = 0,
+    device: torch.device | str = "cpu",
+    max_agents: int = 1024,
+    progress: bool = True,
+) -> dict[str, np.ndarray]:
+    """Samples for a whole split, as the arrays ``trajpref predict`` saves.
+
+    Returns ``history`` [N, T_h, 2], ``future`` [N, T_f, 2], ``pred`` [K, N, T_f, 2],
+    ``scene`` [N] (scene index per agent, in dataset order), ``agent_type`` [N].
+    """
+    gen = _generator(seed)
+    parts: dict[str, list[np.ndarray]] = {k: [] for k in ("history", "future", "pred", "scene")}
+    parts["agent_type"] = []
+    offset = 0
+    for batch in _batches(dataset, max_agents, progress, f"predict {dataset.info.name}"):
+        batch = batch.to(device)
+        pred = model.predict(batch, num_samples, gen)  # [K, N, T_f, 2]
+        parts["history"].append(batch.history.cpu().numpy())
+        parts["future"].append(batch.future.cpu().numpy())
+        parts["pred"].append(pred.cpu().numpy())
+        parts["scene"].append(batch.scene.cpu().numpy() + offset)
+        parts["agent_type"].append(batch.agent_type.cpu().numpy())
+        offset += batch.num_scenes
+    return {k: np.concatenate(v, axis=1 if k == "pred" else 0) for k, v in parts.items()}

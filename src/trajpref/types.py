@@ -1,0 +1,170 @@
+"""Typed containers for trajectory data.
+
+Shape vocabulary: B scenes, P agents in one scene, N agents packed across a batch,
+K samples, T_h history steps, T_f future steps, D = 2 coordinates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+AGENT_PERSON = 0
+"""Agent-type flag: a person, a player or a robot."""
+AGENT_BALL = 1
+"""Agent-type flag: the ball (NBA)."""
+
+
+@dataclass
+class Scene:
+    """One window of one scene: every agent observed over all T_h + T_f frames.
+
+    Coordinates are absolute, in the dataset's units.
+    """
+
+    history: np.ndarray
+    """[P, T_h, 2] observed positions."""
+    future: np.ndarray
+    """[P, T_f, 2] ground-truth future positions."""
+    agent_type: np.ndarray
+    """[P] int64 agent-type flags (AGENT_PERSON or AGENT_BALL)."""
+    scene_id: str
+    """Where the window comes from, e.g. ``crowds_zara01.txt@frame=120``."""
+
+    def __post_init__(self) -> None:
+        if self.history.ndim != 3 or self.history.shape[-1] != 2:
+            raise ValueError(f"history must be [P, T_h, 2], got {self.history.shape}")
+        if self.future.ndim != 3 or self.future.shape[-1] != 2:
+            raise ValueError(f"future must be [P, T_f, 2], got {self.future.shape}")
+        if self.future.shape[0] != self.history.shape[0]:
+            raise ValueError("history and future disagree on the number of agents")
+        if self.agent_type.shape != (self.history.shape[0],):
+            raise ValueError("agent_type must be [P]")
+
+    @property
+    def num_agents(self) -> int:
+        return int(self.history.shape[0])
+
+
+@dataclass
+class DatasetInfo:
+    """What a split is and how to read its numbers."""
+
+    name: str
+    """Dataset name, e.g. ``zara1`` or a folder path."""
+    split: str
+    """``train``, ``val`` or ``test``."""
+    units: str
+    """Units of the coordinates: ``m`` or ``px`` (or ``unknown`` for user folders)."""
+    frame_interval: float
+    """Seconds between two consecutive frames of a window."""
+    t_hist: int = 8
+    """Observed frames per window (T_h)."""
+    t_fut: int = 12
+    """Future frames per window (T_f)."""
+    source: str = ""
+    """Where the data was read from (path) or how it was made (simulator seed)."""
+
+
+@dataclass
+class TrajectoryDataset:
+    """A list of scenes plus what they are. Indexable; items are ``Scene``."""
+
+    scenes: list[Scene]
+    info: DatasetInfo
+
+    def __len__(self) -> int:
+        return len(self.scenes)
+
+    def __getitem__(self, i: int) -> Scene:
+        return self.scenes[i]
+
+    @property
+    def num_agents(self) -> int:
+        return sum(s.num_agents for s in self.scenes)
+
+
+@dataclass
+class Batch:
+    """Many scenes packed agent-wise, with a scene index per agent.
+
+    Agents of different scenes never interact: models build per-scene padded views
+    (``padded_index``) whose attention mask only covers agents of one scene, so the cost
+    is B * P_max^2 rather than N^2 over the whole batch.
+    """
+
+    history: torch.Tensor
+    """[N, T_h, 2] absolute observed positions."""
+    future: torch.Tensor
+    """[N, T_f, 2] absolute future positions."""
+    scene: torch.Tensor
+    """[N] int64 batch-local scene index in 0..B-1, non-decreasing."""
+    agent_type: torch.Tensor
+    """[N] int64 agent-type flags."""
+    num_scenes: int
+    """B, the number of scenes in the batch."""
+    scene_ids: list[str] = field(default_factory=list)
+    """[B] where each scene comes from."""
+
+    @property
+    def num_agents(self) -> int:
+        return int(self.history.shape[0])
+
+    @property
+    def origin(self) -> torch.Tensor:
+        """[N, 2] each agent's last observed position (the origin of relative coordinates)."""
+        return self.history[:, -1]
+
+    def to(self, device: torch.device | str) -> Batch:
+        return Batch(
+            history=self.history.to(device),
+            future=self.future.to(device),
+            scene=self.scene.to(device),
+            agent_type=self.agent_type.to(device),
+            num_scenes=self.num_scenes,
+            scene_ids=self.scene_ids,
+        )
+
+    def scene_sizes(self) -> torch.Tensor:
+        """[B] number of agents in each scene."""
+        return torch.bincount(self.scene, minlength=self.num_scenes)
+
+    def padded_index(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """Where each agent sits in a per-scene padded layout.
+
+        Returns ``(slot, mask)``: ``slot`` [N] is the agent's position within its scene,
+        and ``mask`` [B, P_max] is True where a slot holds a real agent. Scatter a flat
+        tensor x [N, ...] with ``padded = x.new_zeros(B, P_max, ...);
+        padded[batch.scene, slot] = x``.
+        """
+        sizes = self.scene_sizes()  # [B]
+        starts = torch.cumsum(sizes, 0) - sizes  # [B]
+        slot = torch.arange(self.num_agents, device=self.scene.device) - starts[self.scene]  # [N]
+        p_max = int(sizes.max().item()) if self.num_scenes else 0
+        mask = torch.arange(p_max, device=self.scene.device)[None, :] < sizes[:, None]  # [B, P]
+        return slot, mask
+
+    def same_scene(self) -> torch.Tensor:
+        """[N, N] bool: True where two agents belong to the same scene. For tests and tiny
+        batches only; models use ``padded_index``."""
+        return self.scene[:, None] == self.scene[None, :]
+
+
+def collate(scenes: list[Scene]) -> Batch:
+    """Pack scenes agent-wise into a ``Batch`` (float32 tensors)."""
+    if not scenes:
+        raise ValueError("cannot collate an empty list of scenes")
+    hist = np.concatenate([s.history for s in scenes], 0)  # [N, T_h, 2]
+    fut = np.concatenate([s.future for s in scenes], 0)  # [N, T_f, 2]
+    types = np.concatenate([s.agent_type for s in scenes], 0)  # [N]
+    scene = np.repeat(np.arange(len(scenes)), [s.num_agents for s in scenes])  # [N]
+    return Batch(
+        history=torch.as_tensor(hist, dtype=torch.float32),
+        future=torch.as_tensor(fut, dtype=torch.float32),
+        scene=torch.as_tensor(scene, dtype=torch.int64),
+        agent_type=torch.as_tensor(types, dtype=torch.int64),
+        num_scenes=len(scenes),
+        scene_ids=[s.scene_id for s in scenes],
+    )

@@ -1,0 +1,99 @@
+import numpy as np
+import pytest
+from synthetic import straight_rows, write_tracks
+
+from trajpref.data import load_dataset, resolve_data_root
+from trajpref.data.registry import ETH_UCY, FEET_TO_METRES
+from trajpref.errors import DataError, TrajprefError
+
+FOLD_TEST_AGENTS = {"eth": 364, "hotel": 1197, "univ": 24334, "zara1": 2356, "zara2": 5910}
+
+
+def test_user_folder_with_split_subfolders(tmp_path):
+    for split, n in (("train", 25), ("test", 21)):
+        write_tracks(tmp_path / split / "a.txt", straight_rows(n))
+    train = load_dataset(str(tmp_path), "train", frame_interval=0.5, units="m")
+    test = load_dataset(str(tmp_path), "test")
+    assert len(train) == 6 and train.num_agents == 12
+    assert len(test) == 2
+    assert train.info.frame_interval == 0.5 and train.info.units == "m"
+    with pytest.raises(DataError, match="no val/ sub-folder"):
+        load_dataset(str(tmp_path), "val")
+
+
+def test_user_folder_without_subfolders_is_one_split(tmp_path):
+    write_tracks(tmp_path / "a.txt", straight_rows(20))
+    assert load_dataset(str(tmp_path), "test").num_agents == 2
+
+
+def test_unknown_names_and_roots(tmp_path, monkeypatch):
+    with pytest.raises(TrajprefError, match="unknown dataset 'zara9'"):
+        load_dataset("zara9", "test", tmp_path)
+    with pytest.raises(TrajprefError, match="unknown split"):
+        load_dataset("zara1", "dev", tmp_path)
+    monkeypatch.delenv("TRAJPREF_DATA", raising=False)
+    with pytest.raises(TrajprefError, match="--data-root or set TRAJPREF_DATA"):
+        resolve_data_root(None)
+    with pytest.raises(DataError, match="no such folder"):
+        load_dataset("zara1", "test", tmp_path)  # root exists, eth_ucy/ does not
+
+
+def test_bad_npz_is_a_clear_error(tmp_path):
+    (tmp_path / "robo").mkdir()
+    (tmp_path / "robo" / "test.npz").write_bytes(b"not a zip")
+    with pytest.raises(DataError, match="not a readable .npz"):
+        load_dataset("robo", "test", tmp_path)
+    np.savez(tmp_path / "robo" / "test.npz", obs_traj=np.zeros((3, 8, 2)))
+    with pytest.raises(DataError, match="missing arrays"):
+        load_dataset("robo", "test", tmp_path)
+    obs = np.zeros((3, 8, 2))
+    obs[1, 2, 0] = np.nan
+    np.savez(
+        tmp_path / "robo" / "test.npz",
+        obs_traj=obs,
+        pred_traj=np.zeros((3, 12, 2)),
+        seq_start_end=np.array([[0, 3]]),
+    )
+    with pytest.raises(DataError, match="NaN"):
+        load_dataset("robo", "test", tmp_path)
+
+
+# ---- real data -------------------------------------------------------------------------
+
+
+@pytest.mark.realdata
+@pytest.mark.parametrize("fold", ETH_UCY)
+def test_eth_ucy_test_fold_counts(data_root, fold):
+    ds = load_dataset(fold, "test", data_root)
+    assert ds.num_agents == FOLD_TEST_AGENTS[fold]
+    assert ds.info.units == "m" and ds.info.frame_interval == 0.4
+    scene = ds[0]
+    assert scene.history.shape[1:] == (8, 2) and scene.future.shape[1:] == (12, 2)
+
+
+@pytest.mark.realdata
+def test_univ_has_crowded_scenes(data_root):
+    sizes = [s.num_agents for s in load_dataset("univ", "test", data_root).scenes]
+    assert max(sizes) >= 50
+
+
+@pytest.mark.realdata
+def test_sdd_nba_robo(data_root):
+    sdd = load_dataset("sdd", "test", data_root)
+    assert sdd.num_agents == 2829 and sdd.info.units == "px"
+    train, val = load_dataset("sdd", "train", data_root), load_dataset("sdd", "val", data_root)
+    assert set(train.info.source) and len(train) + len(val) == 6097
+    assert not {s.scene_id for s in train.scenes} & {s.scene_id for s in val.scenes}
+
+    nba = load_dataset("nba", "val", data_root)
+    assert all(s.num_agents == 11 for s in nba.scenes)
+    assert all((s.agent_type == 1).sum() == 1 for s in nba.scenes)
+    assert nba.info.units == "m" and nba.info.frame_interval == pytest.approx(0.48)
+    # court is 94 x 50 feet; after conversion every position lies within ~ 29 x 15 m
+    xy = np.concatenate([s.history for s in nba.scenes[:200]])
+    assert xy[..., 0].max() < 110 * FEET_TO_METRES
+
+    robo = load_dataset("robo", "test", data_root)
+    assert robo.num_agents == 1734 and len(robo) == 578
+    with pytest.raises(TrajprefError, match="robo-sim"):
+        load_dataset("robo", "train", data_root)

@@ -1,0 +1,47 @@
+import torch
+from synthetic import make_scene
+
+from trajpref.data.transforms import augment, backward_velocity, from_relative, to_relative
+from trajpref.types import collate
+
+
+def test_backward_velocity_never_looks_ahead():
+    x = torch.tensor([[0.0, 0.0], [1.0, 0.0], [3.0, 0.0], [100.0, 0.0]])  # [T, 2]
+    v = backward_velocity(x)
+    assert v[:, 0].tolist() == [0.0, 1.0, 2.0, 97.0]
+    # changing the last frame leaves every earlier velocity unchanged
+    y = x.clone()
+    y[-1, 0] = -5
+    assert torch.equal(backward_velocity(y)[:-1], v[:-1])
+
+
+def test_relative_roundtrip():
+    batch = collate([make_scene(3), make_scene(2, seed=1)])
+    hist_rel, fut_rel = to_relative(batch)
+    assert torch.equal(hist_rel[:, -1], torch.zeros(5, 2))
+    torch.testing.assert_close(from_relative(fut_rel, batch), batch.future)
+
+
+def _pairwise(x):  # [N, T, 2] -> [N, N, T]
+    return torch.linalg.vector_norm(x[:, None] - x[None], dim=-1)
+
+
+def test_augment_is_rigid_per_scene_and_seeded():
+    batch = collate([make_scene(3), make_scene(4, seed=1)])
+    g = torch.Generator().manual_seed(0)
+    out = augment(batch, g, rotate=True, flip=True)
+    same = batch.same_scene()
+    d_in = _pairwise(torch.cat([batch.history, batch.future], 1))
+    d_out = _pairwise(torch.cat([out.history, out.future], 1))
+    torch.testing.assert_close(d_out[same], d_in[same], atol=1e-4, rtol=1e-4)
+    assert not torch.allclose(out.history, batch.history)
+    again = augment(batch, torch.Generator().manual_seed(0), rotate=True, flip=True)
+    assert torch.equal(out.history, again.history)
+
+
+def test_augment_scale():
+    batch = collate([make_scene(2)])
+    out = augment(batch, torch.Generator().manual_seed(0), rotate=False, scale_range=(2.0, 2.0))
+    step_in = batch.future[:, 1] - batch.future[:, 0]
+    step_out = out.future[:, 1] - out.future[:, 0]
+    torch.testing.assert_close(step_out, 2 * step_in)

@@ -1,0 +1,38 @@
+"""Tiny synthetic fixtures shared by the tests."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from trajpref.types import Scene
+
+
+def make_scene(num_agents: int, seed: int = 0, t_hist: int = 8, t_fut: int = 12) -> Scene:
+    """A scene of agents walking straight lines with a little noise."""
+    rng = np.random.default_rng(seed)
+    start = rng.uniform(-5, 5, size=(num_agents, 1, 2))  # [P, 1, 2]
+    vel = rng.normal(0, 0.5, size=(num_agents, 1, 2))  # [P, 1, 2]
+    t = np.arange(t_hist + t_fut)[None, :, None]  # [1, T, 1]
+    track = start + vel * t + rng.normal(0, 0.01, size=(num_agents, t_hist + t_fut, 2))
+    track = track.astype(np.float32)  # [P, T, 2]
+    return Scene(
+        track[:, :t_hist], track[:, t_hist:], np.zeros(num_agents, np.int64), f"synthetic#{seed}"
+    )
+
+
+def write_tracks(path: Path, rows: list[tuple]) -> Path:
+    """Write ``frame agent x y`` rows, tab-separated like the ETH/UCY files."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("".join("\t".join(str(v) for v in r) + "\n" for r in rows))
+    return path
+
+
+def straight_rows(num_frames: int, agents: int = 2, step: int = 10) -> list[tuple]:
+    """Rows for ``agents`` walking in straight lines over ``num_frames`` frames."""
+    return [
+        (f * step, a + 1, 0.3 * f + a, 0.1 * f - a)
+        for f in range(num_frames)
+        for a in range(agents)
+    ]

@@ -1,0 +1,152 @@
+"""The command line: JSON interfaces, and bad input giving one line and a non-zero status."""
+
+import json
+
+import numpy as np
+import pytest
+from synthetic import straight_rows, write_tracks
+
+from trajpref.cli import main
+
+
+@pytest.fixture
+def folder(tmp_path):
+    """A user dataset: a folder with train/ and test/ sub-folders."""
+    root = tmp_path / "mydata"
+    write_tracks(root / "train" / "a.txt", straight_rows(30, agents=3))
+    write_tracks(root / "test" / "b.txt", straight_rows(22, agents=2))
+    return root
+
+
+def _run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_data_stats_json(capsys, folder):
+    code, out, _ = _run(capsys, "data", "stats", "--dataset", folder, "--split", "test", "--json")
+    assert code == 0
+    stats = json.loads(out)
+    assert stats["scenes"] == 3 and stats["agents"] == 6 and stats["split"] == "test"
+
+
+def test_evaluate_json_and_out_file(capsys, folder, tmp_path):
+    out_file = tmp_path / "res" / "eval.json"
+    code, out, _ = _run(
+        capsys,
+        "evaluate",
+        "--dataset",
+        folder,
+        "--model",
+        "cv",
+        "--samples",
+        "1",
+        "--json",
+        "--no-progress",
+        "--out",
+        out_file,
+        "--device",
+        "cpu",
+    )
+    assert code == 0
+    res = json.loads(out)
+    # agents walk straight lines, so constant velocity is exact
+    assert res["min_ade"] == pytest.approx(0, abs=1e-5)
+    assert res["min_fde"] == pytest.approx(0, abs=1e-5)
+    assert {"joint_min_ade", "joint_min_fde", "agents", "scenes"} <= set(res)
+    assert json.loads(out_file.read_text()) == res
+
+
+def test_predict_writes_the_documented_arrays(capsys, folder, tmp_path):
+    out = tmp_path / "pred.npz"
+    code, _, _ = _run(
+        capsys, "predict", "--dataset", folder, "--samples", "5", "--out", out, "--no-progress"
+    )
+    assert code == 0
+    with np.load(out) as z:
+        assert z["history"].shape == (6, 8, 2)
+        assert z["future"].shape == (6, 12, 2)
+        assert z["pred"].shape == (5, 6, 12, 2)
+        assert z["scene"].tolist() == [0, 0, 1, 1, 2, 2]
+        # absolute coordinates: the first sample (plain CV) continues the straight line
+        np.testing.assert_allclose(z["pred"][0], z["future"], atol=1e-4)
+
+
+def test_plot_writes_png(capsys, folder, tmp_path):
+    out = tmp_path / "scene.png"
+    code, _, _ = _run(capsys, "plot", "--dataset", folder, "--scene", "1", "--out", out)
+    assert code == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+BAD_FILES = {
+    "malformed": ("0\t1\t1.0\n", "bad.txt:1: expected 4 columns"),
+    "non_number": ("0\t1\t1.0\t2.0\n10\t1\tx\t2\n", "bad.txt:2: not a number"),
+    "nan": ("0\t1\tnan\t2.0\n", "bad.txt:1: NaN or infinite"),
+    "duplicate": ("0\t1\t1\t2\n0\t1\t1\t2\n", "bad.txt:2: duplicate row"),
+    "empty": ("", "bad.txt: empty file"),
+    "too_few_frames": ("".join(f"{f}\t1\t{f}\t0\n" for f in range(5)), "bad.txt: too few frames"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_FILES))
+@pytest.mark.parametrize("command", ["evaluate", "predict"])
+def test_bad_input_is_one_line_nonzero_and_writes_nothing(capsys, tmp_path, case, command):
+    content, message = BAD_FILES[case]
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "bad.txt").write_text(content)
+    out = tmp_path / "out.npz"
+    argv = [command, "--dataset", tmp_path / "data", "--no-progress"]
+    if command == "predict":
+        argv += ["--out", out]
+    code, stdout, err = _run(capsys, *argv)
+    assert code != 0
+    assert stdout == ""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err
+    assert message in lines[0]
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["data"]
+
+
+def test_missing_folder_and_bad_options(capsys, tmp_path):
+    code, _, err = _run(capsys, "evaluate", "--dataset", tmp_path / "nope")
+    assert code != 0 and "no such folder" in err and len(err.strip().splitlines()) == 1
+    code, _, err = _run(capsys, "evaluate", "--dataset", "zara9")
+    assert code != 0 and "unknown dataset 'zara9'" in err
+    code, _, err = _run(capsys, "evaluate", "--dataset", tmp_path, "--model", tmp_path / "x.pt")
+    assert code != 0 and "no such model" in err
+    code, _, err = _run(capsys, "evaluate", "--dataset", tmp_path, "--samples", "0")
+    assert code != 0 and "--samples" in err
+    code, _, err = _run(capsys, "evaluate", "--dataset", tmp_path, "--device", "tpu")
+    assert code != 0 and "unknown device" in err
+
+
+def test_missing_data_root(capsys, monkeypatch):
+    monkeypatch.delenv("TRAJPREF_DATA", raising=False)
+    code, _, err = _run(capsys, "data", "stats", "--dataset", "zara1")
+    assert code != 0 and "TRAJPREF_DATA" in err
+
+
+@pytest.mark.realdata
+def test_real_data_stats_and_evaluate(capsys, data_root):
+    code, out, _ = _run(
+        capsys, "data", "stats", "--dataset", "eth", "--data-root", data_root, "--json"
+    )
+    assert code == 0 and json.loads(out)["agents"] == 364
+    code, out, _ = _run(
+        capsys,
+        "evaluate",
+        "--dataset",
+        "eth",
+        "--data-root",
+        data_root,
+        "--samples",
+        "1",
+        "--json",
+        "--no-progress",
+    )
+    res = json.loads(out)
+    assert code == 0 and res["agents"] == 364 and res["scenes"] == 253
+    assert 0.1 < res["min_ade"] < 2.0
