@@ -97,3 +97,13 @@ def test_sdd_nba_robo(data_root):
     assert robo.num_agents == 1734 and len(robo) == 578
     with pytest.raises(TrajprefError, match="robo-sim"):
         load_dataset("robo", "train", data_root)
+
+
+def test_robo_sim_splits_are_seeded_and_distinct():
+    a = load_dataset("robo-sim", "val")
+    b = load_dataset("robo-sim", "val")
+    test = load_dataset("robo-sim", "test")
+    assert len(a) == 1000 and all(s.num_agents == 3 for s in a.scenes)
+    assert a.info.frame_interval == 0.5 and a.info.units == "m"
+    np.testing.assert_array_equal(a[0].history, b[0].history)
+    assert not np.array_equal(a[0].history, test[0].history)
