@@ -36,3 +36,31 @@ def straight_rows(num_frames: int, agents: int = 2, step: int = 10) -> list[tupl
         for f in range(num_frames)
         for a in range(agents)
     ]
+
+
+def write_dataset(root: Path, frames: int = 24, agents: int = 3, seed: int = 0) -> Path:
+    """A user dataset folder with train/val/test sub-folders of curved walks."""
+    rng = np.random.default_rng(seed)
+    for split, files in (("train", 3), ("val", 1), ("test", 1)):
+        for f in range(files):
+            rows = []
+            for a in range(agents):
+                pos = rng.uniform(-3, 3, 2)
+                heading, speed = rng.uniform(0, 2 * np.pi), rng.uniform(0.3, 0.6)
+                turn = rng.normal(0, 0.05)
+                for t in range(frames):
+                    rows.append((t * 10, a + 1, float(pos[0]), float(pos[1])))
+                    heading += turn
+                    pos = pos + speed * np.array([np.cos(heading), np.sin(heading)])
+            write_tracks(root / split / f"walk{f}.txt", rows)
+    return root
+
+
+TINY_OVERRIDES = [
+    "model.hidden=16", "model.heads=2", "model.encoder_layers=1", "model.denoiser_width=32",
+    "model.denoiser_blocks=1", "model.generator_width=32", "diffusion.num_steps=10",
+    "generator.samples=4", "generator.tau=2", "denoiser.epochs=2", "generator.epochs=2",
+    "denoiser.warmup_steps=1", "generator.warmup_steps=1", "denoiser.eval_every=1",
+    "generator.eval_every=1", "data.max_agents=8",
+]  # fmt: skip
+"""Config overrides for a model small enough to train in a second."""

@@ -35,6 +35,13 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", default="cv", help="'cv' (constant velocity) or a checkpoint path")
     p.add_argument("--samples", type=int, default=20, help="K, samples per agent (default 20)")
     p.add_argument("--seed", type=int, default=0, help="random seed for sampling (default 0)")
+    p.add_argument(
+        "--sampler",
+        default=None,
+        choices=["leapfrog", "full"],
+        help="diffusion checkpoints: leapfrog (generator + tau denoising steps; the default for a "
+        "generator) or full (all S steps from noise; the default for a bare denoiser)",
+    )
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     p.add_argument(
         "--max-agents",
@@ -80,6 +87,31 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--scene", type=int, default=0, help="scene index in the split (default 0)")
     pl.add_argument("--out", required=True, help="output .png file")
     pl.set_defaults(func=cmd_plot)
+
+    tr = sub.add_parser("train", help="train the denoiser (diffusion) or the generator")
+    tr.add_argument("stage", choices=["diffusion", "generator"])
+    tr.add_argument("--config", default=None, help="YAML config (default: built-in defaults)")
+    tr.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a config value, e.g. --set denoiser.epochs=5 (repeatable)",
+    )
+    tr.add_argument("--out", required=True, help="run folder: checkpoints, config, metrics")
+    tr.add_argument("--dataset", default=None, help="shortcut for --set data.dataset=NAME")
+    tr.add_argument(
+        "--denoiser",
+        default=None,
+        help="generator stage: the denoiser checkpoint (default OUT/denoiser.pt)",
+    )
+    tr.add_argument("--resume", default=None, help="a <stage>_last.pt to continue from")
+    tr.add_argument("--data-root", default=None, help="data folder (default: $TRAJPREF_DATA)")
+    tr.add_argument("--seed", type=int, default=None, help="override the config's seed")
+    tr.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
+    tr.add_argument("--no-progress", action="store_true", help="hide progress bars")
+    tr.set_defaults(func=cmd_train)
     return parser
 
 
@@ -140,7 +172,7 @@ def _predictor(args):
 
     _check_model_args(args)
     device = resolve_device(args.device)
-    return load_predictor(args.model, device), device
+    return load_predictor(args.model, device, args.sampler), device
 
 
 def cmd_evaluate(args) -> int:
@@ -233,6 +265,33 @@ def cmd_plot(args) -> int:
     )
     plot_scene(scene.history, scene.future, pred, args.out, ds.info.units, title, scene.agent_type)
     print(f"wrote {args.out}")
+    return 0
+
+
+def cmd_train(args) -> int:
+    import dataclasses
+
+    from trajpref.config import load_config
+    from trajpref.train.run import train_stage
+
+    overrides = list(args.overrides)
+    if args.dataset is not None:
+        overrides.append(f"data.dataset={args.dataset}")
+    cfg = load_config(args.config, overrides)
+    if args.seed is not None:
+        cfg = dataclasses.replace(cfg, seed=args.seed)
+    summary = train_stage(
+        args.stage,
+        cfg,
+        args.out,
+        args.data_root,
+        args.device,
+        args.resume,
+        args.denoiser,
+        progress=not args.no_progress,
+    )
+    best = {k: round(v, 4) if isinstance(v, float) else v for k, v in summary["best"].items()}
+    print(f"trained {args.stage} in {summary['train_seconds']:.0f} s; best validation: {best}")
     return 0
 
 

@@ -1,0 +1,262 @@
+"""Experiment configuration: dataclasses with a docstring per field, checked on creation,
+read from and written to YAML. A run writes its resolved config next to its checkpoints."""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from trajpref.errors import ConfigError
+
+
+def _positive(obj: Any, *names: str) -> None:
+    for name in names:
+        if not getattr(obj, name) > 0:
+            raise ConfigError(f"{type(obj).__name__}.{name} must be > 0, got {getattr(obj, name)}")
+
+
+@dataclass
+class DataConfig:
+    """Which data to train on and how to batch and augment it."""
+
+    dataset: str = "zara1"
+    """Dataset name (``eth hotel univ zara1 zara2 sdd nba robo-sim``) or a folder path."""
+    val_dataset: str | None = None
+    """Dataset for validation when it differs (Robo: train on robo-sim, validate on robo)."""
+    max_agents: int = 512
+    """Agents per training batch (whole scenes are packed up to this budget)."""
+    rotate: bool = True
+    """Randomly rotate each training scene."""
+    flip: bool = False
+    """Randomly mirror training scenes."""
+    scale_min: float = 1.0
+    """Lower bound of the random per-scene scale factor (1.0 with scale_max = 1.0: off)."""
+    scale_max: float = 1.0
+    """Upper bound of the random per-scene scale factor."""
+
+    def __post_init__(self) -> None:
+        _positive(self, "max_agents", "scale_min", "scale_max")
+        if self.scale_min > self.scale_max:
+            raise ConfigError("DataConfig.scale_min must be <= scale_max")
+
+
+@dataclass
+class DiffusionConfig:
+    """The DDPM schedule (the paper: 100 steps, beta linear from 1e-4 to 5e-2)."""
+
+    num_steps: int = 100
+    """S, diffusion steps."""
+    beta_start: float = 1e-4
+    """beta at the first step."""
+    beta_end: float = 5e-2
+    """beta at the last step."""
+
+    def __post_init__(self) -> None:
+        _positive(self, "num_steps", "beta_start", "beta_end")
+        if not self.beta_start <= self.beta_end < 1:
+            raise ConfigError("DiffusionConfig needs beta_start <= beta_end < 1")
+
+
+@dataclass
+class ModelConfig:
+    """Network sizes (a CPU-sized default)."""
+
+    hidden: int = 128
+    """Width of the social context encoders."""
+    encoder_layers: int = 2
+    """Social attention layers in each encoder."""
+    heads: int = 4
+    """Attention heads."""
+    denoiser_width: int = 256
+    """Width of the denoiser's residual MLP."""
+    denoiser_blocks: int = 4
+    """Residual blocks in the denoiser."""
+    generator_width: int = 256
+    """Width of the generator's heads."""
+    t_hist: int = 8
+    """Observed frames (T_h)."""
+    t_fut: int = 12
+    """Future frames (T_f)."""
+
+    def __post_init__(self) -> None:
+        _positive(self, "hidden", "encoder_layers", "heads", "denoiser_width", "denoiser_blocks",
+                  "generator_width", "t_hist", "t_fut")  # fmt: skip
+        if self.hidden % self.heads:
+            raise ConfigError("ModelConfig.hidden must be divisible by heads")
+        if self.t_hist < 2:
+            raise ConfigError("ModelConfig.t_hist must be >= 2 (velocities need two frames)")
+
+
+@dataclass
+class OptimConfig:
+    """One training stage's optimisation."""
+
+    epochs: int = 60
+    """Passes over the training split."""
+    lr: float = 1e-3
+    """Peak learning rate (AdamW, cosine decay after a short warm-up)."""
+    weight_decay: float = 1e-4
+    """AdamW weight decay."""
+    warmup_steps: int = 200
+    """Linear warm-up steps."""
+    grad_clip: float = 1.0
+    """Gradient-norm clip."""
+    eval_every: int = 5
+    """Validate every this many epochs (and after the last)."""
+    eval_max_scenes: int | None = None
+    """Validate on at most this many scenes (None: the whole split)."""
+
+    def __post_init__(self) -> None:
+        _positive(self, "epochs", "lr", "grad_clip", "eval_every")
+        if self.weight_decay < 0 or self.warmup_steps < 0:
+            raise ConfigError("OptimConfig.weight_decay and warmup_steps must be >= 0")
+
+
+@dataclass
+class DenoiserTrainConfig(OptimConfig):
+    """Training of the denoiser by Eq. 2."""
+
+    noise_draws: int = 4
+    """Noise draws (and steps s) per agent per batch: more signal per context encoding."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _positive(self, "noise_draws")
+
+
+@dataclass
+class GeneratorTrainConfig(OptimConfig):
+    """Training of the leapfrog generator through the frozen denoiser (Eq. 4)."""
+
+    epochs: int = 20
+    """Passes over the training split."""
+    samples: int = 20
+    """K, samples the generator emits per agent."""
+    tau: int = 5
+    """Denoising steps the frozen denoiser applies to the generator's output."""
+    best_of_k_weight: float = 1.0
+    """Weight of min_k (ADE_k + FDE_k), the best-of-K distance through the denoiser."""
+    mean_weight: float = 0.5
+    """Weight of the ADE of the generator's mean mu (keeps mu meaningful for RL)."""
+    uncertainty_weight: float = 0.1
+    """Weight of the term tying log sigma to the mean's error (LED's uncertainty loss)."""
+    reg_weight: float = 0.0
+    """Weight of Eq. 4 as written (mean over K of squared error; collapses diversity)."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _positive(self, "samples", "tau")
+        for name in ("best_of_k_weight", "mean_weight", "uncertainty_weight", "reg_weight"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"GeneratorTrainConfig.{name} must be >= 0")
+
+
+@dataclass
+class ExperimentConfig:
+    """Everything one dataset's pipeline needs. One YAML file per dataset under configs/."""
+
+    data: DataConfig = field(default_factory=DataConfig)
+    """Data, batching, augmentation."""
+    model: ModelConfig = field(default_factory=ModelConfig)
+    """Network sizes."""
+    diffusion: DiffusionConfig = field(default_factory=DiffusionConfig)
+    """Noise schedule."""
+    denoiser: DenoiserTrainConfig = field(default_factory=DenoiserTrainConfig)
+    """Stage 1: the denoiser."""
+    generator: GeneratorTrainConfig = field(default_factory=GeneratorTrainConfig)
+    """Stage 2: the generator."""
+    seed: int = 0
+    """Seed for initialisation, shuffling, augmentation and noise."""
+
+    def __post_init__(self) -> None:
+        if self.generator.tau > self.diffusion.num_steps:
+            raise ConfigError("generator.tau cannot exceed diffusion.num_steps")
+
+
+def to_dict(cfg: Any) -> dict[str, Any]:
+    return dataclasses.asdict(cfg)
+
+
+def from_dict(cls: type, data: dict[str, Any] | None, where: str = "") -> Any:
+    """Build dataclass ``cls`` from a nested dict; unknown keys are an error."""
+    data = dict(data or {})
+    hints = typing.get_type_hints(cls)
+    known = {f.name for f in fields(cls)}
+    unknown = set(data) - known
+    if unknown:
+        raise ConfigError(f"unknown config keys {sorted(unknown)} in {where or cls.__name__}")
+    kwargs = {}
+    for name, value in data.items():
+        hint = hints[name]
+        if dataclasses.is_dataclass(hint):
+            kwargs[name] = from_dict(hint, value, f"{where}{name}.")
+        else:
+            kwargs[name] = _coerce(value, hint, f"{where}{name}")
+    try:
+        return cls(**kwargs)
+    except TypeError as exc:
+        raise ConfigError(f"{where or cls.__name__}: {exc}") from None
+
+
+def _coerce(value: Any, hint: Any, name: str) -> Any:
+    args = typing.get_args(hint)
+    if value is None:
+        if type(None) in args:
+            return None
+        raise ConfigError(f"config {name} may not be null")
+    base = next((a for a in args if a is not type(None)), hint) if args else hint
+    if base is bool:
+        if isinstance(value, bool):
+            return value
+        if isinstance(value, str) and value.lower() in ("true", "false", "1", "0", "yes", "no"):
+            return value.lower() in ("true", "1", "yes")
+        raise ConfigError(f"config {name} must be true or false, got {value!r}")
+    if base in (int, float, str):
+        try:
+            out = base(value)
+        except (TypeError, ValueError):
+            raise ConfigError(f"config {name} must be {base.__name__}, got {value!r}") from None
+        if base is int and isinstance(value, float) and value != out:
+            raise ConfigError(f"config {name} must be an integer, got {value!r}")
+        return out
+    return value
+
+
+def load_config(path: str | Path | None, overrides: list[str] | None = None) -> ExperimentConfig:
+    """Read a YAML config (or the defaults when ``path`` is None) and apply ``key=value``
+    overrides such as ``denoiser.epochs=5``."""
+    data: dict[str, Any] = {}
+    if path is not None:
+        path = Path(path)
+        if not path.is_file():
+            raise ConfigError(f"{path}: no such config file")
+        try:
+            data = yaml.safe_load(path.read_text()) or {}
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"{path}: not valid YAML ({exc.__class__.__name__})") from None
+        if not isinstance(data, dict):
+            raise ConfigError(f"{path}: the top level must be a mapping")
+    for item in overrides or []:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise ConfigError(f"override {item!r} must look like section.key=value")
+        node = data
+        parts = key.split(".")
+        for part in parts[:-1]:
+            node = node.setdefault(part, {})
+            if not isinstance(node, dict):
+                raise ConfigError(f"override {item!r}: {part} is not a section")
+        node[parts[-1]] = yaml.safe_load(value)
+    return from_dict(ExperimentConfig, data)
+
+
+def save_config(cfg: ExperimentConfig, path: str | Path) -> None:
+    from trajpref.io import atomic_path
+
+    with atomic_path(path) as tmp:
+        tmp.write_text(yaml.safe_dump(to_dict(cfg), sort_keys=False))

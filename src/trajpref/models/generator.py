@@ -1,0 +1,55 @@
+"""The leapfrog generator G (Eq. 1): mu, sigma, S <- G(X); Y^tau = mu + sigma * S."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+
+from trajpref.config import ModelConfig
+from trajpref.models.encoder import SceneFeatures, SocialEncoder
+from trajpref.models.layers import mlp
+
+
+@dataclass
+class GeneratorOutput:
+    """Distribution parameters in normalised units, relative to each agent's last position."""
+
+    mean: torch.Tensor
+    """mu [N, T_f, 2]."""
+    log_sigma: torch.Tensor
+    """log sigma [K, N]: one scale per sample and agent (the paper's sigma in R^{K x P})."""
+    shifts: torch.Tensor
+    """S [K, N, T_f, 2], normalised to unit spread over the K samples of each agent."""
+    context: torch.Tensor
+    """[N, H] the social encoding (the critic's value head shares it)."""
+
+    def initial_sample(self) -> torch.Tensor:
+        """Y^tau = mu + sigma * S: [K, N, T_f, 2]."""
+        return self.mean[None] + self.log_sigma.exp()[..., None, None] * self.shifts
+
+
+class Generator(nn.Module):
+    """Social encoder + heads for the mean, the K scales and the K shifts (LED's initializer)."""
+
+    def __init__(self, cfg: ModelConfig, samples: int):
+        super().__init__()
+        self.cfg = cfg
+        self.samples = samples
+        h, w, tf = cfg.hidden, cfg.generator_width, cfg.t_fut
+        self.encoder = SocialEncoder(cfg.t_hist, h, cfg.encoder_layers, cfg.heads)
+        self.mean_head = mlp([h, w, w, tf * 2])
+        self.sigma_head = mlp([h + tf * 2, w, samples])
+        self.shift_head = mlp([h + tf * 2, w, w, samples * tf * 2])
+
+    def forward(self, features: SceneFeatures) -> GeneratorOutput:
+        ctx = self.encoder(features)  # [N, H]
+        n, tf, k = ctx.shape[0], self.cfg.t_fut, self.samples
+        mean = self.mean_head(ctx).view(n, tf, 2)  # [N, T_f, 2]
+        z = torch.cat([ctx, mean.detach().flatten(1)], -1)  # [N, H + 2T_f]
+        log_sigma = self.sigma_head(z).T  # [K, N]
+        raw = self.shift_head(z).view(n, k, tf, 2).transpose(0, 1)  # [K, N, T_f, 2]
+        raw = raw - raw.mean(0, keepdim=True)
+        spread = raw.pow(2).mean(dim=(0, 2, 3), keepdim=True).add(1e-6).sqrt()  # [1, N, 1, 1]
+        return GeneratorOutput(mean, log_sigma, raw / spread, ctx)

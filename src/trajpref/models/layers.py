@@ -1,0 +1,77 @@
+"""Building blocks shared by the denoiser, the generator and the critic."""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import nn
+
+
+def mlp(sizes: list[int], act: type[nn.Module] = nn.SiLU, final_act: bool = False) -> nn.Sequential:
+    """Linear layers with ``act`` between them (and after the last when ``final_act``)."""
+    layers: list[nn.Module] = []
+    for i in range(len(sizes) - 1):
+        layers.append(nn.Linear(sizes[i], sizes[i + 1]))
+        if i < len(sizes) - 2 or final_act:
+            layers.append(act())
+    return nn.Sequential(*layers)
+
+
+class ResidualBlock(nn.Module):
+    """Pre-norm residual MLP block with FiLM conditioning: x + f(LN(x) * (1 + g) + b)."""
+
+    def __init__(self, width: int, cond: int):
+        super().__init__()
+        self.norm = nn.LayerNorm(width)
+        self.film = nn.Linear(cond, 2 * width)
+        self.ff = nn.Sequential(nn.Linear(width, width), nn.SiLU(), nn.Linear(width, width))
+
+    def forward(self, x: torch.Tensor, c: torch.Tensor) -> torch.Tensor:
+        gain, bias = self.film(c).chunk(2, -1)  # [..., W] each
+        return x + self.ff(self.norm(x) * (1 + gain) + bias)
+
+
+def timestep_embedding(s: torch.Tensor, dim: int, max_period: float = 1000.0) -> torch.Tensor:
+    """Sinusoidal embedding of integer steps: s [...] -> [..., dim]."""
+    half = dim // 2
+    freqs = torch.exp(-math.log(max_period) * torch.arange(half, device=s.device) / half)  # [D/2]
+    args = s.float()[..., None] * freqs  # [..., D/2]
+    return torch.cat([torch.cos(args), torch.sin(args)], -1)
+
+
+class SocialAttention(nn.Module):
+    """Attention across the agents of one scene, with pairwise geometry on keys and values.
+
+    Agent i attends to agent j (itself included) with logits q_i . (k_j + e_ij) and reads
+    v_j + e_ij, where e_ij embeds j's position and velocity relative to i. Works on the padded
+    per-scene layout [B, P, H]; ``mask`` [B, P] hides padding, so no agent sees another scene.
+    """
+
+    def __init__(self, hidden: int, heads: int, edge_features: int = 4):
+        super().__init__()
+        if hidden % heads:
+            raise ValueError("hidden must be divisible by heads")
+        self.heads = heads
+        self.qkv = nn.Linear(hidden, 3 * hidden)
+        self.edge = mlp([edge_features, hidden, hidden])
+        self.out = nn.Linear(hidden, hidden)
+        self.norm1 = nn.LayerNorm(hidden)
+        self.norm2 = nn.LayerNorm(hidden)
+        self.ff = mlp([hidden, 2 * hidden, hidden])
+
+    def forward(self, h: torch.Tensor, geom: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        """h [B, P, H], geom [B, P, P, F] (features of j relative to i), mask [B, P]."""
+        b, p, hid = h.shape
+        nh, d = self.heads, hid // self.heads
+        q, k, v = self.qkv(self.norm1(h)).chunk(3, -1)  # [B, P, H] each
+        e = self.edge(geom)  # [B, P(i), P(j), H]
+        q = q.view(b, p, 1, nh, d)  # [B, P(i), 1, nh, d]
+        k = (k[:, None] + e).view(b, p, p, nh, d)  # [B, P(i), P(j), nh, d]
+        v = (v[:, None] + e).view(b, p, p, nh, d)
+        logits = (q * k).sum(-1) / d**0.5  # [B, P(i), P(j), nh]
+        logits = logits.masked_fill(~mask[:, None, :, None], float("-inf"))
+        att = torch.softmax(logits, dim=2)  # over j
+        out = (att[..., None] * v).sum(2).reshape(b, p, hid)  # [B, P, H]
+        h = h + self.out(out)
+        return h + self.ff(self.norm2(h))

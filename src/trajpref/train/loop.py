@@ -1,0 +1,198 @@
+"""The one training loop, shared by every stage (denoiser, generator, and later RL).
+
+A stage supplies an ``objective`` module whose ``forward(batch, generator)`` returns
+``(loss, logs)``, the ``trainable`` module to optimise and save, a ``validate`` callable, and a
+``payload`` callable that turns the trainable module into a checkpoint. The loop does the rest:
+augmentation, optimisation, DDP, progress bars, metric logs, best checkpoint, resume.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import nn
+from tqdm.auto import tqdm
+
+from trajpref.config import DataConfig, OptimConfig
+from trajpref.data.loader import SceneLoader
+from trajpref.data.transforms import augment
+from trajpref.train import checkpoint as ckpt
+from trajpref.train.distributed import DistInfo
+from trajpref.types import TrajectoryDataset
+
+
+@dataclass
+class Stage:
+    """What differs between training stages."""
+
+    name: str
+    """Checkpoint file stem: ``denoiser`` or ``generator``."""
+    objective: nn.Module
+    """``forward(batch, generator) -> (loss, logs)``; holds the trainable and frozen parts."""
+    trainable: nn.Module
+    """The module whose parameters are optimised and saved."""
+    validate: Callable[[], dict[str, float]]
+    """Validation metrics; must include ``score`` (lower is better)."""
+    payload: Callable[[dict[str, Any]], dict[str, Any]]
+    """Turns the trainable module (+ metadata) into a checkpoint payload."""
+
+
+class MetricLog:
+    """Per-epoch metrics to ``metrics.jsonl`` (and TensorBoard when it is installed)."""
+
+    def __init__(self, out_dir: Path, stage: str, enabled: bool):
+        self.enabled = enabled
+        self.path = out_dir / f"{stage}_metrics.jsonl"
+        self.stage = stage
+        self.tb = None
+        if enabled:
+            try:
+                from torch.utils.tensorboard import SummaryWriter
+
+                self.tb = SummaryWriter(str(out_dir / "tensorboard" / stage))
+            except ImportError:
+                self.tb = None
+
+    def write(self, record: dict[str, Any]) -> None:
+        if not self.enabled:
+            return
+        with self.path.open("a") as fh:
+            fh.write(json.dumps(record) + "\n")
+        if self.tb is not None:
+            for key, value in record.items():
+                if isinstance(value, (int, float)) and key != "epoch":
+                    self.tb.add_scalar(f"{self.stage}/{key}", value, record["epoch"])
+            self.tb.flush()
+
+
+def _lr_lambda(cfg: OptimConfig, total: int) -> Callable[[int], float]:
+    def f(step: int) -> float:
+        if step < cfg.warmup_steps:
+            return (step + 1) / cfg.warmup_steps
+        progress = (step - cfg.warmup_steps) / max(1, total - cfg.warmup_steps)
+        return 0.1 + 0.9 * 0.5 * (1 + math.cos(math.pi * min(1.0, progress)))
+
+    return f
+
+
+def fit(
+    stage: Stage,
+    train: TrajectoryDataset,
+    data_cfg: DataConfig,
+    optim_cfg: OptimConfig,
+    out_dir: str | Path,
+    device: torch.device,
+    seed: int = 0,
+    resume: str | Path | None = None,
+    dist_info: DistInfo | None = None,
+    progress: bool = True,
+    max_steps: int | None = None,
+) -> dict[str, Any]:
+    """Train ``stage`` and keep the checkpoint with the best validation ``score``.
+
+    Writes ``<stage>.pt`` (best), ``<stage>_last.pt`` (for ``resume``) and
+    ``<stage>_metrics.jsonl`` into ``out_dir`` (rank 0 only). ``max_steps`` stops early
+    (for tests). Returns a summary with the best validation metrics and the wall time.
+    """
+    dist_info = dist_info or DistInfo()
+    out_dir = Path(out_dir)
+    main = dist_info.is_main
+    if main:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    loader = SceneLoader(train, max_agents=data_cfg.max_agents, shuffle=True, seed=seed,
+                         rank=dist_info.rank, world_size=dist_info.world_size)  # fmt: skip
+    steps_per_epoch = len(loader)
+    total = steps_per_epoch * optim_cfg.epochs
+    params = [p for p in stage.trainable.parameters() if p.requires_grad]
+    optimizer = torch.optim.AdamW(params, lr=optim_cfg.lr, weight_decay=optim_cfg.weight_decay)
+    sched = torch.optim.lr_scheduler.LambdaLR(optimizer, _lr_lambda(optim_cfg, total))
+    noise_gen = torch.Generator().manual_seed(seed * 1000 + dist_info.rank)
+    aug_gen = torch.Generator().manual_seed(seed * 1000 + 500 + dist_info.rank)
+
+    start_epoch, step, best, elapsed = 0, 0, {"score": math.inf}, 0.0
+    if resume is not None:
+        state = torch.load(resume, map_location="cpu", weights_only=True)
+        if state.get("stage") != stage.name:
+            raise ValueError(f"{resume} is a {state.get('stage')} run, not {stage.name}")
+        stage.trainable.load_state_dict(state["trainable"])
+        optimizer.load_state_dict(state["optimizer"])
+        sched.load_state_dict(state["scheduler"])
+        noise_gen.set_state(state["noise_gen"])
+        aug_gen.set_state(state["aug_gen"])
+        start_epoch, step, best = state["epoch"] + 1, state["step"], state["best"]
+        elapsed = state["elapsed"]
+
+    objective: nn.Module = stage.objective
+    if dist_info.enabled:
+        from torch.nn.parallel import DistributedDataParallel as DDP
+
+        objective = DDP(objective, device_ids=[device] if device.type == "cuda" else None)
+
+    log = MetricLog(out_dir, stage.name, main)
+    scale_range = (data_cfg.scale_min, data_cfg.scale_max)
+    use_scale = scale_range != (1.0, 1.0)
+    for epoch in range(start_epoch, optim_cfg.epochs):
+        t0 = time.perf_counter()
+        loader.set_epoch(epoch)
+        stage.objective.train()
+        sums: dict[str, float] = {}
+        agents = 0
+        bar = tqdm(loader, desc=f"{stage.name} epoch {epoch + 1}/{optim_cfg.epochs}",
+                   unit="batch", disable=not (progress and main), leave=False)  # fmt: skip
+        for batch in bar:
+            batch = augment(batch, aug_gen, rotate=data_cfg.rotate, flip=data_cfg.flip,
+                            scale_range=scale_range if use_scale else None).to(device)  # fmt: skip
+            loss, logs = objective(batch, noise_gen)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            grad_norm = torch.nn.utils.clip_grad_norm_(params, optim_cfg.grad_clip)
+            optimizer.step()
+            sched.step()
+            step += 1
+            logs = {"loss": float(loss.detach()), "grad_norm": float(grad_norm), **logs}
+            for key, value in logs.items():
+                sums[key] = sums.get(key, 0.0) + value * batch.num_agents
+            agents += batch.num_agents
+            bar.set_postfix(loss=f"{logs['loss']:.4f}")
+            if max_steps is not None and step >= max_steps:
+                break
+        elapsed += time.perf_counter() - t0
+        epoch_seconds = time.perf_counter() - t0
+        record: dict[str, Any] = {
+            "epoch": epoch + 1, "step": step, "lr": sched.get_last_lr()[0],
+            "train_seconds": round(elapsed, 2),
+            "samples_per_second": round(agents / max(1e-9, epoch_seconds), 1),
+        }  # fmt: skip
+        record.update({f"train_{k}": v / max(1, agents) for k, v in sums.items()})
+        last = epoch + 1 == optim_cfg.epochs or (max_steps is not None and step >= max_steps)
+        if main and ((epoch + 1) % optim_cfg.eval_every == 0 or last):
+            stage.objective.eval()
+            val = stage.validate()
+            record.update({f"val_{k}": v for k, v in val.items()})
+            if val["score"] < best["score"]:
+                best = {**val, "epoch": epoch + 1}
+                meta = {"epoch": epoch + 1, "step": step, "val": val,
+                        "train_seconds": round(elapsed, 2), "dataset": train.info.name}  # fmt: skip
+                ckpt.save(out_dir / f"{stage.name}.pt", stage.payload(meta))
+                record["best"] = True
+            stage.objective.train()
+        if main:
+            log.write(record)
+            ckpt.save(out_dir / f"{stage.name}_last.pt", {
+                "stage": stage.name, "trainable": stage.trainable.state_dict(),
+                "optimizer": optimizer.state_dict(), "scheduler": sched.state_dict(),
+                "noise_gen": noise_gen.get_state(), "aug_gen": aug_gen.get_state(),
+                "epoch": epoch, "step": step, "best": best, "elapsed": elapsed,
+            })  # fmt: skip
+            summary = {k: (round(v, 4) if isinstance(v, float) else v) for k, v in record.items()}
+            tqdm.write(f"[{stage.name}] " + " ".join(f"{k}={v}" for k, v in summary.items()))
+        if max_steps is not None and step >= max_steps:
+            break
+    return {"best": best, "train_seconds": elapsed, "steps": step}

@@ -1,0 +1,65 @@
+"""``trajpref train diffusion|generator``: datasets + stage + the shared loop, DDP-aware."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from trajpref.config import ExperimentConfig, save_config
+from trajpref.data import load_dataset
+from trajpref.errors import TrajprefError
+from trajpref.train import checkpoint as ckpt
+from trajpref.train.device import resolve_device
+from trajpref.train.distributed import barrier, cleanup, init_from_env
+from trajpref.train.loop import fit
+from trajpref.train.stages import build_denoiser_stage, build_generator_stage
+
+STAGES = ("diffusion", "generator")
+
+
+def train_stage(
+    stage: str,
+    cfg: ExperimentConfig,
+    out_dir: str | Path,
+    data_root: str | None = None,
+    device: str = "auto",
+    resume: str | None = None,
+    denoiser: str | None = None,
+    progress: bool = True,
+    max_steps: int | None = None,
+) -> dict[str, Any]:
+    """Train one stage; returns the loop's summary (best validation metrics, seconds)."""
+    if stage not in STAGES:
+        raise TrajprefError(f"unknown stage {stage!r}; choose {' or '.join(STAGES)}")
+    dev = resolve_device(device)
+    info, dev = init_from_env(dev)
+    torch.set_num_threads(max(1, torch.get_num_threads() // max(1, info.world_size)))
+    out_dir = Path(out_dir)
+    try:
+        train = load_dataset(cfg.data.dataset, "train", data_root)
+        val = load_dataset(cfg.data.val_dataset or cfg.data.dataset, "val", data_root)
+        if stage == "diffusion":
+            built, _ = build_denoiser_stage(cfg, train, val, dev)
+            optim = cfg.denoiser
+        else:
+            path = Path(denoiser) if denoiser else out_dir / "denoiser.pt"
+            payload = ckpt.load(path)
+            if payload["kind"] != "denoiser":
+                raise TrajprefError(f"{path}: expected a denoiser checkpoint")
+            built = build_generator_stage(cfg, payload, val, dev)
+            optim = cfg.generator
+        if info.is_main:
+            out_dir.mkdir(parents=True, exist_ok=True)
+            save_config(cfg, out_dir / "config.yaml")
+        barrier(info)
+        start = time.perf_counter()
+        summary = fit(built, train, cfg.data, optim, out_dir, dev, cfg.seed, resume, info,
+                      progress, max_steps)  # fmt: skip
+        summary["wall_seconds"] = time.perf_counter() - start
+        summary["train_agents"] = train.num_agents
+        return summary
+    finally:
+        cleanup(info)

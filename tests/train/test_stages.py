@@ -1,0 +1,162 @@
+"""Both pretraining stages on tiny synthetic data: they learn, freeze what they should,
+checkpoint, resume and reproduce."""
+
+import json
+
+import pytest
+import torch
+from synthetic import TINY_OVERRIDES, write_dataset
+
+from trajpref.cli import main
+from trajpref.config import load_config
+from trajpref.data import load_dataset
+from trajpref.errors import TrajprefError
+from trajpref.train import checkpoint as ckpt
+from trajpref.train.evaluate import evaluate
+from trajpref.train.run import train_stage
+from trajpref.train.stages import build_denoiser_stage, build_generator_stage
+from trajpref.types import collate
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    return write_dataset(tmp_path_factory.mktemp("walks"))
+
+
+@pytest.fixture(scope="module")
+def cfg(folder):
+    return load_config(None, [*TINY_OVERRIDES, f"data.dataset={folder}"])
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory, cfg):
+    """Both stages trained once; shared by the tests that only read the results."""
+    out = tmp_path_factory.mktemp("run")
+    train_stage("diffusion", cfg, out, device="cpu", progress=False)
+    train_stage("generator", cfg, out, device="cpu", progress=False)
+    return out
+
+
+def _params(module):
+    return {k: v.detach().clone() for k, v in module.state_dict().items()}
+
+
+def _changed(before, module):
+    return [k for k, v in module.state_dict().items() if not torch.equal(before[k], v)]
+
+
+def _one_step(stage, batch):
+    opt = torch.optim.SGD([p for p in stage.trainable.parameters() if p.requires_grad], lr=0.1)
+    loss, _ = stage.objective(batch, torch.Generator().manual_seed(0))
+    opt.zero_grad()
+    loss.backward()
+    opt.step()
+    return loss
+
+
+def test_a_denoiser_step_changes_every_parameter(cfg, folder):
+    train = load_dataset(str(folder), "train")
+    stage, scale = build_denoiser_stage(cfg, train, train, torch.device("cpu"))
+    assert scale > 0
+    before = _params(stage.trainable)
+    _one_step(stage, collate(train.scenes[:4]))
+    assert set(_changed(before, stage.trainable)) == set(before)
+
+
+def test_a_generator_step_changes_the_generator_not_the_denoiser(cfg, folder, trained):
+    train = load_dataset(str(folder), "train")
+    payload = ckpt.load(trained / "denoiser.pt")
+    stage = build_generator_stage(cfg, payload, train, torch.device("cpu"))
+    denoiser = stage.objective.denoiser
+    gen_before, den_before = _params(stage.trainable), _params(denoiser)
+    stage.objective.train()
+    _one_step(stage, collate(train.scenes[:4]))
+    assert not denoiser.training
+    assert _changed(den_before, denoiser) == []
+    assert all(not p.requires_grad for p in denoiser.parameters())
+    changed = set(_changed(gen_before, stage.trainable))
+    assert {
+        k for k in gen_before if k.startswith(("encoder", "mean_head", "shift_head"))
+    } <= changed
+
+
+def test_run_folder_holds_config_metrics_and_self_sufficient_checkpoints(trained):
+    assert (trained / "config.yaml").is_file()
+    records = [json.loads(line) for line in (trained / "generator_metrics.jsonl").open()]
+    assert len(records) == 2 and "val_min_ade" in records[-1]
+    payload = ckpt.load(trained / "generator.pt")
+    assert payload["kind"] == "generator" and payload["denoiser"]["kind"] == "denoiser"
+    # weights_only loading: a checkpoint holds tensors and plain values only
+    torch.load(trained / "generator.pt", weights_only=True)
+
+
+def test_checkpoint_roundtrip_gives_identical_predictions(folder, trained):
+    test = load_dataset(str(folder), "test")
+    batch = collate(test.scenes)
+    a = ckpt.load_predictor(trained / "generator.pt")
+    b = ckpt.load_predictor(trained / "generator.pt")
+    pa = a.predict(batch, 4, torch.Generator().manual_seed(0))
+    pb = b.predict(batch, 4, torch.Generator().manual_seed(0))
+    assert pa.shape == (4, batch.num_agents, 12, 2)
+    assert torch.equal(pa, pb)
+    full = ckpt.load_predictor(trained / "generator.pt", sampler="full")
+    assert full.predict(batch, 7).shape[0] == 7  # the full sampler draws any K
+    with pytest.raises(TrajprefError, match="emits K = 4"):
+        a.predict(batch, 5)
+
+
+def test_seeded_runs_are_identical(tmp_path, cfg):
+    summaries = []
+    for run in ("a", "b"):
+        train_stage("diffusion", cfg, tmp_path / run, device="cpu", progress=False)
+        summaries.append(ckpt.load(tmp_path / run / "denoiser.pt")["hash"])
+    assert summaries[0] == summaries[1]
+
+
+def test_resume_continues_to_the_same_result(tmp_path, cfg):
+    full = tmp_path / "full"
+    train_stage("diffusion", cfg, full, device="cpu", progress=False)
+    stop = tmp_path / "stop"  # stopped after the first epoch, then resumed
+    train_stage("diffusion", cfg, stop, device="cpu", progress=False, max_steps=_steps(cfg))
+    assert torch.load(stop / "denoiser_last.pt", weights_only=True)["epoch"] == 0
+    train_stage("diffusion", cfg, stop, device="cpu", progress=False,
+                resume=str(stop / "denoiser_last.pt"))  # fmt: skip
+    last_full = torch.load(full / "denoiser_last.pt", weights_only=True)
+    last_stop = torch.load(stop / "denoiser_last.pt", weights_only=True)
+    assert last_full["step"] == last_stop["step"]
+    for key, value in last_full["trainable"].items():
+        torch.testing.assert_close(last_stop["trainable"][key], value)
+
+
+def _steps(cfg):
+    from trajpref.data.loader import SceneLoader
+
+    train = load_dataset(cfg.data.dataset, "train")
+    return len(SceneLoader(train, max_agents=cfg.data.max_agents))
+
+
+def test_cli_train_evaluate_predict(tmp_path, folder, capsys):
+    out = tmp_path / "cli"
+    sets = [a for o in TINY_OVERRIDES for a in ("--set", o)]
+    for stage in ("diffusion", "generator"):
+        code = main(["train", stage, "--out", str(out), "--dataset", str(folder), *sets,
+                     "--device", "cpu", "--no-progress"])  # fmt: skip
+        assert code == 0
+    capsys.readouterr()
+    code = main(["evaluate", "--dataset", str(folder), "--model", str(out / "generator.pt"),
+                 "--samples", "4", "--json", "--no-progress"])  # fmt: skip
+    res = json.loads(capsys.readouterr().out)
+    assert code == 0 and res["agents"] > 0 and res["min_ade"] > 0
+    code = main(["evaluate", "--dataset", str(folder), "--model", str(out / "denoiser.pt"),
+                 "--samples", "3", "--json", "--no-progress"])  # fmt: skip
+    assert code == 0 and json.loads(capsys.readouterr().out)["samples"] == 3
+
+
+def test_trained_generator_beats_its_untrained_self(cfg, folder, trained):
+    """Sanity: training lowers validation error (tiny data, loose bound)."""
+    val = load_dataset(str(folder), "val")
+    payload = ckpt.load(trained / "denoiser.pt")
+    fresh = build_generator_stage(cfg, payload, val, torch.device("cpu")).validate()
+    best = ckpt.load(trained / "generator.pt")["meta"]["val"]
+    assert best["score"] < fresh["score"]
+    assert evaluate(ckpt.load_predictor(trained / "generator.pt"), val, 4, progress=False)
