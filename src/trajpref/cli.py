@@ -72,6 +72,12 @@ def build_parser() -> argparse.ArgumentParser:
     _add_model_args(ev)
     ev.add_argument("--json", action="store_true", help="print JSON")
     ev.add_argument("--out", default=None, help="also write the JSON result to this file")
+    ev.add_argument(
+        "--scorer",
+        default=None,
+        help="a denoiser (or generator) checkpoint: adds max_ats, max_fts and the "
+        "top-1/top-5 recall of the ground-truth-free ranking",
+    )
     ev.set_defaults(func=cmd_evaluate)
 
     pr = sub.add_parser("predict", help="save sampled futures of a split to .npz")
@@ -79,6 +85,15 @@ def build_parser() -> argparse.ArgumentParser:
     _add_model_args(pr)
     pr.add_argument("--out", required=True, help="output .npz file")
     pr.add_argument("--json", action="store_true", help="print a JSON summary")
+    pr.add_argument(
+        "--rank",
+        action="store_true",
+        help="order each scene's samples best first by the diffusion score (no "
+        "ground truth used); saves `order` and `residual` [K, B] too",
+    )
+    pr.add_argument(
+        "--scorer", default=None, help="checkpoint whose denoiser scores (default: the model's own)"
+    )
     pr.set_defaults(func=cmd_predict)
 
     pl = sub.add_parser("plot", help="PNG of one scene: histories, ground truth, samples")
@@ -86,6 +101,12 @@ def build_parser() -> argparse.ArgumentParser:
     _add_model_args(pl)
     pl.add_argument("--scene", type=int, default=0, help="scene index in the split (default 0)")
     pl.add_argument("--out", required=True, help="output .png file")
+    pl.add_argument(
+        "--scorer",
+        default=None,
+        help="a denoiser (or generator) checkpoint: draw each agent's top-2 samples "
+        "shaded by their diffusion score, beside the ground truth (the paper's Fig. 2)",
+    )
     pl.set_defaults(func=cmd_plot)
 
     tr = sub.add_parser("train", help="train the denoiser (diffusion) or the generator")
@@ -175,15 +196,23 @@ def _predictor(args):
     return load_predictor(args.model, device, args.sampler), device
 
 
+def _scorer(path: str, device):
+    from trajpref.score import TrajectoryScorer
+
+    return TrajectoryScorer.from_checkpoint(path, device)
+
+
 def cmd_evaluate(args) -> int:
     from trajpref.train.evaluate import evaluate
 
     model, device = _predictor(args)
+    scorer = _scorer(args.scorer, device) if args.scorer else None
     ds = _load(args)
     start = time.perf_counter()
     result = evaluate(
-        model, ds, args.samples, args.seed, device, args.max_agents, progress=not args.no_progress
-    )
+        model, ds, args.samples, args.seed, device, args.max_agents,
+        progress=not args.no_progress, scorer=scorer,
+    )  # fmt: skip
     seconds = time.perf_counter() - start
     out = {
         "dataset": ds.info.name,
@@ -220,10 +249,16 @@ def cmd_predict(args) -> int:
     if not args.out.endswith(".npz"):
         raise TrajprefError(f"--out {args.out}: the output must be a .npz file")
     model, device = _predictor(args)
+    scorer = None
+    if args.rank:
+        if args.scorer is None and args.model in ("cv",):
+            raise TrajprefError("--rank with --model cv needs --scorer CHECKPOINT")
+        scorer = _scorer(args.scorer or args.model, device)
     ds = _load(args)
     arrays = predict_dataset(
-        model, ds, args.samples, args.seed, device, args.max_agents, progress=not args.no_progress
-    )
+        model, ds, args.samples, args.seed, device, args.max_agents,
+        progress=not args.no_progress, scorer=scorer,
+    )  # fmt: skip
     with atomic_path(args.out) as tmp:
         with open(tmp, "wb") as fh:
             np.savez_compressed(fh, **arrays)
@@ -246,7 +281,7 @@ def cmd_plot(args) -> int:
     import torch
 
     from trajpref.types import collate
-    from trajpref.viz.plot import plot_scene
+    from trajpref.viz.plot import plot_scene, plot_scene_scored
 
     if not args.out.endswith(".png"):
         raise TrajprefError(f"--out {args.out}: the output must be a .png file")
@@ -258,12 +293,20 @@ def cmd_plot(args) -> int:
     gen = torch.Generator()
     gen.manual_seed(args.seed)
     batch = collate([scene]).to(device)
-    pred = model.predict(batch, args.samples, gen).cpu().numpy()  # [K, P, T_f, 2]
+    pred = model.predict(batch, args.samples, gen)  # [K, P, T_f, 2]
     title = (
         f"{ds.info.name}/{ds.info.split} scene {args.scene} ({scene.scene_id}), "
         f"{args.model}, K={args.samples}"
     )
-    plot_scene(scene.history, scene.future, pred, args.out, ds.info.units, title, scene.agent_type)
+    if args.scorer:
+        res = _scorer(args.scorer, device).score(batch, pred)
+        d_gt = res.d_gt.sum(-1)  # [P]
+        agent_ats = (1 - res.d_pred.sum(-1) / d_gt).cpu().numpy()  # [K, P] each agent's ATS
+        plot_scene_scored(scene.history, scene.future, pred.cpu().numpy(), agent_ats, args.out,
+                          ds.info.units, title)  # fmt: skip
+    else:
+        plot_scene(scene.history, scene.future, pred.cpu().numpy(), args.out, ds.info.units,
+                   title, scene.agent_type)  # fmt: skip
     print(f"wrote {args.out}")
     return 0
 

@@ -5,10 +5,9 @@ import json
 
 import pytest
 import torch
-from synthetic import TINY_OVERRIDES, write_dataset
+from synthetic import TINY_OVERRIDES
 
 from trajpref.cli import main
-from trajpref.config import load_config
 from trajpref.data import load_dataset
 from trajpref.errors import TrajprefError
 from trajpref.train import checkpoint as ckpt
@@ -18,23 +17,19 @@ from trajpref.train.stages import build_denoiser_stage, build_generator_stage
 from trajpref.types import collate
 
 
-@pytest.fixture(scope="module")
-def folder(tmp_path_factory):
-    return write_dataset(tmp_path_factory.mktemp("walks"))
+@pytest.fixture
+def folder(walks):
+    return walks
 
 
-@pytest.fixture(scope="module")
-def cfg(folder):
-    return load_config(None, [*TINY_OVERRIDES, f"data.dataset={folder}"])
+@pytest.fixture
+def cfg(tiny_cfg):
+    return tiny_cfg
 
 
-@pytest.fixture(scope="module")
-def trained(tmp_path_factory, cfg):
-    """Both stages trained once; shared by the tests that only read the results."""
-    out = tmp_path_factory.mktemp("run")
-    train_stage("diffusion", cfg, out, device="cpu", progress=False)
-    train_stage("generator", cfg, out, device="cpu", progress=False)
-    return out
+@pytest.fixture
+def trained(tiny_run):
+    return tiny_run
 
 
 def _params(module):

@@ -9,7 +9,8 @@ import torch
 from tqdm.auto import tqdm
 
 from trajpref.data.loader import SceneLoader
-from trajpref.metrics import MetricAccumulator
+from trajpref.metrics import MetricAccumulator, scene_sum
+from trajpref.score.scorer import ScoreAccumulator, TrajectoryScorer
 from trajpref.types import Batch, TrajectoryDataset
 
 
@@ -45,15 +46,23 @@ def evaluate(
     device: torch.device | str = "cpu",
     max_agents: int = 1024,
     progress: bool = True,
+    scorer: TrajectoryScorer | None = None,
 ) -> dict[str, float | int]:
-    """minADE_K / minFDE_K per agent and joint, over a whole split."""
+    """minADE_K / minFDE_K per agent and joint over a whole split; with a ``scorer``, also
+    maxATS_K / maxFTS_K and the top-1 / top-5 recall of the ground-truth-free ranking."""
     gen = _generator(seed)
     acc = MetricAccumulator()
+    score_acc = ScoreAccumulator() if scorer is not None else None
     for batch in _batches(dataset, max_agents, progress, f"evaluate {dataset.info.name}"):
         batch = batch.to(device)
         pred = model.predict(batch, num_samples, gen)  # [K, N, T_f, 2]
         acc.update(pred, batch.future, batch.scene, batch.num_scenes)
-    return acc.compute()
+        if score_acc is not None:
+            score_acc.update(scorer, batch, pred)
+    out = acc.compute()
+    if score_acc is not None:
+        out.update(score_acc.compute())
+    return out
 
 
 @torch.no_grad()
@@ -65,11 +74,14 @@ def predict_dataset(
     device: torch.device | str = "cpu",
     max_agents: int = 1024,
     progress: bool = True,
+    scorer: TrajectoryScorer | None = None,
 ) -> dict[str, np.ndarray]:
     """Samples for a whole split, as the arrays ``trajpref predict`` saves.
 
     Returns ``history`` [N, T_h, 2], ``future`` [N, T_f, 2], ``pred`` [K, N, T_f, 2],
-    ``scene`` [N] (scene index per agent, in dataset order), ``agent_type`` [N].
+    ``scene`` [N] (scene index per agent, in dataset order), ``agent_type`` [N]. With a
+    ``scorer``, each scene's samples are reordered best first by the ground-truth-free
+    ranking, and ``order`` [K, B] (original indices) and ``residual`` [K, B] are added.
     """
     gen = _generator(seed)
     parts: dict[str, list[np.ndarray]] = {k: [] for k in ("history", "future", "pred", "scene")}
@@ -78,10 +90,21 @@ def predict_dataset(
     for batch in _batches(dataset, max_agents, progress, f"predict {dataset.info.name}"):
         batch = batch.to(device)
         pred = model.predict(batch, num_samples, gen)  # [K, N, T_f, 2]
+        if scorer is not None:
+            d = scorer.residual(batch, pred).sum(-1)  # [K, N]
+            total = scene_sum(d, batch.scene, batch.num_scenes)  # [K, B]
+            order = total.argsort(0)  # [K, B] best first
+            pred = pred.gather(0, order[:, batch.scene, None, None].expand_as(pred))
+            parts.setdefault("order", []).append(order.T.cpu().numpy())  # [B, K]
+            parts.setdefault("residual", []).append(total.gather(0, order).T.cpu().numpy())
         parts["history"].append(batch.history.cpu().numpy())
         parts["future"].append(batch.future.cpu().numpy())
         parts["pred"].append(pred.cpu().numpy())
         parts["scene"].append(batch.scene.cpu().numpy() + offset)
         parts["agent_type"].append(batch.agent_type.cpu().numpy())
         offset += batch.num_scenes
-    return {k: np.concatenate(v, axis=1 if k == "pred" else 0) for k, v in parts.items()}
+    out = {k: np.concatenate(v, axis=1 if k == "pred" else 0) for k, v in parts.items()}
+    for key in ("order", "residual"):
+        if key in out:
+            out[key] = out[key].T  # [K, B]
+    return out

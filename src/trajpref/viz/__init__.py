@@ -1,5 +1,5 @@
 """Figures from numpy arrays (matplotlib, headless)."""
 
-from trajpref.viz.plot import plot_scene
+from trajpref.viz.plot import plot_scene, plot_scene_scored
 
-__all__ = ["plot_scene"]
+__all__ = ["plot_scene", "plot_scene_scored"]

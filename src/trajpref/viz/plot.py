@@ -65,3 +65,59 @@ def plot_scene(
         fig.savefig(tmp, format="png")
     plt.close(fig)
     return out
+
+
+def plot_scene_scored(
+    history: np.ndarray,
+    future: np.ndarray,
+    pred: np.ndarray,
+    scores: np.ndarray,
+    out: str | Path,
+    units: str = "m",
+    title: str = "",
+    top: int = 2,
+) -> Path:
+    """Two panels, as the paper's Fig. 2: the ground truth alone, then each agent's ``top``
+    samples by score, shaded by their score (darker = higher).
+
+    history [P, T_h, 2], future [P, T_f, 2], pred [K, P, T_f, 2], scores [K, P] (higher is
+    better, e.g. each agent's ATS).
+    """
+    p = history.shape[0]
+    colours = plt.get_cmap("tab10" if p <= 10 else "tab20")
+    pts = np.concatenate([history.reshape(-1, 2), future.reshape(-1, 2)])  # [M, 2]
+    span = np.ptp(pts, axis=0) + 1e-6  # [2]
+    aspect = float(np.clip(span[1] / span[0], 0.35, 1.3))
+    fig, axes = plt.subplots(1, 2, figsize=(11, 1.2 + 5 * aspect), dpi=120, sharex=True,
+                             sharey=True)  # fmt: skip
+    for i in range(p):
+        c = colours(i % colours.N)
+        for ax in axes:
+            ax.plot(history[i, :, 0], history[i, :, 1], color=c, lw=2.2, marker="o", ms=3)
+            ax.plot(*history[i, -1], marker="o", color=c, ms=7, mec="black", mew=0.6)
+        gt = np.concatenate([history[i, -1:], future[i]], 0)  # [T_f+1, 2]
+        axes[0].plot(gt[:, 0], gt[:, 1], color=c, lw=2.0, ls="--")
+        axes[0].annotate(str(i), history[i, 0], fontsize=7, color=c)
+        s = scores[:, i]  # [K]
+        lo, hi = float(s.min()), float(s.max())
+        for rank, k in enumerate(np.argsort(-s)[:top]):
+            weight = 1.0 if hi == lo else (float(s[k]) - lo) / (hi - lo)
+            path = np.concatenate([history[i, -1:], pred[k, i]], 0)  # [T_f+1, 2]
+            axes[1].plot(path[:, 0], path[:, 1], color=c, lw=2.0 - 0.6 * rank,
+                         alpha=0.3 + 0.7 * weight)  # fmt: skip
+    axes[0].set_title("ground truth", fontsize=9)
+    axes[1].set_title(f"top-{top} samples per agent by diffusion score (darker = higher)",
+                      fontsize=9)  # fmt: skip
+    for ax in axes:
+        ax.set_aspect("equal", adjustable="box")
+        ax.set_xlabel(f"x [{units}]")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel(f"y [{units}]")
+    if title:
+        fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    out = Path(out)
+    with atomic_path(out) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+    return out

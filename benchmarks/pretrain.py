@@ -1,0 +1,138 @@
+"""Pretrained predictor (denoiser + leapfrog generator) on one dataset: train (optional),
+publish the checkpoints, evaluate on the test split, and time the two samplers side by side.
+
+    # train both stages (background-friendly: each stage resumes from <run>/<stage>_last.pt)
+    python benchmarks/pretrain.py --dataset zara1 --train --data-root ../shared/data
+    # or evaluate an existing run folder
+    python benchmarks/pretrain.py --dataset zara1 --run-dir runs/zara1 --data-root ../shared/data
+
+Writes models/<dataset>/{denoiser,generator}.pt, benchmarks/results/pretrained_<dataset>.json
+(methods ``pretrained`` and ``full-sampler``) and prints the numbers for docs/pretraining.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import time
+from pathlib import Path
+
+import torch
+
+from trajpref.config import load_config
+from trajpref.data import load_dataset
+from trajpref.results import make_row, write_rows
+from trajpref.train import checkpoint as ckpt
+from trajpref.train.evaluate import evaluate
+from trajpref.types import collate
+
+ROOT = Path(__file__).resolve().parent.parent
+TEST_DATASET = {"robo": "robo"}  # config name -> test dataset (robo trains on robo-sim)
+
+
+def _train(args, run_dir: Path) -> None:
+    from trajpref.train.run import train_stage
+
+    cfg = load_config(ROOT / "configs" / f"{args.dataset}.yaml")
+    for stage in ("diffusion", "generator"):
+        name = "denoiser" if stage == "diffusion" else "generator"
+        last = run_dir / f"{name}_last.pt"
+        resume = str(last) if last.is_file() else None
+        train_stage(stage, cfg, run_dir, args.data_root, args.device, resume)
+
+
+def _metrics_log(run_dir: Path, stage: str) -> list[dict]:
+    path = run_dir / f"{stage}_metrics.jsonl"
+    return [json.loads(line) for line in path.open()] if path.is_file() else []
+
+
+@torch.no_grad()
+def time_samplers(leap, full, dataset, scenes: int, samples: int) -> dict[str, float]:
+    """ms per scene for both samplers on the same scenes, interleaved scene by scene."""
+    times = {"leapfrog": 0.0, "full": 0.0}
+    n = min(scenes, len(dataset))
+    for i in range(n):
+        batch = collate([dataset[i]])
+        for name, model in (("leapfrog", leap), ("full", full)):
+            gen = torch.Generator().manual_seed(i)
+            start = time.perf_counter()
+            model.predict(batch, samples, gen)
+            times[name] += time.perf_counter() - start
+    return {k: 1000 * v / n for k, v in times.items()} | {"scenes": n}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--dataset", required=True, help="config name under configs/")
+    parser.add_argument("--run-dir", default=None, help="default runs/<dataset>")
+    parser.add_argument("--train", action="store_true", help="train (or resume) both stages")
+    parser.add_argument("--data-root", default=None)
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--samples", type=int, default=20)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--timing-scenes", type=int, default=100)
+    args = parser.parse_args()
+
+    run_dir = Path(args.run_dir or ROOT / "runs" / args.dataset)
+    if args.train:
+        _train(args, run_dir)
+    models = ROOT / "models" / args.dataset
+    models.mkdir(parents=True, exist_ok=True)
+    for name in ("denoiser", "generator"):
+        shutil.copyfile(run_dir / f"{name}.pt", models / f"{name}.pt")
+    gen_ckpt = ckpt.load(models / "generator.pt")
+    den_ckpt = gen_ckpt["denoiser"]
+    train_seconds = den_ckpt["meta"]["train_seconds"] + gen_ckpt["meta"]["train_seconds"]
+    # total time of each whole stage (the best checkpoint may come before the last epoch)
+    logs = {s: _metrics_log(run_dir, s) for s in ("denoiser", "generator")}
+    stage_seconds = {s: (log[-1]["train_seconds"] if log else None) for s, log in logs.items()}
+    rates = {s: (sum(r["samples_per_second"] for r in log) / len(log) if log else None)
+             for s, log in logs.items()}  # fmt: skip
+
+    test = load_dataset(TEST_DATASET.get(args.dataset, args.dataset), "test", args.data_root)
+    leap = ckpt.load_predictor(models / "generator.pt", "leapfrog", args.device)
+    full = ckpt.load_predictor(models / "generator.pt", "full", args.device)
+    speed = time_samplers(leap, full, test, args.timing_scenes, args.samples)
+    params = {"denoiser": sum(p.numel() for p in leap.denoiser.parameters()),
+              "generator": sum(p.numel() for p in leap.generator.parameters())}  # fmt: skip
+
+    rows = []
+    for method, model, ms, secs in (("pretrained", leap, speed["leapfrog"], train_seconds),
+                                    ("full-sampler", full, speed["full"], None)):  # fmt: skip
+        res = evaluate(model, test, args.samples, args.seed, args.device)
+        rows.append(make_row(
+            dataset=args.dataset, split="test", method=method, seed=args.seed,
+            samples=args.samples, min_ade=res["min_ade"], min_fde=res["min_fde"],
+            joint_min_ade=res["joint_min_ade"], joint_min_fde=res["joint_min_fde"],
+            train_seconds=round(secs, 1) if secs is not None else None,
+            ms_per_scene=round(ms, 3),
+            checkpoint=str((models / "generator.pt").relative_to(ROOT)),
+        ))  # fmt: skip
+        print(f"{args.dataset} {method:>12}: minADE {res['min_ade']:.3f} minFDE "
+              f"{res['min_fde']:.3f}  joint {res['joint_min_ade']:.3f}/"
+              f"{res['joint_min_fde']:.3f}  {ms:.1f} ms/scene")  # fmt: skip
+    write_rows(ROOT / "benchmarks" / "results" / f"pretrained_{args.dataset}.json", rows)
+    extra = {
+        "dataset": args.dataset,
+        "params": params,
+        "stage_seconds": stage_seconds,
+        "seconds_to_best": {"denoiser": den_ckpt["meta"]["train_seconds"],
+                            "generator": gen_ckpt["meta"]["train_seconds"]},
+        "best_epoch": {"denoiser": den_ckpt["meta"]["epoch"],
+                       "generator": gen_ckpt["meta"]["epoch"]},
+        "samples_per_second": rates,
+        "val": gen_ckpt["meta"]["val"],
+        "ms_per_scene": speed,
+        "speedup_full_over_leapfrog": speed["full"] / speed["leapfrog"],
+        "checkpoint_mb": {n: (models / f"{n}.pt").stat().st_size / 2**20
+                          for n in ("denoiser", "generator")},
+    }  # fmt: skip
+    meta_dir = ROOT / "benchmarks" / "results" / "meta"
+    meta_dir.mkdir(exist_ok=True)
+    (meta_dir / f"pretrained_{args.dataset}.json").write_text(json.dumps(extra, indent=2) + "\n")
+    print(json.dumps(extra, indent=2))
+
+
+if __name__ == "__main__":
+    main()

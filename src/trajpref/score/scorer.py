@@ -1,0 +1,217 @@
+"""Diffusion residuals and the trajectory score (Eq. 5-8), read as in DESIGN.md.
+
+    d(Y; X)[k,p,t] = mean_{s in S_score} || eps_theta(sqrt(abar_s) Y + sqrt(1-abar_s) Z_s, s, X)_t
+                                            - Z_{s,t} ||^2                          (Eq. 5)
+    r = 1 - d_p / d_g                                                               (Eq. 6)
+    ATS(k) = 1 - sum_{p,t} d_p / sum_{p,t} d_g,  FTS(k): the same at t = T_f        (ratio of sums)
+
+S_score = {0, 3, ..., 99}. The same noise Z_s serves all K samples and the ground truth
+(common random numbers), so the ranking of samples by sum d_p depends on the predictions alone
+and needs no ground truth (Lemma 1). Eq. 7's mean of ratios is offered too, under that name.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from trajpref.diffusion.schedule import DDPMSchedule
+from trajpref.metrics import ade_fde, scene_sum
+from trajpref.models.denoiser import Denoiser
+from trajpref.models.encoder import scene_features
+from trajpref.types import AGENT_PERSON, Batch
+
+
+def score_timesteps(num_steps: int = 100, every: int = 3) -> list[int]:
+    """The paper's "every 3 steps": 0, 3, ..., up to num_steps - 1."""
+    if every < 1:
+        raise ValueError("every must be >= 1")
+    return list(range(0, num_steps, every))
+
+
+@dataclass
+class ScoreResult:
+    """Scores of K samples of every scene in a batch."""
+
+    d_pred: torch.Tensor
+    """[K, N, T_f] residuals of the samples."""
+    d_gt: torch.Tensor
+    """[N, T_f] residuals of the ground truth."""
+    r: torch.Tensor
+    """[K, N, T_f] the per-step score 1 - d_pred / d_gt (Eq. 6), unclipped."""
+    ats: torch.Tensor
+    """[K, B] 1 - sum_{p,t} d_pred / sum_{p,t} d_gt (ratio of sums, Lemma 1's form)."""
+    fts: torch.Tensor
+    """[K, B] the same at the final step only."""
+    ats_mean_of_ratios: torch.Tensor
+    """[K, B] Eq. 7 as printed: the mean over p, t of r (depends on the ground truth)."""
+    fts_mean_of_ratios: torch.Tensor
+    """[K, B] Eq. 8 as printed: the mean over p of r at t = T_f."""
+
+
+class TrajectoryScorer:
+    """Scores futures with a frozen denoiser: lower residual = more human-like."""
+
+    def __init__(
+        self,
+        denoiser: Denoiser,
+        schedule: DDPMSchedule,
+        scale: float,
+        steps: list[int] | None = None,
+        seed: int = 0,
+        shared_noise: bool = True,
+        max_rows: int = 1 << 17,
+    ):
+        self.denoiser = denoiser.eval()
+        self.schedule = schedule
+        self.scale = float(scale)
+        self.steps = steps if steps is not None else score_timesteps(schedule.num_steps)
+        if not self.steps or min(self.steps) < 0 or max(self.steps) >= schedule.num_steps:
+            raise ValueError(f"score steps must lie in 0..{schedule.num_steps - 1}")
+        self.seed = seed
+        self.shared_noise = shared_noise
+        self.max_rows = max_rows
+
+    @classmethod
+    def from_checkpoint(cls, path, device="cpu", **kwargs) -> TrajectoryScorer:
+        """From a denoiser checkpoint, or the denoiser embedded in a generator checkpoint."""
+        from trajpref.train import checkpoint as ckpt
+
+        payload = ckpt.load(path)
+        if payload["kind"] != "denoiser":
+            payload = payload["denoiser"]
+        denoiser, cfg = ckpt.build_denoiser(payload)
+        schedule = DDPMSchedule(**vars(cfg.diffusion))
+        return cls(denoiser.to(device), schedule.to(device), payload["scale"], **kwargs)
+
+    @torch.no_grad()
+    def residual(self, batch: Batch, futures: torch.Tensor) -> torch.Tensor:
+        """d for absolute futures [M, N, T_f, 2] of the batch's agents -> [M, N, T_f].
+
+        Uses only the histories of ``batch`` (its ``future`` is never read). The noise is
+        drawn from a generator seeded with ``seed``: the same call gives the same numbers.
+        """
+        m, n, t_f, _ = futures.shape
+        device = futures.device
+        f = scene_features(batch, self.scale)
+        context = self.denoiser.context(f)  # [N, H]
+        y = (futures - batch.origin[None, :, None, :]) / self.scale  # [M, N, T_f, 2]
+        steps = torch.tensor(self.steps, device=device)  # [S']
+        gen = torch.Generator().manual_seed(self.seed)
+        # agent-major draw: an agent's noise depends on its index only, not on the batch size
+        shape = (n, len(self.steps), 1 if self.shared_noise else m, t_f, 2)
+        z = torch.randn(shape, generator=gen).permute(1, 2, 0, 3, 4).to(device)  # [S',1|M,N,T,2]
+        y_s = self.schedule.add_noise(y[None], z, steps)  # [S', M, N, T_f, 2]
+        s_idx = steps[:, None, None].expand(-1, m, n)  # [S', M, N]
+        # all steps and samples in one call; agents in chunks only to bound memory
+        chunk = max(1, self.max_rows // (len(self.steps) * m))
+        d = []
+        for a in range(0, n, chunk):
+            sl = slice(a, a + chunk)
+            eps = self.denoiser(y_s[:, :, sl], s_idx[:, :, sl], context[sl])  # [S', M, n, T_f, 2]
+            d.append((eps - z[:, :, sl]).pow(2).sum(-1).mean(0))  # [M, n, T_f]
+        return torch.cat(d, 1)  # [M, N, T_f]
+
+    @torch.no_grad()
+    def score(self, batch: Batch, pred: torch.Tensor) -> ScoreResult:
+        """Score K samples pred [K, N, T_f, 2] against the batch's ground truth."""
+        k = pred.shape[0]
+        d = self.residual(batch, torch.cat([pred, batch.future[None]], 0))  # [K+1, N, T_f]
+        d_pred, d_gt = d[:k], d[k]
+        r = 1 - d_pred / d_gt
+        b = batch.num_scenes
+        sum_p = scene_sum(d_pred.sum(-1), batch.scene, b)  # [K, B]
+        sum_g = scene_sum(d_gt.sum(-1), batch.scene, b)  # [B]
+        fin_p = scene_sum(d_pred[..., -1], batch.scene, b)  # [K, B]
+        fin_g = scene_sum(d_gt[..., -1], batch.scene, b)  # [B]
+        sizes = batch.scene_sizes().to(r.dtype)  # [B]
+        return ScoreResult(
+            d_pred=d_pred,
+            d_gt=d_gt,
+            r=r,
+            ats=1 - sum_p / sum_g,
+            fts=1 - fin_p / fin_g,
+            ats_mean_of_ratios=scene_sum(r.mean(-1), batch.scene, b) / sizes,
+            fts_mean_of_ratios=scene_sum(r[..., -1], batch.scene, b) / sizes,
+        )
+
+    @torch.no_grad()
+    def rank(self, batch: Batch, pred: torch.Tensor, final: bool = False) -> torch.Tensor:
+        """Ground-truth-free ranking: [K, B] sample indices per scene, best first, by the
+        scene's summed residual over all steps (ATS order) or the final step (FTS order)."""
+        d = self.residual(batch, pred)  # [K, N, T_f]
+        total = scene_sum(d[..., -1] if final else d.sum(-1), batch.scene, batch.num_scenes)
+        return total.argsort(0)  # [K, B]
+
+
+def rank_samples(
+    scorer: TrajectoryScorer,
+    history: torch.Tensor,
+    samples: torch.Tensor,
+    agent_type: torch.Tensor | None = None,
+    final: bool = False,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Rank sampled futures of ONE scene given only its history (the planning use).
+
+    history [P, T_h, 2] and samples [K, P, T_f, 2], absolute coordinates. Returns
+    ``(order [K], residual [K])``: sample indices best first, and each sample's summed
+    residual (lower is more human-like).
+    """
+    if history.ndim != 3 or samples.ndim != 4 or samples.shape[1] != history.shape[0]:
+        raise ValueError("need history [P, T_h, 2] and samples [K, P, T_f, 2]")
+    p = history.shape[0]
+    batch = Batch(
+        history=history.float(),
+        future=torch.full_like(samples[0], float("nan")),  # unknown; never read
+        scene=torch.zeros(p, dtype=torch.int64, device=history.device),
+        agent_type=(agent_type if agent_type is not None
+                    else torch.full((p,), AGENT_PERSON, dtype=torch.int64)),
+        num_scenes=1,
+    )  # fmt: skip
+    d = scorer.residual(batch, samples.float())  # [K, P, T_f]
+    total = (d[..., -1] if final else d.sum(-1)).sum(-1)  # [K]
+    return total.argsort(), total
+
+
+def recall_hits(
+    pred: torch.Tensor, batch: Batch, order_ats: torch.Tensor, order_fts: torch.Tensor,
+    ks: tuple[int, ...] = (1, 5),
+) -> dict[str, torch.Tensor]:  # fmt: skip
+    """Per scene, is the sample with the least joint ADE (FDE) among the top-k by ATS (FTS)?
+
+    Returns {"top{k}_recall_ats": [B] bool, "top{k}_recall_fts": [B] bool}.
+    """
+    ade, fde = ade_fde(pred, batch.future)  # [K, N]
+    best_ade = scene_sum(ade, batch.scene, batch.num_scenes).argmin(0)  # [B]
+    best_fde = scene_sum(fde, batch.scene, batch.num_scenes).argmin(0)  # [B]
+    out = {}
+    for k in ks:
+        out[f"top{k}_recall_ats"] = (order_ats[:k] == best_ade[None]).any(0)
+        out[f"top{k}_recall_fts"] = (order_fts[:k] == best_fde[None]).any(0)
+    return out
+
+
+class ScoreAccumulator:
+    """Running maxATS_K / maxFTS_K and top-k recall over batches (means over scenes)."""
+
+    KEYS = ("max_ats", "max_fts", "top1_recall_ats", "top5_recall_ats", "top1_recall_fts",
+            "top5_recall_fts")  # fmt: skip
+
+    def __init__(self) -> None:
+        self.sums = dict.fromkeys(self.KEYS, 0.0)
+        self.scenes = 0
+
+    def update(self, scorer: TrajectoryScorer, batch: Batch, pred: torch.Tensor) -> None:
+        res = scorer.score(batch, pred)
+        self.sums["max_ats"] += float(res.ats.max(0).values.sum())
+        self.sums["max_fts"] += float(res.fts.max(0).values.sum())
+        # the ranking comes from the residuals alone (Lemma 1): highest ATS first
+        hits = recall_hits(pred, batch, res.ats.argsort(0, descending=True),
+                           res.fts.argsort(0, descending=True))  # fmt: skip
+        for key, value in hits.items():
+            self.sums[key] += float(value.sum())
+        self.scenes += batch.num_scenes
+
+    def compute(self) -> dict[str, float]:
+        return {k: v / max(1, self.scenes) for k, v in self.sums.items()}

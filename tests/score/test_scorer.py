@@ -1,0 +1,125 @@
+import json
+
+import pytest
+import torch
+from synthetic import make_scene
+
+from trajpref.cli import main
+from trajpref.data import load_dataset
+from trajpref.score import TrajectoryScorer, rank_samples, score_timesteps
+from trajpref.types import collate
+
+
+@pytest.fixture(scope="module")
+def scorer(tiny_run):
+    return TrajectoryScorer.from_checkpoint(tiny_run / "denoiser.pt")
+
+
+@pytest.fixture
+def batch(walks):
+    return collate(load_dataset(str(walks), "test").scenes[:3])
+
+
+def _samples(batch, k=6, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    noise = torch.randn((k, *batch.future.shape), generator=g) * 0.3
+    return batch.future[None] + noise  # [K, N, T_f, 2]
+
+
+def test_score_timesteps():
+    assert score_timesteps(100) == list(range(0, 100, 3))
+    assert score_timesteps(100)[-1] == 99 and len(score_timesteps(100)) == 34
+
+
+def test_r_is_exactly_zero_for_the_ground_truth(scorer, batch):
+    res = scorer.score(batch, batch.future[None].expand(3, -1, -1, -1).clone())
+    assert torch.equal(res.r, torch.zeros_like(res.r))
+    assert torch.equal(res.ats, torch.zeros_like(res.ats))
+
+
+def test_ranking_does_not_depend_on_the_ground_truth(scorer, batch):
+    pred = _samples(batch)
+    a = scorer.score(batch, pred)
+    other = type(batch)(batch.history, batch.future + 3.0, batch.scene, batch.agent_type,
+                        batch.num_scenes)  # fmt: skip
+    b = scorer.score(other, pred)
+    assert not torch.allclose(a.ats, b.ats)  # the score itself moves with the ground truth
+    assert torch.equal(a.ats.argsort(0), b.ats.argsort(0))  # ... its ranking does not
+    assert torch.equal(a.fts.argsort(0), b.fts.argsort(0))
+    # rank() never reads the future: NaN futures give the same order
+    blind = type(batch)(batch.history, torch.full_like(batch.future, float("nan")),
+                        batch.scene, batch.agent_type, batch.num_scenes)  # fmt: skip
+    assert torch.equal(scorer.rank(blind, pred), a.ats.argsort(0, descending=True))
+
+
+def test_fixed_seeds_give_identical_scores(tiny_run, batch):
+    pred = _samples(batch)
+    s1 = TrajectoryScorer.from_checkpoint(tiny_run / "denoiser.pt", seed=3)
+    s2 = TrajectoryScorer.from_checkpoint(tiny_run / "denoiser.pt", seed=3)
+    s3 = TrajectoryScorer.from_checkpoint(tiny_run / "denoiser.pt", seed=4)
+    assert torch.equal(s1.residual(batch, pred), s2.residual(batch, pred))
+    assert not torch.equal(s1.residual(batch, pred), s3.residual(batch, pred))
+
+
+def test_shapes_and_scene_masks_in_a_mixed_batch(scorer):
+    scenes = [make_scene(3, seed=1), make_scene(1, seed=2), make_scene(5, seed=3)]
+    batch = collate(scenes)
+    pred = _samples(batch, k=4)
+    res = scorer.score(batch, pred)
+    assert res.d_pred.shape == (4, 9, 12) and res.d_gt.shape == (9, 12)
+    assert res.ats.shape == (4, 3) and res.fts.shape == (4, 3)
+    assert res.ats_mean_of_ratios.shape == (4, 3)
+    # the first scene scored alone gives the same residuals: no agent sees another scene
+    alone = scorer.residual(collate(scenes[:1]), pred[:, :3])
+    torch.testing.assert_close(alone, res.d_pred[:, :3], atol=1e-5, rtol=1e-4)
+    # the chunked path (tiny row budget) agrees with the one-shot path
+    small = TrajectoryScorer(scorer.denoiser, scorer.schedule, scorer.scale, max_rows=50)
+    torch.testing.assert_close(small.residual(batch, pred), res.d_pred, atol=1e-5, rtol=1e-5)
+
+
+def test_near_ground_truth_outranks_a_far_sample(scorer, batch):
+    near = batch.future + 0.02 * torch.randn(
+        batch.future.shape, generator=torch.Generator().manual_seed(0)
+    )
+    far = batch.future + torch.tensor([8.0, -8.0])
+    pred = torch.stack([far, near])  # [2, N, T_f, 2]: the far one first
+    order, total = rank_samples(scorer, batch.history[:3], pred[:, :3])
+    assert order.tolist() == [1, 0] and total[1] < total[0]
+    res = scorer.score(batch, pred)
+    assert (res.ats[1] > res.ats[0]).all()
+
+
+def test_rank_samples_validates_shapes(scorer):
+    with pytest.raises(ValueError, match="history"):
+        rank_samples(scorer, torch.zeros(3, 8, 2), torch.zeros(4, 2, 12, 2))
+
+
+def test_cli_evaluate_with_scorer_and_predict_rank(tiny_run, walks, tmp_path, capsys):
+    code = main(["evaluate", "--dataset", str(walks), "--model", "cv", "--samples", "5",
+                 "--scorer", str(tiny_run / "denoiser.pt"), "--json", "--no-progress"])  # fmt: skip
+    res = json.loads(capsys.readouterr().out)
+    assert code == 0
+    for key in ("max_ats", "max_fts", "top1_recall_ats", "top5_recall_ats", "top1_recall_fts",
+                "top5_recall_fts"):  # fmt: skip
+        assert key in res
+    assert res["top5_recall_ats"] == 1.0  # K = 5: the top 5 hold every sample
+    out = tmp_path / "ranked.npz"
+    code = main(["predict", "--dataset", str(walks), "--model", str(tiny_run / "generator.pt"),
+                 "--samples", "4", "--rank", "--out", str(out), "--no-progress"])  # fmt: skip
+    assert code == 0
+    import numpy as np
+
+    with np.load(out) as z:
+        assert z["order"].shape[0] == 4 and z["residual"].shape == z["order"].shape
+        assert (np.diff(z["residual"], axis=0) >= 0).all()  # best (lowest residual) first
+    code = main(["predict", "--dataset", str(walks), "--model", "cv", "--rank", "--out",
+                 str(tmp_path / "x.npz")])  # fmt: skip
+    assert code == 2 and "--scorer" in capsys.readouterr().err
+
+
+def test_cli_plot_with_scorer(tiny_run, walks, tmp_path):
+    out = tmp_path / "fig2.png"
+    model, scorer = str(tiny_run / "generator.pt"), str(tiny_run / "denoiser.pt")
+    code = main(["plot", "--dataset", str(walks), "--model", model, "--samples", "4",
+                 "--scorer", scorer, "--out", str(out)])  # fmt: skip
+    assert code == 0 and out.read_bytes()[:4] == b"\x89PNG"

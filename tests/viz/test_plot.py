@@ -1,0 +1,29 @@
+import numpy as np
+
+from trajpref.viz import plot_scene, plot_scene_scored
+
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def _scene(p=3, k=5):
+    rng = np.random.default_rng(0)
+    hist = rng.normal(size=(p, 8, 2)).cumsum(1)
+    fut = hist[:, -1:] + rng.normal(size=(p, 12, 2)).cumsum(1)
+    pred = fut[None] + rng.normal(size=(k, p, 12, 2))
+    return hist, fut, pred
+
+
+def test_plot_scene_writes_a_png(tmp_path):
+    hist, fut, pred = _scene()
+    out = plot_scene(hist, fut, pred, tmp_path / "a" / "s.png", "px", "t", np.array([0, 0, 1]))
+    assert out.read_bytes()[:8] == PNG
+    assert plot_scene(hist, fut, None, tmp_path / "n.png").read_bytes()[:8] == PNG
+
+
+def test_plot_scene_scored_writes_a_png(tmp_path):
+    hist, fut, pred = _scene()
+    scores = np.linspace(-1, 1, 15).reshape(5, 3)
+    out = plot_scene_scored(hist, fut, pred, scores, tmp_path / "s.png", "m", "title")
+    assert out.read_bytes()[:8] == PNG and out.stat().st_size > 5000
+    # equal scores (no spread) must not divide by zero
+    plot_scene_scored(hist, fut, pred, np.zeros((5, 3)), tmp_path / "z.png")
