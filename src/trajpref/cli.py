@@ -133,6 +133,37 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     tr.add_argument("--no-progress", action="store_true", help="hide progress bars")
     tr.set_defaults(func=cmd_train)
+
+    ft = sub.add_parser("finetune", help="RLHF / RLHF-ReS fine-tuning of a pretrained generator")
+    ft.add_argument("--method", required=True, choices=["rlhf", "rlhf-res"])
+    ft.add_argument("--from", dest="start", required=True, help="a generator checkpoint")
+    ft.add_argument("--out", required=True, help="run folder: checkpoints, config, metrics")
+    ft.add_argument(
+        "--preset",
+        default=None,
+        choices=["paper"],
+        help="'paper': Eq. 13-20 as written, with the paper's loss weights "
+        "(default: the tuned defaults of FinetuneConfig)",
+    )
+    ft.add_argument(
+        "--config",
+        default=None,
+        help="YAML whose 'finetune' section applies (data and model come from the checkpoint)",
+    )
+    ft.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a config value, e.g. --set finetune.lr=5e-5 (repeatable)",
+    )
+    ft.add_argument("--resume", default=None, help="a finetune_last.pt to continue from")
+    ft.add_argument("--data-root", default=None, help="data folder (default: $TRAJPREF_DATA)")
+    ft.add_argument("--seed", type=int, default=None, help="override the config's seed")
+    ft.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
+    ft.add_argument("--no-progress", action="store_true", help="hide progress bars")
+    ft.set_defaults(func=cmd_finetune)
     return parser
 
 
@@ -335,6 +366,37 @@ def cmd_train(args) -> int:
     )
     best = {k: round(v, 4) if isinstance(v, float) else v for k, v in summary["best"].items()}
     print(f"trained {args.stage} in {summary['train_seconds']:.0f} s; best validation: {best}")
+    return 0
+
+
+def finetune_config(start: str, method: str, preset: str | None, config: str | None,
+                    overrides: list[str], seed: int | None):  # fmt: skip
+    """The fine-tuning config: the checkpoint's own config, the YAML's finetune section,
+    the preset, the method, then --set overrides."""
+    from trajpref.config import load_config
+    from trajpref.rl.presets import preset_overrides
+    from trajpref.train import checkpoint as ckpt
+
+    payload = ckpt.load(start)
+    if payload["kind"] != "generator":
+        raise TrajprefError(f"{start}: fine-tuning starts from a generator checkpoint")
+    extra = preset_overrides(preset, method) if preset else [f"finetune.method={method}"]
+    if seed is not None:
+        extra.append(f"seed={seed}")
+    return load_config(config, [*extra, *overrides], base=payload["config"],
+                       sections=("finetune",))  # fmt: skip
+
+
+def cmd_finetune(args) -> int:
+    from trajpref.train.run import finetune
+
+    cfg = finetune_config(args.start, args.method, args.preset, args.config, args.overrides,
+                          args.seed)  # fmt: skip
+    summary = finetune(cfg, args.start, args.out, args.data_root, args.device, args.resume,
+                       progress=not args.no_progress)  # fmt: skip
+    best = {k: round(v, 4) if isinstance(v, float) else v for k, v in summary["best"].items()}
+    print(f"fine-tuned ({args.method}) in {summary['train_seconds']:.0f} s; best validation: "
+          f"{best}")  # fmt: skip
     return 0
 
 

@@ -3,6 +3,7 @@ read from and written to YAML. A run writes its resolved config next to its chec
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import typing
 from dataclasses import dataclass, field, fields
@@ -157,6 +158,85 @@ class GeneratorTrainConfig(OptimConfig):
 
 
 @dataclass
+class FinetuneConfig(OptimConfig):
+    """RLHF / RLHF-ReS fine-tuning of the generator (the paper's Sec. 5-6). The ``paper``
+    preset (``rl.presets.PRESETS``) sets these to the equations as written."""
+
+    epochs: int = 6
+    """Passes over the training split."""
+    lr: float = 1e-4
+    """Peak learning rate (fine-tuning: lower than pretraining)."""
+    warmup_steps: int = 20
+    """Linear warm-up steps."""
+    eval_every: int = 1
+    """Validate every this many epochs."""
+    method: str = "rlhf-res"
+    """``rlhf`` (policy and value losses on all K samples) or ``rlhf-res`` (on k* only)."""
+    policy_weight: float = 0.3
+    """alpha_p (RLHF, paper 1.0) or beta_p (RLHF-ReS, paper 0.3): weight of Eq. 15 / 18."""
+    value_weight: float = 1.5
+    """alpha_v (RLHF, paper 5.0) or beta_v (RLHF-ReS, paper 1.5): weight of Eq. 16 / 19."""
+    reg_weight: float = 1.0
+    """Weight of L_reg, the pretraining loss on the denoised samples (Eq. 17 / 20: 1)."""
+    clip: float = 0.2
+    """epsilon of the clipped policy ratio (Eq. 15)."""
+    value_clip: float = 0.2
+    """epsilon of the clipped value (Eq. 16)."""
+    kl_coef: float = 0.1
+    """beta of Eq. 13 (the paper gives no value)."""
+    kl_form: str = "paper"
+    """``paper`` (beta p_0 (log p_0 - log p_theta), as printed) or ``logratio``."""
+    gamma: float = 0.99
+    """Discount over future steps (Eq. 14)."""
+    gae_lambda: float = 0.0
+    """GAE lambda; 0 is the paper's one-step advantage (Eq. 14)."""
+    value_target: str = "reward"
+    """``reward`` (Eq. 16 regresses V on R) or ``return`` (the GAE return)."""
+    adv_norm: str = "none"
+    """``none`` or ``scene``: whiten advantages within each scene."""
+    reward_clip: float | None = None
+    """Clip the per-step score r to [-c, c] (None: unclipped, as the paper)."""
+    score_every: int = 3
+    """The reward's score timesteps: every this many of the S steps (the paper: 3)."""
+    detach_critic: bool = True
+    """Stop the value loss's gradient at the shared social encoder."""
+    likelihood: str = "mean"
+    """Eq. 12's density: ``mean`` = N(Y; mu, sigma_k) at the denoised sample, as printed (the
+    K samples are deterministic functions of X, so this is a surrogate); ``sample`` = each
+    initial sample Y^tau_k is perturbed by explore_std noise before denoising and the density
+    is N(perturbed; Y^tau_k, explore_std) - a proper stochastic policy per sample."""
+    explore_std: float = 0.05
+    """Exploration noise of the ``sample`` likelihood, in normalised units."""
+    ratio_against: str = "reference"
+    """Eq. 15's ratio p_theta / p_0 against the frozen ``reference`` (as printed; a trust
+    region around G_0), or against the ``rollout`` policy (standard PPO: p_theta / p_old)."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.method not in ("rlhf", "rlhf-res"):
+            raise ConfigError("finetune.method must be 'rlhf' or 'rlhf-res'")
+        if self.kl_form not in ("paper", "logratio"):
+            raise ConfigError("finetune.kl_form must be 'paper' or 'logratio'")
+        if self.value_target not in ("reward", "return"):
+            raise ConfigError("finetune.value_target must be 'reward' or 'return'")
+        if self.likelihood not in ("mean", "sample"):
+            raise ConfigError("finetune.likelihood must be 'mean' or 'sample'")
+        _positive(self, "explore_std")
+        if self.ratio_against not in ("reference", "rollout"):
+            raise ConfigError("finetune.ratio_against must be 'reference' or 'rollout'")
+        if self.adv_norm not in ("none", "scene"):
+            raise ConfigError("finetune.adv_norm must be 'none' or 'scene'")
+        if not 0 <= self.gamma <= 1 or not 0 <= self.gae_lambda <= 1:
+            raise ConfigError("finetune.gamma and gae_lambda must lie in [0, 1]")
+        if self.reward_clip is not None and self.reward_clip <= 0:
+            raise ConfigError("finetune.reward_clip must be > 0 or null")
+        for name in ("policy_weight", "value_weight", "reg_weight", "kl_coef"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"finetune.{name} must be >= 0")
+        _positive(self, "clip", "value_clip", "score_every")
+
+
+@dataclass
 class ExperimentConfig:
     """Everything one dataset's pipeline needs. One YAML file per dataset under configs/."""
 
@@ -170,6 +250,8 @@ class ExperimentConfig:
     """Stage 1: the denoiser."""
     generator: GeneratorTrainConfig = field(default_factory=GeneratorTrainConfig)
     """Stage 2: the generator."""
+    finetune: FinetuneConfig = field(default_factory=FinetuneConfig)
+    """Stage 3: RLHF / RLHF-ReS fine-tuning."""
     seed: int = 0
     """Seed for initialisation, shuffling, augmentation and noise."""
 
@@ -227,20 +309,32 @@ def _coerce(value: Any, hint: Any, name: str) -> Any:
     return value
 
 
-def load_config(path: str | Path | None, overrides: list[str] | None = None) -> ExperimentConfig:
+def load_config(
+    path: str | Path | None,
+    overrides: list[str] | None = None,
+    base: dict[str, Any] | None = None,
+    sections: tuple[str, ...] | None = None,
+) -> ExperimentConfig:
     """Read a YAML config (or the defaults when ``path`` is None) and apply ``key=value``
-    overrides such as ``denoiser.epochs=5``."""
-    data: dict[str, Any] = {}
+    overrides such as ``denoiser.epochs=5``.
+
+    With ``base`` (a config dict, e.g. a checkpoint's), the YAML file only replaces the
+    top-level ``sections`` named (all when None) on top of ``base``.
+    """
+    data: dict[str, Any] = copy.deepcopy(base) if base is not None else {}
     if path is not None:
         path = Path(path)
         if not path.is_file():
             raise ConfigError(f"{path}: no such config file")
         try:
-            data = yaml.safe_load(path.read_text()) or {}
+            loaded = yaml.safe_load(path.read_text()) or {}
         except yaml.YAMLError as exc:
             raise ConfigError(f"{path}: not valid YAML ({exc.__class__.__name__})") from None
-        if not isinstance(data, dict):
+        if not isinstance(loaded, dict):
             raise ConfigError(f"{path}: the top level must be a mapping")
+        for key, value in loaded.items():
+            if sections is None or key in sections:
+                data[key] = value
     for item in overrides or []:
         key, sep, value = item.partition("=")
         if not sep:

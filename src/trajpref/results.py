@@ -75,27 +75,53 @@ def _fmt(x: Any, digits: int = 3) -> str:
     return str(x)
 
 
-def accuracy_table(rows: list[dict[str, Any]], split: str = "test") -> str:
-    """Markdown table: one line per (dataset, method, samples), mean over seeds."""
-    groups: dict[tuple, list[dict[str, Any]]] = {}
+def merge_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Rows of the same measurement (dataset, split, method, seed, samples) written by
+    different scripts (e.g. accuracy by one, scores by another) merged field by field; the
+    first non-null value wins."""
+    merged: dict[tuple, dict[str, Any]] = {}
     for r in rows:
+        key = (r["dataset"], r["split"], r["method"], r["seed"], r["samples"])
+        if key not in merged:
+            merged[key] = dict(r)
+        else:
+            for field, value in r.items():
+                if merged[key].get(field) is None:
+                    merged[key][field] = value
+    return list(merged.values())
+
+
+def accuracy_table(rows: list[dict[str, Any]], split: str = "test") -> str:
+    """Markdown table: one line per (dataset, method, samples), mean (+- std) over seeds."""
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for r in merge_rows(rows):
         if r["split"] == split:
             groups.setdefault((r["dataset"], r["method"], r["samples"]), []).append(r)
     order = {m: i for i, m in enumerate(METHODS)}
     keys = sorted(groups, key=lambda k: (k[0], order.get(k[1], 99), k[2]))
-    cols = ("min_ade", "min_fde", "joint_min_ade", "joint_min_fde", "max_ats", "max_fts")
+    cols = ("min_ade", "min_fde", "joint_min_ade", "joint_min_fde", "max_ats", "max_fts",
+            "top1_recall_ats", "top5_recall_ats")  # fmt: skip
     lines = [
         "| dataset | method | K | seeds | minADE | minFDE | joint minADE | joint minFDE "
-        "| maxATS | maxFTS |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| maxATS | maxFTS | top-1 / top-5 recall (ATS) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for key in keys:
         g = groups[key]
         vals = []
         for c in cols:
             xs = [r[c] for r in g if r[c] is not None]
-            vals.append(_fmt(sum(xs) / len(xs)) if xs else "–")
-        lines.append(f"| {key[0]} | {key[1]} | {key[2]} | {len(g)} | " + " | ".join(vals) + " |")
+            if not xs:
+                vals.append("–")
+            elif len(xs) == 1:
+                vals.append(_fmt(xs[0]))
+            else:
+                mean = sum(xs) / len(xs)
+                std = (sum((x - mean) ** 2 for x in xs) / (len(xs) - 1)) ** 0.5
+                vals.append(f"{mean:.3f} ± {std:.3f}")
+        recall = f"{vals[6]} / {vals[7]}" if vals[6] != "–" else "–"
+        lines.append(f"| {key[0]} | {key[1]} | {key[2]} | {len(g)} | "
+                     + " | ".join(vals[:6]) + f" | {recall} |")  # fmt: skip
     return "\n".join(lines)
 
 

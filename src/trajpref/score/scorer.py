@@ -92,11 +92,16 @@ class TrajectoryScorer:
         Uses only the histories of ``batch`` (its ``future`` is never read). The noise is
         drawn from a generator seeded with ``seed``: the same call gives the same numbers.
         """
-        m, n, t_f, _ = futures.shape
-        device = futures.device
-        f = scene_features(batch, self.scale)
-        context = self.denoiser.context(f)  # [N, H]
+        context = self.denoiser.context(scene_features(batch, self.scale))  # [N, H]
         y = (futures - batch.origin[None, :, None, :]) / self.scale  # [M, N, T_f, 2]
+        return self.residual_normalised(context, y)
+
+    @torch.no_grad()
+    def residual_normalised(self, context: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        """d for futures already in the denoiser's frame (relative, divided by the data
+        scale): y [M, N, T_f, 2], context [N, H] from this scorer's denoiser -> [M, N, T_f]."""
+        m, n, t_f, _ = y.shape
+        device = y.device
         steps = torch.tensor(self.steps, device=device)  # [S']
         gen = torch.Generator().manual_seed(self.seed)
         # agent-major draw: an agent's noise depends on its index only, not on the batch size

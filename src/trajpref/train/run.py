@@ -63,3 +63,40 @@ def train_stage(
         return summary
     finally:
         cleanup(info)
+
+
+def finetune(
+    cfg: ExperimentConfig,
+    start: str | Path,
+    out_dir: str | Path,
+    data_root: str | None = None,
+    device: str = "auto",
+    resume: str | None = None,
+    progress: bool = True,
+    max_steps: int | None = None,
+) -> dict[str, Any]:
+    """RLHF / RLHF-ReS fine-tuning from the generator checkpoint ``start`` (DDP-aware)."""
+    from trajpref.rl.stage import build_finetune_stage
+
+    dev = resolve_device(device)
+    info, dev = init_from_env(dev)
+    torch.set_num_threads(max(1, torch.get_num_threads() // max(1, info.world_size)))
+    out_dir = Path(out_dir)
+    try:
+        payload = ckpt.load(start)
+        if payload["kind"] != "generator":
+            raise TrajprefError(f"{start}: fine-tuning starts from a generator checkpoint")
+        train = load_dataset(cfg.data.dataset, "train", data_root)
+        val = load_dataset(cfg.data.val_dataset or cfg.data.dataset, "val", data_root)
+        built = build_finetune_stage(cfg, payload, val, dev)
+        if info.is_main:
+            out_dir.mkdir(parents=True, exist_ok=True)
+            save_config(cfg, out_dir / "config.yaml")
+        barrier(info)
+        start_time = time.perf_counter()
+        summary = fit(built, train, cfg.data, cfg.finetune, out_dir, dev, cfg.seed, resume, info,
+                      progress, max_steps)  # fmt: skip
+        summary["wall_seconds"] = time.perf_counter() - start_time
+        return summary
+    finally:
+        cleanup(info)

@@ -126,20 +126,26 @@ class GeneratorObjective(nn.Module):
             self.schedule, lambda x, s: self.denoiser(x, s, context), y_tau, self.cfg.tau, generator
         )  # fmt: skip  [K, N, T_f, 2]
         target = to_relative(batch)[1] / self.scale  # [N, T_f, 2]
-        err = torch.linalg.vector_norm(y - target, dim=-1)  # [K, N, T_f]
-        ade, fde = err.mean(-1), err[..., -1]  # [K, N]
-        best = (ade + fde).min(0).values.mean()
-        mean_err = torch.linalg.vector_norm(out.mean - target, dim=-1).mean(-1)  # [N]
-        log_sigma = out.log_sigma.mean(0)  # [N]
-        unc = (torch.exp(-log_sigma) * mean_err.detach() + log_sigma).mean()
-        reg = (y - target).pow(2).sum(-1).mean()  # Eq. 4
-        c = self.cfg
-        loss = (c.best_of_k_weight * best + c.mean_weight * mean_err.mean()
-                + c.uncertainty_weight * unc + c.reg_weight * reg)  # fmt: skip
-        logs = {k: float(v.detach()) for k, v in (
-            ("best_of_k", best), ("mean_ade", mean_err.mean()), ("uncertainty", unc),
-            ("eq4", reg), ("sigma", out.log_sigma.exp().mean()))}  # fmt: skip
-        return loss, logs
+        return generator_loss(out, y, target, self.cfg)
+
+
+def generator_loss(out, y: torch.Tensor, target: torch.Tensor, c: GeneratorTrainConfig):
+    """The generator's supervised loss on denoised samples y [K, N, T_f, 2] (normalised):
+    w_best * min_k (ADE_k + FDE_k) + w_mean * ADE(mu) + w_unc * (e^{-l} ADE(mu) + l)
+    + w_reg * Eq. 4. Shared by pretraining and by the RL stages (their L_reg)."""
+    err = torch.linalg.vector_norm(y - target, dim=-1)  # [K, N, T_f]
+    ade, fde = err.mean(-1), err[..., -1]  # [K, N]
+    best = (ade + fde).min(0).values.mean()
+    mean_err = torch.linalg.vector_norm(out.mean - target, dim=-1).mean(-1)  # [N]
+    log_sigma = out.log_sigma.mean(0)  # [N]
+    unc = (torch.exp(-log_sigma) * mean_err.detach() + log_sigma).mean()
+    reg = (y - target).pow(2).sum(-1).mean()  # Eq. 4
+    loss = (c.best_of_k_weight * best + c.mean_weight * mean_err.mean()
+            + c.uncertainty_weight * unc + c.reg_weight * reg)  # fmt: skip
+    logs = {k: float(v.detach()) for k, v in (
+        ("best_of_k", best), ("mean_ade", mean_err.mean()), ("uncertainty", unc),
+        ("eq4", reg), ("sigma", out.log_sigma.exp().mean()))}  # fmt: skip
+    return loss, logs
 
 
 def build_generator_stage(

@@ -1,0 +1,102 @@
+"""PPO pieces as small pure functions (the paper's Eq. 12-16), in the style of cleanrl/TRL.
+
+Shapes: K samples, N agents, T = T_f future steps. Every function works on any leading shape;
+time is the last axis where it matters.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+LOG_2PI = math.log(2 * math.pi)
+
+
+def gaussian_log_prob(
+    y: torch.Tensor, mean: torch.Tensor, log_sigma: torch.Tensor, per_sample: bool = False
+):
+    """Eq. 12: log N(y; mu, sigma^2 I) per step, summed over x and y.
+
+    y [K, N, T, 2] (the action), mean [N, T, 2] shared by the K samples (or [K, N, T, 2] with
+    ``per_sample``), log_sigma [K, N] -> [K, N, T]. The density is evaluated at the action,
+    never at the mean itself.
+    """
+    var = torch.exp(2 * log_sigma)[..., None]  # [K, N, 1]
+    sq = (y - (mean if per_sample else mean[None])).pow(2).sum(-1)  # [K, N, T]
+    return -0.5 * sq / var - 2 * log_sigma[..., None] - LOG_2PI
+
+
+def kl_penalty(logp: torch.Tensor, logp_ref: torch.Tensor, beta: float, form: str = "paper"):
+    """Eq. 13: the per-step divergence that is subtracted from the reward.
+
+    ``paper``: beta * p_0 * (log p_0 - log p_theta), with p_0 the reference density, as
+    printed. ``logratio``: beta * (log p_theta - log p_0), the usual RLHF estimator.
+    Both are zero when the policy equals the reference.
+    """
+    if form == "paper":
+        return beta * logp_ref.exp() * (logp_ref - logp)
+    if form == "logratio":
+        return beta * (logp - logp_ref)
+    raise ValueError(f"unknown KL form {form!r}; use 'paper' or 'logratio'")
+
+
+def gae(rewards: torch.Tensor, values: torch.Tensor, gamma: float, lam: float):
+    """Advantages and returns over the last (time) axis, with V(T + 1) = 0.
+
+    A_t = sum_l (gamma lam)^l delta_{t+l}, delta_t = R_t + gamma V_{t+1} - V_t.
+    ``lam = 0`` is the paper's one-step Eq. 14. Returns ``(advantages, returns)``,
+    returns = advantages + values.
+    """
+    t_len = rewards.shape[-1]
+    next_values = torch.cat([values[..., 1:], torch.zeros_like(values[..., :1])], -1)
+    deltas = rewards + gamma * next_values - values  # [..., T]
+    if lam == 0:
+        adv = deltas
+    else:
+        # discounted suffix sums as one matrix product: W[t, u] = (gamma lam)^(u - t), u >= t
+        idx = torch.arange(t_len, device=rewards.device)
+        power = (idx[None, :] - idx[:, None]).to(rewards.dtype)  # [T, T]
+        w = torch.where(power >= 0, (gamma * lam) ** power.clamp(min=0), torch.zeros(()))
+        adv = deltas @ w.T  # [..., T]
+    return adv, adv + values
+
+
+def policy_loss(logp: torch.Tensor, logp_ref: torch.Tensor, adv: torch.Tensor, clip: float):
+    """Eq. 15: -E[min(rho A, clip(rho, 1 - eps, 1 + eps) A)], rho = p_theta / p_0.
+
+    Returns ``(loss, clip_fraction, approx_kl)``; approx_kl is E[(rho - 1) - log rho]
+    (Schulman's k3 estimator of KL(p_0 || p_theta) under the sampled actions).
+    """
+    log_ratio = logp - logp_ref
+    ratio = log_ratio.exp()
+    unclipped = ratio * adv
+    clipped = ratio.clamp(1 - clip, 1 + clip) * adv
+    loss = -torch.minimum(unclipped, clipped).mean()
+    with torch.no_grad():
+        clip_frac = ((ratio - 1).abs() > clip).float().mean()
+        approx_kl = ((ratio - 1) - log_ratio).mean()
+    return loss, clip_frac, approx_kl
+
+
+def value_loss(values: torch.Tensor, values_ref: torch.Tensor, target: torch.Tensor, clip: float):
+    """Eq. 16: E[max((V - R)^2, (clip(V, V_0 - eps, V_0 + eps) - R)^2)]."""
+    clipped = values_ref + (values - values_ref).clamp(-clip, clip)
+    return torch.maximum((values - target).pow(2), (clipped - target).pow(2)).mean()
+
+
+def explained_variance(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """1 - Var(target - pred) / Var(target) (1 is perfect, 0 is no better than a constant)."""
+    var = target.var()
+    return 1 - (target - pred).var() / var if var > 0 else torch.tensor(float("nan"))
+
+
+def whiten_per_group(x: torch.Tensor, group: torch.Tensor, num_groups: int, eps: float = 1e-8):
+    """Normalise x [K, N, T] to zero mean and unit std within each scene (group [N])."""
+    k, _, t = x.shape
+    count = torch.bincount(group, minlength=num_groups).to(x.dtype) * k * t  # [B]
+    total = x.new_zeros(num_groups).index_add_(0, group, x.sum((0, 2)))  # [B]
+    mean = (total / count)[group][None, :, None]  # [1, N, 1]
+    sq = x.new_zeros(num_groups).index_add_(0, group, (x - mean).pow(2).sum((0, 2)))
+    std = (sq / count).sqrt()[group][None, :, None]
+    return (x - mean) / (std + eps)

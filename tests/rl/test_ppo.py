@@ -1,0 +1,124 @@
+"""The PPO pieces against plain reference loops and torch.distributions."""
+
+import math
+
+import pytest
+import torch
+
+from trajpref.rl import ppo
+
+
+def _loop_gae(rewards, values, gamma, lam):
+    """cleanrl-style backward loop over one trajectory (lists)."""
+    t_len = len(rewards)
+    adv = [0.0] * t_len
+    last = 0.0
+    for t in reversed(range(t_len)):
+        next_v = values[t + 1] if t + 1 < t_len else 0.0
+        delta = rewards[t] + gamma * next_v - values[t]
+        last = delta + gamma * lam * last
+        adv[t] = last
+    return adv, [a + v for a, v in zip(adv, values, strict=True)]
+
+
+@pytest.mark.parametrize(("gamma", "lam"), [(0.99, 0.0), (0.99, 0.95), (1.0, 1.0), (0.9, 0.5)])
+def test_gae_matches_a_plain_loop(gamma, lam):
+    g = torch.Generator().manual_seed(0)
+    rewards = torch.randn(3, 4, 12, generator=g, dtype=torch.float64)
+    values = torch.randn(3, 4, 12, generator=g, dtype=torch.float64)
+    adv, ret = ppo.gae(rewards, values, gamma, lam)
+    for k in range(3):
+        for n in range(4):
+            a, r = _loop_gae(rewards[k, n].tolist(), values[k, n].tolist(), gamma, lam)
+            torch.testing.assert_close(adv[k, n], torch.tensor(a, dtype=torch.float64))
+            torch.testing.assert_close(ret[k, n], torch.tensor(r, dtype=torch.float64))
+
+
+def test_lambda_zero_is_the_papers_one_step_advantage():
+    rewards = torch.tensor([1.0, 2.0, 3.0])
+    values = torch.tensor([0.5, 0.25, 1.0])
+    adv, _ = ppo.gae(rewards, values, 0.5, 0.0)
+    # Eq. 14: A_t = R_t + gamma V_{t+1} - V_t, with V_{T+1} = 0
+    assert adv.tolist() == [1.0 + 0.5 * 0.25 - 0.5, 2.0 + 0.5 * 1.0 - 0.25, 3.0 - 1.0]
+
+
+def test_log_prob_equals_torch_normal():
+    g = torch.Generator().manual_seed(1)
+    y = torch.randn(5, 3, 12, 2, generator=g)
+    mean = torch.randn(3, 12, 2, generator=g)
+    log_sigma = torch.randn(5, 3, generator=g) * 0.3
+    ours = ppo.gaussian_log_prob(y, mean, log_sigma)
+    dist = torch.distributions.Normal(mean[None], log_sigma.exp()[..., None, None])
+    ref = dist.log_prob(y).sum(-1)  # summed over x and y
+    torch.testing.assert_close(ours, ref)
+
+
+def test_log_prob_is_not_evaluated_at_the_mean():
+    mean = torch.zeros(1, 12, 2)
+    log_sigma = torch.zeros(1, 1)
+    near = ppo.gaussian_log_prob(torch.zeros(1, 1, 12, 2), mean, log_sigma)
+    far = ppo.gaussian_log_prob(torch.ones(1, 1, 12, 2), mean, log_sigma)
+    assert (near > far).all()
+
+
+def _loop_policy_loss(logp, logp_ref, adv, clip):
+    total = 0.0
+    for lp, lr, a in zip(logp.flatten().tolist(), logp_ref.flatten().tolist(),
+                         adv.flatten().tolist(), strict=True):  # fmt: skip
+        ratio = math.exp(lp - lr)
+        total += min(ratio * a, max(min(ratio, 1 + clip), 1 - clip) * a)
+    return -total / logp.numel()
+
+
+def test_policy_loss_matches_a_plain_loop():
+    g = torch.Generator().manual_seed(2)
+    logp = torch.randn(4, 3, 12, generator=g, dtype=torch.float64)
+    logp_ref = logp + 0.3 * torch.randn(4, 3, 12, generator=g, dtype=torch.float64)
+    adv = torch.randn(4, 3, 12, generator=g, dtype=torch.float64)
+    loss, clip_frac, approx_kl = ppo.policy_loss(logp, logp_ref, adv, 0.2)
+    assert loss.item() == pytest.approx(_loop_policy_loss(logp, logp_ref, adv, 0.2))
+    ratio = (logp - logp_ref).exp()
+    assert clip_frac.item() == pytest.approx(((ratio - 1).abs() > 0.2).double().mean().item())
+    assert approx_kl.item() >= 0
+
+
+def test_value_loss_matches_a_plain_loop():
+    g = torch.Generator().manual_seed(3)
+    v = torch.randn(50, generator=g, dtype=torch.float64)
+    v0 = torch.randn(50, generator=g, dtype=torch.float64)
+    target = torch.randn(50, generator=g, dtype=torch.float64)
+    expected = 0.0
+    for a, b, r in zip(v.tolist(), v0.tolist(), target.tolist(), strict=True):
+        clipped = min(max(a, b - 0.2), b + 0.2)
+        expected += max((a - r) ** 2, (clipped - r) ** 2)
+    assert ppo.value_loss(v, v0, target, 0.2).item() == pytest.approx(expected / 50)
+
+
+@pytest.mark.parametrize("form", ["paper", "logratio"])
+def test_kl_is_zero_when_policy_equals_reference(form):
+    logp = torch.randn(4, 3, 12)
+    assert torch.equal(ppo.kl_penalty(logp, logp.clone(), 0.5, form), torch.zeros_like(logp))
+    with pytest.raises(ValueError):
+        ppo.kl_penalty(logp, logp, 0.5, "other")
+
+
+def test_kl_forms_by_hand():
+    logp, logp_ref = torch.tensor([-1.0]), torch.tensor([-2.0])
+    assert ppo.kl_penalty(logp, logp_ref, 0.5, "logratio").item() == pytest.approx(0.5)
+    paper = 0.5 * math.exp(-2.0) * (-2.0 - -1.0)
+    assert ppo.kl_penalty(logp, logp_ref, 0.5, "paper").item() == pytest.approx(paper)
+
+
+def test_whiten_per_group():
+    x = torch.cat([torch.full((2, 1, 3), 5.0), torch.arange(6.0).view(2, 1, 3)], 1)  # [2, 2, 3]
+    out = ppo.whiten_per_group(x, torch.tensor([0, 1]), 2)
+    assert torch.allclose(out[:, 0], torch.zeros(2, 3))  # a constant group becomes zero
+    assert out[:, 1].mean().abs() < 1e-6 and (out[:, 1].std(unbiased=False) - 1).abs() < 1e-4
+
+
+def test_explained_variance():
+    t = torch.randn(100)
+    assert ppo.explained_variance(t, t).item() == pytest.approx(1.0)
+    assert ppo.explained_variance(torch.full_like(t, t.mean().item()), t).item() == pytest.approx(
+        0.0, abs=1e-6
+    )
