@@ -5,6 +5,7 @@ python benchmarks/update_readme.py
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from trajpref.results import accuracy_table, read_rows, update_readme
@@ -24,6 +25,32 @@ def main() -> None:
     )
     update_readme(ROOT / "README.md", "results", table + note)
     print(table)
+    speed = speed_table(ROOT / "benchmarks" / "results" / "meta")
+    update_readme(ROOT / "README.md", "speed", speed)
+    print(speed)
+
+
+def speed_table(meta_dir: Path) -> str:
+    """Training cost, parameters and sampler speed from meta/pretrained_*.json."""
+    lines = [
+        "| dataset | params D / G | train D / G (min) | samples/s D / G | leapfrog ms/scene "
+        "| full ms/scene | full / leapfrog | score K=20 ms/scene |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for path in sorted(meta_dir.glob("pretrained_*.json")):
+        m = json.loads(path.read_text())
+        score_path = meta_dir / f"score_{m['dataset']}.json"
+        score_ms = (json.loads(score_path.read_text())["ms_to_rank_k_samples_per_scene"]
+                    if score_path.is_file() else None)  # fmt: skip
+        p, t, r, ms = m["params"], m["stage_seconds"], m["samples_per_second"], m["ms_per_scene"]
+        lines.append(
+            f"| {m['dataset']} | {p['denoiser'] / 1e6:.2f} M / {p['generator'] / 1e6:.2f} M "
+            f"| {t['denoiser'] / 60:.1f} / {t['generator'] / 60:.1f} "
+            f"| {r['denoiser']:.0f} / {r['generator']:.0f} | {ms['leapfrog']:.1f} "
+            f"| {ms['full']:.1f} | {m['speedup_full_over_leapfrog']:.1f}x "
+            f"| {'–' if score_ms is None else f'{score_ms:.1f}'} |"
+        )
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

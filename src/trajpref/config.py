@@ -111,9 +111,14 @@ class OptimConfig:
     """Validate every this many epochs (and after the last)."""
     eval_max_scenes: int | None = None
     """Validate on at most this many scenes (None: the whole split)."""
+    steps_per_epoch: int | None = None
+    """Cap on optimiser steps per epoch (None: a full pass). Each epoch then sees a fresh
+    random subset of the shuffled batches; for stages too costly for full passes."""
 
     def __post_init__(self) -> None:
         _positive(self, "epochs", "lr", "grad_clip", "eval_every")
+        if self.steps_per_epoch is not None and self.steps_per_epoch < 1:
+            raise ConfigError("steps_per_epoch must be >= 1 or null")
         if self.weight_decay < 0 or self.warmup_steps < 0:
             raise ConfigError("OptimConfig.weight_decay and warmup_steps must be >= 0")
 

@@ -1,8 +1,9 @@
-"""``make demo``: the pipeline so far, end to end on the CPU.
+"""``make demo``: the whole pipeline on the CPU in a few minutes.
 
-Simulates the Robo scenario (robo-sim), evaluates the constant-velocity baseline on the
-official Robo test set (or on robo-sim's test split when the data is not on this machine),
-prints a table and writes a figure.
+Simulates the Robo scenario (robo-sim), trains the denoiser and the leapfrog generator on it,
+fine-tunes the generator with RLHF-ReS, and evaluates constant velocity, the pretrained model
+and the RLHF-ReS model on the official Robo test set (or robo-sim's test split when the data is
+not on this machine); prints a table and writes figures.
 """
 
 from __future__ import annotations
@@ -16,56 +17,75 @@ import torch
 
 from trajpref.errors import TrajprefError
 
+DEFAULT_CONFIG = Path(__file__).resolve().parent / "resources" / "demo.yaml"
+"""The embedded demo config: a small model and short schedules (shipped with the package)."""
 
-def run(out: Path, data_root: str | None, samples: int, seed: int) -> None:
+
+def run(out: Path, data_root: str | None, samples: int, seed: int, config: Path,
+        overrides: list[str]) -> None:  # fmt: skip
+    from trajpref.cli import finetune_config
+    from trajpref.config import load_config
     from trajpref.data import load_dataset
     from trajpref.models.baseline import ConstantVelocity
+    from trajpref.score import TrajectoryScorer
+    from trajpref.train import checkpoint as ckpt
     from trajpref.train.evaluate import evaluate
+    from trajpref.train.run import finetune, train_stage
     from trajpref.types import collate
-    from trajpref.viz.plot import plot_scene
+    from trajpref.viz.plot import plot_scene, plot_scene_scored
 
-    start = time.perf_counter()
+    t0 = time.perf_counter()
     train = load_dataset("robo-sim", "train")
-    print(
-        f"[1/3] simulated robo-sim train: {len(train)} episodes, {train.num_agents} agents "
-        f"in {time.perf_counter() - start:.1f} s"
-    )
+    print(f"[1/5] simulated robo-sim: {len(train)} episodes, {train.num_agents} agents "
+          f"in {time.perf_counter() - t0:.1f} s")  # fmt: skip
     try:
         test = load_dataset("robo", "test", data_root)
-        where = "official Robo test set"
+        where, val = "official Robo test set", "robo"
     except TrajprefError as exc:
-        print(f"      ({exc}; using robo-sim's test split instead)")
+        print(f"      ({exc}; using robo-sim's splits instead)")
         test = load_dataset("robo-sim", "test")
-        where = "robo-sim test split"
+        where, val = "robo-sim test split", "robo-sim"
+    cfg = load_config(config, [f"data.val_dataset={val}", f"seed={seed}", *overrides])
 
-    rows = []
-    for k in (1, samples):
-        res = evaluate(ConstantVelocity(), test, num_samples=k, seed=seed)
-        rows.append((f"constant velocity (K={k})", res))
-    print(
-        f"[2/3] evaluated on the {where} ({rows[0][1]['agents']} agents, "
-        f"{rows[0][1]['scenes']} scenes), metres:"
-    )
-    print(f"  {'method':<28} {'minADE':>8} {'minFDE':>8} {'jADE':>8} {'jFDE':>8}")
-    for name, r in rows:
-        print(
-            f"  {name:<28} {r['min_ade']:8.3f} {r['min_fde']:8.3f} "
-            f"{r['joint_min_ade']:8.3f} {r['joint_min_fde']:8.3f}"
-        )
+    run_dir = out / "run"
+    t1 = time.perf_counter()
+    train_stage("diffusion", cfg, run_dir, data_root, "auto")
+    train_stage("generator", cfg, run_dir, data_root, "auto")
+    print(f"[2/5] trained the denoiser and the generator in {time.perf_counter() - t1:.0f} s")
+    t2 = time.perf_counter()
+    ft_cfg = finetune_config(str(run_dir / "generator.pt"), "rlhf-res", None, str(config),
+                             [f"data.val_dataset={val}", *overrides], seed)  # fmt: skip
+    finetune(ft_cfg, run_dir / "generator.pt", run_dir / "rlhf-res", data_root, "auto")
+    print(f"[3/5] fine-tuned with RLHF-ReS in {time.perf_counter() - t2:.0f} s")
+
+    scorer = TrajectoryScorer.from_checkpoint(run_dir / "denoiser.pt")
+    models = {
+        f"constant velocity (K={samples})": ConstantVelocity(),
+        "pretrained (leapfrog)": ckpt.load_predictor(run_dir / "generator.pt"),
+        "RLHF-ReS": ckpt.load_predictor(run_dir / "rlhf-res" / "finetune.pt"),
+    }
+    print(f"[4/5] {where} ({test.num_agents} agents, {len(test)} scenes), metres, K={samples}:")
+    print(f"  {'method':<26} {'minADE':>7} {'minFDE':>7} {'jADE':>7} {'jFDE':>7} "
+          f"{'maxATS':>7} {'maxFTS':>7}")  # fmt: skip
+    for name, model in models.items():
+        r = evaluate(model, test, samples, seed, scorer=scorer, progress=False)
+        print(f"  {name:<26} {r['min_ade']:7.3f} {r['min_fde']:7.3f} {r['joint_min_ade']:7.3f} "
+              f"{r['joint_min_fde']:7.3f} {r['max_ats']:7.3f} {r['max_fts']:7.3f}")  # fmt: skip
 
     scene = test[0]
-    gen = torch.Generator()
-    gen.manual_seed(seed)
-    pred = ConstantVelocity().predict(collate([scene]), samples, gen).numpy()  # [K, P, T_f, 2]
-    fig = plot_scene(
-        scene.history,
-        scene.future,
-        pred,
-        out / "robo_scene0_cv.png",
-        "m",
-        f"{where}, scene 0, constant velocity K={samples}",
-    )
-    print(f"[3/3] wrote {fig}")
+    batch = collate([scene])
+    gen = torch.Generator().manual_seed(seed)
+    pred = models["RLHF-ReS"].predict(batch, samples, gen)  # [K, P, T_f, 2]
+    res = scorer.score(batch, pred)
+    agent_ats = (1 - res.d_pred.sum(-1) / res.d_gt.sum(-1)).numpy()  # [K, P]
+    figs = [
+        plot_scene(scene.history, scene.future, pred.numpy(), out / "robo_scene0_rlhf_res.png",
+                   "m", f"{where}, scene 0, RLHF-ReS, K={samples}"),
+        plot_scene_scored(scene.history, scene.future, pred.numpy(), agent_ats,
+                          out / "robo_scene0_scored.png", "m", f"{where}, scene 0"),
+    ]  # fmt: skip
+    total = time.perf_counter() - t0
+    print(f"[5/5] wrote {', '.join(str(f) for f in figs)} (total {total:.0f} s)")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -74,9 +94,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--data-root", default=None, help="data folder (default $TRAJPREF_DATA)")
     parser.add_argument("--samples", type=int, default=20)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--config", default=str(DEFAULT_CONFIG), help="pipeline config (YAML)")
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a config value (repeatable)",
+    )
     args = parser.parse_args(argv)
     try:
-        run(Path(args.out), args.data_root, args.samples, args.seed)
+        run(Path(args.out), args.data_root, args.samples, args.seed, Path(args.config),
+            args.overrides)  # fmt: skip
     except TrajprefError as exc:
         print(f"trajpref demo: error: {exc}", file=sys.stderr)
         return 2

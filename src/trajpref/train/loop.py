@@ -8,6 +8,7 @@ augmentation, optimisation, DDP, progress bars, metric logs, best checkpoint, re
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import time
@@ -109,6 +110,8 @@ def fit(
     loader = SceneLoader(train, max_agents=data_cfg.max_agents, shuffle=True, seed=seed,
                          rank=dist_info.rank, world_size=dist_info.world_size)  # fmt: skip
     steps_per_epoch = len(loader)
+    if optim_cfg.steps_per_epoch is not None:
+        steps_per_epoch = min(steps_per_epoch, optim_cfg.steps_per_epoch)
     total = steps_per_epoch * optim_cfg.epochs
     params = [p for p in stage.trainable.parameters() if p.requires_grad]
     optimizer = torch.optim.AdamW(params, lr=optim_cfg.lr, weight_decay=optim_cfg.weight_decay)
@@ -144,8 +147,9 @@ def fit(
         stage.objective.train()
         sums: dict[str, float] = {}
         agents = 0
-        bar = tqdm(loader, desc=f"{stage.name} epoch {epoch + 1}/{optim_cfg.epochs}",
-                   unit="batch", disable=not (progress and main), leave=False)  # fmt: skip
+        bar = tqdm(itertools.islice(loader, steps_per_epoch), total=steps_per_epoch,
+                   desc=f"{stage.name} epoch {epoch + 1}/{optim_cfg.epochs}", unit="batch",
+                   disable=not (progress and main), leave=False)  # fmt: skip
         for batch in bar:
             batch = augment(batch, aug_gen, rotate=data_cfg.rotate, flip=data_cfg.flip,
                             scale_range=scale_range if use_scale else None).to(device)  # fmt: skip

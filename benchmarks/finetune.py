@@ -1,0 +1,86 @@
+"""RLHF / RLHF-ReS fine-tuning from a dataset's published generator, evaluated on the test
+split (chosen on validation), one row per method and seed.
+
+    python benchmarks/finetune.py --dataset zara1 --methods rlhf rlhf-res --seeds 0 1 2 \
+        --data-root ../shared/data [--preset paper] [--set finetune.epochs=3 ...]
+
+Runs go to runs/<dataset>-<method>-s<seed>[-<tag>] (resumed when their _last.pt exists).
+Writes benchmarks/results/finetune_<dataset>[_<tag>].json and, for seed 0 of the untagged
+run, models/<dataset>/<method>.pt.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+from pathlib import Path
+
+from trajpref.cli import finetune_config
+from trajpref.data import load_dataset
+from trajpref.results import make_row, write_rows
+from trajpref.score.scorer import TrajectoryScorer
+from trajpref.train import checkpoint as ckpt
+from trajpref.train.evaluate import evaluate
+from trajpref.train.run import finetune
+
+ROOT = Path(__file__).resolve().parent.parent
+TEST_DATASET = {"robo": "robo"}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--dataset", required=True)
+    parser.add_argument("--methods", nargs="+", default=["rlhf", "rlhf-res"])
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0])
+    parser.add_argument("--preset", default=None)
+    parser.add_argument("--set", dest="overrides", action="append", default=[])
+    parser.add_argument("--tag", default="", help="names an ablation: its own runs and rows")
+    parser.add_argument("--data-root", default=None)
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--samples", type=int, default=20)
+    args = parser.parse_args()
+
+    start = ROOT / "models" / args.dataset / "generator.pt"
+    test = load_dataset(TEST_DATASET.get(args.dataset, args.dataset), "test", args.data_root)
+    scorer = TrajectoryScorer.from_checkpoint(start)
+    suffix = f"_{args.tag}" if args.tag else ""
+    out = ROOT / "benchmarks" / "results" / f"finetune_{args.dataset}{suffix}.json"
+    # keep rows of other methods/seeds from earlier invocations
+    rows = json.loads(out.read_text()) if out.is_file() else []
+    for method in args.methods:
+        for seed in args.seeds:
+            run = (
+                ROOT
+                / "runs"
+                / f"{args.dataset}-{method}-s{seed}{'-' + args.tag if args.tag else ''}"
+            )
+            cfg = finetune_config(str(start), method, args.preset, None, args.overrides, seed)
+            last = run / "finetune_last.pt"
+            summary = finetune(cfg, start, run, args.data_root, args.device,
+                               str(last) if last.is_file() else None, progress=True)  # fmt: skip
+            model = ckpt.load_predictor(run / "finetune.pt", "leapfrog", args.device)
+            res = evaluate(model, test, args.samples, 0, args.device, scorer=scorer,
+                           progress=False)  # fmt: skip
+            if seed == 0 and not args.tag:
+                shutil.copyfile(
+                    run / "finetune.pt", ROOT / "models" / args.dataset / f"{method}.pt"
+                )
+            method_name = method if not args.tag else f"{method}-{args.tag}"
+            rows = [r for r in rows if (r["method"], r["seed"]) != (method_name, seed)]
+            rows.append(make_row(
+                dataset=args.dataset, split="test", method=method_name, seed=seed,
+                samples=args.samples, **{k: res[k] for k in (
+                    "min_ade", "min_fde", "joint_min_ade", "joint_min_fde", "max_ats",
+                    "max_fts", "top1_recall_ats", "top5_recall_ats")},
+                train_seconds=round(summary["train_seconds"], 1),
+                checkpoint=str((run / "finetune.pt").relative_to(ROOT)),
+            ))  # fmt: skip
+            print(f"{args.dataset} {method_name} seed {seed}: minADE {res['min_ade']:.3f} "
+                  f"minFDE {res['min_fde']:.3f} maxATS {res['max_ats']:.3f} maxFTS "
+                  f"{res['max_fts']:.3f} ({summary['train_seconds']:.0f} s)")  # fmt: skip
+            write_rows(out, rows)
+
+
+if __name__ == "__main__":
+    main()
