@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 from pathlib import Path
 
 from trajpref.cli import finetune_config
@@ -63,9 +62,7 @@ def main() -> None:
             res = evaluate(model, test, args.samples, 0, args.device, scorer=scorer,
                            progress=False)  # fmt: skip
             if seed == 0 and not args.tag:
-                shutil.copyfile(
-                    run / "finetune.pt", ROOT / "models" / args.dataset / f"{method}.pt"
-                )
+                ckpt.publish(run / "finetune.pt", ROOT / "models" / args.dataset / f"{method}.pt")
             method_name = method if not args.tag else f"{method}-{args.tag}"
             rows = [r for r in rows if (r["method"], r["seed"]) != (method_name, seed)]
             rows.append(make_row(

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import time
 from pathlib import Path
 
@@ -79,8 +78,8 @@ def main() -> None:
         _train(args, run_dir)
     models = ROOT / "models" / args.dataset
     models.mkdir(parents=True, exist_ok=True)
-    for name in ("denoiser", "generator"):
-        shutil.copyfile(run_dir / f"{name}.pt", models / f"{name}.pt")
+    # the generator names models/<dataset>/denoiser.pt by path and hash instead of embedding it
+    ckpt.publish(run_dir / "generator.pt", models / "generator.pt")
     gen_ckpt = ckpt.load(models / "generator.pt")
     den_ckpt = gen_ckpt["denoiser"]
     train_seconds = den_ckpt["meta"]["train_seconds"] + gen_ckpt["meta"]["train_seconds"]

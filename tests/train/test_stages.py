@@ -155,3 +155,31 @@ def test_trained_generator_beats_its_untrained_self(cfg, folder, trained):
     best = ckpt.load(trained / "generator.pt")["meta"]["val"]
     assert best["score"] < fresh["score"]
     assert evaluate(ckpt.load_predictor(trained / "generator.pt"), val, 4, progress=False)
+
+
+def test_published_generator_names_its_denoiser_by_hash(tmp_path, trained, folder):
+    pub = tmp_path / "models"
+    ckpt.publish(trained / "generator.pt", pub / "generator.pt")
+    assert (pub / "denoiser.pt").is_file()
+    raw = torch.load(pub / "generator.pt", weights_only=True)
+    assert "denoiser" not in raw and raw["denoiser_ref"]["path"] == "denoiser.pt"
+    assert (pub / "generator.pt").stat().st_size < (trained / "generator.pt").stat().st_size
+    batch = collate(load_dataset(str(folder), "test").scenes)
+    a = ckpt.load_predictor(trained / "generator.pt").predict(batch, 4, torch.Generator())
+    b = ckpt.load_predictor(pub / "generator.pt").predict(batch, 4, torch.Generator())
+    assert torch.equal(a, b)
+    # a different denoiser beside it is refused
+    other = ckpt.load(trained / "denoiser.pt")
+    other["hash"] = "0" * 16
+    ckpt.save(pub / "denoiser.pt", other)
+    with pytest.raises(TrajprefError, match="does not match the recorded hash"):
+        ckpt.load(pub / "generator.pt")
+
+
+def test_steps_per_epoch_caps_each_epoch(tmp_path, cfg):
+    import dataclasses
+
+    capped = dataclasses.replace(cfg, denoiser=dataclasses.replace(cfg.denoiser,
+                                                                   steps_per_epoch=1))  # fmt: skip
+    summary = train_stage("diffusion", capped, tmp_path, device="cpu", progress=False)
+    assert summary["steps"] == capped.denoiser.epochs

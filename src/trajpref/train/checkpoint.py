@@ -28,7 +28,42 @@ def save(path: str | Path, payload: dict[str, Any]) -> None:
 
 
 def load(path: str | Path) -> dict[str, Any]:
-    """Load a checkpoint file without executing code; check its format."""
+    """Load a checkpoint file without executing code; check its format.
+
+    A generator checkpoint that names its denoiser (``denoiser_ref``: a path relative to the
+    checkpoint's folder and a content hash) gets that denoiser loaded in, and a mismatch is
+    refused."""
+    payload = _load_file(path)
+    ref = payload.get("denoiser_ref")
+    if payload["kind"] == "generator" and "denoiser" not in payload and ref is not None:
+        den_path = Path(path).parent / ref["path"]
+        den = _load_file(den_path)
+        if den.get("kind") != "denoiser" or den.get("hash") != ref["hash"]:
+            raise TrajprefError(
+                f"{path}: its denoiser {den_path} does not match the recorded hash "
+                f"{ref['hash']} (found {den.get('hash')})"
+            )
+        payload["denoiser"] = den
+    return payload
+
+
+def publish(src: str | Path, dst: str | Path, denoiser_name: str = "denoiser.pt") -> None:
+    """Copy a generator checkpoint to ``dst`` with its embedded denoiser written once as
+    ``dst.parent / denoiser_name`` and referenced by path and hash (smaller files)."""
+    payload = load(src)
+    dst = Path(dst)
+    if payload["kind"] != "generator":
+        save(dst, payload)
+        return
+    den = payload.pop("denoiser")
+    den_path = dst.parent / denoiser_name
+    if not den_path.is_file() or _load_file(den_path).get("hash") != den["hash"]:
+        save(den_path, den)
+    payload["denoiser_ref"] = {"path": denoiser_name, "hash": den["hash"]}
+    save(dst, payload)
+
+
+def _load_file(path: str | Path) -> dict[str, Any]:
     path = Path(path)
     if not path.is_file():
         raise TrajprefError(f"{path}: no such checkpoint")
