@@ -122,3 +122,12 @@ def test_explained_variance():
     assert ppo.explained_variance(torch.full_like(t, t.mean().item()), t).item() == pytest.approx(
         0.0, abs=1e-6
     )
+
+
+def test_policy_loss_stays_finite_for_huge_log_ratios():
+    logp = torch.tensor([500.0, -500.0, 0.0])
+    loss, clip_frac, approx_kl = ppo.policy_loss(
+        logp, torch.zeros(3), torch.tensor([1.0, -1.0, 0.0]), 0.2
+    )
+    assert torch.isfinite(loss) and torch.isfinite(approx_kl)
+    assert clip_frac.item() == pytest.approx(2 / 3)

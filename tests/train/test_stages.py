@@ -183,3 +183,16 @@ def test_steps_per_epoch_caps_each_epoch(tmp_path, cfg):
                                                                    steps_per_epoch=1))  # fmt: skip
     summary = train_stage("diffusion", capped, tmp_path, device="cpu", progress=False)
     assert summary["steps"] == capped.denoiser.epochs
+
+
+def test_nonfinite_losses_are_skipped_then_refused(tmp_path, cfg, folder):
+    from trajpref.train.loop import fit
+
+    train = load_dataset(str(folder), "train")
+    stage, _ = build_denoiser_stage(cfg, train, train, torch.device("cpu"))
+    before = _params(stage.trainable)
+    real_forward = stage.objective.forward
+    stage.objective.forward = lambda batch, gen: (real_forward(batch, gen)[0] * float("nan"), {})
+    with pytest.raises(TrajprefError, match="non-finite losses"):
+        fit(stage, train, cfg.data, cfg.denoiser, tmp_path, torch.device("cpu"), progress=False)
+    assert _changed(before, stage.trainable) == []  # no NaN update reached the weights

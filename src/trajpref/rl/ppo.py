@@ -11,6 +11,8 @@ import math
 import torch
 
 LOG_2PI = math.log(2 * math.pi)
+LOG_RATIO_BOUND = 20.0
+"""Log-ratios are clamped to +-this before exponentiation (numerical guard only)."""
 
 
 def gaussian_log_prob(
@@ -68,7 +70,9 @@ def policy_loss(logp: torch.Tensor, logp_ref: torch.Tensor, adv: torch.Tensor, c
     Returns ``(loss, clip_fraction, approx_kl)``; approx_kl is E[(rho - 1) - log rho]
     (Schulman's k3 estimator of KL(p_0 || p_theta) under the sampled actions).
     """
-    log_ratio = logp - logp_ref
+    # bounded before exp: a peaked Gaussian can give log-ratios of hundreds, whose exp
+    # overflows to inf and then to NaN (inf * 0); beyond +-20 the ratio is clipped anyway
+    log_ratio = (logp - logp_ref).clamp(-LOG_RATIO_BOUND, LOG_RATIO_BOUND)
     ratio = log_ratio.exp()
     unclipped = ratio * adv
     clipped = ratio.clamp(1 - clip, 1 + clip) * adv

@@ -140,6 +140,10 @@ class RLObjective(nn.Module):
             "value_loss": float(v_loss.detach()),
             "clip_fraction": float(clip_frac),
             "approx_kl": float(approx_kl),
+            # k3 estimate of KL(G_theta || G_0) from the policy's samples (any ratio denominator)
+            "kl_to_reference": float(
+                ((logp_ref - logp.detach()).exp() - 1 - (logp_ref - logp.detach())).mean()
+            ),
             "explained_variance": float(ppo.explained_variance(values.detach(), v_target)),
             "reg_loss": float(reg_loss.detach()),
             **{f"reg_{k}": v for k, v in reg_logs.items()},

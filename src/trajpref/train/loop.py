@@ -24,6 +24,7 @@ from tqdm.auto import tqdm
 from trajpref.config import DataConfig, OptimConfig
 from trajpref.data.loader import SceneLoader
 from trajpref.data.transforms import augment
+from trajpref.errors import TrajprefError
 from trajpref.train import checkpoint as ckpt
 from trajpref.train.distributed import DistInfo
 from trajpref.types import TrajectoryDataset
@@ -139,6 +140,7 @@ def fit(
         objective = DDP(objective, device_ids=[device] if device.type == "cuda" else None)
 
     log = MetricLog(out_dir, stage.name, main)
+    nonfinite = 0
     scale_range = (data_cfg.scale_min, data_cfg.scale_max)
     use_scale = scale_range != (1.0, 1.0)
     for epoch in range(start_epoch, optim_cfg.epochs):
@@ -154,6 +156,19 @@ def fit(
             batch = augment(batch, aug_gen, rotate=data_cfg.rotate, flip=data_cfg.flip,
                             scale_range=scale_range if use_scale else None).to(device)  # fmt: skip
             loss, logs = objective(batch, noise_gen)
+            finite = torch.isfinite(loss.detach()).to(torch.int32)
+            if dist_info.enabled:  # every rank skips together, or DDP's all-reduce would hang
+                torch.distributed.all_reduce(finite, op=torch.distributed.ReduceOp.MIN)
+            if not bool(finite):
+                # skip the update rather than poison the weights; give up if it persists
+                nonfinite += 1
+                tqdm.write(f"[{stage.name}] non-finite loss at step {step + 1}; update skipped")
+                if nonfinite > max(3, steps_per_epoch // 10):
+                    raise TrajprefError(
+                        f"{stage.name}: {nonfinite} non-finite losses; lower the learning "
+                        "rate or clip the reward"
+                    )
+                continue
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             grad_norm = torch.nn.utils.clip_grad_norm_(params, optim_cfg.grad_clip)
