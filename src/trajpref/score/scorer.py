@@ -142,12 +142,17 @@ class TrajectoryScorer:
         )
 
     @torch.no_grad()
+    def scene_residual(self, batch: Batch, pred: torch.Tensor, final: bool = False):
+        """Each sample's residual summed over a scene's agents and all steps (or the final
+        step only): [K, B]. Lower is more human-like; no ground truth is read."""
+        d = self.residual(batch, pred)  # [K, N, T_f]
+        return scene_sum(d[..., -1] if final else d.sum(-1), batch.scene, batch.num_scenes)
+
+    @torch.no_grad()
     def rank(self, batch: Batch, pred: torch.Tensor, final: bool = False) -> torch.Tensor:
         """Ground-truth-free ranking: [K, B] sample indices per scene, best first, by the
         scene's summed residual over all steps (ATS order) or the final step (FTS order)."""
-        d = self.residual(batch, pred)  # [K, N, T_f]
-        total = scene_sum(d[..., -1] if final else d.sum(-1), batch.scene, batch.num_scenes)
-        return total.argsort(0)  # [K, B]
+        return self.scene_residual(batch, pred, final).argsort(0)  # [K, B]
 
 
 def rank_samples(

@@ -9,7 +9,7 @@ import torch
 from tqdm.auto import tqdm
 
 from trajpref.data.loader import SceneLoader
-from trajpref.metrics import MetricAccumulator, scene_sum
+from trajpref.metrics import MetricAccumulator
 from trajpref.score.scorer import ScoreAccumulator, TrajectoryScorer
 from trajpref.types import Batch, TrajectoryDataset
 
@@ -91,8 +91,7 @@ def predict_dataset(
         batch = batch.to(device)
         pred = model.predict(batch, num_samples, gen)  # [K, N, T_f, 2]
         if scorer is not None:
-            d = scorer.residual(batch, pred).sum(-1)  # [K, N]
-            total = scene_sum(d, batch.scene, batch.num_scenes)  # [K, B]
+            total = scorer.scene_residual(batch, pred)  # [K, B]
             order = total.argsort(0)  # [K, B] best first
             pred = pred.gather(0, order[:, batch.scene, None, None].expand_as(pred))
             parts.setdefault("order", []).append(order.T.cpu().numpy())  # [B, K]
