@@ -20,20 +20,18 @@ from trajpref.train.stages import build_denoiser_stage, build_generator_stage
 STAGES = ("diffusion", "generator")
 
 
-def train_stage(
-    stage: str,
+def _run(
     cfg: ExperimentConfig,
     out_dir: str | Path,
-    data_root: str | None = None,
-    device: str = "auto",
-    resume: str | None = None,
-    denoiser: str | None = None,
-    progress: bool = True,
-    max_steps: int | None = None,
+    data_root: str | None,
+    device: str,
+    resume: str | None,
+    progress: bool,
+    max_steps: int | None,
+    build,
 ) -> dict[str, Any]:
-    """Train one stage; returns the loop's summary (best validation metrics, seconds)."""
-    if stage not in STAGES:
-        raise TrajprefError(f"unknown stage {stage!r}; choose {' or '.join(STAGES)}")
+    """What every stage shares: devices and DDP, the datasets, the run folder's config, the
+    loop. ``build(train, val, device) -> (Stage, OptimConfig)`` supplies the stage."""
     dev = resolve_device(device)
     info, dev = init_from_env(dev)
     torch.set_num_threads(max(1, torch.get_num_threads() // max(1, info.world_size)))
@@ -41,16 +39,7 @@ def train_stage(
     try:
         train = load_dataset(cfg.data.dataset, "train", data_root)
         val = load_dataset(cfg.data.val_dataset or cfg.data.dataset, "val", data_root)
-        if stage == "diffusion":
-            built, _ = build_denoiser_stage(cfg, train, val, dev)
-            optim = cfg.denoiser
-        else:
-            path = Path(denoiser) if denoiser else out_dir / "denoiser.pt"
-            payload = ckpt.load(path)
-            if payload["kind"] != "denoiser":
-                raise TrajprefError(f"{path}: expected a denoiser checkpoint")
-            built = build_generator_stage(cfg, payload, val, dev)
-            optim = cfg.generator
+        built, optim = build(train, val, dev)
         if info.is_main:
             out_dir.mkdir(parents=True, exist_ok=True)
             save_config(cfg, out_dir / "config.yaml")
@@ -63,6 +52,34 @@ def train_stage(
         return summary
     finally:
         cleanup(info)
+
+
+def train_stage(
+    stage: str,
+    cfg: ExperimentConfig,
+    out_dir: str | Path,
+    data_root: str | None = None,
+    device: str = "auto",
+    resume: str | None = None,
+    denoiser: str | None = None,
+    progress: bool = True,
+    max_steps: int | None = None,
+) -> dict[str, Any]:
+    """Train one pretraining stage; returns the loop's summary (best validation metrics,
+    seconds)."""
+    if stage not in STAGES:
+        raise TrajprefError(f"unknown stage {stage!r}; choose {' or '.join(STAGES)}")
+
+    def build(train, val, dev):
+        if stage == "diffusion":
+            return build_denoiser_stage(cfg, train, val, dev)[0], cfg.denoiser
+        path = Path(denoiser) if denoiser else Path(out_dir) / "denoiser.pt"
+        payload = ckpt.load(path)
+        if payload["kind"] != "denoiser":
+            raise TrajprefError(f"{path}: expected a denoiser checkpoint")
+        return build_generator_stage(cfg, payload, val, dev), cfg.generator
+
+    return _run(cfg, out_dir, data_root, device, resume, progress, max_steps, build)
 
 
 def finetune(
@@ -78,25 +95,11 @@ def finetune(
     """RLHF / RLHF-ReS fine-tuning from the generator checkpoint ``start`` (DDP-aware)."""
     from trajpref.rl.stage import build_finetune_stage
 
-    dev = resolve_device(device)
-    info, dev = init_from_env(dev)
-    torch.set_num_threads(max(1, torch.get_num_threads() // max(1, info.world_size)))
-    out_dir = Path(out_dir)
-    try:
-        payload = ckpt.load(start)
-        if payload["kind"] != "generator":
-            raise TrajprefError(f"{start}: fine-tuning starts from a generator checkpoint")
-        train = load_dataset(cfg.data.dataset, "train", data_root)
-        val = load_dataset(cfg.data.val_dataset or cfg.data.dataset, "val", data_root)
-        built = build_finetune_stage(cfg, payload, val, dev)
-        if info.is_main:
-            out_dir.mkdir(parents=True, exist_ok=True)
-            save_config(cfg, out_dir / "config.yaml")
-        barrier(info)
-        start_time = time.perf_counter()
-        summary = fit(built, train, cfg.data, cfg.finetune, out_dir, dev, cfg.seed, resume, info,
-                      progress, max_steps)  # fmt: skip
-        summary["wall_seconds"] = time.perf_counter() - start_time
-        return summary
-    finally:
-        cleanup(info)
+    payload = ckpt.load(start)
+    if payload["kind"] != "generator":
+        raise TrajprefError(f"{start}: fine-tuning starts from a generator checkpoint")
+
+    def build(train, val, dev):
+        return build_finetune_stage(cfg, payload, val, dev), cfg.finetune
+
+    return _run(cfg, out_dir, data_root, device, resume, progress, max_steps, build)
