@@ -24,7 +24,6 @@ from trajpref.train.evaluate import evaluate
 from trajpref.train.run import finetune
 
 ROOT = Path(__file__).resolve().parent.parent
-TEST_DATASET = {"robo": "robo"}
 
 
 def main() -> None:
@@ -41,7 +40,7 @@ def main() -> None:
     args = parser.parse_args()
 
     start = ROOT / "models" / args.dataset / "generator.pt"
-    test = load_dataset(TEST_DATASET.get(args.dataset, args.dataset), "test", args.data_root)
+    test = load_dataset(args.dataset, "test", args.data_root)
     scorer = TrajectoryScorer.from_checkpoint(start)
     suffix = f"_{args.tag}" if args.tag else ""
     out = ROOT / "benchmarks" / "results" / f"finetune_{args.dataset}{suffix}.json"

@@ -27,7 +27,6 @@ from trajpref.train.evaluate import evaluate
 from trajpref.types import collate
 
 ROOT = Path(__file__).resolve().parent.parent
-TEST_DATASET = {"robo": "robo"}  # config name -> test dataset (robo trains on robo-sim)
 
 
 def _train(args, run_dir: Path) -> None:
@@ -89,7 +88,7 @@ def main() -> None:
     rates = {s: (sum(r["samples_per_second"] for r in log) / len(log) if log else None)
              for s, log in logs.items()}  # fmt: skip
 
-    test = load_dataset(TEST_DATASET.get(args.dataset, args.dataset), "test", args.data_root)
+    test = load_dataset(args.dataset, "test", args.data_root)
     leap = ckpt.load_predictor(models / "generator.pt", "leapfrog", args.device)
     full = ckpt.load_predictor(models / "generator.pt", "full", args.device)
     speed = time_samplers(leap, full, test, args.timing_scenes, args.samples)

@@ -31,7 +31,6 @@ from trajpref.train.evaluate import evaluate
 from trajpref.types import collate
 
 ROOT = Path(__file__).resolve().parent.parent
-TEST_DATASET = {"robo": "robo"}
 PAPER = {"top1_recall_ats": 0.219, "top5_recall_ats": 0.674, "top1_recall_fts": 0.184,
          "top5_recall_fts": 0.574}  # fmt: skip
 
@@ -103,7 +102,7 @@ def main() -> None:
 
     models = ROOT / "models" / args.dataset
     gen_path = models / "generator.pt"
-    test = load_dataset(TEST_DATASET.get(args.dataset, args.dataset), "test", args.data_root)
+    test = load_dataset(args.dataset, "test", args.data_root)
     scorer = TrajectoryScorer.from_checkpoint(gen_path)
     methods = {
         "cv": ConstantVelocity(),

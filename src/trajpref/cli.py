@@ -52,6 +52,23 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
 
 
+def _add_run_args(p: argparse.ArgumentParser, example: str, last: str) -> None:
+    """Options every training stage shares (train and finetune)."""
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help=f"override a config value, e.g. --set {example} (repeatable)",
+    )
+    p.add_argument("--resume", default=None, help=f"{last} to continue from")
+    p.add_argument("--data-root", default=None, help="data folder (default: $TRAJPREF_DATA)")
+    p.add_argument("--seed", type=int, default=None, help="override the config's seed")
+    p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
+    p.add_argument("--no-progress", action="store_true", help="hide progress bars")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="trajpref",
@@ -112,14 +129,6 @@ def build_parser() -> argparse.ArgumentParser:
     tr = sub.add_parser("train", help="train the denoiser (diffusion) or the generator")
     tr.add_argument("stage", choices=["diffusion", "generator"])
     tr.add_argument("--config", default=None, help="YAML config (default: built-in defaults)")
-    tr.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a config value, e.g. --set denoiser.epochs=5 (repeatable)",
-    )
     tr.add_argument("--out", required=True, help="run folder: checkpoints, config, metrics")
     tr.add_argument("--dataset", default=None, help="shortcut for --set data.dataset=NAME")
     tr.add_argument(
@@ -127,11 +136,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="generator stage: the denoiser checkpoint (default OUT/denoiser.pt)",
     )
-    tr.add_argument("--resume", default=None, help="a <stage>_last.pt to continue from")
-    tr.add_argument("--data-root", default=None, help="data folder (default: $TRAJPREF_DATA)")
-    tr.add_argument("--seed", type=int, default=None, help="override the config's seed")
-    tr.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
-    tr.add_argument("--no-progress", action="store_true", help="hide progress bars")
+    _add_run_args(tr, "denoiser.epochs=5", "a <stage>_last.pt")
     tr.set_defaults(func=cmd_train)
 
     ft = sub.add_parser("finetune", help="RLHF / RLHF-ReS fine-tuning of a pretrained generator")
@@ -142,27 +147,16 @@ def build_parser() -> argparse.ArgumentParser:
         "--preset",
         default=None,
         choices=["paper"],
-        help="'paper': Eq. 13-20 as written, with the paper's loss weights "
-        "(default: the tuned defaults of FinetuneConfig)",
+        help="'paper': Eq. 13-20 as written, with the paper's loss weights for the method "
+        "(default: FinetuneConfig's values, which follow the same readings but keep "
+        "RLHF-ReS's weights 0.3 / 1.5 for both methods)",
     )
     ft.add_argument(
         "--config",
         default=None,
         help="YAML whose 'finetune' section applies (data and model come from the checkpoint)",
     )
-    ft.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a config value, e.g. --set finetune.lr=5e-5 (repeatable)",
-    )
-    ft.add_argument("--resume", default=None, help="a finetune_last.pt to continue from")
-    ft.add_argument("--data-root", default=None, help="data folder (default: $TRAJPREF_DATA)")
-    ft.add_argument("--seed", type=int, default=None, help="override the config's seed")
-    ft.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
-    ft.add_argument("--no-progress", action="store_true", help="hide progress bars")
+    _add_run_args(ft, "finetune.lr=5e-5", "a finetune_last.pt")
     ft.set_defaults(func=cmd_finetune)
     return parser
 

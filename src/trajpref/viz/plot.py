@@ -59,12 +59,7 @@ def plot_scene(
         ax.set_title(title, fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8)
-    fig.tight_layout()
-    out = Path(out)
-    with atomic_path(out) as tmp:
-        fig.savefig(tmp, format="png")
-    plt.close(fig)
-    return out
+    return _save(fig, out)
 
 
 def plot_scene_scored(
@@ -115,6 +110,11 @@ def plot_scene_scored(
     axes[0].set_ylabel(f"y [{units}]")
     if title:
         fig.suptitle(title, fontsize=9)
+    return _save(fig, out)
+
+
+def _save(fig, out: str | Path) -> Path:
+    """Lay out, write as PNG through a temporary file, close."""
     fig.tight_layout()
     out = Path(out)
     with atomic_path(out) as tmp:
