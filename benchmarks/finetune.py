@@ -44,8 +44,6 @@ def main() -> None:
     scorer = TrajectoryScorer.from_checkpoint(start)
     suffix = f"_{args.tag}" if args.tag else ""
     out = ROOT / "benchmarks" / "results" / f"finetune_{args.dataset}{suffix}.json"
-    # keep rows of other methods/seeds from earlier invocations
-    rows = json.loads(out.read_text()) if out.is_file() else []
     for method in args.methods:
         for seed in args.seeds:
             run = (
@@ -63,6 +61,9 @@ def main() -> None:
             if seed == 0 and not args.tag:
                 ckpt.publish(run / "finetune.pt", ROOT / "models" / args.dataset / f"{method}.pt")
             method_name = method if not args.tag else f"{method}-{args.tag}"
+            # re-read: keeps rows of other methods/seeds, also those written meanwhile by a
+            # concurrent invocation for another method or seed
+            rows = json.loads(out.read_text()) if out.is_file() else []
             rows = [r for r in rows if (r["method"], r["seed"]) != (method_name, seed)]
             rows.append(make_row(
                 dataset=args.dataset, split="test", method=method_name, seed=seed,

@@ -365,8 +365,9 @@ def cmd_train(args) -> int:
 
 def finetune_config(start: str, method: str, preset: str | None, config: str | None,
                     overrides: list[str], seed: int | None):  # fmt: skip
-    """The fine-tuning config: the checkpoint's own config, the YAML's finetune section,
-    the preset, the method, then --set overrides."""
+    """The fine-tuning config: the checkpoint's own config with today's fine-tuning
+    defaults (the finetune section a pretraining run wrote out is not carried over), the
+    YAML's finetune section, the preset, the method, then --set overrides."""
     from trajpref.config import load_config
     from trajpref.rl.presets import preset_overrides
     from trajpref.train import checkpoint as ckpt
@@ -377,7 +378,8 @@ def finetune_config(start: str, method: str, preset: str | None, config: str | N
     extra = preset_overrides(preset, method) if preset else [f"finetune.method={method}"]
     if seed is not None:
         extra.append(f"seed={seed}")
-    return load_config(config, [*extra, *overrides], base=payload["config"],
+    base = {k: v for k, v in payload["config"].items() if k != "finetune"}
+    return load_config(config, [*extra, *overrides], base=base,
                        sections=("finetune",))  # fmt: skip
 
 

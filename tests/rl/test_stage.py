@@ -95,3 +95,20 @@ def test_tiny_finetune_raises_the_mean_reward(tiny_run, walks, tmp_path):
     assert after > before, (before, after)
     # the result loads like any model
     assert ckpt.load_predictor(tmp_path / "finetune.pt").generator is not None
+
+
+def test_finetune_config_takes_todays_defaults_not_the_checkpoints_section(tiny_run, tmp_path):
+    from trajpref.cli import finetune_config
+    from trajpref.config import FinetuneConfig
+
+    payload = ckpt.load(tiny_run / "generator.pt")
+    payload["config"]["finetune"] = {**payload["config"]["finetune"], "epochs": 99,
+                                     "kl_form": "paper"}  # fmt: skip
+    path = tmp_path / "old.pt"
+    torch.save(payload, path)
+    cfg = finetune_config(str(path), "rlhf", None, None, ["finetune.lr=0.01"], 3)
+    want = FinetuneConfig(method="rlhf", lr=0.01)
+    assert cfg.finetune == want and cfg.seed == 3
+    assert cfg.model == load_config(None, [], base=payload["config"]).model
+    paper = finetune_config(str(path), "rlhf-res", "paper", None, [], None).finetune
+    assert (paper.kl_form, paper.likelihood, paper.score_every) == ("paper", "mean", 3)

@@ -9,6 +9,8 @@ PRESETS: dict[str, dict[str, object]] = {
     "paper": {
         "kl_form": "paper",
         "ratio_against": "reference",
+        "likelihood": "mean",
+        "score_every": 3,
         "gae_lambda": 0.0,
         "value_target": "reward",
         "adv_norm": "none",
