@@ -224,8 +224,19 @@ class FinetuneConfig(OptimConfig):
     """Eq. 15's ratio p_theta / p_0 against the frozen ``reference`` (as printed; a trust
     region around G_0), or against the ``rollout`` policy (standard PPO: p_theta / p_old)."""
 
+    baseline: str = "critic"
+    """What the policy gradient's advantage subtracts from the reward: ``critic`` (Eq. 14,
+    R + gamma V' - V) or ``antithetic`` (``sample`` likelihood only): each sample is also
+    rolled out with -xi under the same denoising noise and A(+-xi) = +-(R(+xi) - R(-xi)) / 2,
+    which cancels the between-sample part of the reward's variance (measured in
+    docs/rlhf.md); the critic is still trained. Costs a second rollout and score per step."""
+
     def __post_init__(self) -> None:
         super().__post_init__()
+        if self.baseline not in ("critic", "antithetic"):
+            raise ConfigError("finetune.baseline must be 'critic' or 'antithetic'")
+        if self.baseline == "antithetic" and self.likelihood != "sample":
+            raise ConfigError("finetune.baseline=antithetic needs finetune.likelihood=sample")
         if self.method not in ("rlhf", "rlhf-res"):
             raise ConfigError("finetune.method must be 'rlhf' or 'rlhf-res'")
         if self.kl_form not in ("paper", "logratio"):

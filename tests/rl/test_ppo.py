@@ -131,3 +131,20 @@ def test_policy_loss_stays_finite_for_huge_log_ratios():
     )
     assert torch.isfinite(loss) and torch.isfinite(approx_kl)
     assert clip_frac.item() == pytest.approx(2 / 3)
+
+
+def test_antithetic_advantage_cancels_what_the_pair_shares():
+    torch.manual_seed(0)
+    shared = torch.randn(4, 3, 1) * 100  # [K, N, 1]: which sample it is, denoising noise
+    effect = torch.randn(4, 3, 5)  # [K, N, T]: what +xi changes
+    plus, minus = ppo.antithetic_advantage(shared + effect, shared - effect)
+    assert torch.allclose(plus, effect, atol=1e-4) and torch.equal(minus, -plus)
+    same = ppo.antithetic_advantage(shared.expand(4, 3, 5), shared.expand(4, 3, 5))[0]
+    assert torch.count_nonzero(same) == 0
+    # a plain loop
+    a, b = torch.randn(2, 3, 4), torch.randn(2, 3, 4)
+    plus = ppo.antithetic_advantage(a, b)[0]
+    for i in range(2):
+        for j in range(3):
+            for t in range(4):
+                assert plus[i, j, t] == (a[i, j, t] - b[i, j, t]) / 2

@@ -1,5 +1,6 @@
 """The fine-tuning stage on tiny synthetic data."""
 
+import pytest
 import torch
 
 from trajpref.config import load_config
@@ -76,7 +77,8 @@ def _mean_reward(stage, scenes) -> float:
     return logs["reward"]
 
 
-def test_tiny_finetune_raises_the_mean_reward(tiny_run, walks, tmp_path):
+@pytest.mark.parametrize("baseline", ["critic", "antithetic"])
+def test_tiny_finetune_raises_the_mean_reward(tiny_run, walks, tmp_path, baseline):
     start_path = tiny_run / "generator.pt"
     start = ckpt.load(start_path)
     train = load_dataset(str(walks), "train")
@@ -84,7 +86,7 @@ def test_tiny_finetune_raises_the_mean_reward(tiny_run, walks, tmp_path):
                "finetune.policy_weight=1", "finetune.epochs=8", "finetune.warmup_steps=1",
                "finetune.adv_norm=scene", "finetune.eval_every=8",
                "finetune.ratio_against=rollout", "finetune.likelihood=sample",
-               "finetune.explore_std=0.1")  # fmt: skip
+               "finetune.explore_std=0.1", f"finetune.baseline={baseline}")  # fmt: skip
     before = _mean_reward(build_finetune_stage(cfg, start, train, torch.device("cpu")),
                           train.scenes)  # fmt: skip
     finetune(cfg, start_path, tmp_path, device="cpu", progress=False)
@@ -112,3 +114,28 @@ def test_finetune_config_takes_todays_defaults_not_the_checkpoints_section(tiny_
     assert cfg.model == load_config(None, [], base=payload["config"]).model
     paper = finetune_config(str(path), "rlhf-res", "paper", None, [], None).finetune
     assert (paper.kl_form, paper.likelihood, paper.score_every) == ("paper", "mean", 3)
+
+
+def test_antithetic_needs_the_sample_likelihood(tiny_run):
+    from trajpref.config import ConfigError
+
+    start = ckpt.load(tiny_run / "generator.pt")
+    with pytest.raises(ConfigError, match="antithetic needs"):
+        _cfg(start, "finetune.baseline=antithetic", "finetune.likelihood=mean")
+    with pytest.raises(ConfigError, match="baseline must be"):
+        _cfg(start, "finetune.baseline=none")
+
+
+def test_antithetic_steps_change_policy_and_critic_only(tiny_run, walks):
+    start = ckpt.load(tiny_run / "generator.pt")
+    train = load_dataset(str(walks), "train")
+    for method in ("rlhf", "rlhf-res"):
+        cfg = _cfg(start, f"finetune.method={method}", "finetune.baseline=antithetic")
+        obj = build_finetune_stage(cfg, start, train, torch.device("cpu")).objective
+        ref, pol = _state(obj.reference), _state(obj.policy)
+        loss, logs = obj(collate(train.scenes[:3]))  # no generator: one is made per step
+        loss.backward()
+        torch.optim.SGD(obj.policy.parameters(), lr=1e-2).step()
+        assert all(torch.equal(ref[k], v) for k, v in obj.reference.state_dict().items())
+        assert any(not torch.equal(pol[k], v) for k, v in obj.policy.state_dict().items())
+        assert torch.isfinite(loss) and logs["kl_div"] == 0.0

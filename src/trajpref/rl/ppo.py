@@ -64,6 +64,17 @@ def gae(rewards: torch.Tensor, values: torch.Tensor, gamma: float, lam: float):
     return adv, adv + values
 
 
+def antithetic_advantage(reward_plus: torch.Tensor, reward_minus: torch.Tensor):
+    """Advantages of a pair of actions mean + xi and mean - xi rolled out under the same
+    environment noise: A(+xi) = (R(+xi) - R(-xi)) / 2 and A(-xi) = -A(+xi).
+
+    Whatever the pair shares (which sample it is, the denoising noise) cancels, so only the
+    part of the reward the exploration xi changes is left. [K, N, T] -> two [K, N, T].
+    """
+    half = (reward_plus - reward_minus) / 2
+    return half, -half
+
+
 def policy_loss(logp: torch.Tensor, logp_ref: torch.Tensor, adv: torch.Tensor, clip: float):
     """Eq. 15: -E[min(rho A, clip(rho, 1 - eps, 1 + eps) A)], rho = p_theta / p_0.
 

@@ -82,36 +82,57 @@ class RLObjective(nn.Module):
             ref = self.reference(f)
             ref_tau = ref.initial_sample()
         y_tau = mean_tau
+        antithetic = rl.baseline == "antithetic"
+        if antithetic and generator is None:
+            seed = int(torch.randint(2**62, ()))
+            generator = torch.Generator().manual_seed(seed)
         if rl.likelihood == "sample":
             explore = torch.randn(y_tau.shape, generator=generator).to(y_tau) * rl.explore_std
             y_tau = mean_tau + explore
             chosen = y_tau.detach()  # the action: the perturbed initial sample
+        if antithetic:  # the -xi twin is denoised with the same noise as the +xi action
+            twin_gen = torch.Generator().set_state(generator.get_state())
         y = denoise(self.schedule, eps, y_tau, tau, generator)  # [K, N, T_f, 2]
         action = y.detach()
         with torch.no_grad():
             y_ref = denoise(self.schedule, eps, ref_tau, tau, generator)
+            if antithetic:
+                twin = (mean_tau - explore).detach()  # [K, N, T_f, 2]
+                twin_action = denoise(self.schedule, eps, twin, tau, twin_gen)
 
         # Step B: per-step reward R = r - div (Eq. 6, 12, 13)
         if rl.likelihood == "sample":
             log_std = torch.full_like(out.log_sigma, math.log(rl.explore_std))  # [K, N]
             logp = ppo.gaussian_log_prob(chosen, mean_tau, log_std, per_sample=True)
             logp_ref = ppo.gaussian_log_prob(chosen, ref_tau, log_std, per_sample=True)
+            if antithetic:
+                logp_twin = ppo.gaussian_log_prob(twin, mean_tau, log_std, per_sample=True)
+                logp_ref_twin = ppo.gaussian_log_prob(twin, ref_tau, log_std, per_sample=True)
         else:
             logp = ppo.gaussian_log_prob(action, out.mean, out.log_sigma)  # [K, N, T_f]
             logp_ref = ppo.gaussian_log_prob(action, ref.mean, ref.log_sigma)
         with torch.no_grad():
-            d = self.scorer.residual_normalised(d_ctx, torch.cat([action, target[None]]))
-            r = 1 - d[:-1] / d[-1]  # [K, N, T_f]
+            futures = [action, twin_action] if antithetic else [action]
+            d = self.scorer.residual_normalised(d_ctx, torch.cat([*futures, target[None]]))
+            r_all = 1 - d[:-1] / d[-1]  # [K or 2K, N, T_f]
             if rl.reward_clip is not None:
-                r = r.clamp(-rl.reward_clip, rl.reward_clip)
+                r_all = r_all.clamp(-rl.reward_clip, rl.reward_clip)
+            k = action.shape[0]
+            r = r_all[:k]  # [K, N, T_f]
             div = ppo.kl_penalty(logp.detach(), logp_ref, rl.kl_coef, rl.kl_form)
             reward = r - div  # [K, N, T_f]
+            if antithetic:
+                div_twin = ppo.kl_penalty(logp_twin.detach(), logp_ref_twin, rl.kl_coef,
+                                          rl.kl_form)  # fmt: skip
+                reward_twin = r_all[k:] - div_twin  # [K, N, T_f]
 
         ctx = out.context.detach() if rl.detach_critic else out.context
         values = self.critic(ctx, action)  # [K, N, T_f]
         with torch.no_grad():
             values_ref = self.critic(ref.context, y_ref)  # V_0 from the reference prediction
             adv, returns = ppo.gae(reward, values.detach(), rl.gamma, rl.gae_lambda)
+            if antithetic:
+                adv, _ = ppo.antithetic_advantage(reward, reward_twin)
             if rl.adv_norm == "scene":
                 adv = ppo.whiten_per_group(adv, batch.scene, batch.num_scenes)
             v_target = reward if rl.value_target == "reward" else returns
@@ -123,8 +144,13 @@ class RLObjective(nn.Module):
             logp_pg, logp_ref_pg, adv_pg = sel(logp), sel(logp_ref), sel(adv)
             v_pg, v_ref_pg, target_pg = sel(values), sel(values_ref), sel(v_target)
         else:
+            sel = lambda x: x  # noqa: E731
             logp_pg, logp_ref_pg, adv_pg = logp, logp_ref, adv
             v_pg, v_ref_pg, target_pg = values, values_ref, v_target
+        if antithetic:  # the twins' actions enter with the opposite advantage
+            logp_pg = torch.cat([logp_pg, sel(logp_twin)])
+            logp_ref_pg = torch.cat([logp_ref_pg, sel(logp_ref_twin)])
+            adv_pg = torch.cat([adv_pg, -adv_pg])
         # the ratio's denominator: the frozen reference (Eq. 15 as printed) or the rollout
         # policy itself (one update per rollout, standard PPO; KL to G_0 stays in the reward)
         old_pg = logp_ref_pg if rl.ratio_against == "reference" else logp_pg.detach()
