@@ -1,0 +1,175 @@
+"""The RLHF report: test accuracy of every fine-tuning method against its own pretrained start
+(mean +- std over seeds, relative change), the training diagnostics of the runs behind them,
+and the reward-alignment study. Reads benchmarks/results/{pretrained,finetune}_*.json, the
+run folders runs/<dataset>-<method>-s<seed>[-<tag>]/finetune_metrics.jsonl and
+benchmarks/results/meta/reward_alignment_*.json; writes docs/rlhf_results.md.
+
+    python benchmarks/finetune_report.py --datasets zara1 eth robo
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+from pathlib import Path
+
+from trajpref.results import merge_rows, read_rows
+
+ROOT = Path(__file__).resolve().parent.parent
+RUN_SUFFIX = {"rlhf": "rlhf", "rlhf-res": "rlhf-res", "rlhf-res-reg-only": "rlhf-res"}
+
+
+def _ms(xs: list[float], digits: int = 3) -> str:
+    """mean +- std (sample std) of xs, or the single value."""
+    if not xs:
+        return "–"
+    if len(xs) == 1:
+        return f"{xs[0]:.{digits}f}"
+    return f"{statistics.mean(xs):.{digits}f} ± {statistics.stdev(xs):.{digits}f}"
+
+
+def _col(rows: list[dict], key: str) -> list[float]:
+    return [r[key] for r in rows if r[key] is not None]
+
+
+def _at(logs: list[list[dict]], i: int, key: str) -> list[float]:
+    """``key`` of the i-th logged epoch of every run that logged it."""
+    return [lg[i][key] for lg in logs if key in lg[i]]
+
+
+def _pct(new: float, old: float) -> str:
+    return f"{100 * (new - old) / old:+.1f} %"
+
+
+def accuracy_section(rows: list[dict], datasets: list[str]) -> tuple[str, dict]:
+    lines = [
+        "| dataset | method | seeds | minADE | minFDE | ADE vs start | FDE vs start "
+        "| joint minADE / minFDE | maxATS / maxFTS | fine-tune s |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    fde_change: dict[str, dict[str, float]] = {}
+    for d in datasets:
+        start = [
+            r for r in rows if (r["dataset"], r["method"], r["split"]) == (d, "pretrained", "test")
+        ]
+        if not start:
+            continue
+        s = start[0]
+        lines.append(
+            f"| {d} | pretrained (start) | 1 | {s['min_ade']:.3f} | {s['min_fde']:.3f} | – | – "
+            f"| {s['joint_min_ade']:.3f} / {s['joint_min_fde']:.3f} "
+            f"| {_ms(_col([s], 'max_ats'))} / {_ms(_col([s], 'max_fts'))} | – |"
+        )
+        methods = sorted({r["method"] for r in rows if r["dataset"] == d
+                          and r["method"].startswith("rlhf") and r["split"] == "test"})  # fmt: skip
+        for m in methods:
+            g = [r for r in rows if (r["dataset"], r["method"], r["split"]) == (d, m, "test")]
+            ade, fde = [r["min_ade"] for r in g], [r["min_fde"] for r in g]
+            fde_change.setdefault(m, {})[d] = statistics.mean(fde) / s["min_fde"] - 1
+            lines.append(
+                f"| {d} | {m} | {len(g)} | {_ms(ade)} | {_ms(fde)} "
+                f"| {_pct(statistics.mean(ade), s['min_ade'])} "
+                f"| {_pct(statistics.mean(fde), s['min_fde'])} "
+                f"| {_ms(_col(g, 'joint_min_ade'))} / {_ms(_col(g, 'joint_min_fde'))} "
+                f"| {_ms(_col(g, 'max_ats'))} / {_ms(_col(g, 'max_fts'))} "
+                f"| {_ms(_col(g, 'train_seconds'), 0)} |"
+            )
+    return "\n".join(lines), fde_change
+
+
+def _run_dirs(dataset: str, method: str) -> list[Path]:
+    tag = "-reg-only" if method.endswith("-reg-only") else ""
+    return sorted((ROOT / "runs").glob(f"{dataset}-{RUN_SUFFIX[method]}-s[0-9]{tag}"))
+
+
+def diagnostics_section(datasets: list[str]) -> str:
+    lines = [
+        "| dataset | method | runs | reward, epoch 1 -> last | KL to G_0 (last) "
+        "| critic explained variance (last) | val minFDE, epoch 1 -> last | best epoch |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for d in datasets:
+        for m in RUN_SUFFIX:
+            logs = []
+            for run in _run_dirs(d, m):
+                path = run / "finetune_metrics.jsonl"
+                if path.is_file():
+                    logs.append([json.loads(line) for line in path.open()])
+            logs = [lg for lg in logs if lg]
+            if not logs:
+                continue
+            best = [max((r["epoch"] for r in lg if r.get("best")), default=None) for lg in logs]
+            lines.append(
+                f"| {d} | {m} | {len(logs)} | {_ms(_at(logs, 0, 'train_reward'))} -> "
+                f"{_ms(_at(logs, -1, 'train_reward'))} "
+                f"| {_ms(_at(logs, -1, 'train_kl_to_reference'), 2)} "
+                f"| {_ms(_at(logs, -1, 'train_explained_variance'))} "
+                f"| {_ms(_at(logs, 0, 'val_min_fde'))} -> {_ms(_at(logs, -1, 'val_min_fde'))} "
+                f"| {', '.join(str(b) for b in best)} |"
+            )
+    return "\n".join(lines)
+
+
+def alignment_section(datasets: list[str]) -> str:
+    meta = ROOT / "benchmarks" / "results" / "meta"
+    lines = [
+        "| dataset | model | agents | Spearman(reward, -ADE) / (-FDE) | Spearman(reward, "
+        "distance travelled) | FDE: reward's top / mean / best sample | minFDE top-5 by "
+        "reward / 5 random | minFDE top-10 / 10 random | mean reward | endpoint spread "
+        "| minADE / minFDE (K=20) | reward variance: share of the action / of the denoising "
+        "noise |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for d in datasets:
+        for path in sorted(meta.glob(f"reward_alignment_{d}*.json")):
+            a = json.loads(path.read_text())
+            name = path.stem.removeprefix(f"reward_alignment_{d}").lstrip("_") or "pretrained"
+            lines.append(
+                f"| {d} | {name} | {a['agents']} | {a['rho_reward_neg_ade']:.2f} / "
+                f"{a['rho_reward_neg_fde']:.2f} | {a['rho_reward_travelled']:.2f} "
+                f"| {a['fde_top_reward']:.3f} / {a['fde_mean_sample']:.3f} / "
+                f"{a['fde_best_sample']:.3f} | {a['min_fde_top5_by_reward']:.3f} / "
+                f"{a['min_fde_random5']:.3f} | {a['min_fde_top10_by_reward']:.3f} / "
+                f"{a['min_fde_random10']:.3f} | {a['reward_mean']:.2f} "
+                f"| {a['endpoint_spread']:.3f} | {a['min_ade']:.3f} / {a['min_fde']:.3f} "
+                f"| {100 * a['share_action']:.1f} % / {100 * a['share_denoising_noise']:.1f} % |"
+            )
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--datasets", nargs="+", default=["zara1", "eth", "robo"])
+    args = parser.parse_args()
+    rows = merge_rows(read_rows(ROOT / "benchmarks" / "results"))
+    acc, change = accuracy_section(rows, args.datasets)
+    avg = {
+        m: statistics.mean(v.values()) for m, v in change.items() if len(v) == len(args.datasets)
+    }
+    summary = ", ".join(f"{m} {100 * v:+.1f} %" for m, v in sorted(avg.items()))
+    text = "\n\n".join([
+        "# RLHF results (generated)",
+        "_Generated by `python benchmarks/finetune_report.py` from `benchmarks/results/` and "
+        "the run folders of `benchmarks/finetune.py`; the commands and their reading are in "
+        "[rlhf.md](rlhf.md)._",
+        "## Test accuracy against the pretrained start (K = 20, per agent unless joint)",
+        acc,
+        f"Mean relative change of minFDE20 over {', '.join(args.datasets)} (methods run on all "
+        f"of them): {summary or '–'}.",
+        "## Training diagnostics of the same runs (mean ± std over seeds)",
+        "`reward` is the mean clipped per-step score r over the epoch's rollouts; `KL to G_0` "
+        "the k3 estimate per sample; explained variance of the critic against its target.",
+        diagnostics_section(args.datasets),
+        "## Is the reward worth maximising? (`benchmarks/reward_alignment.py`, validation)",
+        "Per agent over its 20 samples, averaged over agents; reward = the summed clipped "
+        "score that fine-tuning maximises.",
+        alignment_section(args.datasets),
+    ])  # fmt: skip
+    out = ROOT / "docs" / "rlhf_results.md"
+    out.write_text(text + "\n")
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
