@@ -42,6 +42,7 @@ from trajpref.diffusion.samplers import denoise
 from trajpref.io import write_json
 from trajpref.metrics import ade_fde
 from trajpref.results import command_line, machine
+from trajpref.rl.stage import step_reward
 from trajpref.score.scorer import TrajectoryScorer, score_timesteps
 from trajpref.train import checkpoint as ckpt
 from trajpref.train.stages import _subset
@@ -67,21 +68,17 @@ def expected_min_of_random(values: torch.Tensor, m: int) -> torch.Tensor:
     return (values.sort(0).values * w[:, None]).sum(0)
 
 
-def variance_sources(model, scorer, batch, samples: int, rl: FinetuneConfig, seed: int):
+def variance_sources(model, scorer, batch, ctx, target, samples: int, rl: FinetuneConfig,
+                     seed: int):  # fmt: skip
     """Per agent: variance of the summed reward over its K samples, and the shares of it
     explained by the exploration action and by the ancestral noise of the tau steps."""
-    f = model.features(batch)
-    ctx = model.denoiser.context(f)  # [N, H]
-    target = to_relative(batch)[1] / model.scale  # [N, T_f, 2]
-    y_tau = model.generator(f).initial_sample()[:samples]  # [K, N, T_f, 2]
+    y_tau = model.generator(model.features(batch)).initial_sample()[:samples]  # [K, N, T_f, 2]
     xi = torch.randn(y_tau.shape, generator=torch.Generator().manual_seed(seed)) * rl.explore_std
 
     def reward(start: torch.Tensor, noise_seed: int) -> torch.Tensor:
         gen = torch.Generator().manual_seed(noise_seed)
         y = denoise(model.schedule, model.eps_fn(ctx), start, model.tau, gen)  # [K, N, T_f, 2]
-        d = scorer.residual_normalised(ctx, torch.cat([y, target[None]]))  # [K+1, N, T_f]
-        r = 1 - d[:-1] / d[-1]
-        return (r.clamp(-rl.reward_clip, rl.reward_clip) if rl.reward_clip else r).sum(-1)
+        return step_reward(scorer, ctx, y, target, rl.reward_clip).sum(-1)  # [K, N]
 
     r_plus, r_minus = reward(y_tau + xi, seed + 1), reward(y_tau - xi, seed + 1)  # [K, N]
     r_fresh = reward(y_tau + xi, seed + 2)
@@ -117,9 +114,11 @@ def main() -> None:
     cols: dict[str, list[torch.Tensor]] = {}
     for batch in SceneLoader(val, max_agents=1024):
         pred = model.predict(batch, args.samples, gen)  # [K, N, T_f, 2]
-        res = scorer.score(batch, pred)
-        r = res.r.clamp(-rl.reward_clip, rl.reward_clip) if rl.reward_clip else res.r
-        reward = r.sum(-1)  # [K, N]: what fine-tuning maximises, per sample
+        ctx = model.denoiser.context(model.features(batch))  # [N, H]
+        target = to_relative(batch)[1] / model.scale  # [N, T_f, 2]
+        y = (pred - batch.origin[None, :, None, :]) / model.scale  # [K, N, T_f, 2]
+        # what fine-tuning maximises, per sample
+        reward = step_reward(scorer, ctx, y, target, rl.reward_clip).sum(-1)  # [K, N]
         ade, fde = ade_fde(pred, batch.future)  # [K, N]
         travelled = (pred[..., -1, :] - batch.history[None, :, -1, :]).norm(dim=-1)  # [K, N]
         top = reward.argmax(0)  # [N]
@@ -141,7 +140,7 @@ def main() -> None:
             "min_fde": fde.min(0).values,
             "min_ade": ade.min(0).values,
         }
-        new |= variance_sources(model, scorer, batch, args.samples, rl, args.seed)
+        new |= variance_sources(model, scorer, batch, ctx, target, args.samples, rl, args.seed)
         for m in (1, 5, 10):
             new[f"min_fde_top{m}_by_reward"] = fde.gather(0, order[:m]).min(0).values
             new[f"min_fde_random{m}"] = expected_min_of_random(fde, m)

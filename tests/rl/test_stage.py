@@ -126,7 +126,7 @@ def test_antithetic_needs_the_sample_likelihood(tiny_run):
         _cfg(start, "finetune.baseline=none")
 
 
-def test_antithetic_steps_change_policy_and_critic_only(tiny_run, walks):
+def test_antithetic_steps_move_the_policy_and_keep_the_reference(tiny_run, walks):
     start = ckpt.load(tiny_run / "generator.pt")
     train = load_dataset(str(walks), "train")
     for method in ("rlhf", "rlhf-res"):

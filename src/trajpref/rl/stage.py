@@ -44,6 +44,16 @@ def take_sample(x: torch.Tensor, k_star: torch.Tensor, scene: torch.Tensor) -> t
     return x[idx, torch.arange(x.shape[1], device=x.device)][None]
 
 
+def step_reward(scorer: TrajectoryScorer, context: torch.Tensor, futures: torch.Tensor,
+                target: torch.Tensor, clip: float | None) -> torch.Tensor:  # fmt: skip
+    """The per-step score r = 1 - d(Y) / d(Y_gt) (Eq. 6) that fine-tuning maximises, clipped
+    to [-clip, clip] when ``clip`` is set: futures [M, N, T_f, 2] and target [N, T_f, 2] in
+    the denoiser's frame, context [N, H] -> [M, N, T_f]."""
+    d = scorer.residual_normalised(context, torch.cat([futures, target[None]]))  # [M+1, N, T_f]
+    r = 1 - d[:-1] / d[-1]
+    return r.clamp(-clip, clip) if clip is not None else r
+
+
 class RLObjective(nn.Module):
     """One PPO step on a fresh rollout: L = w_reg L_reg + w_p L_pg + w_v L_val (Eq. 17 / 20)."""
 
@@ -112,11 +122,8 @@ class RLObjective(nn.Module):
             logp = ppo.gaussian_log_prob(action, out.mean, out.log_sigma)  # [K, N, T_f]
             logp_ref = ppo.gaussian_log_prob(action, ref.mean, ref.log_sigma)
         with torch.no_grad():
-            futures = [action, twin_action] if antithetic else [action]
-            d = self.scorer.residual_normalised(d_ctx, torch.cat([*futures, target[None]]))
-            r_all = 1 - d[:-1] / d[-1]  # [K or 2K, N, T_f]
-            if rl.reward_clip is not None:
-                r_all = r_all.clamp(-rl.reward_clip, rl.reward_clip)
+            futures = torch.cat([action, twin_action]) if antithetic else action
+            r_all = step_reward(self.scorer, d_ctx, futures, target, rl.reward_clip)  # [K|2K,..]
             k = action.shape[0]
             r = r_all[:k]  # [K, N, T_f]
             div = ppo.kl_penalty(logp.detach(), logp_ref, rl.kl_coef, rl.kl_form)
