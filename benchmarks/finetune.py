@@ -41,7 +41,7 @@ def main() -> None:
 
     start = ROOT / "models" / args.dataset / "generator.pt"
     test = load_dataset(args.dataset, "test", args.data_root)
-    scorer = TrajectoryScorer.from_checkpoint(start)
+    scorer = TrajectoryScorer.from_checkpoint(start, args.device)
     suffix = f"_{args.tag}" if args.tag else ""
     out = ROOT / "benchmarks" / "results" / f"finetune_{args.dataset}{suffix}.json"
     for method in args.methods:

@@ -89,6 +89,19 @@ def test_near_ground_truth_outranks_a_far_sample(scorer, batch):
     assert (res.ats[1] > res.ats[0]).all()
 
 
+def test_accumulator_mean_ats_is_the_average_samples_ats(scorer, batch):
+    from trajpref.score.scorer import ScoreAccumulator
+
+    pred = _samples(batch)  # [K, N, T_f, 2]
+    acc = ScoreAccumulator()
+    acc.update(scorer, batch, pred)
+    acc.update(scorer, batch, pred)  # twice: a mean over scenes, not a sum
+    out = acc.compute()
+    ats = scorer.score(batch, pred).ats  # [K, B]
+    assert out["mean_ats"] == pytest.approx(float(ats.mean()), rel=1e-5)
+    assert out["mean_ats"] < out["max_ats"]
+
+
 def test_rank_samples_validates_shapes(scorer):
     with pytest.raises(ValueError, match="history"):
         rank_samples(scorer, torch.zeros(3, 8, 2), torch.zeros(4, 2, 12, 2))

@@ -217,7 +217,7 @@ def build_finetune_stage(
         res = evaluate(predictor, val_set, cfg.generator.samples, seed=0, device=device,
                        max_agents=cfg.data.max_agents, progress=False,
                        scorer=metric_scorer)  # fmt: skip
-        keys = ("min_ade", "min_fde", "max_ats", "max_fts", "top1_recall_ats")
+        keys = ("min_ade", "min_fde", "max_ats", "max_fts", "mean_ats", "top1_recall_ats")
         return {k: res[k] for k in keys} | {"score": res["min_ade"] + res["min_fde"]}
 
     def payload(meta: dict[str, Any]) -> dict[str, Any]:

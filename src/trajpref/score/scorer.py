@@ -203,10 +203,11 @@ def recall_hits(
 
 
 class ScoreAccumulator:
-    """Running maxATS_K / maxFTS_K and top-k recall over batches (means over scenes)."""
+    """Running maxATS_K / maxFTS_K, meanATS_K (the average sample's ATS: what fine-tuning's
+    reward sees) and top-k recall over batches (means over scenes)."""
 
-    KEYS = ("max_ats", "max_fts", "top1_recall_ats", "top5_recall_ats", "top1_recall_fts",
-            "top5_recall_fts")  # fmt: skip
+    KEYS = ("max_ats", "max_fts", "mean_ats", "top1_recall_ats", "top5_recall_ats",
+            "top1_recall_fts", "top5_recall_fts")  # fmt: skip
 
     def __init__(self) -> None:
         self.sums = dict.fromkeys(self.KEYS, 0.0)
@@ -216,6 +217,7 @@ class ScoreAccumulator:
         res = scorer.score(batch, pred)
         self.sums["max_ats"] += float(res.ats.max(0).values.sum())
         self.sums["max_fts"] += float(res.fts.max(0).values.sum())
+        self.sums["mean_ats"] += float(res.ats.mean(0).sum())
         # the ranking comes from the residuals alone (Lemma 1): highest ATS first
         hits = recall_hits(pred, batch, res.ats.argsort(0, descending=True),
                            res.fts.argsort(0, descending=True))  # fmt: skip
