@@ -58,6 +58,23 @@ def test_a_denoiser_step_changes_every_parameter(cfg, folder):
     assert set(_changed(before, stage.trainable)) == set(before)
 
 
+def test_generator_width_may_differ_from_the_denoiser_config_but_nothing_else(cfg, folder, trained):
+    import dataclasses
+
+    train = load_dataset(str(folder), "train")
+    payload = ckpt.load(trained / "denoiser.pt")
+    wide = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, generator_width=48))
+    stage = build_generator_stage(wide, payload, train, torch.device("cpu"))
+    assert stage.objective.generator.mean_head[0].out_features == 48
+    rebuilt, _ = ckpt.build_generator(stage.payload({"epoch": 0}))  # the checkpoint says 48
+    assert rebuilt.mean_head[0].out_features == 48
+    longer = dataclasses.replace(
+        cfg, model=dataclasses.replace(cfg.model, t_fut=cfg.model.t_fut + 1)
+    )
+    with pytest.raises(ValueError, match="generator_width"):
+        build_generator_stage(longer, payload, train, torch.device("cpu"))
+
+
 def test_a_generator_step_changes_the_generator_not_the_denoiser(cfg, folder, trained):
     train = load_dataset(str(folder), "train")
     payload = ckpt.load(trained / "denoiser.pt")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import torch
@@ -155,9 +156,13 @@ def build_generator_stage(
     """Stage 2. Validation: minADE_K + minFDE_K of the leapfrog sampler (lower is better)."""
     torch.manual_seed(cfg.seed)
     denoiser, dcfg = ckpt.build_denoiser(denoiser_payload)
-    if dcfg.model != cfg.model or dcfg.diffusion != cfg.diffusion:
-        raise ValueError("the generator config's model/diffusion sections differ from the "
-                         "denoiser checkpoint's")  # fmt: skip
+    # G may have its own width; everything else describes the frozen denoiser or the data
+    shared = dataclasses.replace(cfg.model, generator_width=dcfg.model.generator_width)
+    if shared != dcfg.model or dcfg.diffusion != cfg.diffusion:
+        raise ValueError(
+            "the generator config's model/diffusion sections differ from the denoiser "
+            "checkpoint's (only model.generator_width may differ)"
+        )
     scale = denoiser_payload["scale"]
     denoiser = denoiser.to(device)
     gcfg: GeneratorTrainConfig = cfg.generator
