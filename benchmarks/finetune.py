@@ -6,7 +6,10 @@ split (chosen on validation), one row per method and seed.
 
 Runs go to runs/<dataset>-<method>-s<seed>[-<tag>] (resumed when their _last.pt exists).
 Writes benchmarks/results/finetune_<dataset>[_<tag>].json and, for seed 0 of the untagged
-run, models/<dataset>/<method>.pt.
+run, models/<dataset>/<method>.pt. Every invocation also writes
+benchmarks/results/meta/finetune_start_<dataset>.json: the start's validation exactly as the
+fine-tuning stage computes it each epoch (the "epoch 0" the run logs start from);
+``--start-only`` writes just that.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from trajpref.data import load_dataset
 from trajpref.results import make_row, write_rows
 from trajpref.score.scorer import TrajectoryScorer
 from trajpref.train import checkpoint as ckpt
+from trajpref.train.device import resolve_device
 from trajpref.train.evaluate import evaluate
 from trajpref.train.run import finetune
 
@@ -37,9 +41,17 @@ def main() -> None:
     parser.add_argument("--data-root", default=None)
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--samples", type=int, default=20)
+    parser.add_argument(
+        "--start-only",
+        action="store_true",
+        help="only validate the start (meta/finetune_start_<dataset>.json)",
+    )
     args = parser.parse_args()
 
     start = ROOT / "models" / args.dataset / "generator.pt"
+    start_validation(args, start)
+    if args.start_only:
+        return
     test = load_dataset(args.dataset, "test", args.data_root)
     scorer = TrajectoryScorer.from_checkpoint(start, args.device)
     suffix = f"_{args.tag}" if args.tag else ""
@@ -77,6 +89,22 @@ def main() -> None:
                   f"minFDE {res['min_fde']:.3f} maxATS {res['max_ats']:.3f} maxFTS "
                   f"{res['max_fts']:.3f} ({summary['train_seconds']:.0f} s)")  # fmt: skip
             write_rows(out, rows)
+
+
+def start_validation(args, start: Path) -> dict[str, float]:
+    """The fine-tuning stage's validation of the untouched start (its "epoch 0")."""
+    from trajpref.rl.stage import build_finetune_stage
+
+    cfg = finetune_config(str(start), args.methods[0], args.preset, None, args.overrides, 0)
+    val = load_dataset(cfg.data.val_dataset or cfg.data.dataset, "val", args.data_root)
+    stage = build_finetune_stage(cfg, ckpt.load(start), val, resolve_device(args.device))
+    res = stage.validate()
+    meta = {"dataset": args.dataset, "start": str(start.relative_to(ROOT)),
+            "eval_max_scenes": cfg.finetune.eval_max_scenes, "val": res}  # fmt: skip
+    path = ROOT / "benchmarks" / "results" / "meta" / f"finetune_start_{args.dataset}.json"
+    path.write_text(json.dumps(meta, indent=2) + "\n")
+    print(f"{args.dataset} start (validation): " + " ".join(f"{k} {v:.4f}" for k, v in res.items()))
+    return res
 
 
 if __name__ == "__main__":

@@ -111,6 +111,67 @@ def diagnostics_section(datasets: list[str]) -> str:
     return "\n".join(lines)
 
 
+def _settings(command: str) -> str:
+    """The --preset / --set part of a benchmark command, short."""
+    words, out = command.split(), []
+    for flag, value in zip(words, words[1:], strict=False):
+        if flag == "--preset":
+            out.append(f"preset {value}")
+        elif flag == "--set":
+            out.append(value.removeprefix("finetune."))
+    return ", ".join(out) or "defaults"
+
+
+def reward_section(rows: list[dict], datasets: list[str]) -> str:
+    """Runs that logged meanATS on validation: does fine-tuning raise the reward, and what
+    does that do to accuracy? meanATS is the average sample's ATS, the quantity the policy
+    gradient pushes up."""
+    meta = ROOT / "benchmarks" / "results" / "meta"
+    lines = [
+        "| dataset | run | settings | seeds | steps | val meanATS: start -> epoch 1 -> last (max) "
+        "| val maxATS start -> last | val minFDE start -> last | best epoch | test minFDE "
+        "(vs start) | machine |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for d in datasets:
+        start_path = meta / f"finetune_start_{d}.json"
+        start_rows = [r for r in rows if (r["dataset"], r["method"], r["split"]) ==
+                      (d, "pretrained", "test")]  # fmt: skip
+        if not start_path.is_file() or not start_rows:
+            continue
+        v0, t0 = json.loads(start_path.read_text())["val"], start_rows[0]["min_fde"]
+        tuned = [r for r in rows if r["dataset"] == d and r["split"] == "test"
+                 and r["method"].startswith("rlhf")]  # fmt: skip
+        for method in sorted({r["method"] for r in tuned}):
+            base = "rlhf-res" if method.startswith("rlhf-res") else "rlhf"
+            tag = method.removeprefix(base).lstrip("-")
+            runs = []
+            for r in sorted((r for r in tuned if r["method"] == method), key=lambda r: r["seed"]):
+                run = ROOT / "runs" / f"{d}-{base}-s{r['seed']}{'-' + tag if tag else ''}"
+                path = run / "finetune_metrics.jsonl"
+                log = [json.loads(line) for line in path.open()] if path.is_file() else []
+                if log and "val_mean_ats" in log[0]:
+                    runs.append((r, log))
+            if not runs:
+                continue
+            logs = [lg for _, lg in runs]
+            r0 = runs[0][0]
+            best = [max((e["epoch"] for e in lg if e.get("best")), default=None) for lg in logs]
+            peak = [max(e["val_mean_ats"] for e in lg) for lg in logs]
+            fde = [r["min_fde"] for r, _ in runs]
+            gpu = "GPU" if "NVIDIA" in r0["machine"] else "CPU"
+            lines.append(
+                f"| {d} | {method} | {_settings(r0['command'] or '')} | {len(runs)} "
+                f"| {logs[0][-1]['step']} | {v0['mean_ats']:.3f} -> "
+                f"{_ms(_at(logs, 0, 'val_mean_ats'))} -> {_ms(_at(logs, -1, 'val_mean_ats'))} "
+                f"({_ms(peak)}) | {v0['max_ats']:.3f} -> {_ms(_at(logs, -1, 'val_max_ats'))} "
+                f"| {v0['min_fde']:.3f} -> {_ms(_at(logs, -1, 'val_min_fde'))} "
+                f"| {', '.join(str(b) for b in best)} "
+                f"| {_ms(fde)} ({_pct(statistics.mean(fde), t0)}) | {gpu} |"
+            )
+    return "\n".join(lines)
+
+
 def alignment_section(datasets: list[str]) -> str:
     meta = ROOT / "benchmarks" / "results" / "meta"
     lines = [
@@ -161,6 +222,13 @@ def main() -> None:
         "`reward` is the mean clipped per-step score r over the epoch's rollouts; `KL to G_0` "
         "the k3 estimate per sample; explained variance of the critic against its target.",
         diagnostics_section(args.datasets),
+        "## Can fine-tuning raise the reward, and what does that cost? (validation)",
+        "Runs that log meanATS (the average sample's ATS on the validation scenes, the "
+        "quantity the policy gradient pushes up; `start` is the pretrained generator, "
+        "`benchmarks/results/meta/finetune_start_<dataset>.json`). The model kept is the best "
+        "epoch by validation minADE + minFDE; `settings` are the run's `--set` overrides of "
+        "the defaults.",
+        reward_section(rows, args.datasets),
         "## Is the reward worth maximising? (`benchmarks/reward_alignment.py`, validation)",
         "Per agent over its 20 samples, averaged over agents; reward = the summed clipped "
         "score that fine-tuning maximises.",
