@@ -7,9 +7,14 @@ publish the checkpoints, evaluate on the test split, and time the two samplers s
     python benchmarks/pretrain.py --dataset zara1 --run-dir runs/zara1 --data-root ../shared/data
     # univ's test split is large: skip the full sampler's accuracy (its speed is still timed)
     python benchmarks/pretrain.py --dataset univ --train --no-full-eval --data-root ../shared/data
+    # a variant trained elsewhere (e.g. a longer schedule on a GPU), published beside the default
+    python benchmarks/pretrain.py --dataset zara1 --run-dir runs/zara1-g100 --variant long \
+        --train-machine "1x H100" --no-full-eval --data-root ../shared/data
 
 Writes models/<dataset>/{denoiser,generator}.pt, benchmarks/results/pretrained_<dataset>.json
 (methods ``pretrained`` and ``full-sampler``) and prints the numbers for docs/pretraining.md.
+With ``--variant NAME``: models/<dataset>/generator-NAME.pt, method ``pretrained-NAME`` in
+pretrained_<dataset>_NAME.json; the README's cost table (this machine, default configs) skips it.
 """
 
 from __future__ import annotations
@@ -78,7 +83,22 @@ def main() -> None:
         help="time the full sampler but skip its whole-test-split accuracy "
         "(about 15x the leapfrog cost: ~30 min on univ's test split)",
     )
+    parser.add_argument(
+        "--variant",
+        default=None,
+        help="publish as generator-VARIANT.pt, rows as pretrained-VARIANT",
+    )
+    parser.add_argument(
+        "--train-machine",
+        default=None,
+        help="where the run was trained, when not on this machine (recorded "
+        "in the meta file; the row's train_seconds is then left empty)",
+    )
     args = parser.parse_args()
+    if args.variant is not None and not args.variant.replace("-", "").isalnum():
+        parser.error("--variant takes letters, digits and '-'")
+    suffix = f"-{args.variant}" if args.variant else ""
+    file_suffix = f"_{args.variant}" if args.variant else ""
 
     run_dir = Path(args.run_dir or ROOT / "runs" / args.dataset)
     if args.train:
@@ -86,8 +106,9 @@ def main() -> None:
     models = ROOT / "models" / args.dataset
     models.mkdir(parents=True, exist_ok=True)
     # the generator names models/<dataset>/denoiser.pt by path and hash instead of embedding it
-    ckpt.publish(run_dir / "generator.pt", models / "generator.pt")
-    gen_ckpt = ckpt.load(models / "generator.pt")
+    published = models / f"generator{suffix}.pt"
+    ckpt.publish(run_dir / "generator.pt", published)
+    gen_ckpt = ckpt.load(published)
     den_ckpt = gen_ckpt["denoiser"]
     train_seconds = den_ckpt["meta"]["train_seconds"] + gen_ckpt["meta"]["train_seconds"]
     # total time of each whole stage (the best checkpoint may come before the last epoch)
@@ -97,16 +118,20 @@ def main() -> None:
              for s, log in logs.items()}  # fmt: skip
 
     test = load_dataset(args.dataset, "test", args.data_root)
-    leap = ckpt.load_predictor(models / "generator.pt", "leapfrog", args.device)
-    full = ckpt.load_predictor(models / "generator.pt", "full", args.device)
+    leap = ckpt.load_predictor(published, "leapfrog", args.device)
+    full = ckpt.load_predictor(published, "full", args.device)
     speed = time_samplers(leap, full, test, args.timing_scenes, args.samples)
     params = {"denoiser": sum(p.numel() for p in leap.denoiser.parameters()),
               "generator": sum(p.numel() for p in leap.generator.parameters())}  # fmt: skip
 
     rows = []
-    for method, model, ms, secs in (("pretrained", leap, speed["leapfrog"], train_seconds),
-                                    ("full-sampler", full, speed["full"], None)):  # fmt: skip
-        if method == "full-sampler" and args.no_full_eval:
+    if args.train_machine is not None:
+        train_seconds = None  # trained elsewhere: not a cost on this machine
+    for method, model, ms, secs in (
+        (f"pretrained{suffix}", leap, speed["leapfrog"], train_seconds),
+        (f"full-sampler{suffix}", full, speed["full"], None),
+    ):
+        if method.startswith("full-sampler") and args.no_full_eval:
             continue
         res = evaluate(model, test, args.samples, args.seed, args.device)
         rows.append(make_row(
@@ -115,14 +140,17 @@ def main() -> None:
             joint_min_ade=res["joint_min_ade"], joint_min_fde=res["joint_min_fde"],
             train_seconds=round(secs, 1) if secs is not None else None,
             ms_per_scene=round(ms, 3),
-            checkpoint=str((models / "generator.pt").relative_to(ROOT)),
+            checkpoint=str(published.relative_to(ROOT)),
         ))  # fmt: skip
         print(f"{args.dataset} {method:>12}: minADE {res['min_ade']:.3f} minFDE "
               f"{res['min_fde']:.3f}  joint {res['joint_min_ade']:.3f}/"
               f"{res['joint_min_fde']:.3f}  {ms:.1f} ms/scene")  # fmt: skip
-    write_rows(ROOT / "benchmarks" / "results" / f"pretrained_{args.dataset}.json", rows)
+    out = ROOT / "benchmarks" / "results" / f"pretrained_{args.dataset}{file_suffix}.json"
+    write_rows(out, rows)
     extra = {
         "dataset": args.dataset,
+        "variant": args.variant,
+        "train_machine": args.train_machine,
         "params": params,
         "stage_seconds": stage_seconds,
         "seconds_to_best": {"denoiser": den_ckpt["meta"]["train_seconds"],
@@ -133,12 +161,13 @@ def main() -> None:
         "val": gen_ckpt["meta"]["val"],
         "ms_per_scene": speed,
         "speedup_full_over_leapfrog": speed["full"] / speed["leapfrog"],
-        "checkpoint_mb": {n: (models / f"{n}.pt").stat().st_size / 2**20
-                          for n in ("denoiser", "generator")},
+        "checkpoint_mb": {"denoiser": (models / "denoiser.pt").stat().st_size / 2**20,
+                          "generator": published.stat().st_size / 2**20},
     }  # fmt: skip
     meta_dir = ROOT / "benchmarks" / "results" / "meta"
     meta_dir.mkdir(exist_ok=True)
-    (meta_dir / f"pretrained_{args.dataset}.json").write_text(json.dumps(extra, indent=2) + "\n")
+    meta_path = meta_dir / f"pretrained_{args.dataset}{file_suffix}.json"
+    meta_path.write_text(json.dumps(extra, indent=2) + "\n")
     print(json.dumps(extra, indent=2))
 
 

@@ -20,7 +20,7 @@ FIELDS = (
 )  # fmt: skip
 """Every row has exactly these keys (null where not measured)."""
 
-METHODS = ("cv", "full-sampler", "pretrained", "rlhf", "rlhf-res")
+METHODS = ("cv", "full-sampler", "pretrained", "pretrained-long", "rlhf", "rlhf-res")
 """Known methods, in the order tables list them."""
 
 
