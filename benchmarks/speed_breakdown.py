@@ -1,0 +1,104 @@
+"""Where does a model's error come from? minFDE_K on a test split broken down by each agent's
+observed speed, against constant velocity, with the training split's speed distribution beside
+it (a speed shift between train and test shows up here).
+
+    python benchmarks/speed_breakdown.py --dataset eth --data-root ../shared/data
+
+Writes benchmarks/results/meta/speed_breakdown_<dataset>.json and prints a markdown table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from trajpref.data import load_dataset
+from trajpref.models.baseline import ConstantVelocity
+from trajpref.results import command_line, machine
+from trajpref.train import checkpoint as ckpt
+from trajpref.train.evaluate import predict_dataset
+
+ROOT = Path(__file__).resolve().parent.parent
+EDGES = (0.0, 0.3, 0.8, 1.3, 2.0, float("inf"))
+"""Observed-speed bins in m/s (standing, slow, walking, brisk, running)."""
+
+
+def observed_speed(history: np.ndarray, dt: float) -> np.ndarray:
+    """Mean speed over the observed frames: history [N, T_h, 2] -> [N]."""
+    return np.linalg.norm(np.diff(history, axis=1), axis=-1).mean(1) / dt
+
+
+def min_fde(pred: np.ndarray, future: np.ndarray) -> np.ndarray:
+    """Per-agent best-of-K final error: pred [K, N, T_f, 2], future [N, T_f, 2] -> [N]."""
+    return np.linalg.norm(pred[:, :, -1] - future[None, :, -1], axis=-1).min(0)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--dataset", required=True)
+    parser.add_argument("--model", default=None, help="default models/<dataset>/generator.pt")
+    parser.add_argument("--data-root", default=None)
+    parser.add_argument("--samples", type=int, default=20)
+    args = parser.parse_args()
+
+    model_path = Path(args.model) if args.model else ROOT / "models" / args.dataset / "generator.pt"
+    test = load_dataset(args.dataset, "test", args.data_root)
+    train = load_dataset(args.dataset, "train", args.data_root)
+    dt = test.info.frame_interval
+    model = predict_dataset(ckpt.load_predictor(model_path, "leapfrog", "cpu"), test,
+                            args.samples, 0, "cpu", progress=False)  # fmt: skip
+    cv = predict_dataset(ConstantVelocity(), test, args.samples, 0, "cpu", progress=False)
+    speed = observed_speed(model["history"], dt)  # [N]
+    f_model = min_fde(model["pred"], model["future"])  # [N]
+    f_cv = min_fde(cv["pred"], cv["future"])  # [N]
+    train_speed = np.concatenate([observed_speed(s.history, dt) for s in train.scenes])
+
+    bins = []
+    for lo, hi in zip(EDGES, EDGES[1:], strict=False):
+        k = (speed >= lo) & (speed < hi)
+        bins.append({
+            "speed_m_s": [lo, None if hi == float("inf") else hi],
+            "agents": int(k.sum()),
+            "test_share": float(k.mean()),
+            "train_share": float(((train_speed >= lo) & (train_speed < hi)).mean()),
+            "min_fde_model": float(f_model[k].mean()) if k.any() else None,
+            "min_fde_cv": float(f_cv[k].mean()) if k.any() else None,
+            "share_of_model_error": float(f_model[k].sum() / f_model.sum()),
+        })  # fmt: skip
+    out = {
+        "dataset": args.dataset,
+        "model": str(model_path),
+        "samples": args.samples,
+        "min_fde_model": float(f_model.mean()),
+        "min_fde_cv": float(f_cv.mean()),
+        "train_speed_p50_p90_p99": [float(np.percentile(train_speed, q)) for q in (50, 90, 99)],
+        "test_speed_p50_p90_p99": [float(np.percentile(speed, q)) for q in (50, 90, 99)],
+        "bins": bins,
+        "command": command_line(),
+        "machine": machine(),
+    }
+    meta = ROOT / "benchmarks" / "results" / "meta" / f"speed_breakdown_{args.dataset}.json"
+    meta.write_text(json.dumps(out, indent=2) + "\n")
+
+    print(f"| observed speed (m/s) | test agents | share of test / of train | minFDE{args.samples} "
+          "model / CV | share of the model's error |")  # fmt: skip
+    print("|---|---|---|---|---|")
+    for b in bins:
+        lo, hi = b["speed_m_s"]
+        rng = f"{lo:.1f}-{hi:.1f}" if hi is not None else f">= {lo:.1f}"
+        vals = ("–" if b["min_fde_model"] is None
+                else f"{b['min_fde_model']:.3f} / {b['min_fde_cv']:.3f}")  # fmt: skip
+        print(f"| {rng} | {b['agents']} | {100 * b['test_share']:.0f} % / "
+              f"{100 * b['train_share']:.1f} % | {vals} | "
+              f"{100 * b['share_of_model_error']:.0f} % |")  # fmt: skip
+    print(
+        f"train speed p50/p90/p99 {out['train_speed_p50_p90_p99']}, "
+        f"test {out['test_speed_p50_p90_p99']}"
+    )
+
+
+if __name__ == "__main__":
+    main()
