@@ -107,7 +107,14 @@ def main() -> None:
     models.mkdir(parents=True, exist_ok=True)
     # the generator names models/<dataset>/denoiser.pt by path and hash instead of embedding it
     published = models / f"generator{suffix}.pt"
-    ckpt.publish(run_dir / "generator.pt", published)
+    # a variant trained with its own denoiser gets its own denoiser file: never overwrite the
+    # one the default generator (and the fine-tuned models) point to
+    den_name = "denoiser.pt"
+    if args.variant and (models / den_name).is_file():
+        own = ckpt.load(run_dir / "generator.pt")["denoiser"]["hash"]
+        if ckpt.load(models / den_name)["hash"] != own:
+            den_name = f"denoiser{suffix}.pt"
+    ckpt.publish(run_dir / "generator.pt", published, denoiser_name=den_name)
     gen_ckpt = ckpt.load(published)
     den_ckpt = gen_ckpt["denoiser"]
     train_seconds = den_ckpt["meta"]["train_seconds"] + gen_ckpt["meta"]["train_seconds"]
@@ -161,7 +168,7 @@ def main() -> None:
         "val": gen_ckpt["meta"]["val"],
         "ms_per_scene": speed,
         "speedup_full_over_leapfrog": speed["full"] / speed["leapfrog"],
-        "checkpoint_mb": {"denoiser": (models / "denoiser.pt").stat().st_size / 2**20,
+        "checkpoint_mb": {"denoiser": (models / den_name).stat().st_size / 2**20,
                           "generator": published.stat().st_size / 2**20},
     }  # fmt: skip
     meta_dir = ROOT / "benchmarks" / "results" / "meta"

@@ -8,7 +8,8 @@ Also evaluates a test-time fix for a speed shift: each scene scaled down (about 
 so that no agent's observed speed exceeds the training split's 99th percentile, predicted,
 and scaled back (the rule was fixed before looking at its result).
 
-Writes benchmarks/results/meta/speed_breakdown_<dataset>.json and prints a markdown table.
+Writes benchmarks/results/meta/speed_breakdown_<dataset>[_<name>].json and prints a markdown
+table.
 """
 
 from __future__ import annotations
@@ -74,6 +75,7 @@ def main() -> None:
     parser.add_argument("--model", default=None, help="default models/<dataset>/generator.pt")
     parser.add_argument("--data-root", default=None)
     parser.add_argument("--samples", type=int, default=20)
+    parser.add_argument("--name", default="", help="names the output for a --model")
     args = parser.parse_args()
 
     model_path = Path(args.model) if args.model else ROOT / "models" / args.dataset / "generator.pt"
@@ -120,7 +122,8 @@ def main() -> None:
         "command": command_line(),
         "machine": machine(),
     }
-    meta = ROOT / "benchmarks" / "results" / "meta" / f"speed_breakdown_{args.dataset}.json"
+    suffix = f"_{args.name}" if args.name else ""
+    meta = ROOT / "benchmarks" / "results" / "meta" / f"speed_breakdown_{args.dataset}{suffix}.json"
     meta.write_text(json.dumps(out, indent=2) + "\n")
 
     print(f"| observed speed (m/s) | test agents | share of test / of train | minFDE{args.samples} "

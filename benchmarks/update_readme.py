@@ -17,7 +17,7 @@ def main() -> None:
     every = read_rows(ROOT / "benchmarks" / "results")
     # the README keeps the methods users run; fine-tuning ablations (tagged runs) are listed,
     # with their commands, in docs/rlhf_results.md
-    rows = [r for r in every if r["method"] in METHODS]
+    rows = [r for r in every if r["method"] in METHODS or r["method"].startswith("pretrained-")]
     dates = sorted({r["date"] for r in rows})
     machines = sorted({r["machine"] for r in rows})
     table = accuracy_table(rows)
