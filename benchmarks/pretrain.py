@@ -114,7 +114,12 @@ def main() -> None:
         own = ckpt.load(run_dir / "generator.pt")["denoiser"]["hash"]
         if ckpt.load(models / den_name)["hash"] != own:
             den_name = f"denoiser{suffix}.pt"
-    ckpt.publish(run_dir / "generator.pt", published, denoiser_name=den_name)
+    ckpt.publish(
+        run_dir / "generator.pt",
+        published,
+        denoiser_name=den_name,
+        replace_denoiser=not args.variant,
+    )  # a retrained default replaces its own
     gen_ckpt = ckpt.load(published)
     den_ckpt = gen_ckpt["denoiser"]
     train_seconds = den_ckpt["meta"]["train_seconds"] + gen_ckpt["meta"]["train_seconds"]

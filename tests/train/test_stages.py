@@ -191,6 +191,14 @@ def test_published_generator_names_its_denoiser_by_hash(tmp_path, trained, folde
     ckpt.save(pub / "denoiser.pt", other)
     with pytest.raises(TrajprefError, match="does not match the recorded hash"):
         ckpt.load(pub / "generator.pt")
+    # and publishing next to a different denoiser does not overwrite it unless asked
+    with pytest.raises(TrajprefError, match="holds a different denoiser"):
+        ckpt.publish(trained / "generator.pt", pub / "generator-v2.pt")
+    assert ckpt.load(pub / "denoiser.pt")["hash"] == "0" * 16
+    ckpt.publish(trained / "generator.pt", pub / "generator-v2.pt", replace_denoiser=True)
+    assert (
+        ckpt.load_predictor(pub / "generator-v2.pt").predict(batch, 4, torch.Generator()).equal(a)
+    )
 
 
 def test_steps_per_epoch_caps_each_epoch(tmp_path, cfg):

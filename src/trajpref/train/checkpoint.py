@@ -47,9 +47,15 @@ def load(path: str | Path) -> dict[str, Any]:
     return payload
 
 
-def publish(src: str | Path, dst: str | Path, denoiser_name: str = "denoiser.pt") -> None:
+def publish(
+    src: str | Path, dst: str | Path, denoiser_name: str = "denoiser.pt",
+    replace_denoiser: bool = False,
+) -> None:  # fmt: skip
     """Copy a generator checkpoint to ``dst`` with its embedded denoiser written once as
-    ``dst.parent / denoiser_name`` and referenced by path and hash (smaller files)."""
+    ``dst.parent / denoiser_name`` and referenced by path and hash (smaller files).
+
+    A different denoiser already at that path is replaced only with ``replace_denoiser``:
+    other published generators (variants, fine-tuned models) may point to it."""
     payload = load(src)
     dst = Path(dst)
     if payload["kind"] != "generator":
@@ -57,7 +63,14 @@ def publish(src: str | Path, dst: str | Path, denoiser_name: str = "denoiser.pt"
         return
     den = payload.pop("denoiser")
     den_path = dst.parent / denoiser_name
-    if not den_path.is_file() or _load_file(den_path).get("hash") != den["hash"]:
+    if den_path.is_file() and _load_file(den_path).get("hash") != den["hash"]:
+        if not replace_denoiser:
+            raise TrajprefError(
+                f"{den_path} holds a different denoiser, which other checkpoints may name; "
+                "publish under another denoiser_name or pass replace_denoiser=True"
+            )
+        save(den_path, den)
+    elif not den_path.is_file():
         save(den_path, den)
     payload["denoiser_ref"] = {"path": denoiser_name, "hash": den["hash"]}
     save(dst, payload)
