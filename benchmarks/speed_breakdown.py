@@ -22,6 +22,8 @@ import numpy as np
 import torch
 
 from trajpref.data import load_dataset
+from trajpref.data.transforms import scene_centroids
+from trajpref.metrics import min_ade_fde
 from trajpref.models.baseline import ConstantVelocity
 from trajpref.results import command_line, machine
 from trajpref.train import checkpoint as ckpt
@@ -33,14 +35,9 @@ EDGES = (0.0, 0.3, 0.8, 1.3, 2.0, float("inf"))
 """Observed-speed bins in m/s (standing, slow, walking, brisk, running)."""
 
 
-def observed_speed(history: np.ndarray, dt: float) -> np.ndarray:
+def observed_speed(history: torch.Tensor, dt: float) -> torch.Tensor:
     """Mean speed over the observed frames: history [N, T_h, 2] -> [N]."""
-    return np.linalg.norm(np.diff(history, axis=1), axis=-1).mean(1) / dt
-
-
-def min_fde(pred: np.ndarray, future: np.ndarray) -> np.ndarray:
-    """Per-agent best-of-K final error: pred [K, N, T_f, 2], future [N, T_f, 2] -> [N]."""
-    return np.linalg.norm(pred[:, :, -1] - future[None, :, -1], axis=-1).min(0)
+    return history.diff(dim=1).norm(dim=-1).mean(1) / dt
 
 
 class SpeedCapped:
@@ -53,15 +50,12 @@ class SpeedCapped:
         self.model, self.cap, self.dt = model, cap, dt
 
     def predict(self, batch: Batch, num_samples: int, generator=None) -> torch.Tensor:
-        speed = batch.history.diff(dim=1).norm(dim=-1).mean(1) / self.dt  # [N]
+        speed = observed_speed(batch.history, self.dt)  # [N]
         fastest = torch.zeros(batch.num_scenes, dtype=speed.dtype).scatter_reduce(
             0, batch.scene, speed, "amax"
         )  # [B]
         c = (self.cap / fastest.clamp(min=1e-6)).clamp(max=1.0)[batch.scene][:, None, None]
-        sizes = batch.scene_sizes().clamp(min=1).to(speed.dtype)  # [B]
-        centre = torch.zeros(batch.num_scenes, 2, dtype=speed.dtype)
-        centre = centre.index_add_(0, batch.scene, batch.origin) / sizes[:, None]  # [B, 2]
-        o = centre[batch.scene][:, None, :]  # [N, 1, 2]
+        o = scene_centroids(batch)[batch.scene][:, None, :]  # [N, 1, 2]
         scaled = Batch(history=(batch.history - o) * c + o, future=(batch.future - o) * c + o,
                        scene=batch.scene, agent_type=batch.agent_type,
                        num_scenes=batch.num_scenes, scene_ids=batch.scene_ids)  # fmt: skip
@@ -83,17 +77,22 @@ def main() -> None:
     train = load_dataset(args.dataset, "train", args.data_root)
     dt = test.info.frame_interval
     predictor = ckpt.load_predictor(model_path, "leapfrog", "cpu")
-    model = predict_dataset(predictor, test, args.samples, 0, "cpu", progress=False)
-    cv = predict_dataset(ConstantVelocity(), test, args.samples, 0, "cpu", progress=False)
-    speed = observed_speed(model["history"], dt)  # [N]
-    f_model = min_fde(model["pred"], model["future"])  # [N]
-    f_cv = min_fde(cv["pred"], cv["future"])  # [N]
-    train_speed = np.concatenate([observed_speed(s.history, dt) for s in train.scenes])
 
+    def min_errors(model) -> tuple[torch.Tensor, torch.Tensor]:
+        """Per-agent minADE_K / minFDE_K over the test split (agents in dataset order)."""
+        out = predict_dataset(model, test, args.samples, 0, "cpu", progress=False)
+        return min_ade_fde(torch.from_numpy(out["pred"]), torch.from_numpy(out["future"]))
+
+    speed = observed_speed(torch.cat([torch.from_numpy(s.history) for s in test.scenes]), dt)
+    a_model, f_model = min_errors(predictor)  # [N]
+    _, f_cv = min_errors(ConstantVelocity())  # [N]
+    train_speed = observed_speed(torch.cat([torch.from_numpy(s.history) for s in train.scenes]),
+                                 dt).numpy()  # fmt: skip
     cap = float(np.percentile(train_speed, 99))
     capped = evaluate(SpeedCapped(predictor, cap, dt), test, args.samples, 0, "cpu",
                       progress=False)  # fmt: skip
-    plain = evaluate(predictor, test, args.samples, 0, "cpu", progress=False)
+    plain = {"min_ade": float(a_model.mean()), "min_fde": float(f_model.mean())}
+    speed, f_model, f_cv = speed.numpy(), f_model.numpy(), f_cv.numpy()
 
     bins = []
     for lo, hi in zip(EDGES, EDGES[1:], strict=False):

@@ -33,6 +33,13 @@ def from_relative(pred_rel: torch.Tensor, batch: Batch) -> torch.Tensor:
     return pred_rel + batch.origin[:, None, :]
 
 
+def scene_centroids(batch: Batch) -> torch.Tensor:
+    """Each scene's mean last observed position: [B, 2]."""
+    sizes = batch.scene_sizes().clamp(min=1).to(batch.history.dtype)  # [B]
+    total = batch.history.new_zeros(batch.num_scenes, 2)  # [B, 2]
+    return total.index_add_(0, batch.scene, batch.origin) / sizes[:, None]
+
+
 def augment(
     batch: Batch,
     generator: torch.Generator | None = None,
@@ -61,10 +68,7 @@ def augment(
         lo, hi = scale_range
         factor = (lo + (hi - lo) * torch.rand(b, generator=generator)).to(device)  # [B]
         rot = rot * factor[:, None, None]
-    sizes = batch.scene_sizes().clamp(min=1).to(batch.history.dtype)  # [B]
-    centre = torch.zeros(b, 2, device=device).index_add_(0, batch.scene, batch.origin)  # [B, 2]
-    centre = centre / sizes[:, None]
-    c = centre[batch.scene][:, None, :]  # [N, 1, 2]
+    c = scene_centroids(batch)[batch.scene][:, None, :]  # [N, 1, 2]
     r = rot[batch.scene]  # [N, 2, 2]
     return Batch(
         history=(batch.history - c) @ r.transpose(1, 2) + c,
