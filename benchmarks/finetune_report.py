@@ -42,6 +42,24 @@ def _pct(new: float, old: float) -> str:
     return f"{100 * (new - old) / old:+.1f} %"
 
 
+def _start(rows: list[dict], dataset: str) -> dict | None:
+    """The pretrained start's test row of a dataset."""
+    key = (dataset, "pretrained", "test")
+    return next((r for r in rows if (r["dataset"], r["method"], r["split"]) == key), None)
+
+
+def _log(run: Path) -> list[dict]:
+    """A run's finetune_metrics.jsonl, one dict per epoch ([] when missing)."""
+    path = run / "finetune_metrics.jsonl"
+    return [json.loads(line) for line in path.open()] if path.is_file() else []
+
+
+def _best_epochs(logs: list[list[dict]]) -> str:
+    return ", ".join(
+        str(max((e["epoch"] for e in lg if e.get("best")), default=None)) for lg in logs
+    )
+
+
 def accuracy_section(rows: list[dict], datasets: list[str]) -> tuple[str, dict]:
     lines = [
         "| dataset | method | seeds | minADE | minFDE | ADE vs start | FDE vs start "
@@ -50,12 +68,9 @@ def accuracy_section(rows: list[dict], datasets: list[str]) -> tuple[str, dict]:
     ]
     fde_change: dict[str, dict[str, float]] = {}
     for d in datasets:
-        start = [
-            r for r in rows if (r["dataset"], r["method"], r["split"]) == (d, "pretrained", "test")
-        ]
-        if not start:
+        s = _start(rows, d)
+        if s is None:
             continue
-        s = start[0]
         lines.append(
             f"| {d} | pretrained (start) | 1 | {s['min_ade']:.3f} | {s['min_fde']:.3f} | – | – "
             f"| {s['joint_min_ade']:.3f} / {s['joint_min_fde']:.3f} "
@@ -91,22 +106,16 @@ def diagnostics_section(datasets: list[str]) -> str:
     ]
     for d in datasets:
         for m in RUN_SUFFIX:
-            logs = []
-            for run in _run_dirs(d, m):
-                path = run / "finetune_metrics.jsonl"
-                if path.is_file():
-                    logs.append([json.loads(line) for line in path.open()])
-            logs = [lg for lg in logs if lg]
+            logs = [lg for lg in map(_log, _run_dirs(d, m)) if lg]
             if not logs:
                 continue
-            best = [max((r["epoch"] for r in lg if r.get("best")), default=None) for lg in logs]
             lines.append(
                 f"| {d} | {m} | {len(logs)} | {_ms(_at(logs, 0, 'train_reward'))} -> "
                 f"{_ms(_at(logs, -1, 'train_reward'))} "
                 f"| {_ms(_at(logs, -1, 'train_kl_to_reference'), 2)} "
                 f"| {_ms(_at(logs, -1, 'train_explained_variance'))} "
                 f"| {_ms(_at(logs, 0, 'val_min_fde'))} -> {_ms(_at(logs, -1, 'val_min_fde'))} "
-                f"| {', '.join(str(b) for b in best)} |"
+                f"| {_best_epochs(logs)} |"
             )
     return "\n".join(lines)
 
@@ -134,12 +143,10 @@ def reward_section(rows: list[dict], datasets: list[str]) -> str:
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for d in datasets:
-        start_path = meta / f"finetune_start_{d}.json"
-        start_rows = [r for r in rows if (r["dataset"], r["method"], r["split"]) ==
-                      (d, "pretrained", "test")]  # fmt: skip
-        if not start_path.is_file() or not start_rows:
+        start_path, start = meta / f"finetune_start_{d}.json", _start(rows, d)
+        if not start_path.is_file() or start is None:
             continue
-        v0, t0 = json.loads(start_path.read_text())["val"], start_rows[0]["min_fde"]
+        v0, t0 = json.loads(start_path.read_text())["val"], start["min_fde"]
         tuned = [r for r in rows if r["dataset"] == d and r["split"] == "test"
                  and r["method"].startswith("rlhf")]  # fmt: skip
         for method in sorted({r["method"] for r in tuned}):
@@ -147,16 +154,13 @@ def reward_section(rows: list[dict], datasets: list[str]) -> str:
             tag = method.removeprefix(base).lstrip("-")
             runs = []
             for r in sorted((r for r in tuned if r["method"] == method), key=lambda r: r["seed"]):
-                run = ROOT / "runs" / f"{d}-{base}-s{r['seed']}{'-' + tag if tag else ''}"
-                path = run / "finetune_metrics.jsonl"
-                log = [json.loads(line) for line in path.open()] if path.is_file() else []
+                log = _log(ROOT / "runs" / f"{d}-{base}-s{r['seed']}{'-' + tag if tag else ''}")
                 if log and "val_mean_ats" in log[0]:
                     runs.append((r, log))
             if not runs:
                 continue
             logs = [lg for _, lg in runs]
             r0 = runs[0][0]
-            best = [max((e["epoch"] for e in lg if e.get("best")), default=None) for lg in logs]
             peak = [max(e["val_mean_ats"] for e in lg) for lg in logs]
             fde = [r["min_fde"] for r, _ in runs]
             gpu = "GPU" if "NVIDIA" in r0["machine"] else "CPU"
@@ -166,7 +170,7 @@ def reward_section(rows: list[dict], datasets: list[str]) -> str:
                 f"{_ms(_at(logs, 0, 'val_mean_ats'))} -> {_ms(_at(logs, -1, 'val_mean_ats'))} "
                 f"({_ms(peak)}) | {v0['max_ats']:.3f} -> {_ms(_at(logs, -1, 'val_max_ats'))} "
                 f"| {v0['min_fde']:.3f} -> {_ms(_at(logs, -1, 'val_min_fde'))} "
-                f"| {', '.join(str(b) for b in best)} "
+                f"| {_best_epochs(logs)} "
                 f"| {_ms(fde)} ({_pct(statistics.mean(fde), t0)}) | {gpu} |"
             )
     return "\n".join(lines)

@@ -63,14 +63,13 @@ def publish(
         return
     den = payload.pop("denoiser")
     den_path = dst.parent / denoiser_name
-    if den_path.is_file() and _load_file(den_path).get("hash") != den["hash"]:
-        if not replace_denoiser:
+    current = _load_file(den_path).get("hash") if den_path.is_file() else None
+    if current != den["hash"]:
+        if current is not None and not replace_denoiser:
             raise TrajprefError(
                 f"{den_path} holds a different denoiser, which other checkpoints may name; "
                 "publish under another denoiser_name or pass replace_denoiser=True"
             )
-        save(den_path, den)
-    elif not den_path.is_file():
         save(den_path, den)
     payload["denoiser_ref"] = {"path": denoiser_name, "hash": den["hash"]}
     save(dst, payload)
