@@ -13,9 +13,9 @@ from pathlib import Path
 
 from trajpref.data import load_dataset
 from trajpref.data.registry import ETH_UCY
+from trajpref.evaluation import evaluate
 from trajpref.models.baseline import ConstantVelocity
 from trajpref.results import make_row, write_rows
-from trajpref.train.evaluate import evaluate
 
 HERE = Path(__file__).resolve().parent
 

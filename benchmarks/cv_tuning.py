@@ -14,9 +14,9 @@ import numpy as np
 
 from trajpref.data import load_dataset
 from trajpref.data.registry import ETH_UCY
+from trajpref.evaluation import evaluate
 from trajpref.models.baseline import ConstantVelocity
 from trajpref.results import command_line, machine
-from trajpref.train.evaluate import evaluate
 
 ROOT = Path(__file__).resolve().parent.parent
 

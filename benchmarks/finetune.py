@@ -5,8 +5,8 @@ split (chosen on validation), one row per method and seed.
         --data-root ../shared/data [--preset paper] [--set finetune.epochs=3 ...]
 
 Runs go to runs/<dataset>-<method>-s<seed>[-<tag>] (resumed when their _last.pt exists).
-Writes benchmarks/results/finetune_<dataset>[_<tag>].json and, for seed 0 of the untagged
-run, models/<dataset>/<method>.pt. Every invocation also writes
+Writes benchmarks/results/finetune_<dataset>[_<tag>].json and, with ``--publish``, seed 0's
+model of the untagged run as models/<dataset>/<method>.safetensors. Every invocation also writes
 benchmarks/results/meta/finetune_start_<dataset>.json: the start's validation exactly as the
 fine-tuning stage computes it each epoch (the "epoch 0" the run logs start from);
 ``--start-only`` writes just that.
@@ -18,14 +18,15 @@ import argparse
 import json
 from pathlib import Path
 
-from trajpref.cli import finetune_config
 from trajpref.data import load_dataset
+from trajpref.device import resolve_device
+from trajpref.evaluation import evaluate
+from trajpref.models import checkpoint as ckpt
 from trajpref.results import make_row, write_rows
+from trajpref.rl.presets import finetune_config
 from trajpref.score.scorer import TrajectoryScorer
-from trajpref.train import checkpoint as ckpt
-from trajpref.train.device import resolve_device
-from trajpref.train.evaluate import evaluate
 from trajpref.train.run import finetune
+from trajpref.train.stages import build_finetune_stage
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -42,13 +43,19 @@ def main() -> None:
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--samples", type=int, default=20)
     parser.add_argument(
+        "--publish",
+        action="store_true",
+        help="publish seed 0's model as models/<dataset>/<method>.safetensors (only for the "
+        "dataset's best method: docs/architecture.md, published models)",
+    )
+    parser.add_argument(
         "--start-only",
         action="store_true",
         help="only validate the start (meta/finetune_start_<dataset>.json)",
     )
     args = parser.parse_args()
 
-    start = ROOT / "models" / args.dataset / "generator.pt"
+    start = ROOT / "models" / args.dataset / f"generator{ckpt.SUFFIX}"
     start_validation(args, start)
     if args.start_only:
         return
@@ -67,11 +74,12 @@ def main() -> None:
             last = run / "finetune_last.pt"
             summary = finetune(cfg, start, run, args.data_root, args.device,
                                str(last) if last.is_file() else None, progress=True)  # fmt: skip
-            model = ckpt.load_predictor(run / "finetune.pt", "leapfrog", args.device)
+            best = run / f"finetune{ckpt.SUFFIX}"
+            model = ckpt.load_predictor(best, "leapfrog", args.device)
             res = evaluate(model, test, args.samples, 0, args.device, scorer=scorer,
                            progress=False)  # fmt: skip
-            if seed == 0 and not args.tag:
-                ckpt.publish(run / "finetune.pt", ROOT / "models" / args.dataset / f"{method}.pt")
+            if args.publish and seed == 0 and not args.tag:
+                ckpt.publish(best, ROOT / "models" / args.dataset / f"{method}{ckpt.SUFFIX}")
             method_name = method if not args.tag else f"{method}-{args.tag}"
             # re-read: keeps rows of other methods/seeds, also those written meanwhile by a
             # concurrent invocation for another method or seed
@@ -83,7 +91,7 @@ def main() -> None:
                     "min_ade", "min_fde", "joint_min_ade", "joint_min_fde", "max_ats",
                     "max_fts", "top1_recall_ats", "top5_recall_ats")},
                 train_seconds=round(summary["train_seconds"], 1),
-                checkpoint=str((run / "finetune.pt").relative_to(ROOT)),
+                checkpoint=str(best.relative_to(ROOT)),
             ))  # fmt: skip
             print(f"{args.dataset} {method_name} seed {seed}: minADE {res['min_ade']:.3f} "
                   f"minFDE {res['min_fde']:.3f} maxATS {res['max_ats']:.3f} maxFTS "
@@ -93,8 +101,6 @@ def main() -> None:
 
 def start_validation(args, start: Path) -> dict[str, float]:
     """The fine-tuning stage's validation of the untouched start (its "epoch 0")."""
-    from trajpref.rl.stage import build_finetune_stage
-
     cfg = finetune_config(str(start), args.methods[0], args.preset, None, args.overrides, 0)
     val = load_dataset(cfg.data.val_dataset or cfg.data.dataset, "val", args.data_root)
     stage = build_finetune_stage(cfg, ckpt.load(start), val, resolve_device(args.device))

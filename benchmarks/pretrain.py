@@ -11,9 +11,10 @@ publish the checkpoints, evaluate on the test split, and time the two samplers s
     python benchmarks/pretrain.py --dataset zara1 --run-dir runs/zara1-g100 --variant long \
         --train-machine "1x H100" --no-full-eval --data-root ../shared/data
 
-Writes models/<dataset>/{denoiser,generator}.pt, benchmarks/results/pretrained_<dataset>.json
-(methods ``pretrained`` and ``full-sampler``) and prints the numbers for docs/pretraining.md.
-With ``--variant NAME``: models/<dataset>/generator-NAME.pt, method ``pretrained-NAME`` in
+Writes models/<dataset>/{denoiser,generator}.safetensors,
+benchmarks/results/pretrained_<dataset>.json (methods ``pretrained`` and ``full-sampler``) and
+prints the numbers for docs/pretraining.md. With ``--variant NAME``:
+models/<dataset>/generator-NAME.safetensors, method ``pretrained-NAME`` in
 pretrained_<dataset>_NAME.json; the README's cost table (this machine, default configs) skips it.
 """
 
@@ -28,17 +29,16 @@ import torch
 
 from trajpref.config import load_config
 from trajpref.data import load_dataset
+from trajpref.evaluation import evaluate
+from trajpref.models import checkpoint as ckpt
 from trajpref.results import make_row, write_rows
-from trajpref.train import checkpoint as ckpt
-from trajpref.train.evaluate import evaluate
+from trajpref.train.run import train_stage
 from trajpref.types import collate
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
 def _train(args, run_dir: Path) -> None:
-    from trajpref.train.run import train_stage
-
     cfg = load_config(ROOT / "configs" / f"{args.dataset}.yaml")
     for stage in ("diffusion", "generator"):
         name = "denoiser" if stage == "diffusion" else "generator"
@@ -86,7 +86,7 @@ def main() -> None:
     parser.add_argument(
         "--variant",
         default=None,
-        help="publish as generator-VARIANT.pt, rows as pretrained-VARIANT",
+        help="publish as generator-VARIANT.safetensors, rows as pretrained-VARIANT",
     )
     parser.add_argument(
         "--train-machine",
@@ -105,21 +105,16 @@ def main() -> None:
         _train(args, run_dir)
     models = ROOT / "models" / args.dataset
     models.mkdir(parents=True, exist_ok=True)
-    # the generator names models/<dataset>/denoiser.pt by path and hash instead of embedding it
-    published = models / f"generator{suffix}.pt"
-    # a variant trained with its own denoiser gets its own denoiser file: never overwrite the
-    # one the default generator (and the fine-tuned models) point to
-    den_name = "denoiser.pt"
-    if args.variant and (models / den_name).is_file():
-        own = ckpt.load(run_dir / "generator.pt")["denoiser"]["hash"]
-        if ckpt.load(models / den_name)["hash"] != own:
-            den_name = f"denoiser{suffix}.pt"
-    ckpt.publish(
-        run_dir / "generator.pt",
-        published,
-        denoiser_name=den_name,
-        replace_denoiser=not args.variant,
-    )  # a retrained default replaces its own
+    # the generator names models/<dataset>/denoiser.safetensors by path and hash instead of
+    # embedding it; published weights are half precision
+    published = models / f"generator{suffix}{ckpt.SUFFIX}"
+    run_generator = run_dir / f"generator{ckpt.SUFFIX}"
+    # a retrained default replaces its own denoiser; a variant trained with a denoiser of its
+    # own gets its own file: it never overwrites the one the default generator points to
+    try:
+        ckpt.publish(run_generator, published, replace_denoiser=not args.variant)
+    except ckpt.DenoiserConflict:
+        ckpt.publish(run_generator, published, denoiser_name=f"denoiser{suffix}{ckpt.SUFFIX}")
     gen_ckpt = ckpt.load(published)
     den_ckpt = gen_ckpt["denoiser"]
     train_seconds = den_ckpt["meta"]["train_seconds"] + gen_ckpt["meta"]["train_seconds"]
@@ -173,7 +168,8 @@ def main() -> None:
         "val": gen_ckpt["meta"]["val"],
         "ms_per_scene": speed,
         "speedup_full_over_leapfrog": speed["full"] / speed["leapfrog"],
-        "checkpoint_mb": {"denoiser": (models / den_name).stat().st_size / 2**20,
+        "checkpoint_mb": {"denoiser": (models / gen_ckpt["denoiser_ref"]["path"]).stat().st_size
+                                      / 2**20,
                           "generator": published.stat().st_size / 2**20},
     }  # fmt: skip
     meta_dir = ROOT / "benchmarks" / "results" / "meta"

@@ -37,15 +37,14 @@ import torch
 from trajpref.config import FinetuneConfig
 from trajpref.data import load_dataset
 from trajpref.data.loader import SceneLoader
-from trajpref.data.transforms import to_relative
-from trajpref.diffusion.samplers import denoise
+from trajpref.data.transforms import to_model_frame
 from trajpref.io import write_json
 from trajpref.metrics import ade_fde
+from trajpref.models import checkpoint as ckpt
 from trajpref.results import command_line, machine
-from trajpref.rl.stage import step_reward
+from trajpref.rl.objective import step_reward
 from trajpref.score.scorer import TrajectoryScorer, score_timesteps
-from trajpref.train import checkpoint as ckpt
-from trajpref.train.stages import _subset
+from trajpref.train.stages import subset
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -68,17 +67,17 @@ def expected_min_of_random(values: torch.Tensor, m: int) -> torch.Tensor:
     return (values.sort(0).values * w[:, None]).sum(0)
 
 
-def variance_sources(model, scorer, batch, ctx, target, samples: int, rl: FinetuneConfig,
+def variance_sources(model, scorer, batch, cond, target, samples: int, rl: FinetuneConfig,
                      seed: int):  # fmt: skip
     """Per agent: variance of the summed reward over its K samples, and the shares of it
     explained by the exploration action and by the ancestral noise of the tau steps."""
-    y_tau = model.generator(model.features(batch)).initial_sample()[:samples]  # [K, N, T_f, 2]
+    y_tau = model.generator(cond.features).initial_sample()[:samples]  # [K, N, T_f, 2]
     xi = torch.randn(y_tau.shape, generator=torch.Generator().manual_seed(seed)) * rl.explore_std
 
     def reward(start: torch.Tensor, noise_seed: int) -> torch.Tensor:
         gen = torch.Generator().manual_seed(noise_seed)
-        y = denoise(model.schedule, model.eps_fn(ctx), start, model.tau, gen)  # [K, N, T_f, 2]
-        return step_reward(scorer, ctx, y, target, rl.reward_clip).sum(-1)  # [K, N]
+        y = model.denoise(cond, start, gen)  # [K, N, T_f, 2]
+        return step_reward(scorer, cond.context, y, target, rl.reward_clip).sum(-1)  # [K, N]
 
     r_plus, r_minus = reward(y_tau + xi, seed + 1), reward(y_tau - xi, seed + 1)  # [K, N]
     r_fresh = reward(y_tau + xi, seed + 2)
@@ -98,14 +97,20 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=20)
     parser.add_argument("--max-scenes", type=int, default=400)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--model", default=None, help="default models/<dataset>/generator.pt")
+    parser.add_argument(
+        "--model", default=None, help="default models/<dataset>/generator.safetensors"
+    )
     parser.add_argument("--name", default="", help="names the output for a --model")
     args = parser.parse_args()
 
-    path = Path(args.model) if args.model else ROOT / "models" / args.dataset / "generator.pt"
+    path = (
+        Path(args.model)
+        if args.model
+        else ROOT / "models" / args.dataset / f"generator{ckpt.SUFFIX}"
+    )
     model = ckpt.load_predictor(path, "leapfrog")
     cfg = ckpt.load(path)["config"]
-    val = _subset(load_dataset(cfg["data"].get("val_dataset") or cfg["data"]["dataset"], "val",
+    val = subset(load_dataset(cfg["data"].get("val_dataset") or cfg["data"]["dataset"], "val",
                                args.data_root), args.max_scenes)  # fmt: skip
     rl = FinetuneConfig()
     steps = score_timesteps(model.schedule.num_steps, rl.score_every)
@@ -114,11 +119,11 @@ def main() -> None:
     cols: dict[str, list[torch.Tensor]] = {}
     for batch in SceneLoader(val, max_agents=1024):
         pred = model.predict(batch, args.samples, gen)  # [K, N, T_f, 2]
-        ctx = model.denoiser.context(model.features(batch))  # [N, H]
-        target = to_relative(batch)[1] / model.scale  # [N, T_f, 2]
-        y = (pred - batch.origin[None, :, None, :]) / model.scale  # [K, N, T_f, 2]
+        cond = model.condition(batch)
+        target = to_model_frame(batch.future, batch, model.scale)  # [N, T_f, 2]
+        y = to_model_frame(pred, batch, model.scale)  # [K, N, T_f, 2]
         # what fine-tuning maximises, per sample
-        reward = step_reward(scorer, ctx, y, target, rl.reward_clip).sum(-1)  # [K, N]
+        reward = step_reward(scorer, cond.context, y, target, rl.reward_clip).sum(-1)  # [K, N]
         ade, fde = ade_fde(pred, batch.future)  # [K, N]
         travelled = (pred[..., -1, :] - batch.history[None, :, -1, :]).norm(dim=-1)  # [K, N]
         top = reward.argmax(0)  # [N]
@@ -140,7 +145,7 @@ def main() -> None:
             "min_fde": fde.min(0).values,
             "min_ade": ade.min(0).values,
         }
-        new |= variance_sources(model, scorer, batch, ctx, target, args.samples, rl, args.seed)
+        new |= variance_sources(model, scorer, batch, cond, target, args.samples, rl, args.seed)
         for m in (1, 5, 10):
             new[f"min_fde_top{m}_by_reward"] = fde.gather(0, order[:m]).min(0).values
             new[f"min_fde_random{m}"] = expected_min_of_random(fde, m)

@@ -23,7 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from trajpref.data.robo_sim import RoboSimConfig, official_arrays, scene_statistics, simulate
+from trajpref.data.registry import stacked_arrays
+from trajpref.data.robo_sim import RoboSimConfig, scene_statistics, simulate
 
 HEADER = """# robo-sim: our simulator for the Robo scenario
 
@@ -114,9 +115,9 @@ def main(argv: list[str] | None = None) -> int:
             parser.error(f"missing {root / f'{split}.npz'}")
 
     columns: dict[str, dict[str, float]] = {}
-    columns["val (official)"] = scene_statistics(*official_arrays("val", args.data_root))
+    columns["val (official)"] = scene_statistics(*stacked_arrays("robo", "val", args.data_root))
     columns["test (official, not used for tuning)"] = scene_statistics(
-        *official_arrays("test", args.data_root)
+        *stacked_arrays("robo", "test", args.data_root)
     )
     simulate(100, seed=args.seed)  # warm-up
     t0 = time.perf_counter()

@@ -23,11 +23,11 @@ import torch
 
 from trajpref.data import load_dataset
 from trajpref.data.loader import SceneLoader
+from trajpref.evaluation import evaluate
+from trajpref.models import checkpoint as ckpt
 from trajpref.models.baseline import ConstantVelocity
 from trajpref.results import command_line, machine, make_row, write_rows
 from trajpref.score.scorer import ScoreAccumulator, TrajectoryScorer, score_timesteps
-from trajpref.train import checkpoint as ckpt
-from trajpref.train.evaluate import evaluate
 from trajpref.types import collate
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -101,7 +101,7 @@ def main() -> None:
     args = parser.parse_args()
 
     models = ROOT / "models" / args.dataset
-    gen_path = models / "generator.pt"
+    gen_path = models / f"generator{ckpt.SUFFIX}"
     test = load_dataset(args.dataset, "test", args.data_root)
     scorer = TrajectoryScorer.from_checkpoint(gen_path)
     methods = {
@@ -161,7 +161,7 @@ def study_doc(args, test, leap, models) -> None:
         idx = torch.linspace(0, len(test) - 1, args.study_scenes).long().tolist()
         test = type(test)([test.scenes[i] for i in idx], test.info)
     preds = predictions(leap, test, args.samples, args.seed)
-    table = study(models / "denoiser.pt", preds, args.study_seeds)
+    table = study(models / ckpt.DENOISER_NAME, preds, args.study_seeds)
     lines = [
         f"# Score study on {args.dataset} (test split, {len(test)} scenes, leapfrog samples, "
         f"K = {args.samples})", "",

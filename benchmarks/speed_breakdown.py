@@ -23,11 +23,11 @@ import torch
 
 from trajpref.data import load_dataset
 from trajpref.data.transforms import scene_centroids
+from trajpref.evaluation import evaluate, predict_dataset
 from trajpref.metrics import min_ade_fde
+from trajpref.models import checkpoint as ckpt
 from trajpref.models.baseline import ConstantVelocity
 from trajpref.results import command_line, machine
-from trajpref.train import checkpoint as ckpt
-from trajpref.train.evaluate import evaluate, predict_dataset
 from trajpref.types import Batch
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -66,13 +66,19 @@ class SpeedCapped:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--dataset", required=True)
-    parser.add_argument("--model", default=None, help="default models/<dataset>/generator.pt")
+    parser.add_argument(
+        "--model", default=None, help="default models/<dataset>/generator.safetensors"
+    )
     parser.add_argument("--data-root", default=None)
     parser.add_argument("--samples", type=int, default=20)
     parser.add_argument("--name", default="", help="names the output for a --model")
     args = parser.parse_args()
 
-    model_path = Path(args.model) if args.model else ROOT / "models" / args.dataset / "generator.pt"
+    model_path = (
+        Path(args.model)
+        if args.model
+        else ROOT / "models" / args.dataset / f"generator{ckpt.SUFFIX}"
+    )
     test = load_dataset(args.dataset, "test", args.data_root)
     train = load_dataset(args.dataset, "train", args.data_root)
     dt = test.info.frame_interval

@@ -59,7 +59,7 @@ def write_dataset(root: Path, frames: int = 24, agents: int = 3, seed: int = 0) 
 TINY_OVERRIDES = [
     "model.hidden=16", "model.heads=2", "model.encoder_layers=1", "model.denoiser_width=32",
     "model.denoiser_blocks=1", "model.generator_width=32", "diffusion.num_steps=10",
-    "generator.samples=4", "generator.tau=2", "denoiser.epochs=2", "generator.epochs=2",
+    "model.samples=4", "model.tau=2", "denoiser.epochs=2", "generator.epochs=2",
     "denoiser.warmup_steps=1", "generator.warmup_steps=1", "denoiser.eval_every=1",
     "generator.eval_every=1", "data.max_agents=8",
 ]  # fmt: skip

@@ -2,7 +2,7 @@ from trajpref import demo
 
 TINY = ["model.hidden=16", "model.heads=2", "model.encoder_layers=1", "model.denoiser_width=32",
         "model.denoiser_blocks=1", "model.generator_width=32", "diffusion.num_steps=10",
-        "generator.samples=5", "generator.tau=2", "denoiser.epochs=1", "generator.epochs=1",
+        "model.samples=5", "model.tau=2", "denoiser.epochs=1", "generator.epochs=1",
         "finetune.epochs=1", "denoiser.eval_max_scenes=50", "generator.eval_max_scenes=50",
         "finetune.eval_max_scenes=50", "finetune.score_every=3"]  # fmt: skip
 
@@ -18,4 +18,4 @@ def test_demo_runs_the_whole_pipeline(tmp_path, capsys, monkeypatch):
     for name in ("constant velocity (K=5)", "pretrained (leapfrog)", "RLHF-ReS"):
         assert name in out
     assert (tmp_path / "robo_scene0_scored.png").stat().st_size > 1000
-    assert (tmp_path / "run" / "rlhf-res" / "finetune.pt").is_file()
+    assert (tmp_path / "run" / "rlhf-res" / "finetune.safetensors").is_file()

@@ -1,16 +1,30 @@
-"""The ``trajpref`` command line: ``data stats``, ``evaluate``, ``predict``, ``plot``."""
+"""The ``trajpref`` command line: ``data stats``, ``evaluate``, ``predict``, ``plot``,
+``train``, ``finetune``."""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
 
 import numpy as np
+import torch
 
 from trajpref import __version__
-from trajpref.errors import TrajprefError
+from trajpref.config import load_config
+from trajpref.data import load_dataset
+from trajpref.device import resolve_device
+from trajpref.errors import ConfigError, TrajprefError
+from trajpref.evaluation import evaluate, predict_dataset
+from trajpref.io import atomic_path, write_json
+from trajpref.models.registry import load_predictor
+from trajpref.rl.presets import finetune_config
+from trajpref.score import TrajectoryScorer
+from trajpref.train.run import finetune, train_stage
+from trajpref.types import collate
+from trajpref.viz.plot import plot_scene, plot_scene_scored
 
 
 def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> None:
@@ -22,12 +36,8 @@ def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> N
     )
     p.add_argument("--split", default=split_default, choices=["train", "val", "test"])
     p.add_argument("--data-root", default=None, help="data folder (default: $TRAJPREF_DATA)")
-    p.add_argument(
-        "--frame-interval",
-        type=float,
-        default=0.4,
-        help="seconds between frames, for a folder dataset (default 0.4)",
-    )
+    p.add_argument("--frame-interval", type=float, default=0.4,
+                   help="seconds between frames, for a folder dataset (default 0.4)")  # fmt: skip
     p.add_argument("--units", default="unknown", help="coordinate units, for a folder dataset")
 
 
@@ -43,17 +53,18 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
         "generator) or full (all S steps from noise; the default for a bare denoiser)",
     )
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
-    p.add_argument(
-        "--max-agents",
-        type=int,
-        default=1024,
-        help="agents per batch (default 1024; lower it to save memory)",
-    )
+    p.add_argument("--max-agents", type=int, default=1024,
+                   help="agents per batch (default 1024; lower it to save memory)")  # fmt: skip
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
+
+
+def _add_scorer_arg(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument("--scorer", default=None, help=f"a denoiser (or generator) checkpoint: {what}")
 
 
 def _add_run_args(p: argparse.ArgumentParser, example: str, last: str) -> None:
     """Options every training stage shares (train and finetune)."""
+    p.add_argument("--out", required=True, help="run folder: checkpoints, config, metrics")
     p.add_argument(
         "--set",
         dest="overrides",
@@ -89,12 +100,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_model_args(ev)
     ev.add_argument("--json", action="store_true", help="print JSON")
     ev.add_argument("--out", default=None, help="also write the JSON result to this file")
-    ev.add_argument(
-        "--scorer",
-        default=None,
-        help="a denoiser (or generator) checkpoint: adds max_ats, max_fts and the "
-        "top-1/top-5 recall of the ground-truth-free ranking",
-    )
+    _add_scorer_arg(ev, "adds max_ats, max_fts and the top-1/top-5 recall of the "
+                    "ground-truth-free ranking")  # fmt: skip
     ev.set_defaults(func=cmd_evaluate)
 
     pr = sub.add_parser("predict", help="save sampled futures of a split to .npz")
@@ -108,9 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="order each scene's samples best first by the diffusion score (no "
         "ground truth used); saves `order` and `residual` [K, B] too",
     )
-    pr.add_argument(
-        "--scorer", default=None, help="checkpoint whose denoiser scores (default: the model's own)"
-    )
+    _add_scorer_arg(pr, "the denoiser that ranks (default: the model's own)")
     pr.set_defaults(func=cmd_predict)
 
     pl = sub.add_parser("plot", help="PNG of one scene: histories, ground truth, samples")
@@ -118,31 +123,22 @@ def build_parser() -> argparse.ArgumentParser:
     _add_model_args(pl)
     pl.add_argument("--scene", type=int, default=0, help="scene index in the split (default 0)")
     pl.add_argument("--out", required=True, help="output .png file")
-    pl.add_argument(
-        "--scorer",
-        default=None,
-        help="a denoiser (or generator) checkpoint: draw each agent's top-2 samples "
-        "shaded by their diffusion score, beside the ground truth (the paper's Fig. 2)",
-    )
+    _add_scorer_arg(pl, "draw each agent's top-2 samples shaded by their diffusion score, "
+                    "beside the ground truth (the paper's Fig. 2)")  # fmt: skip
     pl.set_defaults(func=cmd_plot)
 
     tr = sub.add_parser("train", help="train the denoiser (diffusion) or the generator")
     tr.add_argument("stage", choices=["diffusion", "generator"])
     tr.add_argument("--config", default=None, help="YAML config (default: built-in defaults)")
-    tr.add_argument("--out", required=True, help="run folder: checkpoints, config, metrics")
     tr.add_argument("--dataset", default=None, help="shortcut for --set data.dataset=NAME")
-    tr.add_argument(
-        "--denoiser",
-        default=None,
-        help="generator stage: the denoiser checkpoint (default OUT/denoiser.pt)",
-    )
+    tr.add_argument("--denoiser", default=None, help="generator stage: the denoiser "
+                    "checkpoint (default OUT/denoiser.safetensors)")  # fmt: skip
     _add_run_args(tr, "denoiser.epochs=5", "a <stage>_last.pt")
     tr.set_defaults(func=cmd_train)
 
     ft = sub.add_parser("finetune", help="RLHF / RLHF-ReS fine-tuning of a pretrained generator")
     ft.add_argument("--method", required=True, choices=["rlhf", "rlhf-res"])
     ft.add_argument("--from", dest="start", required=True, help="a generator checkpoint")
-    ft.add_argument("--out", required=True, help="run folder: checkpoints, config, metrics")
     ft.add_argument(
         "--preset",
         default=None,
@@ -151,19 +147,14 @@ def build_parser() -> argparse.ArgumentParser:
         "(default: FinetuneConfig's values, which follow the same readings but keep "
         "RLHF-ReS's weights 0.3 / 1.5 for both methods)",
     )
-    ft.add_argument(
-        "--config",
-        default=None,
-        help="YAML whose 'finetune' section applies (data and model come from the checkpoint)",
-    )
+    ft.add_argument("--config", default=None, help="YAML whose 'finetune' section applies "
+                    "(data and model come from the checkpoint)")  # fmt: skip
     _add_run_args(ft, "finetune.lr=5e-5", "a finetune_last.pt")
     ft.set_defaults(func=cmd_finetune)
     return parser
 
 
 def _load(args):
-    from trajpref.data import load_dataset
-
     return load_dataset(
         args.dataset,
         args.split,
@@ -175,9 +166,9 @@ def _load(args):
 
 def _check_model_args(args) -> None:
     if args.samples < 1:
-        raise TrajprefError("--samples must be >= 1")
+        raise ConfigError("--samples must be >= 1")
     if args.max_agents < 1:
-        raise TrajprefError("--max-agents must be >= 1")
+        raise ConfigError("--max-agents must be >= 1")
 
 
 def cmd_data_stats(args) -> int:
@@ -213,23 +204,16 @@ def cmd_data_stats(args) -> int:
 
 
 def _predictor(args):
-    from trajpref.models.registry import load_predictor
-    from trajpref.train.device import resolve_device
-
     _check_model_args(args)
     device = resolve_device(args.device)
     return load_predictor(args.model, device, args.sampler), device
 
 
 def _scorer(path: str, device):
-    from trajpref.score import TrajectoryScorer
-
     return TrajectoryScorer.from_checkpoint(path, device)
 
 
 def cmd_evaluate(args) -> int:
-    from trajpref.train.evaluate import evaluate
-
     model, device = _predictor(args)
     scorer = _scorer(args.scorer, device) if args.scorer else None
     ds = _load(args)
@@ -250,8 +234,6 @@ def cmd_evaluate(args) -> int:
         "seconds": round(seconds, 3),
     }
     if args.out:
-        from trajpref.io import write_json
-
         write_json(args.out, out)
     if args.json:
         print(json.dumps(out))
@@ -268,9 +250,6 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_predict(args) -> int:
-    from trajpref.io import atomic_path
-    from trajpref.train.evaluate import predict_dataset
-
     if not args.out.endswith(".npz"):
         raise TrajprefError(f"--out {args.out}: the output must be a .npz file")
     model, device = _predictor(args)
@@ -303,11 +282,6 @@ def cmd_predict(args) -> int:
 
 
 def cmd_plot(args) -> int:
-    import torch
-
-    from trajpref.types import collate
-    from trajpref.viz.plot import plot_scene, plot_scene_scored
-
     if not args.out.endswith(".png"):
         raise TrajprefError(f"--out {args.out}: the output must be a .png file")
     model, device = _predictor(args)
@@ -325,8 +299,7 @@ def cmd_plot(args) -> int:
     )
     if args.scorer:
         res = _scorer(args.scorer, device).score(batch, pred)
-        d_gt = res.d_gt.sum(-1)  # [P]
-        agent_ats = (1 - res.d_pred.sum(-1) / d_gt).cpu().numpy()  # [K, P] each agent's ATS
+        agent_ats = res.agent_ats.cpu().numpy()  # [K, P]
         plot_scene_scored(scene.history, scene.future, pred.cpu().numpy(), agent_ats, args.out,
                           ds.info.units, title)  # fmt: skip
     else:
@@ -337,11 +310,6 @@ def cmd_plot(args) -> int:
 
 
 def cmd_train(args) -> int:
-    import dataclasses
-
-    from trajpref.config import load_config
-    from trajpref.train.run import train_stage
-
     overrides = list(args.overrides)
     if args.dataset is not None:
         overrides.append(f"data.dataset={args.dataset}")
@@ -363,29 +331,7 @@ def cmd_train(args) -> int:
     return 0
 
 
-def finetune_config(start: str, method: str, preset: str | None, config: str | None,
-                    overrides: list[str], seed: int | None):  # fmt: skip
-    """The fine-tuning config: the checkpoint's own config with today's fine-tuning
-    defaults (the finetune section a pretraining run wrote out is not carried over), the
-    YAML's finetune section, the preset, the method, then --set overrides."""
-    from trajpref.config import load_config
-    from trajpref.rl.presets import preset_overrides
-    from trajpref.train import checkpoint as ckpt
-
-    payload = ckpt.load(start)
-    if payload["kind"] != "generator":
-        raise TrajprefError(f"{start}: fine-tuning starts from a generator checkpoint")
-    extra = preset_overrides(preset, method) if preset else [f"finetune.method={method}"]
-    if seed is not None:
-        extra.append(f"seed={seed}")
-    base = {k: v for k, v in payload["config"].items() if k != "finetune"}
-    return load_config(config, [*extra, *overrides], base=base,
-                       sections=("finetune",))  # fmt: skip
-
-
 def cmd_finetune(args) -> int:
-    from trajpref.train.run import finetune
-
     cfg = finetune_config(args.start, args.method, args.preset, args.config, args.overrides,
                           args.seed)  # fmt: skip
     summary = finetune(cfg, args.start, args.out, args.data_root, args.device, args.resume,

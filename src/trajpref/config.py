@@ -6,19 +6,33 @@ from __future__ import annotations
 import copy
 import dataclasses
 import typing
+import warnings
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import yaml
 
 from trajpref.errors import ConfigError
+from trajpref.io import atomic_path
 
 
 def _positive(obj: Any, *names: str) -> None:
     for name in names:
         if not getattr(obj, name) > 0:
             raise ConfigError(f"{type(obj).__name__}.{name} must be > 0, got {getattr(obj, name)}")
+
+
+def _check_choices(obj: Any) -> None:
+    """Every ``Literal[...]`` field of dataclass ``obj`` holds one of its choices."""
+    hints = typing.get_type_hints(type(obj))
+    for f in fields(obj):
+        hint = hints[f.name]
+        choices = typing.get_args(hint) if typing.get_origin(hint) is Literal else ()
+        value = getattr(obj, f.name)
+        if choices and value not in choices:
+            options = " or ".join(repr(c) for c in choices)
+            raise ConfigError(f"{type(obj).__name__}.{f.name} must be {options}, got {value!r}")
 
 
 @dataclass
@@ -83,14 +97,29 @@ class ModelConfig:
     """Observed frames (T_h)."""
     t_fut: int = 12
     """Future frames (T_f)."""
+    samples: int = 20
+    """K, the samples the generator emits per agent (its heads' output size)."""
+    tau: int = 5
+    """Denoising steps the leapfrog sampler applies to the generator's output Y^tau."""
 
     def __post_init__(self) -> None:
         _positive(self, "hidden", "encoder_layers", "heads", "denoiser_width", "denoiser_blocks",
-                  "generator_width", "t_hist", "t_fut")  # fmt: skip
+                  "generator_width", "t_hist", "t_fut", "samples", "tau")  # fmt: skip
         if self.hidden % self.heads:
             raise ConfigError("ModelConfig.hidden must be divisible by heads")
+        if self.hidden % 2:
+            raise ConfigError("ModelConfig.hidden must be even (the sinusoidal step embedding)")
         if self.t_hist < 2:
             raise ConfigError("ModelConfig.t_hist must be >= 2 (velocities need two frames)")
+
+    def denoiser_part(self) -> ModelConfig:
+        """This config with the generator-only fields at their defaults: two configs whose
+        ``denoiser_part`` agree describe the same denoiser."""
+        return dataclasses.replace(self, **{k: getattr(ModelConfig, k) for k in GENERATOR_ONLY})
+
+
+GENERATOR_ONLY = ("generator_width", "samples", "tau")
+"""``ModelConfig`` fields that concern the generator and its sampler, not the denoiser."""
 
 
 @dataclass
@@ -141,10 +170,6 @@ class GeneratorTrainConfig(OptimConfig):
 
     epochs: int = 20
     """Passes over the training split."""
-    samples: int = 20
-    """K, samples the generator emits per agent."""
-    tau: int = 5
-    """Denoising steps the frozen denoiser applies to the generator's output."""
     best_of_k_weight: float = 1.0
     """Weight of min_k (ADE_k + FDE_k), the best-of-K distance through the denoiser."""
     mean_weight: float = 0.5
@@ -156,7 +181,6 @@ class GeneratorTrainConfig(OptimConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        _positive(self, "samples", "tau")
         for name in ("best_of_k_weight", "mean_weight", "uncertainty_weight", "reg_weight"):
             if getattr(self, name) < 0:
                 raise ConfigError(f"GeneratorTrainConfig.{name} must be >= 0")
@@ -180,7 +204,7 @@ class FinetuneConfig(OptimConfig):
     steps_per_epoch: int | None = 12
     """Cap on optimiser steps per epoch (None: a full pass); the default 3 x 12 steps is the
     budget measured in docs/rlhf.md."""
-    method: str = "rlhf-res"
+    method: Literal["rlhf", "rlhf-res"] = "rlhf-res"
     """``rlhf`` (policy and value losses on all K samples) or ``rlhf-res`` (on k* only)."""
     policy_weight: float = 0.3
     """alpha_p (RLHF, paper 1.0) or beta_p (RLHF-ReS, paper 0.3): weight of Eq. 15 / 18."""
@@ -194,16 +218,16 @@ class FinetuneConfig(OptimConfig):
     """epsilon of the clipped value (Eq. 16)."""
     kl_coef: float = 0.1
     """beta of Eq. 13 (the paper gives no value)."""
-    kl_form: str = "logratio"
+    kl_form: Literal["paper", "logratio"] = "logratio"
     """``paper`` (beta p_0 (log p_0 - log p_theta), as printed) or ``logratio`` (beta (log
     p_theta - log p_0), the usual per-sample KL estimate)."""
     gamma: float = 0.99
     """Discount over future steps (Eq. 14)."""
     gae_lambda: float = 0.0
     """GAE lambda; 0 is the paper's one-step advantage (Eq. 14)."""
-    value_target: str = "return"
+    value_target: Literal["reward", "return"] = "return"
     """``reward`` (Eq. 16 regresses V on R) or ``return`` (the GAE return)."""
-    adv_norm: str = "scene"
+    adv_norm: Literal["none", "scene"] = "scene"
     """``none`` or ``scene``: whiten advantages within each scene."""
     reward_clip: float | None = 5.0
     """Clip the per-step score r to [-c, c] (None: unclipped, as the paper)."""
@@ -213,18 +237,18 @@ class FinetuneConfig(OptimConfig):
     the cost)."""
     detach_critic: bool = True
     """Stop the value loss's gradient at the shared social encoder."""
-    likelihood: str = "sample"
+    likelihood: Literal["mean", "sample"] = "sample"
     """Eq. 12's density: ``mean`` = N(Y; mu, sigma_k) at the denoised sample, as printed (the
     K samples are deterministic functions of X, so this is a surrogate); ``sample`` = each
     initial sample Y^tau_k is perturbed by explore_std noise before denoising and the density
     is N(perturbed; Y^tau_k, explore_std) - a proper stochastic policy per sample."""
     explore_std: float = 0.05
     """Exploration noise of the ``sample`` likelihood, in normalised units."""
-    ratio_against: str = "rollout"
+    ratio_against: Literal["reference", "rollout"] = "rollout"
     """Eq. 15's ratio p_theta / p_0 against the frozen ``reference`` (as printed; a trust
     region around G_0), or against the ``rollout`` policy (standard PPO: p_theta / p_old)."""
 
-    baseline: str = "critic"
+    baseline: Literal["critic", "antithetic"] = "critic"
     """What the policy gradient's advantage subtracts from the reward: ``critic`` (Eq. 14,
     R + gamma V' - V) or ``antithetic`` (``sample`` likelihood only): each sample is also
     rolled out with -xi under the same denoising noise and A(+-xi) = +-(R(+xi) - R(-xi)) / 2,
@@ -233,23 +257,10 @@ class FinetuneConfig(OptimConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if self.baseline not in ("critic", "antithetic"):
-            raise ConfigError("finetune.baseline must be 'critic' or 'antithetic'")
+        _check_choices(self)
         if self.baseline == "antithetic" and self.likelihood != "sample":
             raise ConfigError("finetune.baseline=antithetic needs finetune.likelihood=sample")
-        if self.method not in ("rlhf", "rlhf-res"):
-            raise ConfigError("finetune.method must be 'rlhf' or 'rlhf-res'")
-        if self.kl_form not in ("paper", "logratio"):
-            raise ConfigError("finetune.kl_form must be 'paper' or 'logratio'")
-        if self.value_target not in ("reward", "return"):
-            raise ConfigError("finetune.value_target must be 'reward' or 'return'")
-        if self.likelihood not in ("mean", "sample"):
-            raise ConfigError("finetune.likelihood must be 'mean' or 'sample'")
         _positive(self, "explore_std")
-        if self.ratio_against not in ("reference", "rollout"):
-            raise ConfigError("finetune.ratio_against must be 'reference' or 'rollout'")
-        if self.adv_norm not in ("none", "scene"):
-            raise ConfigError("finetune.adv_norm must be 'none' or 'scene'")
         if not 0 <= self.gamma <= 1 or not 0 <= self.gae_lambda <= 1:
             raise ConfigError("finetune.gamma and gae_lambda must lie in [0, 1]")
         if self.reward_clip is not None and self.reward_clip <= 0:
@@ -280,8 +291,8 @@ class ExperimentConfig:
     """Seed for initialisation, shuffling, augmentation and noise."""
 
     def __post_init__(self) -> None:
-        if self.generator.tau > self.diffusion.num_steps:
-            raise ConfigError("generator.tau cannot exceed diffusion.num_steps")
+        if self.model.tau > self.diffusion.num_steps:
+            raise ConfigError("model.tau cannot exceed diffusion.num_steps")
 
 
 def to_dict(cfg: Any) -> dict[str, Any]:
@@ -311,6 +322,11 @@ def from_dict(cls: type, data: dict[str, Any] | None, where: str = "") -> Any:
 
 def _coerce(value: Any, hint: Any, name: str) -> Any:
     args = typing.get_args(hint)
+    if typing.get_origin(hint) is Literal:
+        if value not in args:
+            options = ", ".join(repr(a) for a in args)
+            raise ConfigError(f"config {name} must be one of {options}, got {value!r}")
+        return value
     if value is None:
         if type(None) in args:
             return None
@@ -322,6 +338,8 @@ def _coerce(value: Any, hint: Any, name: str) -> Any:
         if isinstance(value, str) and value.lower() in ("true", "false", "1", "0", "yes", "no"):
             return value.lower() in ("true", "1", "yes")
         raise ConfigError(f"config {name} must be true or false, got {value!r}")
+    if base in (int, float) and isinstance(value, bool):
+        raise ConfigError(f"config {name} must be {base.__name__}, got {value!r}")
     if base in (int, float, str):
         try:
             out = base(value)
@@ -331,6 +349,35 @@ def _coerce(value: Any, hint: Any, name: str) -> Any:
             raise ConfigError(f"config {name} must be an integer, got {value!r}")
         return out
     return value
+
+
+LEGACY_MOVES = {
+    ("generator", "samples"): ("model", "samples"),
+    ("generator", "tau"): ("model", "tau"),
+}
+"""Keys that moved between sections: (old section, key) -> (new section, key). Configs written
+before the move (checkpoints, YAML files) still load."""
+
+
+def upgrade_config_dict(data: dict[str, Any]) -> dict[str, Any]:
+    """A copy of a config dict in today's layout: moved keys are carried to their new section
+    (an old key given explicitly wins over the new section's value)."""
+    data = copy.deepcopy(data)
+    for (old_sec, old_key), (new_sec, new_key) in LEGACY_MOVES.items():
+        section = data.get(old_sec)
+        if isinstance(section, dict) and old_key in section:
+            warnings.warn(f"config key {old_sec}.{old_key} is now {new_sec}.{new_key}",
+                          FutureWarning, stacklevel=3)  # fmt: skip
+            target = data.setdefault(new_sec, {})
+            if not isinstance(target, dict):
+                raise ConfigError(f"config section {new_sec} must be a mapping")
+            target[new_key] = section.pop(old_key)
+    return data
+
+
+def experiment_from_dict(data: dict[str, Any] | None) -> ExperimentConfig:
+    """An ``ExperimentConfig`` from a nested dict, in today's layout or an older one."""
+    return from_dict(ExperimentConfig, upgrade_config_dict(data or {}))
 
 
 def load_config(
@@ -370,11 +417,9 @@ def load_config(
             if not isinstance(node, dict):
                 raise ConfigError(f"override {item!r}: {part} is not a section")
         node[parts[-1]] = yaml.safe_load(value)
-    return from_dict(ExperimentConfig, data)
+    return experiment_from_dict(data)
 
 
 def save_config(cfg: ExperimentConfig, path: str | Path) -> None:
-    from trajpref.io import atomic_path
-
     with atomic_path(path) as tmp:
         tmp.write_text(yaml.safe_dump(to_dict(cfg), sort_keys=False))

@@ -15,7 +15,17 @@ from pathlib import Path
 
 import torch
 
+from trajpref.config import load_config
+from trajpref.data import load_dataset
 from trajpref.errors import TrajprefError
+from trajpref.evaluation import evaluate
+from trajpref.models import checkpoint as ckpt
+from trajpref.models.baseline import ConstantVelocity
+from trajpref.rl.presets import finetune_config
+from trajpref.score import TrajectoryScorer
+from trajpref.train.run import finetune, train_stage
+from trajpref.types import collate
+from trajpref.viz.plot import plot_scene, plot_scene_scored
 
 DEFAULT_CONFIG = Path(__file__).resolve().parent / "resources" / "demo.yaml"
 """The embedded demo config: a small model and short schedules (shipped with the package)."""
@@ -23,17 +33,6 @@ DEFAULT_CONFIG = Path(__file__).resolve().parent / "resources" / "demo.yaml"
 
 def run(out: Path, data_root: str | None, samples: int, seed: int, config: Path,
         overrides: list[str]) -> None:  # fmt: skip
-    from trajpref.cli import finetune_config
-    from trajpref.config import load_config
-    from trajpref.data import load_dataset
-    from trajpref.models.baseline import ConstantVelocity
-    from trajpref.score import TrajectoryScorer
-    from trajpref.train import checkpoint as ckpt
-    from trajpref.train.evaluate import evaluate
-    from trajpref.train.run import finetune, train_stage
-    from trajpref.types import collate
-    from trajpref.viz.plot import plot_scene, plot_scene_scored
-
     t0 = time.perf_counter()
     train = load_dataset("robo-sim", "train")
     print(f"[1/5] simulated robo-sim: {len(train)} episodes, {train.num_agents} agents "
@@ -53,16 +52,17 @@ def run(out: Path, data_root: str | None, samples: int, seed: int, config: Path,
     train_stage("generator", cfg, run_dir, data_root, "auto")
     print(f"[2/5] trained the denoiser and the generator in {time.perf_counter() - t1:.0f} s")
     t2 = time.perf_counter()
-    ft_cfg = finetune_config(str(run_dir / "generator.pt"), "rlhf-res", None, str(config),
+    generator = run_dir / f"generator{ckpt.SUFFIX}"
+    ft_cfg = finetune_config(generator, "rlhf-res", None, config,
                              [f"data.val_dataset={val}", *overrides], seed)  # fmt: skip
-    finetune(ft_cfg, run_dir / "generator.pt", run_dir / "rlhf-res", data_root, "auto")
+    finetune(ft_cfg, generator, run_dir / "rlhf-res", data_root, "auto")
     print(f"[3/5] fine-tuned with RLHF-ReS in {time.perf_counter() - t2:.0f} s")
 
-    scorer = TrajectoryScorer.from_checkpoint(run_dir / "denoiser.pt")
+    scorer = TrajectoryScorer.from_checkpoint(run_dir / f"denoiser{ckpt.SUFFIX}")
     models = {
         f"constant velocity (K={samples})": ConstantVelocity(),
-        "pretrained (leapfrog)": ckpt.load_predictor(run_dir / "generator.pt"),
-        "RLHF-ReS": ckpt.load_predictor(run_dir / "rlhf-res" / "finetune.pt"),
+        "pretrained (leapfrog)": ckpt.load_predictor(generator),
+        "RLHF-ReS": ckpt.load_predictor(run_dir / "rlhf-res" / f"finetune{ckpt.SUFFIX}"),
     }
     print(f"[4/5] {where} ({test.num_agents} agents, {len(test)} scenes), metres, K={samples}:")
     print(f"  {'method':<26} {'minADE':>7} {'minFDE':>7} {'jADE':>7} {'jFDE':>7} "
@@ -77,7 +77,7 @@ def run(out: Path, data_root: str | None, samples: int, seed: int, config: Path,
     gen = torch.Generator().manual_seed(seed)
     pred = models["RLHF-ReS"].predict(batch, samples, gen)  # [K, P, T_f, 2]
     res = scorer.score(batch, pred)
-    agent_ats = (1 - res.d_pred.sum(-1) / res.d_gt.sum(-1)).numpy()  # [K, P]
+    agent_ats = res.agent_ats.numpy()  # [K, P]
     figs = [
         plot_scene(scene.history, scene.future, pred.numpy(), out / "robo_scene0_rlhf_res.png",
                    "m", f"{where}, scene 0, RLHF-ReS, K={samples}"),

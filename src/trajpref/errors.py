@@ -9,7 +9,7 @@ class TrajprefError(Exception):
     """Base class for errors a user can fix (bad input, bad options)."""
 
 
-class DataError(TrajprefError):
+class DataError(TrajprefError, ValueError):
     """Malformed or unusable input data. Names the file, and the line when there is one."""
 
     def __init__(self, message: str, path: str | Path | None = None, line: int | None = None):

@@ -1,4 +1,4 @@
-"""Benchmark result rows (the schema in DESIGN.md) and the README tables made from them."""
+"""Benchmark result rows (the schema in docs/design.md) and the README tables made from them."""
 
 from __future__ import annotations
 
@@ -12,6 +12,8 @@ from pathlib import Path
 from typing import Any
 
 import torch
+
+from trajpref.io import write_json
 
 FIELDS = (
     "dataset", "split", "method", "seed", "samples", "min_ade", "min_fde", "joint_min_ade",
@@ -52,8 +54,6 @@ def make_row(**values: Any) -> dict[str, Any]:
 
 
 def write_rows(path: str | Path, rows: list[dict[str, Any]]) -> None:
-    from trajpref.io import write_json
-
     for row in rows:
         if set(row) != set(FIELDS):
             raise KeyError(f"row does not follow the schema: {sorted(set(row) ^ set(FIELDS))}")

@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from trajpref.errors import DataError
+
 AGENT_PERSON = 0
 """Agent-type flag: a person, a player or a robot."""
 AGENT_BALL = 1
@@ -35,13 +37,15 @@ class Scene:
 
     def __post_init__(self) -> None:
         if self.history.ndim != 3 or self.history.shape[-1] != 2:
-            raise ValueError(f"history must be [P, T_h, 2], got {self.history.shape}")
+            shape = self.history.shape
+            raise DataError(f"{self.scene_id}: history must be [P, T_h, 2], got {shape}")
         if self.future.ndim != 3 or self.future.shape[-1] != 2:
-            raise ValueError(f"future must be [P, T_f, 2], got {self.future.shape}")
+            shape = self.future.shape
+            raise DataError(f"{self.scene_id}: future must be [P, T_f, 2], got {shape}")
         if self.future.shape[0] != self.history.shape[0]:
-            raise ValueError("history and future disagree on the number of agents")
+            raise DataError(f"{self.scene_id}: history and future disagree on the agent count")
         if self.agent_type.shape != (self.history.shape[0],):
-            raise ValueError("agent_type must be [P]")
+            raise DataError(f"{self.scene_id}: agent_type must be [P]")
 
     @property
     def num_agents(self) -> int:
@@ -155,7 +159,7 @@ class Batch:
 def collate(scenes: list[Scene]) -> Batch:
     """Pack scenes agent-wise into a ``Batch`` (float32 tensors)."""
     if not scenes:
-        raise ValueError("cannot collate an empty list of scenes")
+        raise DataError("cannot collate an empty list of scenes")
     hist = np.concatenate([s.history for s in scenes], 0)  # [N, T_h, 2]
     fut = np.concatenate([s.future for s in scenes], 0)  # [N, T_f, 2]
     types = np.concatenate([s.agent_type for s in scenes], 0)  # [N]

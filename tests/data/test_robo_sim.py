@@ -7,12 +7,12 @@ import dataclasses
 import numpy as np
 import pytest
 
+from trajpref.data.registry import stacked_arrays
 from trajpref.data.robo_sim import (
     FRAME_DT,
     N_FUTURE,
     N_HISTORY,
     RoboSimConfig,
-    official_arrays,
     scene_statistics,
     simulate,
 )
@@ -137,7 +137,7 @@ def test_scene_statistics_keys(sample: tuple[np.ndarray, np.ndarray]) -> None:
 
 @pytest.mark.realdata
 def test_matches_val_statistics(data_root) -> None:
-    val = scene_statistics(*official_arrays("val", str(data_root)))
+    val = scene_statistics(*stacked_arrays("robo", "val", str(data_root)))
     sim = scene_statistics(*simulate(2000, seed=0))
 
     def close(key: str, rel: float) -> None:

@@ -14,7 +14,7 @@ def test_golden_values():
     assert s.betas[99].item() == pytest.approx(5e-2)
     # alpha_bar_1 = (1 - beta_0)(1 - beta_1), by hand
     assert s.alphas_cumprod[1].item() == pytest.approx(0.9999 * (1 - (1e-4 + 0.0499 / 99)))
-    # DESIGN.md: alpha_bar at the last step is about 0.08 (not pure noise)
+    # docs/design.md: alpha_bar at the last step is about 0.08 (not pure noise)
     assert s.alphas_cumprod[99].item() == pytest.approx(0.078234, abs=1e-5)
     assert s.alphas_cumprod[49].item() == pytest.approx(0.533811, abs=1e-5)
     # posterior variance: beta_s (1 - abar_{s-1}) / (1 - abar_s); zero at s = 0

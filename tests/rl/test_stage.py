@@ -5,10 +5,11 @@ import torch
 
 from trajpref.config import load_config
 from trajpref.data import load_dataset
+from trajpref.models import checkpoint as ckpt
+from trajpref.rl.objective import best_sample, take_sample
 from trajpref.rl.presets import preset_overrides
-from trajpref.rl.stage import best_sample, build_finetune_stage, take_sample
-from trajpref.train import checkpoint as ckpt
 from trajpref.train.run import finetune
+from trajpref.train.stages import build_finetune_stage
 from trajpref.types import collate
 
 
@@ -34,7 +35,7 @@ def test_best_sample_is_the_argmax_of_the_summed_score():
 
 
 def test_steps_change_policy_and_critic_only(tiny_run, walks):
-    start = ckpt.load(tiny_run / "generator.pt")
+    start = ckpt.load(tiny_run / "generator.safetensors")
     train = load_dataset(str(walks), "train")
     for method in ("rlhf", "rlhf-res"):
         cfg = _cfg(start, *preset_overrides("paper", method))
@@ -60,7 +61,7 @@ def test_steps_change_policy_and_critic_only(tiny_run, walks):
 
 
 def test_kl_term_is_zero_before_the_first_update(tiny_run, walks):
-    start = ckpt.load(tiny_run / "generator.pt")
+    start = ckpt.load(tiny_run / "generator.safetensors")
     train = load_dataset(str(walks), "train")
     for form in ("paper", "logratio"):
         cfg = _cfg(start, f"finetune.kl_form={form}", "finetune.kl_coef=1.0")
@@ -79,7 +80,7 @@ def _mean_reward(stage, scenes) -> float:
 
 @pytest.mark.parametrize("baseline", ["critic", "antithetic"])
 def test_tiny_finetune_raises_the_mean_reward(tiny_run, walks, tmp_path, baseline):
-    start_path = tiny_run / "generator.pt"
+    start_path = tiny_run / "generator.safetensors"
     start = ckpt.load(start_path)
     train = load_dataset(str(walks), "train")
     cfg = _cfg(start, "finetune.method=rlhf", "finetune.reg_weight=0", "finetune.lr=3e-3",
@@ -96,18 +97,18 @@ def test_tiny_finetune_raises_the_mean_reward(tiny_run, walks, tmp_path, baselin
     after = _mean_reward(stage, train.scenes)
     assert after > before, (before, after)
     # the result loads like any model
-    assert ckpt.load_predictor(tmp_path / "finetune.pt").generator is not None
+    assert ckpt.load_predictor(tmp_path / "finetune.safetensors").generator is not None
 
 
 def test_finetune_config_takes_todays_defaults_not_the_checkpoints_section(tiny_run, tmp_path):
-    from trajpref.cli import finetune_config
     from trajpref.config import FinetuneConfig
+    from trajpref.rl.presets import finetune_config
 
-    payload = ckpt.load(tiny_run / "generator.pt")
+    payload = ckpt.load(tiny_run / "generator.safetensors")
     payload["config"]["finetune"] = {**payload["config"]["finetune"], "epochs": 99,
                                      "kl_form": "paper"}  # fmt: skip
-    path = tmp_path / "old.pt"
-    torch.save(payload, path)
+    path = tmp_path / "old.safetensors"
+    ckpt.save(path, payload)
     cfg = finetune_config(str(path), "rlhf", None, None, ["finetune.lr=0.01"], 3)
     want = FinetuneConfig(method="rlhf", lr=0.01)
     assert cfg.finetune == want and cfg.seed == 3
@@ -119,7 +120,7 @@ def test_finetune_config_takes_todays_defaults_not_the_checkpoints_section(tiny_
 def test_antithetic_needs_the_sample_likelihood(tiny_run):
     from trajpref.config import ConfigError
 
-    start = ckpt.load(tiny_run / "generator.pt")
+    start = ckpt.load(tiny_run / "generator.safetensors")
     with pytest.raises(ConfigError, match="antithetic needs"):
         _cfg(start, "finetune.baseline=antithetic", "finetune.likelihood=mean")
     with pytest.raises(ConfigError, match="baseline must be"):
@@ -127,7 +128,7 @@ def test_antithetic_needs_the_sample_likelihood(tiny_run):
 
 
 def test_antithetic_steps_move_the_policy_and_keep_the_reference(tiny_run, walks):
-    start = ckpt.load(tiny_run / "generator.pt")
+    start = ckpt.load(tiny_run / "generator.safetensors")
     train = load_dataset(str(walks), "train")
     for method in ("rlhf", "rlhf-res"):
         cfg = _cfg(start, f"finetune.method={method}", "finetune.baseline=antithetic")

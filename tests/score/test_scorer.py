@@ -12,7 +12,7 @@ from trajpref.types import collate
 
 @pytest.fixture(scope="module")
 def scorer(tiny_run):
-    return TrajectoryScorer.from_checkpoint(tiny_run / "denoiser.pt")
+    return TrajectoryScorer.from_checkpoint(tiny_run / "denoiser.safetensors")
 
 
 @pytest.fixture
@@ -54,9 +54,9 @@ def test_ranking_does_not_depend_on_the_ground_truth(scorer, batch):
 
 def test_fixed_seeds_give_identical_scores(tiny_run, batch):
     pred = _samples(batch)
-    s1 = TrajectoryScorer.from_checkpoint(tiny_run / "denoiser.pt", seed=3)
-    s2 = TrajectoryScorer.from_checkpoint(tiny_run / "denoiser.pt", seed=3)
-    s3 = TrajectoryScorer.from_checkpoint(tiny_run / "denoiser.pt", seed=4)
+    s1 = TrajectoryScorer.from_checkpoint(tiny_run / "denoiser.safetensors", seed=3)
+    s2 = TrajectoryScorer.from_checkpoint(tiny_run / "denoiser.safetensors", seed=3)
+    s3 = TrajectoryScorer.from_checkpoint(tiny_run / "denoiser.safetensors", seed=4)
     assert torch.equal(s1.residual(batch, pred), s2.residual(batch, pred))
     assert not torch.equal(s1.residual(batch, pred), s3.residual(batch, pred))
 
@@ -108,8 +108,9 @@ def test_rank_samples_validates_shapes(scorer):
 
 
 def test_cli_evaluate_with_scorer_and_predict_rank(tiny_run, walks, tmp_path, capsys):
+    den, gen = str(tiny_run / "denoiser.safetensors"), str(tiny_run / "generator.safetensors")
     code = main(["evaluate", "--dataset", str(walks), "--model", "cv", "--samples", "5",
-                 "--scorer", str(tiny_run / "denoiser.pt"), "--json", "--no-progress"])  # fmt: skip
+                 "--scorer", den, "--json", "--no-progress"])  # fmt: skip
     res = json.loads(capsys.readouterr().out)
     assert code == 0
     for key in ("max_ats", "max_fts", "top1_recall_ats", "top5_recall_ats", "top1_recall_fts",
@@ -117,7 +118,7 @@ def test_cli_evaluate_with_scorer_and_predict_rank(tiny_run, walks, tmp_path, ca
         assert key in res
     assert res["top5_recall_ats"] == 1.0  # K = 5: the top 5 hold every sample
     out = tmp_path / "ranked.npz"
-    code = main(["predict", "--dataset", str(walks), "--model", str(tiny_run / "generator.pt"),
+    code = main(["predict", "--dataset", str(walks), "--model", gen,
                  "--samples", "4", "--rank", "--out", str(out), "--no-progress"])  # fmt: skip
     assert code == 0
     import numpy as np
@@ -132,7 +133,7 @@ def test_cli_evaluate_with_scorer_and_predict_rank(tiny_run, walks, tmp_path, ca
 
 def test_cli_plot_with_scorer(tiny_run, walks, tmp_path):
     out = tmp_path / "fig2.png"
-    model, scorer = str(tiny_run / "generator.pt"), str(tiny_run / "denoiser.pt")
+    model, scorer = str(tiny_run / "generator.safetensors"), str(tiny_run / "denoiser.safetensors")
     code = main(["plot", "--dataset", str(walks), "--model", model, "--samples", "4",
                  "--scorer", scorer, "--out", str(out)])  # fmt: skip
     assert code == 0 and out.read_bytes()[:4] == b"\x89PNG"

@@ -11,7 +11,7 @@ from synthetic import TINY_OVERRIDES  # noqa: E402
 
 from trajpref.config import load_config  # noqa: E402
 from trajpref.data import load_dataset  # noqa: E402
-from trajpref.train import checkpoint as ckpt  # noqa: E402
+from trajpref.models import checkpoint as ckpt  # noqa: E402
 from trajpref.train.distributed import barrier, cleanup, init_from_env  # noqa: E402
 from trajpref.train.loop import fit  # noqa: E402
 from trajpref.train.stages import build_denoiser_stage, build_generator_stage  # noqa: E402
@@ -28,7 +28,7 @@ def main(folder: str, out: str) -> None:
         progress=False, max_steps=3)  # fmt: skip
     torch.save(stage.trainable.state_dict(), out_dir / f"denoiser_rank{info.rank}.pt")
     barrier(info)
-    gen = build_generator_stage(cfg, ckpt.load(out_dir / "denoiser.pt"), val, device)
+    gen = build_generator_stage(cfg, ckpt.load(out_dir / "denoiser.safetensors"), val, device)
     fit(gen, train, cfg.data, cfg.generator, out_dir, device, cfg.seed, dist_info=info,
         progress=False, max_steps=3)  # fmt: skip
     torch.save(gen.trainable.state_dict(), out_dir / f"generator_rank{info.rank}.pt")

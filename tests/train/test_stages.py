@@ -9,9 +9,9 @@ from synthetic import TINY_OVERRIDES
 
 from trajpref.cli import main
 from trajpref.data import load_dataset
-from trajpref.errors import TrajprefError
-from trajpref.train import checkpoint as ckpt
-from trajpref.train.evaluate import evaluate
+from trajpref.errors import ConfigError, TrajprefError
+from trajpref.evaluation import evaluate
+from trajpref.models import checkpoint as ckpt
 from trajpref.train.run import train_stage
 from trajpref.train.stages import build_denoiser_stage, build_generator_stage
 from trajpref.types import collate
@@ -62,22 +62,25 @@ def test_generator_width_may_differ_from_the_denoiser_config_but_nothing_else(cf
     import dataclasses
 
     train = load_dataset(str(folder), "train")
-    payload = ckpt.load(trained / "denoiser.pt")
+    payload = ckpt.load(trained / "denoiser.safetensors")
     wide = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, generator_width=48))
     stage = build_generator_stage(wide, payload, train, torch.device("cpu"))
-    assert stage.objective.generator.mean_head[0].out_features == 48
+    assert stage.trainable.mean_head[0].out_features == 48
     rebuilt, _ = ckpt.build_generator(stage.payload({"epoch": 0}))  # the checkpoint says 48
     assert rebuilt.mean_head[0].out_features == 48
     longer = dataclasses.replace(
         cfg, model=dataclasses.replace(cfg.model, t_fut=cfg.model.t_fut + 1)
     )
-    with pytest.raises(ValueError, match="generator_width"):
+    with pytest.raises(ConfigError, match="generator_width"):
         build_generator_stage(longer, payload, train, torch.device("cpu"))
+    more = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, samples=6, tau=3))
+    stage = build_generator_stage(more, payload, train, torch.device("cpu"))  # G-only fields
+    assert stage.trainable.samples == 6
 
 
 def test_a_generator_step_changes_the_generator_not_the_denoiser(cfg, folder, trained):
     train = load_dataset(str(folder), "train")
-    payload = ckpt.load(trained / "denoiser.pt")
+    payload = ckpt.load(trained / "denoiser.safetensors")
     stage = build_generator_stage(cfg, payload, train, torch.device("cpu"))
     denoiser = stage.objective.denoiser
     gen_before, den_before = _params(stage.trainable), _params(denoiser)
@@ -96,22 +99,33 @@ def test_run_folder_holds_config_metrics_and_self_sufficient_checkpoints(trained
     assert (trained / "config.yaml").is_file()
     records = [json.loads(line) for line in (trained / "generator_metrics.jsonl").open()]
     assert len(records) == 2 and "val_min_ade" in records[-1]
-    payload = ckpt.load(trained / "generator.pt")
+    payload = ckpt.load(trained / "generator.safetensors")
     assert payload["kind"] == "generator" and payload["denoiser"]["kind"] == "denoiser"
-    # weights_only loading: a checkpoint holds tensors and plain values only
-    torch.load(trained / "generator.pt", weights_only=True)
+    assert payload["config"]["model"]["samples"] == 4  # K lives in the model section
+    assert sorted(p.name for p in trained.glob("*.pt")) == ["denoiser_last.pt",
+                                                            "generator_last.pt"]  # fmt: skip
 
 
-def test_checkpoint_roundtrip_gives_identical_predictions(folder, trained):
+def test_saved_best_checkpoint_predicts_as_the_trained_model(folder, trained, cfg):
+    """The best checkpoint reproduces the predictions of the model it saved (rebuilt here from
+    the stage and the weights of the resume file, which the loop wrote at that epoch), and
+    an untrained generator does not."""
     test = load_dataset(str(folder), "test")
     batch = collate(test.scenes)
-    a = ckpt.load_predictor(trained / "generator.pt")
-    b = ckpt.load_predictor(trained / "generator.pt")
+    a = ckpt.load_predictor(trained / "generator.safetensors")
     pa = a.predict(batch, 4, torch.Generator().manual_seed(0))
-    pb = b.predict(batch, 4, torch.Generator().manual_seed(0))
     assert pa.shape == (4, batch.num_agents, 12, 2)
-    assert torch.equal(pa, pb)
-    full = ckpt.load_predictor(trained / "generator.pt", sampler="full")
+    stage = build_generator_stage(cfg, ckpt.load(trained / "denoiser.safetensors"), test,
+                                  torch.device("cpu"))  # fmt: skip
+    fresh = stage.objective.sampler.predict(batch, 4, torch.Generator().manual_seed(0))
+    assert not torch.allclose(fresh, pa)
+    last = torch.load(trained / "generator_last.pt", weights_only=True)
+    best_epoch = ckpt.load(trained / "generator.safetensors")["meta"]["epoch"]
+    if last["epoch"] + 1 == best_epoch:  # the last epoch was the best
+        stage.trainable.load_state_dict(last["trainable"])
+        trained_pred = stage.objective.sampler.predict(batch, 4, torch.Generator().manual_seed(0))
+        assert torch.equal(trained_pred, pa)
+    full = ckpt.load_predictor(trained / "generator.safetensors", sampler="full")
     assert full.predict(batch, 7).shape[0] == 7  # the full sampler draws any K
     with pytest.raises(TrajprefError, match="emits K = 4"):
         a.predict(batch, 5)
@@ -121,7 +135,7 @@ def test_seeded_runs_are_identical(tmp_path, cfg):
     summaries = []
     for run in ("a", "b"):
         train_stage("diffusion", cfg, tmp_path / run, device="cpu", progress=False)
-        summaries.append(ckpt.load(tmp_path / run / "denoiser.pt")["hash"])
+        summaries.append(ckpt.load(tmp_path / run / "denoiser.safetensors")["hash"])
     assert summaries[0] == summaries[1]
 
 
@@ -155,11 +169,12 @@ def test_cli_train_evaluate_predict(tmp_path, folder, capsys):
                      "--device", "cpu", "--no-progress"])  # fmt: skip
         assert code == 0
     capsys.readouterr()
-    code = main(["evaluate", "--dataset", str(folder), "--model", str(out / "generator.pt"),
-                 "--samples", "4", "--json", "--no-progress"])  # fmt: skip
+    gen = str(out / "generator.safetensors")
+    code = main(["evaluate", "--dataset", str(folder), "--model", gen, "--samples", "4",
+                 "--json", "--no-progress"])  # fmt: skip
     res = json.loads(capsys.readouterr().out)
     assert code == 0 and res["agents"] > 0 and res["min_ade"] > 0
-    code = main(["evaluate", "--dataset", str(folder), "--model", str(out / "denoiser.pt"),
+    code = main(["evaluate", "--dataset", str(folder), "--model", str(out / "denoiser.safetensors"),
                  "--samples", "3", "--json", "--no-progress"])  # fmt: skip
     assert code == 0 and json.loads(capsys.readouterr().out)["samples"] == 3
 
@@ -167,38 +182,44 @@ def test_cli_train_evaluate_predict(tmp_path, folder, capsys):
 def test_trained_generator_beats_its_untrained_self(cfg, folder, trained):
     """Sanity: training lowers validation error (tiny data, loose bound)."""
     val = load_dataset(str(folder), "val")
-    payload = ckpt.load(trained / "denoiser.pt")
+    payload = ckpt.load(trained / "denoiser.safetensors")
     fresh = build_generator_stage(cfg, payload, val, torch.device("cpu")).validate()
-    best = ckpt.load(trained / "generator.pt")["meta"]["val"]
+    best = ckpt.load(trained / "generator.safetensors")["meta"]["val"]
     assert best["score"] < fresh["score"]
-    assert evaluate(ckpt.load_predictor(trained / "generator.pt"), val, 4, progress=False)
+    # the saved model reproduces the validation it was chosen by (same pass: K, batches, seed)
+    res = evaluate(ckpt.load_predictor(trained / "generator.safetensors"), val,
+                   cfg.model.samples, seed=0, max_agents=cfg.data.max_agents,
+                   progress=False)  # fmt: skip
+    assert res["min_ade"] == pytest.approx(best["min_ade"], abs=1e-6)
+    assert res["min_fde"] == pytest.approx(best["min_fde"], abs=1e-6)
 
 
 def test_published_generator_names_its_denoiser_by_hash(tmp_path, trained, folder):
     pub = tmp_path / "models"
-    ckpt.publish(trained / "generator.pt", pub / "generator.pt")
-    assert (pub / "denoiser.pt").is_file()
-    raw = torch.load(pub / "generator.pt", weights_only=True)
-    assert "denoiser" not in raw and raw["denoiser_ref"]["path"] == "denoiser.pt"
-    assert (pub / "generator.pt").stat().st_size < (trained / "generator.pt").stat().st_size
+    run_gen = trained / "generator.safetensors"
+    ckpt.publish(run_gen, pub / "generator.safetensors", half=False)
+    assert (pub / "denoiser.safetensors").is_file()
+    raw = ckpt.load(pub / "generator.safetensors")
+    assert raw["denoiser_ref"]["path"] == "denoiser.safetensors"
+    assert (pub / "generator.safetensors").stat().st_size < run_gen.stat().st_size
     batch = collate(load_dataset(str(folder), "test").scenes)
-    a = ckpt.load_predictor(trained / "generator.pt").predict(batch, 4, torch.Generator())
-    b = ckpt.load_predictor(pub / "generator.pt").predict(batch, 4, torch.Generator())
+    a = ckpt.load_predictor(run_gen).predict(batch, 4, torch.Generator())
+    b = ckpt.load_predictor(pub / "generator.safetensors").predict(batch, 4, torch.Generator())
     assert torch.equal(a, b)
     # a different denoiser beside it is refused
-    other = ckpt.load(trained / "denoiser.pt")
-    other["hash"] = "0" * 16
-    ckpt.save(pub / "denoiser.pt", other)
+    other = ckpt.load(trained / "denoiser.safetensors")
+    other["state_dict"] = {k: v + 1e-3 for k, v in other["state_dict"].items()}
+    other["hash"] = ckpt.state_hash(other["state_dict"])
+    ckpt.save(pub / "denoiser.safetensors", other)
     with pytest.raises(TrajprefError, match="does not match the recorded hash"):
-        ckpt.load(pub / "generator.pt")
+        ckpt.load(pub / "generator.safetensors")
     # and publishing next to a different denoiser does not overwrite it unless asked
     with pytest.raises(TrajprefError, match="holds a different denoiser"):
-        ckpt.publish(trained / "generator.pt", pub / "generator-v2.pt")
-    assert ckpt.load(pub / "denoiser.pt")["hash"] == "0" * 16
-    ckpt.publish(trained / "generator.pt", pub / "generator-v2.pt", replace_denoiser=True)
-    assert (
-        ckpt.load_predictor(pub / "generator-v2.pt").predict(batch, 4, torch.Generator()).equal(a)
-    )
+        ckpt.publish(run_gen, pub / "generator-v2.safetensors", half=False)
+    assert ckpt.load(pub / "denoiser.safetensors")["hash"] == other["hash"]
+    ckpt.publish(run_gen, pub / "generator-v2.safetensors", replace_denoiser=True, half=False)
+    v2 = ckpt.load_predictor(pub / "generator-v2.safetensors")
+    assert v2.predict(batch, 4, torch.Generator()).equal(a)
 
 
 def test_steps_per_epoch_caps_each_epoch(tmp_path, cfg):

@@ -7,6 +7,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
+from trajpref.errors import ConfigError
 from trajpref.types import Batch, TrajectoryDataset, collate
 
 
@@ -34,9 +35,9 @@ class SceneLoader:
         pool: int = 64,
     ):
         if max_agents < 1 or max_scenes < 1:
-            raise ValueError("max_agents and max_scenes must be positive")
+            raise ConfigError("max_agents and max_scenes must be positive")
         if not 0 <= rank < world_size:
-            raise ValueError(f"rank {rank} outside world of size {world_size}")
+            raise ConfigError(f"rank {rank} outside world of size {world_size}")
         self.dataset = dataset
         self.max_agents = max_agents
         self.max_scenes = max_scenes

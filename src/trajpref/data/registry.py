@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from trajpref.data import arrays, text
+from trajpref.data.robo_sim import simulate
 from trajpref.errors import DataError, TrajprefError
 from trajpref.types import DatasetInfo, Scene, TrajectoryDataset
 
@@ -181,8 +182,6 @@ def _robo(base: Path, split: str) -> tuple[list[Scene], Path]:
 
 
 def _robo_sim(split: str) -> TrajectoryDataset:
-    from trajpref.data.robo_sim import simulate
-
     episodes, seed = ROBO_SIM_EPISODES[split], ROBO_SIM_SEEDS[split]
     history, future = simulate(episodes, seed=seed)  # [E, 3, 8, 2], [E, 3, 12, 2]
     scenes = [
@@ -200,3 +199,14 @@ def _robo_sim(split: str) -> TrajectoryDataset:
         f"simulated: {episodes} episodes, seed {seed}",
     )
     return TrajectoryDataset(scenes, info)
+
+
+def stacked_arrays(
+    name: str, split: str, root: str | Path | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """One split of a dataset whose scenes all have the same agent count (Robo, robo-sim),
+    stacked as ``(history [S, P, T_h, 2], future [S, P, T_f, 2])``."""
+    scenes = load_dataset(name, split, root).scenes
+    if len({s.num_agents for s in scenes}) > 1:
+        raise DataError(f"{name}/{split}: scenes differ in agent count; cannot stack them")
+    return np.stack([s.history for s in scenes]), np.stack([s.future for s in scenes])

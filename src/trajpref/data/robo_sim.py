@@ -47,6 +47,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from trajpref.errors import ConfigError
+
 FRAME_DT = 0.5
 """Seconds between two recorded frames."""
 N_HISTORY = 8
@@ -187,7 +189,7 @@ class RoboSimConfig:
             ok = ok and (value > lo if lo_open else value >= lo) and value <= hi
             if not ok:
                 bound = f"{'>' if lo_open else '>='} {lo} and <= {hi}"
-                raise ValueError(
+                raise ConfigError(
                     f"RoboSimConfig.{name} must be a finite number {bound}, got {value!r}"
                 )
 
@@ -198,7 +200,7 @@ class RoboSimConfig:
                 and not isinstance(value, bool)
                 and lo <= value <= hi
             ):
-                raise ValueError(
+                raise ConfigError(
                     f"RoboSimConfig.{name} must be an int in [{lo}, {hi}], got {value!r}"
                 )
 
@@ -207,11 +209,11 @@ class RoboSimConfig:
             try:
                 a, b = (float(v) for v in value)
             except (TypeError, ValueError):
-                raise ValueError(
+                raise ConfigError(
                     f"RoboSimConfig.{name} must be a (low, high) pair, got {value!r}"
                 ) from None
             if not (math.isfinite(a) and math.isfinite(b) and lo <= a <= b <= hi):
-                raise ValueError(
+                raise ConfigError(
                     f"RoboSimConfig.{name} must satisfy {lo} <= low <= high <= {hi}, got {value!r}"
                 )
 
@@ -248,9 +250,9 @@ class RoboSimConfig:
             number(name, 0.0, 0.5)
         number("frame_interval_tail_prob", 0.0, 1.0)
         if self.follower_turn_speed > self.follower_speed:
-            raise ValueError("RoboSimConfig.follower_turn_speed must be <= follower_speed")
+            raise ConfigError("RoboSimConfig.follower_turn_speed must be <= follower_speed")
         if self.approacher_turn_speed > self.approacher_speed:
-            raise ValueError("RoboSimConfig.approacher_turn_speed must be <= approacher_speed")
+            raise ConfigError("RoboSimConfig.approacher_turn_speed must be <= approacher_speed")
         size = self.arena_size
         interval("leader_left_y", 0.0, size)
         interval("leader_right_y", 0.0, size)
@@ -262,7 +264,7 @@ class RoboSimConfig:
         number("approacher_goal_inset", 0.0, size)
         gap = self.approacher_edge_y[1] - self.approacher_edge_y[0] - 2 * self.approacher_goal_inset
         if gap <= 2 * self.approacher_goal_tol + 0.3:
-            raise ValueError(
+            raise ConfigError(
                 "RoboSimConfig.approacher_edge_y lines are too close for "
                 "approacher_goal_inset / approacher_goal_tol"
             )
@@ -560,7 +562,7 @@ def simulate(
         or not isinstance(n_episodes, (int, np.integer))
         or n_episodes < 0
     ):
-        raise ValueError(f"n_episodes must be an int >= 0, got {n_episodes!r}")
+        raise ConfigError(f"n_episodes must be an int >= 0, got {n_episodes!r}")
     cfg = RoboSimConfig() if config is None else config
     if not isinstance(cfg, RoboSimConfig):
         raise TypeError(f"config must be a RoboSimConfig, got {type(cfg).__name__}")
@@ -573,15 +575,6 @@ def simulate(
 
 
 # ----------------------------------------------------------------------------- statistics
-
-
-def official_arrays(split: str, root: str | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The official Robo ``split`` read through the dataset registry, stacked as
-    ``(history [S,3,8,2], future [S,3,12,2])``."""
-    from trajpref.data.registry import load_dataset
-
-    scenes = load_dataset("robo", split, root).scenes
-    return np.stack([s.history for s in scenes]), np.stack([s.future for s in scenes])
 
 
 def _pct(x: np.ndarray, q: float) -> float:

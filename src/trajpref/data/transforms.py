@@ -33,6 +33,17 @@ def from_relative(pred_rel: torch.Tensor, batch: Batch) -> torch.Tensor:
     return pred_rel + batch.origin[:, None, :]
 
 
+def to_model_frame(positions: torch.Tensor, batch: Batch, scale: float) -> torch.Tensor:
+    """The networks' frame: relative to each agent's last observed position, divided by the
+    data scale. Absolute positions [..., N, T, 2] -> same shape."""
+    return (positions - batch.origin[:, None, :]) / scale
+
+
+def from_model_frame(y: torch.Tensor, batch: Batch, scale: float) -> torch.Tensor:
+    """Inverse of ``to_model_frame``: [..., N, T, 2] in the networks' frame -> absolute."""
+    return y * scale + batch.origin[:, None, :]
+
+
 def scene_centroids(batch: Batch) -> torch.Tensor:
     """Each scene's mean last observed position: [B, 2]."""
     sizes = batch.scene_sizes().clamp(min=1).to(batch.history.dtype)  # [B]

@@ -9,11 +9,15 @@ the least noisy. With S = 100 and beta linear from 1e-4 to 5e-2, alpha_bar at s 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import torch
 from torch import nn
 
 from trajpref.errors import ConfigError
+
+if TYPE_CHECKING:
+    from trajpref.config import DiffusionConfig
 
 
 @dataclass
@@ -67,9 +71,10 @@ class DDPMSchedule(nn.Module):
     def extra_repr(self) -> str:
         return f"num_steps={self.num_steps}, beta=linear({self.beta_start}, {self.beta_end})"
 
-    def config(self) -> dict[str, float | int]:
-        return {"num_steps": self.num_steps, "beta_start": self.beta_start,
-                "beta_end": self.beta_end}  # fmt: skip
+    @classmethod
+    def from_config(cls, cfg: DiffusionConfig) -> DDPMSchedule:
+        """The schedule a ``DiffusionConfig`` describes."""
+        return cls(cfg.num_steps, cfg.beta_start, cfg.beta_end)
 
     def _check_steps(self, s: torch.Tensor) -> None:
         if s.numel() and (int(s.min()) < 0 or int(s.max()) >= self.num_steps):

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from trajpref.data.transforms import backward_velocity
+from trajpref.data.transforms import backward_velocity, to_model_frame
 from trajpref.models.layers import SocialAttention, mlp
 from trajpref.types import Batch
 
@@ -32,7 +32,7 @@ class SceneFeatures:
 
 def scene_features(batch: Batch, scale: float) -> SceneFeatures:
     """Features in units of ``scale`` (the data scale stored with each model)."""
-    rel = (batch.history - batch.origin[:, None]) / scale  # [N, T_h, 2]
+    rel = to_model_frame(batch.history, batch, scale)  # [N, T_h, 2]
     vel = backward_velocity(batch.history) / scale  # [N, T_h, 2]
     slot, mask = batch.padded_index()
     b, p = mask.shape

@@ -33,10 +33,10 @@ class GeneratorOutput:
 class Generator(nn.Module):
     """Social encoder + heads for the mean, the K scales and the K shifts (LED's initializer)."""
 
-    def __init__(self, cfg: ModelConfig, samples: int):
+    def __init__(self, cfg: ModelConfig):
         super().__init__()
         self.cfg = cfg
-        self.samples = samples
+        self.samples = samples = cfg.samples
         h, w, tf = cfg.hidden, cfg.generator_width, cfg.t_fut
         self.encoder = SocialEncoder(cfg.t_hist, h, cfg.encoder_layers, cfg.heads)
         self.mean_head = mlp([h, w, w, tf * 2])

@@ -7,6 +7,8 @@ import math
 import torch
 from torch import nn
 
+from trajpref.errors import ConfigError
+
 
 def mlp(sizes: list[int], act: type[nn.Module] = nn.SiLU, final_act: bool = False) -> nn.Sequential:
     """Linear layers with ``act`` between them (and after the last when ``final_act``)."""
@@ -51,7 +53,7 @@ class SocialAttention(nn.Module):
     def __init__(self, hidden: int, heads: int, edge_features: int = 4):
         super().__init__()
         if hidden % heads:
-            raise ValueError("hidden must be divisible by heads")
+            raise ConfigError("hidden must be divisible by heads")
         self.heads = heads
         self.qkv = nn.Linear(hidden, 3 * hidden)
         self.edge = mlp([edge_features, hidden, hidden])

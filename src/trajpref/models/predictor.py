@@ -1,20 +1,57 @@
-"""A trained diffusion predictor: denoiser (+ generator) + schedule, behind ``predict``."""
+"""A trained diffusion predictor: denoiser (+ generator) + schedule, behind ``predict``.
+
+``DiffusionPredictor.rollout`` is the one leapfrog rollout (generator -> Y^tau -> tau
+denoising steps, Eq. 1 and 3). Prediction, the generator stage, fine-tuning and the benchmarks
+all call it; the networks' coordinate frame is ``data.transforms.to_model_frame``.
+"""
 
 from __future__ import annotations
+
+import typing
+from dataclasses import dataclass
+from typing import Literal
 
 import torch
 from torch import nn
 
-from trajpref.config import DiffusionConfig, ModelConfig
+from trajpref.data.transforms import from_model_frame
 from trajpref.diffusion.samplers import denoise, sample_full
 from trajpref.diffusion.schedule import DDPMSchedule
 from trajpref.errors import ConfigError
 from trajpref.models.denoiser import Denoiser
 from trajpref.models.encoder import SceneFeatures, scene_features
-from trajpref.models.generator import Generator
+from trajpref.models.generator import Generator, GeneratorOutput
 from trajpref.types import Batch
 
-SAMPLERS = ("leapfrog", "full")
+Sampler = Literal["leapfrog", "full"]
+SAMPLERS: tuple[str, ...] = typing.get_args(Sampler)
+
+
+@dataclass
+class Condition:
+    """What the networks see of a batch, computed once and shared by every rollout on it."""
+
+    features: SceneFeatures
+    """The normalised history features."""
+    context: torch.Tensor
+    """[N, H] the denoiser's social encoding (never differentiated: the denoiser is frozen
+    wherever a rollout is trained through)."""
+
+
+@dataclass
+class Rollout:
+    """One leapfrog rollout, in the networks' frame (relative, divided by the data scale)."""
+
+    out: GeneratorOutput
+    """mu, sigma, S of the generator (differentiable when the rollout was)."""
+    initial: torch.Tensor
+    """[K, N, T_f, 2] the generator's initial sample mu + sigma S (Eq. 1)."""
+    y_tau: torch.Tensor
+    """[K, N, T_f, 2] what entered the denoiser: ``initial`` plus the exploration, if any."""
+    y: torch.Tensor
+    """[K, N, T_f, 2] the denoised samples after tau steps."""
+    explore: torch.Tensor | None
+    """[K, N, T_f, 2] the exploration noise added to Y^tau, or None."""
 
 
 class DiffusionPredictor(nn.Module):
@@ -26,21 +63,21 @@ class DiffusionPredictor(nn.Module):
 
     def __init__(
         self,
-        model_cfg: ModelConfig,
-        diffusion_cfg: DiffusionConfig,
-        scale: float,
         denoiser: Denoiser,
+        schedule: DDPMSchedule,
+        scale: float,
         generator: Generator | None = None,
         tau: int = 5,
-        sampler: str = "leapfrog",
+        sampler: Sampler = "leapfrog",
     ):
         super().__init__()
         if sampler not in SAMPLERS:
             raise ConfigError(f"unknown sampler {sampler!r}; choose {' or '.join(SAMPLERS)}")
         if sampler == "leapfrog" and generator is None:
             raise ConfigError("the leapfrog sampler needs a generator checkpoint")
-        self.model_cfg = model_cfg
-        self.schedule = DDPMSchedule(**vars(diffusion_cfg))
+        if not 1 <= tau <= schedule.num_steps:
+            raise ConfigError(f"tau must lie in 1..{schedule.num_steps}, got {tau}")
+        self.schedule = schedule
         self.scale = float(scale)
         self.denoiser = denoiser
         self.generator = generator
@@ -52,35 +89,71 @@ class DiffusionPredictor(nn.Module):
     def device(self) -> torch.device:
         return next(self.denoiser.parameters()).device
 
-    def features(self, batch: Batch) -> SceneFeatures:
-        return scene_features(batch, self.scale)
+    def condition(self, batch: Batch) -> Condition:
+        """Features and the denoiser's context of a batch (no gradient into the denoiser)."""
+        features = scene_features(batch, self.scale)
+        with torch.no_grad():
+            context = self.denoiser.context(features)  # [N, H]
+        return Condition(features, context)
 
-    def eps_fn(self, context: torch.Tensor):
-        return lambda y, s: self.denoiser(y, s, context)
+    def denoise(
+        self, cond: Condition, y_tau: torch.Tensor, generator: torch.Generator | None = None
+    ) -> torch.Tensor:
+        """tau ancestral steps of the denoiser from y_tau [K, N, T_f, 2] (differentiable in
+        y_tau)."""
+        return denoise(self.schedule, lambda y, s: self.denoiser(y, s, cond.context), y_tau,
+                       self.tau, generator)  # fmt: skip
+
+    def rollout(
+        self,
+        batch: Batch,
+        generator: torch.Generator | None = None,
+        num_samples: int | None = None,
+        explore_std: float = 0.0,
+        explore_sign: float = 1.0,
+        cond: Condition | None = None,
+    ) -> Rollout:
+        """Generator -> Y^tau (+ exploration) -> tau denoising steps.
+
+        Gradients flow into the generator unless the caller disables them. With
+        ``explore_std`` > 0, Gaussian noise xi of that std (drawn from ``generator`` before
+        the denoising noise) is added to Y^tau; ``explore_sign = -1`` adds -xi instead, so a
+        rollout from a copy of the same generator state is xi's antithetic twin under the same
+        denoising noise.
+        """
+        if self.generator is None:
+            raise ConfigError("a leapfrog rollout needs a generator checkpoint")
+        k = self.generator.samples if num_samples is None else num_samples
+        if k > self.generator.samples:
+            raise ConfigError(
+                f"this generator emits K = {self.generator.samples} samples; "
+                f"asked for {k} (use --sampler full for more)"
+            )
+        cond = cond if cond is not None else self.condition(batch)
+        out = self.generator(cond.features)
+        initial = y_tau = out.initial_sample()[:k]  # [K, N, T_f, 2]
+        explore = None
+        if explore_std > 0:
+            noise = torch.randn(initial.shape, generator=generator).to(initial)
+            explore = explore_sign * explore_std * noise  # [K, N, T_f, 2]
+            y_tau = initial + explore
+        return Rollout(out, initial, y_tau, self.denoise(cond, y_tau, generator), explore)
 
     def sample_normalised(
         self, batch: Batch, num_samples: int, generator: torch.Generator | None = None
     ) -> torch.Tensor:
-        """[K, N, T_f, 2] samples in normalised units, relative to each last observation."""
-        f = self.features(batch)
-        context = self.denoiser.context(f)  # [N, H]
-        if self.sampler == "full":
-            shape = (num_samples, batch.num_agents, self.model_cfg.t_fut, 2)
-            return sample_full(self.schedule, self.eps_fn(context), shape, generator,
-                               batch.history.device)  # fmt: skip
-        assert self.generator is not None
-        if num_samples > self.generator.samples:
-            raise ConfigError(
-                f"this generator emits K = {self.generator.samples} samples; "
-                f"asked for {num_samples} (use --sampler full for more)"
-            )
-        y_tau = self.generator(f).initial_sample()[:num_samples]  # [K, N, T_f, 2]
-        return denoise(self.schedule, self.eps_fn(context), y_tau, self.tau, generator)
+        """[K, N, T_f, 2] samples in the networks' frame."""
+        if self.sampler == "leapfrog":
+            return self.rollout(batch, generator, num_samples).y
+        cond = self.condition(batch)
+        shape = (num_samples, batch.num_agents, self.denoiser.cfg.t_fut, 2)
+        return sample_full(self.schedule, lambda y, s: self.denoiser(y, s, cond.context), shape,
+                           generator, batch.history.device)  # fmt: skip
 
     @torch.no_grad()
     def predict(
         self, batch: Batch, num_samples: int = 20, generator: torch.Generator | None = None
     ) -> torch.Tensor:
         """Absolute future positions [K, N, T_f, 2]."""
-        rel = self.sample_normalised(batch, num_samples, generator)  # [K, N, T_f, 2]
-        return rel * self.scale + batch.origin[None, :, None, :]
+        y = self.sample_normalised(batch, num_samples, generator)  # [K, N, T_f, 2]
+        return from_model_frame(y, batch, self.scale)

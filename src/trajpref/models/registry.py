@@ -2,18 +2,18 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import torch
 
 from trajpref.errors import TrajprefError
+from trajpref.models import checkpoint
 from trajpref.models.baseline import ConstantVelocity
+from trajpref.models.predictor import Sampler
 
 BUILTIN = {"cv": ConstantVelocity}
 """Models that need no checkpoint."""
 
 
-def load_predictor(spec: str, device: torch.device | str = "cpu", sampler: str | None = None):
+def load_predictor(spec: str, device: torch.device | str = "cpu", sampler: Sampler | None = None):
     """``cv`` gives the constant-velocity baseline; a path loads a checkpoint.
 
     ``sampler`` (``leapfrog`` or ``full``) applies to diffusion checkpoints; None picks the
@@ -21,9 +21,8 @@ def load_predictor(spec: str, device: torch.device | str = "cpu", sampler: str |
     """
     if spec in BUILTIN:
         return BUILTIN[spec]()
-    path = Path(spec)
-    if not path.is_file():
-        raise TrajprefError(f"{spec}: no such model (use 'cv' or a checkpoint file)")
-    from trajpref.train.checkpoint import load_predictor as load_checkpoint
-
-    return load_checkpoint(path, sampler, device)
+    try:
+        path = checkpoint.resolve_path(spec)
+    except TrajprefError:
+        raise TrajprefError(f"{spec}: no such model (use 'cv' or a checkpoint file)") from None
+    return checkpoint.load_predictor(path, sampler, device)

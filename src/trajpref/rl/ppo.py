@@ -90,8 +90,16 @@ def policy_loss(logp: torch.Tensor, logp_ref: torch.Tensor, adv: torch.Tensor, c
     loss = -torch.minimum(unclipped, clipped).mean()
     with torch.no_grad():
         clip_frac = ((ratio - 1).abs() > clip).float().mean()
-        approx_kl = ((ratio - 1) - log_ratio).mean()
+        approx_kl = k3_divergence(log_ratio)
     return loss, clip_frac, approx_kl
+
+
+def k3_divergence(log_ratio: torch.Tensor, log_base: torch.Tensor | None = None) -> torch.Tensor:
+    """Schulman's k3 estimate E[(rho - 1) - log rho] of KL(q || p) from samples of q, with
+    log rho = log p - log q = ``log_ratio`` (or ``log_ratio - log_base`` when given)."""
+    if log_base is not None:
+        log_ratio = log_ratio - log_base
+    return (log_ratio.exp() - 1 - log_ratio).mean()
 
 
 def value_loss(values: torch.Tensor, values_ref: torch.Tensor, target: torch.Tensor, clip: float):

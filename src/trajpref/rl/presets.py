@@ -1,6 +1,14 @@
-"""Named settings of the fine-tuning stage. ``paper`` is the equations as written."""
+"""Named settings of the fine-tuning stage (``paper`` is the equations as written), and the
+resolution of a fine-tuning run's config from its starting checkpoint."""
 
 from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from trajpref.config import ExperimentConfig, load_config
+from trajpref.errors import ConfigError
+from trajpref.models import checkpoint
 
 PAPER_WEIGHTS = {"rlhf": (1.0, 5.0), "rlhf-res": (0.3, 1.5)}
 """(policy, value) weights of Eq. 17 (alpha_p, alpha_v) and Eq. 20 (beta_p, beta_v)."""
@@ -25,9 +33,32 @@ PRESETS: dict[str, dict[str, object]] = {
 def preset_overrides(preset: str, method: str) -> list[str]:
     """``key=value`` overrides (for ``config.load_config``) of a preset and method."""
     if preset not in PRESETS:
-        raise ValueError(f"unknown preset {preset!r}; choose {', '.join(PRESETS)}")
+        raise ConfigError(f"unknown preset {preset!r}; choose {', '.join(PRESETS)}")
     if method not in PAPER_WEIGHTS:
-        raise ValueError(f"unknown method {method!r}; choose {', '.join(PAPER_WEIGHTS)}")
+        raise ConfigError(f"unknown method {method!r}; choose {', '.join(PAPER_WEIGHTS)}")
     pw, vw = PAPER_WEIGHTS[method]
     values = {**PRESETS[preset], "method": method, "policy_weight": pw, "value_weight": vw}
     return [f"finetune.{k}={'null' if v is None else v}" for k, v in values.items()]
+
+
+def finetune_config(
+    start: str | Path | dict[str, Any],
+    method: str,
+    preset: str | None = None,
+    config: str | Path | None = None,
+    overrides: list[str] | None = None,
+    seed: int | None = None,
+) -> ExperimentConfig:
+    """The config of a fine-tuning run from the generator checkpoint ``start`` (a path or a
+    loaded payload), resolved in this order: the checkpoint's own config with today's
+    fine-tuning defaults (a finetune section written by an earlier run is not carried over),
+    the YAML file's finetune section, the preset, the method, the seed, then ``overrides``."""
+    payload = start if isinstance(start, dict) else checkpoint.load(start)
+    if payload["kind"] != "generator":
+        where = "the start" if isinstance(start, dict) else str(start)
+        raise ConfigError(f"{where}: fine-tuning starts from a generator checkpoint")
+    extra = preset_overrides(preset, method) if preset else [f"finetune.method={method}"]
+    if seed is not None:
+        extra.append(f"seed={seed}")
+    base = {k: v for k, v in payload["config"].items() if k != "finetune"}
+    return load_config(config, [*extra, *(overrides or [])], base=base, sections=("finetune",))

@@ -1,4 +1,4 @@
-"""Diffusion residuals and the trajectory score (Eq. 5-8), read as in DESIGN.md.
+"""Diffusion residuals and the trajectory score (Eq. 5-8), read as in docs/design.md.
 
     d(Y; X)[k,p,t] = mean_{s in S_score} || eps_theta(sqrt(abar_s) Y + sqrt(1-abar_s) Z_s, s, X)_t
                                             - Z_{s,t} ||^2                          (Eq. 5)
@@ -16,8 +16,11 @@ from dataclasses import dataclass
 
 import torch
 
+from trajpref.data.transforms import to_model_frame
 from trajpref.diffusion.schedule import DDPMSchedule
+from trajpref.errors import ConfigError
 from trajpref.metrics import ade_fde, scene_sum
+from trajpref.models import checkpoint
 from trajpref.models.denoiser import Denoiser
 from trajpref.models.encoder import scene_features
 from trajpref.types import AGENT_PERSON, Batch
@@ -26,8 +29,14 @@ from trajpref.types import AGENT_PERSON, Batch
 def score_timesteps(num_steps: int = 100, every: int = 3) -> list[int]:
     """The paper's "every 3 steps": 0, 3, ..., up to num_steps - 1."""
     if every < 1:
-        raise ValueError("every must be >= 1")
+        raise ConfigError("the score's step spacing must be >= 1")
     return list(range(0, num_steps, every))
+
+
+def relative_score(d_pred: torch.Tensor, d_gt: torch.Tensor) -> torch.Tensor:
+    """Eq. 6, the per-step score r = 1 - d_pred / d_gt: d_pred [..., N, T_f] against the
+    ground truth's d_gt [N, T_f]. 1 is perfect; 0 is as typical as the ground truth."""
+    return 1 - d_pred / d_gt
 
 
 @dataclass
@@ -49,6 +58,12 @@ class ScoreResult:
     fts_mean_of_ratios: torch.Tensor
     """[K, B] Eq. 8 as printed: the mean over p of r at t = T_f."""
 
+    @property
+    def agent_ats(self) -> torch.Tensor:
+        """[K, N] each agent's own ATS (its residual summed over time against its ground
+        truth's): what the per-agent plots shade by."""
+        return relative_score(self.d_pred.sum(-1), self.d_gt.sum(-1))
+
 
 class TrajectoryScorer:
     """Scores futures with a frozen denoiser: lower residual = more human-like."""
@@ -68,7 +83,7 @@ class TrajectoryScorer:
         self.scale = float(scale)
         self.steps = steps if steps is not None else score_timesteps(schedule.num_steps)
         if not self.steps or min(self.steps) < 0 or max(self.steps) >= schedule.num_steps:
-            raise ValueError(f"score steps must lie in 0..{schedule.num_steps - 1}")
+            raise ConfigError(f"score steps must lie in 0..{schedule.num_steps - 1}")
         self.seed = seed
         self.shared_noise = shared_noise
         self.max_rows = max_rows
@@ -76,13 +91,9 @@ class TrajectoryScorer:
     @classmethod
     def from_checkpoint(cls, path, device="cpu", **kwargs) -> TrajectoryScorer:
         """From a denoiser checkpoint, or the denoiser embedded in a generator checkpoint."""
-        from trajpref.train import checkpoint as ckpt
-
-        payload = ckpt.load(path)
-        if payload["kind"] != "denoiser":
-            payload = payload["denoiser"]
-        denoiser, cfg = ckpt.build_denoiser(payload)
-        schedule = DDPMSchedule(**vars(cfg.diffusion))
+        payload = checkpoint.denoiser_of(checkpoint.load(path))
+        denoiser, cfg = checkpoint.build_denoiser(payload)
+        schedule = DDPMSchedule.from_config(cfg.diffusion)
         return cls(denoiser.to(device), schedule.to(device), payload["scale"], **kwargs)
 
     @torch.no_grad()
@@ -93,7 +104,7 @@ class TrajectoryScorer:
         drawn from a generator seeded with ``seed``: the same call gives the same numbers.
         """
         context = self.denoiser.context(scene_features(batch, self.scale))  # [N, H]
-        y = (futures - batch.origin[None, :, None, :]) / self.scale  # [M, N, T_f, 2]
+        y = to_model_frame(futures, batch, self.scale)  # [M, N, T_f, 2]
         return self.residual_normalised(context, y)
 
     @torch.no_grad()
@@ -119,12 +130,22 @@ class TrajectoryScorer:
         return torch.cat(d, 1)  # [M, N, T_f]
 
     @torch.no_grad()
+    def step_scores(
+        self, context: torch.Tensor, futures: torch.Tensor, target: torch.Tensor
+    ) -> torch.Tensor:
+        """Eq. 6 for futures [M, N, T_f, 2] against the ground truth target [N, T_f, 2], both
+        in the denoiser's frame, with context [N, H] -> r [M, N, T_f]. One residual call
+        serves both, so they share the noise."""
+        d = self.residual_normalised(context, torch.cat([futures, target[None]]))  # [M+1,N,T]
+        return relative_score(d[:-1], d[-1])
+
+    @torch.no_grad()
     def score(self, batch: Batch, pred: torch.Tensor) -> ScoreResult:
         """Score K samples pred [K, N, T_f, 2] against the batch's ground truth."""
         k = pred.shape[0]
         d = self.residual(batch, torch.cat([pred, batch.future[None]], 0))  # [K+1, N, T_f]
         d_pred, d_gt = d[:k], d[k]
-        r = 1 - d_pred / d_gt
+        r = relative_score(d_pred, d_gt)
         b = batch.num_scenes
         sum_p = scene_sum(d_pred.sum(-1), batch.scene, b)  # [K, B]
         sum_g = scene_sum(d_gt.sum(-1), batch.scene, b)  # [B]
@@ -135,8 +156,8 @@ class TrajectoryScorer:
             d_pred=d_pred,
             d_gt=d_gt,
             r=r,
-            ats=1 - sum_p / sum_g,
-            fts=1 - fin_p / fin_g,
+            ats=relative_score(sum_p, sum_g),
+            fts=relative_score(fin_p, fin_g),
             ats_mean_of_ratios=scene_sum(r.mean(-1), batch.scene, b) / sizes,
             fts_mean_of_ratios=scene_sum(r[..., -1], batch.scene, b) / sizes,
         )
@@ -169,7 +190,7 @@ def rank_samples(
     residual (lower is more human-like).
     """
     if history.ndim != 3 or samples.ndim != 4 or samples.shape[1] != history.shape[0]:
-        raise ValueError("need history [P, T_h, 2] and samples [K, P, T_f, 2]")
+        raise ConfigError("need history [P, T_h, 2] and samples [K, P, T_f, 2]")
     p = history.shape[0]
     batch = Batch(
         history=history.float(),

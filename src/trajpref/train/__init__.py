@@ -1,6 +1,6 @@
-"""The one evaluation loop (and, with the diffusion models, the one training loop)."""
+"""Training: the three stages (denoiser, generator, fine-tuning), the one training loop, runs
+and DDP."""
 
-from trajpref.train.device import resolve_device
-from trajpref.train.evaluate import Predictor, evaluate, predict_dataset
+from trajpref.train.run import finetune, train_stage
 
-__all__ = ["Predictor", "evaluate", "predict_dataset", "resolve_device"]
+__all__ = ["finetune", "train_stage"]

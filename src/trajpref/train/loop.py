@@ -1,4 +1,4 @@
-"""The one training loop, shared by every stage (denoiser, generator, and later RL).
+"""The one training loop, shared by every stage (denoiser, generator, fine-tuning).
 
 A stage supplies an ``objective`` module whose ``forward(batch, generator)`` returns
 ``(loss, logs)``, the ``trainable`` module to optimise and save, a ``validate`` callable, and a
@@ -13,37 +13,23 @@ import json
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import torch
 from torch import nn
+from torch.nn.parallel import DistributedDataParallel
 from tqdm.auto import tqdm
 
 from trajpref.config import DataConfig, OptimConfig
 from trajpref.data.loader import SceneLoader
 from trajpref.data.transforms import augment
-from trajpref.errors import TrajprefError
-from trajpref.train import checkpoint as ckpt
+from trajpref.errors import ConfigError, TrajprefError
+from trajpref.io import atomic_path
+from trajpref.models import checkpoint as ckpt
 from trajpref.train.distributed import DistInfo
+from trajpref.train.stages import Stage
 from trajpref.types import TrajectoryDataset
-
-
-@dataclass
-class Stage:
-    """What differs between training stages."""
-
-    name: str
-    """Checkpoint file stem: ``denoiser`` or ``generator``."""
-    objective: nn.Module
-    """``forward(batch, generator) -> (loss, logs)``; holds the trainable and frozen parts."""
-    trainable: nn.Module
-    """The module whose parameters are optimised and saved."""
-    validate: Callable[[], dict[str, float]]
-    """Validation metrics; must include ``score`` (lower is better)."""
-    payload: Callable[[dict[str, Any]], dict[str, Any]]
-    """Turns the trainable module (+ metadata) into a checkpoint payload."""
 
 
 class MetricLog:
@@ -84,6 +70,26 @@ def _lr_lambda(cfg: OptimConfig, total: int) -> Callable[[int], float]:
     return f
 
 
+def save_resume_state(path: Path, state: dict[str, Any]) -> None:
+    """The state a run resumes from (weights, optimiser, schedules, random generators):
+    tensors and plain values only, so it loads with ``torch.load(weights_only=True)``."""
+    with atomic_path(path) as tmp:
+        torch.save(state, tmp)
+
+
+def load_resume_state(path: str | Path) -> dict[str, Any]:
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{path}: no such file to resume from")
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - torch raises many types for bad files
+        raise ConfigError(f"{path}: not a resume state ({exc.__class__.__name__})") from None
+    if not isinstance(state, dict):
+        raise ConfigError(f"{path}: not a resume state")
+    return state
+
+
 def fit(
     stage: Stage,
     train: TrajectoryDataset,
@@ -99,7 +105,7 @@ def fit(
 ) -> dict[str, Any]:
     """Train ``stage`` and keep the checkpoint with the best validation ``score``.
 
-    Writes ``<stage>.pt`` (best), ``<stage>_last.pt`` (for ``resume``) and
+    Writes ``<stage>.safetensors`` (best), ``<stage>_last.pt`` (for ``resume``) and
     ``<stage>_metrics.jsonl`` into ``out_dir`` (rank 0 only). ``max_steps`` stops early
     (for tests). Returns a summary with the best validation metrics and the wall time.
     """
@@ -122,9 +128,9 @@ def fit(
 
     start_epoch, step, best, elapsed = 0, 0, {"score": math.inf}, 0.0
     if resume is not None:
-        state = torch.load(resume, map_location="cpu", weights_only=True)
+        state = load_resume_state(resume)
         if state.get("stage") != stage.name:
-            raise ValueError(f"{resume} is a {state.get('stage')} run, not {stage.name}")
+            raise ConfigError(f"{resume} is a {state.get('stage')} run, not {stage.name}")
         stage.trainable.load_state_dict(state["trainable"])
         optimizer.load_state_dict(state["optimizer"])
         sched.load_state_dict(state["scheduler"])
@@ -135,9 +141,8 @@ def fit(
 
     objective: nn.Module = stage.objective
     if dist_info.enabled:
-        from torch.nn.parallel import DistributedDataParallel as DDP
-
-        objective = DDP(objective, device_ids=[device] if device.type == "cuda" else None)
+        device_ids = [device] if device.type == "cuda" else None
+        objective = DistributedDataParallel(objective, device_ids=device_ids)
 
     log = MetricLog(out_dir, stage.name, main)
     nonfinite = 0
@@ -199,12 +204,12 @@ def fit(
                 best = {**val, "epoch": epoch + 1}
                 meta = {"epoch": epoch + 1, "step": step, "val": val,
                         "train_seconds": round(elapsed, 2), "dataset": train.info.name}  # fmt: skip
-                ckpt.save(out_dir / f"{stage.name}.pt", stage.payload(meta))
+                ckpt.save(out_dir / f"{stage.name}{ckpt.SUFFIX}", stage.payload(meta))
                 record["best"] = True
             stage.objective.train()
         if main:
             log.write(record)
-            ckpt.save(out_dir / f"{stage.name}_last.pt", {
+            save_resume_state(out_dir / f"{stage.name}_last.pt", {
                 "stage": stage.name, "trainable": stage.trainable.state_dict(),
                 "optimizer": optimizer.state_dict(), "scheduler": sched.state_dict(),
                 "noise_gen": noise_gen.get_state(), "aug_gen": aug_gen.get_state(),

@@ -1,23 +1,30 @@
-"""``trajpref train diffusion|generator``: datasets + stage + the shared loop, DDP-aware."""
+"""``trajpref train diffusion|generator`` and ``trajpref finetune``: datasets + stage + the
+shared loop, DDP-aware."""
 
 from __future__ import annotations
 
 import time
+import typing
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import torch
 
 from trajpref.config import ExperimentConfig, save_config
 from trajpref.data import load_dataset
-from trajpref.errors import TrajprefError
-from trajpref.train import checkpoint as ckpt
-from trajpref.train.device import resolve_device
+from trajpref.device import resolve_device
+from trajpref.errors import ConfigError
+from trajpref.models import checkpoint as ckpt
 from trajpref.train.distributed import barrier, cleanup, init_from_env
 from trajpref.train.loop import fit
-from trajpref.train.stages import build_denoiser_stage, build_generator_stage
+from trajpref.train.stages import (
+    build_denoiser_stage,
+    build_finetune_stage,
+    build_generator_stage,
+)
 
-STAGES = ("diffusion", "generator")
+Pretraining = Literal["diffusion", "generator"]
+STAGES: tuple[str, ...] = typing.get_args(Pretraining)
 
 
 def _run(
@@ -55,7 +62,7 @@ def _run(
 
 
 def train_stage(
-    stage: str,
+    stage: Pretraining,
     cfg: ExperimentConfig,
     out_dir: str | Path,
     data_root: str | None = None,
@@ -68,15 +75,15 @@ def train_stage(
     """Train one pretraining stage; returns the loop's summary (best validation metrics,
     seconds)."""
     if stage not in STAGES:
-        raise TrajprefError(f"unknown stage {stage!r}; choose {' or '.join(STAGES)}")
+        raise ConfigError(f"unknown stage {stage!r}; choose {' or '.join(STAGES)}")
 
     def build(train, val, dev):
         if stage == "diffusion":
             return build_denoiser_stage(cfg, train, val, dev)[0], cfg.denoiser
-        path = Path(denoiser) if denoiser else Path(out_dir) / "denoiser.pt"
+        path = Path(denoiser) if denoiser else Path(out_dir) / f"denoiser{ckpt.SUFFIX}"
         payload = ckpt.load(path)
         if payload["kind"] != "denoiser":
-            raise TrajprefError(f"{path}: expected a denoiser checkpoint")
+            raise ConfigError(f"{path}: expected a denoiser checkpoint")
         return build_generator_stage(cfg, payload, val, dev), cfg.generator
 
     return _run(cfg, out_dir, data_root, device, resume, progress, max_steps, build)
@@ -92,12 +99,11 @@ def finetune(
     progress: bool = True,
     max_steps: int | None = None,
 ) -> dict[str, Any]:
-    """RLHF / RLHF-ReS fine-tuning from the generator checkpoint ``start`` (DDP-aware)."""
-    from trajpref.rl.stage import build_finetune_stage
-
+    """RLHF / RLHF-ReS fine-tuning from the generator checkpoint ``start`` (DDP-aware);
+    ``cfg`` comes from ``rl.presets.finetune_config``."""
     payload = ckpt.load(start)
     if payload["kind"] != "generator":
-        raise TrajprefError(f"{start}: fine-tuning starts from a generator checkpoint")
+        raise ConfigError(f"{start}: fine-tuning starts from a generator checkpoint")
 
     def build(train, val, dev):
         return build_finetune_stage(cfg, payload, val, dev), cfg.finetune

@@ -1,26 +1,48 @@
-"""The pretraining stages: the denoiser (Eq. 2) and the leapfrog generator (Eq. 1, 3, 4)."""
+"""The three training stages, built in one place: the denoiser (Eq. 2), the leapfrog generator
+(Eq. 1, 3, 4) and RLHF / RLHF-ReS fine-tuning (Eq. 10-20). Each builder returns a ``Stage``
+for the one training loop (``train.loop.fit``); validation runs the one evaluation loop."""
 
 from __future__ import annotations
 
-import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import torch
 from torch import nn
 
-from trajpref.config import DenoiserTrainConfig, ExperimentConfig, GeneratorTrainConfig
+from trajpref.config import ExperimentConfig, GeneratorTrainConfig
 from trajpref.data.loader import SceneLoader
-from trajpref.data.transforms import to_relative
-from trajpref.diffusion.samplers import denoise
+from trajpref.data.transforms import to_model_frame
 from trajpref.diffusion.schedule import DDPMSchedule
+from trajpref.errors import ConfigError
+from trajpref.evaluation import evaluate
+from trajpref.models import checkpoint as ckpt
+from trajpref.models.critic import Critic
 from trajpref.models.denoiser import Denoiser
 from trajpref.models.encoder import scene_features
 from trajpref.models.generator import Generator
+from trajpref.models.losses import denoiser_loss, generator_loss
 from trajpref.models.predictor import DiffusionPredictor
-from trajpref.train import checkpoint as ckpt
-from trajpref.train.evaluate import evaluate
-from trajpref.train.loop import Stage
+from trajpref.rl.objective import RLObjective
+from trajpref.score.scorer import TrajectoryScorer
 from trajpref.types import Batch, TrajectoryDataset
+
+
+@dataclass
+class Stage:
+    """What differs between training stages."""
+
+    name: str
+    """Checkpoint file stem: ``denoiser``, ``generator`` or ``finetune``."""
+    objective: nn.Module
+    """``forward(batch, generator) -> (loss, logs)``; holds the trainable and frozen parts."""
+    trainable: nn.Module
+    """The module whose parameters are optimised and saved."""
+    validate: Callable[[], dict[str, float]]
+    """Validation metrics; must include ``score`` (lower is better)."""
+    payload: Callable[[dict[str, Any]], dict[str, Any]]
+    """Turns the trainable module (+ metadata) into a checkpoint payload."""
 
 
 def data_scale(dataset: TrajectoryDataset) -> float:
@@ -34,15 +56,34 @@ def data_scale(dataset: TrajectoryDataset) -> float:
     return max(1e-3, (total / max(1, count)) ** 0.5)
 
 
-def _subset(dataset: TrajectoryDataset, max_scenes: int | None) -> TrajectoryDataset:
+def subset(dataset: TrajectoryDataset, max_scenes: int | None) -> TrajectoryDataset:
+    """At most ``max_scenes`` scenes, evenly spread over the split (all when None)."""
     if max_scenes is None or len(dataset) <= max_scenes:
         return dataset
-    idx = torch.linspace(0, len(dataset) - 1, max_scenes).long().tolist()  # evenly spread
+    idx = torch.linspace(0, len(dataset) - 1, max_scenes).long().tolist()
     return TrajectoryDataset([dataset.scenes[i] for i in idx], dataset.info)
 
 
+def _leapfrog_validation(predictor: DiffusionPredictor, val: TrajectoryDataset, samples: int,
+                         max_agents: int, device: torch.device,
+                         scorer: TrajectoryScorer | None = None,
+                         keys: tuple[str, ...] = ("min_ade", "min_fde")):  # fmt: skip
+    """Validation of a generator: minADE_K + minFDE_K of its leapfrog samples (lower is
+    better), plus ``keys`` of the evaluation's result."""
+
+    def validate() -> dict[str, float]:
+        res = evaluate(predictor, val, samples, seed=0, device=device, max_agents=max_agents,
+                       progress=False, scorer=scorer)  # fmt: skip
+        return {k: res[k] for k in keys} | {"score": res["min_ade"] + res["min_fde"]}
+
+    return validate
+
+
+# ----------------------------------------------------------------------------- stage 1
+
+
 class DenoiserObjective(nn.Module):
-    """Eq. 2: || eps_theta(sqrt(abar_s) y + sqrt(1 - abar_s) z, s, X) - z ||^2."""
+    """Eq. 2 on a batch: ``models.losses.denoiser_loss`` on the batch's futures."""
 
     def __init__(self, denoiser: Denoiser, schedule: DDPMSchedule, scale: float, draws: int):
         super().__init__()
@@ -52,17 +93,9 @@ class DenoiserObjective(nn.Module):
         self.draws = draws
 
     def forward(self, batch: Batch, generator: torch.Generator | None = None):
-        device = batch.history.device
-        f = scene_features(batch, self.scale)
-        context = self.denoiser.context(f)  # [N, H]
-        _, fut_rel = to_relative(batch)
-        y0 = fut_rel / self.scale  # [N, T_f, 2]
-        m, n = self.draws, batch.num_agents
-        s = torch.randint(0, self.schedule.num_steps, (m, n), generator=generator).to(device)
-        z = torch.randn((m, *y0.shape), generator=generator).to(device)  # [M, N, T_f, 2]
-        y_s = self.schedule.add_noise(y0.expand(m, -1, -1, -1), z, s)  # [M, N, T_f, 2]
-        eps = self.denoiser(y_s, s, context)  # [M, N, T_f, 2]
-        loss = (eps - z).pow(2).mean()
+        context = self.denoiser.context(scene_features(batch, self.scale))  # [N, H]
+        y0 = to_model_frame(batch.future, batch, self.scale)  # [N, T_f, 2]
+        loss = denoiser_loss(self.denoiser, self.schedule, context, y0, self.draws, generator)
         return loss, {}
 
 
@@ -70,14 +103,14 @@ def build_denoiser_stage(
     cfg: ExperimentConfig, train: TrajectoryDataset, val: TrajectoryDataset,
     device: torch.device,
 ) -> tuple[Stage, float]:  # fmt: skip
-    """Stage 1. Validation: Eq. 2 on the validation split with fixed noise (lower is better)."""
+    """Stage 1. Validation: Eq. 2 on the validation split with fixed noise (lower is better).
+    Returns the stage and the data scale measured on ``train``."""
     torch.manual_seed(cfg.seed)
     scale = data_scale(train)
     denoiser = Denoiser(cfg.model).to(device)
-    schedule = DDPMSchedule(**vars(cfg.diffusion)).to(device)
-    tcfg: DenoiserTrainConfig = cfg.denoiser
-    objective = DenoiserObjective(denoiser, schedule, scale, tcfg.noise_draws)
-    val_set = _subset(val, tcfg.eval_max_scenes)
+    schedule = DDPMSchedule.from_config(cfg.diffusion).to(device)
+    objective = DenoiserObjective(denoiser, schedule, scale, cfg.denoiser.noise_draws)
+    val_set = subset(val, cfg.denoiser.eval_max_scenes)
 
     @torch.no_grad()
     def validate() -> dict[str, float]:
@@ -95,21 +128,17 @@ def build_denoiser_stage(
     return Stage("denoiser", objective, denoiser, validate, payload), scale
 
 
+# ----------------------------------------------------------------------------- stage 2
+
+
 class GeneratorObjective(nn.Module):
-    """Trains G through tau steps of the frozen denoiser.
+    """Trains G through tau steps of the frozen denoiser: ``models.losses.generator_loss``
+    on the leapfrog rollout's denoised samples."""
 
-    loss = w_best * min_k (ADE_k + FDE_k) + w_mean * ADE(mu) + w_unc * (e^{-l} ADE(mu) + l)
-           + w_reg * Eq. 4,   with l the agent's mean log sigma,
-    all in normalised units on the denoised samples Y = D^r(X, mu + sigma * S).
-    """
-
-    def __init__(self, generator: Generator, denoiser: Denoiser, schedule: DDPMSchedule,
-                 scale: float, cfg: GeneratorTrainConfig):  # fmt: skip
+    def __init__(self, sampler: DiffusionPredictor, cfg: GeneratorTrainConfig):
         super().__init__()
-        self.generator = generator
-        self.denoiser = denoiser.requires_grad_(False).eval()
-        self.schedule = schedule
-        self.scale = scale
+        self.sampler = sampler
+        self.denoiser = sampler.denoiser.requires_grad_(False).eval()
         self.cfg = cfg
 
     def train(self, mode: bool = True):
@@ -118,35 +147,18 @@ class GeneratorObjective(nn.Module):
         return self
 
     def forward(self, batch: Batch, generator: torch.Generator | None = None):
-        f = scene_features(batch, self.scale)
-        with torch.no_grad():
-            context = self.denoiser.context(f)  # [N, H]
-        out = self.generator(f)
-        y_tau = out.initial_sample()  # [K, N, T_f, 2]
-        y = denoise(
-            self.schedule, lambda x, s: self.denoiser(x, s, context), y_tau, self.cfg.tau, generator
-        )  # fmt: skip  [K, N, T_f, 2]
-        target = to_relative(batch)[1] / self.scale  # [N, T_f, 2]
-        return generator_loss(out, y, target, self.cfg)
+        roll = self.sampler.rollout(batch, generator)  # [K, N, T_f, 2] samples
+        target = to_model_frame(batch.future, batch, self.sampler.scale)  # [N, T_f, 2]
+        return generator_loss(roll.out, roll.y, target, self.cfg)
 
 
-def generator_loss(out, y: torch.Tensor, target: torch.Tensor, c: GeneratorTrainConfig):
-    """The generator's supervised loss on denoised samples y [K, N, T_f, 2] (normalised):
-    w_best * min_k (ADE_k + FDE_k) + w_mean * ADE(mu) + w_unc * (e^{-l} ADE(mu) + l)
-    + w_reg * Eq. 4. Shared by pretraining and by the RL stages (their L_reg)."""
-    err = torch.linalg.vector_norm(y - target, dim=-1)  # [K, N, T_f]
-    ade, fde = err.mean(-1), err[..., -1]  # [K, N]
-    best = (ade + fde).min(0).values.mean()
-    mean_err = torch.linalg.vector_norm(out.mean - target, dim=-1).mean(-1)  # [N]
-    log_sigma = out.log_sigma.mean(0)  # [N]
-    unc = (torch.exp(-log_sigma) * mean_err.detach() + log_sigma).mean()
-    reg = (y - target).pow(2).sum(-1).mean()  # Eq. 4
-    loss = (c.best_of_k_weight * best + c.mean_weight * mean_err.mean()
-            + c.uncertainty_weight * unc + c.reg_weight * reg)  # fmt: skip
-    logs = {k: float(v.detach()) for k, v in (
-        ("best_of_k", best), ("mean_ade", mean_err.mean()), ("uncertainty", unc),
-        ("eq4", reg), ("sigma", out.log_sigma.exp().mean()))}  # fmt: skip
-    return loss, logs
+def _check_matches_denoiser(cfg: ExperimentConfig, denoiser_cfg: ExperimentConfig) -> None:
+    if (cfg.model.denoiser_part() != denoiser_cfg.model.denoiser_part()
+            or cfg.diffusion != denoiser_cfg.diffusion):  # fmt: skip
+        raise ConfigError(
+            "the generator config's model/diffusion sections differ from the denoiser "
+            "checkpoint's (only model.generator_width, samples and tau may differ)"
+        )
 
 
 def build_generator_stage(
@@ -156,30 +168,56 @@ def build_generator_stage(
     """Stage 2. Validation: minADE_K + minFDE_K of the leapfrog sampler (lower is better)."""
     torch.manual_seed(cfg.seed)
     denoiser, dcfg = ckpt.build_denoiser(denoiser_payload)
-    # G may have its own width; everything else describes the frozen denoiser or the data
-    shared = dataclasses.replace(cfg.model, generator_width=dcfg.model.generator_width)
-    if shared != dcfg.model or dcfg.diffusion != cfg.diffusion:
-        raise ValueError(
-            "the generator config's model/diffusion sections differ from the denoiser "
-            "checkpoint's (only model.generator_width may differ)"
-        )
-    scale = denoiser_payload["scale"]
-    denoiser = denoiser.to(device)
-    gcfg: GeneratorTrainConfig = cfg.generator
-    generator = Generator(cfg.model, gcfg.samples).to(device)
-    schedule = DDPMSchedule(**vars(cfg.diffusion)).to(device)
-    objective = GeneratorObjective(generator, denoiser, schedule, scale, gcfg)
-    predictor = DiffusionPredictor(cfg.model, cfg.diffusion, scale, denoiser, generator,
-                                   gcfg.tau, "leapfrog").to(device)  # fmt: skip
-    val_set = _subset(val, gcfg.eval_max_scenes)
-
-    def validate() -> dict[str, float]:
-        res = evaluate(predictor, val_set, gcfg.samples, seed=0, device=device,
-                       max_agents=cfg.data.max_agents, progress=False)  # fmt: skip
-        return {"min_ade": res["min_ade"], "min_fde": res["min_fde"],
-                "score": res["min_ade"] + res["min_fde"]}  # fmt: skip
+    _check_matches_denoiser(cfg, dcfg)
+    generator = Generator(cfg.model).to(device)
+    schedule = DDPMSchedule.from_config(cfg.diffusion).to(device)
+    sampler = DiffusionPredictor(denoiser.to(device), schedule, denoiser_payload["scale"],
+                                 generator, cfg.model.tau)  # fmt: skip
+    objective = GeneratorObjective(sampler, cfg.generator)
+    val_set = subset(val, cfg.generator.eval_max_scenes)
+    validate = _leapfrog_validation(sampler, val_set, cfg.model.samples, cfg.data.max_agents,
+                                    device)  # fmt: skip
 
     def payload(meta: dict[str, Any]) -> dict[str, Any]:
         return ckpt.generator_payload(generator, denoiser_payload, cfg, meta)
 
     return Stage("generator", objective, generator, validate, payload)
+
+
+# ----------------------------------------------------------------------------- stage 3
+
+
+class PolicyAndCritic(nn.Module):
+    """What fine-tuning optimises and saves."""
+
+    def __init__(self, policy: Generator, critic: Critic):
+        super().__init__()
+        self.policy = policy
+        self.critic = critic
+
+
+def build_finetune_stage(
+    cfg: ExperimentConfig, start: dict[str, Any], val: TrajectoryDataset, device: torch.device,
+) -> Stage:  # fmt: skip
+    """Stage 3, from a generator checkpoint payload ``start``. Validation: minADE_K +
+    minFDE_K of the policy's leapfrog samples (lower is better), with maxATS/maxFTS,
+    meanATS and top-1 recall logged (scored at the paper's every-3 steps)."""
+    if start["kind"] != "generator":
+        raise ConfigError("fine-tuning starts from a generator checkpoint")
+    torch.manual_seed(cfg.seed)
+    sampler = ckpt.predictor_from_payload(start, "leapfrog").to(device)
+    assert sampler.generator is not None
+    critic = Critic(cfg.model.hidden, cfg.model.t_fut, cfg.model.generator_width).to(device)
+    objective = RLObjective(sampler, critic, cfg.finetune, cfg.generator)
+    val_set = subset(val, cfg.finetune.eval_max_scenes)
+    metric_scorer = TrajectoryScorer(sampler.denoiser, sampler.schedule, sampler.scale)
+    keys = ("min_ade", "min_fde", "max_ats", "max_fts", "mean_ats", "top1_recall_ats")
+    validate = _leapfrog_validation(sampler, val_set, cfg.model.samples, cfg.data.max_agents,
+                                    device, metric_scorer, keys)  # fmt: skip
+
+    def payload(meta: dict[str, Any]) -> dict[str, Any]:
+        meta = {**meta, "method": cfg.finetune.method, "from": start.get("hash")}
+        return ckpt.generator_payload(sampler.generator, start["denoiser"], cfg, meta, critic)
+
+    return Stage("finetune", objective, PolicyAndCritic(sampler.generator, critic), validate,
+                 payload)  # fmt: skip

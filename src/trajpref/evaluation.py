@@ -1,7 +1,8 @@
-"""The one evaluation loop, shared by every model and every stage."""
+"""The one evaluation loop, shared by every model, every stage's validation and the CLI."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from typing import Protocol
 
 import numpy as np
@@ -25,37 +26,33 @@ class Predictor(Protocol):
     ) -> torch.Tensor: ...
 
 
-def _generator(seed: int) -> torch.Generator:
-    # a CPU generator: draws are identical on every device, and models move them
-    g = torch.Generator()
-    g.manual_seed(seed)
-    return g
-
-
-def _batches(dataset: TrajectoryDataset, max_agents: int, progress: bool, desc: str):
+@torch.no_grad()
+def sampled_batches(
+    model: Predictor, dataset: TrajectoryDataset, num_samples: int = 20, seed: int = 0,
+    device: torch.device | str = "cpu", max_agents: int = 1024, progress: bool = True,
+    desc: str = "sample",
+) -> Iterator[tuple[Batch, torch.Tensor]]:  # fmt: skip
+    """The one pass over a split: ``(batch, pred [K, N, T_f, 2])`` for every batch of whole
+    scenes, in dataset order, with one seeded CPU generator for the whole pass."""
+    gen = torch.Generator().manual_seed(seed)  # CPU: draws are identical on every device
     loader = SceneLoader(dataset, max_agents=max_agents, shuffle=False)
-    return tqdm(loader, desc=desc, unit="batch", disable=not progress, leave=False)
+    for batch in tqdm(loader, desc=desc, unit="batch", disable=not progress, leave=False):
+        batch = batch.to(device)
+        yield batch, model.predict(batch, num_samples, gen)
 
 
 @torch.no_grad()
 def evaluate(
-    model: Predictor,
-    dataset: TrajectoryDataset,
-    num_samples: int = 20,
-    seed: int = 0,
-    device: torch.device | str = "cpu",
-    max_agents: int = 1024,
-    progress: bool = True,
+    model: Predictor, dataset: TrajectoryDataset, num_samples: int = 20, seed: int = 0,
+    device: torch.device | str = "cpu", max_agents: int = 1024, progress: bool = True,
     scorer: TrajectoryScorer | None = None,
-) -> dict[str, float | int]:
+) -> dict[str, float | int]:  # fmt: skip
     """minADE_K / minFDE_K per agent and joint over a whole split; with a ``scorer``, also
     maxATS_K / maxFTS_K and the top-1 / top-5 recall of the ground-truth-free ranking."""
-    gen = _generator(seed)
     acc = MetricAccumulator()
     score_acc = ScoreAccumulator() if scorer is not None else None
-    for batch in _batches(dataset, max_agents, progress, f"evaluate {dataset.info.name}"):
-        batch = batch.to(device)
-        pred = model.predict(batch, num_samples, gen)  # [K, N, T_f, 2]
+    for batch, pred in sampled_batches(model, dataset, num_samples, seed, device, max_agents,
+                                       progress, f"evaluate {dataset.info.name}"):  # fmt: skip
         acc.update(pred, batch.future, batch.scene, batch.num_scenes)
         if score_acc is not None:
             score_acc.update(scorer, batch, pred)
@@ -67,15 +64,10 @@ def evaluate(
 
 @torch.no_grad()
 def predict_dataset(
-    model: Predictor,
-    dataset: TrajectoryDataset,
-    num_samples: int = 20,
-    seed: int = 0,
-    device: torch.device | str = "cpu",
-    max_agents: int = 1024,
-    progress: bool = True,
+    model: Predictor, dataset: TrajectoryDataset, num_samples: int = 20, seed: int = 0,
+    device: torch.device | str = "cpu", max_agents: int = 1024, progress: bool = True,
     scorer: TrajectoryScorer | None = None,
-) -> dict[str, np.ndarray]:
+) -> dict[str, np.ndarray]:  # fmt: skip
     """Samples for a whole split, as the arrays ``trajpref predict`` saves.
 
     Returns ``history`` [N, T_h, 2], ``future`` [N, T_f, 2], ``pred`` [K, N, T_f, 2],
@@ -83,13 +75,11 @@ def predict_dataset(
     ``scorer``, each scene's samples are reordered best first by the ground-truth-free
     ranking, and ``order`` [K, B] (original indices) and ``residual`` [K, B] are added.
     """
-    gen = _generator(seed)
     parts: dict[str, list[np.ndarray]] = {k: [] for k in ("history", "future", "pred", "scene")}
     parts["agent_type"] = []
     offset = 0
-    for batch in _batches(dataset, max_agents, progress, f"predict {dataset.info.name}"):
-        batch = batch.to(device)
-        pred = model.predict(batch, num_samples, gen)  # [K, N, T_f, 2]
+    for batch, pred in sampled_batches(model, dataset, num_samples, seed, device, max_agents,
+                                       progress, f"predict {dataset.info.name}"):  # fmt: skip
         if scorer is not None:
             total = scorer.scene_residual(batch, pred)  # [K, B]
             order = total.argsort(0)  # [K, B] best first

@@ -1,0 +1,308 @@
+"""Checkpoint files: safetensors weights plus a plain-JSON header; loading never unpickles.
+
+A file holds the network's tensors under ``model/``, an embedded denoiser's under
+``denoiser/`` and a fine-tuning critic's under ``critic/``; the safetensors metadata entry
+``trajpref`` is a JSON header with the format, kind, resolved config, data scale, content hash
+and run metadata (and, for a generator, its embedded denoiser's header or a reference
+``denoiser_ref`` = relative path + hash). Published files store float weights in half
+precision; they load as float32.
+
+In memory a checkpoint is a *payload* dict: ``format, kind, config, scale, state_dict, hash,
+meta`` (+ ``denoiser`` payload, ``denoiser_ref``, ``critic`` state). The legacy format
+(``trajpref-checkpoint/1``, a ``.pt`` file read with ``torch.load(weights_only=True)``) still
+loads, with a deprecation warning.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import warnings
+from pathlib import Path
+from typing import Any
+
+import torch
+from safetensors import SafetensorError
+from safetensors.torch import load_file, save_file
+
+from trajpref.config import ExperimentConfig, experiment_from_dict, to_dict
+from trajpref.diffusion.schedule import DDPMSchedule
+from trajpref.errors import TrajprefError
+from trajpref.io import atomic_path
+from trajpref.models.denoiser import Denoiser
+from trajpref.models.generator import Generator
+from trajpref.models.predictor import DiffusionPredictor, Sampler
+
+FORMAT = "trajpref-checkpoint/2"
+LEGACY_FORMAT = "trajpref-checkpoint/1"
+KINDS = ("denoiser", "generator")
+SUFFIX = ".safetensors"
+LEGACY_SUFFIX = ".pt"
+DENOISER_NAME = "denoiser" + SUFFIX
+"""File name of a published dataset's default denoiser, beside its generators."""
+_GROUPS = {"state_dict": "model", "critic": "critic"}
+"""Payload entries holding tensors -> their prefix in the file."""
+
+
+class DenoiserConflict(TrajprefError):
+    """Publishing would replace a different denoiser that other checkpoints may name."""
+
+
+def state_hash(state: dict[str, torch.Tensor]) -> str:
+    """A content hash of a state dict, over its float32 values (to tie a generator to its
+    denoiser; half-precision files hash their weights as loaded)."""
+    h = hashlib.sha256()
+    for key in sorted(state):
+        h.update(key.encode())
+        value = state[key].detach().cpu()
+        value = value.float() if value.is_floating_point() else value
+        h.update(value.contiguous().numpy().tobytes())
+    return h.hexdigest()[:16]
+
+
+def _cpu_state(module: torch.nn.Module) -> dict[str, torch.Tensor]:
+    return {k: v.detach().cpu().clone() for k, v in module.state_dict().items()}
+
+
+def denoiser_payload(denoiser: Denoiser, cfg: ExperimentConfig, scale: float,
+                     meta: dict[str, Any]) -> dict[str, Any]:  # fmt: skip
+    state = _cpu_state(denoiser)
+    return {"format": FORMAT, "kind": "denoiser", "config": to_dict(cfg), "scale": float(scale),
+            "state_dict": state, "hash": state_hash(state), "meta": meta}  # fmt: skip
+
+
+def generator_payload(generator: Generator, denoiser: dict[str, Any], cfg: ExperimentConfig,
+                      meta: dict[str, Any],
+                      critic: torch.nn.Module | None = None) -> dict[str, Any]:  # fmt: skip
+    state = _cpu_state(generator)
+    out = {"format": FORMAT, "kind": "generator", "config": to_dict(cfg),
+           "scale": denoiser["scale"], "state_dict": state, "hash": state_hash(state),
+           "denoiser": denoiser, "meta": meta}  # fmt: skip
+    if critic is not None:
+        out["critic"] = _cpu_state(critic)
+    return out
+
+
+# ----------------------------------------------------------------------------- files
+
+
+def _flatten(payload: dict[str, Any], half: bool, prefix: str = ""):
+    """-> (tensors {name: tensor}, header without tensors)."""
+    tensors: dict[str, torch.Tensor] = {}
+    header = {k: v for k, v in payload.items() if k not in (*_GROUPS, "denoiser")}
+    for key, group in _GROUPS.items():
+        for name, value in payload.get(key, {}).items():
+            value = value.detach().cpu()
+            if half and value.is_floating_point():
+                value = value.half()
+            tensors[f"{prefix}{group}/{name}"] = value.contiguous()
+    if "denoiser" in payload:
+        inner, header["denoiser"] = _flatten(payload["denoiser"], half, prefix + "denoiser/")
+        tensors.update(inner)
+    return tensors, header
+
+
+def _unflatten(tensors: dict[str, torch.Tensor], header: dict[str, Any], prefix: str = ""):
+    payload = {k: v for k, v in header.items() if k != "denoiser"}
+    for key, group in _GROUPS.items():
+        head = f"{prefix}{group}/"
+        state = {name[len(head):]: value.float() if value.is_floating_point() else value
+                 for name, value in tensors.items() if name.startswith(head)}  # fmt: skip
+        if state or key == "state_dict":
+            payload[key] = state
+    if isinstance(header.get("denoiser"), dict):
+        payload["denoiser"] = _unflatten(tensors, header["denoiser"], prefix + "denoiser/")
+    return payload
+
+
+def save(path: str | Path, payload: dict[str, Any], half: bool = False) -> None:
+    """Write a payload as ``.safetensors`` (float weights in half precision with ``half``;
+    the recorded hashes are then those of the rounded weights)."""
+    path = Path(path)
+    if path.suffix != SUFFIX:
+        raise TrajprefError(f"{path}: checkpoints are written as {SUFFIX} files")
+    if half:  # round first, so that the hashes describe what the file holds
+        payload = _unflatten(*_flatten(payload, half=True))
+        _rehash(payload)
+    tensors, header = _flatten(payload, half)
+    header["format"] = FORMAT
+    with atomic_path(path) as tmp:
+        save_file(tensors, str(tmp), metadata={"trajpref": json.dumps(header)})
+
+
+def _rehash(payload: dict[str, Any]) -> None:
+    payload["hash"] = state_hash(payload["state_dict"])
+    if "denoiser" in payload:
+        _rehash(payload["denoiser"])
+
+
+def resolve_path(path: str | Path) -> Path:
+    """``path``, or the ``.safetensors`` file that replaced a legacy ``.pt`` path."""
+    path = Path(path)
+    if not path.is_file() and path.suffix == LEGACY_SUFFIX:
+        new = path.with_suffix(SUFFIX)
+        if new.is_file():
+            warnings.warn(f"{path} is now {new}", FutureWarning, stacklevel=3)
+            return new
+    if not path.is_file():
+        raise TrajprefError(f"{path}: no such checkpoint")
+    return path
+
+
+def _read_file(path: Path) -> dict[str, Any]:
+    if path.suffix == LEGACY_SUFFIX:
+        return _read_legacy(path)
+    try:
+        tensors = load_file(str(path))
+        with open(path, "rb") as fh:
+            length = int.from_bytes(fh.read(8), "little")
+            meta = json.loads(fh.read(length)).get("__metadata__") or {}
+        header = json.loads(meta["trajpref"])
+    except (SafetensorError, OSError, ValueError, KeyError) as exc:
+        raise TrajprefError(
+            f"{path}: not a trajpref checkpoint ({exc.__class__.__name__})"
+        ) from None
+    if not isinstance(header, dict) or header.get("format") != FORMAT:
+        raise TrajprefError(f"{path}: not a trajpref checkpoint (format {FORMAT} expected)")
+    return _unflatten(tensors, header)
+
+
+def _read_legacy(path: Path) -> dict[str, Any]:
+    warnings.warn(
+        f"{path}: a legacy .pt checkpoint; it still loads, but new files are {SUFFIX} "
+        "(benchmarks/convert_models.py converts)",
+        FutureWarning,
+        stacklevel=4,
+    )
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - torch raises many types for bad files
+        raise TrajprefError(
+            f"{path}: not a loadable checkpoint ({exc.__class__.__name__})"
+        ) from None
+    if not isinstance(payload, dict) or payload.get("format") != LEGACY_FORMAT:
+        raise TrajprefError(f"{path}: not a trajpref checkpoint")
+    missing = {"kind", "config", "scale", "state_dict", "hash"} - set(payload)
+    if missing:
+        raise TrajprefError(f"{path}: a checkpoint without {', '.join(sorted(missing))}")
+    _upgrade_config(payload)
+    return payload
+
+
+def _upgrade_config(payload: dict[str, Any]) -> None:
+    """Rewrite a legacy payload's config dicts in today's layout (the file's own warning
+    already said it is old)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        payload["config"] = to_dict(experiment_from_dict(payload["config"]))
+    if isinstance(payload.get("denoiser"), dict):
+        _upgrade_config(payload["denoiser"])
+
+
+def _load_file(path: str | Path) -> dict[str, Any]:
+    payload = _read_file(resolve_path(path))
+    if payload.get("kind") not in KINDS:
+        raise TrajprefError(f"{path}: unknown checkpoint kind {payload.get('kind')!r}")
+    return payload
+
+
+def load(path: str | Path) -> dict[str, Any]:
+    """Load a checkpoint file (never executing code) into a payload dict.
+
+    A generator checkpoint that names its denoiser (``denoiser_ref``: a path relative to the
+    checkpoint's folder and a content hash) gets that denoiser loaded in; a mismatch is
+    refused."""
+    payload = _load_file(path)
+    ref = payload.get("denoiser_ref")
+    if payload["kind"] == "generator" and "denoiser" not in payload and ref is not None:
+        den_path = resolve_path(Path(path).parent / ref["path"])
+        den = _load_file(den_path)
+        found = state_hash(den["state_dict"]) if den.get("kind") == "denoiser" else None
+        if found != ref["hash"]:
+            raise TrajprefError(
+                f"{path}: its denoiser {den_path} does not match the recorded hash "
+                f"{ref['hash']} (found {found})"
+            )
+        payload["denoiser"] = den
+    return payload
+
+
+def publish(
+    src: str | Path, dst: str | Path, denoiser_name: str = DENOISER_NAME,
+    replace_denoiser: bool = False, half: bool = True,
+) -> None:  # fmt: skip
+    """Copy a checkpoint to ``dst`` (half precision by default). A generator's denoiser is
+    written once as ``dst.parent / denoiser_name`` and referenced by path and hash.
+
+    A different denoiser already at that path is replaced only with ``replace_denoiser``:
+    other published generators (variants, fine-tuned models) may point to it."""
+    payload = load(src)
+    payload.pop("denoiser_ref", None)
+    dst = Path(dst)
+    if payload["kind"] != "generator":
+        save(dst, payload, half)
+        return
+    den = payload.pop("denoiser")
+    if half:
+        den = _unflatten(*_flatten(den, half=True))
+        _rehash(den)
+    den_path = dst.parent / denoiser_name
+    current = state_hash(_load_file(den_path)["state_dict"]) if den_path.is_file() else None
+    if current != den["hash"]:
+        if current is not None and not replace_denoiser:
+            raise DenoiserConflict(
+                f"{den_path} holds a different denoiser, which other checkpoints may name; "
+                "publish under another denoiser_name or pass replace_denoiser=True"
+            )
+        save(den_path, den, half)
+    payload["denoiser_ref"] = {"path": denoiser_name, "hash": den["hash"]}
+    save(dst, payload, half)
+
+
+# ----------------------------------------------------------------------------- models
+
+
+def config_of(payload: dict[str, Any]) -> ExperimentConfig:
+    return experiment_from_dict(payload["config"])
+
+
+def build_denoiser(payload: dict[str, Any]) -> tuple[Denoiser, ExperimentConfig]:
+    if payload["kind"] != "denoiser":
+        raise TrajprefError(f"expected a denoiser checkpoint, got a {payload['kind']}")
+    if state_hash(payload["state_dict"]) != payload["hash"]:
+        raise TrajprefError("denoiser weights do not match their recorded hash")
+    cfg = config_of(payload)
+    model = Denoiser(cfg.model)
+    model.load_state_dict(payload["state_dict"])
+    return model, cfg
+
+
+def build_generator(payload: dict[str, Any]) -> tuple[Generator, ExperimentConfig]:
+    if payload["kind"] != "generator":
+        raise TrajprefError(f"expected a generator checkpoint, got a {payload['kind']}")
+    cfg = config_of(payload)
+    model = Generator(cfg.model)
+    model.load_state_dict(payload["state_dict"])
+    return model, cfg
+
+
+def denoiser_of(payload: dict[str, Any]) -> dict[str, Any]:
+    """The denoiser payload of a denoiser or generator payload."""
+    return payload if payload["kind"] == "denoiser" else payload["denoiser"]
+
+
+def predictor_from_payload(payload: dict[str, Any], sampler: Sampler | None = None):
+    """A ``DiffusionPredictor`` from a denoiser (full sampler only) or generator payload."""
+    denoiser, cfg = build_denoiser(denoiser_of(payload))
+    generator = None
+    if payload["kind"] == "generator":
+        generator, cfg = build_generator(payload)
+    sampler = sampler or ("leapfrog" if generator is not None else "full")
+    schedule = DDPMSchedule.from_config(cfg.diffusion)
+    return DiffusionPredictor(denoiser, schedule, payload["scale"], generator, cfg.model.tau,
+                              sampler)  # fmt: skip
+
+
+def load_predictor(path: str | Path, sampler: Sampler | None = None, device: Any = "cpu"):
+    """A ``DiffusionPredictor`` from a checkpoint file, on ``device``, in eval mode."""
+    return predictor_from_payload(load(path), sampler).to(device).eval()

@@ -1,0 +1,54 @@
+"""The supervised losses of the two pretraining stages, in the networks' frame.
+
+The generator's loss is also fine-tuning's L_reg (Eq. 17 / 20), so it lives beside the
+models rather than in a training stage.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from trajpref.config import GeneratorTrainConfig
+from trajpref.diffusion.schedule import DDPMSchedule
+from trajpref.models.denoiser import Denoiser
+from trajpref.models.generator import GeneratorOutput
+
+
+def denoiser_loss(
+    denoiser: Denoiser, schedule: DDPMSchedule, context: torch.Tensor, y0: torch.Tensor,
+    draws: int, generator: torch.Generator | None = None,
+) -> torch.Tensor:  # fmt: skip
+    """Eq. 2: || eps_theta(sqrt(abar_s) y0 + sqrt(1 - abar_s) z, s, X) - z ||^2 averaged over
+    ``draws`` (step, noise) pairs per agent. y0 [N, T_f, 2], context [N, H]."""
+    device = y0.device
+    m, n = draws, y0.shape[0]
+    s = torch.randint(0, schedule.num_steps, (m, n), generator=generator).to(device)  # [M, N]
+    z = torch.randn((m, *y0.shape), generator=generator).to(device)  # [M, N, T_f, 2]
+    y_s = schedule.add_noise(y0.expand(m, -1, -1, -1), z, s)  # [M, N, T_f, 2]
+    eps = denoiser(y_s, s, context)  # [M, N, T_f, 2]
+    return (eps - z).pow(2).mean()
+
+
+def generator_loss(
+    out: GeneratorOutput, y: torch.Tensor, target: torch.Tensor, c: GeneratorTrainConfig
+) -> tuple[torch.Tensor, dict[str, float]]:
+    """The generator's supervised loss on denoised samples y [K, N, T_f, 2] against the
+    target [N, T_f, 2]:
+
+        w_best * min_k (ADE_k + FDE_k) + w_mean * ADE(mu) + w_unc * (e^{-l} ADE(mu) + l)
+        + w_reg * Eq. 4,   with l the agent's mean log sigma.
+
+    Returns ``(loss, logs)``."""
+    err = torch.linalg.vector_norm(y - target, dim=-1)  # [K, N, T_f]
+    ade, fde = err.mean(-1), err[..., -1]  # [K, N]
+    best = (ade + fde).min(0).values.mean()
+    mean_err = torch.linalg.vector_norm(out.mean - target, dim=-1).mean(-1)  # [N]
+    log_sigma = out.log_sigma.mean(0)  # [N]
+    unc = (torch.exp(-log_sigma) * mean_err.detach() + log_sigma).mean()
+    reg = (y - target).pow(2).sum(-1).mean()  # Eq. 4
+    loss = (c.best_of_k_weight * best + c.mean_weight * mean_err.mean()
+            + c.uncertainty_weight * unc + c.reg_weight * reg)  # fmt: skip
+    logs = {k: float(v.detach()) for k, v in (
+        ("best_of_k", best), ("mean_ade", mean_err.mean()), ("uncertainty", unc),
+        ("eq4", reg), ("sigma", out.log_sigma.exp().mean()))}  # fmt: skip
+    return loss, logs

@@ -1,0 +1,1 @@
+"""RLHF / RLHF-ReS: the PPO pieces (pure functions), the fine-tuning objective, presets."""

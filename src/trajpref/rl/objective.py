@@ -1,0 +1,218 @@
+"""RLHF and RLHF-ReS fine-tuning of the generator (the paper's Steps A-C, Eq. 10-20).
+
+Policy G_theta (from a pretrained generator), frozen reference G_0 (a copy), critic V_psi on
+the policy's social encoding, frozen denoiser D as refiner (D^r, tau steps) and rewarder (the
+diffusion score r). One update reads top-down: rollout -> log-likelihoods and reward ->
+values and advantages -> selection -> losses. The PPO arithmetic lives in ``rl.ppo`` as pure
+functions; the rollout is ``DiffusionPredictor.rollout``.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+
+from trajpref.config import FinetuneConfig, GeneratorTrainConfig
+from trajpref.data.transforms import to_model_frame
+from trajpref.metrics import scene_sum
+from trajpref.models.critic import Critic
+from trajpref.models.losses import generator_loss
+from trajpref.models.predictor import DiffusionPredictor, Rollout
+from trajpref.rl import ppo
+from trajpref.score.scorer import TrajectoryScorer, score_timesteps
+from trajpref.types import Batch
+
+
+def best_sample(r: torch.Tensor, scene: torch.Tensor, num_scenes: int) -> torch.Tensor:
+    """RLHF-ReS's k*: per scene, argmax_k sum_{p,t} r[k, p, t]. r [K, N, T] -> [B]."""
+    return scene_sum(r.sum(-1), scene, num_scenes).argmax(0)
+
+
+def take_sample(x: torch.Tensor, k_star: torch.Tensor, scene: torch.Tensor) -> torch.Tensor:
+    """x [K, N, ...] -> [1, N, ...]: each agent's entry at its scene's k*."""
+    idx = k_star[scene]  # [N]
+    return x[idx, torch.arange(x.shape[1], device=x.device)][None]
+
+
+def step_reward(scorer: TrajectoryScorer, context: torch.Tensor, futures: torch.Tensor,
+                target: torch.Tensor, clip: float | None) -> torch.Tensor:  # fmt: skip
+    """The per-step score r (Eq. 6) that fine-tuning maximises, clipped to [-clip, clip]
+    when ``clip`` is set: futures [M, N, T_f, 2] and target [N, T_f, 2] in the denoiser's
+    frame, context [N, H] -> [M, N, T_f]."""
+    r = scorer.step_scores(context, futures, target)
+    return r.clamp(-clip, clip) if clip is not None else r
+
+
+@dataclass
+class Actions:
+    """K actions of one rollout and what the update needs of them. [K, N, T_f] each."""
+
+    logp: torch.Tensor
+    """Eq. 12 under the policy (differentiable)."""
+    logp_ref: torch.Tensor
+    """Eq. 12 under the frozen reference."""
+    action: torch.Tensor
+    """[K, N, T_f, 2] the denoised samples (detached): what is scored."""
+    score: torch.Tensor | None = None
+    """r, the clipped per-step diffusion score (Eq. 6)."""
+    div: torch.Tensor | None = None
+    """The KL penalty (Eq. 13)."""
+    reward: torch.Tensor | None = None
+    """R = r - div."""
+
+
+def _fork(generator: torch.Generator) -> torch.Generator:
+    """A generator in the same state: its draws repeat ``generator``'s."""
+    return torch.Generator().set_state(generator.get_state())
+
+
+class RLObjective(nn.Module):
+    """One PPO step on a fresh rollout: L = w_reg L_reg + w_p L_pg + w_v L_val (Eq. 17 / 20).
+
+    ``sampler`` holds the policy generator and the frozen denoiser; the reference is a frozen
+    copy of the policy taken here."""
+
+    def __init__(self, sampler: DiffusionPredictor, critic: Critic, cfg: FinetuneConfig,
+                 reg_cfg: GeneratorTrainConfig):  # fmt: skip
+        super().__init__()
+        assert sampler.generator is not None
+        self.policy = sampler.generator
+        self.critic = critic
+        self.denoiser = sampler.denoiser.requires_grad_(False).eval()
+        self.reference = copy.deepcopy(self.policy).requires_grad_(False).eval()
+        self.sampler = sampler
+        self.reference_sampler = DiffusionPredictor(
+            self.denoiser, sampler.schedule, sampler.scale, self.reference, sampler.tau
+        )
+        self.rl = cfg
+        self.reg_cfg = reg_cfg
+        steps = score_timesteps(sampler.schedule.num_steps, cfg.score_every)
+        self.scorer = TrajectoryScorer(self.denoiser, sampler.schedule, sampler.scale, steps)
+
+    def train(self, mode: bool = True):
+        super().train(mode)
+        self.reference.eval()
+        self.denoiser.eval()
+        return self
+
+    def forward(self, batch: Batch, generator: torch.Generator | None = None):
+        rl = self.rl
+        cond = self.sampler.condition(batch)
+        target = to_model_frame(batch.future, batch, self.sampler.scale)  # [N, T_f, 2]
+
+        # Step A: rollouts of the policy and the reference (Eq. 1, 3, 10), and for the
+        # antithetic baseline the -xi twin under the same denoising noise
+        policy, reference, twin = self.rollouts(batch, cond, generator)
+
+        # Step B: log-likelihoods (Eq. 12), score (Eq. 6) and reward R = r - div (Eq. 13)
+        acts = [self.actions(policy, policy, reference)]
+        if twin is not None:
+            acts.append(self.actions(twin, policy, reference))
+        self.rewards(acts, cond.context, target)
+        main = acts[0]
+
+        # Step C: values and advantages (Eq. 14), then the clipped losses (Eq. 15-17) on
+        # all K samples (RLHF) or each scene's best-scored k* only (RLHF-ReS)
+        ctx = policy.out.context.detach() if rl.detach_critic else policy.out.context
+        values = self.critic(ctx, main.action)  # [K, N, T_f]
+        with torch.no_grad():
+            values_ref = self.critic(reference.out.context, reference.y)  # V_0 (Eq. 16)
+            adv, v_target = self.advantages(acts, values.detach(), batch)
+        sel = self.selection(main.score, batch)
+        logp = torch.cat([sel(a.logp) for a in acts])
+        logp_ref = torch.cat([sel(a.logp_ref) for a in acts])
+        adv = torch.cat([sel(adv), -sel(adv)][: len(acts)])  # a twin's advantage is -A
+        # the ratio's denominator: the frozen reference (Eq. 15 as printed) or the rollout
+        # policy itself (one update per rollout; the KL to G_0 stays in the reward)
+        old = logp_ref if rl.ratio_against == "reference" else logp.detach()
+        pg_loss, clip_frac, approx_kl = ppo.policy_loss(logp, old, adv, rl.clip)
+        v_loss = ppo.value_loss(sel(values), sel(values_ref), sel(v_target), rl.value_clip)
+        reg_loss, reg_logs = generator_loss(policy.out, policy.y, target, self.reg_cfg)
+        loss = rl.reg_weight * reg_loss + rl.policy_weight * pg_loss + rl.value_weight * v_loss
+        logs = {
+            "reward": float(main.score.mean()),
+            "reward_total": float(main.reward.mean()),
+            "kl_div": float(main.div.mean()),
+            "pg_loss": float(pg_loss.detach()),
+            "value_loss": float(v_loss.detach()),
+            "clip_fraction": float(clip_frac),
+            "approx_kl": float(approx_kl),
+            # k3 estimate of KL(G_theta || G_0) from the policy's samples (any denominator)
+            "kl_to_reference": float(ppo.k3_divergence(main.logp_ref, main.logp.detach())),
+            "explained_variance": float(ppo.explained_variance(values.detach(), v_target)),
+            "reg_loss": float(reg_loss.detach()),
+            **{f"reg_{k}": v for k, v in reg_logs.items()},
+        }
+        return loss, logs
+
+    def rollouts(self, batch: Batch, cond, generator: torch.Generator | None):
+        """-> (policy, reference, twin or None) rollouts, in this order of random draws."""
+        rl = self.rl
+        explore = rl.explore_std if rl.likelihood == "sample" else 0.0
+        twin_gen = None
+        if rl.baseline == "antithetic":
+            if generator is None:
+                generator = torch.Generator().manual_seed(int(torch.randint(2**62, ())))
+            twin_gen = _fork(generator)
+        policy = self.sampler.rollout(batch, generator, explore_std=explore, cond=cond)
+        with torch.no_grad():
+            reference = self.reference_sampler.rollout(batch, generator, cond=cond)
+            twin = None
+            if twin_gen is not None:
+                twin = self.sampler.rollout(batch, twin_gen, explore_std=explore,
+                                            explore_sign=-1.0, cond=cond)  # fmt: skip
+        return policy, reference, twin
+
+    def actions(self, roll: Rollout, policy: Rollout, reference: Rollout) -> Actions:
+        """Eq. 12 for the actions of ``roll`` under the policy and the reference.
+
+        ``sample`` likelihood: the action is the explored initial sample, with density
+        N(Y^tau + xi; Y^tau, explore_std). ``mean``: the denoised sample under N(mu, sigma_k)."""
+        if self.rl.likelihood == "sample":
+            chosen = roll.y_tau.detach()  # [K, N, T_f, 2]
+            log_std = torch.full_like(policy.out.log_sigma, math.log(self.rl.explore_std))
+            logp = ppo.gaussian_log_prob(chosen, policy.initial, log_std, per_sample=True)
+            logp_ref = ppo.gaussian_log_prob(chosen, reference.initial, log_std, per_sample=True)
+        else:
+            action = roll.y.detach()
+            logp = ppo.gaussian_log_prob(action, policy.out.mean, policy.out.log_sigma)
+            logp_ref = ppo.gaussian_log_prob(action, reference.out.mean,
+                                             reference.out.log_sigma)  # fmt: skip
+        return Actions(logp, logp_ref, roll.y.detach())
+
+    @torch.no_grad()
+    def rewards(self, acts: list[Actions], context: torch.Tensor, target: torch.Tensor) -> None:
+        """Fill each ``Actions``' score, KL penalty and reward (one score call for all, so
+        they share the noise)."""
+        rl = self.rl
+        futures = torch.cat([a.action for a in acts])  # [K * len(acts), N, T_f, 2]
+        scores = step_reward(self.scorer, context, futures, target, rl.reward_clip)
+        for a, r in zip(acts, scores.chunk(len(acts)), strict=True):
+            a.score = r
+            a.div = ppo.kl_penalty(a.logp.detach(), a.logp_ref, rl.kl_coef, rl.kl_form)
+            a.reward = r - a.div  # [K, N, T_f]
+
+    def advantages(self, acts: list[Actions], values: torch.Tensor, batch: Batch):
+        """-> (advantages of the main actions, value target), both [K, N, T_f]. With a twin,
+        the advantage is the antithetic difference instead of the critic's TD error."""
+        rl, main = self.rl, acts[0]
+        adv, returns = ppo.gae(main.reward, values, rl.gamma, rl.gae_lambda)
+        if len(acts) > 1:
+            adv, _ = ppo.antithetic_advantage(main.reward, acts[1].reward)
+        if rl.adv_norm == "scene":
+            adv = ppo.whiten_per_group(adv, batch.scene, batch.num_scenes)
+        return adv, main.reward if rl.value_target == "reward" else returns
+
+    def selection(
+        self, score: torch.Tensor, batch: Batch
+    ) -> Callable[[torch.Tensor], torch.Tensor]:
+        """Which samples the policy and value losses see: all K (RLHF) or k* (RLHF-ReS)."""
+        if self.rl.method == "rlhf":
+            return lambda x: x
+        k_star = best_sample(score, batch.scene, batch.num_scenes)  # [B]
+        return lambda x: take_sample(x, k_star, batch.scene)

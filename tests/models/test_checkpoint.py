@@ -1,0 +1,285 @@
+import json
+import warnings
+
+import pytest
+import torch
+from safetensors import safe_open
+from safetensors.torch import save_file
+from synthetic import TINY_OVERRIDES, make_scene
+
+from trajpref.config import load_config, to_dict
+from trajpref.errors import TrajprefError
+from trajpref.models import checkpoint as ckpt
+from trajpref.models.denoiser import Denoiser
+from trajpref.models.encoder import scene_features
+from trajpref.models.generator import Generator
+from trajpref.types import collate
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return load_config(None, TINY_OVERRIDES)
+
+
+def _denoiser(cfg, seed: int = 0) -> Denoiser:
+    torch.manual_seed(seed)
+    return Denoiser(cfg.model)
+
+
+def _generator(cfg, seed: int = 1) -> Generator:
+    torch.manual_seed(seed)
+    return Generator(cfg.model)
+
+
+def _outputs(model: Denoiser) -> torch.Tensor:
+    """The denoiser's eps on a fixed tiny batch: [K=2, N=5, T_f, 2]."""
+    batch = collate([make_scene(3), make_scene(2, seed=1)])
+    y = torch.randn(2, 5, 12, 2, generator=torch.Generator().manual_seed(0))
+    with torch.no_grad():
+        return model(y, 3, model.context(scene_features(batch, 0.7)))
+
+
+def _header(path) -> dict:
+    with safe_open(str(path), "pt") as fh:
+        return json.loads(fh.metadata()["trajpref"])
+
+
+def _assert_same_state(a: dict, b: dict) -> None:
+    assert sorted(a) == sorted(b)
+    for key in a:
+        assert torch.equal(a[key], b[key]), key
+
+
+# ----------------------------------------------------------------------------- denoiser
+
+
+def test_denoiser_round_trip_is_exact(tmp_path, cfg):
+    model = _denoiser(cfg)
+    payload = ckpt.denoiser_payload(model, cfg, scale=0.7, meta={"epoch": 1})
+    ckpt.save(tmp_path / "d.safetensors", payload)
+    loaded = ckpt.load(tmp_path / "d.safetensors")
+
+    _assert_same_state(loaded["state_dict"], model.state_dict())
+    assert loaded["kind"] == "denoiser" and loaded["format"] == ckpt.FORMAT
+    assert loaded["scale"] == 0.7
+    assert loaded["meta"] == {"epoch": 1}
+    assert ckpt.config_of(loaded) == cfg
+    assert loaded["hash"] == ckpt.state_hash(model.state_dict())
+
+    rebuilt, rebuilt_cfg = ckpt.build_denoiser(loaded)
+    assert rebuilt_cfg == cfg
+    assert torch.equal(_outputs(rebuilt), _outputs(model))
+
+
+def test_loaded_weights_are_those_at_save_time(tmp_path, cfg):
+    model = _denoiser(cfg)
+    at_save = {k: v.clone() for k, v in model.state_dict().items()}
+    ckpt.save(tmp_path / "d.safetensors", ckpt.denoiser_payload(model, cfg, 0.7, {}))
+    with torch.no_grad():
+        for p in model.parameters():
+            p.add_(torch.randn_like(p))  # training goes on after the save
+
+    loaded = ckpt.load(tmp_path / "d.safetensors")
+    _assert_same_state(loaded["state_dict"], at_save)
+    assert not torch.equal(loaded["state_dict"]["out.1.weight"], model.out[1].weight)
+    rebuilt, _ = ckpt.build_denoiser(loaded)
+    fresh = _denoiser(cfg, seed=123)
+    assert not torch.allclose(_outputs(fresh), _outputs(rebuilt))
+    assert not torch.allclose(_outputs(model), _outputs(rebuilt))
+
+
+def test_altered_weights_fail_the_hash_check(tmp_path, cfg):
+    ckpt.save(tmp_path / "d.safetensors", ckpt.denoiser_payload(_denoiser(cfg), cfg, 0.7, {}))
+    loaded = ckpt.load(tmp_path / "d.safetensors")
+    loaded["state_dict"]["inp.bias"][0] += 1e-3
+    with pytest.raises(TrajprefError, match="hash"):
+        ckpt.build_denoiser(loaded)
+
+
+def test_half_precision_save(tmp_path, cfg):
+    model = _denoiser(cfg)
+    ckpt.save(tmp_path / "h.safetensors", ckpt.denoiser_payload(model, cfg, 0.7, {}), half=True)
+    with safe_open(str(tmp_path / "h.safetensors"), "pt") as fh:
+        assert fh.get_tensor("model/inp.weight").dtype == torch.float16  # on disk
+    loaded = ckpt.load(tmp_path / "h.safetensors")
+    state = model.state_dict()
+    assert sorted(loaded["state_dict"]) == sorted(state)
+    for key, value in loaded["state_dict"].items():
+        assert value.dtype == state[key].dtype, key  # float32 again
+        torch.testing.assert_close(value, state[key], rtol=1e-3, atol=1e-4)
+    assert loaded["hash"] == ckpt.state_hash(loaded["state_dict"])
+    assert loaded["hash"] != ckpt.state_hash(state)  # it hashes the rounded weights
+    ckpt.build_denoiser(loaded)  # passes its own hash check
+
+
+def test_save_needs_the_safetensors_suffix(tmp_path, cfg):
+    payload = ckpt.denoiser_payload(_denoiser(cfg), cfg, 0.7, {})
+    for name in ("d.pt", "d.bin", "d"):
+        with pytest.raises(TrajprefError, match="safetensors"):
+            ckpt.save(tmp_path / name, payload)
+    assert list(tmp_path.iterdir()) == []
+
+
+# ----------------------------------------------------------------------------- generator
+
+
+def test_generator_payload_embeds_its_denoiser(tmp_path, cfg):
+    den, gen = _denoiser(cfg), _generator(cfg)
+    den_payload = ckpt.denoiser_payload(den, cfg, 0.7, {"epoch": 2})
+    payload = ckpt.generator_payload(gen, den_payload, cfg, {"epoch": 5}, critic=None)
+    ckpt.save(tmp_path / "g.safetensors", payload)
+    loaded = ckpt.load(tmp_path / "g.safetensors")
+
+    assert loaded["kind"] == "generator" and loaded["scale"] == 0.7
+    assert loaded["meta"] == {"epoch": 5} and "critic" not in loaded
+    _assert_same_state(loaded["state_dict"], gen.state_dict())
+    assert ckpt.denoiser_of(loaded)["meta"] == {"epoch": 2}
+    _assert_same_state(ckpt.denoiser_of(loaded)["state_dict"], den.state_dict())
+    rebuilt, _ = ckpt.build_generator(loaded)
+    _assert_same_state(rebuilt.state_dict(), gen.state_dict())
+    with pytest.raises(TrajprefError, match="expected a denoiser"):
+        ckpt.build_denoiser(loaded)
+
+
+def test_generator_payload_keeps_a_critic(tmp_path, cfg):
+    critic = torch.nn.Linear(3, 1)
+    payload = ckpt.generator_payload(_generator(cfg), ckpt.denoiser_payload(
+        _denoiser(cfg), cfg, 0.7, {}), cfg, {}, critic=critic)  # fmt: skip
+    ckpt.save(tmp_path / "g.safetensors", payload)
+    _assert_same_state(ckpt.load(tmp_path / "g.safetensors")["critic"], critic.state_dict())
+
+
+def _publish_generator(tmp_path, cfg, gen_seed: int, den_seed: int = 0, name: str = "g"):
+    src = tmp_path / "run" / f"{name}.safetensors"
+    den_payload = ckpt.denoiser_payload(_denoiser(cfg, den_seed), cfg, 0.7, {})
+    ckpt.save(src, ckpt.generator_payload(_generator(cfg, gen_seed), den_payload, cfg, {}))
+    return src
+
+
+def test_publish_writes_the_denoiser_once_and_names_it(tmp_path, cfg):
+    pub = tmp_path / "pub"
+    ckpt.publish(_publish_generator(tmp_path, cfg, 1, name="a"), pub / "a.safetensors")
+    den_file = pub / ckpt.DENOISER_NAME
+    assert den_file.is_file()
+    inode = den_file.stat().st_ino
+
+    header = _header(pub / "a.safetensors")
+    assert "denoiser" not in header
+    assert header["denoiser_ref"] == {"path": ckpt.DENOISER_NAME, "hash": _header(den_file)["hash"]}
+    with safe_open(str(pub / "a.safetensors"), "pt") as fh:
+        assert not [k for k in fh.keys() if k.startswith("denoiser/")]
+
+    # a second generator over the same denoiser leaves the denoiser file alone
+    ckpt.publish(_publish_generator(tmp_path, cfg, 2, name="b"), pub / "b.safetensors")
+    assert den_file.stat().st_ino == inode
+
+    loaded = ckpt.load(pub / "b.safetensors")  # the denoiser is loaded in by reference
+    den = _denoiser(cfg).state_dict()
+    for key, value in ckpt.denoiser_of(loaded)["state_dict"].items():
+        torch.testing.assert_close(value, den[key], rtol=1e-3, atol=1e-4)
+    pred = ckpt.load_predictor(pub / "b.safetensors")
+    assert pred.predict(collate([make_scene(2)]), 4).shape == (4, 2, 12, 2)
+
+
+def test_publish_refuses_to_replace_a_different_denoiser(tmp_path, cfg):
+    pub = tmp_path / "pub"
+    ckpt.publish(_publish_generator(tmp_path, cfg, 1, name="a"), pub / "a.safetensors")
+    other = _publish_generator(tmp_path, cfg, 2, den_seed=9, name="b")
+    with pytest.raises(ckpt.DenoiserConflict):
+        ckpt.publish(other, pub / "b.safetensors")
+    assert not (pub / "b.safetensors").exists()
+    ckpt.publish(other, pub / "b.safetensors", denoiser_name="denoiser-b.safetensors")
+    assert _header(pub / "b.safetensors")["denoiser_ref"]["path"] == "denoiser-b.safetensors"
+    ckpt.load(pub / "a.safetensors")  # still consistent
+
+
+def test_a_tampered_denoiser_is_refused(tmp_path, cfg):
+    pub = tmp_path / "pub"
+    ckpt.publish(_publish_generator(tmp_path, cfg, 1), pub / "g.safetensors")
+    impostor = ckpt.denoiser_payload(_denoiser(cfg, seed=9), cfg, 0.7, {})  # valid own hash
+    ckpt.save(pub / ckpt.DENOISER_NAME, impostor, half=True)
+    with pytest.raises(TrajprefError, match="does not match the recorded hash"):
+        ckpt.load(pub / "g.safetensors")
+
+
+# ----------------------------------------------------------------------------- legacy
+
+
+def test_legacy_pt_checkpoint_still_loads(tmp_path, cfg):
+    model = _denoiser(cfg)
+    state = {k: v.clone() for k, v in model.state_dict().items()}
+    old = to_dict(cfg)
+    old["generator"]["samples"] = old["model"].pop("samples")  # the old layout ...
+    old["generator"]["tau"] = old["model"].pop("tau")
+    old["generator"]["samples"] = 3  # ... with a K that differs from today's default
+    legacy = {"format": ckpt.LEGACY_FORMAT, "kind": "denoiser", "config": old, "scale": 0.7,
+              "state_dict": state, "hash": ckpt.state_hash(state), "meta": {}}  # fmt: skip
+    torch.save(legacy, tmp_path / "old.pt")
+
+    with pytest.warns(FutureWarning, match="legacy"):
+        payload = ckpt.load(tmp_path / "old.pt")
+    with warnings.catch_warnings():  # the old config layout may warn again (or was upgraded)
+        warnings.simplefilter("ignore", FutureWarning)
+        assert ckpt.config_of(payload).model.samples == 3
+        rebuilt, rebuilt_cfg = ckpt.build_denoiser(payload)
+    assert rebuilt_cfg.model.tau == cfg.model.tau
+    _assert_same_state(payload["state_dict"], model.state_dict())
+    assert torch.equal(_outputs(rebuilt), _outputs(model))
+
+
+def test_legacy_path_resolves_to_the_safetensors_file(tmp_path, cfg):
+    model = _denoiser(cfg)
+    ckpt.save(tmp_path / "x.safetensors", ckpt.denoiser_payload(model, cfg, 0.7, {}))
+    with pytest.warns(FutureWarning, match="x.safetensors"):
+        payload = ckpt.load(tmp_path / "x.pt")
+    _assert_same_state(payload["state_dict"], model.state_dict())
+
+
+# ----------------------------------------------------------------------------- bad files
+
+
+def test_missing_file(tmp_path):
+    for name in ("nope.safetensors", "nope.pt"):
+        with pytest.raises(TrajprefError, match="no such checkpoint"):
+            ckpt.load(tmp_path / name)
+
+
+@pytest.mark.parametrize(
+    "content",
+    [b"", b"garbage bytes, not a checkpoint", (20).to_bytes(8, "little") + b"{not json" * 4],
+    ids=["empty", "garbage", "bad-header"],
+)
+def test_garbage_is_a_trajpref_error(tmp_path, content):
+    (tmp_path / "bad.safetensors").write_bytes(content)
+    with pytest.raises(TrajprefError, match="not a trajpref checkpoint"):
+        ckpt.load(tmp_path / "bad.safetensors")
+    (tmp_path / "bad.pt").write_bytes(content)
+    with pytest.warns(FutureWarning), pytest.raises(TrajprefError):
+        ckpt.load(tmp_path / "bad.pt")
+
+
+@pytest.mark.parametrize(
+    "metadata",
+    [None, {"other": "x"}, {"trajpref": "{not json"}, {"trajpref": '{"format": "other/9"}'},
+     {"trajpref": "[1, 2]"}],
+    ids=["none", "no-trajpref", "bad-json", "wrong-format", "not-a-mapping"],
+)  # fmt: skip
+def test_safetensors_without_the_trajpref_header(tmp_path, metadata):
+    path = tmp_path / "plain.safetensors"
+    save_file({"model/w": torch.zeros(2)}, str(path), metadata=metadata)
+    with pytest.raises(TrajprefError, match="not a trajpref checkpoint"):
+        ckpt.load(path)
+
+
+def test_legacy_file_missing_fields_is_a_trajpref_error(tmp_path):
+    torch.save({"format": "trajpref-checkpoint/1", "kind": "denoiser"}, tmp_path / "x.pt")
+    with pytest.warns(FutureWarning), pytest.raises(TrajprefError, match="without config"):
+        ckpt.load(tmp_path / "x.pt")
+
+
+def test_unknown_kind_is_refused(tmp_path, cfg):
+    payload = ckpt.denoiser_payload(_denoiser(cfg), cfg, 0.7, {})
+    payload["kind"] = "critic"
+    ckpt.save(tmp_path / "c.safetensors", payload)
+    with pytest.raises(TrajprefError, match="unknown checkpoint kind"):
+        ckpt.load(tmp_path / "c.safetensors")

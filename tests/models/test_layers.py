@@ -1,0 +1,93 @@
+import math
+
+import pytest
+import torch
+from torch import nn
+
+from trajpref.errors import ConfigError
+from trajpref.models.layers import SocialAttention, mlp, timestep_embedding
+
+
+def test_mlp_sizes_and_activations():
+    net = mlp([3, 5, 7])
+    assert [type(m) for m in net] == [nn.Linear, nn.SiLU, nn.Linear]
+    assert (net[0].in_features, net[0].out_features) == (3, 5)
+    assert (net[2].in_features, net[2].out_features) == (5, 7)
+    assert net(torch.zeros(4, 3)).shape == (4, 7)
+
+    net = mlp([2, 4, 4, 1], act=nn.ReLU, final_act=True)
+    assert [type(m) for m in net] == [nn.Linear, nn.ReLU] * 3
+    assert (net(torch.randn(10, 2)) >= 0).all()  # a final ReLU clips the output
+
+
+def test_timestep_embedding_at_zero_is_cos_one_sin_zero():
+    emb = timestep_embedding(torch.zeros(2, 3, dtype=torch.long), 8)
+    assert emb.shape == (2, 3, 8)
+    assert torch.equal(emb[..., :4], torch.ones(2, 3, 4))  # cos(0)
+    assert torch.equal(emb[..., 4:], torch.zeros(2, 3, 4))  # sin(0)
+
+
+def test_timestep_embedding_hand_computed():
+    # dim 4: frequencies 1 and 1000^(-1/2)
+    emb = timestep_embedding(torch.tensor(3), 4)
+    f = 1000**-0.5
+    expected = torch.tensor([math.cos(3), math.cos(3 * f), math.sin(3), math.sin(3 * f)])
+    torch.testing.assert_close(emb, expected)
+
+
+def _attention_inputs(b: int, p: int, hidden: int = 8, seed: int = 0):
+    g = torch.Generator().manual_seed(seed)
+    h = torch.randn(b, p, hidden, generator=g)  # [B, P, H]
+    geom = torch.randn(b, p, p, 4, generator=g)  # [B, P, P, 4]
+    return h, geom
+
+
+def test_padding_never_influences_real_agents():
+    torch.manual_seed(0)
+    layer = SocialAttention(8, 2)
+    h, geom = _attention_inputs(1, 4)
+    mask = torch.tensor([[True, True, True, False]])  # slot 3 is padding
+    out = layer(h, geom, mask)
+
+    h2, geom2 = h.clone(), geom.clone()
+    h2[:, 3] = 100 * torch.randn(8)  # padded row's values ...
+    geom2[:, :, 3] = -50.0  # ... its geometry as a key/value ...
+    geom2[:, 3, :] = 77.0  # ... and as a query
+    out2 = layer(h2, geom2, mask)
+    torch.testing.assert_close(out2[:, :3], out[:, :3], rtol=0, atol=0)
+    assert not torch.allclose(out2[:, 3], out[:, 3])  # the padded slot itself did change
+
+    # the same real agents without any padding slot at all give the same outputs
+    out3 = layer(h[:, :3], geom[:, :3, :3], mask[:, :3])
+    torch.testing.assert_close(out3, out[:, :3])
+
+
+def test_real_agents_do_attend_to_each_other():
+    torch.manual_seed(0)
+    layer = SocialAttention(8, 2)
+    h, geom = _attention_inputs(1, 3)
+    mask = torch.ones(1, 3, dtype=torch.bool)
+    out = layer(h, geom, mask)
+    h2 = h.clone()
+    h2[:, 2] = torch.randn(8)  # (not a constant shift: LayerNorm would remove it)
+    assert not torch.allclose(layer(h2, geom, mask)[:, 0], out[:, 0])
+
+
+def test_no_attention_across_scenes():
+    torch.manual_seed(0)
+    layer = SocialAttention(8, 2)
+    h, geom = _attention_inputs(2, 3)
+    mask = torch.tensor([[True, True, True], [True, True, False]])  # 3 + 2 agents
+    out = layer(h, geom, mask)
+
+    h2, geom2 = h.clone(), geom.clone()
+    h2[1] = torch.randn(3, 8)
+    geom2[1] = torch.randn(3, 3, 4)
+    out2 = layer(h2, geom2, mask)
+    torch.testing.assert_close(out2[0], out[0], rtol=0, atol=0)
+    assert not torch.allclose(out2[1, :2], out[1, :2])
+
+
+def test_hidden_not_divisible_by_heads_is_a_config_error():
+    with pytest.raises(ConfigError, match="divisible"):
+        SocialAttention(10, 3)

@@ -1,0 +1,133 @@
+import numpy as np
+import pytest
+import torch
+from synthetic import make_scene
+
+from trajpref.config import DiffusionConfig, ModelConfig
+from trajpref.data.transforms import from_model_frame, to_model_frame
+from trajpref.diffusion.schedule import DDPMSchedule
+from trajpref.errors import ConfigError
+from trajpref.models.denoiser import Denoiser
+from trajpref.models.generator import Generator
+from trajpref.models.predictor import DiffusionPredictor
+from trajpref.types import Scene, collate
+
+K = 4
+TINY = ModelConfig(hidden=16, heads=2, encoder_layers=1, denoiser_width=32, denoiser_blocks=1,
+                   generator_width=32, samples=K, tau=2)  # fmt: skip
+SCALE = 0.5
+
+
+def _predictor(sampler: str = "leapfrog", with_generator: bool = True) -> DiffusionPredictor:
+    torch.manual_seed(0)
+    schedule = DDPMSchedule.from_config(DiffusionConfig(num_steps=10))
+    generator = Generator(TINY) if with_generator else None
+    return DiffusionPredictor(Denoiser(TINY), schedule, SCALE, generator, tau=3, sampler=sampler)
+
+
+@pytest.fixture
+def batch():
+    return collate([make_scene(3), make_scene(2, seed=1)])  # N = 5
+
+
+def test_model_frame_round_trip_hand_computed():
+    hist = np.array([[[0.0, 0.0], [1.0, 2.0]]], np.float32)  # [P=1, T_h=2, 2], origin (1, 2)
+    fut = np.array([[[3.0, 2.0], [5.0, 6.0]]], np.float32)  # [1, T_f=2, 2]
+    batch = collate([Scene(hist, fut, np.zeros(1, np.int64), "hand")])
+    y = to_model_frame(batch.future, batch, 2.0)
+    assert y.tolist() == [[[1.0, 0.0], [2.0, 2.0]]]  # (future - origin) / 2
+    assert torch.equal(from_model_frame(y, batch, 2.0), batch.future)
+    # with leading sample axes [K, N, T, 2]
+    ys = torch.stack([y, -y])
+    assert from_model_frame(ys, batch, 2.0)[1].tolist() == [[[-1.0, 2.0], [-3.0, -2.0]]]
+
+
+def test_predict_is_rollout_in_absolute_coordinates(batch):
+    pred = _predictor()
+    out = pred.predict(batch, K, torch.Generator().manual_seed(5))
+    assert out.shape == (K, 5, 12, 2)
+    roll = pred.rollout(batch, torch.Generator().manual_seed(5), K)
+    torch.testing.assert_close(out, from_model_frame(roll.y, batch, SCALE))
+    # fewer samples: the first k of the generator's K
+    assert pred.predict(batch, 2, torch.Generator().manual_seed(5)).shape == (2, 5, 12, 2)
+
+
+def test_predict_is_seeded(batch):
+    pred = _predictor()
+    a = pred.predict(batch, K, torch.Generator().manual_seed(1))
+    b = pred.predict(batch, K, torch.Generator().manual_seed(1))
+    c = pred.predict(batch, K, torch.Generator().manual_seed(2))
+    assert torch.equal(a, b)
+    assert not torch.allclose(a, c)
+
+
+def test_rollout_without_exploration(batch):
+    roll = _predictor().rollout(batch, torch.Generator().manual_seed(0))
+    assert roll.explore is None
+    assert torch.equal(roll.y_tau, roll.initial)
+    torch.testing.assert_close(roll.initial, roll.out.initial_sample())
+
+
+def test_antithetic_exploration_twin(batch):
+    pred = _predictor()
+    g = torch.Generator().manual_seed(3)
+    fork = torch.Generator().set_state(g.get_state())
+    roll = pred.rollout(batch, g, explore_std=0.1)
+    twin = pred.rollout(batch, fork, explore_std=0.1, explore_sign=-1)
+    assert roll.explore is not None and roll.explore.shape == (K, 5, 12, 2)
+    assert torch.equal(twin.explore, -roll.explore)
+    assert torch.equal(twin.initial, roll.initial)
+    torch.testing.assert_close(roll.y_tau, roll.initial + roll.explore)
+    torch.testing.assert_close(twin.y_tau, roll.initial - roll.explore)
+    # the noise has the asked std (K * N * T_f * 2 = 480 draws)
+    assert 0.08 < roll.explore.std() < 0.12
+    # identical denoising noise: with exploration off, both forks give the same samples
+    g = torch.Generator().manual_seed(4)
+    fork = torch.Generator().set_state(g.get_state())
+    assert torch.equal(pred.rollout(batch, g).y, pred.rollout(batch, fork).y)
+
+
+def test_antithetic_twin_shares_denoising_noise(batch):
+    # with eps = 0 each step is y_{s-1} = y_s / sqrt(alpha_s) + sigma_s z_s, so under shared
+    # noise z the twins differ by exactly prod_s 1 / sqrt(alpha_s) * 2 xi
+    pred = _predictor()
+    for p in pred.denoiser.out[1].parameters():
+        torch.nn.init.zeros_(p)
+    g = torch.Generator().manual_seed(3)
+    fork_a = torch.Generator().set_state(g.get_state())
+    fork_b = torch.Generator().set_state(g.get_state())
+    plus = pred.rollout(batch, fork_a, explore_std=0.1)
+    minus = pred.rollout(batch, fork_b, explore_std=0.1, explore_sign=-1)
+    gain = pred.schedule.alphas[: pred.tau].rsqrt().prod()  # steps tau-1 .. 0
+    torch.testing.assert_close(plus.y - minus.y, gain * 2 * plus.explore, atol=1e-5, rtol=1e-4)
+
+
+def test_more_samples_than_the_generator_emits(batch):
+    pred = _predictor()
+    with pytest.raises(ConfigError, match="emits K"):
+        pred.predict(batch, K + 1)
+    with pytest.raises(ConfigError, match="emits K"):
+        pred.rollout(batch, num_samples=K + 1)
+
+
+def test_leapfrog_needs_a_generator():
+    with pytest.raises(ConfigError, match="generator"):
+        _predictor("leapfrog", with_generator=False)
+
+
+def test_bad_sampler_and_tau():
+    schedule = DDPMSchedule(10)
+    with pytest.raises(ConfigError, match="sampler"):
+        DiffusionPredictor(Denoiser(TINY), schedule, 1.0, Generator(TINY), sampler="bogus")
+    with pytest.raises(ConfigError, match="tau"):
+        DiffusionPredictor(Denoiser(TINY), schedule, 1.0, Generator(TINY), tau=11)
+
+
+@pytest.mark.parametrize("with_generator", [False, True])
+def test_full_sampler_accepts_any_k(batch, with_generator):
+    pred = _predictor("full", with_generator=with_generator)
+    out = pred.predict(batch, 3 * K + 1, torch.Generator().manual_seed(0))
+    assert out.shape == (3 * K + 1, 5, 12, 2)
+    assert torch.isfinite(out).all()
+    again = pred.predict(batch, 3 * K + 1, torch.Generator().manual_seed(0))
+    assert torch.equal(out, again)

@@ -1,0 +1,148 @@
+import dataclasses
+
+import pytest
+import yaml
+
+from trajpref.config import (
+    ExperimentConfig,
+    FinetuneConfig,
+    ModelConfig,
+    experiment_from_dict,
+    load_config,
+    save_config,
+    to_dict,
+)
+from trajpref.errors import ConfigError
+
+
+def test_defaults_round_trip_through_yaml(tmp_path):
+    cfg = ExperimentConfig()
+    save_config(cfg, tmp_path / "c.yaml")
+    assert load_config(tmp_path / "c.yaml") == cfg
+
+
+def test_non_default_values_round_trip_through_yaml(tmp_path):
+    cfg = load_config(None, ["data.val_dataset=robo", "finetune.reward_clip=null",
+                             "finetune.method=rlhf", "data.flip=true", "seed=7"])  # fmt: skip
+    assert cfg != ExperimentConfig()
+    save_config(cfg, tmp_path / "c.yaml")
+    again = load_config(tmp_path / "c.yaml")
+    assert again == cfg
+    assert again.finetune.reward_clip is None and again.data.val_dataset == "robo"
+
+
+def test_overrides():
+    cfg = load_config(None, ["finetune.lr=0.01", "model.samples=7", "data.rotate=false"])
+    assert cfg.finetune.lr == 0.01 and isinstance(cfg.finetune.lr, float)
+    assert cfg.model.samples == 7 and isinstance(cfg.model.samples, int)
+    assert cfg.data.rotate is False
+    default = ExperimentConfig()
+    assert cfg.denoiser == default.denoiser and cfg.diffusion == default.diffusion
+
+
+def test_overrides_apply_on_top_of_a_file(tmp_path):
+    (tmp_path / "c.yaml").write_text("model:\n  hidden: 64\n  heads: 2\nseed: 3\n")
+    cfg = load_config(tmp_path / "c.yaml", ["model.hidden=32"])
+    assert (cfg.model.hidden, cfg.model.heads, cfg.seed) == (32, 2, 3)
+    assert cfg.model.tau == ModelConfig().tau  # unset keys keep their defaults
+
+
+def test_literal_fields_name_their_choices():
+    with pytest.raises(ConfigError, match="'rlhf'.*'rlhf-res'.*bogus"):
+        load_config(None, ["finetune.method=bogus"])
+    with pytest.raises(ConfigError, match="'rlhf'.*'rlhf-res'.*bogus"):
+        FinetuneConfig(method="bogus")
+    with pytest.raises(ConfigError, match="kl_form"):
+        FinetuneConfig(kl_form="nope")
+    assert FinetuneConfig(method="rlhf").method == "rlhf"
+
+
+@pytest.mark.parametrize(
+    ("override", "name"),
+    [("model.bogus=1", "bogus"), ("nosection.key=1", "nosection"), ("bogus=3", "bogus")],
+)
+def test_unknown_keys(override, name):
+    with pytest.raises(ConfigError, match=f"unknown config keys.*{name}"):
+        load_config(None, [override])
+
+
+@pytest.mark.parametrize(
+    "override",
+    ["denoiser.epochs=1.5", "denoiser.epochs=abc", "finetune.lr=fast", "data.rotate=maybe",
+     "model.hidden=null", "model.hidden=[1, 2]", "denoiser.epochs=true", "finetune.lr=false"],
+)  # fmt: skip
+def test_type_errors(override):
+    with pytest.raises(ConfigError, match=override.split("=")[0]):
+        load_config(None, [override])
+
+
+def test_whole_floats_are_accepted_as_integers():
+    assert load_config(None, ["denoiser.epochs=3.0"]).denoiser.epochs == 3
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [["model.hidden=0"], ["model.hidden=30"], ["model.hidden=15", "model.heads=3"],
+     ["diffusion.beta_end=1.5"], ["finetune.gamma=2"],
+     ["data.scale_min=2"], ["finetune.baseline=antithetic", "finetune.likelihood=mean"],
+     ["noequals"]],
+)  # fmt: skip
+def test_invalid_values(overrides):
+    with pytest.raises(ConfigError):
+        load_config(None, overrides)
+
+
+def test_missing_or_bad_files(tmp_path):
+    with pytest.raises(ConfigError, match="no such config file"):
+        load_config(tmp_path / "none.yaml")
+    (tmp_path / "list.yaml").write_text("- 1\n- 2\n")
+    with pytest.raises(ConfigError, match="mapping"):
+        load_config(tmp_path / "list.yaml")
+    (tmp_path / "bad.yaml").write_text("model: [unclosed\n")
+    with pytest.raises(ConfigError, match="YAML"):
+        load_config(tmp_path / "bad.yaml")
+
+
+def test_old_layout_dict_is_converted():
+    with pytest.warns(FutureWarning) as record:
+        cfg = experiment_from_dict({"generator": {"samples": 7, "tau": 3, "epochs": 4}})
+    messages = {str(w.message) for w in record}
+    assert messages == {"config key generator.samples is now model.samples",
+                        "config key generator.tau is now model.tau"}  # fmt: skip
+    assert (cfg.model.samples, cfg.model.tau, cfg.generator.epochs) == (7, 3, 4)
+
+
+def test_old_key_wins_over_the_new_section():
+    with pytest.warns(FutureWarning):
+        cfg = experiment_from_dict({"model": {"samples": 5}, "generator": {"samples": 7}})
+    assert cfg.model.samples == 7
+
+
+def test_old_layout_yaml_is_converted(tmp_path):
+    old = to_dict(ExperimentConfig())
+    del old["model"]["samples"], old["model"]["tau"]
+    old["generator"].update(samples=7, tau=3)
+    (tmp_path / "old.yaml").write_text(yaml.safe_dump(old))
+    with pytest.warns(FutureWarning) as record:
+        cfg = load_config(tmp_path / "old.yaml")
+    assert any("generator.tau is now model.tau" in str(w.message) for w in record)
+    assert (cfg.model.samples, cfg.model.tau) == (7, 3)
+    assert not hasattr(cfg.generator, "samples")
+
+
+def test_tau_cannot_exceed_the_diffusion_steps():
+    with pytest.raises(ConfigError, match="tau"):
+        load_config(None, ["diffusion.num_steps=4", "model.tau=5"])
+    assert load_config(None, ["diffusion.num_steps=5", "model.tau=5"]).model.tau == 5
+
+
+def test_denoiser_part_ignores_generator_only_fields():
+    base = ModelConfig(hidden=32, heads=2)
+    variant = dataclasses.replace(base, generator_width=8, samples=3, tau=2)
+    assert variant != base
+    assert variant.denoiser_part() == base.denoiser_part()
+    assert variant.denoiser_part().hidden == 32
+    assert ModelConfig(hidden=64, heads=2).denoiser_part() != base.denoiser_part()
+    assert ModelConfig(hidden=32, heads=2, denoiser_blocks=1).denoiser_part() != (
+        base.denoiser_part()
+    )
