@@ -8,6 +8,7 @@ import dataclasses
 import json
 import sys
 import time
+import warnings
 
 import numpy as np
 import torch
@@ -342,11 +343,17 @@ def cmd_finetune(args) -> int:
     return 0
 
 
+def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"trajpref: warning: {message}", file=sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return args.func(args)
+        with warnings.catch_warnings():
+            warnings.showwarning = _one_line_warning  # restored when the command ends
+            return args.func(args)
     except TrajprefError as exc:
         print(f"trajpref: error: {exc}", file=sys.stderr)
         return 2
