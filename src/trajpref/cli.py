@@ -23,6 +23,7 @@ from trajpref.io import atomic_path, write_json
 from trajpref.models.registry import load_predictor
 from trajpref.rl.presets import finetune_config
 from trajpref.score import TrajectoryScorer
+from trajpref.survey.cli import add_parser as add_survey_parser
 from trajpref.train.run import finetune, train_stage
 from trajpref.types import collate
 from trajpref.viz.plot import plot_scene, plot_scene_scored
@@ -152,6 +153,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "(data and model come from the checkpoint)")  # fmt: skip
     _add_run_args(ft, "finetune.lr=5e-5", "a finetune_last.pt")
     ft.set_defaults(func=cmd_finetune)
+    add_survey_parser(sub)
     return parser
 
 

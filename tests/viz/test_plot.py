@@ -1,6 +1,6 @@
 import numpy as np
 
-from trajpref.viz import plot_scene, plot_scene_scored
+from trajpref.viz import plot_panel, plot_scene, plot_scene_scored, plot_survey_summary
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -27,3 +27,23 @@ def test_plot_scene_scored_writes_a_png(tmp_path):
     assert out.read_bytes()[:8] == PNG and out.stat().st_size > 5000
     # equal scores (no spread) must not divide by zero
     plot_scene_scored(hist, fut, pred, np.zeros((5, 3)), tmp_path / "z.png")
+
+
+def test_plot_panel_gives_every_panel_of_a_scene_the_same_frame(tmp_path):
+    from PIL import Image
+
+    hist, fut, pred = _scene()
+    limits = (-10.0, 10.0, -5.0, 5.0)
+    a = plot_panel(hist, pred[:2], np.ones((2, 3)), tmp_path / "a.png", limits)
+    b = plot_panel(hist, fut[None], np.zeros((1, 3)), tmp_path / "b.png", limits, dashed=True)
+    assert a.read_bytes()[:8] == PNG and b.read_bytes()[:8] == PNG
+    assert Image.open(a).size == Image.open(b).size  # wide limits: a wide picture
+    assert Image.open(a).size[0] > Image.open(a).size[1]
+
+
+def test_plot_survey_summary_skips_missing_values(tmp_path):
+    mean, sd = np.array([3.5, 2.0, np.nan]), np.array([0.5, np.nan, np.nan])
+    out = plot_survey_summary(["a", "b", "c"], {"human": (mean, sd), "ATS": (mean - 3, sd)},
+                              {"human": ["", "**", "ns"]}, tmp_path / "s.png", "t",
+                              xlims={"human": (0, 5)})  # fmt: skip
+    assert out.read_bytes()[:8] == PNG

@@ -1,5 +1,5 @@
 """Figures from numpy arrays (matplotlib, headless)."""
 
-from trajpref.viz.plot import plot_scene, plot_scene_scored
+from trajpref.viz.plot import plot_panel, plot_scene, plot_scene_scored, plot_survey_summary
 
-__all__ = ["plot_scene", "plot_scene_scored"]
+__all__ = ["plot_panel", "plot_scene", "plot_scene_scored", "plot_survey_summary"]

@@ -113,6 +113,84 @@ def plot_scene_scored(
     return _save(fig, out)
 
 
+def plot_panel(
+    history: np.ndarray,
+    paths: np.ndarray,
+    weights: np.ndarray,
+    out: str | Path,
+    limits: tuple[float, float, float, float],
+    units: str = "m",
+    dashed: bool = False,
+) -> Path:
+    """One panel of a blinded study, drawn as the predictions column of the paper's Fig. 2:
+    every agent's history, then its ``R`` shown futures shaded by ``weights`` (darker =
+    higher score). No title and no legend, so that nothing names the method.
+
+    history [P, T_h, 2], paths [R, P, T_f, 2] (best first), weights [R, P] in [0, 1];
+    ``limits`` (x0, x1, y0, y1) are the same for every panel of a scene; ``dashed`` draws
+    the paths as the ground truth is drawn in Fig. 2 (the study's reference image).
+    """
+    p = history.shape[0]
+    colours = plt.get_cmap("tab10" if p <= 10 else "tab20")
+    aspect = (limits[3] - limits[2]) / max(limits[1] - limits[0], 1e-9)
+    fig, ax = plt.subplots(figsize=(5.6, 0.9 + 4.4 * float(np.clip(aspect, 0.35, 1.2))), dpi=100)
+    for i in range(p):
+        c = colours(i % colours.N)
+        for rank in range(paths.shape[0]):
+            path = np.concatenate([history[i, -1:], paths[rank, i]], 0)  # [T_f+1, 2]
+            alpha = 0.3 + 0.7 * float(weights[rank, i])
+            ax.plot(path[:, 0], path[:, 1], color=c, lw=2.0 - 0.6 * min(rank, 2),
+                    ls="--" if dashed else "-", alpha=alpha)  # fmt: skip
+        ax.plot(history[i, :, 0], history[i, :, 1], color=c, lw=2.2, marker="o", ms=3)
+        ax.plot(*history[i, -1], marker="o", color=c, ms=7, mec="black", mew=0.6)
+    ax.set_xlim(limits[0], limits[1])
+    ax.set_ylim(limits[2], limits[3])
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel(f"x [{units}]")
+    ax.set_ylabel(f"y [{units}]")
+    ax.grid(alpha=0.3)
+    return _save(fig, out)
+
+
+def plot_survey_summary(
+    names: list[str],
+    columns: dict[str, tuple[np.ndarray, np.ndarray]],
+    marks: dict[str, list[str]],
+    out: str | Path,
+    title: str = "",
+    xlims: dict[str, tuple[float, float]] | None = None,
+) -> Path:
+    """The study's result as horizontal bars, one axis per column (human score, ATS, FTS):
+    mean and standard deviation per method, with the significance marks beside the bars.
+
+    names [M]; columns: label -> (mean [M], sd [M]) (NaN draws no bar); marks: label -> [M]
+    strings ("", "ns", "*", ...); xlims: label -> fixed x range (e.g. the rating scale).
+    """
+    m = len(names)
+    fig, axes = plt.subplots(1, len(columns), figsize=(3.6 * len(columns), 0.9 + 0.55 * m),
+                             dpi=120, sharey=True, squeeze=False)  # fmt: skip
+    y = np.arange(m)
+    for ax, (label, (mean, sd)) in zip(axes[0], columns.items(), strict=True):
+        mean = np.asarray(mean, dtype=float)  # [M]
+        sd = np.nan_to_num(np.asarray(sd, dtype=float))  # [M]
+        ok = np.isfinite(mean)
+        ax.barh(y[ok], mean[ok], xerr=sd[ok], color="tab:blue", alpha=0.7, capsize=3)
+        ax.axvline(0, color="black", lw=0.6)
+        for i, mark in enumerate(marks.get(label, [""] * m)):
+            if ok[i] and mark:
+                ax.annotate(mark, (mean[i] + sd[i], y[i]), xytext=(4, -3),
+                            textcoords="offset points", fontsize=8)  # fmt: skip
+        ax.set_title(label, fontsize=9)
+        ax.grid(alpha=0.3, axis="x")
+        if xlims and label in xlims:
+            ax.set_xlim(*xlims[label])
+    axes[0][0].set_yticks(y, names)
+    axes[0][0].invert_yaxis()
+    if title:
+        fig.suptitle(title, fontsize=9)
+    return _save(fig, out)
+
+
 def _save(fig, out: str | Path) -> Path:
     """Lay out, write as PNG through a temporary file, close."""
     fig.tight_layout()

@@ -1,0 +1,454 @@
+"""``trajpref survey analyze``: the paper's Table 3 from a study's answers.
+
+- Human score of an answer: the mean of its two ratings (social appropriateness, kinetics).
+  Per method: mean and standard deviation over all its answers (raters x scenes); the two
+  criteria are also reported apart.
+- ATS / FTS of a panel: the diffusion score of the futures it shows (``PanelKey``); per
+  method: mean and standard deviation over scenes. The ground truth's are 0 by definition.
+- Significance (the stars): the best method by human score against every other row, with
+  the Wilcoxon signed-rank test (two-sided; zero differences dropped; exact null
+  distribution when n <= 50 and no ties, else the normal approximation with tie
+  correction). Human score: paired over raters (each rater's mean over the scenes; raters who
+  answered every panel only). ATS/FTS: paired over scenes. p-values are Holm-adjusted within
+  each column; stars: *** p < 0.001, ** p < 0.01, * p < 0.05, ns otherwise.
+- Agreement of human scores with ATS/FTS (methods only, the ground truth left out): Spearman
+  rho and Kendall tau-b between the methods' means (n = methods), between panels (each
+  panel's mean human score against its ATS, n = scenes x methods), and Kendall tau within
+  each scene, averaged over scenes. p-values: exact for few pairs (Spearman by enumeration
+  up to 8, Kendall by scipy's exact method without ties), else the usual approximations.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import warnings
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from scipy import stats
+
+from trajpref.errors import ConfigError
+from trajpref.io import atomic_path, write_json
+from trajpref.survey.manifest import DATABASE, GROUND_TRUTH, Study, load_study
+from trajpref.survey.store import AnswerStore
+from trajpref.viz.plot import plot_survey_summary
+
+RaterKind = Literal["auto", "human", "synthetic", "all"]
+LEVELS = ((0.001, "***"), (0.01, "**"), (0.05, "*"))
+"""Significance marks: the first level a p-value falls below; ``ns`` otherwise."""
+EXACT_MAX_N = 50
+"""The Wilcoxon test uses the exact null distribution up to this many pairs (without ties)."""
+EXACT_SPEARMAN_MAX_N = 8
+"""Spearman's p-value is exact (by enumeration) up to this many pairs."""
+
+
+def stars(p: float) -> str:
+    if not math.isfinite(p):
+        return "n/a"
+    for level, mark in LEVELS:
+        if p < level:
+            return mark
+    return "ns"
+
+
+def holm(pvalues: list[float]) -> list[float]:
+    """Holm's step-down adjustment (NaN entries are left out and stay NaN)."""
+    idx = [i for i, p in enumerate(pvalues) if math.isfinite(p)]
+    order = sorted(idx, key=lambda i: pvalues[i])
+    out = [math.nan] * len(pvalues)
+    running = 0.0
+    for rank, i in enumerate(order):
+        running = max(running, min(1.0, (len(order) - rank) * pvalues[i]))
+        out[i] = running
+    return out
+
+
+@dataclass
+class Comparison:
+    """One paired comparison of the best method against another row."""
+
+    other: str
+    """The row compared with the best method."""
+    column: str
+    """``human``, ``ats`` or ``fts``."""
+    n: int
+    """Pairs (raters for ``human``, scenes for ATS/FTS), zero differences included."""
+    statistic: float
+    """Wilcoxon's W: the smaller of the two signed-rank sums."""
+    p: float
+    """Two-sided p-value."""
+    p_holm: float = math.nan
+    """Holm-adjusted within the column."""
+    method: str = ""
+    """``exact`` or ``normal approximation``."""
+    mark: str = ""
+    """Stars of ``p_holm``."""
+
+
+def wilcoxon(x: np.ndarray, y: np.ndarray) -> tuple[float, float, str]:
+    """Paired two-sided Wilcoxon signed-rank test: (W, p, method). Zero differences are
+    dropped (Wilcoxon's convention); all zero -> p = 1."""
+    d = np.asarray(x, float) - np.asarray(y, float)  # [n]
+    nz = d[d != 0]
+    if len(d) < 2:
+        return math.nan, math.nan, "too few pairs"
+    if len(nz) == 0:
+        return 0.0, 1.0, "no differences"
+    ties = len(np.unique(np.abs(nz))) < len(nz)
+    exact = len(nz) <= EXACT_MAX_N and not ties and len(nz) == len(d)
+    method = "exact" if exact else "asymptotic"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        res = stats.wilcoxon(x, y, zero_method="wilcox", alternative="two-sided",
+                             method=method)  # fmt: skip
+    return float(res.statistic), float(res.pvalue), ("exact" if exact
+                                                      else "normal approximation")  # fmt: skip
+
+
+def _compare(other: str, column: str, x: list[float], y: list[float]) -> Comparison:
+    w, p, method = wilcoxon(np.asarray(x, float), np.asarray(y, float))
+    return Comparison(other, column, len(x), w, p, method=method)
+
+
+def _corr(a: np.ndarray, b: np.ndarray) -> dict[str, float]:
+    """Spearman rho and Kendall tau-b with their p-values (NaN when undefined)."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    out = {"n": int(len(a)), "spearman": math.nan, "spearman_p": math.nan,
+           "kendall": math.nan, "kendall_p": math.nan}  # fmt: skip
+    if len(a) < 3 or np.ptp(a) == 0 or np.ptp(b) == 0:
+        return out
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rho, p = spearman(a, b)
+        k = stats.kendalltau(a, b)  # exact p for small n without ties
+    out.update(spearman=rho, spearman_p=p, kendall=float(k.statistic),
+               kendall_p=float(k.pvalue))  # fmt: skip
+    return out
+
+
+def spearman(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """Spearman's rho and its two-sided p-value: exact (all n! orderings) for n <= 8, where
+    scipy's t approximation is far off (it gives p = 0 for a perfect rank match of 3),
+    scipy's otherwise."""
+    n = len(a)
+    if n > EXACT_SPEARMAN_MAX_N:
+        res = stats.spearmanr(a, b)
+        return float(res.statistic), float(res.pvalue)
+    ra, rb = stats.rankdata(a), stats.rankdata(b)  # [n]
+    perms = np.array(list(itertools.permutations(range(n))))  # [n!, n]
+    za = (ra - ra.mean()) / np.linalg.norm(ra - ra.mean())
+    zb = (rb - rb.mean()) / np.linalg.norm(rb - rb.mean())
+    null = zb[perms] @ za  # [n!] rho of every ordering
+    rho = float(zb @ za)
+    return rho, float(np.mean(np.abs(null) >= abs(rho) - 1e-12))
+
+
+@dataclass
+class MethodRow:
+    """One row of the table."""
+
+    method: str
+    """The method (or ``ground truth``)."""
+    answers: int
+    """Answers to its panels."""
+    human: float
+    """Mean human score (mean of the two ratings)."""
+    human_sd: float
+    """Its standard deviation over answers."""
+    social: float
+    """Mean social-appropriateness rating."""
+    social_sd: float
+    """Its standard deviation."""
+    kinetics: float
+    """Mean kinetics rating."""
+    kinetics_sd: float
+    """Its standard deviation."""
+    ats: float
+    """Mean ATS of the shown futures over scenes."""
+    ats_sd: float
+    """Its standard deviation over scenes."""
+    fts: float
+    """Mean FTS of the shown futures."""
+    fts_sd: float
+    """Its standard deviation over scenes."""
+    max_ats: float = math.nan
+    """Mean maxATS_K of the method's samples (the paper's Table 1 measure)."""
+    max_fts: float = math.nan
+    """Mean maxFTS_K."""
+    marks: dict[str, str] = field(default_factory=dict)
+    """column -> stars against the best method."""
+
+
+@dataclass
+class Analysis:
+    """Everything ``analyze`` reports."""
+
+    title: str
+    """The study's title."""
+    dataset: dict[str, Any]
+    """The study's data."""
+    rater_kind: str
+    """Which raters were used: human, synthetic or all."""
+    synthetic: bool
+    """True when any answer or the study itself is synthetic."""
+    raters: int
+    """Raters with at least one answer."""
+    complete_raters: int
+    """Raters who answered every panel (the paired test uses these)."""
+    scenes: int
+    """Scenes in the study."""
+    panels: int
+    """Panels in the study."""
+    best: str
+    """The method with the highest mean human score (ground truth excluded)."""
+    rows: list[MethodRow]
+    """Methods by mean human score, best first; the ground truth last."""
+    tests: list[Comparison]
+    """Paired tests of the best method against the others."""
+    agreement: dict[str, dict[str, dict[str, float]]]
+    """level (methods, panels, within_scene) -> score (ats, fts) -> correlations."""
+
+    def to_dict(self) -> dict[str, Any]:
+        return _finite(asdict(self))
+
+    def table(self) -> str:
+        """The Table-3 layout as Markdown."""
+        lines = ["| Method | Human score (↑) | ATS (↑) | FTS (↑) |", "|---|---|---|---|"]
+        for r in self.rows:
+            name = f"**{r.method}**" if r.method == self.best else r.method
+            gt = r.method == GROUND_TRUTH
+            lines.append(
+                f"| {name} | {_pm(r.human, r.human_sd)}{_mark(r.marks.get('human'))} | "
+                f"{'0 (by definition)' if gt else _pm(r.ats, r.ats_sd)}"
+                f"{_mark(r.marks.get('ats'))} | "
+                f"{'0 (by definition)' if gt else _pm(r.fts, r.fts_sd)}"
+                f"{_mark(r.marks.get('fts'))} |"
+            )
+        return "\n".join(lines)
+
+    def legend(self) -> str:
+        n_h = self.complete_raters
+        return (
+            f"Mean ± sd. Rows by human score; **{self.best}** has the highest. Marks: "
+            f"two-sided Wilcoxon signed-rank test of {self.best} against the row, human "
+            f"score paired over raters (each rater's mean over the scenes, n = {n_h} raters "
+            f"who answered every panel), ATS/FTS paired over scenes (n = {self.scenes}); "
+            "p-values Holm-adjusted within each column; *** p < 0.001, ** p < 0.01, "
+            "* p < 0.05, ns not significant. Human score = mean of the two ratings (1-5); "
+            "ATS/FTS = the diffusion score of the futures each panel shows."
+        )
+
+    def markdown(self) -> str:
+        out = [f"# Human evaluation: {self.title}", ""]
+        if self.synthetic:
+            out += ["> **SYNTHETIC RATERS (or a synthetic study): not human data.** These "
+                    "answers come from `trajpref survey simulate`, whose raters prefer futures "
+                    "close to the ground truth; the table shows the analysis working, not what "
+                    "people think.", ""]  # fmt: skip
+        ds = self.dataset
+        where = f"{ds.get('name', '?')}/{ds.get('split', '?')}" if ds else "?"
+        out += [f"Data: {where}; {self.scenes} scenes, {self.panels} panels; raters: "
+                f"{self.raters} {self.rater_kind} ({self.complete_raters} answered every "
+                "panel).", "", self.table(), "", self.legend(), "",
+                "## Per criterion", "",
+                "| Method | Social appropriateness | Kinetics | answers | maxATS_K | maxFTS_K |",
+                "|---|---|---|---|---|---|"]  # fmt: skip
+        for r in self.rows:
+            out.append(f"| {r.method} | {_pm(r.social, r.social_sd)} | "
+                       f"{_pm(r.kinetics, r.kinetics_sd)} | {r.answers} | {_num(r.max_ats)} | "
+                       f"{_num(r.max_fts)} |")  # fmt: skip
+        out += ["", "## Tests", "", f"Best method: {self.best}.", "",
+                "| Against | Column | n | W | p | p (Holm) | | Null distribution |",
+                "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+        for t in self.tests:
+            out.append(f"| {t.other} | {t.column} | {t.n} | {_num(t.statistic, 1)} | "
+                       f"{_p(t.p)} | {_p(t.p_holm)} | {t.mark} | {t.method} |")  # fmt: skip
+        out += ["", "## Agreement of human scores with ATS / FTS", "",
+                "Ground truth left out. *methods*: the methods' mean scores; *panels*: each "
+                "panel's mean human score against its ATS/FTS; *within scene*: Kendall tau "
+                "between the methods' ranks in each scene, averaged over the scenes where neither "
+                "ranking is all ties (its p: Wilcoxon signed-rank test of the scenes' tau "
+                "against 0).", "",
+                "| Level | Score | n | Spearman rho | p | Kendall tau | p |",
+                "|---|---|---|---|---|---|---|"]  # fmt: skip
+        for level, scores in self.agreement.items():
+            for score, c in scores.items():
+                out.append(f"| {level.replace('_', ' ')} | {score.upper()} | {c['n']} | "
+                           f"{_num(c['spearman'])} | {_p(c['spearman_p'])} | "
+                           f"{_num(c['kendall'])} | {_p(c['kendall_p'])} |")  # fmt: skip
+        return "\n".join(out) + "\n"
+
+
+def _finite(obj: Any) -> Any:
+    """NaN -> None, so that the JSON is valid."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_finite(v) for v in obj]
+    return obj
+
+
+def _num(x: float, digits: int = 2) -> str:
+    return "–" if not math.isfinite(x) else f"{x:.{digits}f}"
+
+
+def _pm(mean: float, sd: float) -> str:
+    return "–" if not math.isfinite(mean) else f"{mean:.2f} ± {_num(sd)}"
+
+
+def _p(p: float) -> str:
+    if not math.isfinite(p):
+        return "–"
+    return "< 0.0001" if p < 1e-4 else f"{p:.4f}"
+
+
+def _mark(mark: str | None) -> str:
+    return f" {mark}" if mark else ""
+
+
+def _mean_sd(values: list[float] | np.ndarray) -> tuple[float, float]:
+    v = np.asarray(values, float)
+    if v.size == 0:
+        return math.nan, math.nan
+    return float(v.mean()), float(v.std(ddof=1)) if v.size > 1 else 0.0
+
+
+def analyze(study: Study, rows: list[tuple], rater_kind: RaterKind = "auto") -> Analysis:
+    """The analysis of ``rows`` (``AnswerStore.rows()``: rater, kind, scene, panel, social,
+    kinetics, submitted). ``rater_kind``: ``auto`` uses the human raters when there are any,
+    else the synthetic ones."""
+    if rater_kind == "auto":
+        rater_kind = "human" if any(r[1] == "human" for r in rows) else "synthetic"
+    if rater_kind != "all":
+        rows = [r for r in rows if r[1] == rater_kind]
+    if not rows:
+        raise ConfigError(f"no answers from {rater_kind} raters yet")
+    synthetic = study.synthetic or any(r[1] == "synthetic" for r in rows)
+    method_of = {(s.id, p.id): p.key.method for s in study.scenes for p in s.panels}
+    keys = {(s.id, p.id): p.key for s in study.scenes for p in s.panels}
+    methods = list(study.methods)
+    raters = sorted({r[0] for r in rows})
+    # per method: every answer; per rater and method: the ratings, to average over scenes
+    answers: dict[str, list[tuple[int, int]]] = {m: [] for m in methods}
+    per_rater: dict[str, dict[str, list[float]]] = {r: {m: [] for m in methods} for r in raters}
+    per_panel: dict[tuple[str, str], list[float]] = {k: [] for k in keys}
+    count: dict[str, int] = dict.fromkeys(raters, 0)
+    for rater, _, scene, panel, social, kinetics, _ in rows:
+        m = method_of[(scene, panel)]
+        answers[m].append((social, kinetics))
+        per_rater[rater][m].append((social + kinetics) / 2)
+        per_panel[(scene, panel)].append((social + kinetics) / 2)
+        count[rater] += 1
+    complete = [r for r in raters if count[r] == study.num_panels]
+    table: dict[str, MethodRow] = {}
+    for m in methods:
+        a = np.asarray(answers[m], float).reshape(-1, 2)  # [A, 2]
+        ks = [k for k in keys.values() if k.method == m]
+        table[m] = MethodRow(
+            m, len(a), *_mean_sd(a.mean(1)), *_mean_sd(a[:, 0]), *_mean_sd(a[:, 1]),
+            *_mean_sd([k.ats for k in ks]), *_mean_sd([k.fts for k in ks]),
+            float(np.mean([k.max_ats for k in ks if k.max_ats is not None] or [math.nan])),
+            float(np.mean([k.max_fts for k in ks if k.max_fts is not None] or [math.nan])),
+        )  # fmt: skip
+    candidates = [m for m in methods if m != GROUND_TRUTH and math.isfinite(table[m].human)]
+    if not candidates:
+        raise ConfigError("no answers to any method's panels yet")
+    best = max(candidates, key=lambda m: (table[m].human, -methods.index(m)))
+    ordered = sorted((m for m in methods if m != GROUND_TRUTH), key=lambda m: -table[m].human)
+    ordered += [GROUND_TRUTH] if GROUND_TRUTH in methods else []
+    # tests: human over complete raters, ATS/FTS over scenes
+    tests: list[Comparison] = []
+    rater_means = {r: {m: float(np.mean(per_rater[r][m])) for m in methods} for r in complete}
+    for m in ordered:
+        if m == best:
+            continue
+        x = [rater_means[r][best] for r in complete]
+        y = [rater_means[r][m] for r in complete]
+        tests.append(_compare(m, "human", x, y))
+        if m == GROUND_TRUTH:
+            continue
+        for col in ("ats", "fts"):
+            by_scene = {s.id: {p.key.method: getattr(p.key, col) for p in s.panels}
+                        for s in study.scenes}  # fmt: skip
+            x = [v[best] for v in by_scene.values()]
+            y = [v[m] for v in by_scene.values()]
+            tests.append(_compare(m, col, x, y))
+    for col in ("human", "ats", "fts"):
+        group = [t for t in tests if t.column == col]
+        for t, p in zip(group, holm([t.p for t in group]), strict=True):
+            t.p_holm = p
+            t.mark = stars(p)
+            table[t.other].marks[col] = t.mark
+    # agreement (methods only)
+    ms = [m for m in methods if m != GROUND_TRUTH]
+    agreement: dict[str, dict[str, dict[str, float]]] = {"methods": {}, "panels": {},
+                                                         "within_scene": {}}  # fmt: skip
+    panel_keys = [k for k in keys if method_of[k] != GROUND_TRUTH and per_panel[k]]
+    for col in ("ats", "fts"):
+        agreement["methods"][col] = _corr([table[m].human for m in ms],
+                                          [getattr(table[m], col) for m in ms])  # fmt: skip
+        agreement["panels"][col] = _corr([np.mean(per_panel[k]) for k in panel_keys],
+                                         [getattr(keys[k], col) for k in panel_keys])  # fmt: skip
+        taus = []
+        for s in study.scenes:
+            ks = [(s.id, p.id) for p in s.panels if p.key.method != GROUND_TRUTH]
+            if len(ks) < 2 or not all(per_panel[k] for k in ks):
+                continue
+            h = [np.mean(per_panel[k]) for k in ks]
+            v = [getattr(keys[k], col) for k in ks]
+            if np.ptp(h) > 0 and np.ptp(v) > 0:
+                taus.append(float(stats.kendalltau(h, v).statistic))
+        agreement["within_scene"][col] = {
+            "n": len(taus), "spearman": math.nan, "spearman_p": math.nan,
+            "kendall": float(np.mean(taus)) if taus else math.nan,
+            "kendall_p": (float(stats.wilcoxon(taus).pvalue)
+                          if len(taus) >= 2 and any(taus) else math.nan),
+        }  # fmt: skip
+    return Analysis(
+        title=study.title, dataset=study.dataset, rater_kind=rater_kind, synthetic=synthetic,
+        raters=len(raters), complete_raters=len(complete), scenes=len(study.scenes),
+        panels=study.num_panels, best=best, rows=[table[m] for m in ordered], tests=tests,
+        agreement=agreement,
+    )  # fmt: skip
+
+
+def run_analysis(folder: str | Path, db: str | Path | None = None, out: str | Path | None = None,
+                 rater_kind: RaterKind = "auto") -> tuple[Analysis, dict[str, Path]]:  # fmt: skip
+    """Read a study and its answers, analyse, write ``analysis.md``, ``analysis.json`` and
+    ``analysis.png`` into ``out`` (default: the study folder). Nothing is written on error."""
+    study = load_study(folder)
+    store = AnswerStore(db or study.folder / DATABASE, study, create=False)
+    try:
+        result = analyze(study, store.rows(), rater_kind)
+    finally:
+        store.close()
+    out = Path(out) if out is not None else study.folder
+    paths = {"markdown": out / "analysis.md", "json": out / "analysis.json",
+             "figure": out / "analysis.png"}  # fmt: skip
+    names = [r.method for r in result.rows]
+    marks = {label: [r.marks.get(col, "") for r in result.rows]
+             for label, col in (("human score (1-5)", "human"), ("ATS", "ats"),
+                                ("FTS", "fts"))}  # fmt: skip
+    nan = [math.nan if r.method == GROUND_TRUTH else 0.0 for r in result.rows]
+    columns = {
+        "human score (1-5)": (np.array([r.human for r in result.rows]),
+                              np.array([r.human_sd for r in result.rows])),
+        "ATS": (np.array([r.ats for r in result.rows]) + nan,
+                np.array([r.ats_sd for r in result.rows])),
+        "FTS": (np.array([r.fts for r in result.rows]) + nan,
+                np.array([r.fts_sd for r in result.rows])),
+    }  # fmt: skip
+    label = "SYNTHETIC raters - not human data. " if result.synthetic else ""
+    plot_survey_summary(names, columns, marks, paths["figure"],
+                        f"{label}{result.title} ({result.raters} raters, "
+                        f"{result.scenes} scenes)",
+                        xlims={"human score (1-5)": (0.0, 5.4)})  # fmt: skip
+    with atomic_path(paths["markdown"]) as tmp:
+        tmp.write_text(result.markdown(), encoding="utf-8")
+    write_json(paths["json"], result.to_dict())
+    return result, paths

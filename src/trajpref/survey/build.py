@@ -1,0 +1,207 @@
+"""``trajpref survey build``: pick scenes (seeded, stratified by scene size), sample every
+method, score the samples with one denoiser, and write a blinded study folder."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from trajpref.data import load_dataset
+from trajpref.device import resolve_device
+from trajpref.errors import ConfigError
+from trajpref.models.registry import BUILTIN, load_predictor
+from trajpref.score.scorer import TrajectoryScorer
+from trajpref.survey.manifest import GROUND_TRUTH, METHOD_RE, Study
+from trajpref.survey.study import (
+    GroundTruthMode,
+    SceneData,
+    ground_truth_panel,
+    shown_predictions,
+    write_study,
+)
+from trajpref.types import collate
+
+
+@dataclass
+class BuildConfig:
+    """Everything ``survey build`` needs; checked on creation."""
+
+    dataset: str
+    """Dataset name (``zara1`` ...) or a folder of ``frame agent x y`` files."""
+    models: dict[str, str]
+    """Method name -> ``cv`` or a checkpoint path, in the order given."""
+    split: str = "test"
+    """Which split to draw scenes from."""
+    data_root: str | None = None
+    """Data folder (default ``$TRAJPREF_DATA``)."""
+    frame_interval: float = 0.4
+    """Seconds between frames, for a folder dataset."""
+    units: str = "unknown"
+    """Coordinate units, for a folder dataset."""
+    scorer: str | None = None
+    """The denoiser (or generator) checkpoint whose diffusion score rates every method's
+    samples; default: the first checkpoint among ``models``. One scorer for all methods, so
+    that their ATS/FTS are comparable."""
+    scenes: int = 12
+    """Scenes in the study (the paper: 12)."""
+    samples: int = 20
+    """K, samples per agent drawn from each method before the top ones are picked."""
+    top: int = 2
+    """Futures shown per agent: its ``top`` samples by the agent's ATS (the paper: 2)."""
+    seed: int = 0
+    """Seeds the scene draw, the sampling and the shuffling of the panels."""
+    min_agents: int = 1
+    """Smallest scene drawn."""
+    max_agents: int = 8
+    """Largest scene drawn (crowded scenes are hard to read at a glance)."""
+    min_gap: int = 20
+    """Two drawn scenes are at least this many positions apart in the split, so that no two
+    share a window (ETH/UCY windows overlap by up to 19 frames); 0 allows neighbours."""
+    strata: int = 3
+    """Size strata: the eligible scenes are cut by agent count into this many groups of
+    about equal share, and the scenes are drawn equally from each group."""
+    ground_truth: GroundTruthMode = "rated"
+    """``rated``: the real futures are one more blinded panel to rate (a calibration of the
+    scale); ``reference``: they are shown beside every panel and not rated."""
+    title: str = "Which predicted paths look human?"
+    """Shown at the top of the page."""
+    device: str = "auto"
+    """auto, cpu or cuda."""
+
+    def __post_init__(self) -> None:
+        if not self.models:
+            raise ConfigError("--models: give at least one NAME=MODEL")
+        for name in self.models:
+            if name == GROUND_TRUTH or not METHOD_RE.match(name):
+                raise ConfigError(
+                    f"--models: bad method name {name!r} (letters, digits and ' _.+-', at "
+                    f"most 40; {GROUND_TRUTH!r} is reserved)"
+                )
+        for key in ("scenes", "samples", "top", "strata", "min_agents"):
+            if getattr(self, key) < 1:
+                raise ConfigError(f"--{key.replace('_', '-')} must be >= 1")
+        if self.top > self.samples:
+            raise ConfigError(f"--top {self.top} exceeds --samples {self.samples}")
+        if self.max_agents < self.min_agents:
+            raise ConfigError("--max-agents must be >= --min-agents")
+        if self.min_gap < 0:
+            raise ConfigError("--min-gap must be >= 0")
+        if self.ground_truth not in ("rated", "reference"):
+            raise ConfigError("--ground-truth must be 'rated' or 'reference'")
+
+
+def select_scenes(
+    sizes: np.ndarray, n: int, seed: int = 0, strata: int = 3, min_agents: int = 1,
+    max_agents: int = 8, min_gap: int = 0,
+) -> list[tuple[int, int]]:  # fmt: skip
+    """Draw ``n`` scene indices, stratified by scene size: ``[(index, stratum), ...]``.
+
+    sizes [B] agents per scene. Scenes with ``min_agents..max_agents`` agents are eligible;
+    their distinct sizes are cut into at most ``strata`` groups holding about equal shares
+    of the scenes (a size is never split), ``n`` is shared equally between the groups (the
+    remainder to random ones), and each group is drawn without replacement. No two picks are
+    closer than ``min_gap`` positions; a group that runs short passes its share on to the
+    others. Deterministic for a given seed.
+    """
+    sizes = np.asarray(sizes)
+    eligible = np.flatnonzero((sizes >= min_agents) & (sizes <= max_agents))  # [E]
+    if len(eligible) < n:
+        raise ConfigError(f"only {len(eligible)} scenes have {min_agents}..{max_agents} agents; "
+                          f"{n} were asked for (lower --scenes or widen --max-agents)")  # fmt: skip
+    values, counts = np.unique(sizes[eligible], return_counts=True)  # [V]
+    middle = (np.cumsum(counts) - counts / 2) / counts.sum()  # [V] centre of each size's share
+    group = np.minimum((middle * strata).astype(int), strata - 1)  # [V]
+    _, group = np.unique(group, return_inverse=True)  # renumber the non-empty groups 0..S-1
+    stratum = group[np.searchsorted(values, sizes[eligible])]  # [E]
+    s = int(group.max()) + 1
+    rng = np.random.default_rng(seed)
+    quota = np.full(s, n // s)
+    quota[rng.permutation(s)[: n % s]] += 1
+    pools = [rng.permutation(eligible[stratum == g]) for g in range(s)]
+    gap = max(1, min_gap)
+    picked: list[tuple[int, int]] = []
+    taken = np.zeros(len(sizes), bool)
+
+    def take(g: int, want: int) -> int:
+        got = 0
+        for i in pools[g]:
+            if got == want:
+                break
+            if not taken[i] and all(abs(int(i) - j) >= gap for j, _ in picked):
+                picked.append((int(i), g))
+                taken[i] = True
+                got += 1
+        return got
+
+    short = sum(int(quota[g]) - take(g, int(quota[g])) for g in range(s))
+    for g in rng.permutation(s):
+        if short == 0:
+            break
+        short -= take(int(g), short)
+    if short:
+        raise ConfigError(f"only {len(picked)} of the {len(eligible)} eligible scenes are "
+                          f"--min-gap {min_gap} apart; lower --scenes or --min-gap")  # fmt: skip
+    return picked
+
+
+def _scorer_path(cfg: BuildConfig) -> str:
+    if cfg.scorer:
+        return cfg.scorer
+    for spec in cfg.models.values():
+        if spec not in BUILTIN:
+            return spec
+    raise ConfigError("every method is built in (e.g. cv): pass --scorer DENOISER.safetensors "
+                      "to compute ATS/FTS")  # fmt: skip
+
+
+@torch.no_grad()
+def build_study(cfg: BuildConfig, out: str | Path, progress: bool = True) -> Study:
+    """Draw the scenes, sample and score every method, render and write the study folder."""
+    out = Path(out)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise ConfigError(f"{out}: already exists; a study folder is never overwritten "
+                          "(its answers would no longer match): choose a new --out")  # fmt: skip
+    device = resolve_device(cfg.device)
+    predictors = {name: load_predictor(spec, device) for name, spec in cfg.models.items()}
+    scorer = TrajectoryScorer.from_checkpoint(_scorer_path(cfg), device)
+    ds = load_dataset(cfg.dataset, cfg.split, cfg.data_root, cfg.frame_interval, cfg.units)
+    sizes = np.array([s.num_agents for s in ds.scenes])  # [B]
+    picks = select_scenes(sizes, cfg.scenes, cfg.seed, cfg.strata, cfg.min_agents,
+                          cfg.max_agents, cfg.min_gap)  # fmt: skip
+    order = np.random.default_rng(cfg.seed + 1).permutation(len(picks))  # presentation order
+    scenes = []
+    for j in tqdm(order, desc="survey build", unit="scene", disable=not progress, leave=False):
+        index, stratum = picks[int(j)]
+        scene = ds[index]
+        batch = collate([scene]).to(device)
+        panels = {}
+        for name, model in predictors.items():
+            gen = torch.Generator().manual_seed(cfg.seed * 1_000_003 + index)
+            pred = model.predict(batch, cfg.samples, gen)  # [K, P, T_f, 2]
+            res = scorer.score(batch, pred)
+            panels[name] = shown_predictions(
+                pred.cpu().double().numpy(),
+                res.d_pred.cpu().double().numpy(),  # [K, P, T_f]
+                res.d_gt.cpu().double().numpy(),  # [P, T_f]
+                scene.future.astype(np.float64),
+                cfg.top,
+            )
+        if cfg.ground_truth == "rated":
+            panels[GROUND_TRUTH] = ground_truth_panel(scene.future.astype(np.float64))
+        scenes.append(SceneData(scene.history, scene.future, panels, scene.scene_id, index,
+                                stratum))  # fmt: skip
+    methods = ([GROUND_TRUTH] if cfg.ground_truth == "rated" else []) + list(cfg.models)
+    record = dataclasses.asdict(cfg)
+    record["scorer"] = _scorer_path(cfg)
+    return write_study(
+        out, scenes, methods, seed=cfg.seed, title=cfg.title, ground_truth=cfg.ground_truth,
+        units=ds.info.units,
+        dataset={"name": ds.info.name, "split": ds.info.split, "units": ds.info.units,
+                 "scenes_in_split": len(ds)},
+        build=record,
+    )  # fmt: skip

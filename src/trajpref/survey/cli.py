@@ -1,0 +1,154 @@
+"""``trajpref survey build | serve | analyze | simulate``: registered on the main parser by
+:func:`add_parser`. The heavy modules are imported when a command runs, not before."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from trajpref.errors import ConfigError
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Add ``survey`` and its four commands to the main parser's sub-commands."""
+    sv = subparsers.add_parser("survey", help="a human-evaluation study (the paper's Table 3): "
+                               "build, serve, simulate, analyze")  # fmt: skip
+    sub = sv.add_subparsers(dest="survey_command", required=True)
+
+    b = sub.add_parser("build", help="pick scenes, render each method's top futures, blind them")
+    b.add_argument("--dataset", required=True, help="dataset name or a folder of 'frame agent "
+                   "x y' files")  # fmt: skip
+    b.add_argument("--split", default="test", choices=["train", "val", "test"])
+    b.add_argument("--data-root", default=None, help="data folder (default: $TRAJPREF_DATA)")
+    b.add_argument("--frame-interval", type=float, default=0.4,
+                   help="seconds between frames, for a folder dataset (default 0.4)")  # fmt: skip
+    b.add_argument("--units", default="unknown", help="coordinate units, for a folder dataset")
+    b.add_argument("--models", nargs="+", required=True, metavar="NAME=MODEL",
+                   help="the methods: a name and 'cv' or a checkpoint, e.g. "
+                   "long=models/zara1/generator-long.safetensors")  # fmt: skip
+    b.add_argument("--scorer", default=None, help="the denoiser that scores every method "
+                   "(default: the first checkpoint among --models)")  # fmt: skip
+    b.add_argument("--scenes", type=int, default=12, help="scenes in the study (default 12)")
+    b.add_argument("--samples", type=int, default=20, help="K, samples per agent (default 20)")
+    b.add_argument("--top", type=int, default=2, help="futures shown per agent (default 2)")
+    b.add_argument("--seed", type=int, default=0, help="seed of the draw, sampling, shuffling")
+    b.add_argument("--min-agents", type=int, default=1, help="smallest scene (default 1)")
+    b.add_argument("--max-agents", type=int, default=8, help="largest scene (default 8)")
+    b.add_argument("--min-gap", type=int, default=20, help="picked scenes are this many "
+                   "positions apart in the split (default 20: no shared frames)")  # fmt: skip
+    b.add_argument("--strata", type=int, default=3, help="scene-size strata (default 3)")
+    b.add_argument("--ground-truth", default="rated", choices=["rated", "reference"],
+                   help="rated: the real futures are one more blinded panel (default); "
+                   "reference: shown beside every panel, not rated")  # fmt: skip
+    b.add_argument("--title", default="Which predicted paths look human?", help="page title")
+    b.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
+    b.add_argument("--out", required=True, help="the new study folder")
+    b.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    b.set_defaults(func=cmd_build)
+
+    s = sub.add_parser("serve", help="the rating page; answers go to STUDY/answers.sqlite")
+    s.add_argument("study", help="a study folder made by `survey build`")
+    s.add_argument("--host", default="127.0.0.1",
+                   help="address to listen on (default 127.0.0.1: this machine only)")  # fmt: skip
+    s.add_argument("--port", type=int, default=8000, help="port (default 8000; 0: any free)")
+    s.add_argument("--db", default=None, help="answers database (default STUDY/answers.sqlite)")
+    s.add_argument("--max-body", type=int, default=4096, help="request body limit in bytes")
+    s.add_argument("--quiet", action="store_true", help="no access log")
+    s.set_defaults(func=cmd_serve)
+
+    a = sub.add_parser("analyze", help="Table 3: human scores, ATS/FTS, tests, agreement")
+    a.add_argument("study", help="a study folder")
+    a.add_argument("--db", default=None, help="answers database (default STUDY/answers.sqlite)")
+    a.add_argument("--out", default=None, help="folder for analysis.md/.json/.png "
+                   "(default: the study folder)")  # fmt: skip
+    a.add_argument(
+        "--raters",
+        default="auto",
+        choices=["auto", "human", "synthetic", "all"],
+        help="whose answers (default auto: human raters if any, else synthetic)",
+    )
+    a.add_argument("--json", action="store_true", help="print JSON instead of Markdown")
+    a.set_defaults(func=cmd_analyze)
+
+    m = sub.add_parser("simulate", help="synthetic raters (demos and tests only)")
+    m.add_argument("study", help="a study folder")
+    m.add_argument("--raters", type=int, default=20, help="how many (default 20)")
+    m.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    m.add_argument("--prefix", default="synthetic", help="rater ids PREFIX-01, ... "
+                   "(default synthetic)")  # fmt: skip
+    m.add_argument("--db", default=None, help="answers database (default STUDY/answers.sqlite)")
+    m.set_defaults(func=cmd_simulate)
+    return sv
+
+
+def parse_models(items: list[str]) -> dict[str, str]:
+    """``NAME=MODEL`` items -> {name: model}; a bare ``cv`` is ``cv=cv``."""
+    out: dict[str, str] = {}
+    for item in items:
+        name, sep, spec = item.partition("=")
+        if not sep:
+            if item != "cv":
+                raise ConfigError(f"--models {item!r}: write NAME=MODEL, e.g. mine=run/"
+                                  "generator.safetensors")  # fmt: skip
+            name, spec = "cv", "cv"
+        name, spec = name.strip(), spec.strip()
+        if not name or not spec:
+            raise ConfigError(f"--models {item!r}: write NAME=MODEL")
+        if name in out:
+            raise ConfigError(f"--models: the name {name!r} is given twice")
+        out[name] = spec
+    return out
+
+
+def cmd_build(args) -> int:
+    from trajpref.survey.build import BuildConfig, build_study
+
+    cfg = BuildConfig(
+        dataset=args.dataset, models=parse_models(args.models), split=args.split,
+        data_root=args.data_root, frame_interval=args.frame_interval, units=args.units,
+        scorer=args.scorer, scenes=args.scenes, samples=args.samples, top=args.top,
+        seed=args.seed, min_agents=args.min_agents, max_agents=args.max_agents,
+        min_gap=args.min_gap, strata=args.strata, ground_truth=args.ground_truth,
+        title=args.title, device=args.device,
+    )  # fmt: skip
+    study = build_study(cfg, args.out, progress=not args.no_progress)
+    print(f"wrote {study.folder}: {len(study.scenes)} scenes x {len(study.methods)} panels "
+          f"({', '.join(study.methods)}), blinded; serve it with "
+          f"`trajpref survey serve {study.folder}`")  # fmt: skip
+    return 0
+
+
+def cmd_serve(args) -> int:
+    from trajpref.survey.server import serve
+
+    serve(args.study, args.host, args.port, args.db, args.max_body, args.quiet)
+    return 0
+
+
+def cmd_analyze(args) -> int:
+    from trajpref.survey.analyze import run_analysis
+
+    result, paths = run_analysis(args.study, args.db, args.out, args.raters)
+    if args.json:
+        print(json.dumps(result.to_dict()))
+    else:
+        print(result.markdown())
+        print(f"wrote {paths['markdown']}, {paths['json']}, {paths['figure']}")
+    return 0
+
+
+def cmd_simulate(args) -> int:
+    from trajpref.survey.manifest import DATABASE, load_study
+    from trajpref.survey.simulate import SimulateConfig, simulate
+    from trajpref.survey.store import AnswerStore
+
+    cfg = SimulateConfig(raters=args.raters, seed=args.seed, prefix=args.prefix)
+    study = load_study(args.study)
+    store = AnswerStore(args.db or study.folder / DATABASE, study)
+    try:
+        ids = simulate(study, store, cfg)
+    finally:
+        store.close()
+    print(f"wrote {len(ids)} SYNTHETIC raters ({ids[0]} .. {ids[-1]}) x {study.num_panels} "
+          f"panels to {store.path}: for demos and tests only, not human data")  # fmt: skip
+    return 0

@@ -1,0 +1,298 @@
+"""``trajpref survey serve``: the rating page (Starlette on uvicorn), answers in SQLite.
+
+Routes::
+
+    GET  /                                       the page (static/index.html)
+    GET  /static/{app.js,style.css}              its script and style (package data)
+    GET  /images/{name}.png                      a panel image named in the manifest
+    GET  /api/study                              the public study: scenes, panels, criteria
+    GET  /api/raters/{rater}                     a rater's answers so far (to resume)
+    PUT  /api/raters/{rater}/answers/{scene}/{panel}   {"social": 1..5, "kinetics": 1..5}
+    POST /api/raters/{rater}/submit              mark the answers final
+
+Security: binds to 127.0.0.1 unless told otherwise, and then refuses requests whose Host
+header is not a loopback name (DNS rebinding); serves only the files named in the manifest
+and the three static files (a fixed table: no path from a request ever reaches the file
+system); reads at most ``max_body`` bytes of a body (413 beyond); takes JSON only
+(``Content-Type: application/json``, so a cross-site form cannot post answers); sends a
+strict Content-Security-Policy. Errors are JSON ``{"error": message}`` with a 4xx status.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import socket
+import threading
+import time
+from collections.abc import Iterator
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import uvicorn
+from starlette.applications import Starlette
+from starlette.concurrency import run_in_threadpool
+from starlette.datastructures import MutableHeaders
+from starlette.exceptions import HTTPException
+from starlette.requests import Request
+from starlette.responses import FileResponse, JSONResponse, Response
+from starlette.routing import Route
+
+from trajpref.errors import ConfigError
+from trajpref.survey.manifest import DATABASE, Study, load_study
+from trajpref.survey.store import AnswerError, AnswerStore, check_rater
+
+MAX_BODY = 4096
+"""Default limit of a request body in bytes (an answer is about 30)."""
+LOOPBACK_NAMES = ("127.0.0.1", "localhost", "::1")
+"""Host names accepted in the Host header when the server listens on loopback."""
+STATIC = {
+    "app.js": "text/javascript; charset=utf-8",
+    "style.css": "text/css; charset=utf-8",
+}
+"""The static files besides index.html, with their types."""
+CSP = (
+    "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self'; "
+    "connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'"
+)
+"""Content-Security-Policy of every response."""
+
+
+def _static_bytes(name: str) -> bytes:
+    return (resources.files("trajpref.survey") / "static" / name).read_bytes()
+
+
+def is_loopback(host: str) -> bool:
+    return host in LOOPBACK_NAMES or host.startswith("127.")
+
+
+def _host_name(header: str) -> str:
+    """The host of a Host header, without the port (``[::1]:8000`` -> ``::1``)."""
+    if header.startswith("["):
+        return header[1 : header.find("]")] if "]" in header else header
+    return header.rsplit(":", 1)[0] if header.count(":") == 1 else header
+
+
+class _Guard:
+    """ASGI middleware: security headers on every response, and the Host check."""
+
+    def __init__(self, app, allowed_hosts: tuple[str, ...] | None):
+        self.app = app
+        self.allowed_hosts = allowed_hosts
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+
+        async def send_headers(message):
+            if message["type"] == "http.response.start":
+                headers = MutableHeaders(scope=message)
+                headers["Content-Security-Policy"] = CSP
+                headers["X-Content-Type-Options"] = "nosniff"
+                headers["Referrer-Policy"] = "no-referrer"
+                headers["Cache-Control"] = headers.get("Cache-Control", "no-store")
+            await send(message)
+
+        if self.allowed_hosts is not None:
+            host = dict(scope.get("headers", [])).get(b"host", b"").decode("latin-1")
+            if _host_name(host) not in self.allowed_hosts:
+                response = JSONResponse({"error": f"unexpected Host header {host!r:.60}"}, 400)
+                return await response(scope, receive, send_headers)
+        return await self.app(scope, receive, send_headers)
+
+
+def _error(message: str, status: int) -> JSONResponse:
+    return JSONResponse({"error": message}, status_code=status)
+
+
+async def _read_json(request: Request, limit: int) -> Any:
+    """The body as JSON, at most ``limit`` bytes; AnswerError (400/413/415) otherwise."""
+    ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if ctype != "application/json":
+        raise AnswerError("send the answer as JSON (Content-Type: application/json)", 415)
+    length = request.headers.get("content-length")
+    if length is not None and (not length.isdigit() or int(length) > limit):
+        raise AnswerError(f"the body is limited to {limit} bytes", 413)
+    body = bytearray()
+    async for chunk in request.stream():
+        body += chunk
+        if len(body) > limit:
+            raise AnswerError(f"the body is limited to {limit} bytes", 413)
+    try:
+        return json.loads(body.decode("utf-8"))
+    except (ValueError, UnicodeDecodeError):
+        raise AnswerError("the body is not valid JSON", 400) from None
+
+
+def create_app(study: Study, store: AnswerStore, max_body: int = MAX_BODY,
+               allowed_hosts: tuple[str, ...] | None = None) -> Starlette:  # fmt: skip
+    """The web application of one study. ``allowed_hosts`` (e.g. ``LOOPBACK_NAMES``) turns
+    the Host check on."""
+    if max_body < 64:
+        raise ConfigError("--max-body must be >= 64 bytes")
+    public = study.public()
+    images = study.image_files()  # the only files served from the study folder
+    static = {name: (_static_bytes(name), kind) for name, kind in STATIC.items()}
+    index = _static_bytes("index.html")
+
+    async def page(request: Request) -> Response:
+        return Response(index, media_type="text/html; charset=utf-8",
+                        headers={"Cache-Control": "no-cache"})  # fmt: skip
+
+    async def static_file(request: Request) -> Response:
+        item = static.get(request.path_params["name"])
+        if item is None:
+            return _error("not found", 404)
+        return Response(item[0], media_type=item[1], headers={"Cache-Control": "no-cache"})
+
+    async def image(request: Request) -> Response:
+        path = images.get(request.path_params["name"])
+        if path is None or not path.is_file():
+            return _error("not found", 404)
+        return FileResponse(path, media_type="image/png",
+                            headers={"Cache-Control": "private, max-age=3600"})  # fmt: skip
+
+    async def study_info(request: Request) -> Response:
+        return JSONResponse(public)
+
+    def per_rater(action):
+        """An endpoint that runs ``action(rater)`` on the store for a checked rater id."""
+
+        async def endpoint(request: Request) -> Response:
+            try:
+                rater = check_rater(request.path_params["rater"])
+                return JSONResponse(await run_in_threadpool(action, rater))
+            except AnswerError as exc:
+                return _error(str(exc), exc.status)
+
+        return endpoint
+
+    rater_info = per_rater(store.progress)
+
+    async def answer(request: Request) -> Response:
+        p = request.path_params
+        try:
+            check_rater(p["rater"])
+            store.check_panel(p["scene"], p["panel"])
+            ratings = await _read_json(request, max_body)
+            saved = await run_in_threadpool(store.save, p["rater"], p["scene"], p["panel"],
+                                            ratings)  # fmt: skip
+        except AnswerError as exc:
+            return _error(str(exc), exc.status)
+        return JSONResponse({"saved": True, **saved})
+
+    submit = per_rater(store.submit)
+
+    async def http_error(request: Request, exc: HTTPException) -> Response:
+        return _error(exc.detail, exc.status_code)
+
+    app = Starlette(
+        routes=[
+            Route("/", page, methods=["GET"]),
+            Route("/static/{name}", static_file, methods=["GET"]),
+            Route("/images/{name}", image, methods=["GET"]),
+            Route("/api/study", study_info, methods=["GET"]),
+            Route("/api/raters/{rater}", rater_info, methods=["GET"]),
+            Route("/api/raters/{rater}/answers/{scene}/{panel}", answer, methods=["PUT"]),
+            Route("/api/raters/{rater}/submit", submit, methods=["POST"]),
+        ],
+        exception_handlers={HTTPException: http_error},
+    )
+    return _Guard(app, allowed_hosts)  # type: ignore[return-value]
+
+
+def bind(host: str, port: int) -> socket.socket:
+    """A listening socket, or a one-line ConfigError (port taken, unknown host)."""
+    try:
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        sock = socket.create_server((host, port), family=family, backlog=2048)
+    except (OSError, OverflowError) as exc:
+        raise ConfigError(f"cannot listen on {host}:{port}: {exc}") from None
+    sock.setblocking(False)
+    return sock
+
+
+def url_of(sock: socket.socket) -> str:
+    host, port = sock.getsockname()[:2]
+    return f"http://[{host}]:{port}/" if ":" in host else f"http://{host}:{port}/"
+
+
+def open_study(folder: str | Path, db: str | Path | None = None) -> tuple[Study, AnswerStore]:
+    """Check the study folder first; only then open (or create) its answers database."""
+    study = load_study(folder)
+    return study, AnswerStore(db or study.folder / DATABASE, study)
+
+
+def serve(
+    folder: str | Path,
+    host: str = "127.0.0.1",
+    port: int = 8000,
+    db: str | Path | None = None,
+    max_body: int = MAX_BODY,
+    quiet: bool = False,
+) -> None:
+    """Serve a study until interrupted; prints its address once listening. Everything a user
+    can get wrong (the folder, the manifest, the port, the database) is checked first, in
+    that order, and ends in a ConfigError or DataError before anything is written."""
+    if max_body < 64:
+        raise ConfigError("--max-body must be >= 64 bytes")
+    study = load_study(folder)
+    sock = bind(host, port)
+    try:
+        store = AnswerStore(db or study.folder / DATABASE, study)
+        try:
+            allowed = (*LOOPBACK_NAMES, host) if is_loopback(host) else None
+            app = create_app(study, store, max_body, allowed)
+            config = uvicorn.Config(app, log_level="warning" if quiet else "info",
+                                    access_log=not quiet, server_header=False)  # fmt: skip
+            note = "" if is_loopback(host) else " (not loopback: anyone who can reach it may rate)"
+            print(f"serving {study.title!r}: {len(study.scenes)} scenes, {study.num_panels} "
+                  f"panels at {url_of(sock)}{note}; answers in {store.path}; Ctrl-C to stop",
+                  flush=True)  # fmt: skip
+            uvicorn.Server(config).run(sockets=[sock])
+        finally:
+            store.close()
+    finally:
+        sock.close()
+
+
+class ServerThread:
+    """The app on a free loopback port in a background thread (tests, benchmarks)::
+
+    with ServerThread(study, store) as url: ...
+    """
+
+    def __init__(self, study: Study, store: AnswerStore, max_body: int = MAX_BODY):
+        self.sock = bind("127.0.0.1", 0)
+        self.url = url_of(self.sock)
+        app = create_app(study, store, max_body, LOOPBACK_NAMES)
+        config = uvicorn.Config(app, log_level="warning", access_log=False, lifespan="off")
+        self.server = uvicorn.Server(config)
+        self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [self.sock]},
+                                       daemon=True)  # fmt: skip
+
+    def __enter__(self) -> str:
+        self.thread.start()
+        deadline = time.monotonic() + 10
+        while not self.server.started:
+            if time.monotonic() > deadline or not self.thread.is_alive():
+                raise RuntimeError("the survey server did not start")
+            time.sleep(0.02)
+        return self.url
+
+    def __exit__(self, *exc) -> None:
+        self.server.should_exit = True
+        self.thread.join(10)
+        self.sock.close()
+
+
+@contextlib.contextmanager
+def running(folder: str | Path, db: str | Path | None = None) -> Iterator[tuple[str, AnswerStore]]:
+    """Open a study and serve it in a background thread: ``(url, store)``."""
+    study, store = open_study(folder, db)
+    try:
+        with ServerThread(study, store) as url:
+            yield url, store
+    finally:
+        store.close()

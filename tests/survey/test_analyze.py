@@ -1,0 +1,182 @@
+"""survey analyze: means, the Wilcoxon tests and their stars, agreement, the written report."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from trajpref.errors import ConfigError, DataError
+from trajpref.survey.analyze import analyze, holm, run_analysis, spearman, stars, wilcoxon
+from trajpref.survey.manifest import GROUND_TRUTH, Panel, PanelKey, Study, StudyScene
+
+ATS = {"A": (0.5, 0.3), "B": (0.2, 0.1), "C": (-0.1, -0.4)}
+"""ATS per method in scenes s1, s2; FTS is ATS - 1."""
+
+
+def _study(methods=("A", "B", "C")) -> Study:
+    scenes = []
+    for j, sid in enumerate(("s1", "s2")):
+        panels = []
+        for i, m in enumerate(methods):
+            ats = 0.0 if m == GROUND_TRUTH else ATS[m][j]
+            fts = 0.0 if m == GROUND_TRUTH else ats - 1
+            key = PanelKey(m, ats, fts, 0.0, 0.0)
+            panels.append(Panel("XYZW"[(i + j) % len(methods)], f"{sid}-{i}.png", key))
+        scenes.append(StudyScene(sid, tuple(sorted(panels, key=lambda p: p.id))))
+    return Study(
+        folder=None, title="t", instructions="", methods=tuple(methods), scenes=tuple(scenes)
+    )
+
+
+def _ratings(deficit: int) -> list[int]:
+    """Four ratings (social, kinetics in s1 and s2) summing to 20 - deficit."""
+    r = [5, 5, 5, 5]
+    for k in range(deficit):
+        r[k % 4] -= 1
+    return r
+
+
+def _rows(study: Study, raters: int = 6, gt_deficit: int | None = None) -> list[tuple]:
+    """Rater i (1..6) gives A all 5s, B a deficit of i points, C one of i + 6 points: each
+    rater's mean is 5 (A), 5 - i/4 (B), 5 - (i + 6)/4 (C)."""
+    rows = []
+    for i in range(1, raters + 1):
+        deficits = {"A": 0, "B": i, "C": i + 6, GROUND_TRUTH: gt_deficit}
+        for m in study.methods:
+            r = _ratings(deficits[m])
+            for j, scene in enumerate(study.scenes):
+                (panel,) = [p for p in scene.panels if p.key.method == m]
+                rows.append((f"r{i}", "human", scene.id, panel.id, r[2 * j], r[2 * j + 1], True))
+    return rows
+
+
+def test_means_tests_and_agreement_on_a_hand_computed_case():
+    study = _study()
+    res = analyze(study, _rows(study))
+    assert res.best == "A" and [r.method for r in res.rows] == ["A", "B", "C"]
+    a, b, c = res.rows
+    assert (a.human, a.human_sd) == (5.0, 0.0)
+    assert b.human == pytest.approx(5 - 3.5 / 4) and c.human == pytest.approx(5 - 9.5 / 4)
+    assert a.ats == pytest.approx(0.4) and a.ats_sd == pytest.approx(np.std([0.5, 0.3], ddof=1))
+    assert b.fts == pytest.approx(0.15 - 1) and a.answers == 12
+    assert res.raters == res.complete_raters == 6
+    human = {t.other: t for t in res.tests if t.column == "human"}
+    # six positive, distinct differences: W = 0 and the exact two-sided p = 2 / 2^6
+    for t in human.values():
+        assert (t.n, t.statistic, t.method) == (6, 0.0, "exact")
+        assert t.p == pytest.approx(2 / 64)
+        assert t.p_holm == pytest.approx(2 * 2 / 64) and t.mark == "ns"  # Holm over 2 tests
+    ats = [t for t in res.tests if t.column == "ats"]
+    assert len(ats) == 2 and all(t.n == 2 and t.p == pytest.approx(0.5) for t in ats)
+    # humans rank the methods as ATS and FTS do, overall and within every scene
+    for col in ("ats", "fts"):
+        m = res.agreement["methods"][col]
+        assert (m["n"], m["spearman"], m["kendall"]) == (3, pytest.approx(1.0), 1.0)
+        assert m["spearman_p"] == pytest.approx(2 / 6)  # exact: 2 of the 3! orderings
+        assert res.agreement["within_scene"][col]["kendall"] == 1.0
+        assert res.agreement["panels"][col]["n"] == 6
+        assert res.agreement["panels"][col]["spearman"] > 0.8
+    assert "| **A** | 5.00 ± 0.00 | 0.40 ± 0.14 | -0.60 ± 0.14 |" in res.table()
+    assert "| B | 4.12 ± 0.57 ns |" in res.table()  # sd of 4.5, 5, 4, 5, ..., 3, 4
+    assert not res.synthetic and "SYNTHETIC" not in res.markdown()
+
+
+def test_with_more_raters_the_difference_becomes_significant():
+    study = _study()
+    rows = _rows(study, raters=6)
+    # 12 raters: six more who repeat the first six (ties: the normal approximation)
+    rows += [(r[0] + "b", *r[1:]) for r in rows]
+    res = analyze(study, rows)
+    t = next(t for t in res.tests if t.column == "human" and t.other == "C")
+    x = np.repeat([5.0] * 6, 2)
+    y = np.tile(5 - (np.arange(1, 7) + 6) / 4, 2)
+    expected = stats.wilcoxon(x, y, method="asymptotic").pvalue
+    assert t.method == "normal approximation" and t.p == pytest.approx(expected)
+    assert t.p < 0.01 and t.mark in ("**", "*")  # Holm doubles the smaller p
+
+
+def test_the_ground_truth_is_rated_but_left_out_of_ats_tests_and_agreement():
+    study = _study(("A", "B", "C", GROUND_TRUTH))
+    res = analyze(study, _rows(study, gt_deficit=1))
+    assert res.best == "A" and res.rows[-1].method == GROUND_TRUTH
+    assert [t.other for t in res.tests if t.column == "ats"] == ["B", "C"]
+    assert [t.other for t in res.tests if t.column == "human"] == ["B", "C", GROUND_TRUTH]
+    assert res.agreement["methods"]["ats"]["n"] == 3
+    assert "| ground truth | 4.75 ± 0.26" in res.table()  # 4.5 in s1, 5 in s2
+    assert "0 (by definition)" in res.table()
+
+
+def test_partial_raters_count_in_the_means_but_not_in_the_paired_test():
+    study = _study()
+    rows = _rows(study) + [("late", "human", "s1", "X", 1, 1, False)]
+    res = analyze(study, rows)
+    assert res.raters == 7 and res.complete_raters == 6
+    assert {t.n for t in res.tests if t.column == "human"} == {6}
+
+
+def test_rater_kinds_are_chosen_and_labelled():
+    study = _study()
+    synthetic = [(r[0], "synthetic", *r[2:]) for r in _rows(study)]
+    res = analyze(study, synthetic)  # auto: no humans, so the synthetic raters
+    assert res.synthetic and res.rater_kind == "synthetic"
+    assert "SYNTHETIC RATERS" in res.markdown()
+    with pytest.raises(ConfigError, match="no answers from human raters"):
+        analyze(study, synthetic, "human")
+
+
+def test_spearman_p_is_exact_for_few_pairs_and_matches_scipy():
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=7)
+    b = a + rng.normal(size=7)
+    rho, p = spearman(a, b)
+    exact = stats.permutation_test(
+        (b,),
+        lambda y: stats.spearmanr(a, y).statistic,
+        permutation_type="pairings",
+        n_resamples=np.inf,
+    )
+    assert rho == pytest.approx(stats.spearmanr(a, b).statistic) and p == pytest.approx(
+        exact.pvalue
+    )
+    a, b = rng.normal(size=30), rng.normal(size=30)
+    assert spearman(a, b) == pytest.approx(tuple(stats.spearmanr(a, b)))
+
+
+def test_stars_and_holm():
+    assert [stars(p) for p in (0.0005, 0.005, 0.03, 0.05, 0.2, math.nan)] == [
+        "***",
+        "**",
+        "*",
+        "ns",
+        "ns",
+        "n/a",
+    ]
+    assert holm([0.01, 0.04, 0.03]) == pytest.approx([0.03, 0.06, 0.06])
+    assert holm([0.5, math.nan]) == pytest.approx([0.5, math.nan], nan_ok=True)
+    assert wilcoxon(np.ones(4), np.ones(4))[1:] == (1.0, "no differences")
+
+
+def test_run_analysis_writes_markdown_json_and_figure(synthetic_study, store):
+    from trajpref.survey.simulate import SimulateConfig, simulate
+
+    simulate(store.study, store, SimulateConfig(raters=6))
+    result, paths = run_analysis(synthetic_study)
+    assert paths["markdown"].read_text().startswith("# Human evaluation")
+    assert "SYNTHETIC" in paths["markdown"].read_text()
+    data = json.loads(paths["json"].read_text())  # strict JSON: no NaN
+    assert data["best"] == result.best and data["raters"] == 6
+    assert paths["figure"].read_bytes()[:4] == b"\x89PNG"
+
+
+def test_run_analysis_writes_nothing_for_a_corrupt_manifest_or_no_answers(synthetic_study):
+    out = synthetic_study / "report"
+    with pytest.raises(ConfigError, match="no answers yet"):
+        run_analysis(synthetic_study, out=out)
+    assert not out.exists() and not (synthetic_study / "answers.sqlite").exists()
+    manifest = synthetic_study / "manifest.json"
+    manifest.write_text(manifest.read_text()[:-40])
+    with pytest.raises(DataError, match="corrupt manifest"):
+        run_analysis(synthetic_study, out=out)
+    assert not out.exists()

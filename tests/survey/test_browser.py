@@ -1,0 +1,178 @@
+"""The rating page in headless Chromium (Debian's chromium + chromium-driver, driven by
+selenium): a rater rates every panel with clicks and with the keyboard, reloads mid-way and
+resumes, goes back and changes an answer, submits; then the SQLite file holds exactly the
+expected rows.
+
+Skipped when no browser is installed, except under CI (then it fails): `.ci/run` installs one.
+With TRAJPREF_SURVEY_SCREENSHOT=path the mid-way screenshot is also written there (that is
+how docs/survey-page.png is made).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sqlite3
+from pathlib import Path
+
+import pytest
+
+from trajpref.survey.manifest import load_study
+from trajpref.survey.server import running
+
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+DRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"
+FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--disable-dev-shm-usage",
+    "--window-size=1000,1000",
+]
+"""No GPU, no sandbox (root in a container), and nothing that would try to reach out."""
+METHODS = ("methodalpha", "methodbeta")  # as in conftest.py
+
+
+def _need_browser() -> None:
+    missing = [p for p in (CHROMIUM, DRIVER) if not Path(p).is_file()]
+    try:
+        import selenium  # noqa: F401
+    except ImportError:
+        missing.append("the selenium package")
+    if not missing:
+        return
+    message = (
+        f"headless Chromium not found ({', '.join(missing)} missing): install it with "
+        "`apt-get install -y chromium chromium-driver` and `pip install -e '.[dev]'`"
+    )
+    if os.environ.get("CI"):
+        pytest.fail(message + "; CI is set, so the browser test must run (.ci/run installs it)")
+    pytest.skip(message)
+
+
+@pytest.fixture
+def browser(tmp_path):
+    _need_browser()
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM
+    for flag in (*FLAGS, f"--user-data-dir={tmp_path / 'profile'}"):
+        options.add_argument(flag)
+    driver = webdriver.Chrome(options=options, service=Service(DRIVER))
+    driver.set_page_load_timeout(30)
+    yield driver
+    driver.quit()
+
+
+def test_rate_a_whole_study_in_the_browser(browser, tiny_study, tmp_path):
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.common.keys import Keys
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    folder = Path(shutil.copytree(tiny_study, tmp_path / "study"))
+    study = load_study(folder)
+    items = [(s.id, p.id) for s in study.scenes for p in s.panels]  # display order
+    assert len(items) == 9
+    d = browser
+    wait = WebDriverWait(d, 15)
+
+    def body(name: str) -> str:
+        return d.find_element(By.TAG_NAME, "body").get_attribute(f"data-{name}") or ""
+
+    def until(name: str, value) -> None:
+        wait.until(lambda _: body(name) == str(value), f"data-{name} never became {value}")
+
+    def click(criterion: str, value: int) -> None:
+        d.find_element(
+            By.CSS_SELECTOR, f'button.rate[data-criterion="{criterion}"][data-value="{value}"]'
+        ).click()
+
+    def keys(*k: str) -> None:
+        ActionChains(d).send_keys(*k).perform()
+
+    def selected() -> dict[str, str]:
+        return {
+            b.get_attribute("data-criterion"): b.get_attribute("data-value")
+            for b in d.find_elements(By.CSS_SELECTOR, "button.rate.selected")
+        }
+
+    expected: dict[tuple[str, str], tuple[int, int]] = {}
+    with running(folder) as (url, _store):
+        d.get(url)
+        until("view", "login")
+        d.find_element(By.ID, "rater").send_keys("judge-1")
+        d.find_element(By.ID, "start").click()
+        until("view", "rate")
+        assert d.find_element(By.ID, "progress-text").text == "0 / 9 answered"
+        # panels 1-4 with the mouse
+        for n in range(4):
+            social, kinetics = 1 + n, 5 - n
+            click("social", social)
+            click("kinetics", kinetics)  # the second rating sends the answer and moves on
+            until("answered", n + 1)
+            expected[items[n]] = (social, kinetics)
+        until("pos", 4)
+        # a reload mid-way resumes at the first open panel, from the server's record
+        d.refresh()
+        until("view", "rate")
+        until("answered", 4)
+        until("pos", 4)
+        keys(Keys.ARROW_RIGHT)  # an unanswered panel cannot be skipped
+        until("pos", 4)
+        # back with the keyboard: panel 4 shows its answer, then change it with keys 2 and 3
+        keys(Keys.ARROW_LEFT)
+        until("pos", 3)
+        assert selected() == {"social": "4", "kinetics": "2"}
+        assert d.find_element(By.ID, "progress-text").text == "4 / 9 answered"
+        d.save_screenshot(str(tmp_path / "survey-page.png"))
+        if os.environ.get("TRAJPREF_SURVEY_SCREENSHOT"):
+            shutil.copy(tmp_path / "survey-page.png", os.environ["TRAJPREF_SURVEY_SCREENSHOT"])
+        keys("2", "3")
+        until("pos", 4)
+        wait.until(lambda _: d.find_element(By.ID, "status").text == "saved")
+        expected[items[3]] = (2, 3)
+        # panels 5-9 with the keyboard
+        for n in range(4, 9):
+            social, kinetics = 1 + (n % 5), 1 + ((n + 2) % 5)
+            keys(str(social), str(kinetics))
+            until("answered", n + 1)
+            expected[items[n]] = (social, kinetics)
+        submit = d.find_element(By.ID, "submit")
+        wait.until(lambda _: submit.is_displayed())
+        page = d.page_source.lower()
+        assert not any(m in page for m in (*METHODS, "ground truth", "generator"))
+        submit.click()
+        until("view", "done")
+    with sqlite3.connect(folder / "answers.sqlite") as db:
+        rows = db.execute(
+            "SELECT rater, scene, panel, social, kinetics, revision FROM answers"
+        ).fetchall()
+        raters = db.execute("SELECT rater, kind, submitted_at IS NOT NULL FROM raters").fetchall()
+    # one row per panel; panel 4 was written three times (each change of an answered panel
+    # is saved at once: first answer, then the new social rating, then the new kinetics one)
+    assert sorted(rows) == sorted(
+        ("judge-1", s, p, *expected[(s, p)], 3 if (s, p) == items[3] else 1) for s, p in items
+    )
+    assert raters == [("judge-1", "human", 1)]
+    assert (tmp_path / "survey-page.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_without_a_browser_it_skips_with_the_install_line_but_fails_under_ci(monkeypatch):
+    import sys
+
+    module = sys.modules[__name__]
+    monkeypatch.setattr(module, "CHROMIUM", "/nonexistent/chromium")
+    monkeypatch.delenv("CI", raising=False)
+    with pytest.raises(pytest.skip.Exception, match="apt-get install -y chromium chromium-driver"):
+        _need_browser()
+    monkeypatch.setenv("CI", "1")
+    with pytest.raises(pytest.fail.Exception, match="CI is set"):
+        _need_browser()

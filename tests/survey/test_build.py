@@ -1,0 +1,192 @@
+"""survey build: the scene draw, what a panel shows and its scores, the study folder, blinding."""
+
+import hashlib
+import json
+
+import numpy as np
+import pytest
+from starlette.testclient import TestClient
+
+from trajpref.errors import ConfigError, DataError, TrajprefError
+from trajpref.survey.build import BuildConfig, build_study, select_scenes
+from trajpref.survey.manifest import GROUND_TRUTH, load_study
+from trajpref.survey.server import create_app
+from trajpref.survey.store import AnswerStore
+from trajpref.survey.study import shown_predictions
+
+METHODS = ("methodalpha", "methodbeta")  # as in conftest.py: never to reach the page
+
+
+def test_select_scenes_is_seeded_and_stratified_by_size():
+    sizes = np.array([1] * 40 + [2] * 30 + [3] * 20 + [5] * 10 + [12] * 5)  # [105]
+    a = select_scenes(sizes, 9, seed=3, strata=3, max_agents=8)
+    assert a == select_scenes(sizes, 9, seed=3, strata=3, max_agents=8)
+    assert a != select_scenes(sizes, 9, seed=4, strata=3, max_agents=8)
+    idx = [i for i, _ in a]
+    assert len(set(idx)) == 9 and all(sizes[i] <= 8 for i in idx)  # 12-agent scenes excluded
+    # strata cut the eligible sizes {1: 40, 2: 30, 3: 20, 5: 10} by share: 1 | 2 | 3 and 5
+    strata = {g: sorted({int(sizes[i]) for i, s in a if s == g}) for g in range(3)}
+    assert strata[0] == [1] and strata[1] == [2] and set(strata[2]) <= {3, 5}
+    assert [sum(s == g for _, s in a) for g in range(3)] == [3, 3, 3]  # equal allocation
+
+
+def test_select_scenes_keeps_the_gap_and_says_when_it_cannot():
+    sizes = np.full(100, 2)
+    picks = [i for i, _ in select_scenes(sizes, 4, seed=0, min_gap=20)]
+    assert all(abs(a - b) >= 20 for a in picks for b in picks if a != b)
+    with pytest.raises(ConfigError, match="min-gap"):
+        select_scenes(sizes, 6, seed=0, min_gap=20)  # at most 5 fit in 100 positions
+    with pytest.raises(ConfigError, match="only 100 scenes"):
+        select_scenes(sizes, 101)
+    with pytest.raises(ConfigError, match="agents"):
+        select_scenes(sizes, 1, min_agents=3)
+
+
+def test_shown_predictions_picks_each_agents_top_samples_and_scores_them():
+    # K = 3 samples, P = 2 agents, T_f = 2 steps
+    pred = np.zeros((3, 2, 2, 2))
+    pred[:, :, :, 0] = np.arange(3)[:, None, None]  # sample k is k metres off in x
+    future = np.zeros((2, 2, 2))
+    d_gt = np.ones((2, 2))  # [P, T_f]
+    d_pred = np.array([[[2, 2], [1, 1]], [[1, 1], [4, 4]], [[3, 3], [2, 2]]], float)  # [K,P,T]
+    s = shown_predictions(pred, d_pred, d_gt, future, top=2)
+    # agent 0: residual sums 4, 2, 6 -> best samples 1 then 0; agent 1: 2, 8, 4 -> 0 then 2
+    assert [(e["agent"], e["sample"], e["rank"]) for e in s.shown] == [
+        (0, 1, 0),
+        (0, 0, 1),
+        (1, 0, 0),
+        (1, 2, 1),
+    ]
+    assert s.shown[0]["ats"] == pytest.approx(1 - 2 / 2)  # agent ATS = 1 - sum d / sum d_gt
+    # panel ATS: the shown residuals (2 + 4 + 2 + 4 = 12) over R = 2 times the truth's (4)
+    assert s.ats == pytest.approx(1 - 12 / (2 * 4))
+    assert s.fts == pytest.approx(1 - (1 + 2 + 1 + 2) / (2 * 2))
+    assert s.ade == pytest.approx(np.mean([1, 0, 0, 2]))  # samples 1, 0, 0, 2 are k m off
+    assert s.max_ats == pytest.approx(1 - 6 / 4)  # sample 0: sum 2+2+1+1 = 6
+    assert s.paths.shape == (2, 2, 2, 2) and s.weights.shape == (2, 2)
+    assert s.weights.max() <= 1 and s.weights[0, 0] == 1  # the best is darkest
+
+
+def test_build_writes_a_blinded_study_whose_key_names_every_method(tiny_study):
+    study = load_study(tiny_study)
+    assert len(study.scenes) == 3 and study.methods == (GROUND_TRUTH, *METHODS)
+    for scene in study.scenes:
+        assert sorted(p.key.method for p in scene.panels) == sorted(study.methods)
+        assert [p.id for p in scene.panels] == ["A", "B", "C"]
+        for p in scene.panels:
+            assert (tiny_study / "images" / p.image).read_bytes()[:4] == b"\x89PNG"
+            assert p.image == f"{scene.id}-{p.id}.png"  # the file name says nothing either
+            if p.key.method == GROUND_TRUTH:
+                assert p.key.ats == 0 and p.key.ade == 0
+            else:
+                assert len(p.key.shown) == 2 * scene.agents  # top-2 per agent
+                assert np.isfinite([p.key.ats, p.key.fts, p.key.max_ats]).all()
+    manifest = json.loads((tiny_study / "manifest.json").read_text())
+    assert manifest["build"]["scorer"].endswith("generator.safetensors")  # the first checkpoint
+
+
+def test_build_is_deterministic_under_a_seed(tiny_run, walks, tiny_study, tmp_path):
+    cfg = BuildConfig(
+        dataset=str(walks),
+        units="m",
+        scenes=3,
+        samples=4,
+        min_gap=0,
+        device="cpu",
+        models={METHODS[0]: "cv", METHODS[1]: str(tiny_run / "generator.safetensors")},
+    )
+    again = build_study(cfg, tmp_path / "again", progress=False)
+    first = load_study(tiny_study)
+    assert again.study_id == first.study_id  # same scenes, panels and hidden key
+    assert [s.index for s in again.scenes] == [s.index for s in first.scenes]
+    for a, b in zip(again.scenes, first.scenes, strict=True):
+        assert [p.key for p in a.panels] == [p.key for p in b.panels]
+    digest = lambda f: hashlib.sha256(f.read_bytes()).hexdigest()  # noqa: E731
+    assert {f.name: digest(f) for f in (tmp_path / "again" / "images").iterdir()} == {
+        f.name: digest(f) for f in (tiny_study / "images").iterdir()
+    }
+    other = build_study(BuildConfig(**{**cfg.__dict__, "seed": 1}), tmp_path / "s1", False)
+    assert other.study_id != first.study_id
+
+
+def _png_text(data: bytes) -> bytes:
+    """The text chunks (tEXt, zTXt, iTXt) of a PNG: where a name could hide in an image."""
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    out, pos = b"", 8
+    while pos < len(data):
+        length = int.from_bytes(data[pos : pos + 4], "big")
+        kind = data[pos + 4 : pos + 8]
+        if kind in (b"tEXt", b"zTXt", b"iTXt"):
+            out += data[pos + 8 : pos + 8 + length]
+        pos += 12 + length
+    return out
+
+
+def test_the_served_page_never_names_a_method(tiny_study, tmp_path):
+    study = load_study(tiny_study)
+    store = AnswerStore(tmp_path / "a.sqlite", study)
+    client = TestClient(create_app(study, store))
+    bodies = [
+        client.get(u).content
+        for u in ("/", "/static/app.js", "/static/style.css", "/api/study", "/api/raters/r1")
+    ]
+    images = [client.get(f"/images/{name}") for name in study.image_files()]
+    assert len(images) == 9 and all(r.status_code == 200 for r in images)
+    bodies += [_png_text(r.content) for r in images]
+    for body in bodies:
+        for name in (*METHODS, GROUND_TRUTH, "generator", "safetensors", "truth"):
+            assert name.encode() not in body.lower()
+    public = client.get("/api/study").json()
+    assert [p["id"] for p in public["scenes"][0]["panels"]] == ["A", "B", "C"]
+    assert set(public["scenes"][0]) == {"id", "reference", "panels"}
+    store.close()
+
+
+def test_build_refuses_to_overwrite_and_leaves_nothing_on_failure(
+    tiny_study, tiny_run, walks, tmp_path
+):
+    cfg = BuildConfig(
+        dataset=str(walks),
+        models={"a": "cv"},
+        scorer="missing.safetensors",
+        min_gap=0,
+        scenes=2,
+        device="cpu",
+    )
+    with pytest.raises(ConfigError, match="already exists"):
+        build_study(cfg, tiny_study, progress=False)
+    with pytest.raises(TrajprefError):
+        build_study(cfg, tmp_path / "new", progress=False)  # no such scorer
+    assert not (tmp_path / "new").exists() and list(tmp_path.iterdir()) == []
+    with pytest.raises(ConfigError, match="--scorer"):
+        build_study(BuildConfig(**{**cfg.__dict__, "scorer": None}), tmp_path / "n", False)
+    with pytest.raises(DataError):
+        build_study(
+            BuildConfig(
+                **{
+                    **cfg.__dict__,
+                    "dataset": str(tmp_path / "nothing"),
+                    "scorer": str(tiny_run / "denoiser.safetensors"),
+                }
+            ),
+            tmp_path / "n",
+            False,
+        )
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"models": {}}, "at least one"),
+        ({"models": {"ground truth": "cv"}}, "reserved"),
+        ({"models": {"a/b": "cv"}}, "bad method name"),
+        ({"top": 5, "samples": 4}, "exceeds"),
+        ({"scenes": 0}, "scenes"),
+        ({"max_agents": 0}, "max-agents"),
+        ({"ground_truth": "hidden"}, "ground-truth"),
+    ],
+)
+def test_build_config_checks_its_values(change, message):
+    with pytest.raises(ConfigError, match=message):
+        BuildConfig(**{"dataset": "zara1", "models": {"a": "cv"}, **change})

@@ -1,0 +1,61 @@
+"""survey simulate: synthetic raters, labelled as such, seeded, and following the error."""
+
+import sqlite3
+
+import numpy as np
+import pytest
+
+from trajpref.errors import ConfigError
+from trajpref.survey.manifest import GROUND_TRUTH
+from trajpref.survey.simulate import SimulateConfig, simulate
+
+
+def _answers(path):
+    with sqlite3.connect(path) as db:
+        return db.execute(
+            "SELECT a.rater, r.kind, r.submitted_at IS NOT NULL, a.scene, a.panel, "
+            "a.social, a.kinetics FROM answers a JOIN raters r USING (rater) "
+            "ORDER BY 1, 4, 5"
+        ).fetchall()
+
+
+def test_every_synthetic_rater_answers_every_panel_and_is_labelled(store):
+    ids = simulate(store.study, store, SimulateConfig(raters=5, seed=1))
+    assert ids == [f"synthetic-0{i}" for i in range(1, 6)]
+    rows = _answers(store.path)
+    assert len(rows) == 5 * 9
+    assert {r[1] for r in rows} == {"synthetic"} and all(r[2] for r in rows)
+    assert all(1 <= r[5] <= 5 and 1 <= r[6] <= 5 for r in rows)
+
+
+def test_simulation_is_seeded(store, synthetic_study, tmp_path):
+    from trajpref.survey.manifest import load_study
+    from trajpref.survey.store import AnswerStore
+
+    simulate(store.study, store, SimulateConfig(raters=3, seed=7))
+    other = AnswerStore(tmp_path / "b.sqlite", load_study(synthetic_study))
+    simulate(other.study, other, SimulateConfig(raters=3, seed=7))
+    assert [r[3:] for r in _answers(store.path)] == [r[3:] for r in _answers(other.path)]
+    other.close()
+
+
+def test_synthetic_raters_prefer_small_errors(store):
+    simulate(store.study, store, SimulateConfig(raters=30, seed=0))
+    method = {(s.id, p.id): p.key.method for s in store.study.scenes for p in s.panels}
+    score: dict[str, list[float]] = {}
+    for _, _, _, scene, panel, social, kinetics in _answers(store.path):
+        score.setdefault(method[(scene, panel)], []).append((social + kinetics) / 2)
+    mean = {m: np.mean(v) for m, v in score.items()}
+    # the synthetic study's second method has twice the noise of the first
+    assert mean[GROUND_TRUTH] > mean["methodalpha"] > mean["methodbeta"]
+
+
+def test_simulate_refuses_existing_ids_and_bad_settings(store):
+    simulate(store.study, store, SimulateConfig(raters=2))
+    with pytest.raises(ConfigError, match="already exist"):
+        simulate(store.study, store, SimulateConfig(raters=3))
+    assert len(simulate(store.study, store, SimulateConfig(raters=2, prefix="more"))) == 2
+    with pytest.raises(ConfigError, match="raters"):
+        SimulateConfig(raters=0)
+    with pytest.raises(ConfigError, match="prefix"):
+        SimulateConfig(prefix="a b")
