@@ -38,6 +38,7 @@ def main() -> None:
             ms = 1000 * (time.perf_counter() - start) / len(ds)
             row = make_row(
                 dataset=name, split="test", method="cv", seed=args.seed, samples=k,
+                uses_score=False,
                 ms_per_scene=round(ms, 4),
                 **{key: res[key] for key in ("min_ade", "min_fde", "joint_min_ade",
                                              "joint_min_fde")},

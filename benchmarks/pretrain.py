@@ -147,6 +147,7 @@ def main() -> None:
             joint_min_ade=res["joint_min_ade"], joint_min_fde=res["joint_min_fde"],
             train_seconds=round(secs, 1) if secs is not None else None,
             ms_per_scene=round(ms, 3),
+            uses_score=False,
             checkpoint=str(published.relative_to(ROOT)),
         ))  # fmt: skip
         print(f"{args.dataset} {method:>12}: minADE {res['min_ade']:.3f} minFDE "

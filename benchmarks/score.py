@@ -122,6 +122,7 @@ def main() -> None:
             samples=args.samples, **{k: res[k] for k in (
                 "min_ade", "min_fde", "joint_min_ade", "joint_min_fde", "max_ats", "max_fts",
                 "top1_recall_ats", "top5_recall_ats")},
+            uses_score=False,
             checkpoint=None if method == "cv" else str(gen_path.relative_to(ROOT)),
         ))  # fmt: skip
         extra["methods"][method] = res

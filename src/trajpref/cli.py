@@ -22,7 +22,8 @@ from trajpref.evaluation import evaluate, predict_dataset
 from trajpref.io import atomic_path, write_json
 from trajpref.models.registry import load_predictor
 from trajpref.rl.presets import finetune_config
-from trajpref.score import TrajectoryScorer
+from trajpref.score import TrajectoryScorer, score_timesteps
+from trajpref.score.selection import METHODS, SelectingPredictor, SelectionConfig
 from trajpref.survey.cli import add_parser as add_survey_parser
 from trajpref.train.run import finetune, train_stage
 from trajpref.types import collate
@@ -54,6 +55,8 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
         help="diffusion checkpoints: leapfrog (generator + tau denoising steps; the default for a "
         "generator) or full (all S steps from noise; the default for a bare denoiser)",
     )
+    p.add_argument("--deterministic", action="store_true",
+                   help="diffusion models: no ancestral noise in the denoising steps")  # fmt: skip
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     p.add_argument("--max-agents", type=int, default=1024,
                    help="agents per batch (default 1024; lower it to save memory)")  # fmt: skip
@@ -62,6 +65,21 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
 
 def _add_scorer_arg(p: argparse.ArgumentParser, what: str) -> None:
     p.add_argument("--scorer", default=None, help=f"a denoiser (or generator) checkpoint: {what}")
+
+
+def _add_selection_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--keep", type=int, default=None, metavar="K'",
+                   help="keep K' of the --samples futures (default: keep all)")  # fmt: skip
+    p.add_argument("--select", default="score-fps", choices=METHODS,
+                   help="how to keep them (default score-fps: drop the worst-scored, then "
+                   "farthest-point on the endpoints); score-* and top use the diffusion "
+                   "score of --scorer or the model's own denoiser")  # fmt: skip
+    p.add_argument("--drop", type=float, default=0.4,
+                   help="score-* selections: the fraction dropped first (0.4)")  # fmt: skip
+    p.add_argument("--select-per", default="agent", choices=["agent", "scene"],
+                   help="per agent, or one set of indices per scene (joint metrics)")  # fmt: skip
+    p.add_argument("--score-every", type=int, default=9,
+                   help="selection's score steps: every this many of the S (9)")  # fmt: skip
 
 
 def _add_run_args(p: argparse.ArgumentParser, example: str, last: str) -> None:
@@ -104,6 +122,7 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--out", default=None, help="also write the JSON result to this file")
     _add_scorer_arg(ev, "adds max_ats, max_fts and the top-1/top-5 recall of the "
                     "ground-truth-free ranking")  # fmt: skip
+    _add_selection_args(ev)
     ev.set_defaults(func=cmd_evaluate)
 
     pr = sub.add_parser("predict", help="save sampled futures of a split to .npz")
@@ -118,6 +137,7 @@ def build_parser() -> argparse.ArgumentParser:
         "ground truth used); saves `order` and `residual` [K, B] too",
     )
     _add_scorer_arg(pr, "the denoiser that ranks (default: the model's own)")
+    _add_selection_args(pr)
     pr.set_defaults(func=cmd_predict)
 
     pl = sub.add_parser("plot", help="PNG of one scene: histories, ground truth, samples")
@@ -209,20 +229,49 @@ def cmd_data_stats(args) -> int:
 def _predictor(args):
     _check_model_args(args)
     device = resolve_device(args.device)
-    return load_predictor(args.model, device, args.sampler), device
+    model = load_predictor(args.model, device, args.sampler)
+    if args.deterministic:
+        if not hasattr(model, "stochastic"):
+            raise ConfigError("--deterministic applies to diffusion checkpoints only")
+        model.stochastic = False
+    return model, device
 
 
 def _scorer(path: str, device):
     return TrajectoryScorer.from_checkpoint(path, device)
 
 
+def _selecting(args, model, device):
+    """The model, wrapped to keep --keep of its --samples futures when asked, and the number
+    of futures it returns."""
+    if args.keep is None:
+        return model, args.samples
+    cfg = SelectionConfig(keep=args.keep, method=args.select, drop=args.drop,
+                          per=args.select_per, seed=args.seed)  # fmt: skip
+    scorer = None
+    if cfg.uses_score:
+        if args.scorer is None and args.model == "cv":
+            raise ConfigError(f"--select {args.select} with --model cv needs --scorer")
+        every = TrajectoryScorer.from_checkpoint(args.scorer or args.model, device)
+        steps = score_timesteps(every.schedule.num_steps, args.score_every)
+        scorer = TrajectoryScorer(every.denoiser, every.schedule, every.scale, steps)
+    return SelectingPredictor(model, cfg, args.samples, scorer), args.keep
+
+
+def _selection_fields(args) -> dict:
+    if args.keep is None:
+        return {}
+    return {"candidates": args.samples, "select": args.select, "select_per": args.select_per}
+
+
 def cmd_evaluate(args) -> int:
     model, device = _predictor(args)
     scorer = _scorer(args.scorer, device) if args.scorer else None
+    model, samples = _selecting(args, model, device)
     ds = _load(args)
     start = time.perf_counter()
     result = evaluate(
-        model, ds, args.samples, args.seed, device, args.max_agents,
+        model, ds, samples, args.seed, device, args.max_agents,
         progress=not args.no_progress, scorer=scorer,
     )  # fmt: skip
     seconds = time.perf_counter() - start
@@ -230,8 +279,9 @@ def cmd_evaluate(args) -> int:
         "dataset": ds.info.name,
         "split": ds.info.split,
         "model": args.model,
-        "samples": args.samples,
+        "samples": samples,
         "seed": args.seed,
+        **_selection_fields(args),
         **result,
         "units": ds.info.units,
         "seconds": round(seconds, 3),
@@ -242,8 +292,9 @@ def cmd_evaluate(args) -> int:
         print(json.dumps(out))
     else:
         print(
-            f"{ds.info.name}/{ds.info.split}  model={args.model}  K={args.samples}  "
+            f"{ds.info.name}/{ds.info.split}  model={args.model}  K={samples}  "
             f"({out['agents']} agents, {out['scenes']} scenes, units {ds.info.units})"
+            + ("" if args.keep is None else f", kept by {args.select} of {args.samples}")
         )
         print(
             f"  minADE {out['min_ade']:.4f}  minFDE {out['min_fde']:.4f}   "
@@ -261,9 +312,10 @@ def cmd_predict(args) -> int:
         if args.scorer is None and args.model in ("cv",):
             raise TrajprefError("--rank with --model cv needs --scorer CHECKPOINT")
         scorer = _scorer(args.scorer or args.model, device)
+    model, samples = _selecting(args, model, device)
     ds = _load(args)
     arrays = predict_dataset(
-        model, ds, args.samples, args.seed, device, args.max_agents,
+        model, ds, samples, args.seed, device, args.max_agents,
         progress=not args.no_progress, scorer=scorer,
     )  # fmt: skip
     with atomic_path(args.out) as tmp:
@@ -273,7 +325,7 @@ def cmd_predict(args) -> int:
         "out": args.out,
         "agents": int(arrays["future"].shape[0]),
         "scenes": len(ds),
-        "samples": args.samples,
+        "samples": samples,
         "pred_shape": list(arrays["pred"].shape),
     }
     print(

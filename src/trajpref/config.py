@@ -101,6 +101,9 @@ class ModelConfig:
     """K, the samples the generator emits per agent (its heads' output size)."""
     tau: int = 5
     """Denoising steps the leapfrog sampler applies to the generator's output Y^tau."""
+    stochastic_steps: bool = True
+    """Add the ancestral DDPM noise in the tau denoising steps (false: each step is the
+    posterior mean, deterministic given Y^tau; measured in docs/pretraining.md)."""
 
     def __post_init__(self) -> None:
         _positive(self, "hidden", "encoder_layers", "heads", "denoiser_width", "denoiser_blocks",
@@ -118,7 +121,7 @@ class ModelConfig:
         return dataclasses.replace(self, **{k: getattr(ModelConfig, k) for k in GENERATOR_ONLY})
 
 
-GENERATOR_ONLY = ("generator_width", "samples", "tau")
+GENERATOR_ONLY = ("generator_width", "samples", "tau", "stochastic_steps")
 """``ModelConfig`` fields that concern the generator and its sampler, not the denoiser."""
 
 
@@ -248,6 +251,15 @@ class FinetuneConfig(OptimConfig):
     """Eq. 15's ratio p_theta / p_0 against the frozen ``reference`` (as printed; a trust
     region around G_0), or against the ``rollout`` policy (standard PPO: p_theta / p_old)."""
 
+    ppo_epochs: int = 1
+    """Update epochs on each collected rollout (TRL's ``ppo_epochs``). With 1, the update
+    reuses the rollout's own graph and a ``rollout`` ratio is identically 1 (REINFORCE with
+    a baseline); with more, the rollout is collected without gradients and re-evaluated, so
+    the ratio and its clip act."""
+    reg_on: Literal["explored", "clean"] = "clean"
+    """L_reg on a ``clean`` rollout of the policy (no exploration noise), or on the
+    ``explored`` rollout the reward scored (before 2026-11-23 the only behaviour; needs
+    ppo_epochs = 1)."""
     baseline: Literal["critic", "antithetic"] = "critic"
     """What the policy gradient's advantage subtracts from the reward: ``critic`` (Eq. 14,
     R + gamma V' - V) or ``antithetic`` (``sample`` likelihood only): each sample is also
@@ -260,7 +272,9 @@ class FinetuneConfig(OptimConfig):
         _check_choices(self)
         if self.baseline == "antithetic" and self.likelihood != "sample":
             raise ConfigError("finetune.baseline=antithetic needs finetune.likelihood=sample")
-        _positive(self, "explore_std")
+        _positive(self, "explore_std", "ppo_epochs")
+        if self.reg_on == "explored" and self.ppo_epochs > 1:
+            raise ConfigError("finetune.reg_on=explored needs finetune.ppo_epochs=1")
         if not 0 <= self.gamma <= 1 or not 0 <= self.gae_lambda <= 1:
             raise ConfigError("finetune.gamma and gae_lambda must lie in [0, 1]")
         if self.reward_clip is not None and self.reward_clip <= 0:

@@ -18,9 +18,10 @@ from trajpref.io import write_json
 FIELDS = (
     "dataset", "split", "method", "seed", "samples", "min_ade", "min_fde", "joint_min_ade",
     "joint_min_fde", "max_ats", "max_fts", "top1_recall_ats", "top5_recall_ats",
-    "train_seconds", "ms_per_scene", "checkpoint", "command", "date", "machine",
+    "train_seconds", "ms_per_scene", "checkpoint", "command", "date", "machine", "uses_score",
 )  # fmt: skip
-"""Every row has exactly these keys (null where not measured)."""
+"""Every row has exactly these keys (null where not measured). ``uses_score``: whether the
+diffusion score took part (in training or in selecting the samples)."""
 
 METHODS = ("cv", "full-sampler", "pretrained", "pretrained-long", "rlhf", "rlhf-res")
 """Known methods, in the order tables list them."""
@@ -122,6 +123,39 @@ def accuracy_table(rows: list[dict[str, Any]], split: str = "test") -> str:
         recall = f"{vals[6]} / {vals[7]}" if vals[6] != "–" else "–"
         lines.append(f"| {key[0]} | {key[1]} | {key[2]} | {len(g)} | "
                      + " | ".join(vals[:6]) + f" | {recall} |")  # fmt: skip
+    return "\n".join(lines)
+
+
+def selection_table(rows: list[dict[str, Any]], split: str = "test") -> str:
+    """Markdown table of the ``select-*`` rows: per dataset and K', minFDE_K' of the
+    score-free selections, the best of them, the score-using selection and the change."""
+    sel = [r for r in merge_rows(rows) if r["split"] == split and r["method"].startswith("select-")]
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for r in sel:
+        groups.setdefault((r["dataset"], r["samples"]), []).append(r)
+    free_cols = ("first", "random", "kmeans", "fps", "facility")
+    lines = [
+        "| dataset | K' | " + " | ".join(free_cols) + " | best without score | with the score "
+        "| change | joint minFDE, without / with | ms/scene (score + select) |",
+        "|---|---|" + "---|" * len(free_cols) + "---|---|---|---|---|",
+    ]
+    for (dataset, keep), g in sorted(groups.items()):
+        by_name = {r["method"].removeprefix("select-"): r for r in g}
+        free = [r for r in g if not r["uses_score"]]
+        scored = [r for r in g if r["uses_score"]]
+        if not free or not scored:
+            continue
+        best_free = min(free, key=lambda r: r["min_fde"])
+        best = min(scored, key=lambda r: r["min_fde"])
+        change = 100 * (best["min_fde"] / best_free["min_fde"] - 1)
+        cells = [_fmt(by_name[c]["min_fde"]) if c in by_name else "–" for c in free_cols]
+        lines.append(
+            f"| {dataset} | {keep} | " + " | ".join(cells)
+            + f" | {_fmt(best_free['min_fde'])} | {_fmt(best['min_fde'])} "
+            f"(`{best['method'].removeprefix('select-')}`) | {change:+.1f} % "
+            f"| {_fmt(best_free['joint_min_fde'])} / {_fmt(best['joint_min_fde'])} "
+            f"| {_fmt(best['ms_per_scene'], 1)} |"
+        )  # fmt: skip
     return "\n".join(lines)
 
 

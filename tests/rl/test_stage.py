@@ -140,3 +140,45 @@ def test_antithetic_steps_move_the_policy_and_keep_the_reference(tiny_run, walks
         assert all(torch.equal(ref[k], v) for k, v in obj.reference.state_dict().items())
         assert any(not torch.equal(pol[k], v) for k, v in obj.policy.state_dict().items())
         assert torch.isfinite(loss) and logs["kl_div"] == 0.0
+
+
+def test_ppo_epochs_move_the_ratio_away_from_one_and_clip(tiny_run, walks):
+    """Several update epochs on one collected rollout: the first sees ratio 1 (nothing
+    clipped, approx-KL 0), later ones a moved policy (ratio != 1, some ratios clipped)."""
+    start = ckpt.load(tiny_run / "generator.safetensors")
+    train = load_dataset(str(walks), "train")
+    cfg = _cfg(start, "finetune.ppo_epochs=4", "finetune.ratio_against=rollout",
+               "finetune.likelihood=sample", "finetune.explore_std=0.05",
+               "finetune.policy_weight=1", "finetune.clip=0.05")  # fmt: skip
+    stage = build_finetune_stage(cfg, start, train, torch.device("cpu"))
+    assert stage.updates == 4 and stage.collect is not None
+    obj = stage.objective
+    batch = collate(train.scenes[:6])
+    gen = torch.Generator().manual_seed(0)
+    memo = stage.collect(batch, gen)
+    opt = torch.optim.SGD(stage.trainable.parameters(), lr=0.5)
+    seen = []
+    for _ in range(4):
+        loss, logs = obj(batch, gen, memo)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        seen.append((logs["approx_kl"], logs["clip_fraction"]))
+    assert seen[0] == (0.0, 0.0)  # the rollout policy itself
+    assert any(kl > 0 for kl, _ in seen[1:])
+    assert any(frac > 0 for _, frac in seen[1:])
+
+
+def test_clean_l_reg_ignores_the_exploration(tiny_run, walks):
+    """reg_on=clean: L_reg does not depend on the exploration noise's size."""
+    start = ckpt.load(tiny_run / "generator.safetensors")
+    train = load_dataset(str(walks), "train")
+    batch = collate(train.scenes[:4])
+    reg = {}
+    for on in ("clean", "explored"):
+        for std in (0.01, 1.0):
+            cfg = _cfg(start, f"finetune.reg_on={on}", f"finetune.explore_std={std}")
+            obj = build_finetune_stage(cfg, start, train, torch.device("cpu")).objective
+            reg[on, std] = obj(batch, torch.Generator().manual_seed(0))[1]["reg_loss"]
+    assert reg["clean", 0.01] == pytest.approx(reg["clean", 1.0], rel=1e-6)
+    assert reg["explored", 1.0] > reg["explored", 0.01]

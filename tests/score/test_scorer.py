@@ -6,6 +6,8 @@ from synthetic import make_scene
 
 from trajpref.cli import main
 from trajpref.data import load_dataset
+from trajpref.data.transforms import to_model_frame
+from trajpref.models.encoder import scene_features
 from trajpref.score import TrajectoryScorer, rank_samples, score_timesteps
 from trajpref.types import collate
 
@@ -72,9 +74,18 @@ def test_shapes_and_scene_masks_in_a_mixed_batch(scorer):
     # the first scene scored alone gives the same residuals: no agent sees another scene
     alone = scorer.residual(collate(scenes[:1]), pred[:, :3])
     torch.testing.assert_close(alone, res.d_pred[:, :3], atol=1e-5, rtol=1e-4)
-    # the chunked path (tiny row budget) agrees with the one-shot path
-    small = TrajectoryScorer(scorer.denoiser, scorer.schedule, scorer.scale, max_rows=50)
-    torch.testing.assert_close(small.residual(batch, pred), res.d_pred, atol=1e-5, rtol=1e-5)
+    # Eq. 5 written out with one step per row (the denoiser's per-element path) agrees with
+    # the scorer's step-by-step evaluation
+    context = scorer.denoiser.context(scene_features(batch, scorer.scale))  # [N, H]
+    y = to_model_frame(pred, batch, scorer.scale)  # [K, N, T_f, 2]
+    n, s_count = batch.num_agents, len(scorer.steps)
+    z = torch.randn((n, s_count, 1, 12, 2), generator=torch.Generator().manual_seed(scorer.seed))
+    z = z.permute(1, 2, 0, 3, 4)  # [S', 1, N, T_f, 2]
+    steps = torch.tensor(scorer.steps)[:, None, None].expand(-1, 4, n)  # [S', K, N]
+    y_s = scorer.schedule.add_noise(y[None].expand(s_count, -1, -1, -1, -1), z, steps)
+    eps = scorer.denoiser(y_s, steps, context)  # [S', K, N, T_f, 2]
+    by_hand = (eps - z).pow(2).sum(-1).mean(0)  # [K, N, T_f]
+    torch.testing.assert_close(res.d_pred, by_hand, atol=1e-5, rtol=1e-4)
 
 
 def test_near_ground_truth_outranks_a_far_sample(scorer, batch):

@@ -17,16 +17,19 @@ def denoise(
     sample: torch.Tensor,
     start: int,
     generator: torch.Generator | None = None,
+    stochastic: bool = True,
 ) -> torch.Tensor:
     """Run ancestral steps ``start-1, ..., 0`` from ``sample`` (Eq. 3).
 
     ``start = tau`` is the leapfrog sampler (the generator's Y^tau enters at step tau - 1 and
     is denoised tau times); ``start = S`` from Gaussian noise is the full (MID-style) sampler.
+    With ``stochastic=False`` each step returns the posterior mean (no noise is drawn).
     Differentiable in ``sample`` (the generator stage backpropagates through it).
     """
     y = sample
     for s in schedule.timesteps(start):
-        y = schedule.step(eps_fn(y, s), s, y, generator=generator).prev_sample
+        noise = None if stochastic else torch.zeros_like(y)
+        y = schedule.step(eps_fn(y, s), s, y, generator=generator, noise=noise).prev_sample
     return y
 
 

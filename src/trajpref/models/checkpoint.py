@@ -300,7 +300,7 @@ def predictor_from_payload(payload: dict[str, Any], sampler: Sampler | None = No
     sampler = sampler or ("leapfrog" if generator is not None else "full")
     schedule = DDPMSchedule.from_config(cfg.diffusion)
     return DiffusionPredictor(denoiser, schedule, payload["scale"], generator, cfg.model.tau,
-                              sampler)  # fmt: skip
+                              sampler, cfg.model.stochastic_steps)  # fmt: skip
 
 
 def load_predictor(path: str | Path, sampler: Sampler | None = None, device: Any = "cpu"):

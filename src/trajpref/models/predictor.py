@@ -69,6 +69,7 @@ class DiffusionPredictor(nn.Module):
         generator: Generator | None = None,
         tau: int = 5,
         sampler: Sampler = "leapfrog",
+        stochastic: bool = True,
     ):
         super().__init__()
         if sampler not in SAMPLERS:
@@ -83,6 +84,7 @@ class DiffusionPredictor(nn.Module):
         self.generator = generator
         self.tau = tau
         self.sampler = sampler
+        self.stochastic = stochastic
         self.name = f"diffusion-{sampler}"
 
     @property
@@ -100,9 +102,9 @@ class DiffusionPredictor(nn.Module):
         self, cond: Condition, y_tau: torch.Tensor, generator: torch.Generator | None = None
     ) -> torch.Tensor:
         """tau ancestral steps of the denoiser from y_tau [K, N, T_f, 2] (differentiable in
-        y_tau)."""
+        y_tau); without noise when the predictor is not ``stochastic``."""
         return denoise(self.schedule, lambda y, s: self.denoiser(y, s, cond.context), y_tau,
-                       self.tau, generator)  # fmt: skip
+                       self.tau, generator, self.stochastic)  # fmt: skip
 
     def rollout(
         self,

@@ -22,7 +22,7 @@ from trajpref.data.transforms import to_model_frame
 from trajpref.metrics import scene_sum
 from trajpref.models.critic import Critic
 from trajpref.models.losses import generator_loss
-from trajpref.models.predictor import DiffusionPredictor, Rollout
+from trajpref.models.predictor import Condition, DiffusionPredictor, Rollout
 from trajpref.rl import ppo
 from trajpref.score.scorer import TrajectoryScorer, score_timesteps
 from trajpref.types import Batch
@@ -58,12 +58,41 @@ class Actions:
     """Eq. 12 under the frozen reference."""
     action: torch.Tensor
     """[K, N, T_f, 2] the denoised samples (detached): what is scored."""
+    chosen: torch.Tensor
+    """[K, N, T_f, 2] what Eq. 12's density is evaluated at (detached): the explored initial
+    sample (``sample`` likelihood) or the denoised sample (``mean``)."""
     score: torch.Tensor | None = None
     """r, the clipped per-step diffusion score (Eq. 6)."""
     div: torch.Tensor | None = None
     """The KL penalty (Eq. 13)."""
     reward: torch.Tensor | None = None
     """R = r - div."""
+
+
+@dataclass
+class Memo:
+    """A collected rollout: what the update epochs on it share."""
+
+    cond: Condition
+    """The batch's features and the denoiser's context."""
+    target: torch.Tensor
+    """[N, T_f, 2] the ground truth in the networks' frame (L_reg's target)."""
+    acts: list[Actions]
+    """The policy's actions (and the antithetic twin's), with their rewards."""
+    policy: Rollout | None
+    """The policy rollout with its graph (one update on it), or None (re-evaluate)."""
+    values: torch.Tensor | None
+    """[K, N, T_f] V with its graph (with ``policy``), or None."""
+    select: Callable[[torch.Tensor], torch.Tensor]
+    """All K samples (RLHF) or each scene's k* (RLHF-ReS)."""
+    adv: torch.Tensor
+    """Selected advantages, the twin's (-A) appended."""
+    v_target: torch.Tensor
+    """Selected value targets."""
+    values_ref: torch.Tensor
+    """Selected V_0 of the reference prediction (Eq. 16's clip centre)."""
+    v_target_all: torch.Tensor
+    """[K, N, T_f] value targets of all samples (for the explained-variance log)."""
 
 
 def _fork(generator: torch.Generator) -> torch.Generator:
@@ -87,7 +116,12 @@ class RLObjective(nn.Module):
         self.reference = copy.deepcopy(self.policy).requires_grad_(False).eval()
         self.sampler = sampler
         self.reference_sampler = DiffusionPredictor(
-            self.denoiser, sampler.schedule, sampler.scale, self.reference, sampler.tau
+            self.denoiser,
+            sampler.schedule,
+            sampler.scale,
+            self.reference,
+            sampler.tau,
+            stochastic=sampler.stochastic,
         )
         self.rl = cfg
         self.reg_cfg = reg_cfg
@@ -100,8 +134,24 @@ class RLObjective(nn.Module):
         self.denoiser.eval()
         return self
 
-    def forward(self, batch: Batch, generator: torch.Generator | None = None):
-        rl = self.rl
+    def forward(self, batch: Batch, generator: torch.Generator | None = None,
+                memo: Memo | None = None):  # fmt: skip
+        """One update: on ``memo`` (a rollout collected earlier by ``collect``, for several
+        PPO epochs per rollout) or, without it, on a fresh rollout whose graph the losses
+        reuse (one update per rollout)."""
+        if memo is None:
+            memo = self.collect(batch, generator, live=True)
+        return self.update(batch, memo, generator)
+
+    @torch.no_grad()
+    def collect_frozen(self, batch: Batch, generator: torch.Generator | None = None) -> Memo:
+        """``collect`` without gradients: the rollout several update epochs reuse."""
+        return self.collect(batch, generator, live=False)
+
+    def collect(self, batch: Batch, generator: torch.Generator | None, live: bool) -> Memo:
+        """Steps A and B, and the advantages: everything an update needs that does not change
+        while the policy is updated. ``live`` keeps the policy rollout's graph (for a single
+        update on it)."""
         cond = self.sampler.condition(batch)
         target = to_model_frame(batch.future, batch, self.sampler.scale)  # [N, T_f, 2]
 
@@ -114,25 +164,40 @@ class RLObjective(nn.Module):
         if twin is not None:
             acts.append(self.actions(twin, policy, reference))
         self.rewards(acts, cond.context, target)
-        main = acts[0]
 
-        # Step C: values and advantages (Eq. 14), then the clipped losses (Eq. 15-17) on
-        # all K samples (RLHF) or each scene's best-scored k* only (RLHF-ReS)
-        ctx = policy.out.context.detach() if rl.detach_critic else policy.out.context
-        values = self.critic(ctx, main.action)  # [K, N, T_f]
+        # Step C (first half): values and advantages (Eq. 14); which samples the losses see
+        ctx = policy.out.context.detach() if self.rl.detach_critic else policy.out.context
+        values = self.critic(ctx, acts[0].action)  # [K, N, T_f]
         with torch.no_grad():
             values_ref = self.critic(reference.out.context, reference.y)  # V_0 (Eq. 16)
             adv, v_target = self.advantages(acts, values.detach(), batch)
-        sel = self.selection(main.score, batch)
-        logp = torch.cat([sel(a.logp) for a in acts])
-        logp_ref = torch.cat([sel(a.logp_ref) for a in acts])
+        sel = self.selection(acts[0].score, batch)
         adv = torch.cat([sel(adv), -sel(adv)][: len(acts)])  # a twin's advantage is -A
+        return Memo(cond, target, acts, policy if live else None, values if live else None,
+                    sel, adv, sel(v_target), sel(values_ref), v_target)  # fmt: skip
+
+    def update(self, batch: Batch, memo: Memo, generator: torch.Generator | None = None):
+        """Step C (second half): the clipped losses (Eq. 15-17) on all K samples (RLHF) or
+        each scene's best-scored k* only (RLHF-ReS), with L_reg."""
+        rl, sel, main = self.rl, memo.select, memo.acts[0]
+        reg_roll = memo.policy  # the explored rollout (legacy), or a clean one (below)
+        if rl.reg_on == "clean" or reg_roll is None:
+            reg_roll = self.sampler.rollout(batch, generator, cond=memo.cond)
+        if memo.policy is not None:  # one update on the rollout just collected
+            logp = torch.cat([sel(a.logp) for a in memo.acts])
+            values = memo.values
+        else:  # the policy has moved since the rollout: re-evaluate its actions
+            logp = torch.cat([sel(self.relikelihood(a, reg_roll)) for a in memo.acts])
+            ctx = reg_roll.out.context.detach() if rl.detach_critic else reg_roll.out.context
+            values = self.critic(ctx, main.action)  # [K, N, T_f]
+        logp_ref = torch.cat([sel(a.logp_ref) for a in memo.acts])
+        logp_old = torch.cat([sel(a.logp.detach()) for a in memo.acts])
         # the ratio's denominator: the frozen reference (Eq. 15 as printed) or the rollout
-        # policy itself (one update per rollout; the KL to G_0 stays in the reward)
-        old = logp_ref if rl.ratio_against == "reference" else logp.detach()
-        pg_loss, clip_frac, approx_kl = ppo.policy_loss(logp, old, adv, rl.clip)
-        v_loss = ppo.value_loss(sel(values), sel(values_ref), sel(v_target), rl.value_clip)
-        reg_loss, reg_logs = generator_loss(policy.out, policy.y, target, self.reg_cfg)
+        # policy (standard PPO; the KL to G_0 stays in the reward)
+        old = logp_ref if rl.ratio_against == "reference" else logp_old
+        pg_loss, clip_frac, approx_kl = ppo.policy_loss(logp, old, memo.adv, rl.clip)
+        v_loss = ppo.value_loss(sel(values), memo.values_ref, memo.v_target, rl.value_clip)
+        reg_loss, reg_logs = generator_loss(reg_roll.out, reg_roll.y, memo.target, self.reg_cfg)
         loss = rl.reg_weight * reg_loss + rl.policy_weight * pg_loss + rl.value_weight * v_loss
         logs = {
             "reward": float(main.score.mean()),
@@ -144,11 +209,20 @@ class RLObjective(nn.Module):
             "approx_kl": float(approx_kl),
             # k3 estimate of KL(G_theta || G_0) from the policy's samples (any denominator)
             "kl_to_reference": float(ppo.k3_divergence(main.logp_ref, main.logp.detach())),
-            "explained_variance": float(ppo.explained_variance(values.detach(), v_target)),
+            "explained_variance": float(
+                ppo.explained_variance(values.detach(), memo.v_target_all)
+            ),  # fmt: skip
             "reg_loss": float(reg_loss.detach()),
             **{f"reg_{k}": v for k, v in reg_logs.items()},
         }
         return loss, logs
+
+    def relikelihood(self, acts: Actions, policy: Rollout) -> torch.Tensor:
+        """Eq. 12 of stored actions under the current policy (its rollout ``policy``)."""
+        if self.rl.likelihood == "sample":
+            log_std = torch.full_like(policy.out.log_sigma, math.log(self.rl.explore_std))
+            return ppo.gaussian_log_prob(acts.chosen, policy.initial, log_std, per_sample=True)
+        return ppo.gaussian_log_prob(acts.chosen, policy.out.mean, policy.out.log_sigma)
 
     def rollouts(self, batch: Batch, cond, generator: torch.Generator | None):
         """-> (policy, reference, twin or None) rollouts, in this order of random draws."""
@@ -179,11 +253,11 @@ class RLObjective(nn.Module):
             logp = ppo.gaussian_log_prob(chosen, policy.initial, log_std, per_sample=True)
             logp_ref = ppo.gaussian_log_prob(chosen, reference.initial, log_std, per_sample=True)
         else:
-            action = roll.y.detach()
-            logp = ppo.gaussian_log_prob(action, policy.out.mean, policy.out.log_sigma)
-            logp_ref = ppo.gaussian_log_prob(action, reference.out.mean,
+            chosen = roll.y.detach()
+            logp = ppo.gaussian_log_prob(chosen, policy.out.mean, policy.out.log_sigma)
+            logp_ref = ppo.gaussian_log_prob(chosen, reference.out.mean,
                                              reference.out.log_sigma)  # fmt: skip
-        return Actions(logp, logp_ref, roll.y.detach())
+        return Actions(logp, logp_ref, roll.y.detach(), chosen)
 
     @torch.no_grad()
     def rewards(self, acts: list[Actions], context: torch.Tensor, target: torch.Tensor) -> None:

@@ -76,7 +76,6 @@ class TrajectoryScorer:
         steps: list[int] | None = None,
         seed: int = 0,
         shared_noise: bool = True,
-        max_rows: int = 1 << 17,
     ):
         self.denoiser = denoiser.eval()
         self.schedule = schedule
@@ -86,7 +85,6 @@ class TrajectoryScorer:
             raise ConfigError(f"score steps must lie in 0..{schedule.num_steps - 1}")
         self.seed = seed
         self.shared_noise = shared_noise
-        self.max_rows = max_rows
 
     @classmethod
     def from_checkpoint(cls, path, device="cpu", **kwargs) -> TrajectoryScorer:
@@ -112,22 +110,18 @@ class TrajectoryScorer:
         """d for futures already in the denoiser's frame (relative, divided by the data
         scale): y [M, N, T_f, 2], context [N, H] from this scorer's denoiser -> [M, N, T_f]."""
         m, n, t_f, _ = y.shape
-        device = y.device
-        steps = torch.tensor(self.steps, device=device)  # [S']
         gen = torch.Generator().manual_seed(self.seed)
         # agent-major draw: an agent's noise depends on its index only, not on the batch size
         shape = (n, len(self.steps), 1 if self.shared_noise else m, t_f, 2)
-        z = torch.randn(shape, generator=gen).permute(1, 2, 0, 3, 4).to(device)  # [S',1|M,N,T,2]
-        y_s = self.schedule.add_noise(y[None], z, steps)  # [S', M, N, T_f, 2]
-        s_idx = steps[:, None, None].expand(-1, m, n)  # [S', M, N]
-        # all steps and samples in one call; agents in chunks only to bound memory
-        chunk = max(1, self.max_rows // (len(self.steps) * m))
-        d = []
-        for a in range(0, n, chunk):
-            sl = slice(a, a + chunk)
-            eps = self.denoiser(y_s[:, :, sl], s_idx[:, :, sl], context[sl])  # [S', M, n, T_f, 2]
-            d.append((eps - z[:, :, sl]).pow(2).sum(-1).mean(0))  # [M, n, T_f]
-        return torch.cat(d, 1)  # [M, N, T_f]
+        z = torch.randn(shape, generator=gen).permute(1, 2, 0, 3, 4).to(y)  # [S',1|M,N,T,2]
+        d = y.new_zeros(m, n, t_f)
+        # one step at a time: the denoiser's conditioning on (step, agent) is then computed
+        # once per agent and shared by the M samples (about half the cost of a pass)
+        for i, s in enumerate(self.steps):
+            y_s = self.schedule.add_noise(y, z[i], torch.tensor(s))  # [M, N, T_f, 2]
+            eps = self.denoiser(y_s, s, context)  # [M, N, T_f, 2]
+            d += (eps - z[i]).pow(2).sum(-1)
+        return d / len(self.steps)  # [M, N, T_f]
 
     @torch.no_grad()
     def step_scores(

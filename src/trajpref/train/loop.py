@@ -119,7 +119,7 @@ def fit(
     steps_per_epoch = len(loader)
     if optim_cfg.steps_per_epoch is not None:
         steps_per_epoch = min(steps_per_epoch, optim_cfg.steps_per_epoch)
-    total = steps_per_epoch * optim_cfg.epochs
+    total = steps_per_epoch * optim_cfg.epochs * stage.updates
     params = [p for p in stage.trainable.parameters() if p.requires_grad]
     optimizer = torch.optim.AdamW(params, lr=optim_cfg.lr, weight_decay=optim_cfg.weight_decay)
     sched = torch.optim.lr_scheduler.LambdaLR(optimizer, _lr_lambda(optim_cfg, total))
@@ -160,31 +160,35 @@ def fit(
         for batch in bar:
             batch = augment(batch, aug_gen, rotate=data_cfg.rotate, flip=data_cfg.flip,
                             scale_range=scale_range if use_scale else None).to(device)  # fmt: skip
-            loss, logs = objective(batch, noise_gen)
-            finite = torch.isfinite(loss.detach()).to(torch.int32)
-            if dist_info.enabled:  # every rank skips together, or DDP's all-reduce would hang
-                torch.distributed.all_reduce(finite, op=torch.distributed.ReduceOp.MIN)
-            if not bool(finite):
-                # skip the update rather than poison the weights; give up if it persists
-                nonfinite += 1
-                tqdm.write(f"[{stage.name}] non-finite loss at step {step + 1}; update skipped")
-                if nonfinite > max(3, steps_per_epoch // 10):
-                    raise TrajprefError(
-                        f"{stage.name}: {nonfinite} non-finite losses; lower the learning "
-                        "rate or clip the reward"
-                    )
-                continue
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            grad_norm = torch.nn.utils.clip_grad_norm_(params, optim_cfg.grad_clip)
-            optimizer.step()
-            sched.step()
-            step += 1
-            logs = {"loss": float(loss.detach()), "grad_norm": float(grad_norm), **logs}
-            for key, value in logs.items():
-                sums[key] = sums.get(key, 0.0) + value * batch.num_agents
-            agents += batch.num_agents
-            bar.set_postfix(loss=f"{logs['loss']:.4f}")
+            collected = () if stage.collect is None else (stage.collect(batch, noise_gen),)
+            for _ in range(stage.updates):
+                loss, logs = objective(batch, noise_gen, *collected)
+                finite = torch.isfinite(loss.detach()).to(torch.int32)
+                if dist_info.enabled:  # every rank skips together, or DDP's all-reduce would hang
+                    torch.distributed.all_reduce(finite, op=torch.distributed.ReduceOp.MIN)
+                if not bool(finite):
+                    # skip the update rather than poison the weights; give up if it persists
+                    nonfinite += 1
+                    tqdm.write(f"[{stage.name}] non-finite loss at step {step + 1}; update skipped")
+                    if nonfinite > max(3, steps_per_epoch // 10):
+                        raise TrajprefError(
+                            f"{stage.name}: {nonfinite} non-finite losses; lower the learning "
+                            "rate or clip the reward"
+                        )
+                    continue
+                optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                grad_norm = torch.nn.utils.clip_grad_norm_(params, optim_cfg.grad_clip)
+                optimizer.step()
+                sched.step()
+                step += 1
+                logs = {"loss": float(loss.detach()), "grad_norm": float(grad_norm), **logs}
+                for key, value in logs.items():
+                    sums[key] = sums.get(key, 0.0) + value * batch.num_agents
+                agents += batch.num_agents
+                bar.set_postfix(loss=f"{logs['loss']:.4f}")
+                if max_steps is not None and step >= max_steps:
+                    break
             if max_steps is not None and step >= max_steps:
                 break
         elapsed += time.perf_counter() - t0

@@ -43,6 +43,11 @@ class Stage:
     """Validation metrics; must include ``score`` (lower is better)."""
     payload: Callable[[dict[str, Any]], dict[str, Any]]
     """Turns the trainable module (+ metadata) into a checkpoint payload."""
+    collect: Callable[[Batch, torch.Generator], Any] | None = None
+    """When set, called once per batch without gradients; its result is passed to
+    ``objective(batch, generator, collected)`` for each of ``updates`` optimiser steps."""
+    updates: int = 1
+    """Optimiser steps per batch (PPO's update epochs on one rollout)."""
 
 
 def data_scale(dataset: TrajectoryDataset) -> float:
@@ -172,7 +177,8 @@ def build_generator_stage(
     generator = Generator(cfg.model).to(device)
     schedule = DDPMSchedule.from_config(cfg.diffusion).to(device)
     sampler = DiffusionPredictor(denoiser.to(device), schedule, denoiser_payload["scale"],
-                                 generator, cfg.model.tau)  # fmt: skip
+                                 generator, cfg.model.tau,
+                                 stochastic=cfg.model.stochastic_steps)  # fmt: skip
     objective = GeneratorObjective(sampler, cfg.generator)
     val_set = subset(val, cfg.generator.eval_max_scenes)
     validate = _leapfrog_validation(sampler, val_set, cfg.model.samples, cfg.data.max_agents,
@@ -219,5 +225,6 @@ def build_finetune_stage(
         meta = {**meta, "method": cfg.finetune.method, "from": start.get("hash")}
         return ckpt.generator_payload(sampler.generator, start["denoiser"], cfg, meta, critic)
 
+    epochs = cfg.finetune.ppo_epochs
     return Stage("finetune", objective, PolicyAndCritic(sampler.generator, critic), validate,
-                 payload)  # fmt: skip
+                 payload, objective.collect_frozen if epochs > 1 else None, epochs)  # fmt: skip

@@ -1,0 +1,152 @@
+"""Keeping K' of the K = 20 samples, with and without the diffusion score (no training).
+
+    # choose the settings on a validation split (prints a table; writes nothing to results/)
+    python benchmarks/selection.py --dataset zara1 --split val --data-root ../shared/data
+    # then the chosen settings, once, on the test split (rows: results/select_<D>.json)
+    python benchmarks/selection.py --dataset zara1 --split test --drop 0.5 \
+        --data-root ../shared/data
+
+One pass predicts the 20 samples of every scene once (seed 0) and scores them once; every
+selection method then works on the same samples, so the comparison is paired. Methods (see
+``trajpref.score.selection``): ``first``, ``random``, ``kmeans``, ``fps`` (no score), ``top``,
+``score-kmeans``, ``score-fps`` (score). Per-agent metrics come from per-agent selection, joint
+metrics from per-scene selection. The time of each selection (its share of the scoring
+included) is reported in ms per scene, beside the prediction's own.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import time
+from pathlib import Path
+
+import torch
+
+from trajpref.data import load_dataset
+from trajpref.evaluation import sampled_batches
+from trajpref.metrics import MetricAccumulator
+from trajpref.models import checkpoint as ckpt
+from trajpref.results import command_line, machine, make_row, write_rows
+from trajpref.score.scorer import TrajectoryScorer, score_timesteps
+from trajpref.score.selection import METHODS, SelectionConfig, gather, select_samples
+from trajpref.train.stages import subset
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def settings(args) -> list[SelectionConfig]:
+    """Every (method, K', drop, per) this run measures."""
+    out = []
+    methods = args.methods or METHODS
+    for method, keep, per in itertools.product(methods, args.keep, ("agent", "scene")):
+        drops = args.drop if method.startswith("score-") else [0.0]
+        temps = args.temperature if method == "score-facility" else [1.0]
+        for drop, temp in itertools.product(drops, temps):
+            bandwidth = args.free_bandwidth if method == "facility" else args.bandwidth
+            out.append(SelectionConfig(keep=keep, method=method, drop=drop, per=per,
+                                       final=args.final, temperature=temp,
+                                       bandwidth=bandwidth or args.bandwidth))  # fmt: skip
+    return out
+
+
+def name_of(cfg: SelectionConfig) -> str:
+    drop = f"-d{round(cfg.drop * 100):02d}" if cfg.method.startswith("score-") else ""
+    temp = f"-t{cfg.temperature:g}" if cfg.method == "score-facility" else ""
+    return f"select-{cfg.method}{drop}{temp}"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--dataset", required=True)
+    parser.add_argument("--split", default="val", choices=["val", "test"])
+    parser.add_argument("--data-root", default=None)
+    parser.add_argument("--model", default=None, help="default models/<D>/generator.safetensors")
+    parser.add_argument("--samples", type=int, default=20, help="K, the candidates")
+    parser.add_argument("--keep", type=int, nargs="+", default=[1, 3, 5])
+    parser.add_argument("--drop", type=float, nargs="+", default=[0.25, 0.3, 0.4, 0.5, 0.6])
+    parser.add_argument("--methods", nargs="+", default=None, choices=METHODS)
+    parser.add_argument("--temperature", type=float, nargs="+", default=[0.5, 1.0, 2.0])
+    parser.add_argument("--bandwidth", type=float, default=1.0, help="score-facility's")
+    parser.add_argument("--free-bandwidth", type=float, default=None,
+                        help="facility's (default: --bandwidth)")  # fmt: skip
+    parser.add_argument("--final", action="store_true", help="score by the final step (FTS)")
+    parser.add_argument("--score-every", type=int, default=9, help="score steps' spacing")
+    parser.add_argument("--max-scenes", type=int, default=None)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    torch.manual_seed(args.seed)
+
+    path = Path(args.model or ROOT / "models" / args.dataset / "generator.safetensors")
+    model = ckpt.load_predictor(path, "leapfrog")
+    steps = score_timesteps(model.schedule.num_steps, args.score_every)
+    scorer = TrajectoryScorer(model.denoiser, model.schedule, model.scale, steps)
+    data = subset(load_dataset(args.dataset, args.split, args.data_root), args.max_scenes)
+
+    configs = settings(args)
+    accs = {i: MetricAccumulator() for i in range(len(configs))}
+    seconds = {"predict": 0.0, "score": 0.0} | {i: 0.0 for i in range(len(configs))}
+    scenes = 0
+    rng = torch.Generator().manual_seed(args.seed)
+    t0 = time.perf_counter()
+    for batch, pred in sampled_batches(model, data, args.samples, args.seed, "cpu", 1024,
+                                       True, f"select {args.dataset}/{args.split}"):  # fmt: skip
+        seconds["predict"] += time.perf_counter() - t0
+        t1 = time.perf_counter()
+        d = scorer.residual(batch, pred)  # [K, N, T_f]; the ground truth is not read
+        residual = d[..., -1] if args.final else d.sum(-1)  # [K, N]
+        seconds["score"] += time.perf_counter() - t1
+        for i, cfg in enumerate(configs):
+            t2 = time.perf_counter()
+            idx = select_samples(pred, cfg, residual if cfg.uses_score else None, batch, rng)
+            seconds[i] += time.perf_counter() - t2
+            accs[i].update(gather(pred, idx), batch.future, batch.scene, batch.num_scenes)
+        scenes += batch.num_scenes
+        t0 = time.perf_counter()
+
+    rows, lines = [], []
+    ms_predict = 1000 * seconds["predict"] / scenes
+    ms_score = 1000 * seconds["score"] / scenes
+    header = (f"{args.dataset}/{args.split}: {scenes} scenes, K = {args.samples}, score every "
+              f"{args.score_every} ({'final step' if args.final else 'whole future'}); "
+              f"predict {ms_predict:.1f} ms/scene, score {ms_score:.1f} ms/scene")  # fmt: skip
+    print(header)
+    print(f"{'method':<26} {'per':<6} {'K':>2} {'minADE':>7} {'minFDE':>7} {'ms/scene':>8}")
+    merged: dict[tuple, dict] = {}
+    for i, cfg in enumerate(configs):
+        res = accs[i].compute()
+        ms = 1000 * seconds[i] / scenes + (ms_score if cfg.uses_score else 0.0)
+        key = (name_of(cfg), cfg.keep)
+        if cfg.per == "agent":
+            ade, fde = res["min_ade"], res["min_fde"]
+            merged.setdefault(key, {}).update(min_ade=ade, min_fde=fde, ms=ms,
+                                              uses_score=cfg.uses_score)  # fmt: skip
+        else:
+            ade, fde = res["joint_min_ade"], res["joint_min_fde"]
+            merged.setdefault(key, {}).update(joint_min_ade=ade, joint_min_fde=fde)
+        lines.append(f"{key[0]:<26} {cfg.per:<6} {cfg.keep:>2} {ade:7.4f} {fde:7.4f} {ms:8.2f}")
+        print(lines[-1])
+    for (method, keep), v in merged.items():
+        rows.append(make_row(
+            dataset=args.dataset, split=args.split, method=method, seed=args.seed, samples=keep,
+            min_ade=v["min_ade"], min_fde=v["min_fde"], joint_min_ade=v["joint_min_ade"],
+            joint_min_fde=v["joint_min_fde"], ms_per_scene=round(v["ms"], 3),
+            checkpoint=str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path),
+            uses_score=v["uses_score"],
+        ))  # fmt: skip
+    meta = {"header": header, "ms_predict_per_scene": ms_predict, "ms_score_per_scene": ms_score,
+            "score_every": args.score_every, "final": args.final, "scenes": scenes,
+            "command": command_line(), "machine": machine()}  # fmt: skip
+    out_dir = ROOT / "benchmarks" / "results"
+    suffix = "" if args.split == "test" else "_val"
+    (out_dir / "meta").mkdir(exist_ok=True)
+    (out_dir / "meta" / f"select_{args.dataset}{suffix}.json").write_text(
+        json.dumps(meta | {"rows": rows}, indent=2) + "\n"
+    )
+    if args.split == "test":
+        write_rows(out_dir / f"select_{args.dataset}.json", rows)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,86 @@
+"""What keeping K' of K samples with the diffusion score costs beside the prediction itself,
+measured side by side (interleaved, one scene per call) on a split's largest scenes.
+
+    python benchmarks/selection_cost.py --dataset univ --scenes 20 --data-root ../shared/data
+
+For each score-step spacing, prints ms per scene of: the prediction (K = 20 leapfrog
+samples), the score of its samples, the selection itself, and the ratio (score + selection) /
+prediction. Writes benchmarks/results/meta/selection_cost_<dataset>.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import torch
+
+from trajpref.data import load_dataset
+from trajpref.models import checkpoint as ckpt
+from trajpref.results import command_line, machine
+from trajpref.score.scorer import TrajectoryScorer, score_timesteps
+from trajpref.score.selection import SelectionConfig, select_samples
+from trajpref.types import collate
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@torch.no_grad()
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--dataset", default="univ")
+    parser.add_argument("--data-root", default=None)
+    parser.add_argument("--scenes", type=int, default=20, help="the largest this many")
+    parser.add_argument("--samples", type=int, default=20)
+    parser.add_argument("--every", type=int, nargs="+", default=[3, 9, 13, 20, 33])
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+
+    path = ROOT / "models" / args.dataset / "generator.safetensors"
+    model = ckpt.load_predictor(path, "leapfrog")
+    test = load_dataset(args.dataset, "test", args.data_root)
+    largest = sorted(test.scenes, key=lambda s: -s.num_agents)[: args.scenes]
+    scorers = {e: TrajectoryScorer(model.denoiser, model.schedule, model.scale,
+                                   score_timesteps(model.schedule.num_steps, e))
+               for e in args.every}  # fmt: skip
+    cfg = SelectionConfig(keep=5, method="score-fps", drop=0.4)
+    ms = {"predict": 0.0, "select": 0.0} | {e: 0.0 for e in args.every}
+    for _ in range(args.repeats):
+        for i, scene in enumerate(largest):
+            batch = collate([scene])
+            t0 = time.perf_counter()
+            pred = model.predict(batch, args.samples, torch.Generator().manual_seed(i))
+            ms["predict"] += time.perf_counter() - t0
+            for e, scorer in scorers.items():
+                t0 = time.perf_counter()
+                residual = scorer.residual(batch, pred).sum(-1)  # [K, N]
+                ms[e] += time.perf_counter() - t0
+            t0 = time.perf_counter()
+            select_samples(pred, cfg, residual, batch)
+            ms["select"] += time.perf_counter() - t0
+    calls = args.repeats * len(largest)
+    ms = {k: 1000 * v / calls for k, v in ms.items()}
+    sizes = [s.num_agents for s in largest]
+    print(
+        f"{args.dataset} test, the {len(largest)} largest scenes ({min(sizes)}-{max(sizes)} "
+        f"agents), K = {args.samples}, {torch.get_num_threads()} threads, {args.repeats} "
+        f"repeats: predict {ms['predict']:.1f} ms/scene, select {ms['select']:.2f} ms/scene"
+    )
+    rows = []
+    for e in args.every:
+        steps = len(score_timesteps(model.schedule.num_steps, e))
+        ratio = (ms[e] + ms["select"]) / ms["predict"]
+        rows.append({"every": e, "steps": steps, "ms_score": ms[e], "ratio": ratio})
+        print(f"  score every {e:>2} ({steps:>2} steps): {ms[e]:7.1f} ms/scene, "
+              f"(score + select) / predict = {ratio:.2f}x")  # fmt: skip
+    out = {"dataset": args.dataset, "scene_sizes": sizes, "ms_predict": ms["predict"],
+           "ms_select": ms["select"], "settings": rows, "command": command_line(),
+           "machine": machine()}  # fmt: skip
+    meta = ROOT / "benchmarks" / "results" / "meta" / f"selection_cost_{args.dataset}.json"
+    meta.write_text(json.dumps(out, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,253 @@
+"""Keep K' of K sampled futures, for planners that act on a few: by coverage alone, by the
+diffusion score alone, or by both (drop the worst-scored, then cover what is left).
+
+Selection never reads the ground truth: the score's residual is computed from the histories
+and the samples only. Items are selected independently: each agent (``per="agent"``, what
+the per-agent minADE/minFDE count) or each scene (``per="scene"``: one set of K' sample indices
+shared by all its agents, what the joint metrics count).
+
+Shapes: pred [K, N, T_f, 2], residual [K, N] (one number per sample and agent, lower is more
+human-like), the result idx [K', N] (sample indices per agent, in selection order).
+"""
+
+from __future__ import annotations
+
+import math
+import typing
+from dataclasses import dataclass
+from typing import Literal
+
+import torch
+
+from trajpref.errors import ConfigError
+from trajpref.metrics import scene_sum
+from trajpref.score.scorer import TrajectoryScorer
+from trajpref.types import Batch
+
+Method = Literal["first", "random", "kmeans", "fps", "facility", "top", "score-first",
+                 "score-kmeans", "score-fps", "score-facility"]  # fmt: skip
+METHODS: tuple[str, ...] = typing.get_args(Method)
+USES_SCORE = {m: m == "top" or m.startswith("score-") for m in METHODS}
+"""Methods that read the diffusion score (the others select by the samples alone)."""
+
+
+@dataclass
+class SelectionConfig:
+    """How to keep K' of K samples."""
+
+    keep: int = 5
+    """K', the samples kept per agent (or per scene)."""
+    method: Method = "score-kmeans"
+    """Without the score: ``first`` (the generator's first K'), ``random``, or coverage of
+    the endpoints by ``kmeans``, ``fps`` (farthest-point) or ``facility`` (greedy facility
+    location). With it: ``top`` (the K' best-scored), or ``score-first`` / ``score-kmeans``
+    / ``score-fps`` / ``score-facility``: drop the ``drop`` worst-scored, then the same
+    (``score-facility`` also weights each sample's coverage by its score)."""
+    drop: float = 0.5
+    """Fraction of the K samples the score-coverage methods drop before covering (at most
+    K - K' are dropped)."""
+    per: Literal["agent", "scene"] = "agent"
+    """Select per agent, or one set of sample indices per scene (for joint metrics)."""
+    final: bool = False
+    """Score by the final step's residual (FTS order) instead of the whole future (ATS)."""
+    iters: int = 10
+    """k-means iterations."""
+    bandwidth: float = 1.0
+    """Facility location: the similarity exp(-d^2 / (bandwidth * h^2)), h^2 the median
+    squared distance between an item's samples."""
+    temperature: float = 1.0
+    """score-facility: sample weights exp(-z / temperature), z the residual standardised over
+    the item's K samples."""
+    seed: int = 0
+    """Seed of the ``random`` method's own generator (it never draws from the sampler's, so
+    every method sees the same candidates)."""
+
+    def __post_init__(self) -> None:
+        for name, choices in (("method", METHODS), ("per", ("agent", "scene"))):
+            if getattr(self, name) not in choices:
+                raise ConfigError(f"selection {name} must be one of {', '.join(choices)}")
+        if self.keep < 1:
+            raise ConfigError("selection keep must be >= 1")
+        if not 0 <= self.drop < 1:
+            raise ConfigError("selection drop must lie in [0, 1)")
+        if self.iters < 0:
+            raise ConfigError("selection iters must be >= 0")
+        if self.bandwidth <= 0 or self.temperature <= 0:
+            raise ConfigError("selection bandwidth and temperature must be > 0")
+
+    @property
+    def uses_score(self) -> bool:
+        return USES_SCORE.get(self.method, False)
+
+
+def _pairwise(x: torch.Tensor, centers: torch.Tensor) -> torch.Tensor:
+    """Squared distances x [K, M, F] to centers [C, M, F] -> [K, C, M]."""
+    return (x[:, None] - centers[None]).pow(2).sum(-1)
+
+
+def _farthest_points(x: torch.Tensor, valid: torch.Tensor, first: torch.Tensor, keep: int):
+    """Greedy farthest-point picks among the valid samples, starting from ``first`` [M]:
+    x [K, M, F], valid [K, M] -> idx [keep, M]."""
+    m = torch.arange(x.shape[1], device=x.device)
+    idx = [first]
+    gap = (x - x[first, m][None]).pow(2).sum(-1)  # [K, M] distance to the chosen set
+    for _ in range(keep - 1):
+        gap = gap.masked_fill(~valid, -1.0)
+        gap[torch.stack(idx), m[None].expand(len(idx), -1)] = -1.0  # never twice
+        nxt = gap.argmax(0)  # [M]
+        idx.append(nxt)
+        gap = torch.minimum(gap, (x - x[nxt, m][None]).pow(2).sum(-1))
+    return torch.stack(idx)
+
+
+def _kmeans(x: torch.Tensor, valid: torch.Tensor, first: torch.Tensor, keep: int, iters: int):
+    """k-means on the valid samples (farthest-point initialisation from ``first``); each
+    cluster is represented by its valid member nearest the centre, distinct across clusters.
+    x [K, M, F], valid [K, M] -> idx [keep, M]."""
+    k, m_items, _ = x.shape
+    m = torch.arange(m_items, device=x.device)
+    centers = x[_farthest_points(x, valid, first, keep), m[None]]  # [C, M, F]
+    w = valid.to(x.dtype)  # [K, M]
+    for _ in range(iters):
+        assign = _pairwise(x, centers).argmin(1)  # [K, M]
+        onehot = torch.nn.functional.one_hot(assign, keep).to(x.dtype) * w[..., None]  # [K,M,C]
+        count = onehot.sum(0)  # [M, C]
+        total = torch.einsum("kmc,kmf->cmf", onehot, x)  # [C, M, F]
+        mean = total / count.T[..., None].clamp(min=1)
+        centers = torch.where(count.T[..., None] > 0, mean, centers)  # empty: keep the old one
+    dist = _pairwise(x, centers).masked_fill(~valid[:, None], math.inf)  # [K, C, M]
+    idx = []
+    taken = torch.zeros(k, m_items, dtype=torch.bool, device=x.device)
+    for c in range(keep):
+        pick = dist[:, c].masked_fill(taken, math.inf).argmin(0)  # [M]
+        taken[pick, m] = True
+        idx.append(pick)
+    return torch.stack(idx)
+
+
+def _facility(x: torch.Tensor, valid: torch.Tensor, weight: torch.Tensor, keep: int,
+              bandwidth: float) -> torch.Tensor:  # fmt: skip
+    """Greedy facility location: pick valid samples maximising sum_j weight_j max_{i in S}
+    sim(i, j). x [K, M, F], valid and weight [K, M] -> idx [keep, M]."""
+    k, m_items, _ = x.shape
+    m = torch.arange(m_items, device=x.device)
+    d2 = (x[:, None] - x[None]).pow(2).sum(-1)  # [K(i), K(j), M]
+    h2 = d2.flatten(0, 1).median(0).values.clamp(min=1e-12)  # [M]
+    sim = torch.exp(-d2 / (bandwidth * h2))  # [K(i), K(j), M]
+    cover = x.new_zeros(k, m_items)  # [K(j), M] how well each sample is covered so far
+    idx = []
+    for _ in range(keep):
+        gain = ((sim - cover[None]).clamp(min=0) * weight[None]).sum(1)  # [K(i), M]
+        pick = gain.masked_fill(~valid, -1.0).argmax(0)  # [M]
+        valid = valid.clone()
+        valid[pick, m] = False
+        cover = torch.maximum(cover, sim[pick, :, m].T)
+        idx.append(pick)
+    return torch.stack(idx)
+
+
+def select_indices(features: torch.Tensor, keep: int, cfg: SelectionConfig,
+                   residual: torch.Tensor | None = None,
+                   generator: torch.Generator | None = None) -> torch.Tensor:  # fmt: skip
+    """The core: ``keep`` of K samples per item. features [K, M, F] (what coverage is measured
+    on), residual [K, M] (lower is better; needed by the score methods) -> idx [keep, M]."""
+    k, m_items, _ = features.shape
+    if keep > k:
+        raise ConfigError(f"cannot keep {keep} of {k} samples")
+    method = cfg.method
+    if USES_SCORE.get(method) and residual is None:
+        raise ConfigError(f"selection {method!r} needs the diffusion score (a scorer)")
+    device = features.device
+    if method == "first":
+        return torch.arange(keep, device=device)[:, None].expand(-1, m_items)
+    if method == "random":
+        noise = torch.rand((k, m_items), generator=generator).to(device)
+        return noise.argsort(0)[:keep]
+    if method == "top":
+        return residual.argsort(0)[:keep]
+    valid = torch.ones(k, m_items, dtype=torch.bool, device=device)
+    if method.startswith("score-"):
+        kept = max(keep, k - int(cfg.drop * k))  # the best `kept` by the score stay
+        order = residual.argsort(0)  # [K, M] best first
+        valid = torch.zeros_like(valid).scatter_(0, order[:kept], True)
+        first = order[0]  # cover outward from the best-scored sample
+    else:  # start from the sample nearest the mean of all K
+        first = (features - features.mean(0, keepdim=True)).pow(2).sum(-1).argmin(0)
+    if method == "score-first":  # the generator's own order, skipping the worst-scored
+        rank = torch.arange(k, device=device)[:, None] + k * (~valid).to(torch.int64)
+        return rank.argsort(0)[:keep]
+    if method.endswith("facility"):
+        weight = torch.ones(k, m_items, dtype=features.dtype, device=device)
+        if method == "score-facility":
+            z = (residual - residual.mean(0)) / residual.std(0).clamp(min=1e-12)  # [K, M]
+            weight = torch.exp(-z / cfg.temperature)
+        return _facility(features, valid, weight, keep, cfg.bandwidth)
+    if method.endswith("fps"):
+        return _farthest_points(features, valid, first, keep)
+    return _kmeans(features, valid, first, keep, cfg.iters)
+
+
+def select_samples(pred: torch.Tensor, cfg: SelectionConfig, residual: torch.Tensor | None = None,
+                   batch: Batch | None = None,
+                   generator: torch.Generator | None = None) -> torch.Tensor:  # fmt: skip
+    """Keep ``cfg.keep`` of the K samples pred [K, N, T_f, 2] -> idx [K', N].
+
+    Coverage is measured on the endpoints. ``residual`` [K, N] is each sample's residual
+    per agent. With ``per="scene"`` (``batch`` needed for the scene index), a scene's agents
+    share one set of indices, chosen on their stacked endpoints and summed residuals."""
+    ends = pred[..., -1, :]  # [K, N, 2]
+    if cfg.per == "agent":
+        return select_indices(ends, cfg.keep, cfg, residual, generator)
+    if batch is None:
+        raise ConfigError("per-scene selection needs the batch (its scene index)")
+    slot, mask = batch.padded_index()  # [N], [B, P]
+    k = pred.shape[0]
+    b, p = mask.shape
+    feats = ends.new_zeros(k, b, p, 2)  # padding is zero for every sample: no distance
+    feats[:, batch.scene, slot] = ends
+    scene_res = None if residual is None else scene_sum(residual, batch.scene, b)  # [K, B]
+    idx = select_indices(feats.flatten(2), cfg.keep, cfg, scene_res, generator)  # [K', B]
+    return idx[:, batch.scene]  # [K', N]
+
+
+def gather(pred: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
+    """pred [K, N, ...] at idx [K', N] -> [K', N, ...]."""
+    shape = (*idx.shape, *pred.shape[2:])
+    return pred.gather(0, idx.reshape(*idx.shape, *([1] * (pred.ndim - 2))).expand(shape))
+
+
+class SelectingPredictor:
+    """A predictor that draws K samples from ``base`` and keeps K' of them (``cfg.keep``):
+    ``predict(batch, K', generator)`` returns [K', N, T_f, 2]. The ground truth is never read.
+    Any object with ``predict(batch, K, generator)`` can be the base."""
+
+    def __init__(self, base, cfg: SelectionConfig, candidates: int = 20,
+                 scorer: TrajectoryScorer | None = None):  # fmt: skip
+        if cfg.uses_score and scorer is None:
+            raise ConfigError(f"selection {cfg.method!r} needs a scorer")
+        if cfg.keep > candidates:
+            raise ConfigError(f"cannot keep {cfg.keep} of {candidates} samples")
+        self.base = base
+        self.cfg = cfg
+        self.candidates = candidates
+        self.scorer = scorer
+        self.name = f"{getattr(base, 'name', 'model')}+{cfg.method}{cfg.keep}"
+        self.generator = torch.Generator().manual_seed(cfg.seed)
+
+    @torch.no_grad()
+    def select(self, batch: Batch, pred: torch.Tensor) -> torch.Tensor:
+        """Indices [K', N] of the samples pred [K, N, T_f, 2] to keep."""
+        residual = None
+        if self.cfg.uses_score:
+            d = self.scorer.residual(batch, pred)  # [K, N, T_f]
+            residual = d[..., -1] if self.cfg.final else d.sum(-1)  # [K, N]
+        return select_samples(pred, self.cfg, residual, batch, self.generator)
+
+    @torch.no_grad()
+    def predict(self, batch: Batch, num_samples: int | None = None,
+                generator: torch.Generator | None = None) -> torch.Tensor:  # fmt: skip
+        if num_samples is not None and num_samples != self.cfg.keep:
+            raise ConfigError(f"this selector keeps {self.cfg.keep} samples, asked for "
+                              f"{num_samples}")  # fmt: skip
+        pred = self.base.predict(batch, self.candidates, generator)  # [K, N, T_f, 2]
+        return gather(pred, self.select(batch, pred))

@@ -1,0 +1,144 @@
+"""Keeping K' of K samples: hand-checked picks, the score's role, determinism, and that the
+ground truth is never read."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+from synthetic import make_scene
+
+from trajpref.cli import main
+from trajpref.errors import ConfigError
+from trajpref.models import checkpoint as ckpt
+from trajpref.score import TrajectoryScorer
+from trajpref.score.selection import (
+    SelectingPredictor,
+    SelectionConfig,
+    gather,
+    select_indices,
+    select_samples,
+)
+from trajpref.types import collate
+
+
+def _line(xs: list[float]) -> torch.Tensor:
+    """K samples of one agent whose endpoints lie at (x, 0): features [K, 1, 2]."""
+    return torch.tensor([[[x, 0.0]] for x in xs])
+
+
+def test_farthest_point_covers_the_extremes():
+    feats = _line([0.0, 0.1, 5.0, 10.0, 4.9])  # mean 4.0
+    idx = select_indices(feats, 3, SelectionConfig(method="fps", keep=3))[:, 0].tolist()
+    assert idx[0] == 4  # 4.9 is nearest the mean 4.0
+    assert set(idx[1:]) == {0, 3}  # then the two ends
+
+
+def test_kmeans_represents_each_cluster_once():
+    feats = _line([0.0, 0.1, 0.2, 10.0, 10.1, 10.2, 20.0])
+    idx = select_indices(feats, 3, SelectionConfig(method="kmeans", keep=3))[:, 0].tolist()
+    assert sorted(idx) == [1, 4, 6]  # one per cluster: the member nearest its centre
+
+
+def test_top_and_score_coverage_follow_the_residual():
+    feats = _line([0.0, 0.1, 5.0, 10.0])
+    residual = torch.tensor([[1.0], [0.5], [9.0], [2.0]])  # sample 2 is the least human-like
+    top = select_indices(feats, 2, SelectionConfig(method="top", keep=2), residual)
+    assert top[:, 0].tolist() == [1, 0]
+    cfg = SelectionConfig(method="score-fps", keep=2, drop=0.25)  # drops 1 of 4: sample 2
+    idx = select_indices(feats, 2, cfg, residual)[:, 0].tolist()
+    assert idx == [1, 3]  # the best-scored first, then the farthest of those kept
+    # never more dropped than leaves K' (drop 0.75 would leave 1 < 2)
+    idx = select_indices(feats, 2, SelectionConfig(method="score-kmeans", keep=2, drop=0.75),
+                         residual)[:, 0].tolist()  # fmt: skip
+    assert len(set(idx)) == 2 and 2 not in idx
+
+
+@pytest.mark.parametrize("method", ["kmeans", "fps", "score-kmeans", "score-fps", "random"])
+def test_picks_are_distinct_per_agent(method):
+    g = torch.Generator().manual_seed(0)
+    feats = torch.randn(20, 7, 2, generator=g)  # [K, M, F]
+    feats[:, 3] = 0.0  # an agent whose samples all coincide
+    residual = torch.rand(20, 7, generator=g)
+    cfg = SelectionConfig(method=method, keep=5, drop=0.5)
+    idx = select_indices(feats, 5, cfg, residual, torch.Generator().manual_seed(1))  # [5, M]
+    for m in range(7):
+        assert len(set(idx[:, m].tolist())) == 5
+
+
+def test_per_scene_selection_shares_indices_within_a_scene():
+    batch = collate([make_scene(3, seed=1), make_scene(2, seed=2)])
+    pred = torch.randn(10, batch.num_agents, 12, 2, generator=torch.Generator().manual_seed(0))
+    idx = select_samples(pred, SelectionConfig(method="kmeans", keep=3, per="scene"), None, batch)
+    assert idx.shape == (3, batch.num_agents)
+    for s in range(2):
+        cols = idx[:, batch.scene == s]
+        assert (cols == cols[:, :1]).all()
+    out = gather(pred, idx)
+    assert torch.equal(out[:, 0], pred[idx[:, 0], 0])
+
+
+def test_bad_settings_are_config_errors():
+    with pytest.raises(ConfigError, match="method"):
+        SelectionConfig(method="best")
+    with pytest.raises(ConfigError, match="drop"):
+        SelectionConfig(drop=1.0)
+    with pytest.raises(ConfigError, match="cannot keep 6 of 5"):
+        select_indices(torch.zeros(5, 1, 2), 6, SelectionConfig(method="first", keep=6))
+    with pytest.raises(ConfigError, match="needs the diffusion score"):
+        select_indices(torch.zeros(5, 1, 2), 2, SelectionConfig(method="top", keep=2))
+
+
+def test_selecting_predictor_is_seeded_and_never_reads_the_future(tiny_run, walks):
+    from trajpref.data import load_dataset
+
+    model = ckpt.load_predictor(tiny_run / "generator.safetensors")
+    scorer = TrajectoryScorer.from_checkpoint(tiny_run / "denoiser.safetensors")
+    batch = collate(load_dataset(str(walks), "test").scenes[:4])
+    blind = collate(load_dataset(str(walks), "test").scenes[:4])
+    blind.future = torch.full_like(blind.future, float("nan"))
+    for method in ("score-kmeans", "random", "top"):
+        cfg = SelectionConfig(method=method, keep=2, drop=0.5)
+        outs = []
+        for b in (batch, batch, blind):
+            sel = SelectingPredictor(model, cfg, candidates=4, scorer=scorer)
+            outs.append(sel.predict(b, 2, torch.Generator().manual_seed(0)))
+        assert outs[0].shape == (2, batch.num_agents, 12, 2)
+        assert torch.equal(outs[0], outs[1]), method  # deterministic under a seed
+        assert torch.equal(outs[0], outs[2]), method  # NaN futures change nothing
+    with pytest.raises(ConfigError, match="needs a scorer"):
+        SelectingPredictor(model, SelectionConfig(method="top", keep=2), candidates=4)
+
+
+def test_facility_location_covers_both_clusters_and_follows_the_weights():
+    feats = _line([0.0, 0.1, 0.2, 10.0, 10.1])  # a heavy cluster and a light one
+    idx = select_indices(feats, 2, SelectionConfig(method="facility", keep=2))[:, 0].tolist()
+    assert idx[0] == 1 and idx[1] in (3, 4)  # the heavy cluster's centre, then the other
+    # with the score, samples 0-2 are implausible: the light cluster comes first
+    residual = torch.tensor([[9.0], [9.0], [9.0], [1.0], [1.2]])
+    cfg = SelectionConfig(method="score-facility", keep=1, drop=0.0, temperature=0.5)
+    assert select_indices(feats, 1, cfg, residual)[0, 0].item() in (3, 4)
+
+
+def test_score_first_keeps_the_generators_order_but_skips_the_worst():
+    feats = _line([0.0, 1.0, 2.0, 3.0])
+    residual = torch.tensor([[1.0], [9.0], [2.0], [3.0]])  # sample 1 is the worst
+    cfg = SelectionConfig(method="score-first", keep=2, drop=0.25)
+    assert select_indices(feats, 2, cfg, residual)[:, 0].tolist() == [0, 2]
+
+
+def test_cli_keep_selects_and_reports(tiny_run, walks, capsys, tmp_path):
+    gen = str(tiny_run / "generator.safetensors")
+    code = main(["evaluate", "--dataset", str(walks), "--model", gen, "--samples", "4",
+                 "--keep", "2", "--select", "score-kmeans", "--json", "--no-progress"])  # fmt: skip
+    res = json.loads(capsys.readouterr().out)
+    assert code == 0 and res["samples"] == 2 and res["candidates"] == 4
+    assert res["select"] == "score-kmeans"
+    out = tmp_path / "kept.npz"
+    code = main(["predict", "--dataset", str(walks), "--model", gen, "--samples", "4",
+                 "--keep", "3", "--select", "kmeans", "--out", str(out),
+                 "--no-progress"])  # fmt: skip
+    assert code == 0 and np.load(out)["pred"].shape[0] == 3
+    code = main(["evaluate", "--dataset", str(walks), "--model", "cv", "--keep", "2",
+                 "--select", "top", "--no-progress"])  # fmt: skip
+    assert code == 2 and "needs --scorer" in capsys.readouterr().err
