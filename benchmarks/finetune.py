@@ -92,7 +92,8 @@ def main() -> None:
                     "max_fts", "top1_recall_ats", "top5_recall_ats")},
                 train_seconds=round(summary["train_seconds"], 1),
                 checkpoint=str(best.relative_to(ROOT)),
-                uses_score=cfg.finetune.policy_weight > 0 or cfg.finetune.value_weight > 0,
+                uses_score=cfg.finetune.method != "control"
+                and (cfg.finetune.policy_weight > 0 or cfg.finetune.value_weight > 0),
             ))  # fmt: skip
             print(f"{args.dataset} {method_name} seed {seed}: minADE {res['min_ade']:.3f} "
                   f"minFDE {res['min_fde']:.3f} maxATS {res['max_ats']:.3f} maxFTS "

@@ -70,12 +70,12 @@ def _add_scorer_arg(p: argparse.ArgumentParser, what: str) -> None:
 def _add_selection_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--keep", type=int, default=None, metavar="K'",
                    help="keep K' of the --samples futures (default: keep all)")  # fmt: skip
-    p.add_argument("--select", default="score-fps", choices=METHODS,
-                   help="how to keep them (default score-fps: drop the worst-scored, then "
-                   "farthest-point on the endpoints); score-* and top use the diffusion "
-                   "score of --scorer or the model's own denoiser")  # fmt: skip
-    p.add_argument("--drop", type=float, default=0.4,
-                   help="score-* selections: the fraction dropped first (0.4)")  # fmt: skip
+    p.add_argument("--select", default="score-facility", choices=METHODS,
+                   help="how to keep them (default score-facility: drop the worst-scored, "
+                   "then cover the endpoints weighted by the score; docs/selection.md); "
+                   "score-* and top use --scorer or the model's own denoiser")  # fmt: skip
+    p.add_argument("--drop", type=float, default=0.3,
+                   help="score-* selections: the fraction dropped first (0.3)")  # fmt: skip
     p.add_argument("--select-per", default="agent", choices=["agent", "scene"],
                    help="per agent, or one set of indices per scene (joint metrics)")  # fmt: skip
     p.add_argument("--score-every", type=int, default=9,
@@ -159,7 +159,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr.set_defaults(func=cmd_train)
 
     ft = sub.add_parser("finetune", help="RLHF / RLHF-ReS fine-tuning of a pretrained generator")
-    ft.add_argument("--method", required=True, choices=["rlhf", "rlhf-res"])
+    ft.add_argument("--method", required=True, choices=["rlhf", "rlhf-res", "control"],
+                    help="control: the supervised loss alone (equal-budget control)")  # fmt: skip
     ft.add_argument("--from", dest="start", required=True, help="a generator checkpoint")
     ft.add_argument(
         "--preset",

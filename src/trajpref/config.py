@@ -146,11 +146,17 @@ class OptimConfig:
     steps_per_epoch: int | None = None
     """Cap on optimiser steps per epoch (None: a full pass). Each epoch then sees a fresh
     random subset of the shuffled batches; for stages too costly for full passes."""
+    max_minutes: float | None = None
+    """Wall-clock budget of the training steps (validation excluded): the stage stops after
+    the step that crosses it and validates once more (None: no budget). For equal-budget
+    comparisons between methods."""
 
     def __post_init__(self) -> None:
         _positive(self, "epochs", "lr", "grad_clip", "eval_every")
         if self.steps_per_epoch is not None and self.steps_per_epoch < 1:
             raise ConfigError("steps_per_epoch must be >= 1 or null")
+        if self.max_minutes is not None and self.max_minutes <= 0:
+            raise ConfigError("max_minutes must be > 0 or null")
         if self.weight_decay < 0 or self.warmup_steps < 0:
             raise ConfigError("OptimConfig.weight_decay and warmup_steps must be >= 0")
 
@@ -207,8 +213,10 @@ class FinetuneConfig(OptimConfig):
     steps_per_epoch: int | None = 12
     """Cap on optimiser steps per epoch (None: a full pass); the default 3 x 12 steps is the
     budget measured in docs/rlhf.md."""
-    method: Literal["rlhf", "rlhf-res"] = "rlhf-res"
-    """``rlhf`` (policy and value losses on all K samples) or ``rlhf-res`` (on k* only)."""
+    method: Literal["rlhf", "rlhf-res", "control"] = "rlhf-res"
+    """``rlhf`` (policy and value losses on all K samples), ``rlhf-res`` (on k* only), or
+    ``control``: the supervised generator loss alone on clean rollouts, no score and no
+    reward (the equal-budget control that any RL gain is measured against)."""
     policy_weight: float = 0.3
     """alpha_p (RLHF, paper 1.0) or beta_p (RLHF-ReS, paper 0.3): weight of Eq. 15 / 18."""
     value_weight: float = 1.5

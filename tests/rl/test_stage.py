@@ -182,3 +182,18 @@ def test_clean_l_reg_ignores_the_exploration(tiny_run, walks):
             reg[on, std] = obj(batch, torch.Generator().manual_seed(0))[1]["reg_loss"]
     assert reg["clean", 0.01] == pytest.approx(reg["clean", 1.0], rel=1e-6)
     assert reg["explored", 1.0] > reg["explored", 0.01]
+
+
+def test_the_control_trains_the_policy_on_the_supervised_loss_only(tiny_run, walks):
+    start = ckpt.load(tiny_run / "generator.safetensors")
+    train = load_dataset(str(walks), "train")
+    stage = build_finetune_stage(_cfg(start, "finetune.method=control"), start, train,
+                                 torch.device("cpu"))  # fmt: skip
+    obj = stage.objective
+    pol, cri = _state(obj.policy), _state(obj.critic)
+    loss, logs = obj(collate(train.scenes[:4]), torch.Generator().manual_seed(0))
+    assert "reward" not in logs and logs["reg_loss"] == pytest.approx(float(loss.detach()))
+    loss.backward()
+    torch.optim.SGD(stage.trainable.parameters(), lr=1e-2).step()
+    assert any(not torch.equal(pol[k], v) for k, v in obj.policy.state_dict().items())
+    assert all(torch.equal(cri[k], v) for k, v in obj.critic.state_dict().items())

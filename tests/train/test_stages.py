@@ -242,3 +242,14 @@ def test_nonfinite_losses_are_skipped_then_refused(tmp_path, cfg, folder):
     with pytest.raises(TrajprefError, match="non-finite losses"):
         fit(stage, train, cfg.data, cfg.denoiser, tmp_path, torch.device("cpu"), progress=False)
     assert _changed(before, stage.trainable) == []  # no NaN update reached the weights
+
+
+def test_a_time_budget_stops_the_stage_and_still_validates(tmp_path, cfg):
+    import dataclasses
+
+    budget = dataclasses.replace(cfg, denoiser=dataclasses.replace(cfg.denoiser, epochs=50,
+                                                                   max_minutes=1e-6))  # fmt: skip
+    summary = train_stage("diffusion", budget, tmp_path, device="cpu", progress=False)
+    assert summary["steps"] == 1  # the first step already crosses the budget
+    records = [json.loads(line) for line in (tmp_path / "denoiser_metrics.jsonl").open()]
+    assert len(records) == 1 and "val_denoise_loss" in records[0]

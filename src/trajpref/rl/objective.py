@@ -139,9 +139,22 @@ class RLObjective(nn.Module):
         """One update: on ``memo`` (a rollout collected earlier by ``collect``, for several
         PPO epochs per rollout) or, without it, on a fresh rollout whose graph the losses
         reuse (one update per rollout)."""
+        if self.rl.method == "control":
+            return self.supervised(batch, generator)
         if memo is None:
             memo = self.collect(batch, generator, live=True)
         return self.update(batch, memo, generator)
+
+    def supervised(self, batch: Batch, generator: torch.Generator | None = None):
+        """The control: L_reg alone on a clean rollout (no score, no reference, no critic)."""
+        roll = self.sampler.rollout(batch, generator)
+        target = to_model_frame(batch.future, batch, self.sampler.scale)  # [N, T_f, 2]
+        reg_loss, reg_logs = generator_loss(roll.out, roll.y, target, self.reg_cfg)
+        logs = {
+            "reg_loss": float(reg_loss.detach()),
+            **{f"reg_{k}": v for k, v in reg_logs.items()},
+        }
+        return self.rl.reg_weight * reg_loss, logs
 
     @torch.no_grad()
     def collect_frozen(self, batch: Batch, generator: torch.Generator | None = None) -> Memo:

@@ -57,6 +57,8 @@ def finetune_config(
     if payload["kind"] != "generator":
         where = "the start" if isinstance(start, dict) else str(start)
         raise ConfigError(f"{where}: fine-tuning starts from a generator checkpoint")
+    if preset and method == "control":
+        raise ConfigError("the control takes no preset (it has no policy or value loss)")
     extra = preset_overrides(preset, method) if preset else [f"finetune.method={method}"]
     if seed is not None:
         extra.append(f"seed={seed}")

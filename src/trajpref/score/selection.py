@@ -36,14 +36,15 @@ class SelectionConfig:
     """How to keep K' of K samples."""
 
     keep: int = 5
-    """K', the samples kept per agent (or per scene)."""
-    method: Method = "score-kmeans"
+    """K', the samples kept per agent (or per scene). The defaults below were chosen on the
+    validation splits of zara1 and eth (docs/selection.md)."""
+    method: Method = "score-facility"
     """Without the score: ``first`` (the generator's first K'), ``random``, or coverage of
     the endpoints by ``kmeans``, ``fps`` (farthest-point) or ``facility`` (greedy facility
     location). With it: ``top`` (the K' best-scored), or ``score-first`` / ``score-kmeans``
     / ``score-fps`` / ``score-facility``: drop the ``drop`` worst-scored, then the same
     (``score-facility`` also weights each sample's coverage by its score)."""
-    drop: float = 0.5
+    drop: float = 0.3
     """Fraction of the K samples the score-coverage methods drop before covering (at most
     K - K' are dropped)."""
     per: Literal["agent", "scene"] = "agent"
@@ -52,10 +53,10 @@ class SelectionConfig:
     """Score by the final step's residual (FTS order) instead of the whole future (ATS)."""
     iters: int = 10
     """k-means iterations."""
-    bandwidth: float = 1.0
+    bandwidth: float = 0.5
     """Facility location: the similarity exp(-d^2 / (bandwidth * h^2)), h^2 the median
     squared distance between an item's samples."""
-    temperature: float = 1.0
+    temperature: float = 2.0
     """score-facility: sample weights exp(-z / temperature), z the residual standardised over
     the item's K samples."""
     seed: int = 0

@@ -1,5 +1,5 @@
 """``trajpref survey build | serve | analyze | simulate``: registered on the main parser by
-:func:`add_parser`. The heavy modules are imported when a command runs, not before."""
+:func:`add_parser`."""
 
 from __future__ import annotations
 
@@ -7,6 +7,12 @@ import argparse
 import json
 
 from trajpref.errors import ConfigError
+from trajpref.survey.analyze import run_analysis
+from trajpref.survey.build import BuildConfig, build_study
+from trajpref.survey.manifest import DATABASE, load_study
+from trajpref.survey.server import serve
+from trajpref.survey.simulate import SimulateConfig, simulate
+from trajpref.survey.store import AnswerStore
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -101,8 +107,6 @@ def parse_models(items: list[str]) -> dict[str, str]:
 
 
 def cmd_build(args) -> int:
-    from trajpref.survey.build import BuildConfig, build_study
-
     cfg = BuildConfig(
         dataset=args.dataset, models=parse_models(args.models), split=args.split,
         data_root=args.data_root, frame_interval=args.frame_interval, units=args.units,
@@ -119,14 +123,12 @@ def cmd_build(args) -> int:
 
 
 def cmd_serve(args) -> int:
-    from trajpref.survey.server import serve
 
     serve(args.study, args.host, args.port, args.db, args.max_body, args.quiet)
     return 0
 
 
 def cmd_analyze(args) -> int:
-    from trajpref.survey.analyze import run_analysis
 
     result, paths = run_analysis(args.study, args.db, args.out, args.raters)
     if args.json:
@@ -138,9 +140,6 @@ def cmd_analyze(args) -> int:
 
 
 def cmd_simulate(args) -> int:
-    from trajpref.survey.manifest import DATABASE, load_study
-    from trajpref.survey.simulate import SimulateConfig, simulate
-    from trajpref.survey.store import AnswerStore
 
     cfg = SimulateConfig(raters=args.raters, seed=args.seed, prefix=args.prefix)
     study = load_study(args.study)

@@ -90,6 +90,18 @@ def load_resume_state(path: str | Path) -> dict[str, Any]:
     return state
 
 
+def _should_stop(step: int, max_steps: int | None, seconds: float, max_minutes: float | None,
+                 dist_info: DistInfo, device: torch.device) -> bool:  # fmt: skip
+    """Whether the step or time budget is spent (all ranks agree, or DDP would hang)."""
+    stop = max_steps is not None and step >= max_steps
+    stop = stop or (max_minutes is not None and seconds >= 60 * max_minutes)
+    if dist_info.enabled:
+        flag = torch.tensor(int(stop), device=device)
+        torch.distributed.all_reduce(flag, op=torch.distributed.ReduceOp.MAX)
+        stop = bool(flag)
+    return stop
+
+
 def fit(
     stage: Stage,
     train: TrajectoryDataset,
@@ -154,6 +166,7 @@ def fit(
         stage.objective.train()
         sums: dict[str, float] = {}
         agents = 0
+        stop = False
         bar = tqdm(itertools.islice(loader, steps_per_epoch), total=steps_per_epoch,
                    desc=f"{stage.name} epoch {epoch + 1}/{optim_cfg.epochs}", unit="batch",
                    disable=not (progress and main), leave=False)  # fmt: skip
@@ -187,9 +200,11 @@ def fit(
                     sums[key] = sums.get(key, 0.0) + value * batch.num_agents
                 agents += batch.num_agents
                 bar.set_postfix(loss=f"{logs['loss']:.4f}")
-                if max_steps is not None and step >= max_steps:
+                stop = _should_stop(step, max_steps, elapsed + time.perf_counter() - t0,
+                                    optim_cfg.max_minutes, dist_info, device)  # fmt: skip
+                if stop:
                     break
-            if max_steps is not None and step >= max_steps:
+            if stop:
                 break
         elapsed += time.perf_counter() - t0
         epoch_seconds = time.perf_counter() - t0
@@ -199,7 +214,7 @@ def fit(
             "samples_per_second": round(agents / max(1e-9, epoch_seconds), 1),
         }  # fmt: skip
         record.update({f"train_{k}": v / max(1, agents) for k, v in sums.items()})
-        last = epoch + 1 == optim_cfg.epochs or (max_steps is not None and step >= max_steps)
+        last = epoch + 1 == optim_cfg.epochs or stop
         if main and ((epoch + 1) % optim_cfg.eval_every == 0 or last):
             stage.objective.eval()
             val = stage.validate()
@@ -221,6 +236,6 @@ def fit(
             })  # fmt: skip
             summary = {k: (round(v, 4) if isinstance(v, float) else v) for k, v in record.items()}
             tqdm.write(f"[{stage.name}] " + " ".join(f"{k}={v}" for k, v in summary.items()))
-        if max_steps is not None and step >= max_steps:
+        if stop:
             break
     return {"best": best, "train_seconds": elapsed, "steps": step}

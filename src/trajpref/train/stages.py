@@ -225,6 +225,6 @@ def build_finetune_stage(
         meta = {**meta, "method": cfg.finetune.method, "from": start.get("hash")}
         return ckpt.generator_payload(sampler.generator, start["denoiser"], cfg, meta, critic)
 
-    epochs = cfg.finetune.ppo_epochs
+    epochs = cfg.finetune.ppo_epochs if cfg.finetune.method != "control" else 1
     return Stage("finetune", objective, PolicyAndCritic(sampler.generator, critic), validate,
                  payload, objective.collect_frozen if epochs > 1 else None, epochs)  # fmt: skip
