@@ -259,6 +259,14 @@ class FinetuneConfig(OptimConfig):
     """Eq. 15's ratio p_theta / p_0 against the frozen ``reference`` (as printed; a trust
     region around G_0), or against the ``rollout`` policy (standard PPO: p_theta / p_old)."""
 
+    reward: Literal["score", "set"] = "score"
+    """``score``: each sample's per-step diffusion score r (Eq. 6); ``set``: each sample's
+    marginal gain in a score-weighted DPP over its K samples' endpoints (rl/set_reward.py),
+    which rewards plausible samples that cover what the others do not."""
+    set_bandwidth: float = 0.5
+    """``set`` reward: endpoint similarity bandwidth, in units of the median squared distance."""
+    set_alpha: float = 1.0
+    """``set`` reward: weight of the standardised score in the samples' quality."""
     ppo_epochs: int = 1
     """Update epochs on each collected rollout (TRL's ``ppo_epochs``). With 1, the update
     reuses the rollout's own graph and a ``rollout`` ratio is identically 1 (REINFORCE with
@@ -280,7 +288,7 @@ class FinetuneConfig(OptimConfig):
         _check_choices(self)
         if self.baseline == "antithetic" and self.likelihood != "sample":
             raise ConfigError("finetune.baseline=antithetic needs finetune.likelihood=sample")
-        _positive(self, "explore_std", "ppo_epochs")
+        _positive(self, "explore_std", "ppo_epochs", "set_bandwidth")
         if self.reg_on == "explored" and self.ppo_epochs > 1:
             raise ConfigError("finetune.reg_on=explored needs finetune.ppo_epochs=1")
         if not 0 <= self.gamma <= 1 or not 0 <= self.gae_lambda <= 1:

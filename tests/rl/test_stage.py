@@ -197,3 +197,19 @@ def test_the_control_trains_the_policy_on_the_supervised_loss_only(tiny_run, wal
     torch.optim.SGD(stage.trainable.parameters(), lr=1e-2).step()
     assert any(not torch.equal(pol[k], v) for k, v in obj.policy.state_dict().items())
     assert all(torch.equal(cri[k], v) for k, v in obj.critic.state_dict().items())
+
+
+def test_the_set_reward_steps_and_differs_from_the_score(tiny_run, walks):
+    start = ckpt.load(tiny_run / "generator.safetensors")
+    train = load_dataset(str(walks), "train")
+    batch = collate(train.scenes[:4])
+    logs = {}
+    for reward in ("score", "set"):
+        stage = build_finetune_stage(_cfg(start, f"finetune.reward={reward}"), start, train,
+                                     torch.device("cpu"))  # fmt: skip
+        loss, logs[reward] = stage.objective(batch, torch.Generator().manual_seed(0))
+        loss.backward()
+        assert all(torch.isfinite(p.grad).all() for p in stage.objective.policy.parameters()
+                   if p.grad is not None)  # fmt: skip
+    assert logs["set"]["reward"] == logs["score"]["reward"]  # the same samples, same score
+    assert logs["set"]["reward_total"] != logs["score"]["reward_total"]

@@ -24,6 +24,7 @@ from trajpref.models.critic import Critic
 from trajpref.models.losses import generator_loss
 from trajpref.models.predictor import Condition, DiffusionPredictor, Rollout
 from trajpref.rl import ppo
+from trajpref.rl.set_reward import marginal_gains
 from trajpref.score.scorer import TrajectoryScorer, score_timesteps
 from trajpref.types import Batch
 
@@ -282,6 +283,11 @@ class RLObjective(nn.Module):
         for a, r in zip(acts, scores.chunk(len(acts)), strict=True):
             a.score = r
             a.div = ppo.kl_penalty(a.logp.detach(), a.logp_ref, rl.kl_coef, rl.kl_form)
+            if rl.reward == "set":  # each sample's marginal gain to its set, spread over T_f
+                gain = marginal_gains(
+                    a.action[..., -1, :], r.sum(-1), rl.set_bandwidth, rl.set_alpha
+                )  # fmt: skip  [K, N]
+                r = (gain / r.shape[-1])[..., None].expand_as(r)
             a.reward = r - a.div  # [K, N, T_f]
 
     def advantages(self, acts: list[Actions], values: torch.Tensor, batch: Batch):
