@@ -22,7 +22,6 @@ import os
 import platform
 import random
 import sqlite3
-import subprocess
 import sys
 import tempfile
 import threading
@@ -31,6 +30,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 from urllib.parse import urlsplit
 
+from trajpref.errors import ConfigError
+from trajpref.survey.server import serve_subprocess
 from trajpref.survey.study import make_synthetic_study
 
 
@@ -101,29 +102,13 @@ def main() -> int:
             f"synthetic study: {len(study.scenes)} scenes, {study.num_panels} panels "
             f"({time.perf_counter() - t0:.1f} s to render)"
         )
-        server = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "trajpref.cli",
-                "survey",
-                "serve",
-                str(study.folder),
-                "--port",
-                "0",
-                "--quiet",
-            ],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            env={**os.environ, "OMP_NUM_THREADS": "1"},
-        )
         try:
-            line = server.stdout.readline()
-            if "serving" not in line:
-                print(server.stderr.read(), file=sys.stderr)
-                return 1
-            url = urlsplit(line.split(" at ")[1].split(";")[0].strip())
+            server, address = serve_subprocess(study.folder)
+        except ConfigError as exc:
+            print(exc, file=sys.stderr)
+            return 1
+        try:
+            url = urlsplit(address)
             start = threading.Barrier(args.raters + 1)
             results = [{} for _ in range(args.raters)]
             threads = [

@@ -23,7 +23,7 @@ def _positive(obj: Any, *names: str) -> None:
             raise ConfigError(f"{type(obj).__name__}.{name} must be > 0, got {getattr(obj, name)}")
 
 
-def _check_choices(obj: Any) -> None:
+def check_choices(obj: Any) -> None:
     """Every ``Literal[...]`` field of dataclass ``obj`` holds one of its choices."""
     hints = typing.get_type_hints(type(obj))
     for f in fields(obj):
@@ -285,7 +285,7 @@ class FinetuneConfig(OptimConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        _check_choices(self)
+        check_choices(self)
         if self.baseline == "antithetic" and self.likelihood != "sample":
             raise ConfigError("finetune.baseline=antithetic needs finetune.likelihood=sample")
         _positive(self, "explore_std", "ppo_epochs", "set_bandwidth")

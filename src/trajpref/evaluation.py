@@ -12,6 +12,7 @@ from tqdm.auto import tqdm
 from trajpref.data.loader import SceneLoader
 from trajpref.metrics import MetricAccumulator
 from trajpref.score.scorer import ScoreAccumulator, TrajectoryScorer
+from trajpref.score.selection import gather
 from trajpref.types import Batch, TrajectoryDataset
 
 
@@ -83,7 +84,7 @@ def predict_dataset(
         if scorer is not None:
             total = scorer.scene_residual(batch, pred)  # [K, B]
             order = total.argsort(0)  # [K, B] best first
-            pred = pred.gather(0, order[:, batch.scene, None, None].expand_as(pred))
+            pred = gather(pred, order[:, batch.scene])  # each scene's samples, best first
             parts.setdefault("order", []).append(order.T.cpu().numpy())  # [B, K]
             parts.setdefault("residual", []).append(total.gather(0, order).T.cpu().numpy())
         parts["history"].append(batch.history.cpu().numpy())

@@ -17,6 +17,10 @@ def _cfg(start, *overrides):
     return load_config(None, list(overrides), base=start["config"])
 
 
+def _stage(start, train, *overrides):
+    return build_finetune_stage(_cfg(start, *overrides), start, train, torch.device("cpu"))
+
+
 def _state(module):
     return {k: v.detach().clone() for k, v in module.state_dict().items()}
 
@@ -177,8 +181,8 @@ def test_clean_l_reg_ignores_the_exploration(tiny_run, walks):
     reg = {}
     for on in ("clean", "explored"):
         for std in (0.01, 1.0):
-            cfg = _cfg(start, f"finetune.reg_on={on}", f"finetune.explore_std={std}")
-            obj = build_finetune_stage(cfg, start, train, torch.device("cpu")).objective
+            obj = _stage(start, train, f"finetune.reg_on={on}",
+                         f"finetune.explore_std={std}").objective  # fmt: skip
             reg[on, std] = obj(batch, torch.Generator().manual_seed(0))[1]["reg_loss"]
     assert reg["clean", 0.01] == pytest.approx(reg["clean", 1.0], rel=1e-6)
     assert reg["explored", 1.0] > reg["explored", 0.01]
@@ -187,8 +191,7 @@ def test_clean_l_reg_ignores_the_exploration(tiny_run, walks):
 def test_the_control_trains_the_policy_on_the_supervised_loss_only(tiny_run, walks):
     start = ckpt.load(tiny_run / "generator.safetensors")
     train = load_dataset(str(walks), "train")
-    stage = build_finetune_stage(_cfg(start, "finetune.method=control"), start, train,
-                                 torch.device("cpu"))  # fmt: skip
+    stage = _stage(start, train, "finetune.method=control")
     obj = stage.objective
     pol, cri = _state(obj.policy), _state(obj.critic)
     loss, logs = obj(collate(train.scenes[:4]), torch.Generator().manual_seed(0))
@@ -205,8 +208,7 @@ def test_the_set_reward_steps_and_differs_from_the_score(tiny_run, walks):
     batch = collate(train.scenes[:4])
     logs = {}
     for reward in ("score", "set"):
-        stage = build_finetune_stage(_cfg(start, f"finetune.reward={reward}"), start, train,
-                                     torch.device("cpu"))  # fmt: skip
+        stage = _stage(start, train, f"finetune.reward={reward}")
         loss, logs[reward] = stage.objective(batch, torch.Generator().manual_seed(0))
         loss.backward()
         assert all(torch.isfinite(p.grad).all() for p in stage.objective.policy.parameters()

@@ -2,18 +2,15 @@
 no path traversal, the body limit, the Host check, and durability when the server is killed."""
 
 import json
-import os
 import signal
 import sqlite3
-import subprocess
-import sys
 import urllib.request
 
 import pytest
 from starlette.testclient import TestClient
 
 from trajpref.survey.manifest import load_study
-from trajpref.survey.server import LOOPBACK_NAMES, create_app
+from trajpref.survey.server import LOOPBACK_NAMES, create_app, serve_subprocess
 
 PUT = "/api/raters/r1/answers/s01/A"
 
@@ -174,27 +171,8 @@ def _request(url: str, method: str = "GET", body: dict | None = None) -> dict:
 def test_answers_survive_a_killed_server(synthetic_study):
     """The real command in its own process: every answer acknowledged before SIGKILL is in
     the database afterwards."""
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "trajpref.cli",
-            "survey",
-            "serve",
-            str(synthetic_study),
-            "--port",
-            "0",
-            "--quiet",
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env={**os.environ, "OMP_NUM_THREADS": "1"},
-    )
+    proc, url = serve_subprocess(synthetic_study)
     try:
-        line = proc.stdout.readline()
-        assert "serving" in line, proc.stderr.read()
-        url = line.split(" at ")[1].split(";")[0].strip()
         assert url.startswith("http://127.0.0.1:")
         acked = []
         for scene in _request(url + "api/study")["scenes"]:

@@ -122,12 +122,19 @@ def save(path: str | Path, payload: dict[str, Any], half: bool = False) -> None:
     if path.suffix != SUFFIX:
         raise TrajprefError(f"{path}: checkpoints are written as {SUFFIX} files")
     if half:  # round first, so that the hashes describe what the file holds
-        payload = _unflatten(*_flatten(payload, half=True))
-        _rehash(payload)
+        payload = _rounded(payload)
     tensors, header = _flatten(payload, half)
     header["format"] = FORMAT
     with atomic_path(path) as tmp:
         save_file(tensors, str(tmp), metadata={"trajpref": json.dumps(header)})
+
+
+def _rounded(payload: dict[str, Any]) -> dict[str, Any]:
+    """A copy whose float weights are rounded to half precision (held as float32), with the
+    hashes of the rounded weights."""
+    out = _unflatten(*_flatten(payload, half=True))
+    _rehash(out)
+    return out
 
 
 def _rehash(payload: dict[str, Any]) -> None:
@@ -244,8 +251,7 @@ def publish(
         return
     den = payload.pop("denoiser")
     if half:
-        den = _unflatten(*_flatten(den, half=True))
-        _rehash(den)
+        den = _rounded(den)
     den_path = dst.parent / denoiser_name
     current = state_hash(_load_file(den_path)["state_dict"]) if den_path.is_file() else None
     if current != den["hash"]:

@@ -88,12 +88,10 @@ class Memo:
     """All K samples (RLHF) or each scene's k* (RLHF-ReS)."""
     adv: torch.Tensor
     """Selected advantages, the twin's (-A) appended."""
-    v_target: torch.Tensor
-    """Selected value targets."""
     values_ref: torch.Tensor
     """Selected V_0 of the reference prediction (Eq. 16's clip centre)."""
-    v_target_all: torch.Tensor
-    """[K, N, T_f] value targets of all samples (for the explained-variance log)."""
+    v_target: torch.Tensor
+    """[K, N, T_f] value targets of all samples (the losses see ``select(v_target)``)."""
 
 
 def _fork(generator: torch.Generator) -> torch.Generator:
@@ -188,7 +186,7 @@ class RLObjective(nn.Module):
         sel = self.selection(acts[0].score, batch)
         adv = torch.cat([sel(adv), -sel(adv)][: len(acts)])  # a twin's advantage is -A
         return Memo(cond, target, acts, policy if live else None, values if live else None,
-                    sel, adv, sel(v_target), sel(values_ref), v_target)  # fmt: skip
+                    sel, adv, sel(values_ref), v_target)  # fmt: skip
 
     def update(self, batch: Batch, memo: Memo, generator: torch.Generator | None = None):
         """Step C (second half): the clipped losses (Eq. 15-17) on all K samples (RLHF) or
@@ -210,7 +208,7 @@ class RLObjective(nn.Module):
         # policy (standard PPO; the KL to G_0 stays in the reward)
         old = logp_ref if rl.ratio_against == "reference" else logp_old
         pg_loss, clip_frac, approx_kl = ppo.policy_loss(logp, old, memo.adv, rl.clip)
-        v_loss = ppo.value_loss(sel(values), memo.values_ref, memo.v_target, rl.value_clip)
+        v_loss = ppo.value_loss(sel(values), memo.values_ref, sel(memo.v_target), rl.value_clip)
         reg_loss, reg_logs = generator_loss(reg_roll.out, reg_roll.y, memo.target, self.reg_cfg)
         loss = rl.reg_weight * reg_loss + rl.policy_weight * pg_loss + rl.value_weight * v_loss
         logs = {
@@ -224,7 +222,7 @@ class RLObjective(nn.Module):
             # k3 estimate of KL(G_theta || G_0) from the policy's samples (any denominator)
             "kl_to_reference": float(ppo.k3_divergence(main.logp_ref, main.logp.detach())),
             "explained_variance": float(
-                ppo.explained_variance(values.detach(), memo.v_target_all)
+                ppo.explained_variance(values.detach(), memo.v_target)
             ),  # fmt: skip
             "reg_loss": float(reg_loss.detach()),
             **{f"reg_{k}": v for k, v in reg_logs.items()},

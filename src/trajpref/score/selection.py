@@ -19,6 +19,7 @@ from typing import Literal
 
 import torch
 
+from trajpref.config import check_choices
 from trajpref.errors import ConfigError
 from trajpref.metrics import scene_sum
 from trajpref.score.scorer import TrajectoryScorer
@@ -64,9 +65,7 @@ class SelectionConfig:
     every method sees the same candidates)."""
 
     def __post_init__(self) -> None:
-        for name, choices in (("method", METHODS), ("per", ("agent", "scene"))):
-            if getattr(self, name) not in choices:
-                raise ConfigError(f"selection {name} must be one of {', '.join(choices)}")
+        check_choices(self)
         if self.keep < 1:
             raise ConfigError("selection keep must be >= 1")
         if not 0 <= self.drop < 1:

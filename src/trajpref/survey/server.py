@@ -22,7 +22,10 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import socket
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -296,3 +299,24 @@ def running(folder: str | Path, db: str | Path | None = None) -> Iterator[tuple[
             yield url, store
     finally:
         store.close()
+
+
+def serve_subprocess(folder: str | Path) -> tuple[subprocess.Popen, str]:
+    """``trajpref survey serve FOLDER`` in a child process on a free loopback port (the real
+    command, for durability tests and load tests): ``(process, url)`` once it listens. The
+    caller stops the process and closes its pipes."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "trajpref.cli", "survey", "serve", str(folder), "--port", "0",
+         "--quiet"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
+    )  # fmt: skip
+    line = proc.stdout.readline()  # "serving ... at URL; answers in ..."
+    if "serving" not in line:
+        proc.kill()
+        message = proc.stderr.read().strip()
+        proc.wait(10)
+        proc.stdout.close()
+        proc.stderr.close()
+        raise ConfigError(f"the survey server did not start: {message}")
+    return proc, line.split(" at ")[1].split(";")[0].strip()
