@@ -15,7 +15,9 @@ fine-tuning stage computes it each epoch (the "epoch 0" the run logs start from)
 from __future__ import annotations
 
 import argparse
+import fcntl
 import json
+from contextlib import contextmanager
 from pathlib import Path
 
 from trajpref.data import load_dataset
@@ -49,6 +51,16 @@ def main() -> None:
         "dataset's best method: docs/architecture.md, published models)",
     )
     parser.add_argument(
+        "--skip-done",
+        action="store_true",
+        help="skip (method, seed) pairs that already have a row in the results file",
+    )
+    parser.add_argument(
+        "--no-start-validation",
+        action="store_true",
+        help="do not re-validate the start (meta/finetune_start_<dataset>.json is kept)",
+    )
+    parser.add_argument(
         "--start-only",
         action="store_true",
         help="only validate the start (meta/finetune_start_<dataset>.json)",
@@ -56,49 +68,69 @@ def main() -> None:
     args = parser.parse_args()
 
     start = ROOT / "models" / args.dataset / f"generator{ckpt.SUFFIX}"
-    start_validation(args, start)
+    if not args.no_start_validation:
+        start_validation(args, start)
     if args.start_only:
+        return
+    suffix = f"_{args.tag}" if args.tag else ""
+    out = ROOT / "benchmarks" / "results" / f"finetune_{args.dataset}{suffix}.json"
+    jobs = [(m, s) for m in args.methods for s in args.seeds]
+    if args.skip_done and out.is_file():
+        done = {(r["method"], r["seed"]) for r in json.loads(out.read_text())}
+        jobs = [(m, s) for m, s in jobs if (_method_name(m, args.tag), s) not in done]
+    if not jobs:
+        print(f"{args.dataset}: every requested row is already in {out.name}")
         return
     test = load_dataset(args.dataset, "test", args.data_root)
     scorer = TrajectoryScorer.from_checkpoint(start, args.device)
-    suffix = f"_{args.tag}" if args.tag else ""
-    out = ROOT / "benchmarks" / "results" / f"finetune_{args.dataset}{suffix}.json"
-    for method in args.methods:
-        for seed in args.seeds:
-            run = (
-                ROOT
-                / "runs"
-                / f"{args.dataset}-{method}-s{seed}{'-' + args.tag if args.tag else ''}"
-            )
-            cfg = finetune_config(str(start), method, args.preset, None, args.overrides, seed)
-            last = run / "finetune_last.pt"
-            summary = finetune(cfg, start, run, args.data_root, args.device,
-                               str(last) if last.is_file() else None, progress=True)  # fmt: skip
-            best = run / f"finetune{ckpt.SUFFIX}"
-            model = ckpt.load_predictor(best, "leapfrog", args.device)
-            res = evaluate(model, test, args.samples, 0, args.device, scorer=scorer,
-                           progress=False)  # fmt: skip
-            if args.publish and seed == 0 and not args.tag:
-                ckpt.publish(best, ROOT / "models" / args.dataset / f"{method}{ckpt.SUFFIX}")
-            method_name = method if not args.tag else f"{method}-{args.tag}"
-            # re-read: keeps rows of other methods/seeds, also those written meanwhile by a
-            # concurrent invocation for another method or seed
+    for method, seed in jobs:
+        run = ROOT / "runs" / f"{args.dataset}-{method}-s{seed}{'-' + args.tag if args.tag else ''}"
+        cfg = finetune_config(str(start), method, args.preset, None, args.overrides, seed)
+        last = run / "finetune_last.pt"
+        summary = finetune(cfg, start, run, args.data_root, args.device,
+                           str(last) if last.is_file() else None, progress=True)  # fmt: skip
+        best = run / f"finetune{ckpt.SUFFIX}"
+        model = ckpt.load_predictor(best, "leapfrog", args.device)
+        res = evaluate(model, test, args.samples, 0, args.device, scorer=scorer,
+                       progress=False)  # fmt: skip
+        if args.publish and seed == 0 and not args.tag:
+            ckpt.publish(best, ROOT / "models" / args.dataset / f"{method}{ckpt.SUFFIX}")
+        method_name = _method_name(method, args.tag)
+        row = make_row(
+            dataset=args.dataset, split="test", method=method_name, seed=seed,
+            samples=args.samples, **{k: res[k] for k in (
+                "min_ade", "min_fde", "joint_min_ade", "joint_min_fde", "max_ats",
+                "max_fts", "top1_recall_ats", "top5_recall_ats")},
+            train_seconds=round(summary["train_seconds"], 1),
+            checkpoint=str(best.relative_to(ROOT)),
+            uses_score=cfg.finetune.method != "control"
+            and (cfg.finetune.policy_weight > 0 or cfg.finetune.value_weight > 0),
+        )  # fmt: skip
+        print(f"{args.dataset} {method_name} seed {seed}: minADE {res['min_ade']:.3f} "
+              f"minFDE {res['min_fde']:.3f} maxATS {res['max_ats']:.3f} maxFTS "
+              f"{res['max_fts']:.3f} ({summary['train_seconds']:.0f} s, "
+              f"{summary['steps']} steps)")  # fmt: skip
+        with _locked(out):
+            # re-read: keeps rows of other methods/seeds, also those written meanwhile by
+            # a concurrent invocation for another method or seed
             rows = json.loads(out.read_text()) if out.is_file() else []
             rows = [r for r in rows if (r["method"], r["seed"]) != (method_name, seed)]
-            rows.append(make_row(
-                dataset=args.dataset, split="test", method=method_name, seed=seed,
-                samples=args.samples, **{k: res[k] for k in (
-                    "min_ade", "min_fde", "joint_min_ade", "joint_min_fde", "max_ats",
-                    "max_fts", "top1_recall_ats", "top5_recall_ats")},
-                train_seconds=round(summary["train_seconds"], 1),
-                checkpoint=str(best.relative_to(ROOT)),
-                uses_score=cfg.finetune.method != "control"
-                and (cfg.finetune.policy_weight > 0 or cfg.finetune.value_weight > 0),
-            ))  # fmt: skip
-            print(f"{args.dataset} {method_name} seed {seed}: minADE {res['min_ade']:.3f} "
-                  f"minFDE {res['min_fde']:.3f} maxATS {res['max_ats']:.3f} maxFTS "
-                  f"{res['max_fts']:.3f} ({summary['train_seconds']:.0f} s)")  # fmt: skip
-            write_rows(out, rows)
+            write_rows(out, [*rows, row])
+
+
+def _method_name(method: str, tag: str) -> str:
+    return f"{method}-{tag}" if tag else method
+
+
+@contextmanager
+def _locked(path: Path):
+    """Hold an exclusive lock beside ``path`` (concurrent invocations write one file)."""
+    with open(path.with_suffix(".lock"), "w") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 def start_validation(args, start: Path) -> dict[str, float]:

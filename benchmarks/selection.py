@@ -17,14 +17,18 @@ included) is reported in ms per scene, beside the prediction's own.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import itertools
 import json
 import time
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from trajpref.data import load_dataset
+from trajpref.data.loader import SceneLoader
+from trajpref.data.transforms import scene_speeds
 from trajpref.evaluation import sampled_batches
 from trajpref.metrics import MetricAccumulator
 from trajpref.models import checkpoint as ckpt
@@ -32,6 +36,7 @@ from trajpref.results import command_line, machine, make_row, write_rows
 from trajpref.score.scorer import TrajectoryScorer, score_timesteps
 from trajpref.score.selection import METHODS, SelectionConfig, gather, select_samples
 from trajpref.train.stages import subset
+from trajpref.types import TrajectoryDataset
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -75,14 +80,40 @@ def main() -> None:
     parser.add_argument("--score-every", type=int, default=9, help="score steps' spacing")
     parser.add_argument("--max-scenes", type=int, default=None)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--speed-norm",
+        type=float,
+        default=None,
+        metavar="Q",
+        help="score with speed normalisation: speed_ref = the Q-quantile of the training "
+        "split's scene speeds (docs/selection.md)",
+    )
+    parser.add_argument(
+        "--stretch",
+        type=float,
+        default=1.0,
+        help="validation only: multiply every coordinate by this (a scene moving this much "
+        "faster, as eth's test split does against its training folds)",
+    )
+    parser.add_argument("--tag", default="", help="suffix of the meta file (validation runs)")
     args = parser.parse_args()
     torch.manual_seed(args.seed)
+    if args.stretch != 1.0 and args.split == "test":
+        parser.error("--stretch simulates a shift on validation data; not on a test split")
 
     path = Path(args.model or ROOT / "models" / args.dataset / "generator.safetensors")
     model = ckpt.load_predictor(path, "leapfrog")
     steps = score_timesteps(model.schedule.num_steps, args.score_every)
-    scorer = TrajectoryScorer(model.denoiser, model.schedule, model.scale, steps)
+    speed_ref = None
+    if args.speed_norm is not None:
+        speed_ref = training_speed(args.dataset, args.data_root, args.speed_norm)
+        print(f"speed_ref = {speed_ref:.4f} units/step (the {args.speed_norm:g}-quantile of the "
+              "training split's scene speeds)")  # fmt: skip
+    scorer = TrajectoryScorer(model.denoiser, model.schedule, model.scale, steps,
+                              speed_ref=speed_ref)  # fmt: skip
     data = subset(load_dataset(args.dataset, args.split, args.data_root), args.max_scenes)
+    if args.stretch != 1.0:
+        data = stretched(data, args.stretch)
 
     configs = settings(args)
     accs = {i: MetricAccumulator() for i in range(len(configs))}
@@ -137,15 +168,31 @@ def main() -> None:
         ))  # fmt: skip
     meta = {"header": header, "ms_predict_per_scene": ms_predict, "ms_score_per_scene": ms_score,
             "score_every": args.score_every, "final": args.final, "scenes": scenes,
+            "speed_ref": speed_ref, "stretch": args.stretch,
             "command": command_line(), "machine": machine()}  # fmt: skip
     out_dir = ROOT / "benchmarks" / "results"
-    suffix = "" if args.split == "test" else "_val"
+    suffix = ("" if args.split == "test" else "_val") + (f"_{args.tag}" if args.tag else "")
     (out_dir / "meta").mkdir(exist_ok=True)
     (out_dir / "meta" / f"select_{args.dataset}{suffix}.json").write_text(
         json.dumps(meta | {"rows": rows}, indent=2) + "\n"
     )
     if args.split == "test":
         write_rows(out_dir / f"select_{args.dataset}.json", rows)
+
+
+def training_speed(dataset: str, data_root: str | None, quantile: float) -> float:
+    """The ``quantile`` of the training split's scene speeds (data units per step)."""
+    train = load_dataset(dataset, "train", data_root)
+    speeds = [scene_speeds(b) for b in SceneLoader(train, max_agents=4096, shuffle=False)]
+    return float(np.quantile(torch.cat(speeds).numpy(), quantile))
+
+
+def stretched(data: TrajectoryDataset, factor: float) -> TrajectoryDataset:
+    """Every coordinate multiplied by ``factor`` (about the origin: the models are
+    translation-invariant, so this is a pure change of speed and scene size)."""
+    scenes = [dataclasses.replace(s, history=s.history * factor, future=s.future * factor)
+              for s in data.scenes]  # fmt: skip
+    return TrajectoryDataset(scenes, data.info)
 
 
 if __name__ == "__main__":

@@ -62,7 +62,7 @@ def test_literal_fields_name_their_choices():
     [("model.bogus=1", "bogus"), ("nosection.key=1", "nosection"), ("bogus=3", "bogus")],
 )
 def test_unknown_keys(override, name):
-    with pytest.raises(ConfigError, match=f"unknown config keys.*{name}"):
+    with pytest.raises(ConfigError, match=f"unknown config key.*{name}"):
         load_config(None, [override])
 
 

@@ -1,31 +1,39 @@
 """The ``trajpref`` command line: ``data stats``, ``evaluate``, ``predict``, ``plot``,
-``train``, ``finetune``."""
+``train``, ``finetune``, ``models``."""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
+import math
+import os
+import shlex
 import sys
+import textwrap
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 import torch
 
 from trajpref import __version__
-from trajpref.config import load_config
-from trajpref.data import load_dataset
+from trajpref.config import ExperimentConfig, config_entries, field_docs, load_config
+from trajpref.data import ReadOptions, load_dataset, mean_speed
+from trajpref.data.trajnet import write_trajnet, write_trajnet_truth
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, TrajprefError
 from trajpref.evaluation import evaluate, predict_dataset
-from trajpref.io import atomic_path, write_json
+from trajpref.io import atomic_path, check_output_dir, check_output_file, dumps_json, write_json
+from trajpref.models import zoo
 from trajpref.models.registry import load_predictor
 from trajpref.rl.presets import finetune_config
 from trajpref.score import TrajectoryScorer, score_timesteps
 from trajpref.score.selection import METHODS, SelectingPredictor, SelectionConfig
 from trajpref.survey.cli import add_parser as add_survey_parser
-from trajpref.train.run import finetune, train_stage
+from trajpref.train.run import finetune, last_state_path, train_stage
 from trajpref.types import collate
 from trajpref.viz.plot import plot_scene, plot_scene_scored
 
@@ -42,10 +50,17 @@ def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> N
     p.add_argument("--frame-interval", type=float, default=0.4,
                    help="seconds between frames, for a folder dataset (default 0.4)")  # fmt: skip
     p.add_argument("--units", default="unknown", help="coordinate units, for a folder dataset")
+    p.add_argument("--delimiter", default=None, help="text columns separated by: comma, "
+                   "semicolon, tab, '|' or whitespace (default: sniffed)")  # fmt: skip
+    p.add_argument("--max-gap", type=int, default=None, help="missing frames a window may "
+                   "span (default: any, with a warning; 0: none; docs/data_format.md)")  # fmt: skip
+    p.add_argument("--max-coord", type=float, default=1e6, help="largest accepted |x| or |y| "
+                   "in the dataset's units (default 1e6); larger is an error")  # fmt: skip
 
 
 def _add_model_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--model", default="cv", help="'cv' (constant velocity) or a checkpoint path")
+    p.add_argument("--model", default="cv", help="'cv' (constant velocity), a published model "
+                   "(DATASET/NAME, see `trajpref models`) or a checkpoint path")  # fmt: skip
     p.add_argument("--samples", type=int, default=20, help="K, samples per agent (default 20)")
     p.add_argument("--seed", type=int, default=0, help="random seed for sampling (default 0)")
     p.add_argument(
@@ -59,7 +74,12 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
                    help="diffusion models: no ancestral noise in the denoising steps")  # fmt: skip
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     p.add_argument("--max-agents", type=int, default=1024,
-                   help="agents per batch (default 1024; lower it to save memory)")  # fmt: skip
+                   help="agents per batch of whole scenes (default 1024). Lower it to save "
+                   "memory, but note that it is not only a memory setting: the random draws "
+                   "come from one stream in batch order, so another batching gives each agent "
+                   "other draws and sampled metrics move within their sampling noise; "
+                   "deterministic predictions (cv with --samples 1, a generator with "
+                   "--deterministic) agree to float rounding")  # fmt: skip
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
 
 
@@ -100,8 +120,16 @@ def _add_run_args(p: argparse.ArgumentParser, example: str, last: str) -> None:
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, with usage errors in the one-line form that every other error takes (its
+    sub-commands' parsers are of this class too)."""
+
+    def error(self, message: str):
+        self.exit(2, f"trajpref: error: {message} (see: {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="trajpref",
         description="Human trajectory prediction with a diffusion model refined by RLHF.",
     )
@@ -125,10 +153,24 @@ def build_parser() -> argparse.ArgumentParser:
     _add_selection_args(ev)
     ev.set_defaults(func=cmd_evaluate)
 
-    pr = sub.add_parser("predict", help="save sampled futures of a split to .npz")
+    pr = sub.add_parser("predict", help="save sampled futures of a split (.npz or TrajNet++)")
     _add_data_args(pr)
     _add_model_args(pr)
-    pr.add_argument("--out", required=True, help="output .npz file")
+    pr.add_argument("--out", required=True, help="output .npz file (.ndjson with --format trajnet)")
+    pr.add_argument(
+        "--format",
+        choices=["npz", "trajnet"],
+        default="npz",
+        help="npz: every array (default); trajnet: a TrajNet++ prediction file that "
+        "trajnetplusplustools' evaluator reads (one TrajNet++ scene per agent; "
+        "docs/data_format.md)",
+    )
+    pr.add_argument(
+        "--truth",
+        default=None,
+        metavar="FILE.ndjson",
+        help="with --format trajnet: also write the matching ground-truth file",
+    )
     pr.add_argument("--json", action="store_true", help="print a JSON summary")
     pr.add_argument(
         "--rank",
@@ -174,8 +216,35 @@ def build_parser() -> argparse.ArgumentParser:
                     "(data and model come from the checkpoint)")  # fmt: skip
     _add_run_args(ft, "finetune.lr=5e-5", "a finetune_last.pt")
     ft.set_defaults(func=cmd_finetune)
+
+    cf = sub.add_parser("config", help="the training config's keys, values and meanings")
+    cf_sub = cf.add_subparsers(dest="config_command", required=True)
+    show = cf_sub.add_parser("show", help="print every config key with its value and docstring")
+    show.add_argument("--config", default=None, help="YAML config to resolve (default: the "
+                      "built-in defaults)")  # fmt: skip
+    show.add_argument("--set", dest="overrides", action="append", default=[],
+                      metavar="KEY=VALUE", help="override a value, as train and finetune "
+                      "take it (repeatable)")  # fmt: skip
+    show.set_defaults(func=cmd_config_show)
     add_survey_parser(sub)
+
+    mo = sub.add_parser("models", help="the published models (the zoo): list them or show a card")
+    mo.add_argument("name", nargs="?", default=None,
+                    help="DATASET/NAME (e.g. zara1/generator): print its model card")  # fmt: skip
+    mo.add_argument("--json", action="store_true", help="print the index entries as JSON")
+    mo.set_defaults(func=cmd_models)
     return parser
+
+
+def _check_data_args(args) -> None:
+    if not (math.isfinite(args.frame_interval) and args.frame_interval > 0):
+        raise ConfigError(f"--frame-interval must be a number of seconds > 0, "
+                          f"got {args.frame_interval}")  # fmt: skip
+    _read_options(args)  # --delimiter, --max-gap, --max-coord
+
+
+def _read_options(args) -> ReadOptions:
+    return ReadOptions(delimiter=args.delimiter, max_gap=args.max_gap, max_coord=args.max_coord)
 
 
 def _load(args):
@@ -185,23 +254,27 @@ def _load(args):
         args.data_root,
         frame_interval=args.frame_interval,
         units=args.units,
+        options=_read_options(args),
     )
 
 
 def _check_model_args(args) -> None:
+    """The options every sampling command takes (checked before any model or data is read)."""
+    _check_data_args(args)
     if args.samples < 1:
         raise ConfigError("--samples must be >= 1")
     if args.max_agents < 1:
         raise ConfigError("--max-agents must be >= 1")
+    keep = getattr(args, "keep", None)
+    if keep is not None and not 1 <= keep <= args.samples:
+        raise ConfigError(f"--keep must lie in 1..--samples ({args.samples}), got {keep}")
 
 
 def cmd_data_stats(args) -> int:
+    _check_data_args(args)
     ds = _load(args)
     sizes = np.array([s.num_agents for s in ds.scenes])
-    fut = np.concatenate([s.future for s in ds.scenes])  # [N, T_f, 2]
-    hist = np.concatenate([s.history for s in ds.scenes])  # [N, T_h, 2]
-    track = np.concatenate([hist, fut], 1)  # [N, T, 2]
-    speed = np.linalg.norm(np.diff(track, axis=1), axis=-1) / ds.info.frame_interval  # [N, T-1]
+    speed = mean_speed(ds)  # scene by scene: no copy of the whole split
     out = {
         "dataset": ds.info.name,
         "split": ds.info.split,
@@ -216,11 +289,11 @@ def cmd_data_stats(args) -> int:
         "frame_interval": ds.info.frame_interval,
         "t_hist": ds.info.t_hist,
         "t_fut": ds.info.t_fut,
-        "mean_speed": float(speed.mean()),
+        "mean_speed": speed,
         "source": ds.info.source,
     }
     if args.json:
-        print(json.dumps(out))
+        print(dumps_json(out))
     else:
         for key, value in out.items():
             print(f"{key:>16}: {value}")
@@ -265,7 +338,14 @@ def _selection_fields(args) -> dict:
     return {"candidates": args.samples, "select": args.select, "select_per": args.select_per}
 
 
+SCORE_LINE = (("max_ats", "maxATS"), ("max_fts", "maxFTS"), ("mean_ats", "meanATS"))
+SCORE_RECALL = ("top1_recall_ats", "top5_recall_ats", "top1_recall_fts", "top5_recall_fts")
+
+
 def cmd_evaluate(args) -> int:
+    _check_model_args(args)
+    if args.out:
+        check_output_file(args.out)
     model, device = _predictor(args)
     scorer = _scorer(args.scorer, device) if args.scorer else None
     model, samples = _selecting(args, model, device)
@@ -287,10 +367,13 @@ def cmd_evaluate(args) -> int:
         "units": ds.info.units,
         "seconds": round(seconds, 3),
     }
+    bad = [k for k, v in out.items() if isinstance(v, float) and not math.isfinite(v)]
+    if bad:
+        warnings.warn(f"{', '.join(bad)} not finite: the JSON output holds null", stacklevel=1)
     if args.out:
         write_json(args.out, out)
     if args.json:
-        print(json.dumps(out))
+        print(dumps_json(out))
     else:
         print(
             f"{ds.info.name}/{ds.info.split}  model={args.model}  K={samples}  "
@@ -301,12 +384,23 @@ def cmd_evaluate(args) -> int:
             f"  minADE {out['min_ade']:.4f}  minFDE {out['min_fde']:.4f}   "
             f"joint minADE {out['joint_min_ade']:.4f}  joint minFDE {out['joint_min_fde']:.4f}"
         )
+        if scorer is not None:
+            print("  " + "  ".join(f"{name} {out[k]:.4f}" for k, name in SCORE_LINE)
+                  + "   top-1/top-5 recall: by ATS {:.3f}/{:.3f}  by FTS {:.3f}/{:.3f}".format(
+                      *(out[k] for k in SCORE_RECALL)))  # fmt: skip
     return 0
 
 
 def cmd_predict(args) -> int:
-    if not args.out.endswith(".npz"):
-        raise TrajprefError(f"--out {args.out}: the output must be a .npz file")
+    _check_model_args(args)
+    trajnet = args.format == "trajnet"
+    check_output_file(args.out, ".ndjson" if trajnet else ".npz")
+    if args.truth is not None:
+        if not trajnet:
+            raise ConfigError("--truth needs --format trajnet")
+        check_output_file(args.truth, ".ndjson")
+    if trajnet and args.rank:
+        raise ConfigError("--rank saves order/residual arrays: use --format npz")
     model, device = _predictor(args)
     scorer = None
     if args.rank:
@@ -319,9 +413,16 @@ def cmd_predict(args) -> int:
         model, ds, samples, args.seed, device, args.max_agents,
         progress=not args.no_progress, scorer=scorer,
     )  # fmt: skip
-    with atomic_path(args.out) as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
+    if trajnet:
+        interval = ds.info.frame_interval
+        write_trajnet(args.out, arrays["history"], arrays["pred"], arrays["scene"], interval)
+        if args.truth is not None:
+            write_trajnet_truth(args.truth, arrays["history"], arrays["future"], arrays["scene"],
+                                interval)  # fmt: skip
+    else:
+        with atomic_path(args.out) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez_compressed(fh, **arrays)
     summary = {
         "out": args.out,
         "agents": int(arrays["future"].shape[0]),
@@ -330,7 +431,7 @@ def cmd_predict(args) -> int:
         "pred_shape": list(arrays["pred"].shape),
     }
     print(
-        json.dumps(summary)
+        dumps_json(summary)
         if args.json
         else f"wrote {args.out}: pred {tuple(arrays['pred'].shape)} [K, N, T_f, 2]"
     )
@@ -338,8 +439,10 @@ def cmd_predict(args) -> int:
 
 
 def cmd_plot(args) -> int:
-    if not args.out.endswith(".png"):
-        raise TrajprefError(f"--out {args.out}: the output must be a .png file")
+    _check_model_args(args)
+    check_output_file(args.out, ".png")
+    if args.scene < 0:
+        raise ConfigError(f"--scene {args.scene}: scene indices start at 0")
     model, device = _predictor(args)
     ds = _load(args)
     if not 0 <= args.scene < len(ds):
@@ -365,7 +468,13 @@ def cmd_plot(args) -> int:
     return 0
 
 
+def _is_main_process() -> bool:
+    """False on the ranks > 0 of a torchrun launch (only rank 0 reports)."""
+    return os.environ.get("RANK", "0") == "0"
+
+
 def cmd_train(args) -> int:
+    check_output_dir(args.out)
     overrides = list(args.overrides)
     if args.dataset is not None:
         overrides.append(f"data.dataset={args.dataset}")
@@ -382,19 +491,64 @@ def cmd_train(args) -> int:
         args.denoiser,
         progress=not args.no_progress,
     )
-    best = {k: round(v, 4) if isinstance(v, float) else v for k, v in summary["best"].items()}
-    print(f"trained {args.stage} in {summary['train_seconds']:.0f} s; best validation: {best}")
+    if summary.get("rank", 0) == 0:
+        best = {k: round(v, 4) if isinstance(v, float) else v for k, v in summary["best"].items()}
+        print(f"trained {args.stage} in {summary['train_seconds']:.0f} s; best validation: {best}")
     return 0
 
 
 def cmd_finetune(args) -> int:
+    check_output_dir(args.out)
     cfg = finetune_config(args.start, args.method, args.preset, args.config, args.overrides,
                           args.seed)  # fmt: skip
     summary = finetune(cfg, args.start, args.out, args.data_root, args.device, args.resume,
                        progress=not args.no_progress)  # fmt: skip
-    best = {k: round(v, 4) if isinstance(v, float) else v for k, v in summary["best"].items()}
-    print(f"fine-tuned ({args.method}) in {summary['train_seconds']:.0f} s; best validation: "
-          f"{best}")  # fmt: skip
+    if summary.get("rank", 0) == 0:
+        best = {k: round(v, 4) if isinstance(v, float) else v for k, v in summary["best"].items()}
+        print(f"fine-tuned ({args.method}) in {summary['train_seconds']:.0f} s; best validation: "
+              f"{best}")  # fmt: skip
+    return 0
+
+
+def _yaml_value(value) -> str:
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return str(value)
+
+
+def cmd_config_show(args) -> int:
+    """Every key of the (resolved) config, its value and its docstring, section by section."""
+    cfg = load_config(args.config, args.overrides)
+    sections = field_docs(ExperimentConfig)
+    current = ""  # the section printed last (None: top-level keys)
+    for key, value, doc in config_entries(cfg):
+        section = key.partition(".")[0] if "." in key else None
+        if section != current:
+            if current != "":
+                print()
+            if section is not None:
+                print(f"# {section}: {sections.get(section, '')}")
+            current = section
+        print(f"{key} = {_yaml_value(value)}")
+        print(textwrap.fill(doc, 96, initial_indent="    ", subsequent_indent="    "))
+    return 0
+
+
+def cmd_models(args) -> int:
+    """List the zoo (name, kind, method, test row, training machine and minutes), or print
+    one model's card. Names work wherever a checkpoint path does (--model, --from, ...)."""
+    if args.name is not None:
+        zoo.resolve(args.name)  # an unknown name lists the published ones
+        if args.json:
+            entry = next(e for e in zoo.entries() if e["name"] == args.name)
+            print(json.dumps(entry))
+        else:
+            print(zoo.card(args.name), end="")
+        return 0
+    rows = zoo.entries()
+    print(json.dumps(rows) if args.json else zoo.table(rows))
     return 0
 
 
@@ -402,9 +556,51 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
     print(f"trajpref: warning: {message}", file=sys.stderr)
 
 
+def _resume_state(args) -> tuple[Path | None, tuple[int, int] | None]:
+    """A training command's ``<stage>_last.pt`` and its (inode, modification time); None when
+    there is none yet. Each save is a new file renamed into place: a new inode."""
+    if args.command not in ("train", "finetune"):
+        return None, None
+    state = last_state_path(args.out, args.stage if args.command == "train" else "finetune")
+    with contextlib.suppress(OSError):
+        return state, (state.stat().st_ino, state.stat().st_mtime_ns)
+    return state, None
+
+
+def _resume_hint(args, argv: list[str], before: tuple[int, int] | None) -> str:
+    """After Ctrl-C: the command that continues a training run, or why there is none.
+    ``before``: the resume state's identity when the command started."""
+    state, now = _resume_state(args)
+    if state is None:
+        return ""
+    if now is not None and now != before:  # written by this run: an epoch ended
+        resume = str(state)
+    elif args.resume is not None:
+        resume = args.resume  # no epoch ended in this run: the state it started from
+    else:
+        return "; no epoch ended, so there is nothing to resume (run the command again)"
+    rest, skip = [], False
+    for arg in argv:  # the same command, with --resume replaced
+        if skip:
+            skip = False
+        elif arg == "--resume":
+            skip = True
+        elif not arg.startswith("--resume="):
+            rest.append(arg)
+    command = shlex.join(["trajpref", *rest, "--resume", resume])
+    return f"; to continue from the last finished epoch:\n  {command}"
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run one command. Everything a user can get wrong ends in one line on stderr,
+    ``trajpref: error: ...``, and exit status 2 (argparse's own usage errors included)."""
+    argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a usage error (already printed)
+        return exc.code if isinstance(exc.code, int) else 2
+    before = _resume_state(args)[1]
     try:
         with warnings.catch_warnings():
             warnings.showwarning = _one_line_warning  # restored when the command ends
@@ -412,8 +608,17 @@ def main(argv: list[str] | None = None) -> int:
     except TrajprefError as exc:
         print(f"trajpref: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # stdout closed early (`| head`): not an error of the command
+        with contextlib.suppress(OSError, ValueError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
+    except OSError as exc:  # a file the command could not read or write
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"trajpref: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
-        print("trajpref: interrupted", file=sys.stderr)
+        if _is_main_process():
+            print(f"trajpref: interrupted{_resume_hint(args, argv, before)}", file=sys.stderr)
         return 130
 
 

@@ -3,8 +3,12 @@ read from and written to YAML. A run writes its resolved config next to its chec
 
 from __future__ import annotations
 
+import ast
 import copy
 import dataclasses
+import difflib
+import inspect
+import textwrap
 import typing
 import warnings
 from dataclasses import dataclass, field, fields
@@ -150,6 +154,9 @@ class OptimConfig:
     """Wall-clock budget of the training steps (validation excluded): the stage stops after
     the step that crosses it and validates once more (None: no budget). For equal-budget
     comparisons between methods."""
+    budget_clock: Literal["wall", "cpu"] = "wall"
+    """What ``max_minutes`` counts: ``wall`` (elapsed time) or ``cpu`` (this process's CPU
+    time, all its threads). ``cpu`` keeps a budget fair when other jobs share the machine."""
 
     def __post_init__(self) -> None:
         _positive(self, "epochs", "lr", "grad_clip", "eval_every")
@@ -159,6 +166,7 @@ class OptimConfig:
             raise ConfigError("max_minutes must be > 0 or null")
         if self.weight_decay < 0 or self.warmup_steps < 0:
             raise ConfigError("OptimConfig.weight_decay and warmup_steps must be >= 0")
+        check_choices(self)
 
 
 @dataclass
@@ -254,7 +262,14 @@ class FinetuneConfig(OptimConfig):
     initial sample Y^tau_k is perturbed by explore_std noise before denoising and the density
     is N(perturbed; Y^tau_k, explore_std) - a proper stochastic policy per sample."""
     explore_std: float = 0.05
-    """Exploration noise of the ``sample`` likelihood, in normalised units."""
+    """Exploration noise of the ``sample`` likelihood, in normalised units (its RMS per step
+    and coordinate, for either ``explore``)."""
+    explore: Literal["white", "smooth"] = "white"
+    """The exploration noise's shape: ``white`` (independent per step and coordinate: 24
+    numbers per sample) or ``smooth`` (a random velocity and acceleration offset per sample
+    and coordinate: noise in the span of t and t^2 over the future, 4 numbers per sample),
+    so that exploration moves a sample's speed, heading and curvature rather than jittering
+    it. The density is Gaussian on those coefficients (rl/ppo.py, smooth_basis)."""
     ratio_against: Literal["reference", "rollout"] = "rollout"
     """Eq. 15's ratio p_theta / p_0 against the frozen ``reference`` (as printed; a trust
     region around G_0), or against the ``rollout`` policy (standard PPO: p_theta / p_old)."""
@@ -331,12 +346,15 @@ def to_dict(cfg: Any) -> dict[str, Any]:
 
 def from_dict(cls: type, data: dict[str, Any] | None, where: str = "") -> Any:
     """Build dataclass ``cls`` from a nested dict; unknown keys are an error."""
+    if data is not None and not isinstance(data, dict):
+        section = where.rstrip(".") or cls.__name__
+        raise ConfigError(f"config {section} must be a section (key: value lines), got {data!r}")
     data = dict(data or {})
     hints = typing.get_type_hints(cls)
-    known = {f.name for f in fields(cls)}
-    unknown = set(data) - known
+    known = [f.name for f in fields(cls)]
+    unknown = sorted(set(data) - set(known), key=str)
     if unknown:
-        raise ConfigError(f"unknown config keys {sorted(unknown)} in {where or cls.__name__}")
+        raise ConfigError(unknown_key_message([str(u) for u in unknown], known, where))
     kwargs = {}
     for name, value in data.items():
         hint = hints[name]
@@ -348,6 +366,49 @@ def from_dict(cls: type, data: dict[str, Any] | None, where: str = "") -> Any:
         return cls(**kwargs)
     except TypeError as exc:
         raise ConfigError(f"{where or cls.__name__}: {exc}") from None
+
+
+def unknown_key_message(unknown: list[str], known: list[str], where: str = "") -> str:
+    """One line for unknown config keys: the nearest valid key (difflib) and the valid keys of
+    the section (``where`` is its dotted prefix, e.g. ``"data."``; empty at the top level)."""
+    close = difflib.get_close_matches(unknown[0], known, n=1, cutoff=0.6)
+    hint = f" (did you mean {where}{close[0]}?)" if close else ""
+    more = f"; also unknown: {', '.join(where + u for u in unknown[1:])}" if unknown[1:] else ""
+    section = f"section {where.rstrip('.')}" if where else "the top level"
+    return (f"unknown config key {where}{unknown[0]}{hint}{more}; valid keys of {section}: "
+            f"{', '.join(known)} (all keys with their meaning: trajpref config show)")  # fmt: skip
+
+
+def field_docs(cls: type) -> dict[str, str]:
+    """The docstring written under each field of dataclass ``cls`` (inherited fields
+    included; a subclass's own wins), each as one line."""
+    docs: dict[str, str] = {}
+    for klass in reversed(cls.__mro__):
+        if not dataclasses.is_dataclass(klass):
+            continue
+        body = ast.parse(textwrap.dedent(inspect.getsource(klass))).body[0].body
+        for node, after in zip(body, body[1:], strict=False):
+            if not (isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)):
+                continue
+            doc = getattr(after, "value", None)
+            if isinstance(after, ast.Expr) and isinstance(doc, ast.Constant):
+                if isinstance(doc.value, str):
+                    docs[node.target.id] = " ".join(doc.value.split())
+    return docs
+
+
+def config_entries(cfg: Any, prefix: str = "") -> list[tuple[str, Any, str]]:
+    """``(dotted key, value, docstring)`` for every leaf of a config dataclass, in field
+    order (what ``trajpref config show`` prints)."""
+    docs = field_docs(type(cfg))
+    out: list[tuple[str, Any, str]] = []
+    for f in fields(cfg):
+        value = getattr(cfg, f.name)
+        if dataclasses.is_dataclass(value):
+            out.extend(config_entries(value, f"{prefix}{f.name}."))
+        else:
+            out.append((prefix + f.name, value, docs.get(f.name, "")))
+    return out
 
 
 def _coerce(value: Any, hint: Any, name: str) -> Any:

@@ -1,31 +1,160 @@
-"""Small file helpers: write-then-rename so a failed run never leaves a half-written file."""
+"""Small file helpers: write-then-rename so a failed run never leaves a half-written file,
+output checks made before any compute, and JSON that is always valid (no NaN/Infinity)."""
 
 from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from trajpref.errors import ConfigError, TrajprefError
+
+
+def file_mode() -> int:
+    """The mode a new file gets from ``open()`` under this process's umask (0644 under the
+    usual 022). ``tempfile.mkstemp`` always creates 0600, so renamed files need this."""
+    mask = os.umask(0o022)  # the only portable way to read the umask is to set it
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+def _nearest_existing(path: Path) -> Path:
+    """``path`` or its closest ancestor that exists (the first thing a write would touch)."""
+    for candidate in (path, *path.parents):
+        if candidate.exists() or candidate.is_symlink():
+            return candidate
+    return Path(".")
+
+
+def _probe_folder(folder: Path, what: str, path: Path) -> None:
+    """Make sure a file can be created in the existing ``folder`` (write permission, a
+    writable file system, not /proc or /sys): create one and remove it at once."""
+    if not folder.is_dir():
+        raise ConfigError(f"{what} {path}: {folder} is not a folder")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".trajpref-probe-", dir=folder)
+    except OSError as exc:
+        raise ConfigError(
+            f"{what} {path}: cannot write in {folder} ({exc.strerror or exc.__class__.__name__})"
+        ) from None
+    os.close(fd)
+    os.unlink(probe)
+
+
+def check_output_file(path: str | Path, suffix: str | None = None, what: str = "--out") -> Path:
+    """Check, before any compute and without leaving anything behind, that ``path`` can be
+    written as a file: not an existing folder, the nearest existing ancestor a writable folder,
+    and ending in ``suffix`` when given. Raises ``ConfigError`` naming ``what``."""
+    path = Path(path)
+    if suffix is not None and path.suffix.lower() != suffix:
+        raise ConfigError(f"{what} {path}: the output must be a {suffix} file")
+    if path.is_dir():
+        raise ConfigError(f"{what} {path}: is an existing folder, not a file")
+    if path.exists() and not path.is_file():
+        raise ConfigError(f"{what} {path}: exists and is not a regular file")
+    if path.is_file() and not os.access(path, os.W_OK):
+        raise ConfigError(f"{what} {path}: the existing file is not writable")
+    parent = path.parent
+    _probe_folder(_nearest_existing(parent), what, path)
+    return path
+
+
+def check_output_dir(path: str | Path, what: str = "--out") -> Path:
+    """Check that ``path`` is, or can be created as, a folder that files can be written in
+    (before any compute; nothing is created). Raises ``ConfigError`` naming ``what``."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ConfigError(f"{what} {path}: exists and is not a folder")
+    _probe_folder(_nearest_existing(path), what, path)
+    return path
+
 
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; rename it onto ``path`` only on success."""
+    """Yield a temporary path beside ``path``; rename it onto ``path`` only on success.
+
+    The file gets the umask's mode (as ``open()`` would give it). Folders created for it are
+    removed again when the write fails; an ``OSError`` becomes a one-line ``TrajprefError``."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
+    existing = _nearest_existing(path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
+    except OSError as exc:
+        _remove_new_folders(path.parent, existing)
+        raise TrajprefError(f"{path}: cannot write ({exc.strerror or exc})") from None
     os.close(fd)
     tmp_path = Path(tmp)
+    done = False
     try:
         yield tmp_path
-        os.replace(tmp_path, path)
+        os.chmod(tmp_path, file_mode())
+        try:
+            os.replace(tmp_path, path)
+        except OSError as exc:
+            raise TrajprefError(f"{path}: cannot write ({exc.strerror or exc})") from None
+        done = True
     finally:
         tmp_path.unlink(missing_ok=True)
+        if not done:
+            _remove_new_folders(path.parent, existing)
+
+
+def _remove_new_folders(folder: Path, existing: Path) -> None:
+    """Remove ``folder`` and its empty ancestors up to (not including) ``existing``."""
+    for candidate in (folder, *folder.parents):
+        if candidate == existing or existing not in candidate.parents:
+            return
+        try:
+            candidate.rmdir()
+        except OSError:
+            return
+
+
+def json_safe(obj: Any) -> Any:
+    """``obj`` with every non-finite float (NaN, +-Infinity) replaced by ``None``, so that it
+    serialises as strict JSON (``null``); numpy scalars become Python numbers."""
+    if isinstance(obj, dict):
+        return {k: json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    if hasattr(obj, "item") and getattr(obj, "ndim", None) == 0:  # numpy / torch scalars
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def dumps_json(obj: Any, indent: int | None = None) -> str:
+    """Strict JSON text of ``obj``: non-finite numbers are written as ``null``."""
+    return json.dumps(json_safe(obj), indent=indent, allow_nan=False)
 
 
 def write_json(path: str | Path, obj: Any) -> None:
+    """Write ``obj`` as strict JSON (non-finite numbers as ``null``), atomically."""
+    text = dumps_json(obj, indent=2) + "\n"
     with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(obj, indent=2) + "\n")
+        tmp.write_text(text)
+
+
+def read_checkpoint_header(path: str | Path) -> dict[str, Any]:
+    """The ``trajpref`` JSON metadata of a safetensors checkpoint, without its weights."""
+    try:
+        with open(path, "rb") as fh:
+            length = int.from_bytes(fh.read(8), "little")
+            if length > os.fstat(fh.fileno()).st_size - 8:
+                raise ValueError("header longer than the file")
+            meta = json.loads(fh.read(length)).get("__metadata__") or {}
+        out = json.loads(meta["trajpref"])
+    except (OSError, ValueError, KeyError, AttributeError) as exc:
+        raise TrajprefError(
+            f"{path}: not a trajpref checkpoint ({exc.__class__.__name__})"
+        ) from None
+    if not isinstance(out, dict):
+        raise TrajprefError(f"{path}: not a trajpref checkpoint")
+    return out

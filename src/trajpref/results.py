@@ -23,7 +23,8 @@ FIELDS = (
 """Every row has exactly these keys (null where not measured). ``uses_score``: whether the
 diffusion score took part (in training or in selecting the samples)."""
 
-METHODS = ("cv", "full-sampler", "pretrained", "pretrained-long", "control", "rlhf", "rlhf-res")
+METHODS = ("cv", "full-sampler", "pretrained", "pretrained-long", "control", "rlhf", "rlhf-res",
+           "rlhf-set", "rlhf-res-smooth")  # fmt: skip
 """Known methods, in the order tables list them."""
 
 

@@ -2,9 +2,10 @@ import numpy as np
 import pytest
 from synthetic import straight_rows, write_tracks
 
-from trajpref.data import load_dataset, resolve_data_root
+from trajpref.data import ReadOptions, load_dataset, mean_speed, resolve_data_root
 from trajpref.data.registry import ETH_UCY, FEET_TO_METRES
 from trajpref.errors import DataError, TrajprefError
+from trajpref.types import DatasetInfo, Scene, TrajectoryDataset
 
 FOLD_TEST_AGENTS = {"eth": 364, "hotel": 1197, "univ": 24334, "zara1": 2356, "zara2": 5910}
 
@@ -107,3 +108,61 @@ def test_robo_sim_splits_are_seeded_and_distinct():
     assert a.info.frame_interval == 0.5 and a.info.units == "m"
     np.testing.assert_array_equal(a[0].history, b[0].history)
     assert not np.array_equal(a[0].history, test[0].history)
+
+
+def test_npz_coordinates_beyond_the_bound_name_the_units(tmp_path):
+    (tmp_path / "robo").mkdir()
+    obs = np.zeros((3, 8, 2))
+    obs[2, 7, 1] = -5e7
+    np.savez(tmp_path / "robo" / "test.npz", obs_traj=obs, pred_traj=np.zeros((3, 12, 2)),
+             seq_start_end=np.array([[0, 3]]))  # fmt: skip
+    with pytest.raises(DataError, match=r"magnitude 5e\+07 m is beyond the sane bound of 1e\+06 m"):
+        load_dataset("robo", "test", tmp_path)
+    ok = load_dataset("robo", "test", tmp_path, options=ReadOptions(max_coord=1e8))
+    assert ok.num_agents == 3
+    obs[2, 7, 1] = 1e39
+    np.savez(tmp_path / "robo" / "test.npz", obs_traj=obs, pred_traj=np.zeros((3, 12, 2)),
+             seq_start_end=np.array([[0, 3]]))  # fmt: skip
+    with pytest.raises(DataError, match="float32"):
+        load_dataset("robo", "test", tmp_path)
+
+
+def test_user_folder_options_reach_the_reader(tmp_path):
+    rows = straight_rows(20)
+    (tmp_path / "a.txt").write_text("".join("|".join(map(str, r)) + "\n" for r in rows))
+    with pytest.raises(DataError, match="the line holds '|'"):
+        load_dataset(str(tmp_path), "test")
+    ds = load_dataset(str(tmp_path), "test", units="m", options=ReadOptions(delimiter="|"))
+    assert ds.num_agents == 2
+    with pytest.raises(DataError, match="beyond the sane bound of 1 m"):
+        load_dataset(str(tmp_path), "test", units="m",
+                     options=ReadOptions(delimiter="|", max_coord=1))  # fmt: skip
+
+
+def test_user_folders_read_csv_files_too(tmp_path):
+    rows = straight_rows(20)
+    (tmp_path / "a.csv").write_text(
+        "frame,agent,x,y\n" + "".join(",".join(map(str, r)) + "\n" for r in rows)
+    )
+    write_tracks(tmp_path / "b.txt", rows)
+    ds = load_dataset(str(tmp_path), "test")
+    assert [s.scene_id for s in ds.scenes] == ["a.csv@frame=0", "b.txt@frame=0"]
+    np.testing.assert_array_equal(ds[0].future, ds[1].future)
+
+
+def test_a_looping_dataset_path_says_so(tmp_path):
+    (tmp_path / "loop").symlink_to(tmp_path / "loop")
+    with pytest.raises(DataError, match="symlink loop"):
+        load_dataset(str(tmp_path / "loop"), "test")
+    (tmp_path / "x.ndjson").symlink_to(tmp_path / "x.ndjson")
+    with pytest.raises(DataError, match="symlink loop"):
+        load_dataset(str(tmp_path / "x.ndjson"), "test")
+
+
+def test_mean_speed_is_hand_computable():
+    # agent 0 moves 1 unit per frame along x, agent 1 stands still: mean step 0.5 per 0.5 s
+    track = np.stack([np.stack([np.arange(20.0), np.zeros(20)], 1), np.ones((20, 2))])
+    track = track.astype(np.float32)  # [2, 20, 2]
+    scene = Scene(track[:, :8], track[:, 8:], np.zeros(2, np.int64), "s")
+    ds = TrajectoryDataset([scene, scene], DatasetInfo("x", "test", "m", 0.5))
+    assert mean_speed(ds) == pytest.approx(1.0)

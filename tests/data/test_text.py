@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 from synthetic import straight_rows, write_tracks
 
-from trajpref.data.text import read_folder, read_tracks, window_scenes
-from trajpref.errors import DataError
+from trajpref.data.text import GapWarning, ReadOptions, read_folder, read_tracks, window_scenes
+from trajpref.errors import ConfigError, DataError
 
 
 def test_windowing_rule_counts_agents_present_in_all_frames(tmp_path):
@@ -24,13 +24,18 @@ def test_windows_follow_unique_frames_even_with_gaps(tmp_path):
     # frame numbers jump (0, 10, 20, 60, ...): windows walk the sorted unique frames
     frames = [0, 10, 20] + [60 + 10 * i for i in range(17)]
     rows = [(f, 1, i, 0) for i, f in enumerate(frames)]
-    scenes = window_scenes(read_tracks(write_tracks(tmp_path / "g.txt", rows)), 8, 12)
+    tracks = read_tracks(write_tracks(tmp_path / "g.txt", rows))
+    with pytest.warns(GapWarning, match=r"1 windows \(1 agent-windows\) .* \(up to 3 in a row\)"):
+        scenes = window_scenes(tracks, 8, 12)
     assert len(scenes) == 1
+    assert window_scenes(tracks, 8, 12, max_gap=0) == []
+    assert window_scenes(tracks, 8, 12, max_gap=2) == []
+    assert len(window_scenes(tracks, 8, 12, max_gap=3)) == 1
 
 
 def test_scale_converts_units(tmp_path):
     path = write_tracks(tmp_path / "s.txt", straight_rows(20, agents=1))
-    scene = window_scenes(read_tracks(path), 8, 12, scale=0.5)[0]
+    scene = window_scenes(read_tracks(path, scale=0.5), 8, 12)[0]
     assert scene.history[0, 1, 0] == pytest.approx(0.15)
 
 
@@ -88,3 +93,168 @@ def test_typed_rows(tmp_path):
     path.write_text("0 -1 1.0 2.0 BALL\n0 7 3.0 4.0 PLAYER\n")
     tracks = read_tracks(path, with_type=True)
     assert tracks.agent_type.tolist() == [1, 0]
+
+
+# ---- formats: CSV, headers, delimiters ----------------------------------------------------
+
+
+def _same_scenes(a, b):
+    assert [s.scene_id.split("@")[1] for s in a] == [s.scene_id.split("@")[1] for s in b]
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(x.history, y.history)
+        np.testing.assert_array_equal(x.future, y.future)
+
+
+@pytest.mark.parametrize(
+    ("header", "sep"),
+    [
+        ("", "\t"),
+        ("frame agent x y\n", " "),
+        ("frame,agent,x,y\n", ","),
+        ("frame, agent, x, y\n", ", "),
+        ("# exported by a tool\nframe;agent;x;y\n", ";"),
+    ],
+)
+def test_csv_and_header_lines_read_like_the_tab_format(tmp_path, header, sep):
+    rows = straight_rows(21, agents=2)
+    reference = window_scenes(read_tracks(write_tracks(tmp_path / "ref.txt", rows)), 8, 12)
+    path = tmp_path / "data.txt"
+    body = "".join(sep.join(str(v) for v in r) + "  # trailing comment\n" for r in rows)
+    path.write_text(header + body)
+    _same_scenes(window_scenes(read_tracks(path), 8, 12), reference)
+    assert len(reference) == 2
+
+
+def test_explicit_delimiter_and_hints_on_a_wrong_column_count(tmp_path):
+    path = tmp_path / "mixed.txt"
+    path.write_text("0 1 2.0 3.0\n10,1,2.5,3.5\n")
+    with pytest.raises(DataError, match=r"found 1; the line holds ',': pass --delimiter ','"):
+        read_tracks(path)
+    path.write_text("0|1|2.0|3.0\n10|1|2.5|3.5\n")
+    with pytest.raises(DataError, match="separated by whitespace, found 1; the line holds '|'"):
+        read_tracks(path)
+    assert read_tracks(path, options=ReadOptions(delimiter="|")).num_rows == 2
+    path.write_text("0\t1\t2.0\t3.0\n")
+    with pytest.raises(
+        DataError, match=r"separated by ',', found 1; the line holds a tab: pass --delimiter tab"
+    ):
+        read_tracks(path, options=ReadOptions(delimiter=","))
+    assert read_tracks(path, options=ReadOptions(delimiter="tab")).num_rows == 1
+    path.write_text("0 1 2.0 3.0 7\n")
+    with pytest.raises(DataError, match="found 5; only frame agent x y are read"):
+        read_tracks(path)
+
+
+def test_a_header_is_only_the_first_line_and_only_when_nothing_in_it_is_a_number(tmp_path):
+    path = tmp_path / "h.txt"
+    path.write_text("frame agent x y\n0 1 2 3\nframe agent x y\n")
+    with pytest.raises(DataError, match="not a number: 'frame'") as info:
+        read_tracks(path)
+    assert info.value.line == 3
+    path.write_text("frame agent 2 y\n0 1 2 3\n")
+    with pytest.raises(DataError, match="not a number: 'frame'") as info:
+        read_tracks(path)
+    assert info.value.line == 1
+    path.write_text("frame agent x y\n")
+    with pytest.raises(DataError, match="empty file"):
+        read_tracks(path)
+
+
+def test_a_byte_order_mark_is_ignored(tmp_path):
+    path = tmp_path / "bom.csv"
+    path.write_bytes(b"\xef\xbb\xbf0,1,2,3\n10,1,2.5,3.5\n")
+    np.testing.assert_array_equal(read_tracks(path).xy, [[2, 3], [2.5, 3.5]])
+    path.write_bytes(b"\xef\xbb\xbf0,1,2,3\n   \n10,1,2.5,3.5\n")  # the line parser too
+    np.testing.assert_array_equal(read_tracks(path).xy, [[2, 3], [2.5, 3.5]])
+
+
+def test_csv_lines_numpy_refuses_are_read_by_the_line_parser(tmp_path):
+    # a blank-but-spaces line inside a CSV stops numpy's parser; the line parser skips it
+    path = tmp_path / "c.csv"
+    path.write_text("0,1,2,3\n   \n10,1,2.5,3.5\n")
+    tracks = read_tracks(path)
+    np.testing.assert_array_equal(tracks.xy, [[2, 3], [2.5, 3.5]])
+    path.write_text("0,1,2,3\n   \n10,1,abc,3.5\n")
+    with pytest.raises(DataError, match="not a number: 'abc'") as info:
+        read_tracks(path)
+    assert info.value.line == 3
+
+
+def test_read_options_are_checked():
+    with pytest.raises(ConfigError, match="delimiter ':'"):
+        ReadOptions(delimiter=":")
+    with pytest.raises(ConfigError, match="max_gap"):
+        ReadOptions(max_gap=-1)
+    with pytest.raises(ConfigError, match="max_coord"):
+        ReadOptions(max_coord=float("inf"))
+    assert ReadOptions(delimiter="comma").delimiter == ","
+    assert ReadOptions(delimiter="whitespace").delimiter == "whitespace"
+
+
+def test_explicit_whitespace_turns_sniffing_off(tmp_path):
+    path = tmp_path / "a.csv"
+    path.write_text("0,1,2,3\n")
+    assert read_tracks(path).num_rows == 1
+    with pytest.raises(DataError, match="separated by whitespace, found 1; the line holds ','"):
+        read_tracks(path, options=ReadOptions(delimiter="whitespace"))
+
+
+# ---- sanity: float32, bounds, encodings, links ---------------------------------------------
+
+
+def test_coordinates_beyond_float32_or_the_bound_are_errors_with_units(tmp_path):
+    path = tmp_path / "big.txt"
+    path.write_text("0 1 2 3\n10 1 1e39 3\n")
+    with pytest.raises(DataError, match="1e\\+39 does not fit float32") as info:
+        read_tracks(path)
+    assert info.value.line == 2
+    path.write_text("0 1 2 3\n10 1 5 3\n20 1 3 -2e20\n")
+    with pytest.raises(DataError, match=r"-2e\+20 m is beyond the sane bound of 1e\+06 m"):
+        read_tracks(path, units="m")
+    with pytest.raises(DataError, match=r"5 px is beyond the sane bound of 4 px") as info:
+        read_tracks(path, options=ReadOptions(max_coord=4), units="px")
+    assert info.value.line == 2
+    assert read_tracks(path, options=ReadOptions(max_coord=1e21)).num_rows == 3
+    # the bound applies after unit scaling (feet -> metres)
+    path.write_text("0 1 10 0\n")
+    with pytest.raises(DataError, match="beyond the sane bound of 3 m"):
+        read_tracks(path, options=ReadOptions(max_coord=3), scale=0.3048 * 1.0, units="m")
+
+
+def test_text_that_is_not_utf8_names_the_line(tmp_path):
+    path = tmp_path / "bin.txt"
+    path.write_bytes(b"0 1 2 3\n10 1 \xff\xfe 3\n")
+    with pytest.raises(DataError, match="not UTF-8 text") as info:
+        read_tracks(path)
+    assert info.value.line == 2
+
+
+def test_symlink_loops_and_broken_links_are_named(tmp_path):
+    folder = tmp_path / "d"
+    folder.mkdir()
+    (folder / "a.txt").symlink_to(folder / "b.txt")
+    (folder / "b.txt").symlink_to(folder / "a.txt")
+    with pytest.raises(DataError, match="symlink loop") as info:
+        read_folder(folder, 8, 12)
+    assert info.value.path == str(folder / "a.txt")
+    with pytest.raises(DataError, match="symlink loop"):
+        read_tracks(folder / "b.txt")
+    other = tmp_path / "e"
+    other.mkdir()
+    (other / "gone.txt").symlink_to(tmp_path / "nowhere.txt")
+    with pytest.raises(DataError, match="broken symlink"):
+        read_folder(other, 8, 12)
+    (tmp_path / "loop").symlink_to(tmp_path / "loop")
+    with pytest.raises(DataError, match="symlink loop"):
+        read_folder(tmp_path / "loop", 8, 12)
+
+
+def test_a_folder_warns_once_about_gaps_and_max_gap_drops_those_windows(tmp_path):
+    frames = [10 * i for i in range(10)] + [10 * i for i in range(15, 25)]
+    for name in ("a.txt", "b.txt"):
+        write_tracks(tmp_path / name, [(f, 1, f / 10, 0) for f in frames])
+    with pytest.warns(GapWarning, match=r"^" + str(tmp_path) + r": 2 windows") as record:
+        scenes = read_folder(tmp_path, 8, 12)
+    assert len(record) == 1 and len(scenes) == 2
+    with pytest.raises(DataError, match="no agent is observed in 20 consecutive frames"):
+        read_folder(tmp_path, 8, 12, options=ReadOptions(max_gap=0))

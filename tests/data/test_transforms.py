@@ -1,8 +1,16 @@
 import torch
 from synthetic import make_scene
 
-from trajpref.data.transforms import augment, backward_velocity, from_relative, to_relative
-from trajpref.types import collate
+from trajpref.data.transforms import (
+    augment,
+    backward_velocity,
+    from_relative,
+    scene_speeds,
+    speed_normaliser,
+    to_relative,
+    transform_scenes,
+)
+from trajpref.types import Batch, collate
 
 
 def test_backward_velocity_never_looks_ahead():
@@ -45,3 +53,20 @@ def test_augment_scale():
     step_in = batch.future[:, 1] - batch.future[:, 0]
     step_out = out.future[:, 1] - out.future[:, 0]
     torch.testing.assert_close(step_out, 2 * step_in)
+
+
+def test_scene_speeds_is_the_median_agent_step_length():
+    # scene 0: agents stepping 1, 2 and 6 units per step -> median 2; scene 1: one agent at 0.5
+    steps = torch.tensor([1.0, 2.0, 6.0, 0.5])  # [N]
+    t = torch.arange(8, dtype=torch.float32)  # [T_h]
+    history = torch.stack([t[:, None] * torch.stack([s, torch.tensor(0.0)]) for s in steps])
+    batch = Batch(history=history, future=torch.zeros(4, 12, 2),
+                  scene=torch.tensor([0, 0, 0, 1]), agent_type=torch.zeros(4, dtype=torch.int64),
+                  num_scenes=2)  # fmt: skip
+    assert torch.allclose(scene_speeds(batch), torch.tensor([2.0, 0.5]))
+    mats = speed_normaliser(batch, speed_ref=1.0)  # scene 0 halved, scene 1 (slower) kept
+    assert torch.allclose(mats[:, 0, 0], torch.tensor([0.5, 1.0]))
+    scaled = transform_scenes(batch, mats)
+    centre = batch.history[:3, -1].mean(0)  # scene 0's mean last observed position
+    assert torch.allclose(scaled.history[:3], (batch.history[:3] - centre) * 0.5 + centre)
+    assert torch.equal(scaled.history[3], batch.history[3])

@@ -4,6 +4,7 @@ import math
 
 import pytest
 import torch
+from torch.distributions import Normal
 
 from trajpref.rl import ppo
 
@@ -148,3 +149,38 @@ def test_antithetic_advantage_cancels_what_the_pair_shares():
         for j in range(3):
             for t in range(4):
                 assert plus[i, j, t] == (a[i, j, t] - b[i, j, t]) / 2
+
+
+def test_smooth_basis_is_orthonormal_and_spans_t_and_t_squared():
+    q = ppo.smooth_basis(12)  # [T, 2]
+    assert torch.allclose(q.T @ q, torch.eye(2), atol=1e-6)
+    t = torch.arange(1, 13) / 12
+    for f in (t, t**2, 3 * t - t**2):
+        assert torch.allclose(q @ (q.T @ f), f, atol=1e-5)  # inside the span
+    assert not torch.allclose(q @ (q.T @ t**3), t**3, atol=1e-3)  # t^3 is not
+
+
+def test_smooth_noise_is_smooth_and_has_the_asked_rms():
+    q = ppo.smooth_basis(12)
+    xi = ppo.smooth_noise(torch.Size([4000, 3, 12, 2]), q, 0.05, torch.Generator().manual_seed(0))
+    proj = torch.einsum("tj,sj,ksnd->ktnd", q, q, xi.transpose(1, 2)).transpose(1, 2)
+    assert torch.allclose(proj, xi, atol=1e-6)  # no component outside t, t^2
+    assert float(xi.pow(2).mean().sqrt()) == pytest.approx(0.05, rel=0.03)
+
+
+def test_smooth_log_prob_is_the_coefficients_gaussian_density_up_to_a_constant():
+    q, std = ppo.smooth_basis(12), 0.1
+    g = torch.Generator().manual_seed(1)
+    mean = torch.randn(2, 3, 12, 2, generator=g)
+    c = torch.randn(2, 3, 2, 2, generator=g) * 0.2  # [K, N, J, 2] coefficients
+    y = mean + torch.einsum("tj,knjd->kntd", q, c)
+    coeff_std = std * (12 / 2) ** 0.5
+    exact = Normal(0.0, coeff_std).log_prob(c).sum((-1, -2))  # [K, N]
+    ours = ppo.smooth_log_prob(y, mean, std, q).sum(-1)  # [K, N]
+    offset = ours - exact
+    assert torch.allclose(offset, offset.flatten()[0].expand_as(offset), atol=1e-4)
+    # a change of the mean outside the span (a zig-zag) does not move the density
+    zigzag = torch.tensor([(-1.0) ** i for i in range(12)])[:, None] * 0.3  # [T, 1]
+    zig = zigzag - q @ (q.T @ zigzag)
+    moved = ppo.smooth_log_prob(y, mean + zig, std, q)
+    assert torch.allclose(moved, ppo.smooth_log_prob(y, mean, std, q), atol=1e-5)

@@ -215,3 +215,26 @@ def test_the_set_reward_steps_and_differs_from_the_score(tiny_run, walks):
                    if p.grad is not None)  # fmt: skip
     assert logs["set"]["reward"] == logs["score"]["reward"]  # the same samples, same score
     assert logs["set"]["reward_total"] != logs["score"]["reward_total"]
+
+
+def test_smooth_exploration_explores_in_the_smooth_span_and_steps(tiny_run, walks):
+    start = ckpt.load(tiny_run / "generator.safetensors")
+    train = load_dataset(str(walks), "train")
+    stage = _stage(start, train, "finetune.explore=smooth", "finetune.explore_std=0.2")
+    obj = stage.objective
+    batch = collate(train.scenes[:4])
+    policy, _, _ = obj.rollouts(
+        batch, obj.sampler.condition(batch), torch.Generator().manual_seed(0)
+    )
+    q = obj.basis  # [T, 2]
+    xi = policy.explore  # [K, N, T, 2]
+    inside = torch.einsum("tj,sj,knsd->kntd", q, q, xi)
+    assert torch.allclose(inside, xi, atol=1e-5) and float(xi.abs().max()) > 0.05
+    before = _state(obj.policy)
+    opt = torch.optim.Adam(stage.trainable.parameters(), lr=1e-2)
+    loss, logs = obj(batch, torch.Generator().manual_seed(0))
+    opt.zero_grad()
+    loss.backward()
+    opt.step()
+    assert torch.isfinite(loss) and any(not torch.equal(before[k], v)
+                                        for k, v in obj.policy.state_dict().items())  # fmt: skip

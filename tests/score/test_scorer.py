@@ -7,6 +7,7 @@ from synthetic import make_scene
 from trajpref.cli import main
 from trajpref.data import load_dataset
 from trajpref.data.transforms import to_model_frame
+from trajpref.errors import ConfigError
 from trajpref.models.encoder import scene_features
 from trajpref.score import TrajectoryScorer, rank_samples, score_timesteps
 from trajpref.types import collate
@@ -148,3 +149,24 @@ def test_cli_plot_with_scorer(tiny_run, walks, tmp_path):
     code = main(["plot", "--dataset", str(walks), "--model", model, "--samples", "4",
                  "--scorer", scorer, "--out", str(out)])  # fmt: skip
     assert code == 0 and out.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_speed_normalisation_leaves_slow_scenes_alone_and_rescales_fast_ones(tiny_run, batch):
+    from trajpref.data.transforms import scene_speeds, transform_positions, transform_scenes
+
+    path = tiny_run / "denoiser.safetensors"
+    plain = TrajectoryScorer.from_checkpoint(path)
+    samples = _samples(batch)
+    speeds = scene_speeds(batch)  # [B]
+    slow = TrajectoryScorer.from_checkpoint(path, speed_ref=float(speeds.max()) * 1.01)
+    assert torch.allclose(slow.residual(batch, samples), plain.residual(batch, samples))
+    # a reference at half the slowest scene's speed: every scene is shrunk by ref / speed
+    ref = float(speeds.min()) / 2
+    fast = TrajectoryScorer.from_checkpoint(path, speed_ref=ref)
+    mats = (ref / speeds)[:, None, None] * torch.eye(2)  # [B, 2, 2]
+    expected = plain.residual(transform_scenes(batch, mats),
+                              transform_positions(samples, batch, mats))  # fmt: skip
+    assert torch.allclose(fast.residual(batch, samples), expected)
+    assert not torch.allclose(expected, plain.residual(batch, samples))
+    with pytest.raises(ConfigError, match="speed_ref must be > 0"):
+        TrajectoryScorer.from_checkpoint(path, speed_ref=0.0)

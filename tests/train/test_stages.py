@@ -244,12 +244,22 @@ def test_nonfinite_losses_are_skipped_then_refused(tmp_path, cfg, folder):
     assert _changed(before, stage.trainable) == []  # no NaN update reached the weights
 
 
-def test_a_time_budget_stops_the_stage_and_still_validates(tmp_path, cfg):
+@pytest.mark.parametrize("clock", ["wall", "cpu"])
+def test_a_time_budget_stops_the_stage_and_still_validates(tmp_path, cfg, clock):
     import dataclasses
 
-    budget = dataclasses.replace(cfg, denoiser=dataclasses.replace(cfg.denoiser, epochs=50,
-                                                                   max_minutes=1e-6))  # fmt: skip
+    denoiser = dataclasses.replace(cfg.denoiser, epochs=50, max_minutes=1e-6, budget_clock=clock)
+    budget = dataclasses.replace(cfg, denoiser=denoiser)
     summary = train_stage("diffusion", budget, tmp_path, device="cpu", progress=False)
     assert summary["steps"] == 1  # the first step already crosses the budget
+    assert 0 < summary["budget_seconds"]
     records = [json.loads(line) for line in (tmp_path / "denoiser_metrics.jsonl").open()]
     assert len(records) == 1 and "val_denoise_loss" in records[0]
+    assert records[0][f"budget_{clock}_seconds"] > 0
+
+
+def test_an_unknown_budget_clock_is_a_config_error():
+    from trajpref.config import DenoiserTrainConfig
+
+    with pytest.raises(ConfigError, match="budget_clock must be 'wall' or 'cpu'"):
+        DenoiserTrainConfig(budget_clock="gpu")

@@ -1,4 +1,7 @@
 import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from PIL import Image
 
 from trajpref.viz import plot_panel, plot_scene, plot_scene_scored, plot_survey_summary
 
@@ -30,8 +33,6 @@ def test_plot_scene_scored_writes_a_png(tmp_path):
 
 
 def test_plot_panel_gives_every_panel_of_a_scene_the_same_frame(tmp_path):
-    from PIL import Image
-
     hist, fut, pred = _scene()
     limits = (-10.0, 10.0, -5.0, 5.0)
     a = plot_panel(hist, pred[:2], np.ones((2, 3)), tmp_path / "a.png", limits)
@@ -47,3 +48,18 @@ def test_plot_survey_summary_skips_missing_values(tmp_path):
                               {"human": ["", "**", "ns"]}, tmp_path / "s.png", "t",
                               xlims={"human": (0, 5)})  # fmt: skip
     assert out.read_bytes()[:8] == PNG
+
+
+def test_long_titles_and_labels_are_not_clipped(tmp_path):
+    """The saved canvas grows to hold the whole title: a title wider than the 6.4-inch figure
+    is still in the picture (it was cut at the figure's edge)."""
+    hist, fut, pred = _scene()
+    title = "zara1/test scene 100, models/zara1/generator-long.safetensors, K=20; " * 3
+    fig = Figure(dpi=120)
+    text = fig.text(0, 0, title, fontsize=9)
+    title_px = text.get_window_extent(FigureCanvasAgg(fig).get_renderer()).width
+    assert title_px > 6.4 * 120  # wider than the figure itself
+    for out in (plot_scene(hist, fut, pred, tmp_path / "a.png", "m", title),
+                plot_scene_scored(hist, fut, pred, np.zeros((5, 3)), tmp_path / "b.png", "m",
+                                  title)):  # fmt: skip
+        assert Image.open(out).size[0] >= title_px

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from trajpref.data.text import DEFAULT_MAX_COORD
 from trajpref.errors import DataError
 from trajpref.types import Scene
 
@@ -32,8 +33,13 @@ def scenes_from_arrays(
     seq_start_end: np.ndarray,
     path: str | Path,
     scale: float = 1.0,
+    max_coord: float = DEFAULT_MAX_COORD,
+    units: str = "unknown",
 ) -> list[Scene]:
-    """Split agent-packed arrays [N, T_h, 2] / [N, T_f, 2] into scenes by ``seq_start_end``."""
+    """Split agent-packed arrays [N, T_h, 2] / [N, T_f, 2] into scenes by ``seq_start_end``.
+
+    Coordinates (after ``scale``) must be finite in float32 and within ``max_coord`` (in
+    ``units``)."""
     if history.ndim != 3 or history.shape[-1] != 2 or future.ndim != 3 or future.shape[-1] != 2:
         raise DataError(
             f"expected [N, T, 2] trajectories, got {history.shape} and {future.shape}", path
@@ -42,6 +48,18 @@ def scenes_from_arrays(
         raise DataError("history and future disagree on the number of agents", path)
     if not (np.isfinite(history).all() and np.isfinite(future).all()):
         raise DataError("NaN or infinite coordinates", path)
+    with np.errstate(over="ignore"):
+        history = (history * scale).astype(np.float32)  # [N, T_h, 2]
+        future = (future * scale).astype(np.float32)  # [N, T_f, 2]
+    if not (np.isfinite(history).all() and np.isfinite(future).all()):
+        raise DataError("coordinates beyond the float32 range (|value| > 3.4e38)", path)
+    biggest = float(max(np.abs(history).max(initial=0), np.abs(future).max(initial=0)))
+    if biggest > max_coord:
+        raise DataError(
+            f"coordinate of magnitude {biggest:g} {units} is beyond the sane bound of "
+            f"{max_coord:g} {units} (raise it with --max-coord if the data really spans that far)",
+            path,
+        )
     sse = np.asarray(seq_start_end, dtype=np.int64)  # [S, 2]
     if sse.ndim != 2 or sse.shape[1] != 2:
         raise DataError(f"seq_start_end must be [S, 2], got {sse.shape}", path)
@@ -53,8 +71,8 @@ def scenes_from_arrays(
     for i, (a, b) in enumerate(sse):
         scenes.append(
             Scene(
-                history=(history[a:b] * scale).astype(np.float32),
-                future=(future[a:b] * scale).astype(np.float32),
+                history=history[a:b],
+                future=future[a:b],
                 agent_type=np.zeros(b - a, np.int64),
                 scene_id=f"{name}#{i}",
             )

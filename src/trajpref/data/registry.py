@@ -1,7 +1,8 @@
 """One entry point for every dataset: ``load_dataset(name, split, root)``.
 
 Names: ``eth hotel univ zara1 zara2 sdd nba robo robo-sim``, or a path to a folder of
-``frame agent x y`` text files (with ``train/val/test`` sub-folders when present).
+``frame agent x y`` text files or TrajNet++ ``.ndjson`` scene files (with ``train/val/test``
+sub-folders when present), or to one ``.ndjson`` file. Formats: ``docs/data_format.md``.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from trajpref.data import arrays, text
+from trajpref.data import arrays, text, trajnet
 from trajpref.data.robo_sim import simulate
 from trajpref.errors import DataError, TrajprefError
 from trajpref.types import DatasetInfo, Scene, TrajectoryDataset
@@ -22,6 +23,8 @@ ETH_UCY = ("eth", "hotel", "univ", "zara1", "zara2")
 NAMES = (*ETH_UCY, "sdd", "nba", "robo", "robo-sim")
 """Built-in dataset names."""
 SPLITS = ("train", "val", "test")
+USER_TEXT = ("*.txt", "*.csv")
+"""Track files of a user folder (Social-GAN text format; docs/data_format.md)."""
 
 FEET_TO_METRES = 0.3048
 
@@ -80,13 +83,16 @@ def load_dataset(
     root: str | Path | None = None,
     frame_interval: float = 0.4,
     units: str = "unknown",
+    options: text.ReadOptions | None = None,
 ) -> TrajectoryDataset:
     """Load one split of a dataset as a list of scenes in absolute coordinates.
 
     ``frame_interval`` and ``units`` describe user folders (a path ``name``) only; built-in
-    datasets know their own.
+    datasets know their own. ``options`` (delimiter, ``max_gap``, ``max_coord``) apply to every
+    reader that they make sense for (the bound to all of them).
     """
     _check_split(split)
+    options = options or text.ReadOptions()
     if name == "robo-sim":
         return _robo_sim(split)
     if name in NAMES:
@@ -94,36 +100,78 @@ def load_dataset(
         spec = SPECS[name]
         if name in ETH_UCY:
             folder = base / "eth_ucy" / name / split
-            scenes = text.read_folder(folder, spec.t_hist, spec.t_fut)
+            scenes = text.read_folder(
+                folder, spec.t_hist, spec.t_fut, options=options, units=spec.units
+            )
             source = folder
         elif name == "sdd":
-            scenes, source = _sdd(base, split)
+            scenes, source = _sdd(base, split, options)
         elif name == "nba":
-            scenes, source = _nba(base, split, spec)
+            scenes, source = _nba(base, split, spec, options)
         else:  # robo
-            scenes, source = _robo(base, split)
+            scenes, source = _robo(base, split, options)
         info = DatasetInfo(
             name, split, spec.units, spec.frame_interval, spec.t_hist, spec.t_fut, str(source)
         )
         return TrajectoryDataset(scenes, info)
     path = Path(name).expanduser()
-    if path.exists() or os.sep in name or name.startswith("."):
-        return _user_folder(path, split, frame_interval, units)
+    if path.exists() or path.is_symlink() or os.sep in name or name.startswith("."):
+        return _user_folder(path, split, frame_interval, units, options)
     raise TrajprefError(
         f"unknown dataset {name!r}; choose one of {', '.join(NAMES)} or pass a folder path"
     )
 
 
-def _user_folder(path: Path, split: str, frame_interval: float, units: str) -> TrajectoryDataset:
+def _user_folder(
+    path: Path, split: str, frame_interval: float, units: str, options: text.ReadOptions
+) -> TrajectoryDataset:
+    if path.suffix == ".ndjson" and not path.is_dir():
+        text.check_file(path)  # a clear error for a missing file or a symlink loop
+        return _trajnet([path], str(path), split, frame_interval, units, options, path)
     if not path.is_dir():
+        if path.is_symlink():
+            text.track_files(path)  # says "symlink loop" or "broken symlink"
         raise DataError("no such folder", path)
     has_splits = any((path / s).is_dir() for s in SPLITS)
     folder = path / split if has_splits else path
     if has_splits and not folder.is_dir():
         present = [s for s in SPLITS if (path / s).is_dir()]
         raise DataError(f"no {split}/ sub-folder (found {', '.join(present)})", path)
-    scenes = text.read_folder(folder, 8, 12)
+    has_text = any(folder.glob("*.txt")) or any(folder.glob("*.csv"))
+    if any(folder.glob("*.ndjson")):
+        if has_text:
+            raise DataError("holds both text (*.txt, *.csv) and *.ndjson files: keep one "
+                            "format per folder",
+                            folder)  # fmt: skip
+        files = text.track_files(folder, "*.ndjson")
+        return _trajnet(files, str(path), split, frame_interval, units, options, folder)
+    scenes = text.read_folder(folder, 8, 12, pattern=USER_TEXT, options=options, units=units)
     info = DatasetInfo(str(path), split, units, frame_interval, 8, 12, str(folder))
+    return TrajectoryDataset(scenes, info)
+
+
+def _trajnet(
+    files: list[Path],
+    name: str,
+    split: str,
+    frame_interval: float,
+    units: str,
+    options: text.ReadOptions,
+    source: Path,
+) -> TrajectoryDataset:
+    """TrajNet++ scene files: metres by the format's convention, the interval from their fps."""
+    units = "m" if units == "unknown" else units
+    scenes: list[Scene] = []
+    fps: set[float] = set()
+    for path in files:
+        read = trajnet.read_trajnet(path, 8, 12, options.max_coord, units)
+        scenes.extend(read.scenes)
+        fps |= read.fps
+    if not scenes:
+        raise DataError("no TrajNet++ scene has 20 frames of its primary agent", source)
+    if len(fps) == 1:
+        frame_interval = 1.0 / fps.pop()
+    info = DatasetInfo(name, split, units, frame_interval, 8, 12, str(source))
     return TrajectoryDataset(scenes, info)
 
 
@@ -136,39 +184,38 @@ def _carve_val(n: int) -> np.ndarray:
     return mask
 
 
-def _sdd(base: Path, split: str) -> tuple[list[Scene], Path]:
+def _sdd(base: Path, split: str, options: text.ReadOptions) -> tuple[list[Scene], Path]:
     path = base / "sdd" / ("test.npz" if split == "test" else "train.npz")
     data = arrays.load_npz(path, ("traj", "seq_start_end"))
     traj = data["traj"]  # [N, 20, 2]
     if traj.ndim != 3 or traj.shape[1] != 20:
         raise DataError(f"traj must be [N, 20, 2], got {traj.shape}", path)
-    scenes = arrays.scenes_from_arrays(traj[:, :8], traj[:, 8:], data["seq_start_end"], path)
+    scenes = arrays.scenes_from_arrays(
+        traj[:, :8], traj[:, 8:], data["seq_start_end"], path,
+        max_coord=options.max_coord, units=SPECS["sdd"].units,
+    )  # fmt: skip
     if split != "test":
         is_val = _carve_val(len(scenes))
         scenes = [s for s, v in zip(scenes, is_val, strict=True) if v == (split == "val")]
     return scenes, path
 
 
-def _nba(base: Path, split: str, spec: SourceSpec) -> tuple[list[Scene], Path]:
+def _nba(
+    base: Path, split: str, spec: SourceSpec, options: text.ReadOptions
+) -> tuple[list[Scene], Path]:
     folder = base / "nba" / "rebound" / ("test" if split == "test" else "train")
-    if not folder.is_dir():
-        raise DataError("no such folder", folder)
-    files = sorted(folder.glob("*.txt"))
-    if not files:
-        raise DataError("no *.txt files in folder", folder)
+    files = text.track_files(folder)
     if split != "test":
         is_val = _carve_val(len(files))
         files = [f for f, v in zip(files, is_val, strict=True) if v == (split == "val")]
-    scenes: list[Scene] = []
-    for path in files:
-        tracks = text.read_tracks(path, with_type=True)
-        scenes.extend(
-            text.window_scenes(tracks, spec.t_hist, spec.t_fut, stride=1, scale=FEET_TO_METRES)
-        )
+    scenes = text.read_files(
+        files, spec.t_hist, spec.t_fut, stride=1, scale=FEET_TO_METRES, with_type=True,
+        options=options, units=spec.units, where=folder,
+    )  # fmt: skip
     return scenes, folder
 
 
-def _robo(base: Path, split: str) -> tuple[list[Scene], Path]:
+def _robo(base: Path, split: str, options: text.ReadOptions) -> tuple[list[Scene], Path]:
     if split == "train":
         raise TrajprefError(
             "the official Robo set has no public training split; train on 'robo-sim'"
@@ -176,8 +223,9 @@ def _robo(base: Path, split: str) -> tuple[list[Scene], Path]:
     path = base / "robo" / f"{split}.npz"
     data = arrays.load_npz(path, ("obs_traj", "pred_traj", "seq_start_end"))
     scenes = arrays.scenes_from_arrays(
-        data["obs_traj"], data["pred_traj"], data["seq_start_end"], path
-    )
+        data["obs_traj"], data["pred_traj"], data["seq_start_end"], path,
+        max_coord=options.max_coord, units=SPECS["robo"].units,
+    )  # fmt: skip
     return scenes, path
 
 

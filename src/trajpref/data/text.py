@@ -1,88 +1,120 @@
-"""Readers for whitespace-separated track files (``frame agent x y [type]``) and the
-windowing rule that turns tracks into scenes.
+"""Readers for track text files (``frame agent x y [type]``, the Social-GAN format) and the
+windowing rule that turns tracks into scenes. The format and its options are documented in
+``docs/data_format.md``.
 
 Windowing (the standard of Social-GAN, Trajectron++, AgentFormer and LED): per file, take the
 sorted unique frame numbers; a window is ``T_h + T_f`` consecutive entries of that list,
 starting at every ``stride``-th entry; an agent belongs to a window when it has a row in all
-of its frames; every window with at least one such agent is a scene.
+of its frames; every window with at least one such agent is a scene. Scenes come in the order
+of their first frame, and a scene's agents in the order of their ids.
+
+Memory: rows are parsed by numpy's C parser, sorted by (agent, frame), and each track's
+windows are read off runs of consecutive frame indices, so the reader holds O(rows + windows)
+numbers and never a frames x agents array. A file's scenes are views into two arrays
+(histories and futures of all its windows).
 """
 
 from __future__ import annotations
 
-import math
+import errno
+import os
+import re
+import warnings
+from array import array
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from trajpref.errors import DataError
+from trajpref.errors import ConfigError, DataError
 from trajpref.types import AGENT_BALL, AGENT_PERSON, Scene
+
+DEFAULT_MAX_COORD = 1e6
+"""Largest accepted |x| or |y|, in the dataset's units (after any unit scaling)."""
+
+DELIMITERS = {",": ",", ";": ";", "|": "|", "\t": "\t", "tab": "\t", "comma": ",",
+              "semicolon": ";", "whitespace": "whitespace"}  # fmt: skip
+"""Accepted ``delimiter`` values and what they mean (``whitespace``: runs of spaces or tabs)."""
+
+_TYPE_NAMES = {"PLAYER": AGENT_PERSON, "PERSON": AGENT_PERSON, "BALL": AGENT_BALL}
+_TYPED = np.dtype([("frame", "f8"), ("agent", "f8"), ("x", "f8"), ("y", "f8"), ("kind", "U16")])
+_CHUNK = 1 << 16
+"""Windows gathered per step when the window arrays are filled."""
+
+
+class GapWarning(UserWarning):
+    """Some windows span frames missing from a file (a jump in its frame numbers)."""
+
+
+@dataclass(frozen=True)
+class ReadOptions:
+    """How track text files are read (``docs/data_format.md``)."""
+
+    delimiter: str | None = None
+    """Column separator: ``None`` sniffs it from the first data line (a comma if it has one,
+    else a semicolon if it has one, else runs of spaces/tabs); or one of ``, ; | \\t`` (also
+    spelled ``comma semicolon tab``), or ``whitespace``."""
+    max_gap: int | None = None
+    """Missing frames a window may span. ``None``: windows follow the unique frame numbers
+    across any jump (the Social-GAN rule) and a ``GapWarning`` says how many do; ``0``: no
+    window spans a missing frame."""
+    max_coord: float = DEFAULT_MAX_COORD
+    """Largest accepted |x| or |y| in the dataset's units (after unit scaling); a larger
+    coordinate is a ``DataError``."""
+
+    def __post_init__(self) -> None:
+        if self.delimiter is not None:
+            if self.delimiter not in DELIMITERS:
+                names = ", ".join(repr(k) for k in DELIMITERS)
+                raise ConfigError(f"delimiter {self.delimiter!r}: choose one of {names}")
+            object.__setattr__(self, "delimiter", DELIMITERS[self.delimiter])
+        if self.max_gap is not None and (isinstance(self.max_gap, bool) or self.max_gap < 0):
+            raise ConfigError(f"max_gap must be None or an integer >= 0, got {self.max_gap!r}")
+        if not (np.isfinite(self.max_coord) and self.max_coord > 0):
+            raise ConfigError(f"max_coord must be a positive finite number, got {self.max_coord}")
 
 
 @dataclass
 class Tracks:
-    """The rows of one track file, validated."""
+    """The rows of one track file, validated, sorted by (agent, frame)."""
 
     path: Path
-    frame: np.ndarray
-    """[R] float64 frame numbers."""
-    agent: np.ndarray
-    """[R] float64 agent ids."""
+    frames: np.ndarray
+    """[F] float64 sorted unique frame numbers."""
+    agents: np.ndarray
+    """[A] float64 sorted unique agent ids."""
+    frame_index: np.ndarray
+    """[R] int32 index into ``frames`` of each row."""
+    agent_index: np.ndarray
+    """[R] int32 index into ``agents`` of each row (non-decreasing)."""
     xy: np.ndarray
-    """[R, 2] float64 positions."""
+    """[R, 2] float32 positions, in the dataset's units (``scale`` applied)."""
     agent_type: np.ndarray
-    """[R] int64 agent-type flags."""
+    """[A] int64 agent-type flag per agent (the type on the agent's last row in the file)."""
+
+    @property
+    def num_rows(self) -> int:
+        return int(self.xy.shape[0])
 
 
-_TYPE_NAMES = {"PLAYER": AGENT_PERSON, "PERSON": AGENT_PERSON, "BALL": AGENT_BALL}
+@dataclass
+class _Layout:
+    """What the first data line says about a file."""
+
+    delimiter: str | None
+    header_line: int | None
+    """1-based number of a header line to skip (None: no header)."""
 
 
-def read_tracks(path: str | Path, with_type: bool = False) -> Tracks:
-    """Read ``frame agent x y`` rows (plus a ``BALL|PLAYER`` column when ``with_type``).
+def _sep_name(delimiter: str | None) -> str:
+    return {None: "whitespace", "\t": "tab"}.get(delimiter, repr(delimiter))
 
-    Raises ``DataError`` naming the file and line for: a wrong number of columns, a value that
-    is not a number, NaN or infinity, a duplicated (frame, agent) pair, or an empty file.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise DataError("no such file", path)
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DataError(f"cannot read file ({exc.__class__.__name__})", path) from None
-    n_cols = 5 if with_type else 4
-    expect = "frame agent x y BALL|PLAYER" if with_type else "frame agent x y"
-    rows: list[tuple[float, float, float, float]] = []
-    types: list[int] = []
-    line_of: list[int] = []
-    for lineno, line in enumerate(text.splitlines(), start=1):
-        parts = line.split()
-        if not parts or parts[0].startswith("#"):
-            continue
-        if len(parts) != n_cols:
-            raise DataError(
-                f"expected {n_cols} columns ({expect}), found {len(parts)}", path, lineno
-            )
-        try:
-            values = tuple(float(v) for v in parts[:4])
-        except ValueError:
-            bad = next(v for v in parts[:4] if not _is_float(v))
-            raise DataError(f"not a number: {bad!r}", path, lineno) from None
-        if not all(math.isfinite(v) for v in values):
-            raise DataError("NaN or infinite value", path, lineno)
-        if with_type:
-            kind = _TYPE_NAMES.get(parts[4].upper())
-            if kind is None:
-                raise DataError(f"unknown agent type {parts[4]!r} (BALL or PLAYER)", path, lineno)
-            types.append(kind)
-        rows.append(values)  # type: ignore[arg-type]
-        line_of.append(lineno)
-    if not rows:
-        raise DataError("empty file: no data rows", path)
-    arr = np.asarray(rows, dtype=np.float64)  # [R, 4]
-    _check_duplicates(arr[:, 0], arr[:, 1], np.asarray(line_of), path)
-    agent_type = np.asarray(types, np.int64) if with_type else np.zeros(len(arr), np.int64)
-    return Tracks(path, arr[:, 0], arr[:, 1], arr[:, 2:4], agent_type)
+
+def _split(content: str, delimiter: str | None) -> list[str]:
+    if delimiter is None:
+        return content.split()
+    return [field.strip() for field in content.split(delimiter)]
 
 
 def _is_float(v: str) -> bool:
@@ -93,19 +125,347 @@ def _is_float(v: str) -> bool:
     return True
 
 
-def _check_duplicates(frame: np.ndarray, agent: np.ndarray, lines: np.ndarray, path: Path):
-    keys = np.stack([frame, agent], 1)  # [R, 2]
-    _, first, counts = np.unique(keys, axis=0, return_index=True, return_counts=True)
-    if (counts > 1).any():
-        dup_keys = keys[first[counts > 1]]  # [U, 2]
-        is_dup = (keys[:, None, :] == dup_keys[None, :1, :]).all(-1).any(-1)  # [R]
-        dup_lines = lines[is_dup]
-        f, a = dup_keys[0]
+def _link_error(path: Path) -> DataError:
+    """The error for a path that is a symlink whose target cannot be reached."""
+    try:
+        os.stat(path)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return DataError("symlink loop (the link leads back to itself)", path)
+        try:
+            target = os.readlink(path)
+        except OSError:
+            target = "?"
+        return DataError(f"broken symlink (points to {target}, which does not exist)", path)
+    return DataError("cannot follow symlink", path)
+
+
+def check_file(path: Path) -> None:
+    """Raise ``DataError`` unless ``path`` is a readable-looking file (says which symlink
+    problem when it is a link)."""
+    if path.is_file():
+        return
+    if path.is_symlink():
+        raise _link_error(path)
+    raise DataError("no such file", path)
+
+
+def _layout(path: Path, options: ReadOptions) -> _Layout:
+    """Sniff the delimiter and a header from the first line that holds data."""
+    try:
+        with open(path, "rb") as fh:
+            for lineno, raw in enumerate(fh, start=1):
+                try:
+                    line = raw.decode("utf-8-sig" if lineno == 1 else "utf-8")
+                except UnicodeDecodeError:
+                    break  # the parser reports it with its line number
+                content = line.split("#", 1)[0]
+                if not content.strip():
+                    continue
+                delimiter = options.delimiter
+                if delimiter is None:
+                    delimiter = "," if "," in content else ";" if ";" in content else None
+                elif delimiter == "whitespace":
+                    delimiter = None
+                tokens = [t for t in re.split(r"[\s,;|]+", content) if t]
+                is_header = not any(_is_float(t) for t in tokens)
+                return _Layout(delimiter, lineno if is_header else None)
+    except OSError as exc:
+        raise DataError(f"cannot read file ({exc.strerror or exc})", path) from None
+    return _Layout(None if options.delimiter == "whitespace" else options.delimiter, None)
+
+
+def _parse_fast(path: Path, layout: _Layout, with_type: bool):
+    """numpy's C parser; ``None`` when it refuses the file (the slow path then says why)."""
+    skip = layout.header_line or 0
+    kwargs = dict(comments="#", delimiter=layout.delimiter, skiprows=skip, encoding="utf-8-sig")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "input contained no data"
+            if with_type:
+                table = np.loadtxt(path, dtype=_TYPED, ndmin=1, **kwargs)  # [R]
+                if table.size == 0:
+                    return np.zeros((0, 4)), np.zeros(0, "U16")
+                values = np.stack([table[k] for k in ("frame", "agent", "x", "y")], 1)  # [R, 4]
+                return values, table["kind"]
+            values = np.loadtxt(path, dtype=np.float64, ndmin=2, **kwargs)  # [R, C]
+    except (ValueError, TypeError, IndexError, OverflowError, UnicodeError, OSError):
+        return None
+    if values.size == 0:
+        return np.zeros((0, 4)), None
+    if values.shape[1] != 4:
+        return None
+    return values, None
+
+
+def _parse_slow(path: Path, layout: _Layout, with_type: bool):
+    """Line-by-line parser: the reference for what is accepted, and the source of the
+    line-numbered error messages. Returns ``(values [R, 4], kinds [R] | None, lines [R])``."""
+    n_cols = 5 if with_type else 4
+    expect = "frame agent x y BALL|PLAYER" if with_type else "frame agent x y"
+    delimiter = layout.delimiter
+    values = array("d")
+    kinds: list[str] = []
+    lines = array("q")
+    try:
+        fh = open(path, "rb")
+    except OSError as exc:
+        raise DataError(f"cannot read file ({exc.strerror or exc})", path) from None
+    with fh:
+        for lineno, raw in enumerate(fh, start=1):
+            if lineno == layout.header_line:
+                continue
+            try:
+                line = raw.decode("utf-8-sig" if lineno == 1 else "utf-8")  # a BOM is dropped
+            except UnicodeDecodeError:
+                raise DataError("not UTF-8 text", path, lineno) from None
+            content = line.split("#", 1)[0]
+            if not content.strip():
+                continue
+            fields = _split(content.rstrip("\r\n"), delimiter)
+            if len(fields) != n_cols:
+                message = (
+                    f"expected {n_cols} columns ({expect}) separated by {_sep_name(delimiter)}, "
+                    f"found {len(fields)}"
+                )
+                raise DataError(message + _column_hint(content, delimiter, len(fields), n_cols),
+                                path, lineno)  # fmt: skip
+            try:
+                values.extend(float(v) for v in fields[:4])
+            except ValueError:
+                bad = next(v for v in fields[:4] if not _is_float(v))
+                raise DataError(f"not a number: {bad!r}", path, lineno) from None
+            if with_type:
+                kinds.append(fields[4])
+            lines.append(lineno)
+    table = np.frombuffer(values, dtype=np.float64).reshape(-1, 4)  # [R, 4]
+    return table, (np.asarray(kinds, dtype="U16") if with_type else None), np.asarray(lines)
+
+
+def _column_hint(content: str, delimiter: str | None, found: int, n_cols: int) -> str:
+    others = [c for c in (",", ";", "\t", "|") if c in content and c != delimiter]
+    if found < n_cols and others:
+        sep = others[0]
+        held = "a tab" if sep == "\t" else repr(sep)
+        return f"; the line holds {held}: pass --delimiter {_sep_name(sep)}"
+    if found > n_cols and n_cols == 4:
+        return "; only frame agent x y are read (typed rows are an NBA-only format)"
+    if found == 1 and delimiter is not None:
+        return "; is the file whitespace-separated? pass --delimiter whitespace"
+    return ""
+
+
+def _data_lines(path: Path, layout: _Layout, rows: Iterable[int]) -> dict[int, int]:
+    """Line numbers of the given data rows (0-based, file order) of a file the fast parser
+    accepted: a re-scan only done to word an error."""
+    wanted = sorted(set(int(r) for r in rows))
+    found: dict[int, int] = {}
+    row = -1
+    with open(path, "rb") as fh:
+        for lineno, raw in enumerate(fh, start=1):
+            if lineno == layout.header_line:
+                continue
+            if not raw.decode("utf-8", "replace").split("#", 1)[0].strip():
+                continue
+            row += 1
+            if row == wanted[len(found)]:
+                found[row] = lineno
+                if len(found) == len(wanted):
+                    break
+    return found
+
+
+def read_tracks(
+    path: str | Path,
+    with_type: bool = False,
+    options: ReadOptions | None = None,
+    scale: float = 1.0,
+    units: str = "unknown",
+) -> Tracks:
+    """Read ``frame agent x y`` rows (plus a ``BALL|PLAYER`` column when ``with_type``).
+
+    ``scale`` multiplies coordinates (e.g. feet to metres); ``units`` names the units after
+    scaling, for messages. Raises ``DataError`` naming the file and line for: a wrong number of
+    columns, a value that is not a number, NaN or infinity, a coordinate that overflows float32
+    or exceeds ``options.max_coord``, a duplicated (frame, agent) pair, an unknown agent type,
+    text that is not UTF-8, or an empty file.
+    """
+    path = Path(path)
+    options = options or ReadOptions()
+    check_file(path)
+    layout = _layout(path, options)
+    parsed = _parse_fast(path, layout, with_type)
+    lines = None
+    if parsed is None:
+        values, kinds, lines = _parse_slow(path, layout, with_type)
+    else:
+        values, kinds = parsed
+    if len(values) == 0:
+        raise DataError("empty file: no data rows", path)
+
+    def line_of(rows: list[int]) -> list[int]:
+        known = lines
+        if known is None:
+            found = _data_lines(path, layout, rows)
+            if all(int(r) in found for r in rows):
+                return [found[int(r)] for r in rows]
+            known = _parse_slow(path, layout, with_type)[2]  # the two parsers disagree on rows
+        return [int(known[r]) for r in rows]
+
+    xy = _checked_xy(values, scale, options.max_coord, units, path, line_of)  # [R, 2]
+    frames, f_idx = np.unique(values[:, 0], return_inverse=True)  # [F], [R]
+    agents, a_idx = np.unique(values[:, 1], return_inverse=True)  # [A], [R]
+    del values
+    agent_type = np.zeros(len(agents), np.int64)  # [A]
+    if kinds is not None:
+        agent_type[a_idx] = _kind_flags(kinds, path, line_of)  # last row of an agent wins
+    order = np.lexsort((f_idx, a_idx))  # [R] rows by (agent, frame), stable
+    index = np.int32 if max(len(frames), len(agents)) < 2**31 else np.int64
+    f_idx, a_idx = f_idx[order].astype(index), a_idx[order].astype(index)
+    same = (f_idx[1:] == f_idx[:-1]) & (a_idx[1:] == a_idx[:-1])  # [R-1]
+    if same.any():
+        _raise_duplicate(np.flatnonzero(same), order, f_idx, a_idx, frames, agents, path, line_of)
+    return Tracks(path, frames, agents, f_idx, a_idx, xy[order], agent_type)
+
+
+def _checked_xy(values, scale, max_coord, units, path, line_of) -> np.ndarray:
+    """[R, 2] float32 positions after ``scale``; the first bad row (file order) raises."""
+    finite = np.isfinite(values).all(1)  # [R]
+    with np.errstate(over="ignore", invalid="ignore"):
+        xy = (values[:, 2:4] * scale).astype(np.float32)  # [R, 2]
+    fits = np.isfinite(xy).all(1)  # [R]
+    inside = (np.abs(xy) <= max_coord).all(1)  # [R]
+    bad = ~(finite & fits & inside)  # [R]
+    if not bad.any():
+        return xy
+    r = int(np.argmax(bad))
+    (line,) = line_of([r])
+    if not finite[r]:
+        raise DataError("NaN or infinite value", path, line)
+    v = values[r, 2:4] * scale  # [2]
+    big = float(v[np.argmax(np.abs(v))])
+    if not fits[r]:
+        raise DataError(f"coordinate {big:g} does not fit float32 (|value| > 3.4e38)", path, line)
+    raise DataError(
+        f"coordinate {big:g} {units} is beyond the sane bound of {max_coord:g} {units} "
+        "(raise it with --max-coord if the data really spans that far)",
+        path,
+        line,
+    )
+
+
+def _kind_flags(kinds: np.ndarray, path: Path, line_of) -> np.ndarray:
+    """[R] agent-type flags from the type column (file order)."""
+    names, inverse = np.unique(kinds, return_inverse=True)  # [U], [R]
+    flags = np.empty(len(names), np.int64)  # [U]
+    for i, name in enumerate(names):
+        flag = _TYPE_NAMES.get(str(name).upper())
+        if flag is None:
+            (line,) = line_of([int(np.argmax(inverse == i))])
+            raise DataError(f"unknown agent type {str(name)!r} (BALL or PLAYER)", path, line)
+        flags[i] = flag
+    return flags[inverse]
+
+
+def _raise_duplicate(pos, order, f_idx, a_idx, frames, agents, path, line_of):
+    """Report the smallest duplicated (frame, agent) pair at its second row in the file."""
+    first = pos[np.lexsort((a_idx[pos], f_idx[pos]))[0]]  # sorted position of the pair's 1st row
+    line_first, line_second = line_of([int(order[first]), int(order[first + 1])])
+    f, a = frames[f_idx[first]], agents[a_idx[first]]
+    raise DataError(
+        f"duplicate row for frame {f:g}, agent {a:g} (also on line {line_first})",
+        path,
+        line_second,
+    )
+
+
+@dataclass
+class _Windows:
+    scenes: list[Scene]
+    gap_scenes: int = 0
+    """Scenes (windows) that span missing frames (kept: ``max_gap`` is None)."""
+    gap_agents: int = 0
+    """Agent-windows among them."""
+    max_missing: int = 0
+    """The largest number of missing frames one of them spans."""
+    step: float = 0.0
+    """The file's frame step (the most common difference between unique frames)."""
+
+
+def _missing_frames(frames: np.ndarray) -> tuple[np.ndarray, float]:
+    """Missing frames between consecutive unique frames [F-1], and the frame step."""
+    jumps = np.diff(frames)  # [F-1]
+    if len(jumps) == 0:
+        return np.zeros(0, np.int64), 0.0
+    values, counts = np.unique(jumps, return_counts=True)
+    step = float(values[np.argmax(counts)])  # the most common jump (the smallest on ties)
+    missing = np.maximum(np.rint(jumps / step).astype(np.int64) - 1, 0)  # [F-1]
+    return missing, step
+
+
+def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int | None):
+    t_total = t_hist + t_fut
+    frames = tracks.frames
+    n_f = len(frames)
+    if n_f < t_total:
         raise DataError(
-            f"duplicate row for frame {f:g}, agent {a:g} (also on line {dup_lines[0]})",
-            path,
-            int(dup_lines[1]),
+            f"too few frames: {n_f} unique frames, a window needs {t_total}", tracks.path
         )
+    f_idx, a_idx, n_r = tracks.frame_index, tracks.agent_index, tracks.num_rows
+    # a row starts a complete window when the row T-1 further holds the same agent
+    # T-1 frames later (rows are sorted by agent, then frame, without duplicates)
+    head = slice(0, max(n_r - t_total + 1, 0))
+    tail = slice(t_total - 1, n_r)
+    full = (a_idx[tail] == a_idx[head]) & (f_idx[tail] - f_idx[head] == t_total - 1)  # [R-T+1]
+    full &= f_idx[head] % stride == 0
+    start_row = np.flatnonzero(full)  # [W] first row of each agent-window
+    start = f_idx[start_row]  # [W] index of its first frame
+    missing, step = _missing_frames(frames)  # [F-1]
+    out = _Windows([], step=step)
+    if missing.any():
+        # jumps of a window starting at unique frame j: missing[j : j + T - 1]
+        over = missing > (max_gap or 0)  # [F-1]
+        count = np.concatenate([[0], np.cumsum(over)])  # [F]
+        spans = count[start + t_total - 1] - count[start] > 0  # [W]
+        if max_gap is None and spans.any():
+            out.gap_scenes = len(np.unique(start[spans]))
+            out.gap_agents = int(spans.sum())
+            runs = [int(missing[s : s + t_total - 1].max()) for s in np.unique(start[spans])]
+            out.max_missing = max(runs)
+        elif max_gap is not None:
+            start_row, start = start_row[~spans], start[~spans]
+    by_start = np.argsort(start, kind="stable")  # [W] scene order; agents stay sorted by id
+    start_row, start = start_row[by_start], start[by_start]
+    n_w = len(start_row)
+    history = np.empty((n_w, t_hist, 2), np.float32)  # [W, T_h, 2]
+    future = np.empty((n_w, t_fut, 2), np.float32)  # [W, T_f, 2]
+    offsets = np.arange(t_total)  # [T]
+    for c in range(0, n_w, _CHUNK):
+        rows = start_row[c : c + _CHUNK, None] + offsets  # [C, T]
+        np.take(tracks.xy, rows[:, :t_hist], axis=0, out=history[c : c + _CHUNK])
+        np.take(tracks.xy, rows[:, t_hist:], axis=0, out=future[c : c + _CHUNK])
+    kind = tracks.agent_type[a_idx[start_row]]  # [W]
+    cuts = np.flatnonzero(np.diff(start)) + 1  # [S-1] where a new scene begins
+    bounds = np.concatenate([[0], cuts, [n_w]]) if n_w else np.zeros(1, np.int64)
+    name = tracks.path.name
+    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+        out.scenes.append(
+            Scene(
+                history=history[a:b],
+                future=future[a:b],
+                agent_type=kind[a:b],
+                scene_id=f"{name}@frame={frames[start[a]]:g}",
+            )
+        )
+    return out
+
+
+def _gap_message(where: Path, gap_scenes: int, gap_agents: int, max_missing: int) -> str:
+    return (
+        f"{where}: {gap_scenes} windows ({gap_agents} agent-windows) span missing frames "
+        f"(up to {max_missing} in a row); they are kept as the Social-GAN rule does: pass "
+        "--max-gap 0 (ReadOptions.max_gap=0) to leave them out"
+    )
 
 
 def window_scenes(
@@ -113,43 +473,65 @@ def window_scenes(
     t_hist: int,
     t_fut: int,
     stride: int = 1,
-    scale: float = 1.0,
+    max_gap: int | None = None,
 ) -> list[Scene]:
     """Cut one file's tracks into scenes by the windowing rule in the module docstring.
 
-    ``scale`` multiplies coordinates (e.g. feet to metres). Raises ``DataError`` when the file
-    has fewer unique frames than one window needs.
+    ``max_gap`` as in ``ReadOptions``; with ``None`` a ``GapWarning`` reports windows that span
+    missing frames. Raises ``DataError`` when the file has fewer unique frames than one window
+    needs.
     """
-    t_total = t_hist + t_fut
-    frames, f_idx = np.unique(tracks.frame, return_inverse=True)  # [F], [R]
-    if len(frames) < t_total:
-        raise DataError(
-            f"too few frames: {len(frames)} unique frames, a window needs {t_total}", tracks.path
-        )
-    agents, a_idx = np.unique(tracks.agent, return_inverse=True)  # [A], [R]
-    n_f, n_a = len(frames), len(agents)
-    pos = np.full((n_f, n_a, 2), np.nan)  # [F, A, 2]
-    pos[f_idx, a_idx] = tracks.xy * scale
-    present = np.zeros((n_f, n_a), np.int64)  # [F, A]
-    present[f_idx, a_idx] = 1
-    kind = np.zeros(n_a, np.int64)  # [A]
-    kind[a_idx] = tracks.agent_type
-    counts = np.concatenate([np.zeros((1, n_a), np.int64), np.cumsum(present, 0)])  # [F+1, A]
-    starts = np.arange(0, n_f - t_total + 1, stride)  # [W]
-    full = (counts[starts + t_total] - counts[starts]) == t_total  # [W, A]
-    scenes = []
-    for w in np.flatnonzero(full.any(1)):
-        s = starts[w]
-        members = np.flatnonzero(full[w])  # [P]
-        window = pos[s : s + t_total, members].transpose(1, 0, 2)  # [P, T, 2]
-        scenes.append(
-            Scene(
-                history=window[:, :t_hist].astype(np.float32),
-                future=window[:, t_hist:].astype(np.float32),
-                agent_type=kind[members],
-                scene_id=f"{tracks.path.name}@frame={frames[s]:g}",
-            )
-        )
+    out = _window(tracks, t_hist, t_fut, stride, max_gap)
+    if out.gap_scenes:
+        message = _gap_message(tracks.path, out.gap_scenes, out.gap_agents, out.max_missing)
+        warnings.warn(message, GapWarning, stacklevel=2)
+    return out.scenes
+
+
+def track_files(folder: str | Path, pattern: str | tuple[str, ...] = "*.txt") -> list[Path]:
+    """The files matching ``pattern`` (one glob pattern or several) in ``folder``, sorted by
+    name. Raises ``DataError`` for a missing folder, a symlink loop or a broken symlink, and a
+    folder without such files."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        if folder.is_symlink():
+            raise _link_error(folder)
+        raise DataError("no such folder", folder)
+    patterns = (pattern,) if isinstance(pattern, str) else pattern
+    files = []
+    for path in sorted({p for pat in patterns for p in folder.glob(pat)}):
+        if path.is_file():
+            files.append(path)
+        elif path.is_symlink() and not path.exists():
+            raise _link_error(path)
+    if not files:
+        raise DataError(f"no {' or '.join(patterns)} files in folder", folder)
+    return files
+
+
+def read_files(
+    files: list[Path],
+    t_hist: int,
+    t_fut: int,
+    stride: int = 1,
+    scale: float = 1.0,
+    with_type: bool = False,
+    options: ReadOptions | None = None,
+    units: str = "unknown",
+    where: Path | None = None,
+) -> list[Scene]:
+    """Read track files into scenes, in the given order. Windows that span missing frames
+    give one ``GapWarning`` for all files (naming ``where``, else the first file)."""
+    options = options or ReadOptions()
+    scenes: list[Scene] = []
+    gap = [0, 0, 0]  # scenes, agent-windows, largest run of missing frames
+    for path in files:
+        tracks = read_tracks(path, with_type, options, scale, units)
+        out = _window(tracks, t_hist, t_fut, stride, options.max_gap)
+        scenes.extend(out.scenes)
+        gap = [gap[0] + out.gap_scenes, gap[1] + out.gap_agents, max(gap[2], out.max_missing)]
+    if gap[0]:
+        warnings.warn(_gap_message(where or files[0], *gap), GapWarning, stacklevel=2)
     return scenes
 
 
@@ -160,18 +542,14 @@ def read_folder(
     stride: int = 1,
     scale: float = 1.0,
     with_type: bool = False,
-    pattern: str = "*.txt",
+    pattern: str | tuple[str, ...] = "*.txt",
+    options: ReadOptions | None = None,
+    units: str = "unknown",
 ) -> list[Scene]:
-    """Read every track file in ``folder`` (sorted by name) into scenes."""
+    """Read every track file in ``folder`` matching ``pattern`` (sorted by name) into scenes."""
     folder = Path(folder)
-    if not folder.is_dir():
-        raise DataError("no such folder", folder)
-    files = sorted(p for p in folder.glob(pattern) if p.is_file())
-    if not files:
-        raise DataError(f"no {pattern} files in folder", folder)
-    scenes: list[Scene] = []
-    for path in files:
-        scenes.extend(window_scenes(read_tracks(path, with_type), t_hist, t_fut, stride, scale))
+    files = track_files(folder, pattern)
+    scenes = read_files(files, t_hist, t_fut, stride, scale, with_type, options, units, folder)
     if not scenes:
         raise DataError(
             f"no agent is observed in {t_hist + t_fut} consecutive frames in any file", folder

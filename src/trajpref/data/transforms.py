@@ -79,13 +79,43 @@ def augment(
         lo, hi = scale_range
         factor = (lo + (hi - lo) * torch.rand(b, generator=generator)).to(device)  # [B]
         rot = rot * factor[:, None, None]
-    c = scene_centroids(batch)[batch.scene][:, None, :]  # [N, 1, 2]
-    r = rot[batch.scene]  # [N, 2, 2]
+    return transform_scenes(batch, rot)
+
+
+def transform_scenes(batch: Batch, mats: torch.Tensor) -> Batch:
+    """Apply one linear map per scene, mats [B, 2, 2], about the scene's centroid."""
     return Batch(
-        history=(batch.history - c) @ r.transpose(1, 2) + c,
-        future=(batch.future - c) @ r.transpose(1, 2) + c,
+        history=transform_positions(batch.history, batch, mats),
+        future=transform_positions(batch.future, batch, mats),
         scene=batch.scene,
         agent_type=batch.agent_type,
         num_scenes=batch.num_scenes,
         scene_ids=batch.scene_ids,
     )
+
+
+def transform_positions(positions: torch.Tensor, batch: Batch, mats: torch.Tensor) -> torch.Tensor:
+    """Positions [..., N, T, 2] of the batch's agents mapped by their scene's mats [B, 2, 2]
+    about the scene's mean last observed position (as ``transform_scenes`` maps the batch)."""
+    c = scene_centroids(batch)[batch.scene][:, None, :]  # [N, 1, 2]
+    r = mats[batch.scene]  # [N, 2, 2]
+    return (positions - c) @ r.transpose(-1, -2) + c
+
+
+def scene_speeds(batch: Batch, steps: int = 4) -> torch.Tensor:
+    """Each scene's typical observed speed [B], in data units per step: the median over its
+    agents of their mean step length over the last ``steps`` observed steps."""
+    hist = batch.history[:, -(steps + 1) :]  # [N, steps+1, 2]
+    speed = (hist[:, 1:] - hist[:, :-1]).norm(dim=-1).mean(-1)  # [N]
+    out = speed.new_zeros(batch.num_scenes)
+    for b in range(batch.num_scenes):
+        out[b] = speed[batch.scene == b].median()
+    return out
+
+
+def speed_normaliser(batch: Batch, speed_ref: float) -> torch.Tensor:
+    """Per-scene maps [B, 2, 2] that shrink a scene moving faster than ``speed_ref`` (data
+    units per step) to that speed, and leave slower scenes as they are (factor <= 1)."""
+    factor = (speed_ref / scene_speeds(batch).clamp(min=1e-6)).clamp(max=1.0)  # [B]
+    eye = torch.eye(2, dtype=batch.history.dtype, device=batch.history.device)
+    return factor[:, None, None] * eye  # [B, 2, 2]

@@ -28,7 +28,8 @@ from safetensors.torch import load_file, save_file
 from trajpref.config import ExperimentConfig, experiment_from_dict, to_dict
 from trajpref.diffusion.schedule import DDPMSchedule
 from trajpref.errors import TrajprefError
-from trajpref.io import atomic_path
+from trajpref.io import atomic_path, read_checkpoint_header
+from trajpref.models import zoo
 from trajpref.models.denoiser import Denoiser
 from trajpref.models.generator import Generator
 from trajpref.models.predictor import DiffusionPredictor, Sampler
@@ -144,8 +145,13 @@ def _rehash(payload: dict[str, Any]) -> None:
 
 
 def resolve_path(path: str | Path) -> Path:
-    """``path``, or the ``.safetensors`` file that replaced a legacy ``.pt`` path."""
+    """``path``, the published model it names (``DATASET/NAME``, e.g. ``zara1/generator``:
+    see ``trajpref models``), or the ``.safetensors`` file that replaced a legacy ``.pt``
+    path. An existing file wins over a published name."""
+    spec = path
     path = Path(path)
+    if not path.is_file() and zoo.is_name(spec):
+        return zoo.resolve(str(spec))
     if not path.is_file() and path.suffix == LEGACY_SUFFIX:
         new = path.with_suffix(SUFFIX)
         if new.is_file():
@@ -159,17 +165,14 @@ def resolve_path(path: str | Path) -> Path:
 def _read_file(path: Path) -> dict[str, Any]:
     if path.suffix == LEGACY_SUFFIX:
         return _read_legacy(path)
+    header = read_checkpoint_header(path)
     try:
         tensors = load_file(str(path))
-        with open(path, "rb") as fh:
-            length = int.from_bytes(fh.read(8), "little")
-            meta = json.loads(fh.read(length)).get("__metadata__") or {}
-        header = json.loads(meta["trajpref"])
-    except (SafetensorError, OSError, ValueError, KeyError) as exc:
+    except (SafetensorError, OSError) as exc:
         raise TrajprefError(
             f"{path}: not a trajpref checkpoint ({exc.__class__.__name__})"
         ) from None
-    if not isinstance(header, dict) or header.get("format") != FORMAT:
+    if header.get("format") != FORMAT:
         raise TrajprefError(f"{path}: not a trajpref checkpoint (format {FORMAT} expected)")
     return _unflatten(tensors, header)
 
@@ -219,10 +222,11 @@ def load(path: str | Path) -> dict[str, Any]:
     A generator checkpoint that names its denoiser (``denoiser_ref``: a path relative to the
     checkpoint's folder and a content hash) gets that denoiser loaded in; a mismatch is
     refused."""
+    path = resolve_path(path)
     payload = _load_file(path)
     ref = payload.get("denoiser_ref")
     if payload["kind"] == "generator" and "denoiser" not in payload and ref is not None:
-        den_path = resolve_path(Path(path).parent / ref["path"])
+        den_path = resolve_path(path.parent / ref["path"])
         den = _load_file(den_path)
         found = state_hash(den["state_dict"]) if den.get("kind") == "denoiser" else None
         if found != ref["hash"]:

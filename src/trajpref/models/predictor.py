@@ -8,6 +8,7 @@ all call it; the networks' coordinate frame is ``data.transforms.to_model_frame`
 from __future__ import annotations
 
 import typing
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
@@ -114,6 +115,7 @@ class DiffusionPredictor(nn.Module):
         explore_std: float = 0.0,
         explore_sign: float = 1.0,
         cond: Condition | None = None,
+        explore_noise: Callable[[torch.Size, torch.Generator | None], torch.Tensor] | None = None,
     ) -> Rollout:
         """Generator -> Y^tau (+ exploration) -> tau denoising steps.
 
@@ -121,7 +123,8 @@ class DiffusionPredictor(nn.Module):
         ``explore_std`` > 0, Gaussian noise xi of that std (drawn from ``generator`` before
         the denoising noise) is added to Y^tau; ``explore_sign = -1`` adds -xi instead, so a
         rollout from a copy of the same generator state is xi's antithetic twin under the same
-        denoising noise.
+        denoising noise. ``explore_noise(shape, generator)`` draws the noise instead of
+        ``explore_std`` white noise (e.g. the RL objective's smooth exploration).
         """
         if self.generator is None:
             raise ConfigError("a leapfrog rollout needs a generator checkpoint")
@@ -135,7 +138,10 @@ class DiffusionPredictor(nn.Module):
         out = self.generator(cond.features)
         initial = y_tau = out.initial_sample()[:k]  # [K, N, T_f, 2]
         explore = None
-        if explore_std > 0:
+        if explore_noise is not None:
+            explore = explore_sign * explore_noise(initial.shape, generator).to(initial)
+            y_tau = initial + explore  # [K, N, T_f, 2]
+        elif explore_std > 0:
             noise = torch.randn(initial.shape, generator=generator).to(initial)
             explore = explore_sign * explore_std * noise  # [K, N, T_f, 2]
             y_tau = initial + explore

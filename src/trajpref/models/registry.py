@@ -1,11 +1,11 @@
-"""Build a predictor from a ``--model`` value: ``cv`` or a checkpoint path."""
+"""Build a predictor from a ``--model`` value: ``cv``, a published name or a checkpoint path."""
 
 from __future__ import annotations
 
 import torch
 
 from trajpref.errors import TrajprefError
-from trajpref.models import checkpoint
+from trajpref.models import checkpoint, zoo
 from trajpref.models.baseline import ConstantVelocity
 from trajpref.models.predictor import Sampler
 
@@ -14,15 +14,21 @@ BUILTIN = {"cv": ConstantVelocity}
 
 
 def load_predictor(spec: str, device: torch.device | str = "cpu", sampler: Sampler | None = None):
-    """``cv`` gives the constant-velocity baseline; a path loads a checkpoint.
+    """``cv`` gives the constant-velocity baseline; a published name (``zara1/generator``)
+    or a path loads a checkpoint.
 
     ``sampler`` (``leapfrog`` or ``full``) applies to diffusion checkpoints; None picks the
     checkpoint's natural one (leapfrog for a generator, full for a bare denoiser).
     """
     if spec in BUILTIN:
         return BUILTIN[spec]()
+    if zoo.is_name(spec):  # DATASET/NAME: a published model, or an error listing them
+        return checkpoint.load_predictor(checkpoint.resolve_path(spec), sampler, device)
     try:
         path = checkpoint.resolve_path(spec)
     except TrajprefError:
-        raise TrajprefError(f"{spec}: no such model (use 'cv' or a checkpoint file)") from None
+        raise TrajprefError(
+            f"{spec}: no such model (use 'cv', a published name such as zara1/generator "
+            "(`trajpref models` lists them) or a checkpoint file)"
+        ) from None
     return checkpoint.load_predictor(path, sampler, device)

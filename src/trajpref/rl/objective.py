@@ -126,6 +126,22 @@ class RLObjective(nn.Module):
         self.reg_cfg = reg_cfg
         steps = score_timesteps(sampler.schedule.num_steps, cfg.score_every)
         self.scorer = TrajectoryScorer(self.denoiser, sampler.schedule, sampler.scale, steps)
+        t_f = sampler.denoiser.cfg.t_fut
+        # smooth exploration: noise in the span of t and t^2 over the future (rl/ppo.py)
+        self.register_buffer("basis", ppo.smooth_basis(t_f) if cfg.explore == "smooth" else None,
+                             persistent=False)  # fmt: skip
+
+    def explore_noise(self, shape: torch.Size, generator: torch.Generator | None) -> torch.Tensor:
+        """The ``smooth`` exploration noise [K, N, T_f, 2] (rollout's ``explore_noise``)."""
+        return ppo.smooth_noise(shape, self.basis, self.rl.explore_std, generator)
+
+    def sample_log_prob(self, chosen: torch.Tensor, initial: torch.Tensor) -> torch.Tensor:
+        """Eq. 12 of the ``sample`` likelihood: the explored initial samples ``chosen`` under
+        the exploration density centred on ``initial`` [K, N, T_f, 2] -> [K, N, T_f]."""
+        if self.basis is not None:
+            return ppo.smooth_log_prob(chosen, initial, self.rl.explore_std, self.basis)
+        log_std = torch.full(chosen.shape[:2], math.log(self.rl.explore_std)).to(chosen)
+        return ppo.gaussian_log_prob(chosen, initial, log_std, per_sample=True)
 
     def train(self, mode: bool = True):
         super().train(mode)
@@ -232,8 +248,7 @@ class RLObjective(nn.Module):
     def relikelihood(self, acts: Actions, policy: Rollout) -> torch.Tensor:
         """Eq. 12 of stored actions under the current policy (its rollout ``policy``)."""
         if self.rl.likelihood == "sample":
-            log_std = torch.full_like(policy.out.log_sigma, math.log(self.rl.explore_std))
-            return ppo.gaussian_log_prob(acts.chosen, policy.initial, log_std, per_sample=True)
+            return self.sample_log_prob(acts.chosen, policy.initial)
         return ppo.gaussian_log_prob(acts.chosen, policy.out.mean, policy.out.log_sigma)
 
     def rollouts(self, batch: Batch, cond, generator: torch.Generator | None):
@@ -245,13 +260,16 @@ class RLObjective(nn.Module):
             if generator is None:
                 generator = torch.Generator().manual_seed(int(torch.randint(2**62, ())))
             twin_gen = _fork(generator)
-        policy = self.sampler.rollout(batch, generator, explore_std=explore, cond=cond)
+        noise = self.explore_noise if explore > 0 and self.basis is not None else None
+        policy = self.sampler.rollout(batch, generator, explore_std=explore, cond=cond,
+                                      explore_noise=noise)  # fmt: skip
         with torch.no_grad():
             reference = self.reference_sampler.rollout(batch, generator, cond=cond)
             twin = None
             if twin_gen is not None:
                 twin = self.sampler.rollout(batch, twin_gen, explore_std=explore,
-                                            explore_sign=-1.0, cond=cond)  # fmt: skip
+                                            explore_sign=-1.0, cond=cond,
+                                            explore_noise=noise)  # fmt: skip
         return policy, reference, twin
 
     def actions(self, roll: Rollout, policy: Rollout, reference: Rollout) -> Actions:
@@ -261,9 +279,8 @@ class RLObjective(nn.Module):
         N(Y^tau + xi; Y^tau, explore_std). ``mean``: the denoised sample under N(mu, sigma_k)."""
         if self.rl.likelihood == "sample":
             chosen = roll.y_tau.detach()  # [K, N, T_f, 2]
-            log_std = torch.full_like(policy.out.log_sigma, math.log(self.rl.explore_std))
-            logp = ppo.gaussian_log_prob(chosen, policy.initial, log_std, per_sample=True)
-            logp_ref = ppo.gaussian_log_prob(chosen, reference.initial, log_std, per_sample=True)
+            logp = self.sample_log_prob(chosen, policy.initial)  # [K, N, T_f]
+            logp_ref = self.sample_log_prob(chosen, reference.initial)
         else:
             chosen = roll.y.detach()
             logp = ppo.gaussian_log_prob(chosen, policy.out.mean, policy.out.log_sigma)

@@ -29,6 +29,38 @@ def gaussian_log_prob(
     return -0.5 * sq / var - 2 * log_sigma[..., None] - LOG_2PI
 
 
+def smooth_basis(steps: int, degree: int = 2) -> torch.Tensor:
+    """Orthonormal columns [T, degree] spanning t, t^2, ... over the future steps t = 1..T
+    (each vanishes at the last observed position): smooth exploration directions."""
+    t = torch.arange(1, steps + 1, dtype=torch.float64) / steps  # [T]
+    raw = torch.stack([t**j for j in range(1, degree + 1)], -1)  # [T, J]
+    q, _ = torch.linalg.qr(raw)
+    return q.float()  # [T, J]
+
+
+def smooth_noise(shape: torch.Size, basis: torch.Tensor, std: float,
+                 generator: torch.Generator | None = None) -> torch.Tensor:  # fmt: skip
+    """Noise of shape [..., T, 2] in the span of ``basis`` [T, J] whose RMS per step and
+    coordinate is ``std``: coefficients c ~ N(0, (std sqrt(T / J))^2), xi = basis @ c."""
+    t, j = basis.shape
+    coeff = torch.randn((*shape[:-2], j, shape[-1]), generator=generator)  # [..., J, 2]
+    coeff = coeff.to(basis) * std * math.sqrt(t / j)
+    return torch.einsum("tj,...jd->...td", basis, coeff)  # [..., T, 2]
+
+
+def smooth_log_prob(y: torch.Tensor, mean: torch.Tensor, std: float,
+                    basis: torch.Tensor) -> torch.Tensor:  # fmt: skip
+    """Per-step log density of ``smooth_noise``: y, mean [K, N, T, 2] -> [K, N, T]. The
+    difference is projected on the basis, so summed over T it is the Gaussian log density
+    of the coefficients (up to a constant that cancels in every ratio); a policy change
+    outside the smooth span does not move it."""
+    t, j = basis.shape
+    diff = y - mean  # [K, N, T, 2]
+    proj = torch.einsum("tj,sj,...sd->...td", basis, basis, diff)  # [K, N, T, 2]
+    var = std**2 * t / j
+    return -0.5 * proj.pow(2).sum(-1) / var - math.log(var) - LOG_2PI
+
+
 def kl_penalty(logp: torch.Tensor, logp_ref: torch.Tensor, beta: float, form: str = "paper"):
     """Eq. 13: the per-step divergence that is subtracted from the reward.
 

@@ -14,16 +14,22 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
-from trajpref.data.transforms import to_model_frame
+from trajpref.data.transforms import (
+    speed_normaliser,
+    to_model_frame,
+    transform_positions,
+    transform_scenes,
+)
 from trajpref.diffusion.schedule import DDPMSchedule
-from trajpref.errors import ConfigError
+from trajpref.errors import ConfigError, DataError
 from trajpref.metrics import ade_fde, scene_sum
 from trajpref.models import checkpoint
 from trajpref.models.denoiser import Denoiser
 from trajpref.models.encoder import scene_features
-from trajpref.types import AGENT_PERSON, Batch
+from trajpref.types import AGENT_BALL, AGENT_PERSON, Batch
 
 
 def score_timesteps(num_steps: int = 100, every: int = 3) -> list[int]:
@@ -76,7 +82,12 @@ class TrajectoryScorer:
         steps: list[int] | None = None,
         seed: int = 0,
         shared_noise: bool = True,
+        speed_ref: float | None = None,
     ):
+        """``speed_ref`` (data units per step; None: off): score a scene that moves faster
+        than this as if it were slowed down to it (scene, history and samples scaled together
+        about the scene's centre), so that a denoiser trained on slower scenes still ranks
+        the samples that keep the scene's own pace as typical (docs/selection.md)."""
         self.denoiser = denoiser.eval()
         self.schedule = schedule
         self.scale = float(scale)
@@ -85,6 +96,9 @@ class TrajectoryScorer:
             raise ConfigError(f"score steps must lie in 0..{schedule.num_steps - 1}")
         self.seed = seed
         self.shared_noise = shared_noise
+        if speed_ref is not None and not speed_ref > 0:
+            raise ConfigError(f"speed_ref must be > 0 or None, got {speed_ref}")
+        self.speed_ref = speed_ref
 
     @classmethod
     def from_checkpoint(cls, path, device="cpu", **kwargs) -> TrajectoryScorer:
@@ -94,6 +108,36 @@ class TrajectoryScorer:
         schedule = DDPMSchedule.from_config(cfg.diffusion)
         return cls(denoiser.to(device), schedule.to(device), payload["scale"], **kwargs)
 
+    @property
+    def t_hist(self) -> int:
+        """T_h, the observed steps per agent the denoiser was trained on (its config's)."""
+        return self.denoiser.cfg.t_hist
+
+    @property
+    def t_fut(self) -> int:
+        """T_f, the future steps per sample the denoiser scores (its config's)."""
+        return self.denoiser.cfg.t_fut
+
+    @property
+    def device(self) -> torch.device:
+        """Where the denoiser's weights are (and where the scoring runs)."""
+        return next(self.denoiser.parameters()).device
+
+    def check_shapes(self, batch: Batch, futures: torch.Tensor) -> None:
+        """DataError unless the batch's histories are [N, T_h, 2] and futures [M, N, T_f, 2]
+        with this scorer's T_h and T_f."""
+        n = batch.history.shape[0]
+        if batch.history.ndim != 3 or tuple(batch.history.shape[1:]) != (self.t_hist, 2):
+            raise DataError(
+                f"history: expected [N, {self.t_hist}, 2] (this scorer's T_h = {self.t_hist}), "
+                f"got {list(batch.history.shape)}"
+            )
+        if futures.ndim != 4 or tuple(futures.shape[1:]) != (n, self.t_fut, 2):
+            raise DataError(
+                f"futures: expected [M, {n}, {self.t_fut}, 2] (N = {n} agents, this scorer's "
+                f"T_f = {self.t_fut}), got {list(futures.shape)}"
+            )
+
     @torch.no_grad()
     def residual(self, batch: Batch, futures: torch.Tensor) -> torch.Tensor:
         """d for absolute futures [M, N, T_f, 2] of the batch's agents -> [M, N, T_f].
@@ -101,6 +145,11 @@ class TrajectoryScorer:
         Uses only the histories of ``batch`` (its ``future`` is never read). The noise is
         drawn from a generator seeded with ``seed``: the same call gives the same numbers.
         """
+        self.check_shapes(batch, futures)
+        if self.speed_ref is not None:
+            mats = speed_normaliser(batch, self.speed_ref)  # [B, 2, 2]
+            futures = transform_positions(futures, batch, mats)  # [M, N, T_f, 2]
+            batch = transform_scenes(batch, mats)
         context = self.denoiser.context(scene_features(batch, self.scale))  # [N, H]
         y = to_model_frame(futures, batch, self.scale)  # [M, N, T_f, 2]
         return self.residual_normalised(context, y)
@@ -136,6 +185,7 @@ class TrajectoryScorer:
     @torch.no_grad()
     def score(self, batch: Batch, pred: torch.Tensor) -> ScoreResult:
         """Score K samples pred [K, N, T_f, 2] against the batch's ground truth."""
+        self.check_shapes(batch, pred)
         k = pred.shape[0]
         d = self.residual(batch, torch.cat([pred, batch.future[None]], 0))  # [K+1, N, T_f]
         d_pred, d_gt = d[:k], d[k]
@@ -170,33 +220,97 @@ class TrajectoryScorer:
         return self.scene_residual(batch, pred, final).argsort(0)  # [K, B]
 
 
+ArrayLike = np.ndarray | torch.Tensor
+"""What the public API accepts: a numpy array (or anything ``np.asarray`` reads) or a tensor."""
+
+
+def _float_tensor(name: str, value, device: torch.device) -> torch.Tensor:
+    """``value`` as float32 on ``device``; DataError for non-numbers and for values that are
+    not finite after the float32 conversion (NaN, inf, or beyond float32's range)."""
+    if isinstance(value, torch.Tensor):
+        if value.is_complex() or value.dtype == torch.bool:
+            raise DataError(f"{name}: expected real numbers, got a {value.dtype} tensor")
+        tensor = value.detach().to(device=device, dtype=torch.float32)
+    else:
+        try:
+            with np.errstate(over="ignore"):  # overflow becomes inf, reported below
+                array = np.asarray(value, dtype=np.float32)
+        except (TypeError, ValueError) as exc:
+            raise DataError(f"{name}: expected an array of numbers ({exc})") from None
+        tensor = torch.from_numpy(array).to(device)
+    finite = torch.isfinite(tensor)
+    if not bool(finite.all()):
+        bad = (~finite).nonzero()
+        raise DataError(
+            f"{name}: {len(bad)} value(s) not finite after conversion to float32 (NaN, inf or "
+            f"beyond +-3.4e38), the first at index {bad[0].tolist()}"
+        )
+    return tensor
+
+
+def _agent_types(value, p: int, device: torch.device) -> torch.Tensor:
+    if value is None:
+        return torch.full((p,), AGENT_PERSON, dtype=torch.int64, device=device)
+    types = torch.as_tensor(np.asarray(value.cpu() if isinstance(value, torch.Tensor) else value))
+    if tuple(types.shape) != (p,) or types.is_floating_point() or types.is_complex():
+        raise DataError(f"agent_type: expected {p} integer flags [P], got {list(types.shape)} "
+                        f"of {types.dtype}")  # fmt: skip
+    if bool(((types != AGENT_PERSON) & (types != AGENT_BALL)).any()):
+        raise DataError(f"agent_type: flags must be {AGENT_PERSON} (person) or "
+                        f"{AGENT_BALL} (ball), got {sorted(set(types.tolist()))}")  # fmt: skip
+    return types.to(device=device, dtype=torch.int64)
+
+
 def rank_samples(
     scorer: TrajectoryScorer,
-    history: torch.Tensor,
-    samples: torch.Tensor,
-    agent_type: torch.Tensor | None = None,
+    history: ArrayLike,
+    samples: ArrayLike,
+    agent_type: ArrayLike | None = None,
     final: bool = False,
-) -> tuple[torch.Tensor, torch.Tensor]:
+) -> tuple[ArrayLike, ArrayLike]:
     """Rank sampled futures of ONE scene given only its history (the planning use).
 
-    history [P, T_h, 2] and samples [K, P, T_f, 2], absolute coordinates. Returns
-    ``(order [K], residual [K])``: sample indices best first, and each sample's summed
-    residual (lower is more human-like).
+    history [P, T_h, 2] and samples [K, P, T_f, 2], absolute coordinates in the units the
+    scorer's data had (metres for the published ETH/UCY and Robo models), with T_h and T_f
+    the scorer's (``scorer.t_hist``, ``scorer.t_fut``: 8 and 12 for the published models).
+    Each may be a numpy array (what ``trajpref predict`` exports) or a torch tensor.
+    ``agent_type`` [P]: 0 person (the default), 1 ball. ``final``: rank by the last step
+    only (FTS order) instead of all steps (ATS order).
+
+    Returns ``(order [K] int64, residual [K] float32)``: sample indices best first, and each
+    sample's residual summed over agents and steps (lower is more human-like). Both are numpy
+    arrays when neither ``history`` nor ``samples`` is a tensor, else tensors on the scorer's
+    device. Wrong shapes, non-numbers and non-finite values raise ``DataError``.
     """
-    if history.ndim != 3 or samples.ndim != 4 or samples.shape[1] != history.shape[0]:
-        raise ConfigError("need history [P, T_h, 2] and samples [K, P, T_f, 2]")
-    p = history.shape[0]
+    device = scorer.device
+    hist = _float_tensor("history", history, device)  # [P, T_h, 2]
+    futs = _float_tensor("samples", samples, device)  # [K, P, T_f, 2]
+    t_h, t_f = scorer.t_hist, scorer.t_fut
+    if hist.ndim != 3 or tuple(hist.shape[1:]) != (t_h, 2) or hist.shape[0] < 1:
+        raise DataError(
+            f"history: expected [P, {t_h}, 2] (agents, observed steps, x/y; this scorer's "
+            f"T_h = {t_h}), got {list(hist.shape)}"
+        )
+    p = hist.shape[0]
+    if futs.ndim != 4 or tuple(futs.shape[1:]) != (p, t_f, 2) or futs.shape[0] < 1:
+        hint = " (one sample? add a leading axis: samples[None])" if futs.ndim == 3 else ""
+        raise DataError(
+            f"samples: expected [K, {p}, {t_f}, 2] (samples, the history's {p} agents, "
+            f"future steps, x/y; this scorer's T_f = {t_f}), got {list(futs.shape)}{hint}"
+        )
     batch = Batch(
-        history=history.float(),
-        future=torch.full_like(samples[0], float("nan")),  # unknown; never read
-        scene=torch.zeros(p, dtype=torch.int64, device=history.device),
-        agent_type=(agent_type if agent_type is not None
-                    else torch.full((p,), AGENT_PERSON, dtype=torch.int64)),
+        history=hist,
+        future=torch.full_like(futs[0], float("nan")),  # unknown; never read
+        scene=torch.zeros(p, dtype=torch.int64, device=device),
+        agent_type=_agent_types(agent_type, p, device),
         num_scenes=1,
-    )  # fmt: skip
-    d = scorer.residual(batch, samples.float())  # [K, P, T_f]
+    )
+    d = scorer.residual(batch, futs)  # [K, P, T_f]
     total = (d[..., -1] if final else d.sum(-1)).sum(-1)  # [K]
-    return total.argsort(), total
+    order = total.argsort()  # [K]
+    if isinstance(history, torch.Tensor) or isinstance(samples, torch.Tensor):
+        return order, total
+    return order.cpu().numpy(), total.cpu().numpy()
 
 
 def recall_hits(

@@ -9,7 +9,6 @@ augmentation, optimisation, DDP, progress bars, metric logs, best checkpoint, re
 from __future__ import annotations
 
 import itertools
-import json
 import math
 import time
 from collections.abc import Callable
@@ -25,7 +24,7 @@ from trajpref.config import DataConfig, OptimConfig
 from trajpref.data.loader import SceneLoader
 from trajpref.data.transforms import augment
 from trajpref.errors import ConfigError, TrajprefError
-from trajpref.io import atomic_path
+from trajpref.io import atomic_path, dumps_json
 from trajpref.models import checkpoint as ckpt
 from trajpref.train.distributed import DistInfo
 from trajpref.train.stages import Stage
@@ -52,7 +51,7 @@ class MetricLog:
         if not self.enabled:
             return
         with self.path.open("a") as fh:
-            fh.write(json.dumps(record) + "\n")
+            fh.write(dumps_json(record) + "\n")
         if self.tb is not None:
             for key, value in record.items():
                 if isinstance(value, (int, float)) and key != "epoch":
@@ -77,17 +76,59 @@ def save_resume_state(path: Path, state: dict[str, Any]) -> None:
         torch.save(state, tmp)
 
 
-def load_resume_state(path: str | Path) -> dict[str, Any]:
+RESUME_KEYS = ("stage", "trainable", "optimizer", "scheduler", "noise_gen", "aug_gen", "epoch",
+               "step", "best", "elapsed")  # fmt: skip
+"""What every resume state holds (``spent`` was added later and may be missing)."""
+
+
+def load_resume_state(path: str | Path, stage: str | None = None) -> dict[str, Any]:
+    """Read a ``<stage>_last.pt`` resume state (never executing code); with ``stage``, check
+    that it was written by that stage. Every way a file can be the wrong one is a one-line
+    ``ConfigError`` that says which file to pass instead."""
     path = Path(path)
+    want = f"{stage}_last.pt" if stage else "the <stage>_last.pt"
+    if path.is_dir():
+        raise ConfigError(f"--resume {path}: is a folder; pass {want} inside it")
     if not path.is_file():
-        raise ConfigError(f"{path}: no such file to resume from")
+        raise ConfigError(f"--resume {path}: no such file to resume from")
+    with path.open("rb") as fh:
+        head = fh.read(9)
+    if len(head) == 9 and head[8:9] == b"{":  # a safetensors header: u64 length, then JSON
+        raise ConfigError(f"--resume {path}: a best checkpoint (weights only) cannot be resumed; "
+                          f"pass {want} from the same run folder")  # fmt: skip
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001 - torch raises many types for bad files
-        raise ConfigError(f"{path}: not a resume state ({exc.__class__.__name__})") from None
-    if not isinstance(state, dict):
-        raise ConfigError(f"{path}: not a resume state")
+        raise ConfigError(
+            f"--resume {path}: not a resume state ({exc.__class__.__name__}); pass {want}"
+        ) from None
+    if isinstance(state, dict) and "format" in state and "kind" in state:
+        raise ConfigError(f"--resume {path}: a model checkpoint ({state.get('kind')}) cannot be "
+                          f"resumed; pass {want} from the same run folder")  # fmt: skip
+    missing = [k for k in RESUME_KEYS if k not in state] if isinstance(state, dict) else ["keys"]
+    if not missing and not isinstance(state["trainable"], dict):
+        missing = ["weights"]
+    if missing:
+        raise ConfigError(f"--resume {path}: not a resume state (no {missing[0]}); pass {want}")
+    if stage is not None and state["stage"] != stage:
+        raise ConfigError(f"--resume {path}: the state of a {state['stage']} stage, not of "
+                          f"{stage}; pass {want}")  # fmt: skip
     return state
+
+
+def check_resume_matches(state: dict[str, Any], module: nn.Module, path: str | Path) -> None:
+    """The resume state's weights fit ``module`` (same names and shapes), or a one-line
+    ``ConfigError`` before anything is written."""
+    own = module.state_dict()
+    saved = state["trainable"]
+    for key in sorted(set(own) | set(saved)):
+        if key not in own or key not in saved or own[key].shape != saved[key].shape:
+            got = tuple(saved[key].shape) if key in saved else "missing"
+            want = tuple(own[key].shape) if key in own else "not in this model"
+            raise ConfigError(
+                f"--resume {path}: its weights do not fit this run's model ({key}: {got} in the "
+                f"file, {want} here); resume with the run's own config.yaml"
+            )
 
 
 def _should_stop(step: int, max_steps: int | None, seconds: float, max_minutes: float | None,
@@ -110,7 +151,7 @@ def fit(
     out_dir: str | Path,
     device: torch.device,
     seed: int = 0,
-    resume: str | Path | None = None,
+    resume: str | Path | dict[str, Any] | None = None,
     dist_info: DistInfo | None = None,
     progress: bool = True,
     max_steps: int | None = None,
@@ -139,10 +180,14 @@ def fit(
     aug_gen = torch.Generator().manual_seed(seed * 1000 + 500 + dist_info.rank)
 
     start_epoch, step, best, elapsed = 0, 0, {"score": math.inf}, 0.0
+    # what max_minutes counts: elapsed time, or this process's CPU time (fair under sharing)
+    clock = time.process_time if optim_cfg.budget_clock == "cpu" else time.perf_counter
+    spent = 0.0  # seconds of the budget's clock used by training steps
     if resume is not None:
-        state = load_resume_state(resume)
-        if state.get("stage") != stage.name:
-            raise ConfigError(f"{resume} is a {state.get('stage')} run, not {stage.name}")
+        state = resume if isinstance(resume, dict) else load_resume_state(resume, stage.name)
+        check_resume_matches(
+            state, stage.trainable, "(state)" if isinstance(resume, dict) else resume
+        )
         stage.trainable.load_state_dict(state["trainable"])
         optimizer.load_state_dict(state["optimizer"])
         sched.load_state_dict(state["scheduler"])
@@ -150,6 +195,7 @@ def fit(
         aug_gen.set_state(state["aug_gen"])
         start_epoch, step, best = state["epoch"] + 1, state["step"], state["best"]
         elapsed = state["elapsed"]
+        spent = state.get("spent", elapsed)  # states written before budget_clock: wall time
 
     objective: nn.Module = stage.objective
     if dist_info.enabled:
@@ -161,7 +207,7 @@ def fit(
     scale_range = (data_cfg.scale_min, data_cfg.scale_max)
     use_scale = scale_range != (1.0, 1.0)
     for epoch in range(start_epoch, optim_cfg.epochs):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), clock()
         loader.set_epoch(epoch)
         stage.objective.train()
         sums: dict[str, float] = {}
@@ -200,17 +246,19 @@ def fit(
                     sums[key] = sums.get(key, 0.0) + value * batch.num_agents
                 agents += batch.num_agents
                 bar.set_postfix(loss=f"{logs['loss']:.4f}")
-                stop = _should_stop(step, max_steps, elapsed + time.perf_counter() - t0,
+                stop = _should_stop(step, max_steps, spent + clock() - c0,
                                     optim_cfg.max_minutes, dist_info, device)  # fmt: skip
                 if stop:
                     break
             if stop:
                 break
         elapsed += time.perf_counter() - t0
+        spent += clock() - c0
         epoch_seconds = time.perf_counter() - t0
         record: dict[str, Any] = {
             "epoch": epoch + 1, "step": step, "lr": sched.get_last_lr()[0],
             "train_seconds": round(elapsed, 2),
+            f"budget_{optim_cfg.budget_clock}_seconds": round(spent, 2),
             "samples_per_second": round(agents / max(1e-9, epoch_seconds), 1),
         }  # fmt: skip
         record.update({f"train_{k}": v / max(1, agents) for k, v in sums.items()})
@@ -232,10 +280,10 @@ def fit(
                 "stage": stage.name, "trainable": stage.trainable.state_dict(),
                 "optimizer": optimizer.state_dict(), "scheduler": sched.state_dict(),
                 "noise_gen": noise_gen.get_state(), "aug_gen": aug_gen.get_state(),
-                "epoch": epoch, "step": step, "best": best, "elapsed": elapsed,
+                "epoch": epoch, "step": step, "best": best, "elapsed": elapsed, "spent": spent,
             })  # fmt: skip
             summary = {k: (round(v, 4) if isinstance(v, float) else v) for k, v in record.items()}
             tqdm.write(f"[{stage.name}] " + " ".join(f"{k}={v}" for k, v in summary.items()))
         if stop:
             break
-    return {"best": best, "train_seconds": elapsed, "steps": step}
+    return {"best": best, "train_seconds": elapsed, "budget_seconds": spent, "steps": step}

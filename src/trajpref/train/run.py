@@ -14,9 +14,10 @@ from trajpref.config import ExperimentConfig, save_config
 from trajpref.data import load_dataset
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError
+from trajpref.io import check_output_dir
 from trajpref.models import checkpoint as ckpt
 from trajpref.train.distributed import barrier, cleanup, init_from_env
-from trajpref.train.loop import fit
+from trajpref.train.loop import check_resume_matches, fit, load_resume_state
 from trajpref.train.stages import (
     build_denoiser_stage,
     build_finetune_stage,
@@ -25,6 +26,13 @@ from trajpref.train.stages import (
 
 Pretraining = Literal["diffusion", "generator"]
 STAGES: tuple[str, ...] = typing.get_args(Pretraining)
+STAGE_NAMES = {"diffusion": "denoiser", "generator": "generator", "finetune": "finetune"}
+"""CLI stage -> the name its files carry (``<name>.safetensors``, ``<name>_last.pt``)."""
+
+
+def last_state_path(out_dir: str | Path, stage: str) -> Path:
+    """The resume state a stage (``diffusion``, ``generator``, ``finetune``) writes."""
+    return Path(out_dir) / f"{STAGE_NAMES[stage]}_last.pt"
 
 
 def _run(
@@ -36,9 +44,15 @@ def _run(
     progress: bool,
     max_steps: int | None,
     build,
+    name: str,
 ) -> dict[str, Any]:
     """What every stage shares: devices and DDP, the datasets, the run folder's config, the
-    loop. ``build(train, val, device) -> (Stage, OptimConfig)`` supplies the stage."""
+    loop. ``build(train, val, device) -> (Stage, OptimConfig)`` supplies the stage ``name``.
+
+    The run folder and the resume state are checked before any data is read and before
+    anything is written (a failed check leaves nothing behind)."""
+    check_output_dir(out_dir)
+    state = load_resume_state(resume, name) if resume is not None else None
     dev = resolve_device(device)
     info, dev = init_from_env(dev)
     torch.set_num_threads(max(1, torch.get_num_threads() // max(1, info.world_size)))
@@ -47,15 +61,18 @@ def _run(
         train = load_dataset(cfg.data.dataset, "train", data_root)
         val = load_dataset(cfg.data.val_dataset or cfg.data.dataset, "val", data_root)
         built, optim = build(train, val, dev)
+        if state is not None:
+            check_resume_matches(state, built.trainable, resume)
         if info.is_main:
             out_dir.mkdir(parents=True, exist_ok=True)
             save_config(cfg, out_dir / "config.yaml")
         barrier(info)
         start = time.perf_counter()
-        summary = fit(built, train, cfg.data, optim, out_dir, dev, cfg.seed, resume, info,
+        summary = fit(built, train, cfg.data, optim, out_dir, dev, cfg.seed, state, info,
                       progress, max_steps)  # fmt: skip
         summary["wall_seconds"] = time.perf_counter() - start
         summary["train_agents"] = train.num_agents
+        summary["rank"] = info.rank  # only rank 0 validates: other ranks' "best" is empty
         return summary
     finally:
         cleanup(info)
@@ -76,17 +93,20 @@ def train_stage(
     seconds)."""
     if stage not in STAGES:
         raise ConfigError(f"unknown stage {stage!r}; choose {' or '.join(STAGES)}")
-
-    def build(train, val, dev):
-        if stage == "diffusion":
-            return build_denoiser_stage(cfg, train, val, dev)[0], cfg.denoiser
+    payload = None
+    if stage == "generator":  # read before any compute: a wrong file fails at once
         path = Path(denoiser) if denoiser else Path(out_dir) / f"denoiser{ckpt.SUFFIX}"
         payload = ckpt.load(path)
         if payload["kind"] != "denoiser":
-            raise ConfigError(f"{path}: expected a denoiser checkpoint")
+            raise ConfigError(f"{path}: expected a denoiser checkpoint, got a {payload['kind']}")
+
+    def build(train, val, dev):
+        if payload is None:
+            return build_denoiser_stage(cfg, train, val, dev)[0], cfg.denoiser
         return build_generator_stage(cfg, payload, val, dev), cfg.generator
 
-    return _run(cfg, out_dir, data_root, device, resume, progress, max_steps, build)
+    return _run(cfg, out_dir, data_root, device, resume, progress, max_steps, build,
+                STAGE_NAMES[stage])  # fmt: skip
 
 
 def finetune(
@@ -108,4 +128,5 @@ def finetune(
     def build(train, val, dev):
         return build_finetune_stage(cfg, payload, val, dev), cfg.finetune
 
-    return _run(cfg, out_dir, data_root, device, resume, progress, max_steps, build)
+    return _run(cfg, out_dir, data_root, device, resume, progress, max_steps, build,
+                STAGE_NAMES["finetune"])  # fmt: skip

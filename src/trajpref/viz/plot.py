@@ -192,10 +192,14 @@ def plot_survey_summary(
 
 
 def _save(fig, out: str | Path) -> Path:
-    """Lay out, write as PNG through a temporary file, close."""
+    """Lay out, write as PNG through a temporary file, close. The saved canvas grows to hold
+    every title and label (``bbox_inches="tight"``), so nothing is clipped however long the
+    title or however tall the axes' aspect."""
     fig.tight_layout()
     out = Path(out)
-    with atomic_path(out) as tmp:
-        fig.savefig(tmp, format="png")
-    plt.close(fig)
+    try:
+        with atomic_path(out) as tmp:
+            fig.savefig(tmp, format="png", bbox_inches="tight", pad_inches=0.1)
+    finally:
+        plt.close(fig)
     return out

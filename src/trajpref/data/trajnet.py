@@ -1,0 +1,297 @@
+"""TrajNet++ ``.ndjson`` scene files: read them as a dataset, and write predictions in the
+layout that trajnetplusplustools' ``Reader`` and its evaluator's metrics accept.
+
+One JSON object per line (``docs/data_format.md``)::
+
+    {"scene": {"id": 3, "p": 12, "s": 100, "e": 120, "fps": 2.5, "tag": [2, []]}}
+    {"track": {"f": 100, "p": 12, "x": 1.23, "y": 4.56}}
+    {"track": {"f": 109, "p": 12, "x": 1.9, "y": 4.1, "prediction_number": 0, "scene_id": 3}}
+
+A scene follows its primary agent ``p`` from frame ``s`` to frame ``e``; the agents of the scene
+are every agent with rows in those frames. Rows with a ``prediction_number`` are predictions.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from trajpref.data.text import DEFAULT_MAX_COORD, check_file
+from trajpref.errors import ConfigError, DataError
+from trajpref.io import atomic_path
+from trajpref.types import Scene
+
+
+@dataclass
+class TrajnetScenes:
+    """What one ``.ndjson`` file holds, as windows."""
+
+    scenes: list[Scene]
+    """One scene per TrajNet++ scene: the primary agent first, then every agent with a row in
+    all of its T_h + T_f frames, by id."""
+    fps: set[float] = field(default_factory=set)
+    """The ``fps`` values the scene rows declare."""
+
+
+def _number(value, what: str, path: Path, line: int, integer: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise DataError(f"{what} must be a number, got {value!r}", path, line)
+    if not math.isfinite(value):
+        raise DataError(f"{what} is NaN or infinite", path, line)
+    if integer and value != int(value):
+        raise DataError(f"{what} must be an integer, got {value!r}", path, line)
+    return value
+
+
+def _fields(obj: dict, keys: tuple[str, ...], kind: str, path: Path, line: int) -> list:
+    missing = [k for k in keys if k not in obj]
+    if missing:
+        raise DataError(f"{kind} row without {', '.join(repr(k) for k in missing)}", path, line)
+    return [obj[k] for k in keys]
+
+
+def read_trajnet(
+    path: str | Path,
+    t_hist: int = 8,
+    t_fut: int = 12,
+    max_coord: float = DEFAULT_MAX_COORD,
+    units: str = "m",
+) -> TrajnetScenes:
+    """Read one TrajNet++ ``.ndjson`` file into scenes of ``t_hist + t_fut`` frames.
+
+    Each TrajNet++ scene becomes one ``Scene`` over the last ``t_hist + t_fut`` frames of its
+    primary agent inside ``[s, e]`` (TrajNet++ scenes have 9 + 12 frames; the default keeps the
+    last 8 observed). Raises ``DataError`` naming the file and line for a line that is not a
+    JSON object of one ``scene`` or ``track``, a missing or non-numeric field, NaN, a coordinate
+    beyond ``max_coord`` (in ``units``), a repeated (frame, agent) row or scene id, and a scene
+    whose primary agent has fewer frames than a window needs.
+    """
+    path = Path(path)
+    check_file(path)
+    t_total = t_hist + t_fut
+    # frame -> agent -> (x, y); scene rows as (line, id, primary, start, end)
+    rows: dict[int, dict[int, tuple[float, float]]] = defaultdict(dict)
+    scene_rows: list[tuple[int, int, int, int, int]] = []
+    seen_ids: set[int] = set()
+    fps: set[float] = set()
+    try:
+        fh = open(path, "rb")
+    except OSError as exc:
+        raise DataError(f"cannot read file ({exc.strerror or exc})", path) from None
+    with fh:
+        for line, raw in enumerate(fh, start=1):
+            try:
+                text = raw.decode("utf-8")
+            except UnicodeDecodeError:
+                raise DataError("not UTF-8 text", path, line) from None
+            if not text.strip():
+                continue
+            try:
+                obj = json.loads(text)
+            except (ValueError, RecursionError):
+                raise DataError("not a JSON object", path, line) from None
+            if (
+                not isinstance(obj, dict)
+                or len(obj) != 1
+                or not (isinstance(obj.get("track"), dict) or isinstance(obj.get("scene"), dict))
+            ):
+                raise DataError('expected {"scene": {...}} or {"track": {...}}', path, line)
+            if "track" in obj:
+                track = obj["track"]
+                if track.get("prediction_number") is not None:
+                    continue  # a prediction, not an observation
+                f, p, x, y = _fields(track, ("f", "p", "x", "y"), "track", path, line)
+                f = int(_number(f, "frame 'f'", path, line, integer=True))
+                p = int(_number(p, "agent 'p'", path, line, integer=True))
+                x, y = _number(x, "'x'", path, line), _number(y, "'y'", path, line)
+                with np.errstate(over="ignore"):
+                    xy32 = np.array([x, y], np.float32)  # [2]
+                if not np.isfinite(xy32).all():
+                    raise DataError("coordinate does not fit float32 (|value| > 3.4e38)",
+                                    path, line)  # fmt: skip
+                if max(abs(x), abs(y)) > max_coord:
+                    big = x if abs(x) >= abs(y) else y
+                    raise DataError(
+                        f"coordinate {big:g} {units} is beyond the sane bound of {max_coord:g} "
+                        f"{units} (raise it with --max-coord if the data really spans that far)",
+                        path,
+                        line,
+                    )
+                if p in rows[f]:
+                    raise DataError(f"duplicate row for frame {f}, agent {p}", path, line)
+                rows[f][p] = (float(xy32[0]), float(xy32[1]))
+                continue
+            scene = obj["scene"]
+            sid, p, s, e = _fields(scene, ("id", "p", "s", "e"), "scene", path, line)
+            named = zip(("id", "p", "s", "e"), (sid, p, s, e), strict=True)
+            sid, p, s, e = (int(_number(v, f"scene {k!r}", path, line, integer=True))
+                            for k, v in named)  # fmt: skip
+            if s > e:
+                raise DataError(f"scene {sid}: start frame {s} is after end frame {e}", path, line)
+            if sid in seen_ids:
+                raise DataError(f"scene id {sid} appears twice", path, line)
+            seen_ids.add(sid)
+            if scene.get("fps") is not None:
+                rate = _number(scene["fps"], "scene 'fps'", path, line)
+                if rate <= 0:
+                    raise DataError(f"scene 'fps' must be > 0, got {rate}", path, line)
+                fps.add(float(rate))
+            scene_rows.append((line, sid, p, s, e))
+    if not scene_rows:
+        raise DataError('no {"scene": ...} rows', path)
+    frames_of: dict[int, list[int]] = defaultdict(list)  # agent -> its frames, sorted
+    for f in sorted(rows):
+        for p in rows[f]:
+            frames_of[p].append(f)
+    scenes = []
+    for line, sid, p, s, e in scene_rows:
+        own = [f for f in frames_of.get(p, ()) if s <= f <= e]
+        if len(own) < t_total:
+            raise DataError(
+                f"scene {sid}: its primary agent {p} has {len(own)} frames in {s}..{e}; a "
+                f"window needs {t_total}",
+                path,
+                line,
+            )
+        window = own[-t_total:]
+        others = set(rows[window[0]])
+        for f in window[1:]:
+            others &= rows[f].keys()
+        agents = [p, *sorted(others - {p})]
+        xy = np.array([[rows[f][a] for f in window] for a in agents], np.float32)  # [P, T, 2]
+        scenes.append(
+            Scene(
+                xy[:, :t_hist],
+                xy[:, t_hist:],
+                np.zeros(len(agents), np.int64),
+                f"{path.name}#{sid}",
+            )  # fmt: skip
+        )
+    return TrajnetScenes(scenes, fps)
+
+
+def _check_arrays(history, pred, scene, future) -> tuple[np.ndarray, ...]:
+    history = np.asarray(history, dtype=np.float32)
+    pred = np.asarray(pred, dtype=np.float32)
+    scene = np.asarray(scene)
+    if history.ndim != 3 or history.shape[-1] != 2:
+        raise DataError(f"history must be [N, T_h, 2], got {history.shape}")
+    n = history.shape[0]
+    if pred.ndim != 4 or pred.shape[1] != n or pred.shape[-1] != 2:
+        raise DataError(f"pred must be [K, N={n}, T_f, 2], got {pred.shape}")
+    if scene.shape != (n,) or not np.issubdtype(scene.dtype, np.integer):
+        raise DataError(f"scene must be [N={n}] integer scene indices, got {scene.shape}")
+    if n and (scene.min() != 0 or (np.diff(scene) < 0).any() or (np.diff(scene) > 1).any()):
+        raise DataError("scene must number the scenes 0, 1, 2, ... in non-decreasing order")
+    if future is not None:
+        future = np.asarray(future, dtype=np.float32)
+        if future.shape != pred.shape[1:]:
+            raise DataError(f"future must be [N, T_f, 2] = {pred.shape[1:]}, got {future.shape}")
+    for name, arr in (("history", history), ("pred", pred), ("future", future)):
+        if arr is not None and not np.isfinite(arr).all():
+            raise DataError(f"{name} holds NaN or infinite values")
+    return history, pred, scene.astype(np.int64), future
+
+
+def _coords(xy: np.ndarray, decimals: int | None) -> np.ndarray:
+    """[..., 2] float32 -> strings: the shortest that read back as the same float32, or
+    rounded to ``decimals``."""
+    if decimals is None:
+        return xy.astype(str)
+    return np.round(xy.astype(np.float64), decimals).astype(str)
+
+
+def _track_lines(frames, agents, xy, decimals, k: int | None = None) -> list[str]:
+    """One ``track`` line per row; predictions (``k``) carry their scene id (= the agent)."""
+    text = _coords(xy, decimals)  # [R, 2]
+    extra = "" if k is None else f', "prediction_number": {k}, "scene_id": '
+    out = []
+    for f, p, (x, y) in zip(frames.tolist(), agents.tolist(), text.tolist(), strict=True):
+        tail = "" if k is None else f"{extra}{p}"
+        out.append(f'{{"track": {{"f": {f}, "p": {p}, "x": {x}, "y": {y}{tail}}}}}\n')
+    return out
+
+
+def write_trajnet(
+    path: str | Path,
+    history,
+    pred,
+    scene,
+    frame_interval: float = 0.4,
+    decimals: int | None = None,
+) -> int:
+    """Write sampled futures as a TrajNet++ prediction file; return the number of TrajNet++
+    scenes written (one per agent).
+
+    ``history`` [N, T_h, 2], ``pred`` [K, N, T_f, 2] and ``scene`` [N] (scene index per agent:
+    0, 1, ... non-decreasing) are the arrays ``trajpref predict`` saves (numpy or torch).
+    TrajNet++ scores one primary agent per scene, so every agent gets its own TrajNet++ scene
+    (scene id = agent id = its index n) spanning the frames of its scene: scene b holds frames
+    ``b * (T_h + T_f)`` onwards, one apart, with ``fps = 1 / frame_interval``. The file holds the
+    scene rows, the observed rows and, for each agent and sample k, its predicted rows with
+    ``"prediction_number": k`` and ``"scene_id"``; ``write_trajnet_truth`` writes the matching
+    ground truth. Coordinates are written as the shortest text that reads back as the same
+    float32 value, or rounded to ``decimals`` (TrajNet++'s own files use 2).
+
+    TrajNet++'s evaluator reads predictions 0, 1 and 2 for its Top-3 metrics whenever there is
+    more than one, so K must be 1 or at least 3.
+    """
+    history, pred, scene, _ = _check_arrays(history, pred, scene, None)
+    if pred.shape[0] == 2:
+        raise ConfigError(
+            "TrajNet++'s evaluator needs 1 or at least 3 predictions per agent (its Top-3 "
+            "reads predictions 0, 1 and 2); got K=2"
+        )
+    return _write(path, history, scene, frame_interval, decimals, pred=pred)
+
+
+def write_trajnet_truth(
+    path: str | Path,
+    history,
+    future,
+    scene,
+    frame_interval: float = 0.4,
+    decimals: int | None = None,
+) -> int:
+    """Write the ground truth that matches ``write_trajnet``'s file (same scene, agent and
+    frame numbers; observed and true future rows): the file TrajNet++'s evaluator compares a
+    prediction file with. ``future`` is [N, T_f, 2]; the rest as in ``write_trajnet``."""
+    fut = np.asarray(future, dtype=np.float32)
+    history, _, scene, future = _check_arrays(history, fut[None], scene, fut)
+    return _write(path, history, scene, frame_interval, decimals, future=future)
+
+
+def _write(path, history, scene, frame_interval, decimals, pred=None, future=None) -> int:
+    if not (math.isfinite(frame_interval) and frame_interval > 0):
+        raise ConfigError(f"frame_interval must be > 0 seconds, got {frame_interval}")
+    n, t_hist = history.shape[:2]
+    t_fut = pred.shape[2] if pred is not None else future.shape[1]
+    t_total = t_hist + t_fut
+    agents = np.arange(n)  # [N] TrajNet++ agent id = scene id = index
+    first = scene * t_total  # [N] first frame of each agent's scene
+    fps = 1.0 / frame_interval
+    lines = [
+        f'{{"scene": {{"id": {a}, "p": {a}, "s": {f}, "e": {f + t_total - 1}, '
+        f'"fps": {fps:g}, "tag": [0, []]}}}}\n'
+        for a, f in zip(agents.tolist(), first.tolist(), strict=True)
+    ]
+    obs_frames = first[:, None] + np.arange(t_hist)  # [N, T_h]
+    fut_frames = (first[:, None] + t_hist + np.arange(t_fut)).ravel()  # [N * T_f]
+    lines += _track_lines(obs_frames.ravel(), np.repeat(agents, t_hist),
+                          history.reshape(-1, 2), decimals)  # fmt: skip
+    per_agent = np.repeat(agents, t_fut)  # [N * T_f]
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
+        fh.writelines(lines)
+        if future is not None:
+            fh.writelines(_track_lines(fut_frames, per_agent, future.reshape(-1, 2), decimals))
+        else:
+            for k in range(pred.shape[0]):
+                fh.writelines(
+                    _track_lines(fut_frames, per_agent, pred[k].reshape(-1, 2), decimals, k)
+                )
+    return n

@@ -1,0 +1,138 @@
+"""The model zoo: published checkpoints that ship inside the package, named ``DATASET/NAME``.
+
+The files live in ``trajpref/zoo/<dataset>/<name>.safetensors`` (the repository's ``models/``
+folder links there), each beside a model card ``<name>.md``; ``zoo/index.json`` describes them
+(method, training machine and minutes, the test row). ``benchmarks/zoo_index.py`` writes the
+index and the cards from ``benchmarks/results/`` and the checkpoints' own headers, so an
+installed wheel can list its models without the benchmark results.
+
+A name resolves to a file wherever a checkpoint path is accepted (``--model``, ``--from``,
+``--scorer``, ``--denoiser``, ``TrajectoryScorer.from_checkpoint``): see
+``checkpoint.resolve_path``.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+from typing import Any
+
+from trajpref.errors import TrajprefError
+from trajpref.io import read_checkpoint_header
+
+ZOO_DIR = Path(__file__).resolve().parent.parent / "zoo"
+"""Where the published checkpoints live: inside the installed package."""
+INDEX = "index.json"
+"""The zoo's index file, in ``ZOO_DIR``."""
+INDEX_FORMAT = "trajpref-zoo/1"
+SUFFIX = ".safetensors"
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*/[A-Za-z0-9][A-Za-z0-9_.-]*$")
+
+
+def is_name(spec: str | Path) -> bool:
+    """Whether ``spec`` has the form of a zoo name (``DATASET/NAME``, no file suffix)."""
+    text = str(spec)
+    return bool(_NAME.match(text)) and not text.endswith((SUFFIX, ".pt"))
+
+
+def published(root: Path | None = None) -> dict[str, Path]:
+    """Every published checkpoint, ``{"DATASET/NAME": file}``, sorted by name."""
+    root = ZOO_DIR if root is None else root
+    files = root.glob(f"*/*{SUFFIX}") if root.is_dir() else []
+    return dict(sorted((f"{f.parent.name}/{f.stem}", f) for f in files))
+
+
+def header(path: Path) -> dict[str, Any]:
+    """The ``trajpref`` JSON header of a checkpoint file, without reading its weights."""
+    return read_checkpoint_header(path)
+
+
+def resolve(name: str, root: Path | None = None) -> Path:
+    """The file of a published model; an unknown name is an error that lists the known ones."""
+    models = published(root)
+    if name in models:
+        return models[name]
+    known = ", ".join(models) or "none (the package was built without its models)"
+    raise TrajprefError(
+        f"{name}: neither a checkpoint file nor a published model; published: {known} "
+        "(`trajpref models` describes them)"
+    )
+
+
+def load_index(root: Path | None = None) -> dict[str, dict[str, Any]]:
+    """The index's entries by name (empty when the zoo has no index)."""
+    path = (ZOO_DIR if root is None else root) / INDEX
+    if not path.is_file():
+        return {}
+    try:
+        index = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise TrajprefError(f"{path}: unreadable zoo index ({exc.__class__.__name__})") from None
+    if not isinstance(index, dict) or index.get("format") != INDEX_FORMAT:
+        raise TrajprefError(f"{path}: not a zoo index (format {INDEX_FORMAT} expected)")
+    return {entry["name"]: entry for entry in index.get("models", [])}
+
+
+def entries(root: Path | None = None) -> list[dict[str, Any]]:
+    """One entry per published file: its index entry (``indexed: True``), or what the file's
+    own header says (name, dataset, kind, training minutes) when the index does not describe
+    it yet (``benchmarks/zoo_index.py`` adds it)."""
+    index = load_index(root)
+    out = []
+    for name, path in published(root).items():
+        entry = dict(index.get(name) or _from_header(name, path))
+        entry["indexed"] = name in index
+        entry["path"] = str(path)
+        out.append(entry)
+    return out
+
+
+def _from_header(name: str, path: Path) -> dict[str, Any]:
+    head = header(path)
+    meta = head.get("meta") or {}
+    seconds = meta.get("train_seconds")
+    train = {"minutes": {head.get("kind", "?"): round(seconds / 60, 1)}} if seconds else {}
+    return {"name": name, "dataset": path.parent.name, "kind": head.get("kind", "?"),
+            "method": meta.get("method", "(not indexed)"), "train": train}  # fmt: skip
+
+
+def card(name: str, root: Path | None = None) -> str:
+    """The model card (Markdown) of a published model."""
+    path = resolve(name, root).with_suffix(".md")
+    if not path.is_file():
+        raise TrajprefError(f"{name}: published without a model card ({path.name})")
+    return path.read_text()
+
+
+def _minutes(train: dict[str, Any]) -> str:
+    parts = [f"{v:.1f}" for v in (train.get("minutes") or {}).values() if v is not None]
+    return " + ".join(parts) or "-"
+
+
+def _test(entry: dict[str, Any]) -> str:
+    test = entry.get("test")
+    if not test:
+        return "-"
+    return f"{test['min_ade']:.3f} / {test['min_fde']:.3f}"
+
+
+def table(rows: list[dict[str, Any]]) -> str:
+    """The listing printed by ``trajpref models``: one line per model."""
+    head = ("name", "kind", "method", "test minADE/minFDE", "trained on", "train min")
+    lines = [head]
+    for e in rows:
+        train = e.get("train") or {}
+        lines.append((
+            e["name"],
+            e.get("kind", "?"),
+            e.get("method", "(not indexed)"),
+            _test(e),
+            train.get("machine_short", "-"),
+            _minutes(train),
+        ))  # fmt: skip
+    widths = [max(len(str(row[i])) for row in lines) for i in range(len(head))]
+    return "\n".join(
+        "  ".join(str(v).ljust(w) for v, w in zip(row, widths, strict=True)).rstrip()
+        for row in lines
+    )

@@ -1,0 +1,202 @@
+"""TrajNet++ .ndjson: reading scene files as a dataset, and writing predictions that
+trajnetplusplustools (the real package from PyPI) reads and scores like we do."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+import trajnetplusplustools as tnt
+from synthetic import make_scene
+
+from trajpref.data import load_dataset
+from trajpref.data.trajnet import read_trajnet, write_trajnet, write_trajnet_truth
+from trajpref.errors import ConfigError, DataError
+from trajpref.metrics import ade_fde, min_ade_fde
+from trajpref.types import collate
+
+
+def _scene_file(path, tracks, scenes):
+    lines = [json.dumps({"scene": s}) for s in scenes]
+    lines += [json.dumps({"track": {"f": f, "p": p, "x": x, "y": y}}) for f, p, x, y in tracks]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _three_agents(path):
+    """Frames 0, 10, ..., 200 (21 = 9 + 12); agent 1 is the primary, agent 2 is there all the
+    time, agent 3 misses frame 100, agent 4 only appears at frame 10 (before the window)."""
+    frames = range(0, 210, 10)
+    tracks = [(f, 1, f / 10, 0.0) for f in frames]
+    tracks += [(f, 2, f / 10, 1.0) for f in frames]
+    tracks += [(f, 3, 0.5, f / 10) for f in frames if f != 100]
+    tracks += [(10, 4, 9.0, 9.0)]
+    scenes = [{"id": 7, "p": 1, "s": 0, "e": 200, "fps": 2.5, "tag": [1, []]},
+              {"id": 8, "p": 3, "s": 0, "e": 90, "fps": 2.5, "tag": [1, []]}]  # fmt: skip
+    return _scene_file(path, tracks, scenes)
+
+
+def test_reading_a_scene_file(tmp_path):
+    path = _three_agents(tmp_path / "a.ndjson")
+    with pytest.raises(DataError, match="scene 8: its primary agent 3 has 10 frames in 0..90; "
+                       "a window needs 20") as info:  # fmt: skip
+        read_trajnet(path)
+    assert info.value.line == 2
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join(lines[:1] + lines[2:]))
+    read = read_trajnet(path)
+    (scene,) = read.scenes
+    assert read.fps == {2.5}
+    assert scene.scene_id == "a.ndjson#7"
+    # the last 20 of 21 frames: history frames 10..80, future 90..200; primary first
+    np.testing.assert_array_equal(scene.history[:, :, 0], [np.arange(1, 9)] * 2)
+    np.testing.assert_array_equal(scene.history[:, 0, 1], [0.0, 1.0])
+    np.testing.assert_array_equal(scene.future[0, :, 0], np.arange(9, 21))
+
+
+def test_a_folder_or_a_file_is_a_dataset(tmp_path):
+    (tmp_path / "test").mkdir()
+    path = _three_agents(tmp_path / "test" / "a.ndjson")
+    path.write_text("\n".join(l for l in path.read_text().splitlines() if '"id": 8' not in l))
+    (tmp_path / "train").mkdir()
+    (tmp_path / "train" / "b.ndjson").write_text(path.read_text())
+    ds = load_dataset(str(tmp_path), "test")
+    assert len(ds) == 1 and ds.info.units == "m" and ds.info.frame_interval == 0.4
+    assert load_dataset(str(path), "test").num_agents == 2
+    (tmp_path / "test" / "c.txt").write_text("0 1 2 3\n")
+    with pytest.raises(DataError, match=r"both text \(\*.txt, \*.csv\) and \*.ndjson"):
+        load_dataset(str(tmp_path), "test")
+
+
+@pytest.mark.parametrize(
+    ("line", "message"),
+    [
+        ("{nope", "not a JSON object"),
+        ('{"row": {}}', 'expected {"scene": {...}} or {"track": {...}}'),
+        ('{"track": {"f": 0, "p": 1, "x": 2}}', "track row without 'y'"),
+        ('{"track": {"f": 0.5, "p": 1, "x": 2, "y": 3}}', "frame 'f' must be an integer"),
+        ('{"track": {"f": 0, "p": 1, "x": NaN, "y": 3}}', "'x' is NaN or infinite"),
+        ('{"track": {"f": 0, "p": 1, "x": "2", "y": 3}}', "'x' must be a number"),
+        ('{"track": {"f": 0, "p": 1, "x": 1e20, "y": 3}}', "1e\\+20 m is beyond the sane bound"),
+        ('{"track": {"f": 0, "p": 1, "x": 0.0, "y": 0.0}}', "duplicate row for frame 0, agent 1"),
+        ('{"scene": {"id": 7, "p": 1, "s": 0, "e": 200}}', "scene id 7 appears twice"),
+        ('{"scene": {"id": 9, "p": 1, "s": 5, "e": 2}}', "start frame 5 is after end frame 2"),
+    ],
+)
+def test_bad_lines_name_the_line(tmp_path, line, message):
+    path = tmp_path / "bad.ndjson"
+    _three_agents(path)
+    good = [l for l in path.read_text().splitlines() if '"id": 8' not in l]
+    path.write_text("\n".join([*good, line]) + "\n")
+    with pytest.raises(DataError, match=message) as info:
+        read_trajnet(path)
+    assert info.value.line == len(good) + 1
+
+
+def _predictions(seed: int = 0, k: int = 4):
+    scenes = [make_scene(n, seed=seed + i) for i, n in enumerate((2, 3, 1))]
+    batch = collate(scenes)
+    gen = torch.Generator().manual_seed(seed)
+    noise = 0.3 * torch.randn(k, *batch.future.shape, generator=gen)  # [K, N, T_f, 2]
+    return scenes, batch, batch.future[None] + noise.cumsum(2)
+
+
+def test_trajnetplusplustools_scores_our_file_like_we_do(tmp_path):
+    scenes, batch, pred = _predictions(k=4)
+    hist, fut, scene = batch.history.numpy(), batch.future.numpy(), batch.scene.numpy()
+    assert write_trajnet(tmp_path / "pred.ndjson", hist, pred.numpy(), scene) == 6
+    assert write_trajnet_truth(tmp_path / "gt.ndjson", hist, fut, scene) == 6
+
+    # what trajnetplusplusbaselines' evaluator does with the two files, per scene
+    gt = tnt.Reader(str(tmp_path / "gt.ndjson"), scene_type="paths")
+    sub = tnt.Reader(str(tmp_path / "pred.ndjson"), scene_type="paths")
+    gt_ids, gt_scenes = zip(*gt.scenes(), strict=True)
+    sub_scenes = [paths for _, paths in sub.scenes()]
+    ade, fde, top_ade, top_fde = [], [], [], []
+    for sid, truth, paths in zip(gt_ids, gt_scenes, sub_scenes, strict=True):
+        primary_all = [t for t in paths[0] if t.scene_id == sid]
+        primary = [t for t in primary_all if t.prediction_number == 0]
+        assert [t.frame for t in truth[0]][-12:] == [t.frame for t in primary]
+        ade.append(tnt.metrics.average_l2(truth[0], primary, n_predictions=12))
+        fde.append(tnt.metrics.final_l2(truth[0], primary))
+        a, f = tnt.metrics.topk(primary_all, truth[0], n_predictions=12, k_samples=4)
+        top_ade.append(a)
+        top_fde.append(f)
+        for other in truth[1:]:  # the evaluator's collision check runs on these paths
+            tnt.metrics.collision(primary, other, n_predictions=12)
+    assert len(ade) == batch.num_agents == 6
+
+    ours_ade, ours_fde = ade_fde(pred, batch.future)  # [K, N]
+    min_ade, _ = min_ade_fde(pred, batch.future)  # [N]
+    best = ours_ade.argmin(0)  # [N] TrajNet++'s Top-k reports the FDE of the best-ADE sample
+    np.testing.assert_allclose(ade, ours_ade[0].numpy(), rtol=1e-5)
+    np.testing.assert_allclose(fde, ours_fde[0].numpy(), rtol=1e-5)
+    np.testing.assert_allclose(top_ade, min_ade.numpy(), rtol=1e-5)
+    np.testing.assert_allclose(top_fde, ours_fde[best, torch.arange(6)].numpy(), rtol=1e-5)
+    assert np.mean(top_ade) < np.mean(ade)  # the samples differ: min over 4 helps
+
+
+def test_our_reader_reads_the_truth_file_back(tmp_path):
+    scenes, batch, _ = _predictions()
+    write_trajnet_truth(tmp_path / "gt.ndjson", batch.history, batch.future, batch.scene, 0.5)
+    ds = load_dataset(str(tmp_path / "gt.ndjson"), "test")
+    assert ds.info.frame_interval == 0.5 and len(ds) == 6
+    # agent n's TrajNet++ scene is its own scene with n first, then the others by id
+    n = 0
+    for scene in scenes:
+        for i in range(scene.num_agents):
+            got = ds[n]
+            order = [i, *[j for j in range(scene.num_agents) if j != i]]
+            np.testing.assert_array_equal(got.history, scene.history[order])
+            np.testing.assert_array_equal(got.future, scene.future[order])
+            n += 1
+
+
+def test_writer_checks_its_input(tmp_path):
+    _, batch, pred = _predictions(k=2)
+    hist, scene = batch.history.numpy(), batch.scene.numpy()
+    with pytest.raises(ConfigError, match="1 or at least 3 predictions"):
+        write_trajnet(tmp_path / "p.ndjson", hist, pred.numpy(), scene)
+    with pytest.raises(DataError, match="pred must be"):
+        write_trajnet(tmp_path / "p.ndjson", hist, pred[:1, :2].numpy(), scene)
+    bad = pred[:1].numpy().copy()
+    bad[0, 0, 0, 0] = np.nan
+    with pytest.raises(DataError, match="pred holds NaN"):
+        write_trajnet(tmp_path / "p.ndjson", hist, bad, scene)
+    with pytest.raises(DataError, match="scene must number"):
+        write_trajnet(tmp_path / "p.ndjson", hist, pred[:1].numpy(), scene + 1)
+    assert not list(tmp_path.iterdir())  # nothing written
+
+
+def test_decimals_round_like_trajnet_files(tmp_path):
+    _, batch, pred = _predictions(k=1)
+    write_trajnet(tmp_path / "p.ndjson", batch.history, pred, batch.scene, decimals=2)
+    rows = [json.loads(l) for l in (tmp_path / "p.ndjson").read_text().splitlines()]
+    xs = [r["track"]["x"] for r in rows if "track" in r]
+    assert all(round(x, 2) == x for x in xs)
+    first = next(r["track"] for r in rows if "track" in r)
+    assert first["x"] == round(float(batch.history[0, 0, 0]), 2)
+
+
+def test_cli_predict_format_trajnet_scores_like_evaluate(walks, tmp_path, capsys):
+    from trajpref.cli import main
+
+    common = ["--dataset", str(walks), "--model", "cv", "--samples", "5", "--no-progress"]
+    assert main(["evaluate", *common, "--json"]) == 0
+    ours = json.loads(capsys.readouterr().out)
+    pred, truth = tmp_path / "pred.ndjson", tmp_path / "gt.ndjson"
+    code = main(["predict", *common, "--format", "trajnet", "--out", str(pred),
+                 "--truth", str(truth)])  # fmt: skip
+    assert code == 0
+    gt = tnt.Reader(str(truth), scene_type="paths")
+    sub = tnt.Reader(str(pred), scene_type="paths")
+    top_ade = []
+    for (sid, paths_gt), (_, paths) in zip(gt.scenes(), sub.scenes(), strict=True):
+        primary = [t for t in paths[0] if t.scene_id == sid]
+        top_ade.append(tnt.metrics.topk(primary, paths_gt[0], n_predictions=12, k_samples=5)[0])
+    # every agent is the primary of its own TrajNet++ scene: the mean over scenes is ours
+    assert np.mean(top_ade) == pytest.approx(ours["min_ade"], rel=1e-5)
+    # a wrong suffix or --truth without the format is one line, exit 2, before any compute
+    assert main(["predict", *common, "--format", "trajnet", "--out", str(tmp_path / "p.npz")]) == 2
+    assert main(["predict", *common, "--out", str(tmp_path / "p.npz"), "--truth", str(truth)]) == 2
+    assert not (tmp_path / "p.npz").exists()

@@ -1,0 +1,169 @@
+"""The model zoo: names resolve to the published files, the listing and the cards ship with
+them, and the repository's index is what benchmarks/zoo_index.py writes."""
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from trajpref.cli import main
+from trajpref.errors import TrajprefError
+from trajpref.models import checkpoint, zoo
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture
+def fake_zoo(tiny_run, tmp_path, monkeypatch) -> Path:
+    """A zoo of one dataset, ``walks``: the tiny run's generator published with its
+    denoiser (referenced by path and hash, as the real zoo's are). The cwd is elsewhere."""
+    root = tmp_path / "zoo"
+    checkpoint.publish(tiny_run / "generator.safetensors", root / "walks" / "generator.safetensors")
+    monkeypatch.setattr(zoo, "ZOO_DIR", root)
+    cwd = tmp_path / "cwd"
+    cwd.mkdir()
+    monkeypatch.chdir(cwd)
+    return root
+
+
+@pytest.mark.parametrize(
+    ("spec", "expected"),
+    [
+        ("zara1/generator", True),
+        ("zara1/rlhf-res", True),
+        ("eth/generator-speedaug", True),
+        ("cv", False),
+        ("models/zara1/generator.safetensors", False),
+        ("zara1/generator.safetensors", False),
+        ("zara1/generator.pt", False),
+        ("/abs/zara1/generator", False),
+        ("a/b/c", False),
+    ],
+)
+def test_what_counts_as_a_published_name(spec, expected):
+    assert zoo.is_name(spec) is expected
+
+
+def test_a_name_resolves_and_loads_the_denoiser_it_names(fake_zoo):
+    assert checkpoint.resolve_path("walks/generator") == fake_zoo / "walks/generator.safetensors"
+    # the generator names its denoiser by a path relative to its own folder, not the cwd
+    payload = checkpoint.load("walks/generator")
+    den = zoo.header(fake_zoo / "walks/denoiser.safetensors")
+    assert payload["denoiser"]["hash"] == den["hash"]
+    assert zoo.published() == {
+        "walks/denoiser": fake_zoo / "walks/denoiser.safetensors",
+        "walks/generator": fake_zoo / "walks/generator.safetensors",
+    }
+
+
+def test_an_unknown_name_lists_the_published_ones(fake_zoo):
+    with pytest.raises(TrajprefError, match=r"walks/nope: .*published: walks/denoiser, "
+                       r"walks/generator \(`trajpref models`"):  # fmt: skip
+        checkpoint.resolve_path("walks/nope")
+
+
+def test_an_existing_file_wins_over_a_published_name(fake_zoo):
+    local = Path("walks/generator")
+    local.parent.mkdir()
+    shutil.copy(fake_zoo / "walks/denoiser.safetensors", local)
+    assert checkpoint.resolve_path("walks/generator") == local
+    assert checkpoint.load("walks/generator")["kind"] == "denoiser"
+
+
+def test_unindexed_files_are_listed_from_their_headers(fake_zoo):
+    rows = {e["name"]: e for e in zoo.entries()}
+    assert rows["walks/generator"]["kind"] == "generator"
+    assert rows["walks/denoiser"]["kind"] == "denoiser"
+    assert not rows["walks/generator"]["indexed"]
+    table = zoo.table(list(rows.values())).splitlines()
+    assert table[0].split()[:2] == ["name", "kind"]
+    assert table[2].split()[:3] == ["walks/generator", "generator", "(not"]
+
+
+def test_indexed_entries_show_their_test_row_machine_and_minutes(fake_zoo):
+    entry = {
+        "name": "walks/generator", "kind": "generator", "method": "pretrained",
+        "test": {"min_ade": 0.12345, "min_fde": 0.5},
+        "train": {"machine_short": "CPU (2 cores)", "minutes": {"generator": 14.04}},
+    }  # fmt: skip
+    index = {"format": zoo.INDEX_FORMAT, "models": [entry]}
+    (fake_zoo / zoo.INDEX).write_text(json.dumps(index))
+    rows = {e["name"]: e for e in zoo.entries()}
+    assert rows["walks/generator"]["indexed"] and not rows["walks/denoiser"]["indexed"]
+    line = next(x for x in zoo.table(list(rows.values())).splitlines() if "walks/gen" in x)
+    assert line.split() == ["walks/generator", "generator", "pretrained", "0.123", "/", "0.500",
+                            "CPU", "(2", "cores)", "14.0"]  # fmt: skip
+
+
+def test_a_bad_index_is_a_one_line_error(fake_zoo):
+    (fake_zoo / zoo.INDEX).write_text(json.dumps({"format": "something/9", "models": []}))
+    with pytest.raises(TrajprefError, match="not a zoo index"):
+        zoo.entries()
+    (fake_zoo / zoo.INDEX).write_text("{not json")
+    with pytest.raises(TrajprefError, match="unreadable zoo index"):
+        zoo.entries()
+
+
+def test_cli_lists_the_zoo_and_prints_cards(fake_zoo, capsys):
+    assert main(["models"]) == 0
+    out = capsys.readouterr().out
+    assert "walks/denoiser" in out and "walks/generator" in out
+    assert main(["models", "--json"]) == 0
+    assert [e["name"] for e in json.loads(capsys.readouterr().out)] == [
+        "walks/denoiser", "walks/generator"]  # fmt: skip
+    assert main(["models", "walks/generator"]) == 2  # no card written yet
+    assert "published without a model card" in capsys.readouterr().err
+    (fake_zoo / "walks" / "generator.md").write_text("# walks/generator\n\nA card.\n")
+    assert main(["models", "walks/generator"]) == 0
+    assert capsys.readouterr().out == "# walks/generator\n\nA card.\n"
+    assert main(["models", "walks/nope"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("trajpref: error: walks/nope: ")
+
+
+def test_cli_model_and_scorer_accept_names(fake_zoo, walks, capsys):
+    def evaluate(model, scorer):
+        argv = ["evaluate", "--dataset", str(walks), "--model", model, "--scorer", scorer,
+                "--samples", "3", "--json", "--no-progress", "--device", "cpu"]  # fmt: skip
+        assert main(argv) == 0
+        return json.loads(capsys.readouterr().out)
+
+    by_name = evaluate("walks/generator", "walks/denoiser")
+    by_path = evaluate(str(fake_zoo / "walks/generator.safetensors"),
+                       str(fake_zoo / "walks/denoiser.safetensors"))  # fmt: skip
+    for key in ("min_ade", "min_fde", "max_ats"):
+        assert by_name[key] == by_path[key]
+    assert main(["evaluate", "--dataset", str(walks), "--model", "walks/nope"]) == 2
+    assert "published: walks/denoiser, walks/generator" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------- the repository's zoo
+
+
+def test_every_published_model_is_indexed_with_a_card():
+    published = zoo.published()
+    index = zoo.load_index()
+    assert published and set(index) == set(published)
+    for name, path in published.items():
+        entry = index[name]
+        assert entry["hash"] == zoo.header(path)["hash"], name
+        assert (zoo.ZOO_DIR / entry["card"]).is_file(), name
+        assert entry["train"]["minutes"] and entry["train"]["machine"], name
+        if entry["kind"] == "generator":
+            assert entry["denoiser"] in published, name
+            assert entry["test"]["samples"] == 20 and entry["test"]["split"] == "test", name
+
+
+def test_the_index_cards_and_readme_listing_are_up_to_date():
+    """After publishing a model, `python benchmarks/zoo_index.py` rewrites them."""
+    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "zoo_index.py"), "--check"],
+                          capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_the_repository_models_folder_is_the_packaged_zoo():
+    assert (ROOT / "models").resolve() == zoo.ZOO_DIR
+    assert (ROOT / "models" / "zara1" / "generator.safetensors").is_file()

@@ -1,0 +1,141 @@
+"""The command line's finish: score metrics in evaluate's text, strict JSON, `config show`,
+the resume command after Ctrl-C, and only rank 0 reporting."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import shlex
+from pathlib import Path
+
+import pytest
+import torch
+
+import trajpref.cli as cli
+from trajpref.cli import main
+from trajpref.config import ExperimentConfig, config_entries
+from trajpref.train.run import train_stage
+
+
+def _run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_evaluate_prints_the_score_metrics_in_text_too(capsys, walks, tiny_run):
+    argv = ["evaluate", "--dataset", walks, "--model", "cv", "--samples", "6", "--no-progress",
+            "--device", "cpu", "--scorer", tiny_run / "denoiser.safetensors"]  # fmt: skip
+    code, text, _ = _run(capsys, *argv)
+    assert code == 0
+    code, js, _ = _run(capsys, *argv, "--json")
+    res = json.loads(js)
+    line = next(x for x in text.splitlines() if "maxATS" in x)
+    found = dict(re.findall(r"(maxATS|maxFTS|meanATS) (-?\d+\.\d+)", line))
+    assert float(found["maxATS"]) == pytest.approx(res["max_ats"], abs=1e-4)
+    assert float(found["maxFTS"]) == pytest.approx(res["max_fts"], abs=1e-4)
+    assert float(found["meanATS"]) == pytest.approx(res["mean_ats"], abs=1e-4)
+    recalls = [float(v) for v in re.findall(r"(\d\.\d{3})/(\d\.\d{3})", line)[0]]
+    assert recalls == pytest.approx([res["top1_recall_ats"], res["top5_recall_ats"]], abs=1e-3)
+
+
+def test_non_finite_metrics_are_null_in_json_with_a_warning(capsys, monkeypatch, walks, tmp_path):
+    def fake_evaluate(*args, **kwargs):
+        return {"min_ade": math.inf, "min_fde": math.nan, "joint_min_ade": 1.0,
+                "joint_min_fde": 2.0, "agents": 3, "scenes": 1}  # fmt: skip
+
+    monkeypatch.setattr(cli, "evaluate", fake_evaluate)
+    out_file = tmp_path / "r.json"
+    code, out, err = _run(capsys, "evaluate", "--dataset", walks, "--json", "--out", out_file)
+    assert code == 0
+    for text in (out, out_file.read_text()):
+        assert "Infinity" not in text and "NaN" not in text
+        res = json.loads(text)
+        assert res["min_ade"] is None and res["min_fde"] is None and res["joint_min_ade"] == 1.0
+    assert (
+        err.strip() == "trajpref: warning: min_ade, min_fde not finite: the JSON output holds null"
+    )
+
+
+def test_config_show_prints_every_key_with_its_docstring(capsys):
+    code, out, _ = _run(capsys, "config", "show", "--set", "data.max_agents=64")
+    assert code == 0
+    lines = out.splitlines()
+    entries = config_entries(ExperimentConfig())
+    assert len(entries) > 60
+    for key, _, doc in entries:
+        i = next(i for i, x in enumerate(lines) if x.startswith(f"{key} = "))
+        assert doc and lines[i + 1].startswith("    ")  # a docstring follows every key
+        assert " ".join(lines[i + 1].split()) in doc
+    assert "data.max_agents = 64" in lines  # --set applies
+    assert "finetune.reward_clip = 5.0" in lines and "data.val_dataset = null" in lines
+    assert "# finetune: Stage 3: RLHF / RLHF-ReS fine-tuning." in lines
+
+
+TRAIN_ARGS = ["train", "diffusion", "--set", "data.dataset=walks", "--no-progress"]
+
+
+def _interrupting_train(write_state: bool):
+    """A stand-in for train_stage: Ctrl-C arrives, after an epoch ended or before."""
+
+    def fake(stage, cfg, out, *args, **kwargs):
+        if write_state:
+            Path(out).mkdir(parents=True, exist_ok=True)
+            torch.save({"stage": "denoiser"}, Path(out) / "denoiser_last.pt")
+        raise KeyboardInterrupt
+
+    return fake
+
+
+def test_ctrl_c_prints_the_exact_resume_command(capsys, monkeypatch, tmp_path):
+    run = tmp_path / "my run"  # a space: the command must be quoted to be pasted back
+    monkeypatch.setattr(cli, "train_stage", _interrupting_train(True))
+    code, out, err = _run(capsys, *TRAIN_ARGS, "--out", run)
+    assert code == 130 and out == ""
+    first, command = err.strip().splitlines()
+    assert first == "trajpref: interrupted; to continue from the last finished epoch:"
+    assert shlex.split(command) == ["trajpref", *TRAIN_ARGS, "--out", str(run), "--resume",
+                                    str(run / "denoiser_last.pt")]  # fmt: skip
+    # a run started with --resume: the old value is replaced, not repeated
+    os.utime(run / "denoiser_last.pt", (0, 0))  # (the fake writes it again below)
+    code, _, err = _run(capsys, *TRAIN_ARGS, "--out", run, "--resume", tmp_path / "old_last.pt")
+    command = shlex.split(err.strip().splitlines()[1])
+    assert command.count("--resume") == 1 and command[-1] == str(run / "denoiser_last.pt")
+
+
+def test_ctrl_c_before_an_epoch_ends(capsys, monkeypatch, tmp_path):
+    monkeypatch.setattr(cli, "train_stage", _interrupting_train(False))
+    code, _, err = _run(capsys, *TRAIN_ARGS, "--out", tmp_path / "r")
+    assert code == 130 and "nothing to resume" in err
+    # an old state from an earlier run is not offered; the state this run started from is
+    old = tmp_path / "r" / "denoiser_last.pt"
+    old.parent.mkdir()
+    torch.save({}, old)
+    os.utime(old, (0, 0))  # written long before this run started
+    code, _, err = _run(capsys, *TRAIN_ARGS, "--out", tmp_path / "r")
+    assert "nothing to resume" in err
+    code, _, err = _run(capsys, *TRAIN_ARGS, "--out", tmp_path / "r", "--resume", "a_last.pt")
+    assert shlex.split(err.strip().splitlines()[1])[-2:] == ["--resume", "a_last.pt"]
+
+
+def test_only_rank_0_reports(capsys, monkeypatch, tmp_path):
+    summary = {"best": {"score": math.inf}, "train_seconds": 1.0}
+    monkeypatch.setattr(cli, "train_stage", lambda *a, **k: {**summary, "rank": 1})
+    code, out, err = _run(capsys, *TRAIN_ARGS, "--out", tmp_path / "r")
+    assert code == 0 and out == "" and err == ""
+    monkeypatch.setattr(cli, "train_stage", _interrupting_train(True))
+    monkeypatch.setenv("RANK", "1")
+    code, out, err = _run(capsys, *TRAIN_ARGS, "--out", tmp_path / "r")
+    assert code == 130 and out == "" and err == ""
+    monkeypatch.setattr(cli, "train_stage", lambda *a, **k: {**summary, "rank": 0})
+    monkeypatch.setenv("RANK", "0")
+    code, out, _ = _run(capsys, *TRAIN_ARGS, "--out", tmp_path / "r")
+    assert out.startswith("trained diffusion in 1 s; best validation:")
+
+
+def test_a_run_reports_its_rank(tiny_cfg, tmp_path):
+    summary = train_stage("diffusion", tiny_cfg, tmp_path / "r", device="cpu", progress=False,
+                          max_steps=1)  # fmt: skip
+    assert summary["rank"] == 0 and math.isfinite(summary["best"]["score"])
