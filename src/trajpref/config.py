@@ -57,11 +57,21 @@ class DataConfig:
     """Lower bound of the random per-scene scale factor (1.0 with scale_max = 1.0: off)."""
     scale_max: float = 1.0
     """Upper bound of the random per-scene scale factor."""
+    delimiter: str | None = None
+    """Column separator of text track files (None: sniffed; ``, ; | tab whitespace``), as
+    ``--delimiter`` (docs/data_format.md)."""
+    max_gap: int | None = None
+    """Missing frames a window may span (None: the Social-GAN rule with a warning; 0: none),
+    as ``--max-gap``."""
+    max_coord: float = 1e6
+    """Largest accepted |x| or |y| in the dataset's units, as ``--max-coord``."""
 
     def __post_init__(self) -> None:
-        _positive(self, "max_agents", "scale_min", "scale_max")
+        _positive(self, "max_agents", "scale_min", "scale_max", "max_coord")
         if self.scale_min > self.scale_max:
             raise ConfigError("DataConfig.scale_min must be <= scale_max")
+        if self.max_gap is not None and self.max_gap < 0:
+            raise ConfigError("DataConfig.max_gap must be >= 0 or null")
 
 
 @dataclass

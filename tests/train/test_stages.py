@@ -2,6 +2,7 @@
 checkpoint, resume and reproduce."""
 
 import json
+import re
 
 import pytest
 import torch
@@ -263,3 +264,22 @@ def test_an_unknown_budget_clock_is_a_config_error():
 
     with pytest.raises(ConfigError, match="budget_clock must be 'wall' or 'cpu'"):
         DenoiserTrainConfig(budget_clock="gpu")
+
+
+@pytest.mark.parametrize(
+    ("setting", "message"),
+    [
+        ("data.max_coord=0.5", r"beyond .*0\.5"),  # the synthetic walks leave a 0.5 box
+        ("data.delimiter=x", "delimiter 'x'"),
+        ("data.max_gap=-1", "max_gap must be >= 0"),
+    ],
+)
+def test_training_reads_with_the_configs_read_options(tmp_path, folder, capsys, setting, message):
+    out = tmp_path / "run"
+    sets = [a for o in [*TINY_OVERRIDES, setting] for a in ("--set", o)]
+    code = main(["train", "diffusion", "--out", str(out), "--dataset", str(folder), *sets,
+                 "--device", "cpu", "--no-progress"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert re.search(message, err), err
+    assert not out.exists()  # nothing written

@@ -11,7 +11,7 @@ from typing import Any, Literal
 import torch
 
 from trajpref.config import ExperimentConfig, save_config
-from trajpref.data import load_dataset
+from trajpref.data import ReadOptions, load_dataset
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError
 from trajpref.io import check_output_dir
@@ -53,13 +53,15 @@ def _run(
     anything is written (a failed check leaves nothing behind)."""
     check_output_dir(out_dir)
     state = load_resume_state(resume, name) if resume is not None else None
+    options = ReadOptions(cfg.data.delimiter, cfg.data.max_gap, cfg.data.max_coord)
     dev = resolve_device(device)
     info, dev = init_from_env(dev)
     torch.set_num_threads(max(1, torch.get_num_threads() // max(1, info.world_size)))
     out_dir = Path(out_dir)
     try:
-        train = load_dataset(cfg.data.dataset, "train", data_root)
-        val = load_dataset(cfg.data.val_dataset or cfg.data.dataset, "val", data_root)
+        train = load_dataset(cfg.data.dataset, "train", data_root, options=options)
+        val = load_dataset(cfg.data.val_dataset or cfg.data.dataset, "val", data_root,
+                           options=options)  # fmt: skip
         built, optim = build(train, val, dev)
         if state is not None:
             check_resume_matches(state, built.trainable, resume)
