@@ -25,8 +25,9 @@ from trajpref.data import ReadOptions, load_dataset, mean_speed
 from trajpref.data.trajnet import write_trajnet, write_trajnet_truth
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, TrajprefError
-from trajpref.evaluation import evaluate, predict_dataset
+from trajpref.evaluation import evaluate, predict_dataset, resolve_collision_radius
 from trajpref.io import atomic_path, check_output_dir, check_output_file, dumps_json, write_json
+from trajpref.metrics import SCENE_SIZE_EDGES, check_bin_edges
 from trajpref.models import zoo
 from trajpref.models.registry import load_predictor
 from trajpref.rl.presets import finetune_config
@@ -151,6 +152,19 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scorer_arg(ev, "adds max_ats, max_fts and the top-1/top-5 recall of the "
                     "ground-truth-free ranking")  # fmt: skip
     _add_selection_args(ev)
+    ev.add_argument(
+        "--bins",
+        nargs="?",
+        const=",".join(map(str, SCENE_SIZE_EDGES)),
+        default=None,
+        metavar="EDGES",
+        help="also every metric per scene-size bin: upper edges of the bins in "
+        "agents per scene (default 5,10,20: <=5, 6-10, 11-20, >20); JSON: 'bins'",
+    )
+    ev.add_argument("--collision-radius", type=float, default=None, metavar="R",
+                    help="Col-I/Col-II person radius, in the data's units (collision when "
+                    "centres come within 2R; default: TrajNet++'s 0.1 for data in metres, "
+                    "off for other units such as SDD's pixels; docs/social.md)")  # fmt: skip
     ev.set_defaults(func=cmd_evaluate)
 
     pr = sub.add_parser("predict", help="save sampled futures of a split (.npz or TrajNet++)")
@@ -340,10 +354,51 @@ def _selection_fields(args) -> dict:
 
 SCORE_LINE = (("max_ats", "maxATS"), ("max_fts", "maxFTS"), ("mean_ats", "meanATS"))
 SCORE_RECALL = ("top1_recall_ats", "top5_recall_ats", "top1_recall_fts", "top5_recall_fts")
+BIN_COLUMNS = (("min_ade", "minADE"), ("min_fde", "minFDE"), ("joint_min_ade", "jADE"),
+               ("joint_min_fde", "jFDE"), ("col_i_pct", "Col-I%"), ("col_ii_pct", "Col-II%"),
+               ("max_ats", "maxATS"))  # fmt: skip
+
+
+def _parse_bins(text: str | None) -> tuple[int, ...] | None:
+    """``--bins 5,10,20`` -> (5, 10, 20); ConfigError unless increasing integers >= 1."""
+    if text is None:
+        return None
+    try:
+        edges = tuple(int(v) for v in text.split(","))
+        check_bin_edges(edges)
+    except ValueError:
+        raise ConfigError(f"--bins takes increasing integers >= 1 separated by commas "
+                          f"(e.g. 5,10,20), got {text!r}") from None  # fmt: skip
+    return edges
+
+
+def _fmt(value) -> str:
+    return "-" if value is None else f"{value:.4f}" if isinstance(value, float) else str(value)
+
+
+def _print_collisions(out: dict) -> None:
+    if out.get("col_radius") is None:
+        print(f"  collisions off (units {out['units']}; pass --collision-radius in these units)")
+        return
+    print(f"  Col-I {out['col_i_pct']:.2f} %  Col-II {out['col_ii_pct']:.2f} %   ground truth "
+          f"{out['col_gt_pct']:.2f} %   (of {out['col_agents']} agents with a neighbour; "
+          f"radius {out['col_radius']:g} {out['units']})")  # fmt: skip
+
+
+def _print_bins(bins: dict) -> None:
+    cols = [(k, name) for k, name in BIN_COLUMNS if any(k in row for row in bins.values())]
+    print("  " + f"{'size':>8} {'scenes':>7} {'agents':>8} "
+          + " ".join(f"{name:>8}" for _, name in cols))  # fmt: skip
+    for label, row in bins.items():
+        print("  " + f"{label:>8} {row['scenes']:>7} {row['agents']:>8} "
+              + " ".join(f"{_fmt(row.get(k)):>8}" for k, _ in cols))  # fmt: skip
 
 
 def cmd_evaluate(args) -> int:
     _check_model_args(args)
+    bins = _parse_bins(args.bins)
+    if args.collision_radius is not None:
+        resolve_collision_radius(args.collision_radius, "")  # ConfigError unless > 0
     if args.out:
         check_output_file(args.out)
     model, device = _predictor(args)
@@ -354,6 +409,8 @@ def cmd_evaluate(args) -> int:
     result = evaluate(
         model, ds, samples, args.seed, device, args.max_agents,
         progress=not args.no_progress, scorer=scorer,
+        collision_radius="auto" if args.collision_radius is None else args.collision_radius,
+        bins=bins,
     )  # fmt: skip
     seconds = time.perf_counter() - start
     out = {
@@ -363,10 +420,12 @@ def cmd_evaluate(args) -> int:
         "samples": samples,
         "seed": args.seed,
         **_selection_fields(args),
-        **result,
+        **{k: v for k, v in result.items() if k != "bins"},
         "units": ds.info.units,
         "seconds": round(seconds, 3),
     }
+    if bins is not None:
+        out["bins"] = result["bins"]
     bad = [k for k, v in out.items() if isinstance(v, float) and not math.isfinite(v)]
     if bad:
         warnings.warn(f"{', '.join(bad)} not finite: the JSON output holds null", stacklevel=1)
@@ -388,6 +447,9 @@ def cmd_evaluate(args) -> int:
             print("  " + "  ".join(f"{name} {out[k]:.4f}" for k, name in SCORE_LINE)
                   + "   top-1/top-5 recall: by ATS {:.3f}/{:.3f}  by FTS {:.3f}/{:.3f}".format(
                       *(out[k] for k in SCORE_RECALL)))  # fmt: skip
+        _print_collisions(out)
+        if bins is not None:
+            _print_bins(out["bins"])
     return 0
 
 

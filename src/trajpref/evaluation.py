@@ -3,17 +3,29 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
-from typing import Protocol
+from typing import Literal, Protocol
 
 import numpy as np
 import torch
 from tqdm.auto import tqdm
 
 from trajpref.data.loader import SceneLoader
-from trajpref.metrics import MetricAccumulator
+from trajpref.errors import ConfigError
+from trajpref.metrics import (
+    BinnedMetrics,
+    CollisionAccumulator,
+    MetricAccumulator,
+    check_bin_edges,
+    check_collision_radius,
+    collision_flags,
+    default_collision_radius,
+)
 from trajpref.score.scorer import ScoreAccumulator, TrajectoryScorer
 from trajpref.score.selection import gather
 from trajpref.types import Batch, TrajectoryDataset
+
+COLLISION_KEYS = ("col_i_pct", "col_ii_pct", "col_gt_pct", "col_agents", "col_radius")
+"""The collision keys of ``evaluate``'s result (None when the collision metrics are off)."""
 
 
 class Predictor(Protocol):
@@ -42,24 +54,72 @@ def sampled_batches(
         yield batch, model.predict(batch, num_samples, gen)
 
 
+def resolve_collision_radius(radius: float | None | Literal["auto"], units: str) -> float | None:
+    """The collision radius to use: ``auto`` is TrajNet++'s 0.1 m for data in metres and None
+    (collision metrics off) for other units; a number is a radius in the data's units."""
+    if radius == "auto":
+        return default_collision_radius(units)
+    if radius is not None:
+        try:
+            check_collision_radius(radius)
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
+    return radius
+
+
 @torch.no_grad()
 def evaluate(
     model: Predictor, dataset: TrajectoryDataset, num_samples: int = 20, seed: int = 0,
     device: torch.device | str = "cpu", max_agents: int = 1024, progress: bool = True,
     scorer: TrajectoryScorer | None = None,
-) -> dict[str, float | int]:  # fmt: skip
+    collision_radius: float | None | Literal["auto"] = "auto",
+    bins: tuple[int, ...] | None = None,
+) -> dict:  # fmt: skip
     """minADE_K / minFDE_K per agent and joint over a whole split; with a ``scorer``, also
-    maxATS_K / maxFTS_K and the top-1 / top-5 recall of the ground-truth-free ranking."""
+    maxATS_K / maxFTS_K and the top-1 / top-5 recall of the ground-truth-free ranking.
+
+    With a collision radius (``auto``: 0.1 m on data in metres, off otherwise; see
+    ``resolve_collision_radius``), also Col-I / Col-II and the ground truth's own rate
+    (``col_i_pct``, ``col_ii_pct``, ``col_gt_pct``, ``col_agents``, ``col_radius``;
+    docs/social.md); when off, these keys hold None. With ``bins`` (upper edges of scene-size
+    bins, e.g. ``metrics.SCENE_SIZE_EDGES``), ``out["bins"]`` maps each bin's label to the same
+    metrics over its scenes (maxATS / maxFTS / meanATS with a scorer).
+    """
+    radius = resolve_collision_radius(collision_radius, dataset.info.units)
+    if bins is not None:
+        try:
+            check_bin_edges(bins)
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
     acc = MetricAccumulator()
+    col_acc = CollisionAccumulator(radius) if radius is not None else None
+    bin_acc = BinnedMetrics(bins, radius) if bins is not None else None
     score_acc = ScoreAccumulator() if scorer is not None else None
     for batch, pred in sampled_batches(model, dataset, num_samples, seed, device, max_agents,
                                        progress, f"evaluate {dataset.info.name}"):  # fmt: skip
         acc.update(pred, batch.future, batch.scene, batch.num_scenes)
+        flags = None
+        if col_acc is not None:
+            flags = collision_flags(pred, batch.future, batch.scene, radius)
+            col_acc.add(flags)
+        res = scorer.score(batch, pred) if scorer is not None else None
         if score_acc is not None:
-            score_acc.update(scorer, batch, pred)
-    out = acc.compute()
+            score_acc.update(scorer, batch, pred, result=res)
+        if bin_acc is not None:
+            values = None
+            if res is not None:  # per scene: [B] each
+                values = {"max_ats": res.ats.amax(0), "max_fts": res.fts.amax(0),
+                          "mean_ats": res.ats.mean(0)}  # fmt: skip
+            bin_acc.update(pred, batch.future, batch.scene, batch.num_scenes, values, flags)
+    out: dict = acc.compute()
+    if col_acc is not None:
+        out.update(col_acc.compute())
+    else:
+        out.update(dict.fromkeys(COLLISION_KEYS))
     if score_acc is not None:
         out.update(score_acc.compute())
+    if bin_acc is not None:
+        out["bins"] = bin_acc.compute()
     return out
 
 

@@ -4,10 +4,16 @@ Per-agent metrics (minADE_K, minFDE_K) pick the best of K for each agent separat
 and FDE pick their own best; this is how the paper's tables and LED count. Joint (scene-level)
 metrics pick one sample k per scene for all its agents.
 
+Collision rates (Col-I, Col-II) follow TrajNet++'s test, on each agent's best sample; bins
+split every metric by the number of agents in a scene (docs/social.md).
+
 Shapes: pred [K, N, T_f, 2], future [N, T_f, 2], scene [N] (scene index per agent, 0..B-1).
 """
 
 from __future__ import annotations
+
+import math
+from dataclasses import dataclass
 
 import torch
 
@@ -93,4 +99,269 @@ class MetricAccumulator:
         }
         out["agents"] = self.agents
         out["scenes"] = self.scenes
+        return out
+
+
+# ----------------------------------------------------------------------------- collisions
+
+COLLISION_RADIUS = 0.1
+"""TrajNet++'s person radius, in metres (``trajnetplusplustools.metrics.collision``): two
+agents collide when their centres come within twice this distance (0.2 m, inclusive)."""
+
+COLLISION_PARTS = 2
+"""Points per step interval checked besides the steps themselves, as TrajNet++'s
+``inter_parts``: 2 checks each step and the midpoint between consecutive steps."""
+
+METRE_UNITS = frozenset({"m", "metre", "metres", "meter", "meters"})
+"""The unit names for which the default collision radius (metres) applies."""
+
+_PAIR_CHUNK = 1 << 16
+"""Agent pairs tested at a time (bounds the memory of a scene with very many agents)."""
+
+
+def default_collision_radius(units: str) -> float | None:
+    """``COLLISION_RADIUS`` for data in metres; None (collision metrics off) for anything
+    else, e.g. SDD's pixels or a user folder's ``unknown``: a radius in metres means nothing
+    there, so such data needs an explicit radius in its own units."""
+    return COLLISION_RADIUS if units.lower() in METRE_UNITS else None
+
+
+def check_collision_radius(radius: float) -> None:
+    """ValueError unless ``radius`` is a finite number > 0."""
+    try:
+        value = float(radius)
+    except (TypeError, ValueError):
+        value = math.nan
+    if isinstance(radius, bool) or not (math.isfinite(value) and value > 0):
+        raise ValueError(f"the collision radius must be a finite number > 0, got {radius!r}")
+
+
+def interpolate_steps(path: torch.Tensor, parts: int = COLLISION_PARTS) -> torch.Tensor:
+    """Positions at every step and at ``parts - 1`` evenly spaced points on the straight
+    segment between consecutive steps: [..., T, 2] -> [..., (T - 1) * parts + 1, 2]."""
+    if parts < 1:
+        raise ValueError(f"parts must be >= 1, got {parts}")
+    frac = torch.arange(parts, dtype=path.dtype, device=path.device) / parts  # [parts]
+    start = path[..., :-1, None, :]  # [..., T-1, 1, 2]
+    inner = start + frac[:, None] * (path[..., 1:, None, :] - start)  # [..., T-1, parts, 2]
+    return torch.cat([inner.flatten(-3, -2), path[..., -1:, :]], -2)  # [..., (T-1)*parts+1, 2]
+
+
+def collides(
+    a: torch.Tensor, b: torch.Tensor, radius: float = COLLISION_RADIUS,
+    parts: int = COLLISION_PARTS,
+) -> torch.Tensor:  # fmt: skip
+    """TrajNet++'s collision test of paths a and b [..., T, 2] over the same T steps ->
+    [...] bool: True where the two centres come within ``2 * radius`` (inclusive) at a step or
+    at one of the ``parts - 1`` points linearly interpolated between two steps.
+
+    This is ``trajnetplusplustools.metrics.collision(path1, path2, T, radius, parts)`` for two
+    paths on the same frames, vectorised. One difference: a single-step path (T = 1) is
+    checked at its one position, where TrajNet++'s loop over step intervals checks nothing.
+    """
+    if a.shape != b.shape or a.ndim < 2 or a.shape[-1] != 2:
+        raise ValueError(f"paths must both be [..., T, 2], got {tuple(a.shape)} and "
+                         f"{tuple(b.shape)}")  # fmt: skip
+    check_collision_radius(radius)
+    # the interpolated gap between a and b is the gap between their interpolations
+    gap = interpolate_steps(a - b, parts)  # [..., T', 2]
+    return torch.linalg.vector_norm(gap, dim=-1).amin(-1) <= 2 * radius  # [...]
+
+
+def best_sample(pred: torch.Tensor, future: torch.Tensor) -> torch.Tensor:
+    """Each agent's best sample, by its ADE against its own ground truth: [N] in 0..K-1
+    (the first on a tie)."""
+    return ade_fde(pred, future)[0].argmin(0)  # [N]
+
+
+def neighbour_pairs(scene: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Every ordered pair (i, j), i != j, of agents in the same scene: two [P] index tensors
+    (P = sum over scenes of n (n - 1)). ``scene`` [N] need not be sorted."""
+    order = torch.argsort(scene, stable=True)  # [N] agents grouped by scene
+    ordered = scene[order]  # [N]
+    _, sizes = torch.unique_consecutive(ordered, return_counts=True)  # [B']
+    starts = torch.cumsum(sizes, 0) - sizes  # [B'] first sorted position of each scene
+    group = torch.repeat_interleave(torch.arange(len(sizes), device=scene.device), sizes)  # [N]
+    reps = sizes[group]  # [N] partners per sorted agent, itself included
+    i = torch.repeat_interleave(torch.arange(len(scene), device=scene.device), reps)  # [sum n^2]
+    offset = torch.arange(len(i), device=scene.device) - torch.repeat_interleave(
+        torch.cumsum(reps, 0) - reps, reps
+    )  # [sum n^2] position of the partner within the scene
+    j = starts[group[i]] + offset  # [sum n^2]
+    keep = i != j
+    return order[i[keep]], order[j[keep]]
+
+
+@dataclass
+class CollisionFlags:
+    """Per-agent collision outcomes of one batch (every tensor [N] bool)."""
+
+    col_i: torch.Tensor
+    """Col-I: the agent's best sample collides with a neighbour's sample of the same index."""
+    col_ii: torch.Tensor
+    """Col-II: the agent's best sample collides with a neighbour's ground truth."""
+    col_gt: torch.Tensor
+    """The agent's ground truth collides with a neighbour's ground truth (the data's own rate,
+    a floor for Col-II: tracks annotated closer than 2 radii)."""
+    has_neighbour: torch.Tensor
+    """The agent's scene has at least one other agent (the rates' denominator)."""
+
+
+def collision_flags(
+    pred: torch.Tensor, future: torch.Tensor, scene: torch.Tensor,
+    radius: float = COLLISION_RADIUS, parts: int = COLLISION_PARTS,
+) -> CollisionFlags:  # fmt: skip
+    """Col-I, Col-II and the ground truth's own collisions of every agent.
+
+    Reads nothing but the samples pred [K, N, T_f, 2], the ground truth future [N, T_f, 2] and
+    scene [N] (which agents are neighbours: those of the same scene). Agent i's best sample
+    k_i (``best_sample``, by ADE) is tested against each neighbour j's sample k_i (Col-I) and
+    against j's ground truth (Col-II), with ``collides``. An agent alone in its scene has no
+    neighbour and never collides.
+    """
+    _check(pred, future)
+    if scene.shape != (pred.shape[1],):
+        raise ValueError(f"scene must be [N] = [{pred.shape[1]}], got {tuple(scene.shape)}")
+    n = pred.shape[1]
+    k_best = best_sample(pred, future)  # [N]
+    pi, pj = neighbour_pairs(scene)  # [P], [P]
+    hits = {key: torch.zeros(n, dtype=torch.long, device=pred.device) for key in
+            ("col_i", "col_ii", "col_gt")}  # fmt: skip
+    for lo in range(0, len(pi), _PAIR_CHUNK):
+        i, j = pi[lo : lo + _PAIR_CHUNK], pj[lo : lo + _PAIR_CHUNK]  # [P']
+        own = pred[k_best[i], i]  # [P', T_f, 2] agent i's best sample
+        tests = {
+            "col_i": collides(own, pred[k_best[i], j], radius, parts),  # [P']
+            "col_ii": collides(own, future[j], radius, parts),  # [P']
+            "col_gt": collides(future[i], future[j], radius, parts),  # [P']
+        }
+        for key, hit in tests.items():
+            hits[key].index_add_(0, i, hit.long())
+    sizes = torch.bincount(scene)  # [max scene + 1]
+    return CollisionFlags(**{k: v > 0 for k, v in hits.items()}, has_neighbour=sizes[scene] > 1)
+
+
+class CollisionAccumulator:
+    """Running Col-I / Col-II / ground-truth collision rates over batches.
+
+    Rates are percentages of the agents that have at least one neighbour (agents alone in
+    their scene are left out of numerator and denominator; ``col_agents`` counts the rest).
+    """
+
+    def __init__(self, radius: float = COLLISION_RADIUS, parts: int = COLLISION_PARTS) -> None:
+        check_collision_radius(radius)
+        self.radius = radius
+        self.parts = parts
+        self.counts = {"col_i": 0, "col_ii": 0, "col_gt": 0}
+        self.agents = 0
+
+    def update(self, pred: torch.Tensor, future: torch.Tensor, scene: torch.Tensor) -> None:
+        self.add(collision_flags(pred, future, scene, self.radius, self.parts))
+
+    def add(self, flags: CollisionFlags, mask: torch.Tensor | None = None) -> None:
+        """Count ``flags`` (optionally only the agents where ``mask`` [N] is True)."""
+        keep = flags.has_neighbour if mask is None else flags.has_neighbour & mask  # [N]
+        for key in self.counts:
+            self.counts[key] += int((getattr(flags, key) & keep).sum())
+        self.agents += int(keep.sum())
+
+    def compute(self) -> dict[str, float | int]:
+        """``col_i_pct``, ``col_ii_pct``, ``col_gt_pct`` (NaN when no agent had a neighbour),
+        ``col_agents`` and ``col_radius``."""
+        out: dict[str, float | int] = {
+            f"{key}_pct": 100 * count / self.agents if self.agents else float("nan")
+            for key, count in self.counts.items()
+        }
+        out["col_agents"] = self.agents
+        out["col_radius"] = self.radius
+        return out
+
+
+# ----------------------------------------------------------------------------- scene-size bins
+
+SCENE_SIZE_EDGES = (5, 10, 20)
+"""Upper edges of the scene-size bins (agents per scene): <= 5, 6-10, 11-20, > 20 (§8.5)."""
+
+
+def check_bin_edges(edges: tuple[int, ...]) -> None:
+    """ValueError unless ``edges`` are strictly increasing integers >= 1."""
+    if (
+        not edges
+        or any(not isinstance(e, int) or e < 1 for e in edges)
+        or any(b <= a for a, b in zip(edges, edges[1:], strict=False))
+    ):
+        raise ValueError(f"bin edges must be strictly increasing integers >= 1, got {edges}")
+
+
+def bin_labels(edges: tuple[int, ...] = SCENE_SIZE_EDGES) -> list[str]:
+    """Names of the bins: (5, 10, 20) -> ['<=5', '6-10', '11-20', '>20']."""
+    check_bin_edges(edges)
+    labels = [f"<={edges[0]}"]
+    for lo, hi in zip(edges, edges[1:], strict=False):
+        labels.append(f"{lo + 1}" if hi == lo + 1 else f"{lo + 1}-{hi}")
+    return [*labels, f">{edges[-1]}"]
+
+
+def size_bin(sizes: torch.Tensor, edges: tuple[int, ...] = SCENE_SIZE_EDGES) -> torch.Tensor:
+    """The bin of each scene size: [B] agents per scene -> [B] in 0..len(edges)."""
+    check_bin_edges(edges)
+    bounds = torch.tensor(edges, dtype=sizes.dtype, device=sizes.device)  # [E]
+    return torch.bucketize(sizes, bounds)  # [B]: edges[b-1] < size <= edges[b]
+
+
+class BinnedMetrics:
+    """Metrics per scene-size bin: minADE/minFDE per agent and joint, the collision rates
+    (when a radius is given) and per-scene values passed in (e.g. maxATS), each averaged over
+    the scenes of its bin."""
+
+    def __init__(
+        self, edges: tuple[int, ...] = SCENE_SIZE_EDGES,
+        collision_radius: float | None = COLLISION_RADIUS, parts: int = COLLISION_PARTS,
+    ) -> None:  # fmt: skip
+        self.edges = tuple(edges)
+        self.labels = bin_labels(self.edges)
+        self.metrics = [MetricAccumulator() for _ in self.labels]
+        self.collisions = (
+            None if collision_radius is None
+            else [CollisionAccumulator(collision_radius, parts) for _ in self.labels]
+        )  # fmt: skip
+        self.value_sums: list[dict[str, float]] = [{} for _ in self.labels]
+
+    def update(
+        self, pred: torch.Tensor, future: torch.Tensor, scene: torch.Tensor, num_scenes: int,
+        scene_values: dict[str, torch.Tensor] | None = None, flags: CollisionFlags | None = None,
+    ) -> None:  # fmt: skip
+        """One batch. ``scene_values``: name -> [B] per-scene numbers to average per bin;
+        ``flags``: this batch's ``collision_flags`` when already computed."""
+        _check(pred, future)
+        which = size_bin(torch.bincount(scene, minlength=num_scenes), self.edges)  # [B]
+        if self.collisions is not None and flags is None:
+            radius, parts = self.collisions[0].radius, self.collisions[0].parts
+            flags = collision_flags(pred, future, scene, radius, parts)
+        for b in which.unique().tolist():
+            in_bin = which == b  # [B]
+            agents = in_bin[scene]  # [N]
+            renumber = torch.cumsum(in_bin, 0) - 1  # [B] scene index within the bin
+            self.metrics[b].update(pred[:, agents], future[agents], renumber[scene[agents]],
+                                   int(in_bin.sum()))  # fmt: skip
+            if self.collisions is not None:
+                self.collisions[b].add(flags, agents)
+            for key, values in (scene_values or {}).items():
+                total = self.value_sums[b].get(key, 0.0)
+                self.value_sums[b][key] = total + float(values[in_bin].sum())
+
+    def compute(self) -> dict[str, dict[str, float | int]]:
+        """label -> that bin's metrics, plus ``scenes`` and ``agents``; a bin without scenes
+        holds only ``{"scenes": 0, "agents": 0}``."""
+        out: dict[str, dict[str, float | int]] = {}
+        for b, label in enumerate(self.labels):
+            acc = self.metrics[b]
+            if acc.agents == 0:
+                out[label] = {"scenes": 0, "agents": 0}
+                continue
+            row = acc.compute()
+            if self.collisions is not None:
+                row.update(self.collisions[b].compute())
+            row.update({k: v / acc.scenes for k, v in self.value_sums[b].items()})
+            out[label] = row
         return out

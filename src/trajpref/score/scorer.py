@@ -342,8 +342,10 @@ class ScoreAccumulator:
         self.sums = dict.fromkeys(self.KEYS, 0.0)
         self.scenes = 0
 
-    def update(self, scorer: TrajectoryScorer, batch: Batch, pred: torch.Tensor) -> None:
-        res = scorer.score(batch, pred)
+    def update(self, scorer: TrajectoryScorer, batch: Batch, pred: torch.Tensor,
+               result: ScoreResult | None = None) -> None:  # fmt: skip
+        """One batch; ``result``: ``scorer.score(batch, pred)`` when the caller has it."""
+        res = scorer.score(batch, pred) if result is None else result
         self.sums["max_ats"] += float(res.ats.max(0).values.sum())
         self.sums["max_fts"] += float(res.fts.max(0).values.sum())
         self.sums["mean_ats"] += float(res.ats.mean(0).sum())
