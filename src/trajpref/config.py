@@ -259,7 +259,8 @@ class FinetuneConfig(OptimConfig):
     adv_norm: Literal["none", "scene"] = "scene"
     """``none`` or ``scene``: whiten advantages within each scene."""
     reward_clip: float | None = 5.0
-    """Clip the per-step score r to [-c, c] (None: unclipped, as the paper)."""
+    """Clip the per-step score r (or the ``sda`` reward) to [-c, c] (None: unclipped, as the
+    paper)."""
     score_every: int = 9
     """The reward's score timesteps: every this many of the S steps (the paper: 3; 9 gives 12
     steps, whose ranking recall matches 34 steps in docs/score_study_zara1.md, at a third of
@@ -284,14 +285,28 @@ class FinetuneConfig(OptimConfig):
     """Eq. 15's ratio p_theta / p_0 against the frozen ``reference`` (as printed; a trust
     region around G_0), or against the ``rollout`` policy (standard PPO: p_theta / p_old)."""
 
-    reward: Literal["score", "set"] = "score"
+    reward: Literal["score", "set", "sda"] = "score"
     """``score``: each sample's per-step diffusion score r (Eq. 6); ``set``: each sample's
     marginal gain in a score-weighted DPP over its K samples' endpoints (rl/set_reward.py),
-    which rewards plausible samples that cover what the others do not."""
+    which rewards plausible samples that cover what the others do not; ``sda``: the paper's
+    hand-crafted baseline reward (Sec. 8.1), keeping social groups found in the observed
+    motion at their observed distances (rl/sda.py, docs/sda.md; no diffusion score)."""
     set_bandwidth: float = 0.5
     """``set`` reward: endpoint similarity bandwidth, in units of the median squared distance."""
     set_alpha: float = 1.0
     """``set`` reward: weight of the standardised score in the samples' quality."""
+    sda_radius: float = 1.5
+    """``sda`` reward: two persons of a scene can be one group only if they stay within this
+    distance of each other at every observed step (the data's units: metres, SDD pixels)."""
+    sda_drift: float = 0.5
+    """``sda`` reward: two persons can be one group only if the offset between them moves by
+    at most this much over the observed steps (their velocities agree: 0.5 m over ETH/UCY's
+    2.8 s history is a mean relative speed of 0.18 m/s). Groups are the connected components
+    of the pairs that pass both tests."""
+    sda_tolerance: float = 0.2
+    """``sda`` reward: the per-step reward is 1 - e / tolerance, e the mean error of a
+    sample's distances to its group mates against their observed mean distances (the data's
+    units); 0.2 m is about the ground truth's own error on ETH/UCY (docs/sda.md)."""
     ppo_epochs: int = 1
     """Update epochs on each collected rollout (TRL's ``ppo_epochs``). With 1, the update
     reuses the rollout's own graph and a ``rollout`` ratio is identically 1 (REINFORCE with
@@ -314,6 +329,7 @@ class FinetuneConfig(OptimConfig):
         if self.baseline == "antithetic" and self.likelihood != "sample":
             raise ConfigError("finetune.baseline=antithetic needs finetune.likelihood=sample")
         _positive(self, "explore_std", "ppo_epochs", "set_bandwidth")
+        _positive(self, "sda_radius", "sda_drift", "sda_tolerance")
         if self.reg_on == "explored" and self.ppo_epochs > 1:
             raise ConfigError("finetune.reg_on=explored needs finetune.ppo_epochs=1")
         if not 0 <= self.gamma <= 1 or not 0 <= self.gae_lambda <= 1:

@@ -12,18 +12,18 @@ from __future__ import annotations
 import copy
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 from torch import nn
 
 from trajpref.config import FinetuneConfig, GeneratorTrainConfig
-from trajpref.data.transforms import to_model_frame
+from trajpref.data.transforms import from_model_frame, to_model_frame
 from trajpref.metrics import scene_sum
 from trajpref.models.critic import Critic
 from trajpref.models.losses import generator_loss
 from trajpref.models.predictor import Condition, DiffusionPredictor, Rollout
-from trajpref.rl import ppo
+from trajpref.rl import ppo, sda
 from trajpref.rl.set_reward import marginal_gains
 from trajpref.score.scorer import TrajectoryScorer, score_timesteps
 from trajpref.types import Batch
@@ -49,6 +49,29 @@ def step_reward(scorer: TrajectoryScorer, context: torch.Tensor, futures: torch.
     return r.clamp(-clip, clip) if clip is not None else r
 
 
+HandcraftedReward = Callable[[Batch, torch.Tensor, FinetuneConfig], torch.Tensor]
+"""A per-step reward beside the diffusion score, as a plain callable: (the batch with its
+future hidden, futures [M, N, T_f, 2] in absolute coordinates, the fine-tuning config) -> r
+[M, N, T_f], higher is better."""
+
+
+def sda_step_reward(batch: Batch, futures: torch.Tensor, cfg: FinetuneConfig) -> torch.Tensor:
+    """``finetune.reward=sda``: rl/sda.py's reward at the config's thresholds."""
+    return sda.sda_reward(batch.history, batch.scene, futures, cfg.sda_radius, cfg.sda_drift,
+                          cfg.sda_tolerance, batch.agent_type)  # fmt: skip
+
+
+REWARDS: dict[str, HandcraftedReward] = {"sda": sda_step_reward}
+"""Hand-crafted rewards by ``finetune.reward`` name. ``score`` and ``set`` are not here: they
+need the frozen denoiser and the ground truth's residual (Eq. 6)."""
+
+
+def hide_future(batch: Batch) -> Batch:
+    """The batch with its future replaced by NaN: what a hand-crafted reward is given, so it
+    cannot read the ground truth even by mistake."""
+    return replace(batch, future=torch.full_like(batch.future, math.nan))
+
+
 @dataclass
 class Actions:
     """K actions of one rollout and what the update needs of them. [K, N, T_f] each."""
@@ -63,7 +86,8 @@ class Actions:
     """[K, N, T_f, 2] what Eq. 12's density is evaluated at (detached): the explored initial
     sample (``sample`` likelihood) or the denoised sample (``mean``)."""
     score: torch.Tensor | None = None
-    """r, the clipped per-step diffusion score (Eq. 6)."""
+    """r, the clipped per-step diffusion score (Eq. 6), or the hand-crafted reward in its place
+    (``REWARDS``; then also what RLHF-ReS's k* maximises)."""
     div: torch.Tensor | None = None
     """The KL penalty (Eq. 13)."""
     reward: torch.Tensor | None = None
@@ -191,7 +215,7 @@ class RLObjective(nn.Module):
         acts = [self.actions(policy, policy, reference)]
         if twin is not None:
             acts.append(self.actions(twin, policy, reference))
-        self.rewards(acts, cond.context, target)
+        self.rewards(acts, cond.context, target, batch)
 
         # Step C (first half): values and advantages (Eq. 14); which samples the losses see
         ctx = policy.out.context.detach() if self.rl.detach_critic else policy.out.context
@@ -289,12 +313,20 @@ class RLObjective(nn.Module):
         return Actions(logp, logp_ref, roll.y.detach(), chosen)
 
     @torch.no_grad()
-    def rewards(self, acts: list[Actions], context: torch.Tensor, target: torch.Tensor) -> None:
+    def rewards(self, acts: list[Actions], context: torch.Tensor, target: torch.Tensor,
+                batch: Batch) -> None:  # fmt: skip
         """Fill each ``Actions``' score, KL penalty and reward (one score call for all, so
         they share the noise)."""
         rl = self.rl
         futures = torch.cat([a.action for a in acts])  # [K * len(acts), N, T_f, 2]
-        scores = step_reward(self.scorer, context, futures, target, rl.reward_clip)
+        if rl.reward in REWARDS:  # hand-crafted, in the data's units, blind to the future
+            observed = hide_future(batch)
+            absolute = from_model_frame(futures, observed, self.sampler.scale)  # [M, N, T_f, 2]
+            scores = REWARDS[rl.reward](observed, absolute, rl)  # [M, N, T_f]
+            if rl.reward_clip is not None:
+                scores = scores.clamp(-rl.reward_clip, rl.reward_clip)
+        else:
+            scores = step_reward(self.scorer, context, futures, target, rl.reward_clip)
         for a, r in zip(acts, scores.chunk(len(acts)), strict=True):
             a.score = r
             a.div = ppo.kl_penalty(a.logp.detach(), a.logp_ref, rl.kl_coef, rl.kl_form)
