@@ -1,0 +1,792 @@
+"""The paper's Tables 1 and 2 for every dataset here, ours beside the paper's, in one command.
+
+Table 1 is minADE20 / minFDE20, Table 2 maxATS20 / maxFTS20.
+
+    # from the published checkpoints and the existing result rows, no training (minutes)
+    python benchmarks/reproduce.py --quick --data-root ../shared/data [--datasets zara1 eth robo]
+    # also train what is missing (pretraining, RLHF, RLHF-ReS, the best method), resuming
+    python benchmarks/reproduce.py --data-root ../shared/data
+    # only rebuild the tables from what is stored
+    python benchmarks/reproduce.py --report
+
+Our columns, per dataset (K = 20, test split, seed 0):
+
+- ``cv``, ``full-sampler``, ``pretrained``: constant velocity, and the full 100-step sampler and
+  the leapfrog generator of ``models/<D>/generator.safetensors``, evaluated here, each scored
+  by the dataset's published denoiser for Table 2 (``TrajectoryScorer``, every 3rd step);
+- ``rlhf``, ``rlhf-res``: evaluated when ``models/<D>/<method>.safetensors`` is published,
+  otherwise the mean over seeds of the rows in ``benchmarks/results/`` (the equal-budget rows
+  of ``benchmarks/equal_budget.py``; their weights are not published);
+- ``best``: the best score-using method at K = 20 (``--best``, default ``rlhf-set``: RLHF with
+  the set-aware reward, ``finetune_<D>_set.json``). The score-guided selections of
+  docs/selection.md keep K' <= 5 of 20, so they have no best-of-20 row; of the fine-tuning
+  methods in the equal-budget table, RLHF-set is the one whose runs beat their start on
+  validation on every dataset measured, a choice made without the test split.
+
+A dataset without a published generator gets constant velocity only ("no model" elsewhere;
+full mode pretrains one when ``configs/<D>.yaml`` exists). In full mode the missing rows are
+trained by ``benchmarks/pretrain.py`` and ``benchmarks/finetune.py`` (with the equal-budget
+table's arguments), one subprocess per job, logs in ``runs/logs/``.
+
+Resuming: every evaluation is stored in ``benchmarks/results/meta/reproduce/<D>_<column>.json``
+with a key (checkpoint and denoiser hashes, sampler, K, seed, scenes); a run skips the
+evaluations whose key matches, the training jobs whose rows exist and the pretraining whose
+generator is published, so an interrupted run loses at most the job it was in. A progress bar
+weighted by each job's estimated cost gives the ETA. CPU time (this process plus its finished
+children, ``resource.getrusage``) is logged per invocation in
+``benchmarks/results/meta/reproduce/invocations.json`` and summed.
+
+Writes docs/reproduce.md (generated) and benchmarks/results/meta/reproduce.json; no rows are
+added to benchmarks/results/*.json by this script itself.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from datetime import date
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from tqdm import tqdm
+
+from trajpref.data import load_dataset
+from trajpref.errors import TrajprefError
+from trajpref.evaluation import evaluate
+from trajpref.io import write_json
+from trajpref.models import checkpoint as ckpt
+from trajpref.models.baseline import ConstantVelocity
+from trajpref.results import command_line, machine
+from trajpref.score.scorer import TrajectoryScorer
+from trajpref.types import TrajectoryDataset
+
+ROOT = Path(__file__).resolve().parent.parent
+DATASETS = ("eth", "hotel", "univ", "zara1", "zara2", "sdd", "nba", "robo")
+"""Every dataset here, in the order the tables list them."""
+ETH_UCY = DATASETS[:5]
+COLUMNS = ("cv", "full-sampler", "pretrained", "rlhf", "rlhf-res", "best")
+"""Our columns, in table order."""
+LABELS = {"cv": "CV", "full-sampler": "full sampler", "pretrained": "pretrained",
+          "rlhf": "RLHF", "rlhf-res": "RLHF-ReS"}  # fmt: skip
+PAPER_COLUMNS = ("LED", "RLHF", "RLHF-ReS")
+"""The paper's columns printed beside ours (its whole tables follow below them)."""
+LED_REFERENCE = "LED (its authors)"
+TRAIN_ARGS = {
+    "rlhf": ["--methods", "rlhf"],
+    "rlhf-res": ["--methods", "rlhf-res"],
+    "rlhf-set": ["--methods", "rlhf", "--tag", "set", "--set", "finetune.reward=set"],
+}
+"""finetune.py arguments of each method full mode can train: the same as
+benchmarks/equal_budget.py's, so the rows land where that table reads them (tested)."""
+SAMPLERS = {"full-sampler": "full", "pretrained": "leapfrog"}
+RESULT_KEYS = ("min_ade", "min_fde", "joint_min_ade", "joint_min_fde", "max_ats", "max_fts",
+               "top1_recall_ats", "top5_recall_ats")  # fmt: skip
+"""The metrics a cell keeps (from an evaluation or from result rows)."""
+COST = {"cv": 0.025, "full-sampler": 0.104, "pretrained": 0.026, "unscored": 0.002,
+        "finetune": 600.0, "pretrain": 3600.0}  # fmt: skip
+"""Rough cost of a job for the progress bar's ETA: seconds per test agent of an evaluation
+with the scorer (one busy core, eth, 2026-11-23), or seconds per training job. Only the
+ratios matter: the bar's rate calibrates itself as jobs finish."""
+ROW_TOLERANCE = 5e-4
+"""An evaluation "matches" an existing result row of the same measurement within this."""
+
+
+@dataclass
+class Setup:
+    """Where the script reads and writes: the repository by default (tests point it at a
+    temporary folder; the training subprocesses always write into the repository)."""
+
+    models: Path = ROOT / "models"
+    """The published checkpoints, ``<dataset>/generator.safetensors`` etc."""
+    results: Path = ROOT / "benchmarks" / "results"
+    """The result rows (``*.json``) and ``meta/``."""
+    configs: Path = ROOT / "configs"
+    """``<dataset>.yaml``: a dataset full mode can pretrain."""
+    paper: Path = ROOT / "benchmarks" / "paper_tables.json"
+    """The paper's numbers, typed in from its Tables 1 and 2."""
+    doc: Path = ROOT / "docs" / "reproduce.md"
+    """The generated markdown."""
+    logs: Path = ROOT / "runs" / "logs"
+    """Logs of the training subprocesses."""
+    sources: dict[str, str] = field(default_factory=dict)
+    """Extra datasets: table name -> what ``load_dataset`` reads (a folder)."""
+
+    def __post_init__(self) -> None:
+        bad = set(self.sources) & set(DATASETS)
+        if bad:
+            raise ValueError(f"sources may not redefine built-in datasets: {sorted(bad)}")
+
+    @property
+    def state(self) -> Path:
+        return self.results / "meta" / "reproduce"
+
+    @property
+    def summary(self) -> Path:
+        return self.results / "meta" / "reproduce.json"
+
+
+@dataclass
+class Job:
+    """One unit of work: an evaluation, a pretraining or a fine-tuning run."""
+
+    kind: Literal["evaluate", "pretrain", "finetune"]
+    """What the job does."""
+    dataset: str
+    """The table's dataset name."""
+    column: str
+    """Our table column it fills (``evaluate``); the trained method (``finetune``)."""
+    model: Path | None = None
+    """``evaluate``: the checkpoint (None: constant velocity)."""
+    sampler: str | None = None
+    """``evaluate``: ``full`` or ``leapfrog`` (None for constant velocity)."""
+    seed: int = 0
+    """``finetune``: the training seed."""
+
+    @property
+    def label(self) -> str:
+        what = self.column + (f" seed {self.seed}" if self.kind == "finetune" else "")
+        return f"{self.kind} {self.dataset} {what}"
+
+
+# ----------------------------------------------------------------------------- small helpers
+
+
+_HASHES: dict[tuple[Path, int], str] = {}
+
+
+def sha256(path: Path) -> str:
+    """The file's content hash (memoised per path and modification time)."""
+    key = (path.resolve(), path.stat().st_mtime_ns)
+    if key not in _HASHES:
+        _HASHES[key] = hashlib.sha256(path.read_bytes()).hexdigest()
+    return _HASHES[key]
+
+
+def cpu_seconds() -> tuple[float, float]:
+    """(this process, its finished children): user + system CPU seconds so far."""
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime, kids.ru_utime + kids.ru_stime
+
+
+def rel(path: Path | None) -> str | None:
+    """A path relative to the repository when it lies inside it."""
+    if path is None:
+        return None
+    absolute = Path(os.path.abspath(path))  # not resolved: models/ is a link into src/
+    try:
+        return str(absolute.relative_to(ROOT))
+    except ValueError:
+        return str(path)
+
+
+def read_json(path: Path, default: Any = None) -> Any:
+    return json.loads(path.read_text()) if path.is_file() else default
+
+
+def result_rows(setup: Setup) -> list[dict[str, Any]]:
+    """Every row of ``results/*.json``, each with the file it came from (``_file``)."""
+    rows = []
+    for path in sorted(setup.results.glob("*.json")):
+        rows.extend({**r, "_file": path.name} for r in json.loads(path.read_text()))
+    return rows
+
+
+def matching_rows(rows, dataset: str, method: str, samples: int, seed: int | None = None):
+    """The test rows of one measurement (every seed when ``seed`` is None)."""
+    return [r for r in rows if r["dataset"] == dataset and r["method"] == method
+            and r["split"] == "test" and r["samples"] == samples
+            and (seed is None or r["seed"] == seed)]  # fmt: skip
+
+
+def generator_path(setup: Setup, dataset: str, name: str = "generator") -> Path:
+    return setup.models / dataset / f"{name}{ckpt.SUFFIX}"
+
+
+def denoiser_path(setup: Setup, dataset: str) -> Path:
+    return setup.models / dataset / ckpt.DENOISER_NAME
+
+
+def column_method(column: str, best: str) -> str:
+    """The method name of the result rows behind a column."""
+    return best if column == "best" else column
+
+
+# ----------------------------------------------------------------------------- planning
+
+
+def evaluation_job(
+    opts: argparse.Namespace, setup: Setup, dataset: str, column: str, will_pretrain: bool = False
+) -> Job | None:
+    """The evaluation that fills a column, or None where the column is not evaluated here
+    (no model, or a method whose weights are not published: its cell comes from rows)."""
+    gen = generator_path(setup, dataset)
+    if column == "cv":
+        return Job("evaluate", dataset, "cv")
+    if column in SAMPLERS:
+        return Job("evaluate", dataset, column, gen, SAMPLERS[column]) if (
+            gen.is_file() or will_pretrain) else None  # fmt: skip
+    published = generator_path(setup, dataset, column_method(column, opts.best))
+    return Job("evaluate", dataset, column, published, "leapfrog") if published.is_file() else None
+
+
+def plan(opts: argparse.Namespace, setup: Setup) -> list[Job]:
+    """Every job of the tables, done or not, in the order they run."""
+    jobs: list[Job] = []
+    for dataset in opts.datasets:
+        has_model = generator_path(setup, dataset).is_file()
+        trainable = (setup.configs / f"{dataset}.yaml").is_file()
+        pretrain = not has_model and not opts.quick and trainable
+        if pretrain:
+            jobs.append(Job("pretrain", dataset, "pretrained"))
+        for column in COLUMNS:
+            job = evaluation_job(opts, setup, dataset, column, pretrain)
+            method = column_method(column, opts.best)
+            if job is not None:
+                jobs.append(job)
+            elif (has_model or pretrain) and not opts.quick and method in TRAIN_ARGS:
+                jobs += [Job("finetune", dataset, method, seed=s) for s in opts.seeds]
+    unique = {job.label: job for job in reversed(jobs)}  # e.g. --best rlhf-res: one job
+    return [job for job in jobs if unique[job.label] is job]
+
+
+def eval_key(job: Job, opts: argparse.Namespace, setup: Setup) -> dict[str, Any] | None:
+    """What an evaluation's result depends on; None while its checkpoint does not exist."""
+    if job.model is not None and not job.model.is_file():
+        return None
+    den = denoiser_path(setup, job.dataset)
+    return {
+        "dataset": job.dataset, "column": job.column,
+        "checkpoint": rel(job.model), "checkpoint_sha256": sha256(job.model) if job.model else None,
+        "scorer": rel(den) if den.is_file() else None,
+        "scorer_sha256": sha256(den) if den.is_file() else None,
+        "sampler": job.sampler, "samples": opts.samples, "seed": opts.seed,
+        "max_scenes": opts.max_scenes,
+    }  # fmt: skip
+
+
+def state_file(setup: Setup, dataset: str, column: str) -> Path:
+    return setup.state / f"{dataset}_{column}.json"
+
+
+def is_done(job: Job, opts: argparse.Namespace, setup: Setup, rows) -> bool:
+    if job.kind == "pretrain":
+        return generator_path(setup, job.dataset).is_file()
+    if job.kind == "finetune":
+        return bool(matching_rows(rows, job.dataset, job.column, opts.samples, job.seed))
+    key = eval_key(job, opts, setup)
+    stored = read_json(state_file(setup, job.dataset, job.column))
+    return key is not None and stored is not None and stored.get("key") == key
+
+
+class Splits:
+    """Test splits (and scorers), loaded once per dataset."""
+
+    def __init__(self, opts: argparse.Namespace, setup: Setup):
+        self.opts, self.setup = opts, setup
+        self._data: dict[str, TrajectoryDataset] = {}
+        self._scorers: dict[str, TrajectoryScorer | None] = {}
+
+    def test(self, dataset: str) -> TrajectoryDataset:
+        if dataset not in self._data:
+            source = self.setup.sources.get(dataset, dataset)
+            data = load_dataset(source, "test", self.opts.data_root)
+            n = self.opts.max_scenes
+            if n is not None and n < len(data):
+                idx = np.unique(np.linspace(0, len(data) - 1, n).round().astype(int))
+                data = TrajectoryDataset([data.scenes[i] for i in idx], data.info)
+            self._data[dataset] = data
+        return self._data[dataset]
+
+    def scorer(self, dataset: str) -> TrajectoryScorer | None:
+        """The dataset's published denoiser as the scorer (None when there is none)."""
+        if dataset not in self._scorers:
+            den = denoiser_path(self.setup, dataset)
+            self._scorers[dataset] = (
+                TrajectoryScorer.from_checkpoint(den, self.opts.device) if den.is_file() else None
+            )
+        return self._scorers[dataset]
+
+
+def cost(job: Job, splits: Splits) -> float:
+    """The job's estimated cost (COST's units), for the progress bar."""
+    if job.kind == "pretrain":
+        return COST["pretrain"]
+    agents = splits.test(job.dataset).num_agents
+    if job.kind == "finetune":
+        return COST["finetune"] + COST["pretrained"] * agents
+    scored = denoiser_path(splits.setup, job.dataset).is_file()
+    per_agent = COST.get(job.column, COST["pretrained"]) if scored else COST["unscored"]
+    return per_agent * agents
+
+
+# ----------------------------------------------------------------------------- running
+
+
+def run_evaluation(job: Job, opts: argparse.Namespace, setup: Setup, splits: Splits) -> None:
+    """Evaluate one column on the test split and store it with its key."""
+    key = eval_key(job, opts, setup)
+    if key is None:
+        raise FileNotFoundError(f"{job.model} does not exist")
+    test = splits.test(job.dataset)
+    model = (ConstantVelocity() if job.model is None
+             else ckpt.load_predictor(job.model, job.sampler, opts.device))  # fmt: skip
+    wall, cpu = time.perf_counter(), cpu_seconds()[0]
+    res = evaluate(model, test, opts.samples, opts.seed, opts.device, progress=False,
+                   scorer=splits.scorer(job.dataset))  # fmt: skip
+    record = {
+        "key": key,
+        "result": {k: v for k, v in res.items() if k != "bins"},
+        "scenes": len(test), "agents": test.num_agents, "units": test.info.units,
+        "wall_seconds": round(time.perf_counter() - wall, 2),
+        "cpu_seconds": round(cpu_seconds()[0] - cpu, 2),
+        "date": date.today().isoformat(), "machine": machine(), "command": command_line(),
+    }  # fmt: skip
+    write_json(state_file(setup, job.dataset, job.column), record)
+
+
+def budget_args(minutes: float, warmup: int) -> list[str]:
+    """The equal-budget table's training budget (benchmarks/equal_budget.py)."""
+    return [
+        "--set", f"finetune.max_minutes={minutes}", "--set", "finetune.budget_clock=cpu",
+        "--set", "finetune.epochs=100000", "--set", "finetune.eval_every=3",
+        "--set", f"finetune.warmup_steps={warmup}",
+    ]  # fmt: skip
+
+
+def training_command(job: Job, opts: argparse.Namespace, setup: Setup) -> list[str]:
+    """The benchmark script that trains a job's missing model or rows."""
+    data = ["--data-root", opts.data_root] if opts.data_root else []
+    scripts = ROOT / "benchmarks"
+    if job.kind == "pretrain":
+        return [sys.executable, str(scripts / "pretrain.py"), "--dataset", job.dataset,
+                "--train", "--no-full-eval", "--device", opts.device, *data]  # fmt: skip
+    start = setup.results / "meta" / f"finetune_start_{job.dataset}.json"
+    return [sys.executable, str(scripts / "finetune.py"), "--dataset", job.dataset,
+            *TRAIN_ARGS[job.column], "--seeds", str(job.seed), "--skip-done",
+            *(["--no-start-validation"] if start.is_file() else []),
+            *budget_args(opts.minutes, opts.warmup), "--device", opts.device, *data]  # fmt: skip
+
+
+def run_command(cmd: list[str], log: Path) -> int:
+    """Run a training subprocess (one thread), its output appended to ``log``."""
+    log.parent.mkdir(parents=True, exist_ok=True)
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    with open(log, "a") as handle:
+        return subprocess.call(cmd, env=env, stdout=handle, stderr=subprocess.STDOUT)
+
+
+def run_jobs(jobs: list[Job], opts, setup: Setup, splits: Splits) -> tuple[list, list]:
+    """Run the jobs (in order) under one progress bar; returns (finished, failed) jobs."""
+    done, failed = [], []
+    total = sum(cost(j, splits) for j in jobs)
+    bar = tqdm(total=total, desc="reproduce", unit="est-s", dynamic_ncols=True,
+               bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} est-s [{elapsed}<{remaining}] "
+               "{postfix}")  # fmt: skip
+    with bar:
+        for i, job in enumerate(jobs):
+            bar.set_postfix_str(f"job {i + 1}/{len(jobs)}: {job.label}")
+            wall = time.perf_counter()
+            try:
+                if job.kind == "evaluate":
+                    run_evaluation(job, opts, setup, splits)
+                    code = 0
+                else:
+                    name = f"reproduce-{job.kind}-{job.dataset}-{job.column}-s{job.seed}.log"
+                    code = run_command(training_command(job, opts, setup), setup.logs / name)
+            except (FileNotFoundError, TrajprefError) as exc:
+                code, reason = 1, str(exc)
+            else:
+                reason = f"exit {code}"
+            status = "ok" if code == 0 else f"FAILED ({reason})"
+            tqdm.write(f"{job.label}: {status} in {(time.perf_counter() - wall) / 60:.1f} min")
+            (done if code == 0 else failed).append(job)
+            bar.update(cost(job, splits))
+    return done, failed
+
+
+# ----------------------------------------------------------------------------- cells
+
+
+def cell_from_state(job: Job, opts: argparse.Namespace, setup: Setup, rows) -> dict | None:
+    """The stored evaluation of a column, when its key matches the checkpoint there now."""
+    record = read_json(state_file(setup, job.dataset, job.column))
+    key = eval_key(job, opts, setup)
+    if record is None or key is None or record.get("key") != key:
+        return None
+    res = record["result"]
+    cell = {k: res.get(k) for k in RESULT_KEYS}
+    what = "constant velocity" if key["checkpoint"] is None else (
+        f"`{key['checkpoint']}` ({key['sampler']} sampler)")  # fmt: skip
+    scenes = f"{record['scenes']} scenes" + (
+        f" (--max-scenes {key['max_scenes']})" if key["max_scenes"] else "")  # fmt: skip
+    detail = f"evaluated {record['date']}: {what}, {scenes}, {record['wall_seconds']:.0f} s"
+    method = column_method(job.column, opts.best)
+    same = matching_rows(rows, job.dataset, method, key["samples"], key["seed"])
+    if same and key["max_scenes"] is None:
+        agree = all(abs(r[k] - cell[k]) <= ROW_TOLERANCE for r in same
+                    for k in ("min_ade", "min_fde", "max_ats", "max_fts")
+                    if r.get(k) is not None and cell.get(k) is not None)  # fmt: skip
+        files = ", ".join(f"`benchmarks/results/{f}`" for f in sorted({r["_file"] for r in same}))
+        detail += f"; {'matches' if agree else 'DIFFERS from'} the `{method}` rows in {files}"
+    return {**cell, "source": "evaluated", "detail": detail, "units": record.get("units"),
+            "date": record["date"], "seeds": [key["seed"]]}  # fmt: skip
+
+
+def cell_from_rows(rows, dataset: str, method: str, samples: int) -> dict | None:
+    """The mean over seeds of a method's test rows."""
+    own = sorted(matching_rows(rows, dataset, method, samples), key=lambda r: r["seed"])
+    if not own:
+        return None
+    cell = {}
+    for k in RESULT_KEYS:
+        xs = [r[k] for r in own if r.get(k) is not None]
+        cell[k] = sum(xs) / len(xs) if xs else None
+    seeds = [r["seed"] for r in own]
+    dates = sorted({r["date"] for r in own})
+    files = sorted({r["_file"] for r in own})
+    detail = (f"from results rows, trained {', '.join(dates)}: method `{method}` in "
+              + ", ".join(f"`benchmarks/results/{f}`" for f in files)
+              + f", mean over {len(seeds)} seed{'s' if len(seeds) > 1 else ''} "
+              f"({', '.join(map(str, seeds))})")  # fmt: skip
+    return {**cell, "source": "rows", "detail": detail, "date": dates[-1], "seeds": seeds}
+
+
+def missing_cell(note: str, detail: str) -> dict:
+    return {**dict.fromkeys(RESULT_KEYS), "source": "missing", "note": note, "detail": detail}
+
+
+def build_cells(opts: argparse.Namespace, setup: Setup, failed: list[Job]) -> dict:
+    """Every cell of our side: {dataset: {column: cell}}."""
+    rows = result_rows(setup)
+    cells: dict[str, dict[str, dict]] = {}
+    for dataset in opts.datasets:
+        out = cells[dataset] = {}
+        gen = generator_path(setup, dataset)
+        trainable = (setup.configs / f"{dataset}.yaml").is_file()
+        for column in COLUMNS:
+            method = column_method(column, opts.best)
+            job = evaluation_job(opts, setup, dataset, column)
+            if job is not None:
+                cell = cell_from_state(job, opts, setup, rows)
+            elif gen.is_file():
+                cell = cell_from_rows(rows, dataset, method, opts.samples)
+            else:
+                cell = None
+            if cell is None:
+                if column != "cv" and not gen.is_file():
+                    why = f"no published `{rel(gen)}`" + (
+                        "" if trainable else f" and no `configs/{dataset}.yaml` to train one"
+                    )
+                    cell = missing_cell("no model", why)
+                elif any(f.dataset == dataset and f.column in (column, method) for f in failed):
+                    cell = missing_cell("failed", "its job failed (logs in runs/logs/)")
+                elif job is None:
+                    how = "full mode trains them" if method in TRAIN_ARGS else "not trainable here"
+                    cell = missing_cell("not trained", f"no published weights and no `{method}` "
+                                        f"rows; {how}")  # fmt: skip
+                else:
+                    cell = missing_cell("not measured", "not evaluated yet (or its checkpoint "
+                                        "changed since); run without --report")  # fmt: skip
+            if cell["source"] != "missing" and cell.get("max_ats") is None:
+                cell["note2"] = ("no scorer" if not denoiser_path(setup, dataset).is_file()
+                                 else "–")  # fmt: skip
+            out[column] = cell
+    return cells
+
+
+# ----------------------------------------------------------------------------- tables
+
+
+def _pair(a: float | None, b: float | None, digits: int) -> str:
+    return "–" if a is None or b is None else f"{a:.{digits}f} / {b:.{digits}f}"
+
+
+def our_cell(cell: dict, metrics: tuple[str, str]) -> str:
+    if cell["source"] == "missing":
+        return cell["note"]
+    a, b = cell.get(metrics[0]), cell.get(metrics[1])
+    if a is None or b is None:
+        return cell.get("note2", "–")
+    return _pair(a, b, 3) + (" †" if cell["source"] == "rows" else "")
+
+
+def pair_of(cell: dict, metrics: tuple[str, str]) -> tuple[float, float] | None:
+    a, b = cell.get(metrics[0]), cell.get(metrics[1])
+    return None if a is None or b is None else (a, b)
+
+
+def eth_ucy_mean(values: list[tuple[float, float] | None]) -> tuple[float, float] | None:
+    if len(values) != len(ETH_UCY) or any(v is None for v in values):
+        return None
+    return (sum(v[0] for v in values) / len(values), sum(v[1] for v in values) / len(values))
+
+
+def comparison_table(cells: dict, paper: dict, table: str, best: str) -> str:
+    """Ours beside the paper's: one line per dataset and the mean over the ETH/UCY folds."""
+    spec = paper["tables"][table]
+    metrics = tuple(spec["metrics"])
+    reference = paper["references"][LED_REFERENCE] if table == "table1" else None
+    ours = [LABELS.get(c, f"best with the score ({best})") for c in COLUMNS]
+    theirs = [f"paper: {c}" for c in PAPER_COLUMNS] + (["LED (its authors)"] if reference else [])
+    lines = ["| dataset | " + " | ".join(ours + theirs) + " |",
+             "|---|" + "---|" * (len(ours) + len(theirs))]  # fmt: skip
+    for dataset, row in cells.items():
+        name = dataset + (" (px)" if row["cv"].get("units") == "px" else "")
+        mine = [our_cell(row[c], metrics) for c in COLUMNS]
+        printed = spec["rows"].get(dataset)
+        if printed is None:
+            paper_cells = ["not in the paper's table"] * len(PAPER_COLUMNS)
+        else:
+            paper_cells = [_pair(*printed[c], 2) for c in PAPER_COLUMNS]
+        if reference:
+            ref = reference["rows"].get(dataset)
+            paper_cells.append(_pair(*ref, 2) if ref else "–")
+        lines.append(f"| {name} | " + " | ".join(mine + paper_cells) + " |")
+    if all(d in cells for d in ETH_UCY):
+        mine = []
+        for c in COLUMNS:
+            vals = [pair_of(cells[d][c], metrics) for d in ETH_UCY]
+            mean = eth_ucy_mean(vals)
+            have = sum(v is not None for v in vals)
+            mine.append(_pair(*mean, 3) if mean else f"– ({have} of 5)")
+        paper_cells = [_pair(*eth_ucy_mean([spec["rows"][d][c] for d in ETH_UCY]), 2)
+                       for c in PAPER_COLUMNS]  # fmt: skip
+        if reference:
+            paper_cells.append(_pair(*eth_ucy_mean([reference["rows"][d] for d in ETH_UCY]), 2))
+        lines.append("| mean of the 5 ETH/UCY folds | " + " | ".join(mine + paper_cells) + " |")
+    return "\n".join(lines)
+
+
+def paper_table(paper: dict, table: str) -> str:
+    """The paper's table as printed (all its columns and its AVG row)."""
+    spec = paper["tables"][table]
+    cols = paper["columns"]
+    lines = ["| dataset | " + " | ".join(paper["column_names"][c] for c in cols) + " |",
+             "|---|" + "---|" * len(cols)]  # fmt: skip
+    for dataset, row in spec["rows"].items():
+        lines.append(f"| {dataset} | " + " | ".join(_pair(*row[c], 2) for c in cols) + " |")
+    return "\n".join(lines)
+
+
+def sources_list(cells: dict, best: str) -> str:
+    lines = []
+    for dataset, row in cells.items():
+        for column in COLUMNS:
+            cell = row[column]
+            label = LABELS.get(column, f"best ({best})")
+            lines.append(f"- {dataset}, {label}: {cell['detail']}")
+    return "\n".join(lines)
+
+
+def render(cells: dict, paper: dict, opts, cpu: dict) -> str:
+    """docs/reproduce.md."""
+    last = cpu["last_run"]
+    if last is None:
+        runs = "Nothing has been measured by this script yet."
+    else:
+        runs = (
+            f"The last run that measured: `{last['command']}` on {last['date']}, "
+            f"{last['machine']}: {last['wall_seconds'] / 60:.1f} min, {_hours(last):.3f} "
+            f"CPU-hours{' (interrupted)' if last['interrupted'] else ''}. All runs that built "
+            f"the stored state ({cpu['invocations']}): "
+            f"{cpu['all_invocations_hours']:.3f} CPU-hours (this script and its training "
+            "subprocesses; rows taken from `benchmarks/results/` cost what their own "
+            "`train_seconds` say)."
+        )
+    scenes = (f" Evaluated cells use {opts.max_scenes} evenly spread test scenes per dataset "
+              "(`--max-scenes`), not the whole split." if opts.max_scenes else "")  # fmt: skip
+    parts = [
+        "<!-- Generated by benchmarks/reproduce.py; do not edit by hand: rerun it. -->",
+        "",
+        "# The paper's Tables 1 and 2, rebuilt",
+        "",
+        f"Tables written by `{command_line()}` on {date.today().isoformat()}. {runs}{scenes}",
+        "",
+        f"Test splits, K = {opts.samples}, seed {opts.seed}. Our columns: constant velocity, the "
+        "full 100-step sampler and the leapfrog generator (`pretrained`) of "
+        "`models/<D>/generator.safetensors`, RLHF, RLHF-ReS, and the best score-using method "
+        f"at K = 20 (`{opts.best}`; see the script's docstring for the choice). † marks a cell "
+        "taken from `benchmarks/results/` rows (weights not published); the others were "
+        'evaluated from the published checkpoints. "no model": no published generator for '
+        'the dataset; "not trained": no rows yet (full mode trains them). The paper\'s numbers '
+        'are typed in from its tables (`benchmarks/paper_tables.json`); "LED (its authors)" '
+        "is LED's own published result, for comparison with the paper's run of LED. When all "
+        "five ETH/UCY folds are listed, a last line gives their mean (the paper's: our mean of "
+        "its five printed rows).",
+        "",
+        "## Table 1: minADE20 / minFDE20 (lower is better; metres, SDD in pixels)",
+        "",
+        comparison_table(cells, paper, "table1", opts.best),
+        "",
+        "## Table 2: maxATS20 / maxFTS20 (higher is better)",
+        "",
+        "Each side is scored by its own denoiser (ours: `models/<D>/denoiser.safetensors`, every "
+        "3rd of 100 steps, `docs/score.md`), so absolute values are not comparable between the "
+        'paper and us; orderings within a row are. "no scorer": the dataset has no published '
+        "denoiser.",
+        "",
+        comparison_table(cells, paper, "table2", opts.best),
+        "",
+        "## Notes",
+        "",
+        *[f"- {n}" for n in paper["notes"]],
+        f"- SDD: {paper['text_only']['sdd']}",
+        "",
+        "## Where each cell comes from",
+        "",
+        sources_list(cells, opts.best),
+        "",
+        "## The paper's tables as printed",
+        "",
+        f"Source: {paper['source']}.",
+        "",
+        paper_table(paper, "table1"),
+        "",
+        paper_table(paper, "table2"),
+        "",
+    ]
+    return "\n".join(parts)
+
+
+# ----------------------------------------------------------------------------- main
+
+
+def parse_args(argv: list[str] | None, setup: Setup) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="no training: published checkpoints and existing rows only",
+    )
+    parser.add_argument(
+        "--report", action="store_true", help="run nothing: rebuild the tables from what is stored"
+    )
+    names = (*DATASETS, *setup.sources)
+    parser.add_argument("--datasets", nargs="+", default=list(DATASETS), choices=names)
+    parser.add_argument(
+        "--best",
+        default="rlhf-set",
+        help="the result-row method of the 'best with the score' column",
+    )
+    parser.add_argument(
+        "--seeds", nargs="+", type=int, default=[0], help="full mode: the seeds to train"
+    )
+    parser.add_argument(
+        "--minutes",
+        type=float,
+        default=4.0,
+        help="full mode: CPU minutes of fine-tuning per run (equal_budget.py's)",
+    )
+    parser.add_argument(
+        "--warmup",
+        type=int,
+        default=4,
+        help="full mode: learning-rate warm-up steps (equal_budget.py's)",
+    )
+    parser.add_argument("--samples", type=int, default=20)
+    parser.add_argument("--seed", type=int, default=0, help="evaluation seed")
+    parser.add_argument(
+        "--max-scenes",
+        type=int,
+        default=None,
+        help="evaluate on this many evenly spread test scenes (a smoke run; "
+        "the table's numbers use the whole split)",
+    )
+    parser.add_argument("--data-root", default=None)
+    parser.add_argument("--device", default="cpu")
+    args = parser.parse_args(argv)
+    if args.max_scenes is not None and args.max_scenes < 1:
+        parser.error("--max-scenes must be >= 1")
+    if args.samples < 1:
+        parser.error("--samples must be >= 1")
+    args.datasets = [d for d in names if d in args.datasets]  # table order, no repeats
+    return args
+
+
+def _hours(entry: dict) -> float:
+    return (entry["cpu_seconds_own"] + entry["cpu_seconds_children"]) / 3600
+
+
+def log_invocation(setup: Setup, entry: dict | None) -> dict:
+    """Append a run's entry to the log (None: a ``--report``, not logged); returns the CPU
+    totals and the last run that ran jobs (or tried to)."""
+    path = setup.state / "invocations.json"
+    log = read_json(path, [])
+    if entry is not None:
+        log.append(entry)
+        write_json(path, log)
+    return {
+        "this_invocation_hours": _hours(entry) if entry else 0.0,
+        "all_invocations_hours": sum(_hours(e) for e in log),
+        "invocations": len(log),
+        "last_run": log[-1] if log else None,
+    }
+
+
+def main(argv: list[str] | None = None, setup: Setup | None = None) -> dict:
+    setup = setup or Setup()
+    opts = parse_args(argv, setup)
+    paper = json.loads(setup.paper.read_text())
+    setup.state.mkdir(parents=True, exist_ok=True)
+    wall0, (own0, kids0) = time.perf_counter(), cpu_seconds()
+    done: list[Job] = []
+    failed: list[Job] = []
+    skipped = 0
+    interrupted = True
+    try:
+        if not opts.report:
+            splits = Splits(opts, setup)
+            rows = result_rows(setup)
+            jobs = plan(opts, setup)
+            todo = [j for j in jobs if not is_done(j, opts, setup, rows)]
+            skipped = len(jobs) - len(todo)
+            print(f"{skipped} of {len(jobs)} jobs already done; {len(todo)} to run")
+            done, failed = run_jobs(todo, opts, setup, splits)
+        interrupted = False
+    finally:
+        own, kids = cpu_seconds()
+        entry = {"date": date.today().isoformat(), "command": command_line(),
+                 "machine": machine(), "mode": "quick" if opts.quick else "full",
+                 "datasets": opts.datasets, "wall_seconds": round(time.perf_counter() - wall0, 1),
+                 "cpu_seconds_own": round(own - own0, 1),
+                 "cpu_seconds_children": round(kids - kids0, 1),
+                 "jobs_run": len(done), "jobs_failed": len(failed), "jobs_skipped": skipped,
+                 "interrupted": interrupted}  # fmt: skip
+        cpu = log_invocation(setup, None if opts.report else entry)
+    cells = build_cells(opts, setup, failed)
+    wall = time.perf_counter() - wall0
+    doc = render(cells, paper, opts, cpu)
+    summary = {
+        "generated_by": command_line(), "date": date.today().isoformat(), "machine": machine(),
+        "mode": "report" if opts.report else entry["mode"], "datasets": opts.datasets,
+        "samples": opts.samples, "seed": opts.seed, "best_method": opts.best,
+        "max_scenes": opts.max_scenes, "wall_seconds": round(wall, 1), "cpu_hours": cpu,
+        "jobs": {"run": [j.label for j in done], "failed": [j.label for j in failed],
+                 "skipped": skipped},
+        "paper": rel(setup.paper), "cells": cells,
+    }  # fmt: skip
+    write_json(setup.summary, summary)
+    setup.doc.parent.mkdir(parents=True, exist_ok=True)
+    setup.doc.write_text(doc)
+    print(comparison_table(cells, paper, "table1", opts.best))
+    print()
+    print(comparison_table(cells, paper, "table2", opts.best))
+    print(f"\n{wall / 60:.1f} min, {cpu['this_invocation_hours']:.3f} CPU-hours "
+          f"({cpu['all_invocations_hours']:.3f} over {cpu['invocations']} invocations); "
+          f"wrote {rel(setup.doc)} and {rel(setup.summary)}")  # fmt: skip
+    if failed:
+        print(f"{len(failed)} jobs failed: {[j.label for j in failed]}", file=sys.stderr)
+    return summary
+
+
+if __name__ == "__main__":
+    sys.exit(1 if main()["jobs"]["failed"] else 0)

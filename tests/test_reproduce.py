@@ -1,0 +1,299 @@
+"""benchmarks/reproduce.py: the paper's numbers file, quick mode's tables, resuming, and full
+mode's training jobs (run by a fake runner), on the tiny synthetic run."""
+
+import importlib.util
+import json
+import shutil
+import subprocess
+import sys
+from argparse import Namespace
+from pathlib import Path
+
+import pytest
+
+from trajpref.data import load_dataset
+from trajpref.evaluation import evaluate
+from trajpref.models import checkpoint
+from trajpref.results import make_row, write_rows
+from trajpref.score.scorer import TrajectoryScorer
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _load(name: str):
+    spec = importlib.util.spec_from_file_location(
+        f"bench_{name}", ROOT / "benchmarks" / f"{name}.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
+
+
+reproduce = _load("reproduce")
+SAMPLES = ["--samples", "4"]
+
+
+@pytest.fixture
+def setup(tiny_run, walks, tmp_path):
+    """A repository of two datasets: ``walks`` with a published generator and denoiser, and
+    ``bare`` (the same scenes) with no model; empty results and no configs."""
+    models = tmp_path / "models"
+    checkpoint.publish(
+        tiny_run / "generator.safetensors", models / "walks" / "generator.safetensors"
+    )
+    results = tmp_path / "results"
+    results.mkdir()
+    (tmp_path / "configs").mkdir()
+    return reproduce.Setup(
+        models=models, results=results, configs=tmp_path / "configs",
+        doc=tmp_path / "docs" / "reproduce.md", logs=tmp_path / "logs",
+        sources={"walks": str(walks), "bare": str(walks)},
+    )  # fmt: skip
+
+
+def _row(method: str, seed: int, min_ade: float, min_fde: float, **extra) -> dict:
+    return make_row(dataset="walks", split="test", method=method, seed=seed, samples=4,
+                    min_ade=min_ade, min_fde=min_fde, date="2026-11-23", **extra)  # fmt: skip
+
+
+def _counting(monkeypatch, fail_at: int | None = None) -> list:
+    """Count reproduce's evaluate calls; raise KeyboardInterrupt at call ``fail_at``."""
+    calls = []
+
+    def wrapped(*args, **kwargs):
+        calls.append(args[1].info.name)
+        if fail_at is not None and len(calls) == fail_at:
+            raise KeyboardInterrupt
+        return evaluate(*args, **kwargs)
+
+    monkeypatch.setattr(reproduce, "evaluate", wrapped)
+    return calls
+
+
+# ----------------------------------------------------------------------------- the paper
+
+
+def test_the_paper_numbers_parse_cover_the_datasets_and_match_their_avg_row():
+    paper = json.loads((ROOT / "benchmarks" / "paper_tables.json").read_text())
+    assert "Table 1" in paper["source"] and "Table 2" in paper["source"]
+    assert paper["datasets"] == ["eth", "hotel", "univ", "zara1", "zara2", "nba", "robo"]
+    assert set(paper["datasets"]) | {"sdd"} == set(reproduce.DATASETS)  # SDD: text only
+    assert "sdd" in paper["text_only"]
+    for table in ("table1", "table2"):
+        rows = paper["tables"][table]["rows"]
+        assert list(rows) == [*paper["datasets"], "avg"]
+        for row in rows.values():
+            assert set(row) == set(paper["columns"])
+            assert all(len(v) == 2 and all(isinstance(x, float) for x in v) for v in row.values())
+        # a typing check: the printed AVG is the mean of the seven printed rows, to rounding
+        for col in paper["columns"]:
+            for i in (0, 1):
+                mean = sum(rows[d][col][i] for d in paper["datasets"]) / 7
+                assert mean == pytest.approx(rows["avg"][col][i], abs=0.005 + 1e-9), (table, col)
+    assert paper["tables"]["table1"]["rows"]["robo"]["RLHF-ReS"] == [0.21, 0.29]
+    assert paper["tables"]["table2"]["rows"]["avg"]["RLHF-ReS"] == [0.34, -0.29]
+    assert set(reproduce.PAPER_COLUMNS) <= set(paper["columns"])
+
+
+def test_the_comparison_puts_the_papers_numbers_beside_ours_and_averages_the_folds():
+    paper = json.loads((ROOT / "benchmarks" / "paper_tables.json").read_text())
+    cells = {}
+    for i, dataset in enumerate(reproduce.ETH_UCY):
+        cells[dataset] = {c: reproduce.missing_cell("not trained", "") for c in reproduce.COLUMNS}
+        cells[dataset]["cv"] = {"min_ade": 0.1 * (i + 1), "min_fde": 0.2 * (i + 1),
+                                "source": "evaluated", "units": "m"}  # fmt: skip
+    table = reproduce.comparison_table(cells, paper, "table1", "rlhf-set").splitlines()
+    assert table[2] == ("| eth | 0.100 / 0.200 | not trained | not trained | not trained "
+                        "| not trained | not trained | 0.33 / 0.60 | 0.34 / 0.53 | 0.31 / 0.48 "
+                        "| 0.39 / 0.58 |")  # fmt: skip
+    # ours: (0.1 + ... + 0.5) / 5 = 0.3; the paper's LED: (0.33 + 0.20 + 0.31 + 0.18 + 0.16) / 5
+    # = 0.236 and (0.60 + 0.40 + 0.62 + 0.31 + 0.28) / 5 = 0.442
+    assert table[-1].startswith("| mean of the 5 ETH/UCY folds | 0.300 / 0.600 | – (0 of 5) |")
+    assert "| 0.24 / 0.44 |" in table[-1]
+    del cells["zara2"]
+    table = reproduce.comparison_table(cells, paper, "table2", "rlhf-set").splitlines()
+    assert not table[-1].startswith("| mean")  # not every fold: no mean
+    assert table[2].startswith("| eth | – | not trained |")  # no maxATS in the cell
+
+
+# ----------------------------------------------------------------------------- quick mode
+
+
+def test_quick_mode_builds_both_tables_with_our_columns_beside_the_papers(setup, walks):
+    # the published generator evaluated directly (seed 0, scored by its denoiser)
+    gen = setup.models / "walks" / "generator.safetensors"
+    model, test = checkpoint.load_predictor(gen, "leapfrog"), load_dataset(str(walks), "test")
+    direct = evaluate(model, test, 4, 0, progress=False,
+                      scorer=TrajectoryScorer.from_checkpoint(gen))  # fmt: skip
+    write_rows(setup.results / "finetune_walks.json",
+               [_row("rlhf", 0, 0.5, 1.0, max_ats=0.2, max_fts=0.1),
+                _row("rlhf", 1, 0.7, 1.2, max_ats=0.4, max_fts=0.3)])  # fmt: skip
+    write_rows(setup.results / "pretrained_walks.json",
+               [_row("pretrained", 0, direct["min_ade"], direct["min_fde"]),
+                _row("cv", 0, 9.0, 9.0)])  # fmt: skip
+    out = reproduce.main(["--quick", "--datasets", "walks", "bare", *SAMPLES], setup)
+
+    walks_cells, bare = out["cells"]["walks"], out["cells"]["bare"]
+    for column in ("cv", "full-sampler", "pretrained"):
+        assert walks_cells[column]["source"] == "evaluated"
+        assert walks_cells[column]["max_ats"] is not None  # scored by walks' denoiser
+    assert walks_cells["pretrained"]["min_ade"] == pytest.approx(direct["min_ade"])
+    assert walks_cells["pretrained"]["max_ats"] == pytest.approx(direct["max_ats"])
+    # an evaluation is checked against an existing row of the same measurement
+    assert "; matches the `pretrained` rows in" in walks_cells["pretrained"]["detail"]
+    assert "; DIFFERS from the `cv` rows in" in walks_cells["cv"]["detail"]
+    assert "rows in" not in walks_cells["full-sampler"]["detail"]  # no such row
+    # RLHF from the rows (mean over the two seeds), RLHF-ReS and the best method not trained
+    assert walks_cells["rlhf"]["source"] == "rows"
+    assert walks_cells["rlhf"]["min_ade"] == pytest.approx(0.6)
+    assert walks_cells["rlhf"]["seeds"] == [0, 1]
+    assert "trained 2026-11-23" in walks_cells["rlhf"]["detail"]
+    assert walks_cells["rlhf-res"]["note"] == "not trained"
+    assert walks_cells["best"]["note"] == "not trained"
+    # no model: constant velocity only, and unscored
+    assert bare["cv"]["source"] == "evaluated" and bare["cv"]["max_ats"] is None
+    assert all(bare[c]["note"] == "no model" for c in reproduce.COLUMNS[1:])
+
+    doc = setup.doc.read_text()
+    assert doc.startswith("<!-- Generated by benchmarks/reproduce.py")
+    header = ("| dataset | CV | full sampler | pretrained | RLHF | RLHF-ReS | best with the score "
+              "(rlhf-set) | paper: LED | paper: RLHF | paper: RLHF-ReS |")  # fmt: skip
+    assert doc.count(header) == 2  # Tables 1 and 2
+    assert "| 0.600 / 1.100 † |" in doc  # Table 1's RLHF cell, from rows
+    assert "| 0.300 / 0.200 † |" in doc  # Table 2's
+    table2_bare = [x for x in doc.splitlines() if x.startswith("| bare |")][-1]
+    assert "| no scorer | no model |" in table2_bare
+    assert "| not in the paper's table |" in table2_bare
+    # the paper's Table 1 as printed, all seven columns
+    assert "| eth | 0.63 / 1.03 | 0.55 / 0.86 | 0.46 / 0.73 | 0.43 / 0.69 | 0.33 / 0.60 " in doc
+    summary = json.loads(setup.summary.read_text())
+    assert summary["mode"] == "quick" and summary["cells"]["walks"]["cv"]["source"] == "evaluated"
+    assert summary["cpu_hours"]["this_invocation_hours"] > 0
+
+
+def test_a_second_run_does_no_work_and_an_interrupted_run_resumes(setup, monkeypatch):
+    args = ["--quick", "--datasets", "walks", "bare", *SAMPLES]
+    calls = _counting(monkeypatch, fail_at=3)
+    with pytest.raises(KeyboardInterrupt):
+        reproduce.main(args, setup)
+    assert len(calls) == 3  # two finished and were stored, the third was interrupted
+    log = json.loads((setup.state / "invocations.json").read_text())
+    assert log[-1]["interrupted"] is True and log[-1]["jobs_run"] == 0
+
+    calls = _counting(monkeypatch)
+    out = reproduce.main(args, setup)
+    assert len(calls) == 2  # walks cv + full sampler + pretrained, bare cv: 4 - 2 done
+    assert out["jobs"]["skipped"] == 2
+
+    calls = _counting(monkeypatch)
+    out = reproduce.main(args, setup)
+    assert calls == [] and out["jobs"]["skipped"] == 4
+    assert out["cells"]["walks"]["pretrained"]["source"] == "evaluated"
+    assert out["cpu_hours"]["invocations"] == 3
+    # --report runs nothing and keeps the stored cells
+    out = reproduce.main([*args[1:], "--report"], setup)
+    assert calls == [] and out["cells"]["walks"]["full-sampler"]["source"] == "evaluated"
+    assert out["cpu_hours"]["invocations"] == 3  # a report is not a run
+    assert "The last run that measured: `" in setup.doc.read_text()
+    # another K is another measurement
+    calls = _counting(monkeypatch)
+    reproduce.main(["--quick", "--datasets", "walks", "--samples", "3"], setup)
+    assert len(calls) == 3
+
+
+def test_a_changed_checkpoint_is_evaluated_again(setup, tiny_run, monkeypatch):
+    args = ["--quick", "--datasets", "walks", *SAMPLES]
+    reproduce.main(args, setup)
+    gen = setup.models / "walks" / "generator.safetensors"
+    shutil.copy(tiny_run / "generator.safetensors", gen)  # the same model in other bytes
+    calls = _counting(monkeypatch)
+    reproduce.main(args, setup)
+    assert len(calls) == 2  # full sampler and pretrained; constant velocity is unchanged
+
+
+# ----------------------------------------------------------------------------- full mode
+
+
+def test_full_mode_trains_the_missing_rows_once(setup, monkeypatch):
+    commands = []
+
+    def fake_run(cmd, log):
+        """Stand in for finetune.py: write the row the real script would."""
+        commands.append(cmd)
+        method = cmd[cmd.index("--methods") + 1]
+        tag = cmd[cmd.index("--tag") + 1] if "--tag" in cmd else ""
+        name = f"{method}-{tag}" if tag else method
+        path = setup.results / f"finetune_walks{'_' + tag if tag else ''}.json"
+        rows = json.loads(path.read_text()) if path.is_file() else []
+        write_rows(path, [*rows, _row(name, int(cmd[cmd.index("--seeds") + 1]), 0.4, 0.8)])
+        return 0
+
+    monkeypatch.setattr(reproduce, "run_command", fake_run)
+    args = ["--datasets", "walks", "bare", *SAMPLES, "--seeds", "0", "1"]
+    out = reproduce.main(args, setup)
+    trained = sorted((c[c.index("--methods") + 1], "--tag" in c, c[c.index("--seeds") + 1])
+                     for c in commands)  # fmt: skip
+    assert trained == [
+        ("rlhf", False, "0"),
+        ("rlhf", False, "1"),
+        ("rlhf", True, "0"),
+        ("rlhf", True, "1"),
+        ("rlhf-res", False, "0"),
+        ("rlhf-res", False, "1"),
+    ]
+    assert all("finetune.budget_clock=cpu" in c and "--skip-done" in c for c in commands)
+    cells = out["cells"]["walks"]
+    assert all(cells[c]["source"] == "rows" and cells[c]["seeds"] == [0, 1]
+               for c in ("rlhf", "rlhf-res", "best"))  # fmt: skip
+    assert out["cells"]["bare"]["rlhf"]["note"] == "no model"  # no config: nothing to train
+
+    commands.clear()
+    out = reproduce.main(args, setup)
+    assert commands == [] and out["jobs"]["run"] == []
+
+
+def test_full_mode_pretrains_a_dataset_that_has_a_config_but_no_model(setup):
+    (setup.configs / "bare.yaml").write_text("{}\n")
+    opts = reproduce.parse_args(["--datasets", "bare"], setup)
+    jobs = reproduce.plan(opts, setup)
+    assert [j.label for j in jobs] == [
+        "pretrain bare pretrained", "evaluate bare cv", "evaluate bare full-sampler",
+        "evaluate bare pretrained", "finetune bare rlhf seed 0", "finetune bare rlhf-res seed 0",
+        "finetune bare rlhf-set seed 0",
+    ]  # fmt: skip
+    cmd = reproduce.training_command(jobs[0], opts, setup)
+    assert cmd[1].endswith("pretrain.py") and cmd[2:] == [
+        "--dataset", "bare", "--train", "--no-full-eval", "--device", "cpu"]  # fmt: skip
+    quick = reproduce.plan(reproduce.parse_args(["--quick", "--datasets", "bare"], setup), setup)
+    assert [j.label for j in quick] == ["evaluate bare cv"]
+
+
+def test_full_mode_trains_with_the_equal_budget_tables_arguments(setup, tmp_path, monkeypatch):
+    """The fine-tuning jobs run exactly what benchmarks/equal_budget.py runs, so their rows
+    are the equal-budget table's."""
+    equal_budget = _load("equal_budget")
+    monkeypatch.setattr(equal_budget, "ROOT", tmp_path / "eb")
+    seen = []
+
+    def fake_call(cmd, **kwargs):
+        seen.append(cmd)
+        return 0
+
+    monkeypatch.setattr(subprocess, "call", fake_call)
+    ns = Namespace(datasets=["walks"], methods=list(reproduce.TRAIN_ARGS), seeds=[0],
+                   minutes=4.0, warmup=4, workers=1, data_root="/data")  # fmt: skip
+    equal_budget.run_jobs(ns)
+    start = setup.results / "meta" / "finetune_start_walks.json"
+    start.parent.mkdir(parents=True)
+    start.write_text("{}")
+    opts = reproduce.parse_args(["--datasets", "walks", "--data-root", "/data"], setup)
+    for theirs in seen:
+        method = next(m for m, a in equal_budget.METHODS.items()
+                      if theirs[4:4 + len(a) + 1] == [*a, "--seeds"])  # fmt: skip
+        job = reproduce.Job("finetune", "walks", method, seed=0)
+        mine = reproduce.training_command(job, opts, setup)
+        assert mine[0] == sys.executable and mine[1].endswith("finetune.py")
+        device = mine.index("--device")
+        assert mine[2:device] + mine[device + 2 :] == theirs[2:]
+    assert len(seen) == len(reproduce.TRAIN_ARGS)
