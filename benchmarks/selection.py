@@ -96,6 +96,13 @@ def main() -> None:
         "faster, as eth's test split does against its training folds)",
     )
     parser.add_argument("--tag", default="", help="suffix of the meta file (validation runs)")
+    parser.add_argument(
+        "--draws",
+        type=int,
+        default=1,
+        help="oversampling: D passes with seeds seed..seed+D-1 (the same generator samples, "
+        "other tau-step noise) give D*K candidates; `first` then keeps the first pass's own K",
+    )
     args = parser.parse_args()
     torch.manual_seed(args.seed)
     if args.stretch != 1.0 and args.split == "test":
@@ -121,8 +128,12 @@ def main() -> None:
     scenes = 0
     rng = torch.Generator().manual_seed(args.seed)
     t0 = time.perf_counter()
-    for batch, pred in sampled_batches(model, data, args.samples, args.seed, "cpu", 1024,
-                                       True, f"select {args.dataset}/{args.split}"):  # fmt: skip
+    passes = [sampled_batches(model, data, args.samples, args.seed + d, "cpu", 1024,
+                              d == 0, f"select {args.dataset}/{args.split}")
+              for d in range(args.draws)]  # fmt: skip
+    for drawn in zip(*passes, strict=True):
+        batch = drawn[0][0]
+        pred = torch.cat([p for _, p in drawn])  # [D*K, N, T_f, 2]
         seconds["predict"] += time.perf_counter() - t0
         t1 = time.perf_counter()
         d = scorer.residual(batch, pred)  # [K, N, T_f]; the ground truth is not read
@@ -139,7 +150,8 @@ def main() -> None:
     rows, lines = [], []
     ms_predict = 1000 * seconds["predict"] / scenes
     ms_score = 1000 * seconds["score"] / scenes
-    header = (f"{args.dataset}/{args.split}: {scenes} scenes, K = {args.samples}, score every "
+    header = (f"{args.dataset}/{args.split}: {scenes} scenes, K = {args.samples} x {args.draws} "
+              f"draws, score every "
               f"{args.score_every} ({'final step' if args.final else 'whole future'}); "
               f"predict {ms_predict:.1f} ms/scene, score {ms_score:.1f} ms/scene")  # fmt: skip
     print(header)
@@ -159,6 +171,7 @@ def main() -> None:
         lines.append(f"{key[0]:<26} {cfg.per:<6} {cfg.keep:>2} {ade:7.4f} {fde:7.4f} {ms:8.2f}")
         print(lines[-1])
     for (method, keep), v in merged.items():
+        method = method if args.draws == 1 else f"{method}-x{args.draws}"
         rows.append(make_row(
             dataset=args.dataset, split=args.split, method=method, seed=args.seed, samples=keep,
             min_ade=v["min_ade"], min_fde=v["min_fde"], joint_min_ade=v["joint_min_ade"],
@@ -168,7 +181,7 @@ def main() -> None:
         ))  # fmt: skip
     meta = {"header": header, "ms_predict_per_scene": ms_predict, "ms_score_per_scene": ms_score,
             "score_every": args.score_every, "final": args.final, "scenes": scenes,
-            "speed_ref": speed_ref, "stretch": args.stretch,
+            "speed_ref": speed_ref, "stretch": args.stretch, "draws": args.draws,
             "command": command_line(), "machine": machine()}  # fmt: skip
     out_dir = ROOT / "benchmarks" / "results"
     suffix = ("" if args.split == "test" else "_val") + (f"_{args.tag}" if args.tag else "")
@@ -177,7 +190,8 @@ def main() -> None:
         json.dumps(meta | {"rows": rows}, indent=2) + "\n"
     )
     if args.split == "test":
-        write_rows(out_dir / f"select_{args.dataset}.json", rows)
+        draws = "" if args.draws == 1 else f"_x{args.draws}"
+        write_rows(out_dir / f"select_{args.dataset}{draws}.json", rows)
 
 
 def training_speed(dataset: str, data_root: str | None, quantile: float) -> float:

@@ -20,6 +20,7 @@ import numpy as np
 import torch
 
 from trajpref import __version__
+from trajpref.adapt import ADAPT_PARAMS, AdaptConfig, evaluate_in_context
 from trajpref.config import ExperimentConfig, config_entries, field_docs, load_config
 from trajpref.data import ReadOptions, load_dataset, mean_speed
 from trajpref.data.trajnet import write_trajnet, write_trajnet_truth
@@ -165,6 +166,26 @@ def build_parser() -> argparse.ArgumentParser:
                     help="Col-I/Col-II person radius, in the data's units (collision when "
                     "centres come within 2R; default: TrajNet++'s 0.1 for data in metres, "
                     "off for other units such as SDD's pixels; docs/social.md)")  # fmt: skip
+    ev.add_argument(
+        "--in-context",
+        type=int,
+        default=None,
+        metavar="CTX_FRAMES",
+        help="in-context adaptation (docs/in_context.md): before each window, adapt "
+        "a copy of the generator on the windows of the same recording that lie in "
+        "the CTX_FRAMES frames ending at its last observed frame (e.g. 40)",
+    )
+    ev.add_argument("--adapt-steps", type=int, default=5, help="adaptation steps (default 5)")
+    ev.add_argument("--adapt-lr", type=float, default=1e-4,
+                    help="adaptation learning rate (default 1e-4)")  # fmt: skip
+    ev.add_argument("--adapt-params", default="heads", choices=list(ADAPT_PARAMS),
+                    help="generator parameters that adapt (default heads)")  # fmt: skip
+    ev.add_argument(
+        "--adapt-trust",
+        type=float,
+        default=0.0,
+        help="trust region: weight of the L2 penalty to the start weights (0)",
+    )
     ev.set_defaults(func=cmd_evaluate)
 
     pr = sub.add_parser("predict", help="save sampled futures of a split (.npz or TrajNet++)")
@@ -396,6 +417,8 @@ def _print_bins(bins: dict) -> None:
 
 def cmd_evaluate(args) -> int:
     _check_model_args(args)
+    if args.in_context is not None:
+        return _evaluate_in_context(args)
     bins = _parse_bins(args.bins)
     if args.collision_radius is not None:
         resolve_collision_radius(args.collision_radius, "")  # ConfigError unless > 0
@@ -450,6 +473,48 @@ def cmd_evaluate(args) -> int:
         _print_collisions(out)
         if bins is not None:
             _print_bins(out["bins"])
+    return 0
+
+
+def _evaluate_in_context(args) -> int:
+    """``evaluate --in-context``: the usual metrics with per-window adaptation, plus the
+    windows that had context, before/after on them and seconds per window."""
+    if args.keep is not None or args.scorer or args.bins is not None:
+        raise ConfigError("--in-context does not combine with --keep, --scorer or --bins")
+    cfg = AdaptConfig(ctx_frames=args.in_context, steps=args.adapt_steps, lr=args.adapt_lr,
+                      params=args.adapt_params, trust=args.adapt_trust)  # fmt: skip
+    if args.out:
+        check_output_file(args.out)
+    model, device = _predictor(args)
+    ds = _load(args)
+    result = evaluate_in_context(model, ds, cfg, args.samples, args.seed, device=device)
+    out = {"dataset": ds.info.name, "split": ds.info.split, "model": args.model,
+           "samples": args.samples, "seed": args.seed, "in_context": args.in_context,
+           "adapt_steps": cfg.steps, "adapt_lr": cfg.lr, "adapt_params": cfg.params,
+           "adapt_trust": cfg.trust, **result, "units": ds.info.units}  # fmt: skip
+    if args.out:
+        write_json(args.out, out)
+    if args.json:
+        print(dumps_json(out))
+        return 0
+    print(
+        f"{ds.info.name}/{ds.info.split}  model={args.model}  K={args.samples}  in-context "
+        f"{cfg.ctx_frames} frames, {cfg.steps} steps of {cfg.params} at lr {cfg.lr:g}"
+    )
+    print(
+        f"  minADE {out['min_ade']:.4f}  minFDE {out['min_fde']:.4f}   "
+        f"joint minADE {out['joint_min_ade']:.4f}  joint minFDE {out['joint_min_fde']:.4f}"
+    )
+    print(
+        f"  {out['windows_with_context']} of {out['windows']} windows have context; "
+        f"{out['seconds_per_window']:.3f} s per window"
+    )
+    for key in ("before", "after"):
+        if out[key] is not None:
+            print(
+                f"  {key:>6} (windows with context): minADE {out[key]['min_ade']:.4f}  "
+                f"minFDE {out[key]['min_fde']:.4f}"
+            )
     return 0
 
 
