@@ -324,8 +324,7 @@ class FinetuneConfig(OptimConfig):
     docs/rlhf.md); the critic is still trained. Costs a second rollout and score per step."""
 
     def __post_init__(self) -> None:
-        super().__post_init__()
-        check_choices(self)
+        super().__post_init__()  # OptimConfig checks every Literal field, these included
         if self.baseline == "antithetic" and self.likelihood != "sample":
             raise ConfigError("finetune.baseline=antithetic needs finetune.likelihood=sample")
         _positive(self, "explore_std", "ppo_epochs", "set_bandwidth")

@@ -24,6 +24,7 @@ from array import array
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
@@ -198,6 +199,14 @@ def _parse_fast(path: Path, layout: _Layout, with_type: bool):
     return values, None
 
 
+def open_data_file(path: Path) -> BinaryIO:
+    """``path`` opened for binary reading; a file that cannot be opened is a DataError."""
+    try:
+        return open(path, "rb")
+    except OSError as exc:
+        raise DataError(f"cannot read file ({exc.strerror or exc})", path) from None
+
+
 def _parse_slow(path: Path, layout: _Layout, with_type: bool):
     """Line-by-line parser: the reference for what is accepted, and the source of the
     line-numbered error messages. Returns ``(values [R, 4], kinds [R] | None, lines [R])``."""
@@ -207,11 +216,7 @@ def _parse_slow(path: Path, layout: _Layout, with_type: bool):
     values = array("d")
     kinds: list[str] = []
     lines = array("q")
-    try:
-        fh = open(path, "rb")
-    except OSError as exc:
-        raise DataError(f"cannot read file ({exc.strerror or exc})", path) from None
-    with fh:
+    with open_data_file(path) as fh:
         for lineno, raw in enumerate(fh, start=1):
             if lineno == layout.header_line:
                 continue

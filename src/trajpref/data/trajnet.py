@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from trajpref.data.text import DEFAULT_MAX_COORD, check_file
+from trajpref.data.text import DEFAULT_MAX_COORD, check_file, open_data_file
 from trajpref.errors import ConfigError, DataError
 from trajpref.io import atomic_path
 from trajpref.types import Scene
@@ -79,11 +79,7 @@ def read_trajnet(
     scene_rows: list[tuple[int, int, int, int, int]] = []
     seen_ids: set[int] = set()
     fps: set[float] = set()
-    try:
-        fh = open(path, "rb")
-    except OSError as exc:
-        raise DataError(f"cannot read file ({exc.strerror or exc})", path) from None
-    with fh:
+    with open_data_file(path) as fh:
         for line, raw in enumerate(fh, start=1):
             try:
                 text = raw.decode("utf-8")
