@@ -190,7 +190,7 @@ def _ms(xs: list[float]) -> str:
 
 def report(datasets: list[str], methods: list[str]) -> str:
     """Mean +- std over seeds of each method's test rows, against the start and the control."""
-    rows = merge_rows(read_rows(ROOT / "benchmarks" / "results"))
+    rows = merge_rows(read_rows(ROOT / "benchmarks" / "results", protocol="all"))
     lines = [
         "| dataset | method | seeds | minADE20 | minFDE20 | minFDE20 vs start "
         "| vs the control chosen on val "

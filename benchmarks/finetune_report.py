@@ -207,7 +207,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--datasets", nargs="+", default=["zara1", "eth", "robo"])
     args = parser.parse_args()
-    rows = merge_rows(read_rows(ROOT / "benchmarks" / "results"))
+    rows = merge_rows(read_rows(ROOT / "benchmarks" / "results", protocol="all"))
     acc, change = accuracy_section(rows, args.datasets)
     avg = {
         m: statistics.mean(v.values()) for m, v in change.items() if len(v) == len(args.datasets)

@@ -193,10 +193,12 @@ def read_json(path: Path, default: Any = None) -> Any:
 
 
 def result_rows(setup: Setup) -> list[dict[str, Any]]:
-    """Every row of ``results/*.json``, each with the file it came from (``_file``)."""
+    """Every row of ``results/*.json`` measured under the default protocol (``all``, the
+    paper's), each with the file it came from (``_file``)."""
     rows = []
     for path in sorted(setup.results.glob("*.json")):
-        rows.extend({**r, "_file": path.name} for r in json.loads(path.read_text()))
+        rows.extend({**r, "_file": path.name} for r in json.loads(path.read_text())
+                    if r["protocol"] == "all")  # fmt: skip
     return rows
 
 

@@ -37,7 +37,7 @@ DOCS = HERE.parent / "docs"
 
 REFERENCE_COLLISIONS_PCT = {"LED": 2.62, "SingularTrajectory": 2.96, "MART": 2.23, "MoRE": 2.11}
 """Published collision rates (%) on ETH/UCY: MoRE preprint Table 2, under its own protocol (its
-Col-I/Col-II variant and averaging are not stated there; ../shared/peers.json)."""
+Col-I/Col-II variant and averaging are not stated there; benchmarks/peers.json)."""
 
 OVERALL = (("min_ade", "minADE"), ("min_fde", "minFDE"), ("joint_min_ade", "joint minADE"),
            ("joint_min_fde", "joint minFDE"), ("col_i_pct", "Col-I %"),

@@ -31,6 +31,25 @@ def test_data_stats_json(capsys, folder):
     assert stats["scenes"] == 3 and stats["agents"] == 6 and stats["split"] == "test"
 
 
+def test_protocol_option_reaches_stats_and_evaluate(capsys, tmp_path):
+    rows = straight_rows(20) + [(10 * f, 9, 0.0, 0.5 * f) for f in range(20, 40)]  # + a loner
+    write_tracks(tmp_path / "d" / "a.txt", rows)
+    counts = {}
+    for protocol in ("all", "sgan"):
+        code, out, _ = _run(capsys, "data", "stats", "--dataset", tmp_path / "d", "--json",
+                            "--protocol", protocol)  # fmt: skip
+        stats = json.loads(out)
+        assert code == 0 and stats["protocol"] == protocol
+        counts[protocol] = (stats["scenes"], stats["agents"])
+        code, out, _ = _run(capsys, "evaluate", "--dataset", tmp_path / "d", "--samples", "1",
+                            "--json", "--protocol", protocol, "--no-progress")  # fmt: skip
+        res = json.loads(out)
+        assert code == 0 and res["protocol"] == protocol and res["agents"] == counts[protocol][1]
+    assert counts == {"all": (2, 3), "sgan": (1, 2)}
+    code, _, err = _run(capsys, "data", "stats", "--dataset", tmp_path / "d", "--protocol", "x")
+    assert code == 2 and "invalid choice: 'x'" in err
+
+
 def test_evaluate_json_and_out_file(capsys, folder, tmp_path):
     out_file = tmp_path / "res" / "eval.json"
     code, out, _ = _run(

@@ -22,7 +22,7 @@ import torch
 from trajpref import __version__
 from trajpref.adapt import ADAPT_PARAMS, AdaptConfig, evaluate_in_context
 from trajpref.config import ExperimentConfig, config_entries, field_docs, load_config
-from trajpref.data import ReadOptions, load_dataset, mean_speed
+from trajpref.data import PROTOCOLS, ReadOptions, load_dataset, mean_speed
 from trajpref.data.trajnet import write_trajnet, write_trajnet_truth
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, TrajprefError
@@ -58,6 +58,10 @@ def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> N
                    "span (default: any, with a warning; 0: none; docs/data_format.md)")  # fmt: skip
     p.add_argument("--max-coord", type=float, default=1e6, help="largest accepted |x| or |y| "
                    "in the dataset's units (default 1e6); larger is an error")  # fmt: skip
+    p.add_argument("--protocol", default="all", choices=list(PROTOCOLS),
+                   help="which windows count: all (default: every window with a fully observed "
+                   "agent) or sgan (windows with at least two, as Social-GAN's loader keeps; "
+                   "docs/data.md)")  # fmt: skip
 
 
 def _add_model_args(p: argparse.ArgumentParser) -> None:
@@ -290,6 +294,7 @@ def _load(args):
         frame_interval=args.frame_interval,
         units=args.units,
         options=_read_options(args),
+        protocol=args.protocol,
     )
 
 
@@ -313,6 +318,7 @@ def cmd_data_stats(args) -> int:
     out = {
         "dataset": ds.info.name,
         "split": ds.info.split,
+        "protocol": ds.info.protocol,
         "scenes": len(ds),
         "agents": int(sizes.sum()),
         "agents_per_scene": {
@@ -393,6 +399,10 @@ def _parse_bins(text: str | None) -> tuple[int, ...] | None:
     return edges
 
 
+def _protocol_tag(ds) -> str:
+    return "" if ds.info.protocol == "all" else f" (protocol {ds.info.protocol})"
+
+
 def _fmt(value) -> str:
     return "-" if value is None else f"{value:.4f}" if isinstance(value, float) else str(value)
 
@@ -439,6 +449,7 @@ def cmd_evaluate(args) -> int:
     out = {
         "dataset": ds.info.name,
         "split": ds.info.split,
+        "protocol": ds.info.protocol,
         "model": args.model,
         "samples": samples,
         "seed": args.seed,
@@ -458,7 +469,7 @@ def cmd_evaluate(args) -> int:
         print(dumps_json(out))
     else:
         print(
-            f"{ds.info.name}/{ds.info.split}  model={args.model}  K={samples}  "
+            f"{ds.info.name}/{ds.info.split}{_protocol_tag(ds)}  model={args.model}  K={samples}  "
             f"({out['agents']} agents, {out['scenes']} scenes, units {ds.info.units})"
             + ("" if args.keep is None else f", kept by {args.select} of {args.samples}")
         )
@@ -488,10 +499,11 @@ def _evaluate_in_context(args) -> int:
     model, device = _predictor(args)
     ds = _load(args)
     result = evaluate_in_context(model, ds, cfg, args.samples, args.seed, device=device)
-    out = {"dataset": ds.info.name, "split": ds.info.split, "model": args.model,
-           "samples": args.samples, "seed": args.seed, "in_context": args.in_context,
-           "adapt_steps": cfg.steps, "adapt_lr": cfg.lr, "adapt_params": cfg.params,
-           "adapt_trust": cfg.trust, **result, "units": ds.info.units}  # fmt: skip
+    out = {"dataset": ds.info.name, "split": ds.info.split, "protocol": ds.info.protocol,
+           "model": args.model, "samples": args.samples, "seed": args.seed,
+           "in_context": args.in_context, "adapt_steps": cfg.steps, "adapt_lr": cfg.lr,
+           "adapt_params": cfg.params, "adapt_trust": cfg.trust, **result,
+           "units": ds.info.units}  # fmt: skip
     if args.out:
         write_json(args.out, out)
     if args.json:

@@ -198,7 +198,10 @@ class GeneratorTrainConfig(OptimConfig):
     epochs: int = 20
     """Passes over the training split."""
     best_of_k_weight: float = 1.0
-    """Weight of min_k (ADE_k + FDE_k), the best-of-K distance through the denoiser."""
+    """Weight of min_k (ADE_k + fde_weight FDE_k), the best-of-K distance through the
+    denoiser."""
+    fde_weight: float = 1.0
+    """Weight of the endpoint error inside the best-of-K term (1: ADE + FDE)."""
     mean_weight: float = 0.5
     """Weight of the ADE of the generator's mean mu (keeps mu meaningful for RL)."""
     uncertainty_weight: float = 0.1
@@ -208,7 +211,13 @@ class GeneratorTrainConfig(OptimConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        for name in ("best_of_k_weight", "mean_weight", "uncertainty_weight", "reg_weight"):
+        for name in (
+            "best_of_k_weight",
+            "fde_weight",
+            "mean_weight",
+            "uncertainty_weight",
+            "reg_weight",
+        ):
             if getattr(self, name) < 0:
                 raise ConfigError(f"GeneratorTrainConfig.{name} must be >= 0")
 

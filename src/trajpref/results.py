@@ -16,11 +16,12 @@ import torch
 from trajpref.io import write_json
 
 FIELDS = (
-    "dataset", "split", "method", "seed", "samples", "min_ade", "min_fde", "joint_min_ade",
-    "joint_min_fde", "max_ats", "max_fts", "top1_recall_ats", "top5_recall_ats",
+    "dataset", "split", "protocol", "method", "seed", "samples", "min_ade", "min_fde",
+    "joint_min_ade", "joint_min_fde", "max_ats", "max_fts", "top1_recall_ats", "top5_recall_ats",
     "train_seconds", "ms_per_scene", "checkpoint", "command", "date", "machine", "uses_score",
 )  # fmt: skip
-"""Every row has exactly these keys (null where not measured). ``uses_score``: whether the
+"""Every row has exactly these keys (null where not measured). ``protocol``: which test windows
+count (``data.PROTOCOLS``; ``make_row`` defaults it to ``all``). ``uses_score``: whether the
 diffusion score took part (in training or in selecting the samples)."""
 
 METHODS = ("cv", "full-sampler", "pretrained", "pretrained-long", "control", "rlhf", "rlhf-res",
@@ -49,6 +50,7 @@ def make_row(**values: Any) -> dict[str, Any]:
     if unknown:
         raise KeyError(f"unknown result fields: {sorted(unknown)}")
     row = {k: values.get(k) for k in FIELDS}
+    row["protocol"] = row["protocol"] or "all"
     row["date"] = row["date"] or date.today().isoformat()
     row["machine"] = row["machine"] or machine()
     row["command"] = row["command"] or command_line()
@@ -62,11 +64,12 @@ def write_rows(path: str | Path, rows: list[dict[str, Any]]) -> None:
     write_json(path, rows)
 
 
-def read_rows(folder: str | Path) -> list[dict[str, Any]]:
+def read_rows(folder: str | Path, protocol: str | None = None) -> list[dict[str, Any]]:
+    """Every row of ``folder/*.json``; only those measured under ``protocol`` when given."""
     rows = []
     for path in sorted(Path(folder).glob("*.json")):
         rows.extend(json.loads(path.read_text()))
-    return rows
+    return [r for r in rows if protocol is None or r["protocol"] == protocol]
 
 
 def _fmt(x: Any, digits: int = 3) -> str:
@@ -78,12 +81,12 @@ def _fmt(x: Any, digits: int = 3) -> str:
 
 
 def merge_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Rows of the same measurement (dataset, split, method, seed, samples) written by
-    different scripts (e.g. accuracy by one, scores by another) merged field by field; the
+    """Rows of the same measurement (dataset, split, protocol, method, seed, samples) written
+    by different scripts (e.g. accuracy by one, scores by another) merged field by field; the
     first non-null value wins."""
     merged: dict[tuple, dict[str, Any]] = {}
     for r in rows:
-        key = (r["dataset"], r["split"], r["method"], r["seed"], r["samples"])
+        key = (r["dataset"], r["split"], r["protocol"], r["method"], r["seed"], r["samples"])
         if key not in merged:
             merged[key] = dict(r)
         else:
@@ -93,11 +96,12 @@ def merge_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return list(merged.values())
 
 
-def accuracy_table(rows: list[dict[str, Any]], split: str = "test") -> str:
-    """Markdown table: one line per (dataset, method, samples), mean (+- std) over seeds."""
+def accuracy_table(rows: list[dict[str, Any]], split: str = "test", protocol: str = "all") -> str:
+    """Markdown table: one line per (dataset, method, samples), mean (+- std) over seeds, of
+    the rows measured under ``protocol``."""
     groups: dict[tuple, list[dict[str, Any]]] = {}
     for r in merge_rows(rows):
-        if r["split"] == split:
+        if r["split"] == split and r["protocol"] == protocol:
             groups.setdefault((r["dataset"], r["method"], r["samples"]), []).append(r)
     order = {m: i for i, m in enumerate(METHODS)}
     keys = sorted(groups, key=lambda k: (k[0], order.get(k[1], 99), k[2]))
@@ -170,3 +174,41 @@ def update_readme(readme: str | Path, marker: str, content: str) -> None:
     head, rest = text.split(start, 1)
     _, tail = rest.split(end, 1)
     path.write_text(f"{head}{start}\n{content}\n{end}{tail}")
+
+
+PEER_COLUMNS = ("eth", "hotel", "univ", "zara1", "zara2", "avg", "sdd", "nba", "robo")
+"""Columns of the peers table: the five ETH/UCY folds, their average, SDD, NBA and Robo."""
+
+
+def _pair(values: Any) -> str:
+    return "–" if not values else f"{values[0]:.2f} / {values[1]:.2f}"
+
+
+def peers_table(peers: dict[str, Any], rows: list[dict[str, Any]],
+                method: str = "pretrained") -> str:  # fmt: skip
+    """Markdown table: our ``method`` rows (test split, K = 20, seed-mean) under each
+    evaluation protocol beside the published peers (``benchmarks/peers.json``), minADE20 /
+    minFDE20 per column. The ETH/UCY average is ours only when all five folds are there."""
+    lines = [
+        "| method | protocol | " + " | ".join(PEER_COLUMNS) + " |",
+        "|---|---|" + "---|" * len(PEER_COLUMNS),
+    ]
+    merged = [r for r in merge_rows(rows) if r["split"] == "test" and r["samples"] == 20]
+    for protocol in ("all", "sgan"):
+        cells = {}
+        for col in PEER_COLUMNS:
+            xs = [r for r in merged if r["dataset"] == col and r["method"] == method
+                  and r["protocol"] == protocol]  # fmt: skip
+            if xs:
+                cells[col] = [sum(r[k] for r in xs) / len(xs) for k in ("min_ade", "min_fde")]
+        folds = ("eth", "hotel", "univ", "zara1", "zara2")
+        if all(f in cells for f in folds):
+            cells["avg"] = [sum(cells[f][i] for f in folds) / len(folds) for i in (0, 1)]
+        if cells:
+            lines.append(f"| **trajpref** (`{method}`) | {protocol} | "
+                         + " | ".join(f"**{_pair(cells.get(c))}**" if c in cells else "–"
+                                      for c in PEER_COLUMNS) + " |")  # fmt: skip
+    for name, entry in peers["methods"].items():
+        lines.append(f"| {name} | {entry.get('protocol', 'unknown')} | "
+                     + " | ".join(_pair(entry.get(c)) for c in PEER_COLUMNS) + " |")  # fmt: skip
+    return "\n".join(lines)

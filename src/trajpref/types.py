@@ -70,6 +70,9 @@ class DatasetInfo:
     """Future frames per window (T_f)."""
     source: str = ""
     """Where the data was read from (path) or how it was made (simulator seed)."""
+    protocol: str = "all"
+    """Which windows count: ``all`` (every window with a fully observed agent) or ``sgan``
+    (only windows with at least two, as the Social-GAN loader counts them; docs/data.md)."""
 
 
 @dataclass

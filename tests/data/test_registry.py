@@ -3,11 +3,15 @@ import pytest
 from synthetic import straight_rows, write_tracks
 
 from trajpref.data import ReadOptions, load_dataset, mean_speed, resolve_data_root
-from trajpref.data.registry import ETH_UCY, FEET_TO_METRES
+from trajpref.data.registry import ETH_UCY, FEET_TO_METRES, apply_protocol
 from trajpref.errors import DataError, TrajprefError
 from trajpref.types import DatasetInfo, Scene, TrajectoryDataset
 
 FOLD_TEST_AGENTS = {"eth": 364, "hotel": 1197, "univ": 24334, "zara1": 2356, "zara2": 5910}
+SGAN_TEST = {  # (scenes, agents) under --protocol sgan; eth and hotel as the issue states them
+    "eth": (70, 181), "hotel": (301, 1053), "univ": (947, 24334), "zara1": (602, 2253),
+    "zara2": (921, 5833),
+}  # fmt: skip
 
 
 def test_user_folder_with_split_subfolders(tmp_path):
@@ -70,6 +74,44 @@ def test_eth_ucy_test_fold_counts(data_root, fold):
     assert ds.info.units == "m" and ds.info.frame_interval == 0.4
     scene = ds[0]
     assert scene.history.shape[1:] == (8, 2) and scene.future.shape[1:] == (12, 2)
+
+
+@pytest.mark.realdata
+@pytest.mark.parametrize("fold", ETH_UCY)
+def test_sgan_protocol_counts(data_root, fold):
+    ds = load_dataset(fold, "test", data_root, protocol="sgan")
+    assert (len(ds), ds.num_agents) == SGAN_TEST[fold]
+    assert ds.info.protocol == "sgan" and min(s.num_agents for s in ds.scenes) >= 2
+
+
+def _scene(p: int, tag: str) -> Scene:
+    return Scene(np.zeros((p, 8, 2), np.float32), np.zeros((p, 12, 2), np.float32),
+                 np.zeros(p, np.int64), tag)  # fmt: skip
+
+
+def test_sgan_protocol_keeps_scenes_with_two_or_more_agents():
+    info = DatasetInfo("toy", "test", "m", 0.4, source="toy")
+    ds = TrajectoryDataset([_scene(1, "a"), _scene(2, "b"), _scene(1, "c"), _scene(5, "d")], info)
+    kept = apply_protocol(ds, "sgan")
+    assert [s.scene_id for s in kept.scenes] == ["b", "d"]
+    assert kept.num_agents == 7 and kept.info.protocol == "sgan"
+    same = apply_protocol(ds, "all")
+    assert len(same) == 4 and same.info.protocol == "all" and ds.info.protocol == "all"
+    lonely = TrajectoryDataset([_scene(1, "a")], info)
+    with pytest.raises(DataError, match="leaves nothing"):
+        apply_protocol(lonely, "sgan")
+    with pytest.raises(TrajprefError, match="unknown protocol 'trajnet'; choose one of all, sgan"):
+        apply_protocol(ds, "trajnet")
+
+
+def test_load_dataset_applies_the_protocol(tmp_path):
+    rows = straight_rows(20)  # two agents over 20 frames
+    rows += [(10 * f, 9, 0.0, 0.5 * f) for f in range(20, 40)]  # a lone agent afterwards
+    write_tracks(tmp_path / "a.txt", rows)
+    every = load_dataset(str(tmp_path), "test")
+    sgan = load_dataset(str(tmp_path), "test", protocol="sgan")
+    assert (len(every), every.num_agents) == (2, 3)
+    assert (len(sgan), sgan.num_agents) == (1, 2)
 
 
 @pytest.mark.realdata

@@ -1,6 +1,13 @@
 """Datasets: readers, the unified registry, batching and transforms."""
 
-from trajpref.data.registry import ETH_UCY, NAMES, load_dataset, resolve_data_root
+from trajpref.data.registry import (
+    ETH_UCY,
+    NAMES,
+    PROTOCOLS,
+    apply_protocol,
+    load_dataset,
+    resolve_data_root,
+)
 from trajpref.data.stats import mean_speed
 from trajpref.data.text import GapWarning, ReadOptions
 from trajpref.data.trajnet import write_trajnet, write_trajnet_truth
@@ -8,8 +15,10 @@ from trajpref.data.trajnet import write_trajnet, write_trajnet_truth
 __all__ = [
     "ETH_UCY",
     "NAMES",
+    "PROTOCOLS",
     "GapWarning",
     "ReadOptions",
+    "apply_protocol",
     "load_dataset",
     "mean_speed",
     "resolve_data_root",

@@ -7,6 +7,7 @@ sub-folders when present), or to one ``.ndjson`` file. Formats: ``docs/data_form
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +28,13 @@ USER_TEXT = ("*.txt", "*.csv")
 """Track files of a user folder (Social-GAN text format; docs/data_format.md)."""
 
 FEET_TO_METRES = 0.3048
+
+PROTOCOLS = ("all", "sgan")
+"""Which windows count (docs/data.md, "Evaluation protocols"): ``all`` keeps every window with
+at least one fully observed agent; ``sgan`` keeps only windows with at least
+``SGAN_MIN_AGENTS`` of them, as the Social-GAN loader does (its ``min_ped = 1`` and
+``num_peds_considered > min_ped``)."""
+SGAN_MIN_AGENTS = 2
 
 
 @dataclass(frozen=True)
@@ -84,14 +92,53 @@ def load_dataset(
     frame_interval: float = 0.4,
     units: str = "unknown",
     options: text.ReadOptions | None = None,
+    protocol: str = "all",
 ) -> TrajectoryDataset:
     """Load one split of a dataset as a list of scenes in absolute coordinates.
 
     ``frame_interval`` and ``units`` describe user folders (a path ``name``) only; built-in
     datasets know their own. ``options`` (delimiter, ``max_gap``, ``max_coord``) apply to every
-    reader that they make sense for (the bound to all of them).
+    reader that they make sense for (the bound to all of them). ``protocol`` is one of
+    ``PROTOCOLS`` (``apply_protocol``).
     """
     _check_split(split)
+    check_protocol(protocol)
+    return apply_protocol(_load(name, split, root, frame_interval, units, options), protocol)
+
+
+def check_protocol(protocol: str) -> None:
+    """Raise a clear error unless ``protocol`` is one of ``PROTOCOLS``."""
+    if protocol not in PROTOCOLS:
+        raise TrajprefError(f"unknown protocol {protocol!r}; choose one of {', '.join(PROTOCOLS)}")
+
+
+def apply_protocol(dataset: TrajectoryDataset, protocol: str) -> TrajectoryDataset:
+    """The scenes of ``dataset`` that count under ``protocol``, with ``info.protocol`` set.
+
+    ``sgan`` drops the scenes with fewer than ``SGAN_MIN_AGENTS`` agents: every metric is then
+    over the agents of the remaining scenes. Raises ``DataError`` when nothing is left."""
+    check_protocol(protocol)
+    scenes = dataset.scenes
+    if protocol == "sgan":
+        scenes = [s for s in scenes if s.num_agents >= SGAN_MIN_AGENTS]
+        if not scenes:
+            raise DataError(
+                f"no scene has {SGAN_MIN_AGENTS} or more agents, so the sgan protocol "
+                "leaves nothing to evaluate",
+                dataset.info.source,
+            )
+    info = dataclasses.replace(dataset.info, protocol=protocol)
+    return TrajectoryDataset(scenes, info)
+
+
+def _load(
+    name: str,
+    split: str,
+    root: str | Path | None,
+    frame_interval: float,
+    units: str,
+    options: text.ReadOptions | None,
+) -> TrajectoryDataset:
     options = options or text.ReadOptions()
     if name == "robo-sim":
         return _robo_sim(split)

@@ -35,13 +35,13 @@ def generator_loss(
     """The generator's supervised loss on denoised samples y [K, N, T_f, 2] against the
     target [N, T_f, 2]:
 
-        w_best * min_k (ADE_k + FDE_k) + w_mean * ADE(mu) + w_unc * (e^{-l} ADE(mu) + l)
+        w_best * min_k (ADE_k + w_fde FDE_k) + w_mean * ADE(mu) + w_unc * (e^{-l} ADE(mu) + l)
         + w_reg * Eq. 4,   with l the agent's mean log sigma.
 
     Returns ``(loss, logs)``."""
     err = torch.linalg.vector_norm(y - target, dim=-1)  # [K, N, T_f]
     ade, fde = err.mean(-1), err[..., -1]  # [K, N]
-    best = (ade + fde).min(0).values.mean()
+    best = (ade + c.fde_weight * fde).min(0).values.mean()
     mean_err = torch.linalg.vector_norm(out.mean - target, dim=-1).mean(-1)  # [N]
     log_sigma = out.log_sigma.mean(0)  # [N]
     unc = (torch.exp(-log_sigma) * mean_err.detach() + log_sigma).mean()

@@ -1,0 +1,52 @@
+import pytest
+import torch
+
+from trajpref.config import GeneratorTrainConfig
+from trajpref.errors import ConfigError
+from trajpref.models.generator import GeneratorOutput
+from trajpref.models.losses import generator_loss
+
+
+def _case():
+    """One agent, T_f = 2, K = 2 samples; the target stays at the origin.
+
+    Sample 0 is off by 1 m at both steps (ADE 1, FDE 1); sample 1 is exact at the first
+    step and off by 3 m at the last (ADE 1.5, FDE 3)."""
+    target = torch.zeros(1, 2, 2)  # [N, T_f, 2]
+    y = torch.tensor([[[1.0, 0.0], [1.0, 0.0]], [[0.0, 0.0], [0.0, 3.0]]])[:, None]  # [K,N,T_f,2]
+    out = GeneratorOutput(
+        mean=torch.zeros(1, 2, 2), log_sigma=torch.zeros(2, 1), shifts=torch.zeros(2, 1, 2, 2),
+        context=torch.zeros(1, 4),
+    )  # fmt: skip
+    return out, y, target
+
+
+def test_best_of_k_term_is_hand_computable():
+    out, y, target = _case()
+    only_best = dict(mean_weight=0.0, uncertainty_weight=0.0)
+    loss, logs = generator_loss(out, y, target, GeneratorTrainConfig(**only_best))
+    assert loss.item() == pytest.approx(2.0)  # min(1 + 1, 1.5 + 3)
+    assert logs["best_of_k"] == pytest.approx(2.0)
+    # a heavier endpoint: sample 0 still wins with 1 + 3 * 1 = 4 against 1.5 + 9
+    loss, _ = generator_loss(out, y, target, GeneratorTrainConfig(fde_weight=3.0, **only_best))
+    assert loss.item() == pytest.approx(4.0)
+    # ADE alone: 1 against 1.5
+    loss, _ = generator_loss(out, y, target, GeneratorTrainConfig(fde_weight=0.0, **only_best))
+    assert loss.item() == pytest.approx(1.0)
+
+
+def test_fde_weight_moves_the_choice_of_the_best_sample():
+    out, _, target = _case()
+    # sample 0: ADE 2, FDE 0 (back at the target); sample 1: ADE 0.5, FDE 1
+    y = torch.tensor([[[4.0, 0.0], [0.0, 0.0]], [[0.0, 0.0], [1.0, 0.0]]])[:, None]
+    y = y.requires_grad_(True)
+    cfg = GeneratorTrainConfig(fde_weight=3.0, mean_weight=0.0, uncertainty_weight=0.0)
+    loss, _ = generator_loss(out, y, target, cfg)
+    assert loss.item() == pytest.approx(2.0)  # sample 0: 2 + 0 beats 0.5 + 3
+    loss.backward()
+    assert y.grad[1].abs().sum() == 0 and y.grad[0].abs().sum() > 0  # only the best learns
+
+
+def test_fde_weight_must_not_be_negative():
+    with pytest.raises(ConfigError, match="fde_weight must be >= 0"):
+        GeneratorTrainConfig(fde_weight=-1.0)

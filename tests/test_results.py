@@ -1,0 +1,70 @@
+"""Result rows and the README tables made from them."""
+
+import json
+from pathlib import Path
+
+import pytest
+
+from trajpref.results import (
+    FIELDS,
+    accuracy_table,
+    make_row,
+    merge_rows,
+    peers_table,
+    read_rows,
+    write_rows,
+)
+
+ROOT = Path(__file__).resolve().parent.parent
+FOLDS = ("eth", "hotel", "univ", "zara1", "zara2")
+
+
+def _row(dataset, method="pretrained", protocol=None, ade=0.2, fde=0.4, seed=0):
+    return make_row(dataset=dataset, split="test", protocol=protocol, method=method, seed=seed,
+                    samples=20, min_ade=ade, min_fde=fde, date="2026-11-23", machine="m",
+                    command="c")  # fmt: skip
+
+
+def test_rows_default_to_the_all_protocol_and_keep_the_schema(tmp_path):
+    row = _row("eth")
+    assert row["protocol"] == "all" and set(row) == set(FIELDS)
+    write_rows(tmp_path / "a.json", [row, _row("eth", protocol="sgan", ade=0.3)])
+    assert [r["protocol"] for r in read_rows(tmp_path)] == ["all", "sgan"]
+    assert [r["min_ade"] for r in read_rows(tmp_path, protocol="sgan")] == [0.3]
+    with pytest.raises(KeyError, match="unknown result fields"):
+        make_row(dataset="eth", protokol="sgan")
+
+
+def test_the_same_measurement_under_two_protocols_is_not_merged():
+    rows = merge_rows([_row("eth", ade=0.2), _row("eth", protocol="sgan", ade=0.3)])
+    assert sorted(r["min_ade"] for r in rows) == [0.2, 0.3]
+
+
+def test_accuracy_table_shows_one_protocol():
+    rows = [_row("eth", ade=0.111), _row("eth", protocol="sgan", ade=0.222)]
+    assert "0.111" in accuracy_table(rows) and "0.222" not in accuracy_table(rows)
+    sgan = accuracy_table(rows, protocol="sgan")
+    assert "0.222" in sgan and "0.111" not in sgan
+
+
+def test_peers_table_averages_our_folds_only_when_all_five_are_there():
+    peers = {"methods": {"Peer": {"protocol": "sgan", "eth": [0.35, 0.42], "source": "s"}}}
+    rows = [_row(f, ade=0.1 * (i + 1), fde=0.2 * (i + 1)) for i, f in enumerate(FOLDS)]
+    rows.append(_row("eth", protocol="sgan", ade=0.5, fde=0.9))
+    lines = peers_table(peers, rows).splitlines()
+    ours_all, ours_sgan, peer = lines[2], lines[3], lines[4]
+    assert ours_all.startswith("| **trajpref** (`pretrained`) | all |")
+    assert "**0.30 / 0.60**" in ours_all  # mean of 0.1..0.5 and of 0.2..1.0
+    assert "| sgan | **0.50 / 0.90** |" in ours_sgan and "0.30 / 0.60" not in ours_sgan
+    assert peer == "| Peer | sgan | 0.35 / 0.42 | – | – | – | – | – | – | – | – |"
+
+
+def test_the_peers_file_has_a_source_and_a_protocol_for_every_method():
+    peers = json.loads((ROOT / "benchmarks" / "peers.json").read_text())
+    for name, entry in peers["methods"].items():
+        assert entry["source"], name
+        assert entry["protocol"] in ("all", "sgan", "unknown"), name
+        for col in peers["columns"]:
+            if col in entry:
+                ade, fde = entry[col]
+                assert 0 < ade < fde, (name, col)
