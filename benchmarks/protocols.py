@@ -25,6 +25,7 @@ from trajpref.data import load_dataset
 from trajpref.data.registry import ETH_UCY
 from trajpref.evaluation import evaluate
 from trajpref.models import checkpoint as ckpt
+from trajpref.models import zoo
 from trajpref.models.baseline import ConstantVelocity
 from trajpref.results import make_row, write_rows
 
@@ -34,11 +35,11 @@ METRICS = ("min_ade", "min_fde", "joint_min_ade", "joint_min_fde")
 
 def published_generators(fold: str) -> dict[str, Path]:
     """Result-row method name -> checkpoint, for the fold's published generators."""
-    folder = ROOT / "src" / "trajpref" / "zoo" / fold
     out = {}
-    for path in sorted(folder.glob(f"generator*{ckpt.SUFFIX}")):
-        variant = path.name.removesuffix(ckpt.SUFFIX).removeprefix("generator")
-        out["pretrained" + variant] = path  # "" or "-long", "-speedaug", ...
+    for name, path in zoo.published().items():
+        dataset, stem = name.split("/")
+        if dataset == fold and stem.startswith("generator"):
+            out["pretrained" + stem.removeprefix("generator")] = path  # "", "-long", ...
     return out
 
 

@@ -1,6 +1,6 @@
 import numpy as np
 import pytest
-from synthetic import straight_rows, write_tracks
+from synthetic import make_scene, straight_rows, write_tracks
 
 from trajpref.data import ReadOptions, load_dataset, mean_speed, resolve_data_root
 from trajpref.data.registry import ETH_UCY, FEET_TO_METRES, apply_protocol
@@ -84,20 +84,16 @@ def test_sgan_protocol_counts(data_root, fold):
     assert ds.info.protocol == "sgan" and min(s.num_agents for s in ds.scenes) >= 2
 
 
-def _scene(p: int, tag: str) -> Scene:
-    return Scene(np.zeros((p, 8, 2), np.float32), np.zeros((p, 12, 2), np.float32),
-                 np.zeros(p, np.int64), tag)  # fmt: skip
-
-
 def test_sgan_protocol_keeps_scenes_with_two_or_more_agents():
     info = DatasetInfo("toy", "test", "m", 0.4, source="toy")
-    ds = TrajectoryDataset([_scene(1, "a"), _scene(2, "b"), _scene(1, "c"), _scene(5, "d")], info)
+    sizes = (1, 2, 1, 5)
+    ds = TrajectoryDataset([make_scene(p, seed=i) for i, p in enumerate(sizes)], info)
     kept = apply_protocol(ds, "sgan")
-    assert [s.scene_id for s in kept.scenes] == ["b", "d"]
+    assert [s.scene_id for s in kept.scenes] == ["synthetic#1", "synthetic#3"]
     assert kept.num_agents == 7 and kept.info.protocol == "sgan"
     same = apply_protocol(ds, "all")
     assert len(same) == 4 and same.info.protocol == "all" and ds.info.protocol == "all"
-    lonely = TrajectoryDataset([_scene(1, "a")], info)
+    lonely = TrajectoryDataset([make_scene(1)], info)
     with pytest.raises(DataError, match="leaves nothing"):
         apply_protocol(lonely, "sgan")
     with pytest.raises(TrajprefError, match="unknown protocol 'trajnet'; choose one of all, sgan"):
