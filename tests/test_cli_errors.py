@@ -12,6 +12,7 @@ The checks run in process through ``trajpref.cli.main`` on tiny synthetic data.
 from __future__ import annotations
 
 import os
+import random
 import re
 from pathlib import Path
 
@@ -58,6 +59,8 @@ CASES: dict[str, tuple[list[str], str]] = {
     "missing model file": ([*EVAL, "--model", "{in}/nope.safetensors"], r"no such model"),
     "random bytes as model": ([*EVAL, "--model", "{in}/rand.safetensors"],
                               r"rand\.safetensors: not a trajpref checkpoint"),
+    "pickle protocol 105 as model": ([*EVAL, "--model", "{in}/proto105.pt"],
+                                     r"proto105\.pt: not a loadable checkpoint"),
     "missing scorer": ([*EVAL, "--scorer", "{in}/nope.safetensors"], r"no such checkpoint"),
     "keep 0": ([*EVAL, "--keep", "0"], r"--keep must lie in 1\.\.--samples \(20\)"),
     "keep > samples": ([*EVAL, "--samples", "5", "--keep", "6"], r"--keep must lie in 1\.\."),
@@ -103,6 +106,9 @@ CASES: dict[str, tuple[list[str], str]] = {
                             r"--resume .*nope_last\.pt: no such file"),
     "resume random bytes": ([*TRAIN, "--out", "{out}/run", "--resume", "{in}/rand.bin"],
                             r"--resume .*rand\.bin: not a resume state .*denoiser_last\.pt"),
+    "resume pickle protocol 105": (
+        [*TRAIN, "--out", "{out}/run", "--resume", "{in}/proto105.pt"],
+        r"--resume .*proto105\.pt: not a resume state .*denoiser_last\.pt"),
     "resume a folder": ([*TRAIN, "--out", "{out}/run", "--resume", "{run}"],
                         r"is a folder; pass denoiser_last\.pt inside it"),
     "resume the wrong stage": (
@@ -175,8 +181,12 @@ def inputs(tmp_path_factory) -> Path:
         (root / name).mkdir()
         (root / name / "bad.txt").write_text(text)
     write_tracks(root / "nan" / "good.txt", straight_rows(24, agents=2))
-    (root / "rand.bin").write_bytes(os.urandom(2000))
-    (root / "rand.safetensors").write_bytes(os.urandom(2000))
+    noise = random.Random(0).randbytes(2000)  # fixed: the same bytes on every machine
+    (root / "rand.bin").write_bytes(noise)
+    (root / "rand.safetensors").write_bytes(noise)
+    # a pickle PROTO opcode for protocol 105: torch warns before it fails (seen in CI once
+    # os.urandom happened to start with 0x80); the warning must not reach the user
+    (root / "proto105.pt").write_bytes(b"\x80\x69" + noise)
     (root / "bad.yaml").write_text("data: [unclosed\n")
     torch.save({"format": "trajpref-checkpoint/1", "kind": "denoiser"}, root / "legacy.pt")
     torch.save(torch.zeros(3), root / "tensor.pt")

@@ -8,6 +8,7 @@ import json
 import math
 import os
 import tempfile
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -158,3 +159,14 @@ def read_checkpoint_header(path: str | Path) -> dict[str, Any]:
     if not isinstance(out, dict):
         raise TrajprefError(f"{path}: not a trajpref checkpoint")
     return out
+
+
+def load_tensors(path: str | Path) -> Any:
+    """``torch.load(path, weights_only=True)`` on the CPU, with torch's own warnings about the
+    file silenced: for a damaged or foreign file the caller's one-line error is the message,
+    not a pickle-protocol warning printed before it."""
+    import torch  # local: the other helpers here are used by tools that never load torch
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return torch.load(path, map_location="cpu", weights_only=True)

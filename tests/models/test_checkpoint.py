@@ -254,8 +254,10 @@ def test_garbage_is_a_trajpref_error(tmp_path, content):
     with pytest.raises(TrajprefError, match="not a trajpref checkpoint"):
         ckpt.load(tmp_path / "bad.safetensors")
     (tmp_path / "bad.pt").write_bytes(content)
-    with pytest.warns(FutureWarning), pytest.raises(TrajprefError):
-        ckpt.load(tmp_path / "bad.pt")
+    with warnings.catch_warnings():  # a broken .pt is one error, not a "legacy" warning first
+        warnings.simplefilter("error")
+        with pytest.raises(TrajprefError):
+            ckpt.load(tmp_path / "bad.pt")
 
 
 @pytest.mark.parametrize(
@@ -273,8 +275,10 @@ def test_safetensors_without_the_trajpref_header(tmp_path, metadata):
 
 def test_legacy_file_missing_fields_is_a_trajpref_error(tmp_path):
     torch.save({"format": "trajpref-checkpoint/1", "kind": "denoiser"}, tmp_path / "x.pt")
-    with pytest.warns(FutureWarning), pytest.raises(TrajprefError, match="without config"):
-        ckpt.load(tmp_path / "x.pt")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(TrajprefError, match="without config"):
+            ckpt.load(tmp_path / "x.pt")
 
 
 def test_unknown_kind_is_refused(tmp_path, cfg):

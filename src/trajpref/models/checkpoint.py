@@ -28,7 +28,7 @@ from safetensors.torch import load_file, save_file
 from trajpref.config import ExperimentConfig, experiment_from_dict, to_dict
 from trajpref.diffusion.schedule import DDPMSchedule
 from trajpref.errors import TrajprefError
-from trajpref.io import atomic_path, read_checkpoint_header
+from trajpref.io import atomic_path, load_tensors, read_checkpoint_header
 from trajpref.models import zoo
 from trajpref.models.denoiser import Denoiser
 from trajpref.models.generator import Generator
@@ -178,14 +178,8 @@ def _read_file(path: Path) -> dict[str, Any]:
 
 
 def _read_legacy(path: Path) -> dict[str, Any]:
-    warnings.warn(
-        f"{path}: a legacy .pt checkpoint; it still loads, but new files are {SUFFIX} "
-        "(benchmarks/convert_models.py converts)",
-        FutureWarning,
-        stacklevel=4,
-    )
     try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
+        payload = load_tensors(path)
     except Exception as exc:  # noqa: BLE001 - torch raises many types for bad files
         raise TrajprefError(
             f"{path}: not a loadable checkpoint ({exc.__class__.__name__})"
@@ -196,6 +190,13 @@ def _read_legacy(path: Path) -> dict[str, Any]:
     if missing:
         raise TrajprefError(f"{path}: a checkpoint without {', '.join(sorted(missing))}")
     _upgrade_config(payload)
+    # warned only once the file has proved to be a checkpoint: a broken file gets one error
+    warnings.warn(
+        f"{path}: a legacy .pt checkpoint; it still loads, but new files are {SUFFIX} "
+        "(benchmarks/convert_models.py converts)",
+        FutureWarning,
+        stacklevel=4,
+    )
     return payload
 
 

@@ -24,7 +24,7 @@ from trajpref.config import DataConfig, OptimConfig
 from trajpref.data.loader import SceneLoader
 from trajpref.data.transforms import augment
 from trajpref.errors import ConfigError, TrajprefError
-from trajpref.io import atomic_path, dumps_json
+from trajpref.io import atomic_path, dumps_json, load_tensors
 from trajpref.models import checkpoint as ckpt
 from trajpref.train.distributed import DistInfo
 from trajpref.train.stages import Stage
@@ -97,7 +97,7 @@ def load_resume_state(path: str | Path, stage: str | None = None) -> dict[str, A
         raise ConfigError(f"--resume {path}: a best checkpoint (weights only) cannot be resumed; "
                           f"pass {want} from the same run folder")  # fmt: skip
     try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
+        state = load_tensors(path)
     except Exception as exc:  # noqa: BLE001 - torch raises many types for bad files
         raise ConfigError(
             f"--resume {path}: not a resume state ({exc.__class__.__name__}); pass {want}"
