@@ -44,7 +44,7 @@ def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> N
     p.add_argument(
         "--dataset",
         required=True,
-        help="eth hotel univ zara1 zara2 sdd nba robo robo-sim, or a folder of "
+        help="eth hotel univ zara1 zara2 sdd nba robo robo-sim robo-mix, or a folder of "
         "'frame agent x y' text files (with train/val/test sub-folders when present)",
     )
     p.add_argument("--split", default=split_default, choices=["train", "val", "test"])

@@ -44,7 +44,7 @@ class DataConfig:
     """Which data to train on and how to batch and augment it."""
 
     dataset: str = "zara1"
-    """Dataset name (``eth hotel univ zara1 zara2 sdd nba robo-sim``) or a folder path."""
+    """Dataset name (``eth hotel univ zara1 zara2 sdd nba robo-sim robo-mix``) or a folder path."""
     val_dataset: str | None = None
     """Dataset for validation when it differs (Robo: train on robo-sim, validate on robo)."""
     max_agents: int = 512

@@ -3,7 +3,7 @@ import pytest
 from synthetic import make_scene, straight_rows, write_tracks
 
 from trajpref.data import ReadOptions, load_dataset, mean_speed, resolve_data_root
-from trajpref.data.registry import ETH_UCY, FEET_TO_METRES, apply_protocol
+from trajpref.data.registry import ETH_UCY, FEET_TO_METRES, apply_protocol, robo_episodes
 from trajpref.errors import DataError, TrajprefError
 from trajpref.types import DatasetInfo, Scene, TrajectoryDataset
 
@@ -136,6 +136,44 @@ def test_sdd_nba_robo(data_root):
     assert robo.num_agents == 1734 and len(robo) == 578
     with pytest.raises(TrajprefError, match="robo-sim"):
         load_dataset("robo", "train", data_root)
+
+
+def _sliding_windows(track: np.ndarray, name: str) -> list[Scene]:
+    """Every 20-frame window of ``track`` [P, F, 2], one frame apart."""
+    kinds = np.zeros(track.shape[0], np.int64)
+    return [Scene(track[:, f : f + 8], track[:, f + 8 : f + 20], kinds, f"{name}{f}")
+            for f in range(track.shape[1] - 19)]  # fmt: skip
+
+
+def test_robo_episodes_split_where_windows_stop_overlapping():
+    rng = np.random.default_rng(0)
+    a = np.cumsum(rng.normal(size=(3, 24, 2)), axis=1)  # 5 windows
+    b = np.cumsum(rng.normal(size=(3, 22, 2)), axis=1)  # 3 windows
+    c = np.cumsum(rng.normal(size=(2, 21, 2)), axis=1)  # 2 windows, fewer agents
+    scenes = _sliding_windows(a, "a") + _sliding_windows(b, "b") + _sliding_windows(c, "c")
+    assert robo_episodes(scenes).tolist() == [0] * 5 + [1] * 3 + [2] * 2
+
+
+@pytest.mark.realdata
+def test_robo_mix_holds_out_whole_real_episodes(data_root):
+    real = load_dataset("robo", "val", data_root)
+    assert robo_episodes(real.scenes).max() + 1 == 19
+    train = load_dataset("robo-mix", "train", data_root)
+    val = load_dataset("robo-mix", "val", data_root)
+    test = load_dataset("robo-mix", "test", data_root)
+    assert len(test) == 578  # the official test split, untouched
+    # 4 of 19 real episodes validate; the other 15 train, beside robo-sim's 10,000 episodes
+    real_ids = {s.scene_id for s in real.scenes}
+    val_ids = {s.scene_id for s in val.scenes}
+    train_real = [s for s in train.scenes if s.scene_id in real_ids]
+    assert val_ids <= real_ids and not val_ids & {s.scene_id for s in train_real}
+    assert len(val) + len({s.scene_id for s in train_real}) == len(real)
+    assert len(train) - len(train_real) == 10_000
+    assert 0.25 < len(train_real) / len(train) < 0.4  # real repeated to about a third
+    ids = [s.scene_id for s in real.scenes]
+    episode = dict(zip(ids, robo_episodes(real.scenes).tolist(), strict=True))
+    held = {episode[i] for i in val_ids}
+    assert len(held) == 4 and not held & {episode[s.scene_id] for s in train_real}
 
 
 def test_robo_sim_splits_are_seeded_and_distinct():

@@ -1,6 +1,6 @@
 """One entry point for every dataset: ``load_dataset(name, split, root)``.
 
-Names: ``eth hotel univ zara1 zara2 sdd nba robo robo-sim``, or a path to a folder of
+Names: ``eth hotel univ zara1 zara2 sdd nba robo robo-sim robo-mix``, or a path to a folder of
 ``frame agent x y`` text files or TrajNet++ ``.ndjson`` scene files (with ``train/val/test``
 sub-folders when present), or to one ``.ndjson`` file. Formats: ``docs/data_format.md``.
 """
@@ -21,7 +21,7 @@ from trajpref.types import DatasetInfo, Scene, TrajectoryDataset
 
 ETH_UCY = ("eth", "hotel", "univ", "zara1", "zara2")
 """The five ETH/UCY leave-one-out folds."""
-NAMES = (*ETH_UCY, "sdd", "nba", "robo", "robo-sim")
+NAMES = (*ETH_UCY, "sdd", "nba", "robo", "robo-sim", "robo-mix")
 """Built-in dataset names."""
 SPLITS = ("train", "val", "test")
 USER_TEXT = ("*.txt", "*.csv")
@@ -57,6 +57,7 @@ SPECS = {
     "nba": SourceSpec("m", 0.48),
     "robo": SourceSpec("m", 0.5),
     "robo-sim": SourceSpec("m", 0.5),
+    "robo-mix": SourceSpec("m", 0.5),
 }
 
 VAL_FRACTION = 0.1
@@ -67,6 +68,15 @@ VAL_SEED = 0
 ROBO_SIM_EPISODES = {"train": 10_000, "val": 1_000, "test": 1_000}
 """Episodes per robo-sim split; each split has its own seed (``ROBO_SIM_SEEDS``)."""
 ROBO_SIM_SEEDS = {"train": 0, "val": 1, "test": 2}
+
+ROBO_MIX_VAL_FRACTION = 0.2
+"""robo-mix: this fraction of the official Robo val split's episodes (whole episodes, drawn with
+``VAL_SEED``) is held out as robo-mix's validation split; the rest joins robo-sim's training
+split. robo-mix's test split is the official Robo test split."""
+ROBO_MIX_REAL_SHARE = 1 / 3
+"""robo-mix: the share of training scenes that are real. The ~400 real training windows are
+repeated (whole copies, rounded) until they make up about this share beside robo-sim's 10,000
+episodes; without it they would be 4 % of what the model sees. One unsearched choice."""
 
 
 def resolve_data_root(root: str | Path | None = None) -> Path:
@@ -142,6 +152,8 @@ def _load(
     options = options or text.ReadOptions()
     if name == "robo-sim":
         return _robo_sim(split)
+    if name == "robo-mix":
+        return _robo_mix(split, root, options)
     if name in NAMES:
         base = resolve_data_root(root)
         spec = SPECS[name]
@@ -292,6 +304,54 @@ def _robo_sim(split: str) -> TrajectoryDataset:
         spec.t_hist,
         spec.t_fut,
         f"simulated: {episodes} episodes, seed {seed}",
+    )
+    return TrajectoryDataset(scenes, info)
+
+
+def robo_episodes(scenes: list[Scene]) -> np.ndarray:
+    """Episode id [S] of each window of an official Robo split, in file order.
+
+    The files hold sliding windows of a few recordings, one frame apart: window i continues
+    window i-1 when its 20 frames are those of i-1 shifted by one. Holding out whole episodes
+    keeps overlapping windows from landing on both sides of a split."""
+    ids = np.zeros(len(scenes), np.int64)
+    for i in range(1, len(scenes)):
+        prev, cur = scenes[i - 1], scenes[i]
+        same = prev.num_agents == cur.num_agents
+        if same:
+            a = np.concatenate([prev.history, prev.future], axis=1)  # [P, 20, 2]
+            b = np.concatenate([cur.history, cur.future], axis=1)  # [P, 20, 2]
+            same = bool(np.allclose(a[:, 1:], b[:, :-1], atol=1e-3))
+        ids[i] = ids[i - 1] + (0 if same else 1)
+    return ids
+
+
+def _robo_mix(split: str, root: str | Path | None, options: text.ReadOptions) -> TrajectoryDataset:
+    base = resolve_data_root(root)
+    spec = SPECS["robo-mix"]
+    if split == "test":
+        scenes, source = _robo(base, "test", options)
+        where = str(source)
+    else:
+        real, source = _robo(base, "val", options)
+        episode = robo_episodes(real)  # [S]
+        rng = np.random.default_rng(VAL_SEED)
+        n_ep = int(episode.max()) + 1
+        held = rng.permutation(n_ep)[: max(1, round(ROBO_MIX_VAL_FRACTION * n_ep))]
+        is_val = np.isin(episode, held)  # [S]
+        chosen = [s for s, v in zip(real, is_val, strict=True) if v == (split == "val")]
+        if split == "val":
+            scenes = chosen
+            where = f"{source}: {len(held)} of {n_ep} episodes held out"
+        else:
+            sim = _robo_sim("train").scenes
+            copies = max(1, round(ROBO_MIX_REAL_SHARE / (1 - ROBO_MIX_REAL_SHARE)
+                                  * len(sim) / len(chosen)))  # fmt: skip
+            scenes = sim + chosen * copies
+            where = (f"robo-sim train + {source}: {n_ep - len(held)} of {n_ep} episodes "
+                     f"({len(chosen)} windows x {copies})")  # fmt: skip
+    info = DatasetInfo(
+        "robo-mix", split, spec.units, spec.frame_interval, spec.t_hist, spec.t_fut, where
     )
     return TrajectoryDataset(scenes, info)
 
