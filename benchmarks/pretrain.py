@@ -22,18 +22,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
 from pathlib import Path
-
-import torch
 
 from trajpref.config import load_config
 from trajpref.data import load_dataset
-from trajpref.evaluation import evaluate
+from trajpref.evaluation import evaluate, time_predictors
 from trajpref.models import checkpoint as ckpt
 from trajpref.results import make_row, write_rows
 from trajpref.train.run import train_stage
-from trajpref.types import collate
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -50,21 +46,6 @@ def _train(args, run_dir: Path) -> None:
 def _metrics_log(run_dir: Path, stage: str) -> list[dict]:
     path = run_dir / f"{stage}_metrics.jsonl"
     return [json.loads(line) for line in path.open()] if path.is_file() else []
-
-
-@torch.no_grad()
-def time_samplers(leap, full, dataset, scenes: int, samples: int) -> dict[str, float]:
-    """ms per scene for both samplers on the same scenes, interleaved scene by scene."""
-    times = {"leapfrog": 0.0, "full": 0.0}
-    n = min(scenes, len(dataset))
-    for i in range(n):
-        batch = collate([dataset[i]])
-        for name, model in (("leapfrog", leap), ("full", full)):
-            gen = torch.Generator().manual_seed(i)
-            start = time.perf_counter()
-            model.predict(batch, samples, gen)
-            times[name] += time.perf_counter() - start
-    return {k: 1000 * v / n for k, v in times.items()} | {"scenes": n}
 
 
 def main() -> None:
@@ -127,7 +108,8 @@ def main() -> None:
     test = load_dataset(args.dataset, "test", args.data_root)
     leap = ckpt.load_predictor(published, "leapfrog", args.device)
     full = ckpt.load_predictor(published, "full", args.device)
-    speed = time_samplers(leap, full, test, args.timing_scenes, args.samples)
+    speed = time_predictors({"leapfrog": leap, "full": full}, test, args.samples,
+                            args.timing_scenes)  # fmt: skip
     params = {"denoiser": sum(p.numel() for p in leap.denoiser.parameters()),
               "generator": sum(p.numel() for p in leap.generator.parameters())}  # fmt: skip
 

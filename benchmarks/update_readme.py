@@ -68,26 +68,48 @@ def main() -> None:
 
 
 def speed_table(meta_dir: Path) -> str:
-    """Training cost, parameters and sampler speed from meta/pretrained_*.json."""
+    """Training cost and parameters from meta/pretrained_*.json (default configs); sampler
+    latency and the full / leapfrog ratio from meta/speed.json (every published generator,
+    timed side by side in one run by benchmarks/speed.py) where it has the model, else from
+    the training run's own timing (marked *)."""
+    speed_path = meta_dir / "speed.json"
+    speed = json.loads(speed_path.read_text()) if speed_path.is_file() else {"models": {}}
+    timed = speed["models"]
     lines = [
-        "| dataset | params D / G | train D / G (min) | samples/s D / G | leapfrog ms/scene "
+        "| model | params D / G | train D / G (min) | samples/s D / G | leapfrog ms/scene "
         "| full ms/scene | full / leapfrog | score K=20 ms/scene |",
         "|---|---|---|---|---|---|---|---|",
     ]
+    defaults = {}
     for path in sorted(meta_dir.glob("pretrained_*.json")):
         m = json.loads(path.read_text())
-        if m.get("variant"):  # trained elsewhere or off the default config: docs/pretraining.md
-            continue
-        score_path = meta_dir / f"score_{m['dataset']}.json"
+        if not m.get("variant"):  # variants: trained elsewhere or off the default config
+            defaults[f"{m['dataset']}/generator"] = m
+    for name in sorted(set(defaults) | set(timed)):
+        m, t = defaults.get(name), timed.get(name)
+        score_path = meta_dir / f"score_{name.split('/')[0]}.json"
         score_ms = (json.loads(score_path.read_text())["ms_to_rank_k_samples_per_scene"]
-                    if score_path.is_file() else None)  # fmt: skip
-        p, t, r, ms = m["params"], m["stage_seconds"], m["samples_per_second"], m["ms_per_scene"]
+                    if score_path.is_file() and m is not None else None)  # fmt: skip
+        if m is not None:
+            p, secs, r = m["params"], m["stage_seconds"], m["samples_per_second"]
+            cost = (f"{p['denoiser'] / 1e6:.2f} M / {p['generator'] / 1e6:.2f} M "
+                    f"| {secs['denoiser'] / 60:.1f} / {secs['generator'] / 60:.1f} "
+                    f"| {r['denoiser']:.0f} / {r['generator']:.0f}")  # fmt: skip
+        else:
+            cost = "– | – | –"
+        if t is not None:
+            ms = (f"{t['leapfrog_ms_per_scene']:.1f} | {t['full_ms_per_scene']:.1f} "
+                  f"| {t['full_over_leapfrog']:.1f}x")  # fmt: skip
+        else:
+            ms = (f"{m['ms_per_scene']['leapfrog']:.1f}* | {m['ms_per_scene']['full']:.1f}* "
+                  f"| {m['speedup_full_over_leapfrog']:.1f}x*")  # fmt: skip
+        score = "–" if score_ms is None else f"{score_ms:.1f}"
+        lines.append(f"| {name} | {cost} | {ms} | {score} |")
+    if timed:
+        lines.append("")
         lines.append(
-            f"| {m['dataset']} | {p['denoiser'] / 1e6:.2f} M / {p['generator'] / 1e6:.2f} M "
-            f"| {t['denoiser'] / 60:.1f} / {t['generator'] / 60:.1f} "
-            f"| {r['denoiser']:.0f} / {r['generator']:.0f} | {ms['leapfrog']:.1f} "
-            f"| {ms['full']:.1f} | {m['speedup_full_over_leapfrog']:.1f}x "
-            f"| {'–' if score_ms is None else f'{score_ms:.1f}'} |"
+            f"_Latencies: `{speed['command']}`, {speed['date']}, {speed['machine']}; "
+            f"{speed['samples']} samples, the same test scenes for both samplers._"
         )
     return "\n".join(lines)
 

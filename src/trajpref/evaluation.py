@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from typing import Literal, Protocol
 
@@ -22,7 +23,7 @@ from trajpref.metrics import (
 )
 from trajpref.score.scorer import ScoreAccumulator, TrajectoryScorer
 from trajpref.score.selection import gather
-from trajpref.types import Batch, TrajectoryDataset
+from trajpref.types import Batch, TrajectoryDataset, collate
 
 COLLISION_KEYS = ("col_i_pct", "col_ii_pct", "col_gt_pct", "col_agents", "col_radius")
 """The collision keys of ``evaluate``'s result (None when the collision metrics are off)."""
@@ -158,3 +159,34 @@ def predict_dataset(
         if key in out:
             out[key] = out[key].T  # [K, B]
     return out
+
+
+@torch.no_grad()
+def time_predictors(
+    predictors: dict[str, Predictor],
+    dataset: TrajectoryDataset,
+    num_samples: int,
+    scenes: int = 100,
+    warmup: int = 2,
+) -> dict[str, float]:
+    """Milliseconds per scene of each predictor, timed side by side: the same ``scenes`` scenes
+    (evenly spaced over the split), one scene per call, the predictors interleaved scene by
+    scene so that a change in machine load hits them alike. ``warmup`` calls per predictor
+    come first and are not counted. Returns ``{name: ms}`` plus ``"scenes"``."""
+    if not predictors:
+        raise ConfigError("time_predictors needs at least one predictor")
+    if scenes < 1 or len(dataset) == 0:
+        raise ConfigError("time_predictors needs at least one scene")
+    picks = np.unique(np.linspace(0, len(dataset) - 1, min(scenes, len(dataset))).round())
+    batches = [collate([dataset[int(i)]]) for i in picks]
+    for model in predictors.values():
+        for b in batches[:warmup]:
+            model.predict(b, num_samples, torch.Generator().manual_seed(0))
+    total = dict.fromkeys(predictors, 0.0)
+    for i, batch in enumerate(batches):
+        for name, model in predictors.items():
+            gen = torch.Generator().manual_seed(i)
+            start = time.perf_counter()
+            model.predict(batch, num_samples, gen)
+            total[name] += time.perf_counter() - start
+    return {name: 1000 * t / len(batches) for name, t in total.items()} | {"scenes": len(batches)}

@@ -1,0 +1,98 @@
+"""Sampler speed of every published generator, measured side by side in one run.
+
+    python benchmarks/speed.py --data-root ../shared/data
+
+For each published ``DATASET/generator*`` this times, on the same test scenes of its dataset
+(evenly spaced over the split, one scene per call, K = 20), the leapfrog sampler (the
+generator plus tau denoising steps) against the full sampler of its own denoiser (100
+ancestral steps), interleaved scene by scene (``evaluation.time_predictors``). All models are
+timed in this one process, one after the other, so their latencies compare with each other;
+the ratio full / leapfrog is the number that does not depend on the machine's load.
+
+Writes benchmarks/results/meta/speed.json (machine, threads, date, command, one entry per
+model); ``python benchmarks/update_readme.py`` puts it in the README's cost table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import sys
+from pathlib import Path
+
+import torch
+from tqdm.auto import tqdm
+
+from trajpref.data import load_dataset
+from trajpref.evaluation import time_predictors
+from trajpref.models import checkpoint as ckpt
+from trajpref.models import zoo
+from trajpref.results import machine
+
+ROOT = Path(__file__).resolve().parent.parent
+OUT = ROOT / "benchmarks" / "results" / "meta" / "speed.json"
+
+
+def generators(only: list[str] | None) -> dict[str, Path]:
+    """Published generators by zoo name, optionally only those of the datasets in ``only``."""
+    out = {}
+    for name, path in zoo.published().items():
+        dataset, stem = name.split("/")
+        if stem.startswith("generator") and (only is None or dataset in only):
+            out[name] = path
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data-root", default=None, help="default: $TRAJPREF_DATA")
+    parser.add_argument("--datasets", nargs="+", default=None, help="default: every dataset")
+    parser.add_argument("--scenes", type=int, default=100, help="test scenes per model")
+    parser.add_argument("--samples", type=int, default=20)
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--out", default=str(OUT))
+    args = parser.parse_args()
+
+    models = generators(args.datasets)
+    if not models:
+        parser.error("no published generator matches --datasets")
+    entries = {}
+    splits: dict[str, object] = {}
+    for name, path in tqdm(models.items(), desc="models", unit="model"):
+        dataset = name.split("/")[0]
+        if dataset not in splits:
+            splits[dataset] = load_dataset(dataset, "test", args.data_root)
+        test = splits[dataset]
+        predictors = {
+            "leapfrog": ckpt.load_predictor(path, "leapfrog", args.device),
+            "full": ckpt.load_predictor(path, "full", args.device),
+        }
+        ms = time_predictors(predictors, test, args.samples, args.scenes)
+        picks = ms["scenes"]
+        entries[name] = {
+            "dataset": dataset,
+            "scenes": picks,
+            "mean_agents_per_scene": test.num_agents / len(test),
+            "leapfrog_ms_per_scene": round(ms["leapfrog"], 2),
+            "full_ms_per_scene": round(ms["full"], 2),
+            "full_over_leapfrog": round(ms["full"] / ms["leapfrog"], 2),
+        }
+        tqdm.write(f"{name:<26} leapfrog {ms['leapfrog']:7.1f} ms  full {ms['full']:8.1f} ms  "
+                   f"ratio {ms['full'] / ms['leapfrog']:.1f}x  ({picks} scenes)")  # fmt: skip
+    result = {
+        "machine": machine(),
+        "threads": torch.get_num_threads(),
+        "date": dt.date.today().isoformat(),
+        "command": "python benchmarks/speed.py " + " ".join(sys.argv[1:]),
+        "samples": args.samples,
+        "models": entries,
+    }
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(result, indent=2) + "\n")
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()
