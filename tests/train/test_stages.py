@@ -230,6 +230,9 @@ def test_steps_per_epoch_caps_each_epoch(tmp_path, cfg):
                                                                    steps_per_epoch=1))  # fmt: skip
     summary = train_stage("diffusion", capped, tmp_path, device="cpu", progress=False)
     assert summary["steps"] == capped.denoiser.epochs
+    # the summary's throughput is the last epoch's, as its metrics line logs it
+    last = json.loads((tmp_path / "denoiser_metrics.jsonl").read_text().splitlines()[-1])
+    assert summary["samples_per_second"] == pytest.approx(last["samples_per_second"], abs=0.06)
 
 
 def test_nonfinite_losses_are_skipped_then_refused(tmp_path, cfg, folder):

@@ -203,6 +203,7 @@ def fit(
         objective = DistributedDataParallel(objective, device_ids=device_ids)
 
     log = MetricLog(out_dir, stage.name, main)
+    rate = None  # agent-windows per second of the last epoch run here
     nonfinite = 0
     scale_range = (data_cfg.scale_min, data_cfg.scale_max)
     use_scale = scale_range != (1.0, 1.0)
@@ -255,11 +256,12 @@ def fit(
         elapsed += time.perf_counter() - t0
         spent += clock() - c0
         epoch_seconds = time.perf_counter() - t0
+        rate = agents / max(1e-9, epoch_seconds)
         record: dict[str, Any] = {
             "epoch": epoch + 1, "step": step, "lr": sched.get_last_lr()[0],
             "train_seconds": round(elapsed, 2),
             f"budget_{optim_cfg.budget_clock}_seconds": round(spent, 2),
-            "samples_per_second": round(agents / max(1e-9, epoch_seconds), 1),
+            "samples_per_second": round(rate, 1),
         }  # fmt: skip
         record.update({f"train_{k}": v / max(1, agents) for k, v in sums.items()})
         last = epoch + 1 == optim_cfg.epochs or stop
@@ -286,4 +288,5 @@ def fit(
             tqdm.write(f"[{stage.name}] " + " ".join(f"{k}={v}" for k, v in summary.items()))
         if stop:
             break
-    return {"best": best, "train_seconds": elapsed, "budget_seconds": spent, "steps": step}
+    return {"best": best, "train_seconds": elapsed, "budget_seconds": spent, "steps": step,
+            "samples_per_second": rate}  # fmt: skip
