@@ -75,10 +75,14 @@ def speed_table(meta_dir: Path) -> str:
     speed_path = meta_dir / "speed.json"
     speed = json.loads(speed_path.read_text()) if speed_path.is_file() else {"models": {}}
     timed = speed["models"]
+    cost_path = meta_dir / "train_cost.json"
+    cost_run = json.loads(cost_path.read_text()) if cost_path.is_file() else {"datasets": {}}
+    estimates = cost_run["datasets"]
     lines = [
-        "| model | params D / G | train D / G (min) | samples/s D / G | leapfrog ms/scene "
-        "| full ms/scene | full / leapfrog | score K=20 ms/scene |",
-        "|---|---|---|---|---|---|---|---|",
+        "| model | params D / G | train D / G (min), as run | train D + G (min), estimated "
+        "alone | samples/s D / G | leapfrog ms/scene | full ms/scene | full / leapfrog "
+        "| score K=20 ms/scene |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     defaults = {}
     for path in sorted(meta_dir.glob("pretrained_*.json")):
@@ -90,13 +94,15 @@ def speed_table(meta_dir: Path) -> str:
         score_path = meta_dir / f"score_{name.split('/')[0]}.json"
         score_ms = (json.loads(score_path.read_text())["ms_to_rank_k_samples_per_scene"]
                     if score_path.is_file() and m is not None else None)  # fmt: skip
+        est = estimates.get(name.split("/")[0]) if m is not None else None
+        guess = "–" if est is None else f"{est['minutes']:.1f}"
         if m is not None:
             p, secs, r = m["params"], m["stage_seconds"], m["samples_per_second"]
             cost = (f"{p['denoiser'] / 1e6:.2f} M / {p['generator'] / 1e6:.2f} M "
-                    f"| {secs['denoiser'] / 60:.1f} / {secs['generator'] / 60:.1f} "
+                    f"| {secs['denoiser'] / 60:.1f} / {secs['generator'] / 60:.1f} | {guess} "
                     f"| {r['denoiser']:.0f} / {r['generator']:.0f}")  # fmt: skip
         else:
-            cost = "– | – | –"
+            cost = "– | – | – | –"
         if t is not None:
             ms = (f"{t['leapfrog_ms_per_scene']:.1f} | {t['full_ms_per_scene']:.1f} "
                   f"| {t['full_over_leapfrog']:.1f}x")  # fmt: skip
@@ -105,6 +111,13 @@ def speed_table(meta_dir: Path) -> str:
                   f"| {m['speedup_full_over_leapfrog']:.1f}x*")  # fmt: skip
         score = "–" if score_ms is None else f"{score_ms:.1f}"
         lines.append(f"| {name} | {cost} | {ms} | {score} |")
+    if estimates:
+        lines.append("")
+        lines.append(
+            f"_Estimated minutes: `{cost_run['command']}`, {cost_run['date']}, "
+            f"{cost_run['machine']}: each stage's throughput and one validation pass, measured "
+            "alone, times the config's epochs and evaluations._"
+        )
     if timed:
         lines.append("")
         lines.append(
