@@ -16,19 +16,15 @@ model); ``python benchmarks/update_readme.py`` puts it in the README's cost tabl
 from __future__ import annotations
 
 import argparse
-import datetime as dt
-import json
-import sys
 from pathlib import Path
 
-import torch
 from tqdm.auto import tqdm
 
 from trajpref.data import load_dataset
 from trajpref.evaluation import time_predictors
 from trajpref.models import checkpoint as ckpt
 from trajpref.models import zoo
-from trajpref.results import machine
+from trajpref.results import write_meta
 
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "benchmarks" / "results" / "meta" / "speed.json"
@@ -80,18 +76,8 @@ def main() -> None:
         }
         tqdm.write(f"{name:<26} leapfrog {ms['leapfrog']:7.1f} ms  full {ms['full']:8.1f} ms  "
                    f"ratio {ms['full'] / ms['leapfrog']:.1f}x  ({picks} scenes)")  # fmt: skip
-    result = {
-        "machine": machine(),
-        "threads": torch.get_num_threads(),
-        "date": dt.date.today().isoformat(),
-        "command": "python benchmarks/speed.py " + " ".join(sys.argv[1:]),
-        "samples": args.samples,
-        "models": entries,
-    }
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"wrote {out}")
+    write_meta(args.out, samples=args.samples, models=entries)
+    print(f"wrote {args.out}")
 
 
 if __name__ == "__main__":

@@ -19,16 +19,11 @@ data loading and checkpoint writes (seconds).
 from __future__ import annotations
 
 import argparse
-import datetime as dt
-import json
-import sys
 import tempfile
 from pathlib import Path
 
-import torch
-
 from trajpref.config import load_config
-from trajpref.results import machine
+from trajpref.results import write_meta
 from trajpref.train.run import train_stage
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -101,17 +96,8 @@ def main() -> None:
                            if isinstance(v, dict))  # fmt: skip
         print(f"{dataset:<9} {parts} = {total:.1f} min (estimated, alone on the machine)",
               flush=True)  # fmt: skip
-    result = {
-        "machine": machine(),
-        "threads": torch.get_num_threads(),
-        "date": dt.date.today().isoformat(),
-        "command": "python benchmarks/train_cost.py " + " ".join(sys.argv[1:]),
-        "datasets": entries,
-    }
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"wrote {out}")
+    write_meta(args.out, datasets=entries)
+    print(f"wrote {args.out}")
 
 
 if __name__ == "__main__":

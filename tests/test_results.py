@@ -12,6 +12,7 @@ from trajpref.results import (
     merge_rows,
     peers_table,
     read_rows,
+    write_meta,
     write_rows,
 )
 
@@ -68,3 +69,14 @@ def test_the_peers_file_has_a_source_and_a_protocol_for_every_method():
             if col in entry:
                 ade, fde = entry[col]
                 assert 0 < ade < fde, (name, col)
+
+
+def test_write_meta_records_where_and_how_then_the_fields(tmp_path, monkeypatch):
+    monkeypatch.setattr("sys.argv", ["benchmarks/speed.py", "--scenes", "5"])
+    path = tmp_path / "deep" / "speed.json"
+    written = write_meta(path, models={"a/generator": {"ratio": 12.5}}, bad=float("nan"))
+    loaded = json.loads(path.read_text())
+    assert loaded == written | {"bad": None}  # strict JSON: NaN is written as null
+    assert loaded["command"] == "python benchmarks/speed.py --scenes 5"
+    assert loaded["threads"] >= 1 and "CPU cores" in loaded["machine"]
+    assert loaded["models"]["a/generator"]["ratio"] == 12.5

@@ -57,6 +57,16 @@ def make_row(**values: Any) -> dict[str, Any]:
     return row
 
 
+def write_meta(path: str | Path, **fields: Any) -> dict[str, Any]:
+    """Write a benchmark's measurement file: where, when and by what command it was measured
+    (``machine``, ``threads``, ``date``, ``command``), then ``fields``. Returns what it wrote."""
+    meta = {"machine": machine(), "threads": torch.get_num_threads(),
+            "date": date.today().isoformat(), "command": command_line(), **fields}  # fmt: skip
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    write_json(path, meta)
+    return meta
+
+
 def write_rows(path: str | Path, rows: list[dict[str, Any]]) -> None:
     for row in rows:
         if set(row) != set(FIELDS):
