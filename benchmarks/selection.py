@@ -32,7 +32,7 @@ from trajpref.data.transforms import scene_speeds
 from trajpref.evaluation import sampled_batches
 from trajpref.metrics import MetricAccumulator
 from trajpref.models import checkpoint as ckpt
-from trajpref.results import command_line, machine, make_row, write_rows
+from trajpref.results import command_line, machine, make_row, upsert_rows
 from trajpref.score.scorer import TrajectoryScorer, score_timesteps
 from trajpref.score.selection import METHODS, SelectionConfig, gather, select_samples
 from trajpref.train.stages import subset
@@ -185,13 +185,15 @@ def main() -> None:
             "command": command_line(), "machine": machine()}  # fmt: skip
     out_dir = ROOT / "benchmarks" / "results"
     suffix = ("" if args.split == "test" else "_val") + (f"_{args.tag}" if args.tag else "")
+    suffix += f"_seed{args.seed}" if args.seed else ""  # seed 0 keeps the files' old names
     (out_dir / "meta").mkdir(exist_ok=True)
     (out_dir / "meta" / f"select_{args.dataset}{suffix}.json").write_text(
         json.dumps(meta | {"rows": rows}, indent=2) + "\n"
     )
     if args.split == "test":
         draws = "" if args.draws == 1 else f"_x{args.draws}"
-        write_rows(out_dir / f"select_{args.dataset}{draws}.json", rows)
+        # rows of other seeds stay: each seed adds its own (results.upsert_rows)
+        upsert_rows(out_dir / f"select_{args.dataset}{draws}.json", rows)
 
 
 def training_speed(dataset: str, data_root: str | None, quantile: float) -> float:

@@ -12,6 +12,7 @@ from trajpref.results import (
     merge_rows,
     peers_table,
     read_rows,
+    upsert_rows,
     write_meta,
     write_rows,
 )
@@ -80,3 +81,14 @@ def test_write_meta_records_where_and_how_then_the_fields(tmp_path, monkeypatch)
     assert loaded["command"] == "python benchmarks/speed.py --scenes 5"
     assert loaded["threads"] >= 1 and "CPU cores" in loaded["machine"]
     assert loaded["models"]["a/generator"]["ratio"] == 12.5
+
+
+def test_upsert_rows_adds_other_seeds_and_replaces_the_same_measurement(tmp_path):
+    path = tmp_path / "select_zara1.json"
+    seed0 = [_row("zara1", "select-a", fde=0.30), _row("zara1", "select-b", fde=0.31)]
+    upsert_rows(path, seed0)
+    upsert_rows(path, [_row("zara1", "select-a", seed=1, fde=0.32)])  # another seed: added
+    upsert_rows(path, [_row("zara1", "select-b", fde=0.29)])  # a re-run: replaced
+    rows = json.loads(path.read_text())
+    got = {(r["method"], r["seed"]): r["min_fde"] for r in rows}
+    assert got == {("select-a", 0): 0.30, ("select-b", 0): 0.29, ("select-a", 1): 0.32}

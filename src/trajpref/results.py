@@ -74,6 +74,23 @@ def write_rows(path: str | Path, rows: list[dict[str, Any]]) -> None:
     write_json(path, rows)
 
 
+ROW_KEY = ("dataset", "split", "protocol", "method", "seed", "samples")
+"""What identifies one measurement: rows that agree on these measure the same thing."""
+
+
+def upsert_rows(path: str | Path, rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Write ``rows`` into the rows file ``path``, keeping its other rows: a row already there
+    with the same ``ROW_KEY`` is replaced, the rest stay in their order (so a run with another
+    seed adds to the file instead of overwriting it). Returns the rows written."""
+    path = Path(path)
+    new = {tuple(r[k] for k in ROW_KEY): r for r in rows}
+    old = json.loads(path.read_text()) if path.is_file() else []
+    kept = [r for r in old if tuple(r[k] for k in ROW_KEY) not in new]
+    out = kept + list(new.values())
+    write_rows(path, out)
+    return out
+
+
 def read_rows(folder: str | Path, protocol: str | None = None) -> list[dict[str, Any]]:
     """Every row of ``folder/*.json``; only those measured under ``protocol`` when given."""
     rows = []
@@ -96,7 +113,7 @@ def merge_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     first non-null value wins."""
     merged: dict[tuple, dict[str, Any]] = {}
     for r in rows:
-        key = (r["dataset"], r["split"], r["protocol"], r["method"], r["seed"], r["samples"])
+        key = tuple(r[k] for k in ROW_KEY)
         if key not in merged:
             merged[key] = dict(r)
         else:
