@@ -27,7 +27,7 @@ from trajpref.evaluation import evaluate
 from trajpref.models import checkpoint as ckpt
 from trajpref.models import zoo
 from trajpref.models.baseline import ConstantVelocity
-from trajpref.results import make_row, write_rows
+from trajpref.results import make_row, upsert_rows
 
 ROOT = Path(__file__).resolve().parent.parent
 METRICS = ("min_ade", "min_fde", "joint_min_ade", "joint_min_fde")
@@ -78,7 +78,7 @@ def main() -> None:
             ))  # fmt: skip
             print(f"  {method:<20} minADE {res['min_ade']:.3f}  minFDE {res['min_fde']:.3f}  "
                   f"joint {res['joint_min_ade']:.3f} / {res['joint_min_fde']:.3f}")  # fmt: skip
-    write_rows(args.out, rows)
+    upsert_rows(args.out, rows)  # the other folds' rows stay
     print(f"wrote {args.out}")
 
 
