@@ -28,7 +28,7 @@ from trajpref.config import load_config
 from trajpref.data import load_dataset
 from trajpref.evaluation import evaluate, time_predictors
 from trajpref.models import checkpoint as ckpt
-from trajpref.results import make_row, upsert_rows
+from trajpref.results import make_row, upsert_rows, write_rows
 from trajpref.train.run import train_stage
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -147,7 +147,11 @@ def main() -> None:
               f"{res['min_fde']:.3f}  joint {res['joint_min_ade']:.3f}/"
               f"{res['joint_min_fde']:.3f}  {ms:.1f} ms/scene")  # fmt: skip
     out = ROOT / "benchmarks" / "results" / f"pretrained_{args.dataset}{file_suffix}.json"
-    upsert_rows(out, rows)  # a --no-full-eval run keeps the full sampler's row of the same denoiser
+    if args.no_full_eval and logs["denoiser"] and out.is_file():
+        # a new denoiser: the file's full-sampler row measured the old one; drop it
+        stale = [r for r in json.loads(out.read_text()) if not r["method"].startswith("full")]
+        write_rows(out, stale)
+    upsert_rows(out, rows)  # a generator-only run keeps the full sampler's row (same denoiser)
     extra = {
         "dataset": args.dataset,
         "variant": args.variant,
