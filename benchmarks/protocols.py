@@ -35,12 +35,8 @@ METRICS = ("min_ade", "min_fde", "joint_min_ade", "joint_min_fde")
 
 def published_generators(fold: str) -> dict[str, Path]:
     """Result-row method name -> checkpoint, for the fold's published generators."""
-    out = {}
-    for name, path in zoo.published().items():
-        dataset, stem = name.split("/")
-        if dataset == fold and stem.startswith("generator"):
-            out["pretrained" + stem.removeprefix("generator")] = path  # "", "-long", ...
-    return out
+    return {"pretrained" + name.split("/")[1].removeprefix("generator"): path  # "", "-long"
+            for name, path in zoo.generators([fold]).items()}  # fmt: skip
 
 
 def main() -> None:

@@ -30,16 +30,6 @@ ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "benchmarks" / "results" / "meta" / "speed.json"
 
 
-def generators(only: list[str] | None) -> dict[str, Path]:
-    """Published generators by zoo name, optionally only those of the datasets in ``only``."""
-    out = {}
-    for name, path in zoo.published().items():
-        dataset, stem = name.split("/")
-        if stem.startswith("generator") and (only is None or dataset in only):
-            out[name] = path
-    return out
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data-root", default=None, help="default: $TRAJPREF_DATA")
@@ -50,7 +40,7 @@ def main() -> None:
     parser.add_argument("--out", default=str(OUT))
     args = parser.parse_args()
 
-    models = generators(args.datasets)
+    models = zoo.generators(args.datasets)
     if not models:
         parser.error("no published generator matches --datasets")
     entries = {}

@@ -19,6 +19,7 @@ data loading and checkpoint writes (seconds).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import tempfile
 from pathlib import Path
 
@@ -39,15 +40,13 @@ def evaluations(epochs: int, every: int) -> int:
 def probe(cfg, stage: str, data_root, steps: int, denoiser: Path | None) -> dict:
     """Time ``steps`` training steps of one stage (one short epoch; its first steps' warm-up
     counts, so the rate errs low) and the validation pass that follows them."""
-    optim = cfg.denoiser if stage == "diffusion" else cfg.generator
-    saved = (optim.epochs, optim.steps_per_epoch, optim.eval_every)
-    optim.epochs, optim.steps_per_epoch, optim.eval_every = 1, steps, 1
-    try:
-        with tempfile.TemporaryDirectory() as tmp:
-            summary = train_stage(stage, cfg, Path(tmp) / "run", data_root, "cpu",
-                                  denoiser=denoiser, progress=False)  # fmt: skip
-    finally:
-        optim.epochs, optim.steps_per_epoch, optim.eval_every = saved
+    section = "denoiser" if stage == "diffusion" else "generator"
+    short = dataclasses.replace(getattr(cfg, section), epochs=1, steps_per_epoch=steps,
+                                eval_every=1)  # fmt: skip
+    with tempfile.TemporaryDirectory() as tmp:
+        summary = train_stage(stage, dataclasses.replace(cfg, **{section: short}),
+                              Path(tmp) / "run", data_root, "cpu", denoiser=denoiser,
+                              progress=False)  # fmt: skip
     return {
         "rate": summary["samples_per_second"],  # agent-windows per second of the timed steps
         "val_seconds": summary["wall_seconds"] - summary["train_seconds"],

@@ -59,6 +59,16 @@ def test_a_name_resolves_and_loads_the_denoiser_it_names(fake_zoo):
     }
 
 
+def test_generators_lists_each_datasets_generators_only(fake_zoo):
+    checkpoint.publish(fake_zoo / "walks/generator.safetensors",
+                       fake_zoo / "walks/generator-long.safetensors")  # fmt: skip
+    checkpoint.publish(fake_zoo / "walks/generator.safetensors",
+                       fake_zoo / "runs/generator.safetensors")  # fmt: skip
+    assert list(zoo.generators()) == ["runs/generator", "walks/generator", "walks/generator-long"]
+    assert list(zoo.generators(["walks"])) == ["walks/generator", "walks/generator-long"]
+    assert zoo.generators(["nowhere"]) == {}
+
+
 def test_an_unknown_name_lists_the_published_ones(fake_zoo):
     with pytest.raises(TrajprefError, match=r"walks/nope: .*published: walks/denoiser, "
                        r"walks/generator \(`trajpref models`"):  # fmt: skip

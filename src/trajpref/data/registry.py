@@ -234,10 +234,11 @@ def _trajnet(
     return TrajectoryDataset(scenes, info)
 
 
-def _carve_val(n: int) -> np.ndarray:
-    """Boolean [n] mask of items that form the validation split (fixed seed)."""
+def _carve_val(n: int, fraction: float = VAL_FRACTION) -> np.ndarray:
+    """Boolean [n] mask of the items (scenes, files, episodes) that form the validation split:
+    ``fraction`` of them, at least one, drawn with ``VAL_SEED``."""
     rng = np.random.default_rng(VAL_SEED)
-    n_val = max(1, round(VAL_FRACTION * n))
+    n_val = max(1, round(fraction * n))
     mask = np.zeros(n, bool)
     mask[rng.permutation(n)[:n_val]] = True
     return mask
@@ -335,20 +336,19 @@ def _robo_mix(split: str, root: str | Path | None, options: text.ReadOptions) ->
     else:
         real, source = _robo(base, "val", options)
         episode = robo_episodes(real)  # [S]
-        rng = np.random.default_rng(VAL_SEED)
         n_ep = int(episode.max()) + 1
-        held = rng.permutation(n_ep)[: max(1, round(ROBO_MIX_VAL_FRACTION * n_ep))]
-        is_val = np.isin(episode, held)  # [S]
+        held = _carve_val(n_ep, ROBO_MIX_VAL_FRACTION)  # [episodes]
+        is_val = held[episode]  # [S]
         chosen = [s for s, v in zip(real, is_val, strict=True) if v == (split == "val")]
         if split == "val":
             scenes = chosen
-            where = f"{source}: {len(held)} of {n_ep} episodes held out"
+            where = f"{source}: {int(held.sum())} of {n_ep} episodes held out"
         else:
             sim = _robo_sim("train").scenes
             copies = max(1, round(ROBO_MIX_REAL_SHARE / (1 - ROBO_MIX_REAL_SHARE)
                                   * len(sim) / len(chosen)))  # fmt: skip
             scenes = sim + chosen * copies
-            where = (f"robo-sim train + {source}: {n_ep - len(held)} of {n_ep} episodes "
+            where = (f"robo-sim train + {source}: {n_ep - int(held.sum())} of {n_ep} episodes "
                      f"({len(chosen)} windows x {copies})")  # fmt: skip
     info = DatasetInfo(
         "robo-mix", split, spec.units, spec.frame_interval, spec.t_hist, spec.t_fut, where

@@ -43,6 +43,14 @@ def published(root: Path | None = None) -> dict[str, Path]:
     return dict(sorted((f"{f.parent.name}/{f.stem}", f) for f in files))
 
 
+def generators(datasets: list[str] | None = None, root: Path | None = None) -> dict[str, Path]:
+    """The published generators (``DATASET/generator``, ``DATASET/generator-VARIANT``), sorted
+    by name; only those of ``datasets`` when given."""
+    return {name: path for name, path in published(root).items()
+            if name.split("/")[1].startswith("generator")
+            and (datasets is None or name.split("/")[0] in datasets)}  # fmt: skip
+
+
 def header(path: Path) -> dict[str, Any]:
     """The ``trajpref`` JSON header of a checkpoint file, without reading its weights."""
     return read_checkpoint_header(path)
