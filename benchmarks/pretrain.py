@@ -28,7 +28,7 @@ from trajpref.config import load_config
 from trajpref.data import load_dataset
 from trajpref.evaluation import evaluate, time_predictors
 from trajpref.models import checkpoint as ckpt
-from trajpref.results import make_row, upsert_rows, write_rows
+from trajpref.results import make_row, upsert_rows
 from trajpref.train.run import train_stage
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -46,6 +46,10 @@ def _train(args, run_dir: Path) -> None:
 def _metrics_log(run_dir: Path, stage: str) -> list[dict]:
     path = run_dir / f"{stage}_metrics.jsonl"
     return [json.loads(line) for line in path.open()] if path.is_file() else []
+
+
+def _is_full_sampler_row(row: dict) -> bool:
+    return row["method"].startswith("full")
 
 
 def main() -> None:
@@ -147,11 +151,14 @@ def main() -> None:
               f"{res['min_fde']:.3f}  joint {res['joint_min_ade']:.3f}/"
               f"{res['joint_min_fde']:.3f}  {ms:.1f} ms/scene")  # fmt: skip
     out = ROOT / "benchmarks" / "results" / f"pretrained_{args.dataset}{file_suffix}.json"
-    if args.no_full_eval and logs["denoiser"] and out.is_file():
-        # a new denoiser: the file's full-sampler row measured the old one; drop it
-        stale = [r for r in json.loads(out.read_text()) if not r["method"].startswith("full")]
-        write_rows(out, stale)
-    upsert_rows(out, rows)  # a generator-only run keeps the full sampler's row (same denoiser)
+    # a generator-only run keeps the full sampler's row (same denoiser); a new denoiser
+    # published without --full-eval drops it (it measured the old one)
+    stale = (
+        (lambda r: r["method"].startswith("full"))
+        if args.no_full_eval and logs["denoiser"]
+        else None
+    )
+    upsert_rows(out, rows, drop=stale)
     extra = {
         "dataset": args.dataset,
         "variant": args.variant,

@@ -44,7 +44,6 @@ from trajpref.models import checkpoint as ckpt
 from trajpref.results import command_line, machine
 from trajpref.rl.objective import step_reward
 from trajpref.score.scorer import TrajectoryScorer, score_timesteps
-from trajpref.train.stages import subset
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -110,8 +109,8 @@ def main() -> None:
     )
     model = ckpt.load_predictor(path, "leapfrog")
     cfg = ckpt.load(path)["config"]
-    val = subset(load_dataset(cfg["data"].get("val_dataset") or cfg["data"]["dataset"], "val",
-                               args.data_root), args.max_scenes)  # fmt: skip
+    val = load_dataset(cfg["data"].get("val_dataset") or cfg["data"]["dataset"], "val",
+                       args.data_root).evenly_spaced(args.max_scenes)  # fmt: skip
     rl = FinetuneConfig()
     steps = score_timesteps(model.schedule.num_steps, rl.score_every)
     scorer = TrajectoryScorer(model.denoiser, model.schedule, model.scale, steps)

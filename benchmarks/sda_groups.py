@@ -29,7 +29,6 @@ from trajpref.data import load_dataset
 from trajpref.io import write_json
 from trajpref.models.checkpoint import load_predictor
 from trajpref.rl.sda import sda_reward, social_groups
-from trajpref.train.stages import subset
 from trajpref.types import collate
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -48,7 +47,7 @@ def spearman(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
 
 
 def measure(name: str, args: argparse.Namespace) -> dict:
-    data = subset(load_dataset(name, "test", args.data_root), args.max_scenes)
+    data = load_dataset(name, "test", args.data_root).evenly_spaced(args.max_scenes)
     predictor = load_predictor(ROOT / "models" / name / "generator.safetensors")
     gen = torch.Generator().manual_seed(0)
     thresholds = (args.radius, args.drift)

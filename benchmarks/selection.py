@@ -35,7 +35,6 @@ from trajpref.models import checkpoint as ckpt
 from trajpref.results import command_line, machine, make_row, upsert_rows
 from trajpref.score.scorer import TrajectoryScorer, score_timesteps
 from trajpref.score.selection import METHODS, SelectionConfig, gather, select_samples
-from trajpref.train.stages import subset
 from trajpref.types import TrajectoryDataset
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -118,7 +117,7 @@ def main() -> None:
               "training split's scene speeds)")  # fmt: skip
     scorer = TrajectoryScorer(model.denoiser, model.schedule, model.scale, steps,
                               speed_ref=speed_ref)  # fmt: skip
-    data = subset(load_dataset(args.dataset, args.split, args.data_root), args.max_scenes)
+    data = load_dataset(args.dataset, args.split, args.data_root).evenly_spaced(args.max_scenes)
     if args.stretch != 1.0:
         data = stretched(data, args.stretch)
 

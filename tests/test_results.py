@@ -12,6 +12,7 @@ from trajpref.results import (
     merge_rows,
     peers_table,
     read_rows,
+    selection_table,
     upsert_rows,
     write_meta,
     write_rows,
@@ -92,3 +93,35 @@ def test_upsert_rows_adds_other_seeds_and_replaces_the_same_measurement(tmp_path
     rows = json.loads(path.read_text())
     got = {(r["method"], r["seed"]): r["min_fde"] for r in rows}
     assert got == {("select-a", 0): 0.30, ("select-b", 0): 0.29, ("select-a", 1): 0.32}
+
+
+def test_upsert_rows_drops_the_old_rows_the_caller_marks_stale(tmp_path):
+    path = tmp_path / "pretrained_nba.json"
+    upsert_rows(path, [_row("nba", "pretrained", fde=0.38), _row("nba", "full-sampler", fde=0.5)])
+    upsert_rows(path, [_row("nba", "pretrained", fde=0.40)],
+                drop=lambda r: r["method"].startswith("full"))  # fmt: skip
+    got = {r["method"]: r["min_fde"] for r in json.loads(path.read_text())}
+    assert got == {"pretrained": 0.40}
+    upsert_rows(path, [_row("nba", "full-sampler", fde=0.5)], drop=lambda r: False)
+    assert len(json.loads(path.read_text())) == 2
+
+
+def _sel(dataset, method, seed, fde, uses_score):
+    return make_row(dataset=dataset, split="test", method=f"select-{method}", seed=seed,
+                    samples=5, min_fde=fde, joint_min_fde=2 * fde, ms_per_scene=10.0,
+                    uses_score=uses_score, date="2026-11-23", machine="m", command="c")  # fmt: skip
+
+
+def test_selection_table_averages_seeds_and_computes_the_change_within_each_seed():
+    rows = [_sel("zara1", "kmeans", 0, 0.70, False), _sel("zara1", "kmeans", 1, 0.80, False),
+            _sel("zara1", "facility", 0, 0.60, False), _sel("zara1", "facility", 1, 0.80, False),
+            _sel("zara1", "score-fps", 0, 0.54, True),
+            _sel("zara1", "score-fps", 1, 0.80, True)]  # fmt: skip
+    line = selection_table(rows).splitlines()[2]
+    cells = [c.strip() for c in line.strip("|").split("|")]
+    # facility's mean (0.70) beats kmeans' (0.75); the change is -10 % and 0 % within the seeds
+    assert cells[:3] == ["zara1", "5", "2"]
+    assert cells[5] == "0.750" and cells[7] == "0.700" and cells[8] == "0.700"
+    assert cells[9] == "0.670 (`score-fps`)"
+    assert cells[10] == "-5.0 ± 7.1 %"
+    assert cells[11] == "1.400 / 1.340"

@@ -177,8 +177,7 @@ def time_predictors(
         raise ConfigError("time_predictors needs at least one predictor")
     if scenes < 1 or len(dataset) == 0:
         raise ConfigError("time_predictors needs at least one scene")
-    picks = np.unique(np.linspace(0, len(dataset) - 1, min(scenes, len(dataset))).round())
-    batches = [collate([dataset[int(i)]]) for i in picks]
+    batches = [collate([scene]) for scene in dataset.evenly_spaced(scenes)]
     for model in predictors.values():
         for b in batches[:warmup]:
             model.predict(b, num_samples, torch.Generator().manual_seed(0))

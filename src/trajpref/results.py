@@ -7,6 +7,7 @@ import os
 import platform
 import shlex
 import sys
+from collections.abc import Callable
 from datetime import date
 from pathlib import Path
 from typing import Any
@@ -78,14 +79,20 @@ ROW_KEY = ("dataset", "split", "protocol", "method", "seed", "samples")
 """What identifies one measurement: rows that agree on these measure the same thing."""
 
 
-def upsert_rows(path: str | Path, rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+def upsert_rows(
+    path: str | Path,
+    rows: list[dict[str, Any]],
+    drop: Callable[[dict[str, Any]], bool] | None = None,
+) -> list[dict[str, Any]]:
     """Write ``rows`` into the rows file ``path``, keeping its other rows: a row already there
     with the same ``ROW_KEY`` is replaced, the rest stay in their order (so a run with another
-    seed adds to the file instead of overwriting it). Returns the rows written."""
+    seed adds to the file instead of overwriting it); old rows for which ``drop(row)`` is true
+    are removed (rows that measured something the run replaced). Returns the rows written."""
     path = Path(path)
     new = {tuple(r[k] for k in ROW_KEY): r for r in rows}
     old = json.loads(path.read_text()) if path.is_file() else []
-    kept = [r for r in old if tuple(r[k] for k in ROW_KEY) not in new]
+    kept = [r for r in old if tuple(r[k] for k in ROW_KEY) not in new
+            and not (drop is not None and drop(r))]  # fmt: skip
     out = kept + list(new.values())
     write_rows(path, out)
     return out
@@ -160,33 +167,48 @@ def accuracy_table(rows: list[dict[str, Any]], split: str = "test", protocol: st
 
 def selection_table(rows: list[dict[str, Any]], split: str = "test") -> str:
     """Markdown table of the ``select-*`` rows: per dataset and K', minFDE_K' of the
-    score-free selections, the best of them, the score-using selection and the change."""
+    score-free selections, the best of them, the score-using selection and the change, each
+    the mean over the seeds measured; the change is computed within each seed and shown as
+    mean +- std when there are several."""
     sel = [r for r in merge_rows(rows) if r["split"] == split and r["method"].startswith("select-")]
-    groups: dict[tuple, list[dict[str, Any]]] = {}
+    groups: dict[tuple, dict[str, list[dict[str, Any]]]] = {}
     for r in sel:
-        groups.setdefault((r["dataset"], r["samples"]), []).append(r)
+        groups.setdefault((r["dataset"], r["samples"]), {}).setdefault(r["method"], []).append(r)
     free_cols = ("first", "random", "kmeans", "fps", "facility")
     lines = [
-        "| dataset | K' | " + " | ".join(free_cols) + " | best without score | with the score "
-        "| change | joint minFDE, without / with | ms/scene (score + select) |",
-        "|---|---|" + "---|" * len(free_cols) + "---|---|---|---|---|",
+        "| dataset | K' | seeds | " + " | ".join(free_cols) + " | best without score "
+        "| with the score | change | joint minFDE, without / with | ms/scene (score + select) |",
+        "|---|---|---|" + "---|" * len(free_cols) + "---|---|---|---|---|",
     ]
-    for (dataset, keep), g in sorted(groups.items()):
-        by_name = {r["method"].removeprefix("select-"): r for r in g}
-        free = [r for r in g if not r["uses_score"]]
-        scored = [r for r in g if r["uses_score"]]
+
+    def mean(runs: list[dict[str, Any]], field: str) -> float | None:
+        values = [r[field] for r in runs if r[field] is not None]
+        return sum(values) / len(values) if values else None
+
+    for (dataset, keep), by_method in sorted(groups.items()):
+        free = {m: g for m, g in by_method.items() if not g[0]["uses_score"]}
+        scored = {m: g for m, g in by_method.items() if g[0]["uses_score"]}
         if not free or not scored:
             continue
-        best_free = min(free, key=lambda r: r["min_fde"])
-        best = min(scored, key=lambda r: r["min_fde"])
-        change = 100 * (best["min_fde"] / best_free["min_fde"] - 1)
-        cells = [_fmt(by_name[c]["min_fde"]) if c in by_name else "–" for c in free_cols]
+        best_free = min(free, key=lambda m: mean(free[m], "min_fde"))
+        best = min(scored, key=lambda m: mean(scored[m], "min_fde"))
+        free_by_seed = {r["seed"]: r["min_fde"] for r in free[best_free]}
+        changes = torch.tensor([100 * (r["min_fde"] / free_by_seed[r["seed"]] - 1)
+                                for r in scored[best] if r["seed"] in free_by_seed])  # fmt: skip
+        change = f"{changes.mean():+.1f} %" if len(changes) else "–"
+        if len(changes) > 1:
+            change = f"{changes.mean():+.1f} ± {changes.std():.1f} %"
+        seeds = len({r["seed"] for r in scored[best]})
+        cells = [_fmt(mean(by_method[f"select-{c}"], "min_fde")) if f"select-{c}" in by_method
+                 else "–" for c in free_cols]  # fmt: skip
         lines.append(
-            f"| {dataset} | {keep} | " + " | ".join(cells)
-            + f" | {_fmt(best_free['min_fde'])} | {_fmt(best['min_fde'])} "
-            f"(`{best['method'].removeprefix('select-')}`) | {change:+.1f} % "
-            f"| {_fmt(best_free['joint_min_fde'])} / {_fmt(best['joint_min_fde'])} "
-            f"| {_fmt(best['ms_per_scene'], 1)} |"
+            f"| {dataset} | {keep} | {seeds} | " + " | ".join(cells)
+            + f" | {_fmt(mean(free[best_free], 'min_fde'))} "
+            f"| {_fmt(mean(scored[best], 'min_fde'))} "
+            f"(`{best.removeprefix('select-')}`) | {change} "
+            f"| {_fmt(mean(free[best_free], 'joint_min_fde'))} / "
+            f"{_fmt(mean(scored[best], 'joint_min_fde'))} "
+            f"| {_fmt(mean(scored[best], 'ms_per_scene'), 1)} |"
         )  # fmt: skip
     return "\n".join(lines)
 

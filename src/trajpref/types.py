@@ -92,6 +92,16 @@ class TrajectoryDataset:
     def num_agents(self) -> int:
         return sum(s.num_agents for s in self.scenes)
 
+    def evenly_spaced(self, max_scenes: int | None) -> TrajectoryDataset:
+        """At most ``max_scenes`` scenes, evenly spread over the split (all when None): the
+        subset that validation during training, timing and the studies' ``--max-scenes`` read."""
+        if max_scenes is None or len(self) <= max_scenes:
+            return self
+        if max_scenes < 1:
+            raise ValueError(f"max_scenes must be at least 1, got {max_scenes}")
+        idx = torch.linspace(0, len(self) - 1, max_scenes).long().tolist()
+        return TrajectoryDataset([self.scenes[i] for i in idx], self.info)
+
 
 @dataclass
 class Batch:

@@ -61,14 +61,6 @@ def data_scale(dataset: TrajectoryDataset) -> float:
     return max(1e-3, (total / max(1, count)) ** 0.5)
 
 
-def subset(dataset: TrajectoryDataset, max_scenes: int | None) -> TrajectoryDataset:
-    """At most ``max_scenes`` scenes, evenly spread over the split (all when None)."""
-    if max_scenes is None or len(dataset) <= max_scenes:
-        return dataset
-    idx = torch.linspace(0, len(dataset) - 1, max_scenes).long().tolist()
-    return TrajectoryDataset([dataset.scenes[i] for i in idx], dataset.info)
-
-
 def _leapfrog_validation(predictor: DiffusionPredictor, val: TrajectoryDataset, samples: int,
                          max_agents: int, device: torch.device,
                          scorer: TrajectoryScorer | None = None,
@@ -115,7 +107,7 @@ def build_denoiser_stage(
     denoiser = Denoiser(cfg.model).to(device)
     schedule = DDPMSchedule.from_config(cfg.diffusion).to(device)
     objective = DenoiserObjective(denoiser, schedule, scale, cfg.denoiser.noise_draws)
-    val_set = subset(val, cfg.denoiser.eval_max_scenes)
+    val_set = val.evenly_spaced(cfg.denoiser.eval_max_scenes)
 
     @torch.no_grad()
     def validate() -> dict[str, float]:
@@ -180,7 +172,7 @@ def build_generator_stage(
                                  generator, cfg.model.tau,
                                  stochastic=cfg.model.stochastic_steps)  # fmt: skip
     objective = GeneratorObjective(sampler, cfg.generator)
-    val_set = subset(val, cfg.generator.eval_max_scenes)
+    val_set = val.evenly_spaced(cfg.generator.eval_max_scenes)
     validate = _leapfrog_validation(sampler, val_set, cfg.model.samples, cfg.data.max_agents,
                                     device)  # fmt: skip
 
@@ -215,7 +207,7 @@ def build_finetune_stage(
     assert sampler.generator is not None
     critic = Critic(cfg.model.hidden, cfg.model.t_fut, cfg.model.generator_width).to(device)
     objective = RLObjective(sampler, critic, cfg.finetune, cfg.generator)
-    val_set = subset(val, cfg.finetune.eval_max_scenes)
+    val_set = val.evenly_spaced(cfg.finetune.eval_max_scenes)
     metric_scorer = TrajectoryScorer(sampler.denoiser, sampler.schedule, sampler.scale)
     keys = ("min_ade", "min_fde", "max_ats", "max_fts", "mean_ats", "top1_recall_ats")
     validate = _leapfrog_validation(sampler, val_set, cfg.model.samples, cfg.data.max_agents,
