@@ -67,6 +67,10 @@ def main() -> None:
     parser.add_argument("--split", default="val", choices=["val", "test"])
     parser.add_argument("--data-root", default=None)
     parser.add_argument("--model", default=None, help="default models/<D>/generator.safetensors")
+    parser.add_argument(
+        "--variant", default=None,
+        help="a published variant (models/<D>/generator-NAME.safetensors): its methods carry "
+        "the suffix -NAME, its rows go to select_<D>_NAME.json")  # fmt: skip
     parser.add_argument("--samples", type=int, default=20, help="K, the candidates")
     parser.add_argument("--keep", type=int, nargs="+", default=[1, 3, 5])
     parser.add_argument("--drop", type=float, nargs="+", default=[0.25, 0.3, 0.4, 0.5, 0.6])
@@ -107,7 +111,8 @@ def main() -> None:
     if args.stretch != 1.0 and args.split == "test":
         parser.error("--stretch simulates a shift on validation data; not on a test split")
 
-    path = Path(args.model or ROOT / "models" / args.dataset / "generator.safetensors")
+    stem = f"generator-{args.variant}" if args.variant else "generator"
+    path = Path(args.model or ROOT / "models" / args.dataset / f"{stem}.safetensors")
     model = ckpt.load_predictor(path, "leapfrog")
     steps = score_timesteps(model.schedule.num_steps, args.score_every)
     speed_ref = None
@@ -171,6 +176,7 @@ def main() -> None:
         print(lines[-1])
     for (method, keep), v in merged.items():
         method = method if args.draws == 1 else f"{method}-x{args.draws}"
+        method += f"-{args.variant}" if args.variant else ""
         rows.append(make_row(
             dataset=args.dataset, split=args.split, method=method, seed=args.seed, samples=keep,
             min_ade=v["min_ade"], min_fde=v["min_fde"], joint_min_ade=v["joint_min_ade"],
@@ -183,7 +189,10 @@ def main() -> None:
             "speed_ref": speed_ref, "stretch": args.stretch, "draws": args.draws,
             "command": command_line(), "machine": machine()}  # fmt: skip
     out_dir = ROOT / "benchmarks" / "results"
-    suffix = ("" if args.split == "test" else "_val") + (f"_{args.tag}" if args.tag else "")
+    variant = f"_{args.variant}" if args.variant else ""
+    suffix = (
+        variant + ("" if args.split == "test" else "_val") + (f"_{args.tag}" if args.tag else "")
+    )
     suffix += f"_seed{args.seed}" if args.seed else ""  # seed 0 keeps the files' old names
     (out_dir / "meta").mkdir(exist_ok=True)
     (out_dir / "meta" / f"select_{args.dataset}{suffix}.json").write_text(
@@ -192,7 +201,7 @@ def main() -> None:
     if args.split == "test":
         draws = "" if args.draws == 1 else f"_x{args.draws}"
         # rows of other seeds stay: each seed adds its own (results.upsert_rows)
-        upsert_rows(out_dir / f"select_{args.dataset}{draws}.json", rows)
+        upsert_rows(out_dir / f"select_{args.dataset}{variant}{draws}.json", rows)
 
 
 def training_speed(dataset: str, data_root: str | None, quantile: float) -> float:

@@ -125,3 +125,17 @@ def test_selection_table_averages_seeds_and_computes_the_change_within_each_seed
     assert cells[9] == "0.670 (`score-fps`)"
     assert cells[10] == "-5.0 ± 7.1 %"
     assert cells[11] == "1.400 / 1.340"
+
+
+def test_selection_table_gives_a_published_variant_its_own_line():
+    rows = [_sel("eth", "facility", 0, 1.0, False), _sel("eth", "score-fps", 0, 1.2, True)]
+    for r in rows:
+        r["checkpoint"] = "models/eth/generator.safetensors"
+    variant = [_sel("eth", "facility-speedaug", 0, 0.8, False),
+               _sel("eth", "score-fps-speedaug", 0, 0.6, True)]  # fmt: skip
+    for r in variant:
+        r["checkpoint"] = "models/eth/generator-speedaug.safetensors"
+    lines = selection_table(rows + variant).splitlines()[2:]
+    assert [line.split("|")[1].strip() for line in lines] == ["eth", "eth (speedaug)"]
+    assert "1.200 (`score-fps`) | +20.0 %" in lines[0]
+    assert "0.600 (`score-fps`) | -25.0 %" in lines[1]

@@ -165,6 +165,11 @@ def accuracy_table(rows: list[dict[str, Any]], split: str = "test", protocol: st
     return "\n".join(lines)
 
 
+def _variant(checkpoint: str | None) -> str:
+    """``models/eth/generator-speedaug.safetensors`` -> ``speedaug``; the default -> ``""``."""
+    return Path(checkpoint).stem.removeprefix("generator").lstrip("-") if checkpoint else ""
+
+
 def selection_table(rows: list[dict[str, Any]], split: str = "test") -> str:
     """Markdown table of the ``select-*`` rows: per dataset and K', minFDE_K' of the
     score-free selections, the best of them, the score-using selection and the change, each
@@ -173,7 +178,10 @@ def selection_table(rows: list[dict[str, Any]], split: str = "test") -> str:
     sel = [r for r in merge_rows(rows) if r["split"] == split and r["method"].startswith("select-")]
     groups: dict[tuple, dict[str, list[dict[str, Any]]]] = {}
     for r in sel:
-        groups.setdefault((r["dataset"], r["samples"]), {}).setdefault(r["method"], []).append(r)
+        variant = _variant(r.get("checkpoint"))  # a published variant's rows form their own line
+        method = r["method"].removesuffix(f"-{variant}") if variant else r["method"]
+        label = f"{r['dataset']} ({variant})" if variant else r["dataset"]
+        groups.setdefault((label, r["samples"]), {}).setdefault(method, []).append(r)
     free_cols = ("first", "random", "kmeans", "fps", "facility")
     lines = [
         "| dataset | K' | seeds | " + " | ".join(free_cols) + " | best without score "
