@@ -23,10 +23,17 @@ from pathlib import Path
 
 import numpy as np
 
-from trajpref.adapt import ADAPT_PARAMS, AdaptConfig, context_windows, evaluate_in_context
+from trajpref.adapt import (
+    ADAPT_OBJECTIVES,
+    ADAPT_PARAMS,
+    AdaptConfig,
+    context_windows,
+    evaluate_in_context,
+)
 from trajpref.data import load_dataset
 from trajpref.io import write_json
 from trajpref.models.registry import load_predictor
+from trajpref.results import machine
 
 HERE = Path(__file__).resolve().parent
 METRICS = ("min_ade", "min_fde", "joint_min_ade", "joint_min_fde")
@@ -53,6 +60,8 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=5)
     ap.add_argument("--lr", type=float, default=1e-4)
     ap.add_argument("--trust", type=float, default=0.0)
+    ap.add_argument("--objective", nargs="+", default=["supervised"], choices=ADAPT_OBJECTIVES)
+    ap.add_argument("--score-weight", type=float, default=1.0, help="objective both's")
     ap.add_argument("--samples", type=int, default=20)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=None, help="default results/meta/in_context_<D>_<split>.json")
@@ -65,17 +74,22 @@ def main() -> None:
     )
     result = json.loads(out.read_text()) if out.exists() else {"rows": {}}
     command = shlex.join(["python", "benchmarks/in_context.py", *sys.argv[1:]])
-    for params in args.params:
+    settings = [(p, o) for p in args.params for o in args.objective]
+    for params, objective in settings:
         cfg = AdaptConfig(ctx_frames=args.ctx_frames, steps=args.steps, lr=args.lr,
-                          params=params, trust=args.trust)  # fmt: skip
+                          params=params, trust=args.trust, objective=objective,
+                          score_weight=args.score_weight)  # fmt: skip
         ctx = context_windows(ds, cfg)
         idx = chosen_windows(ctx, args.max_windows)
         res = evaluate_in_context(model, ds, cfg, args.samples, args.seed, indices=idx)
         before, after = res["before"], res["after"]
         key = f"{params}_s{cfg.steps}_lr{cfg.lr:g}_trust{cfg.trust:g}_ctx{cfg.ctx_frames}"
+        if objective != "supervised":  # the supervised rows keep their earlier keys
+            key += f"_{objective}" + (f"{cfg.score_weight:g}" if objective == "both" else "")
         result["rows"][key] = {
             "model": spec, "params": params, "steps": cfg.steps, "lr": cfg.lr,
             "trust": cfg.trust, "ctx_frames": cfg.ctx_frames, "samples": args.samples,
+            "objective": objective, "score_weight": cfg.score_weight, "machine": machine(),
             "seed": args.seed, "windows": len(idx), "windows_in_split": len(ds),
             "windows_with_context_in_split": sum(1 for c in ctx if c),
             "seconds_per_window": res["seconds_per_window"],

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -11,6 +12,7 @@ from synthetic import write_dataset
 
 from trajpref.adapt import (
     AdaptConfig,
+    _with_generator,
     adapt_and_predict,
     adapt_generator,
     context_windows,
@@ -20,8 +22,10 @@ from trajpref.adapt import (
 )
 from trajpref.cli import main
 from trajpref.data import load_dataset
+from trajpref.data.transforms import to_model_frame
 from trajpref.errors import ConfigError, DataError
 from trajpref.models.registry import load_predictor
+from trajpref.score.scorer import TrajectoryScorer, score_timesteps
 from trajpref.types import Scene, TrajectoryDataset, collate
 
 STEP = 10  # raw frame numbers between frames in synthetic.write_dataset
@@ -81,21 +85,25 @@ def test_bad_config_is_a_config_error():
         AdaptConfig(params="everything")
     with pytest.raises(ConfigError, match="steps"):
         AdaptConfig(steps=-1)
-    with pytest.raises(ConfigError, match="supervised"):
+    with pytest.raises(ConfigError, match="supervised, score, both"):
         AdaptConfig(objective="rl")
+    with pytest.raises(ConfigError, match="score_weight"):
+        AdaptConfig(objective="both", score_weight=-1.0)
 
 
-def test_adaptation_never_reads_a_frame_after_the_last_observed_one(model, long_walks):
+@pytest.mark.parametrize("objective", ["supervised", "score", "both"])
+def test_adaptation_never_reads_a_frame_after_the_last_observed_one(model, long_walks, objective):
+    cfg = dataclasses.replace(CFG, objective=objective)
     i = 16  # window at frame 160, last observed 230; windows 0..4 are its context
-    clean = adapt_and_predict(model, long_walks, CFG, num_samples=4, seed=3, indices=[i])
+    clean = adapt_and_predict(model, long_walks, cfg, num_samples=4, seed=3, indices=[i])
     assert clean.context == [[0, 1, 2, 3, 4]]
     poisoned = _poisoned(long_walks, last=230.0)
     assert np.isnan(poisoned[i].future).all() and np.isnan(poisoned[i + 1].history).any()
-    dirty = adapt_and_predict(model, poisoned, CFG, num_samples=4, seed=3, indices=[i])
+    dirty = adapt_and_predict(model, poisoned, cfg, num_samples=4, seed=3, indices=[i])
     assert torch.isfinite(clean.pred[0]).all()
     assert torch.equal(clean.pred[0], dirty.pred[0])
     # the check is sensitive: poisoning one frame that IS observed (230) changes the output
-    leaky = adapt_and_predict(model, _poisoned(long_walks, last=220.0), CFG, num_samples=4,
+    leaky = adapt_and_predict(model, _poisoned(long_walks, last=220.0), cfg, num_samples=4,
                               seed=3, indices=[i])  # fmt: skip
     assert not torch.equal(clean.pred[0], leaky.pred[0])
 
@@ -130,6 +138,28 @@ def test_only_the_chosen_parameters_change(model, long_walks, params):
     changed = {n for n, p in adapted.named_parameters() if not torch.equal(p, start[n])}
     assert changed and all(n.startswith(heads) for n in changed)
     assert any(n.startswith("sigma_head.") for n in changed)
+
+
+def _context_reward(model, generator, context) -> float:
+    """The mean Eq. 6 score of ``generator``'s samples on the context windows (fixed draws)."""
+    view = _with_generator(model, generator)
+    scorer = TrajectoryScorer(model.denoiser, model.schedule, model.scale,
+                              score_timesteps(model.schedule.num_steps, 9))  # fmt: skip
+    cond = view.condition(context)
+    with torch.no_grad():
+        y = view.rollout(context, torch.Generator().manual_seed(7), cond=cond).y
+    target = to_model_frame(context.future, context, model.scale)
+    return float(scorer.step_scores(cond.context, y, target).mean())
+
+
+def test_the_score_objective_raises_the_score_and_leaves_the_denoiser_alone(model, long_walks):
+    context = collate([long_walks[j] for j in range(5)])
+    denoiser = {n: p.clone() for n, p in model.denoiser.named_parameters()}
+    cfg = AdaptConfig(steps=5, lr=1e-2, params="all", objective="score")
+    adapted = adapt_generator(model, context, cfg, torch.Generator().manual_seed(0))
+    before = _context_reward(model, model.generator, context)
+    assert _context_reward(model, adapted, context) > before + 1e-3
+    assert all(torch.equal(p, denoiser[n]) for n, p in model.denoiser.named_parameters())
 
 
 def test_evaluate_in_context_reports_before_and_after(model, long_walks):

@@ -36,10 +36,13 @@ from trajpref.metrics import MetricAccumulator
 from trajpref.models.generator import Generator
 from trajpref.models.losses import generator_loss
 from trajpref.models.predictor import DiffusionPredictor
+from trajpref.score.scorer import TrajectoryScorer, relative_score, score_timesteps
 from trajpref.types import Batch, TrajectoryDataset, collate
 
 AdaptParams = Literal["heads", "sigma", "all"]
 ADAPT_PARAMS: tuple[str, ...] = typing.get_args(AdaptParams)
+AdaptObjective = Literal["supervised", "score", "both"]
+ADAPT_OBJECTIVES: tuple[str, ...] = typing.get_args(AdaptObjective)
 PARAM_PREFIXES: dict[str, tuple[str, ...]] = {
     "heads": ("mean_head.", "sigma_head.", "shift_head."),
     "sigma": ("sigma_head.",),
@@ -66,9 +69,16 @@ class AdaptConfig:
     (the sigma head only) or ``all``."""
     trust: float = 0.0
     """Weight of the trust region: trust * sum ||theta - theta_start||^2 is added to the loss."""
-    objective: Literal["supervised"] = "supervised"
-    """The adaptation loss: ``supervised`` is the generator's best-of-K loss
-    (``models.losses.generator_loss``) on the context windows."""
+    objective: AdaptObjective = "supervised"
+    """The adaptation loss on the context windows: ``supervised`` is the generator's best-of-K
+    loss (``models.losses.generator_loss``); ``score`` maximises the fine-tuning's reward, the
+    diffusion score of Eq. 6 (r = 1 - d_pred / d_gt, averaged over samples, agents and steps),
+    by its pathwise gradient through the tau denoising steps instead of a policy gradient;
+    ``both`` adds ``score_weight`` times the score loss to the supervised one."""
+    score_weight: float = 1.0
+    """Weight of the score loss when ``objective`` is ``both``."""
+    score_every: int = 9
+    """Spacing of the diffusion steps the score is computed at (9: 12 of 100 steps)."""
     grad_clip: float = 1.0
     """Gradient-norm clip per step."""
     frame_step: float | None = None
@@ -89,9 +99,13 @@ class AdaptConfig:
                               f"got {self.params!r}")  # fmt: skip
         if not self.trust >= 0:
             raise ConfigError(f"AdaptConfig.trust must be >= 0, got {self.trust}")
-        if self.objective != "supervised":
-            raise ConfigError(f"AdaptConfig.objective: only 'supervised' is implemented, "
-                              f"got {self.objective!r}")  # fmt: skip
+        if self.objective not in ADAPT_OBJECTIVES:
+            raise ConfigError(f"AdaptConfig.objective must be one of "
+                              f"{', '.join(ADAPT_OBJECTIVES)}, got {self.objective!r}")  # fmt: skip
+        if not self.score_weight >= 0:
+            raise ConfigError(f"AdaptConfig.score_weight must be >= 0, got {self.score_weight}")
+        if self.score_every < 1:
+            raise ConfigError(f"AdaptConfig.score_every must be >= 1, got {self.score_every}")
         if not self.grad_clip > 0:
             raise ConfigError(f"AdaptConfig.grad_clip must be > 0, got {self.grad_clip}")
         if self.frame_step is not None and not self.frame_step > 0:
@@ -160,7 +174,7 @@ def adapt_generator(
     model: DiffusionPredictor, context: Batch, cfg: AdaptConfig,
     rng: torch.Generator | None = None,
 ) -> Generator:  # fmt: skip
-    """A copy of ``model.generator`` after ``cfg.steps`` Adam steps of the supervised loss on
+    """A copy of ``model.generator`` after ``cfg.steps`` Adam steps of ``cfg.objective`` on
     the ``context`` batch; ``model`` itself is left unchanged."""
     gen = copy.deepcopy(model.generator)
     gen.eval()
@@ -173,10 +187,22 @@ def adapt_generator(
     view = _with_generator(model, gen)
     cond = view.condition(context)
     target = to_model_frame(context.future, context, model.scale)  # [N, T_f, 2]
+    scorer = None
+    if cfg.objective != "supervised":
+        steps = score_timesteps(model.schedule.num_steps, cfg.score_every)
+        scorer = TrajectoryScorer(model.denoiser, model.schedule, model.scale, steps)
     opt = torch.optim.Adam(chosen, lr=cfg.lr)
     for _ in range(cfg.steps):
         roll = view.rollout(context, rng, cond=cond)
-        loss, _ = generator_loss(roll.out, roll.y, target, cfg.loss)
+        loss = torch.zeros((), device=target.device)
+        if cfg.objective in ("supervised", "both"):
+            loss = loss + generator_loss(roll.out, roll.y, target, cfg.loss)[0]
+        if scorer is not None:
+            # the ground truth shares the samples' noise (one call); its d is a constant
+            d = scorer.residual_differentiable(cond.context, torch.cat([roll.y, target[None]]))
+            r = relative_score(d[:-1], d[-1].detach())  # [K, N, T_f]
+            weight = cfg.score_weight if cfg.objective == "both" else 1.0
+            loss = loss - weight * r.mean()
         if cfg.trust > 0:
             loss = loss + cfg.trust * sum((p - s).pow(2).sum() for p, s in
                                           zip(chosen, start, strict=True))  # fmt: skip

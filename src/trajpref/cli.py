@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from trajpref import __version__
-from trajpref.adapt import ADAPT_PARAMS, AdaptConfig, evaluate_in_context
+from trajpref.adapt import ADAPT_OBJECTIVES, ADAPT_PARAMS, AdaptConfig, evaluate_in_context
 from trajpref.config import ExperimentConfig, config_entries, field_docs, load_config
 from trajpref.data import PROTOCOLS, ReadOptions, load_dataset, mean_speed
 from trajpref.data.trajnet import write_trajnet, write_trajnet_truth
@@ -189,6 +189,13 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=0.0,
         help="trust region: weight of the L2 penalty to the start weights (0)",
+    )
+    ev.add_argument(
+        "--adapt-objective",
+        default="supervised",
+        choices=list(ADAPT_OBJECTIVES),
+        help="supervised (best-of-K on the context windows), score (the diffusion score of "
+        "Eq. 6, the fine-tuning's reward) or both (default supervised)",
     )
     ev.set_defaults(func=cmd_evaluate)
 
@@ -493,7 +500,8 @@ def _evaluate_in_context(args) -> int:
     if args.keep is not None or args.scorer or args.bins is not None:
         raise ConfigError("--in-context does not combine with --keep, --scorer or --bins")
     cfg = AdaptConfig(ctx_frames=args.in_context, steps=args.adapt_steps, lr=args.adapt_lr,
-                      params=args.adapt_params, trust=args.adapt_trust)  # fmt: skip
+                      params=args.adapt_params, trust=args.adapt_trust,
+                      objective=args.adapt_objective)  # fmt: skip
     if args.out:
         check_output_file(args.out)
     model, device = _predictor(args)
@@ -502,7 +510,8 @@ def _evaluate_in_context(args) -> int:
     out = {"dataset": ds.info.name, "split": ds.info.split, "protocol": ds.info.protocol,
            "model": args.model, "samples": args.samples, "seed": args.seed,
            "in_context": args.in_context, "adapt_steps": cfg.steps, "adapt_lr": cfg.lr,
-           "adapt_params": cfg.params, "adapt_trust": cfg.trust, **result,
+           "adapt_params": cfg.params, "adapt_trust": cfg.trust,
+           "adapt_objective": cfg.objective, **result,
            "units": ds.info.units}  # fmt: skip
     if args.out:
         write_json(args.out, out)

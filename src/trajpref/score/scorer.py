@@ -158,6 +158,11 @@ class TrajectoryScorer:
     def residual_normalised(self, context: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
         """d for futures already in the denoiser's frame (relative, divided by the data
         scale): y [M, N, T_f, 2], context [N, H] from this scorer's denoiser -> [M, N, T_f]."""
+        return self.residual_differentiable(context, y)
+
+    def residual_differentiable(self, context: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        """``residual_normalised`` with autograd on: gradients flow from d into y (and into
+        whatever made y), never into the frozen denoiser's weights unless they require it."""
         m, n, t_f, _ = y.shape
         gen = torch.Generator().manual_seed(self.seed)
         # agent-major draw: an agent's noise depends on its index only, not on the batch size
