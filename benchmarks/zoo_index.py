@@ -67,9 +67,10 @@ LIMITS = {
     "prefer it to the sim-only `robo/generator` (0.450 against 0.430 minFDE) although its test "
     "row is better (0.420 against 0.458), so it is published beside the default, not instead "
     "(docs/pretraining.md).",
-    "nba": "Its config (denoiser 12 + generator 5 epochs over 203,511 windows) is estimated at "
-    "67 minutes alone on two CPU cores, past the 45-minute budget (benchmarks/train_cost.py); "
-    "no full-sampler test row (56,386 test windows).",
+    "nba": "Short schedules (denoiser 6 + generator 3 epochs over 203,511 windows) to fit the "
+    "45-minute CPU budget; validation was still falling at the last epoch, and the longer 12 + "
+    "5 epoch schedule trained first (~67 min) reached 0.222 / 0.376 on the test split "
+    "(docs/pretraining.md). No full-sampler test row (56,386 test windows).",
     "univ": "No full-sampler test row: univ's test split is large (24,334 agent-windows) and "
     "the 100-step sampler was only timed on it.",
     "denoiser": "As a predictor it runs the full 100-step sampler (about 15x slower than a "
