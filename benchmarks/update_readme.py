@@ -82,6 +82,8 @@ def speed_table(meta_dir: Path) -> str:
     cost_path = meta_dir / "train_cost.json"
     cost_run = json.loads(cost_path.read_text()) if cost_path.is_file() else {"datasets": {}}
     estimates = cost_run["datasets"]
+    repeat_path = meta_dir / "train_cost_repeat.json"  # a longer probe of some configs
+    repeat = json.loads(repeat_path.read_text()) if repeat_path.is_file() else {"datasets": {}}
     lines = [
         "| model | params D / G | train D / G (min), as run | train D + G (min), estimated "
         "alone | samples/s D / G | leapfrog ms/scene | full ms/scene | full / leapfrog "
@@ -100,6 +102,8 @@ def speed_table(meta_dir: Path) -> str:
                     if score_path.is_file() and m is not None else None)  # fmt: skip
         est = estimates.get(name.split("/")[0]) if m is not None else None
         guess = "–" if est is None else f"{est['minutes']:.1f}"
+        again = repeat["datasets"].get(name.split("/")[0]) if est is not None else None
+        guess += "" if again is None else f" ({again['minutes']:.1f})"
         if m is not None:
             p, secs, r = m["params"], m["stage_seconds"], m["samples_per_second"]
             cost = (f"{p['denoiser'] / 1e6:.2f} M / {p['generator'] / 1e6:.2f} M "
@@ -121,6 +125,14 @@ def speed_table(meta_dir: Path) -> str:
             f"_Estimated minutes: `{cost_run['command']}`, {cost_run['date']}, "
             f"{cost_run['machine']}: each stage's throughput and one validation pass, measured "
             "alone, times the config's epochs and evaluations._"
+        )
+    if repeat["datasets"]:
+        lines.append("")
+        lines.append(
+            f"_In brackets: a longer probe right after, `{repeat['command']}`, "
+            f"{repeat['date']}: the same estimate from more timed steps. The two differ by up to "
+            "20 % on this machine, whose speed drifts from hour to hour (and by 2x from day to "
+            "day), so a config estimated within a few minutes of 45 sits at the budget's edge._"
         )
     if timed:
         lines.append("")
