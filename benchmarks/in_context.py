@@ -48,6 +48,27 @@ def chosen_windows(ctx: list[list[int]], max_windows: int | None) -> list[int]:
     return [have[p] for p in sorted(set(picks.tolist()))]
 
 
+def report(split: str) -> str:
+    """Markdown table of every row in meta/in_context_*_<split>.json: before -> after on the
+    windows with context, per dataset and setting."""
+    lines = ["| dataset | setting | windows (with context / in split) | minADE before -> after "
+             "| minFDE before -> after | s / window |", "|---|---|---|---|---|---|"]  # fmt: skip
+    for path in sorted((HERE / "results" / "meta").glob(f"in_context_*_{split}.json")):
+        dataset = path.stem.removeprefix("in_context_").removesuffix(f"_{split}")
+        for key, r in json.loads(path.read_text())["rows"].items():
+            if not (r["before"] and r["after"]):
+                continue
+            cells = []
+            for m in ("min_ade", "min_fde"):
+                b, a = r["before"][m], r["after"][m]
+                cells.append(f"{b:.4f} -> {a:.4f} ({100 * (a / b - 1):+.1f} %)")
+            have, total = r["windows_with_context_in_split"], r["windows_in_split"]
+            secs = r["seconds_per_window"]
+            lines.append(f"| {dataset} | `{key}` | {r['windows']} ({have} / {total}) "
+                         f"| {cells[0]} | {cells[1]} | {secs:.1f} |")  # fmt: skip
+    return "\n".join(lines)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--dataset", default="zara1")
@@ -65,7 +86,11 @@ def main() -> None:
     ap.add_argument("--samples", type=int, default=20)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=None, help="default results/meta/in_context_<D>_<split>.json")
+    ap.add_argument("--report", action="store_true", help="print the table of every stored row")
     args = ap.parse_args()
+    if args.report:
+        print(report(args.split))
+        return
     spec = args.model.format(dataset=args.dataset)
     model = load_predictor(spec, "cpu")
     ds = load_dataset(args.dataset, args.split, args.data_root)
