@@ -153,12 +153,8 @@ def main() -> None:
     out = ROOT / "benchmarks" / "results" / f"pretrained_{args.dataset}{file_suffix}.json"
     # a generator-only run keeps the full sampler's row (same denoiser); a new denoiser
     # published without --full-eval drops it (it measured the old one)
-    stale = (
-        (lambda r: r["method"].startswith("full"))
-        if args.no_full_eval and logs["denoiser"]
-        else None
-    )
-    upsert_rows(out, rows, drop=stale)
+    new_denoiser = args.no_full_eval and logs["denoiser"]
+    upsert_rows(out, rows, drop=_is_full_sampler_row if new_denoiser else None)
     extra = {
         "dataset": args.dataset,
         "variant": args.variant,
