@@ -39,7 +39,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from trajpref.results import merge_rows, read_rows, update_readme
+from trajpref.results import FINETUNE_START, merge_rows, read_rows, update_readme
 
 ROOT = Path(__file__).resolve().parent.parent
 METHODS = {
@@ -202,7 +202,7 @@ def report(datasets: list[str], methods: list[str]) -> str:
     for dataset in datasets:
         pick = [r for r in rows if r["dataset"] == dataset and r["split"] == "test"]
         pick = [r for r in pick if r["samples"] == 20]
-        start = next((r for r in pick if r["method"] == "pretrained"), None)
+        start = next((r for r in pick if r["method"] == FINETUNE_START), None)
         chosen = _chosen_control(dataset, pick, methods)
         control = [r["min_fde"] for r in pick if r["method"] == chosen]
         if start is not None:

@@ -14,7 +14,7 @@ import json
 import statistics
 from pathlib import Path
 
-from trajpref.results import merge_rows, read_rows
+from trajpref.results import FINETUNE_START, merge_rows, read_rows
 
 ROOT = Path(__file__).resolve().parent.parent
 RUN_SUFFIX = {"rlhf": "rlhf", "rlhf-res": "rlhf-res", "rlhf-res-reg-only": "rlhf-res"}
@@ -43,8 +43,8 @@ def _pct(new: float, old: float) -> str:
 
 
 def _start(rows: list[dict], dataset: str) -> dict | None:
-    """The pretrained start's test row of a dataset."""
-    key = (dataset, "pretrained", "test")
+    """The pretrained start's test row of a dataset (as the fine-tuning runs sampled it)."""
+    key = (dataset, FINETUNE_START, "test")
     return next((r for r in rows if (r["dataset"], r["method"], r["split"]) == key), None)
 
 

@@ -115,6 +115,7 @@ def main() -> None:
             "model": spec, "params": params, "steps": cfg.steps, "lr": cfg.lr,
             "trust": cfg.trust, "ctx_frames": cfg.ctx_frames, "samples": args.samples,
             "objective": objective, "score_weight": cfg.score_weight, "machine": machine(),
+            "stochastic_steps": model.stochastic,  # ancestral tau steps (before 2026-11-24)
             "seed": args.seed, "windows": len(idx), "windows_in_split": len(ds),
             "windows_with_context_in_split": sum(1 for c in ctx if c),
             "seconds_per_window": res["seconds_per_window"],

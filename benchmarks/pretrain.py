@@ -5,6 +5,9 @@ publish the checkpoints, evaluate on the test split, and time the two samplers s
     python benchmarks/pretrain.py --dataset zara1 --train --data-root ../shared/data
     # or evaluate an existing run folder
     python benchmarks/pretrain.py --dataset zara1 --run-dir runs/zara1 --data-root ../shared/data
+    # or re-measure a published generator as it is, after a change of its sampling setting
+    # (benchmarks/deterministic_steps.py): its training records are kept from the meta file
+    python benchmarks/pretrain.py --dataset zara1 --published --data-root ../shared/data
     # univ's test split is large: skip the full sampler's accuracy (its speed is still timed)
     python benchmarks/pretrain.py --dataset univ --train --no-full-eval --data-root ../shared/data
     # a variant trained elsewhere (e.g. a longer schedule on a GPU), published beside the default
@@ -79,7 +82,16 @@ def main() -> None:
         help="where the run was trained, when not on this machine (recorded "
         "in the meta file; the row's train_seconds is then left empty)",
     )
+    parser.add_argument(
+        "--published",
+        action="store_true",
+        help="re-measure the published generator (and its leapfrog row) as it is: no "
+        "training or publishing; the training records come from the previous meta file",
+    )
     args = parser.parse_args()
+    if args.published and (args.train or args.run_dir or args.train_machine):
+        parser.error("--published re-measures a published file: no --train, --run-dir or "
+                     "--train-machine")  # fmt: skip
     if args.variant is not None and not args.variant.replace("-", "").isalnum():
         parser.error("--variant takes letters, digits and '-'")
     suffix = f"-{args.variant}" if args.variant else ""
@@ -96,26 +108,37 @@ def main() -> None:
     run_generator = run_dir / f"generator{ckpt.SUFFIX}"
     # a retrained default replaces its own denoiser; a variant trained with a denoiser of its
     # own gets its own file: it never overwrites the one the default generator points to
-    try:
-        ckpt.publish(run_generator, published, replace_denoiser=not args.variant)
-    except ckpt.DenoiserConflict:
-        ckpt.publish(run_generator, published, denoiser_name=f"denoiser{suffix}{ckpt.SUFFIX}")
+    meta_path = (
+        ROOT / "benchmarks" / "results" / "meta" / f"pretrained_{args.dataset}{file_suffix}.json"
+    )
+    previous = json.loads(meta_path.read_text()) if meta_path.is_file() else None
+    if args.published:
+        if previous is None or not published.is_file():
+            parser.error(f"--published: no {published.name} or {meta_path.name} to re-measure")
+        args.train_machine = previous.get("train_machine")
+        args.no_full_eval = True  # the full sampler does not depend on the generator
+    else:
+        try:
+            ckpt.publish(run_generator, published, replace_denoiser=not args.variant)
+        except ckpt.DenoiserConflict:
+            ckpt.publish(run_generator, published, denoiser_name=f"denoiser{suffix}{ckpt.SUFFIX}")
     gen_ckpt = ckpt.load(published)
     den_ckpt = gen_ckpt["denoiser"]
     train_seconds = den_ckpt["meta"]["train_seconds"] + gen_ckpt["meta"]["train_seconds"]
     # total time of each whole stage (the best checkpoint may come before the last epoch)
     logs = {s: _metrics_log(run_dir, s) for s in ("denoiser", "generator")}
+    if args.published:
+        logs = {s: [] for s in logs}  # the training records are the previous meta file's
     stage_seconds = {s: (log[-1]["train_seconds"] if log else None) for s, log in logs.items()}
     rates = {s: (sum(r["samples_per_second"] for r in log) / len(log) if log else None)
              for s, log in logs.items()}  # fmt: skip
-    meta_path = (
-        ROOT / "benchmarks" / "results" / "meta" / f"pretrained_{args.dataset}{file_suffix}.json"
-    )
     denoiser_note = None
-    if not logs["denoiser"] and meta_path.is_file():
+    if args.published:
+        stage_seconds, rates = previous["stage_seconds"], previous["samples_per_second"]
+        denoiser_note = previous.get("denoiser_note")
+    elif not logs["denoiser"] and previous is not None:
         # a generator-only run from the published denoiser: that denoiser's training cost is
         # the one its own run recorded, kept from the previous meta file
-        previous = json.loads(meta_path.read_text())
         stage_seconds["denoiser"] = previous["stage_seconds"]["denoiser"]
         rates["denoiser"] = previous["samples_per_second"]["denoiser"]
         denoiser_note = "reused the published denoiser; its cost is from its own training run"
@@ -159,6 +182,7 @@ def main() -> None:
         "dataset": args.dataset,
         "variant": args.variant,
         "train_machine": args.train_machine,
+        "stochastic_steps": ckpt.config_of(gen_ckpt).model.stochastic_steps,
         "params": params,
         "stage_seconds": stage_seconds,
         "denoiser_note": denoiser_note,

@@ -61,7 +61,7 @@ from tqdm import tqdm
 from trajpref.data import load_dataset
 from trajpref.errors import TrajprefError
 from trajpref.evaluation import evaluate
-from trajpref.io import write_json
+from trajpref.io import read_checkpoint_header, write_json
 from trajpref.models import checkpoint as ckpt
 from trajpref.models.baseline import ConstantVelocity
 from trajpref.results import command_line, machine
@@ -170,6 +170,15 @@ def sha256(path: Path) -> str:
     return _HASHES[key]
 
 
+def sampled_weights(model: Path, sampler: str | None) -> Path:
+    """The file whose content a sampler's output depends on: a generator file, or, for the
+    full sampler of a generator, the denoiser file it names (``denoiser_ref``)."""
+    if sampler != "full":
+        return model
+    ref = read_checkpoint_header(model).get("denoiser_ref")
+    return model.parent / ref["path"] if ref else model
+
+
 def cpu_seconds() -> tuple[float, float]:
     """(this process, its finished children): user + system CPU seconds so far."""
     own = resource.getrusage(resource.RUSAGE_SELF)
@@ -265,13 +274,17 @@ def eval_key(job: Job, opts: argparse.Namespace, setup: Setup) -> dict[str, Any]
     if job.model is not None and not job.model.is_file():
         return None
     den = denoiser_path(setup, job.dataset)
+    # the full sampler runs the generator's denoiser only: a change of the generator's own
+    # weights or sampling setting does not invalidate it
+    weights = sampled_weights(job.model, job.sampler) if job.model else None
     return {
         "dataset": job.dataset, "column": job.column,
-        "checkpoint": rel(job.model), "checkpoint_sha256": sha256(job.model) if job.model else None,
+        "checkpoint": rel(job.model), "checkpoint_sha256": sha256(weights) if weights else None,
         "scorer": rel(den) if den.is_file() else None,
         "scorer_sha256": sha256(den) if den.is_file() else None,
         "sampler": job.sampler, "samples": opts.samples, "seed": opts.seed,
         "max_scenes": opts.max_scenes,
+        **({"full_sampler_agents": opts.full_sampler_agents} if job.sampler == "full" else {}),
     }  # fmt: skip
 
 
@@ -308,6 +321,20 @@ class Splits:
             self._data[dataset] = data
         return self._data[dataset]
 
+    def of(self, job: Job) -> TrajectoryDataset:
+        """The scenes a job evaluates: the test split, or for the full sampler (100 denoiser
+        passes per sample) the most evenly spaced scenes that hold at most
+        ``--full-sampler-agents`` agents when the split holds more."""
+        data = self.test(job.dataset)
+        cap = self.opts.full_sampler_agents
+        if job.sampler != "full" or cap is None or data.num_agents <= cap:
+            return data
+        lo, hi = 1, len(data)  # the largest n whose evenly spaced subset fits the cap
+        while lo < hi:
+            mid = (lo + hi + 1) // 2
+            lo, hi = (mid, hi) if data.evenly_spaced(mid).num_agents <= cap else (lo, mid - 1)
+        return data.evenly_spaced(lo)
+
     def scorer(self, dataset: str) -> TrajectoryScorer | None:
         """The dataset's published denoiser as the scorer (None when there is none)."""
         if dataset not in self._scorers:
@@ -322,7 +349,7 @@ def cost(job: Job, splits: Splits) -> float:
     """The job's estimated cost (COST's units), for the progress bar."""
     if job.kind == "pretrain":
         return COST["pretrain"]
-    agents = splits.test(job.dataset).num_agents
+    agents = splits.of(job).num_agents
     if job.kind == "finetune":
         return COST["finetune"] + COST["pretrained"] * agents
     scored = denoiser_path(splits.setup, job.dataset).is_file()
@@ -338,7 +365,8 @@ def run_evaluation(job: Job, opts: argparse.Namespace, setup: Setup, splits: Spl
     key = eval_key(job, opts, setup)
     if key is None:
         raise FileNotFoundError(f"{job.model} does not exist")
-    test = splits.test(job.dataset)
+    test = splits.of(job)
+    whole = splits.test(job.dataset)
     model = (ConstantVelocity() if job.model is None
              else ckpt.load_predictor(job.model, job.sampler, opts.device))  # fmt: skip
     wall, cpu = time.perf_counter(), cpu_seconds()[0]
@@ -348,6 +376,7 @@ def run_evaluation(job: Job, opts: argparse.Namespace, setup: Setup, splits: Spl
         "key": key,
         "result": {k: v for k, v in res.items() if k != "bins"},
         "scenes": len(test), "agents": test.num_agents, "units": test.info.units,
+        "split_scenes": len(whole), "split_agents": whole.num_agents,
         "wall_seconds": round(time.perf_counter() - wall, 2),
         "cpu_seconds": round(cpu_seconds()[0] - cpu, 2),
         "date": date.today().isoformat(), "machine": machine(), "command": command_line(),
@@ -428,19 +457,22 @@ def cell_from_state(job: Job, opts: argparse.Namespace, setup: Setup, rows) -> d
     cell = {k: res.get(k) for k in RESULT_KEYS}
     what = "constant velocity" if key["checkpoint"] is None else (
         f"`{key['checkpoint']}` ({key['sampler']} sampler)")  # fmt: skip
+    subset = record.get("split_scenes", record["scenes"]) != record["scenes"]
     scenes = f"{record['scenes']} scenes" + (
-        f" (--max-scenes {key['max_scenes']})" if key["max_scenes"] else "")  # fmt: skip
+        f" (--max-scenes {key['max_scenes']})" if key["max_scenes"] else
+        f" of {record['split_scenes']}, evenly spaced ({record['agents']} of "
+        f"{record['split_agents']} agents; --full-sampler-agents)" if subset else "")  # fmt: skip
     detail = f"evaluated {record['date']}: {what}, {scenes}, {record['wall_seconds']:.0f} s"
     method = column_method(job.column, opts.best)
     same = matching_rows(rows, job.dataset, method, key["samples"], key["seed"])
-    if same and key["max_scenes"] is None:
+    if same and key["max_scenes"] is None and not subset:
         agree = all(abs(r[k] - cell[k]) <= ROW_TOLERANCE for r in same
                     for k in ("min_ade", "min_fde", "max_ats", "max_fts")
                     if r.get(k) is not None and cell.get(k) is not None)  # fmt: skip
         files = ", ".join(f"`benchmarks/results/{f}`" for f in sorted({r["_file"] for r in same}))
         detail += f"; {'matches' if agree else 'DIFFERS from'} the `{method}` rows in {files}"
     return {**cell, "source": "evaluated", "detail": detail, "units": record.get("units"),
-            "date": record["date"], "seeds": [key["seed"]]}  # fmt: skip
+            "date": record["date"], "seeds": [key["seed"]], "subset": subset}  # fmt: skip
 
 
 def cell_from_rows(rows, dataset: str, method: str, samples: int) -> dict | None:
@@ -518,7 +550,8 @@ def our_cell(cell: dict, metrics: tuple[str, str]) -> str:
     a, b = cell.get(metrics[0]), cell.get(metrics[1])
     if a is None or b is None:
         return cell.get("note2", "–")
-    return _pair(a, b, 3) + (" †" if cell["source"] == "rows" else "")
+    mark = " †" if cell["source"] == "rows" else " ‡" if cell.get("subset") else ""
+    return _pair(a, b, 3) + mark
 
 
 def pair_of(cell: dict, metrics: tuple[str, str]) -> tuple[float, float] | None:
@@ -618,7 +651,9 @@ def render(cells: dict, paper: dict, opts, cpu: dict) -> str:
         "`models/<D>/generator.safetensors`, RLHF, RLHF-ReS, and the best score-using method "
         f"at K = 20 (`{opts.best}`; see the script's docstring for the choice). † marks a cell "
         "taken from `benchmarks/results/` rows (weights not published); the others were "
-        'evaluated from the published checkpoints. "no model": no published generator for '
+        "evaluated from the published checkpoints. ‡ marks a full-sampler cell measured on "
+        "evenly spaced test scenes only (at most `--full-sampler-agents` agents, on the "
+        'largest splits; sizes in the list at the end). "no model": no published generator for '
         'the dataset; "not trained": no rows yet (full mode trains them). The paper\'s numbers '
         'are typed in from its tables (`benchmarks/paper_tables.json`); "LED (its authors)" '
         "is LED's own published result, for comparison with the paper's run of LED. When all "
@@ -642,6 +677,11 @@ def render(cells: dict, paper: dict, opts, cpu: dict) -> str:
         "",
         *[f"- {n}" for n in paper["notes"]],
         f"- SDD: {paper['text_only']['sdd']}",
+        "- Sampling: the published generators' tau denoising steps are posterior means since "
+        '2026-11-24 (docs/pretraining.md, "The switch"), so the evaluated `pretrained` cells '
+        "use them; the RLHF, RLHF-ReS and best cells that come from result rows (†) are "
+        "fine-tuning runs that sampled with the ancestral steps of before, and compare with "
+        "their own start, the `pretrained-ancestral` rows (docs/rlhf.md).",
         "",
         "## Where each cell comes from",
         "",
@@ -703,9 +743,20 @@ def parse_args(argv: list[str] | None, setup: Setup) -> argparse.Namespace:
         help="evaluate on this many evenly spread test scenes (a smoke run; "
         "the table's numbers use the whole split)",
     )
+    parser.add_argument(
+        "--full-sampler-agents",
+        type=int,
+        default=6000,
+        help="evaluate the full sampler (100 steps, ~15x the leapfrog's cost) on the evenly "
+        "spaced test scenes holding at most this many agents, on the splits that hold more "
+        "(univ, NBA); 0: the whole split (default 6000)",
+    )
     parser.add_argument("--data-root", default=None)
     parser.add_argument("--device", default="cpu")
     args = parser.parse_args(argv)
+    if args.full_sampler_agents < 0:
+        parser.error("--full-sampler-agents must be >= 0")
+    args.full_sampler_agents = args.full_sampler_agents or None
     if args.max_scenes is not None and args.max_scenes < 1:
         parser.error("--max-scenes must be >= 1")
     if args.samples < 1:

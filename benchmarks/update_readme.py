@@ -9,6 +9,7 @@ import json
 from pathlib import Path
 
 from trajpref.results import (
+    ANCESTRAL_SUFFIX,
     METHODS,
     accuracy_table,
     peers_table,
@@ -24,7 +25,8 @@ def main() -> None:
     every = read_rows(ROOT / "benchmarks" / "results")
     # the README keeps the methods users run; fine-tuning ablations (tagged runs) are listed,
     # with their commands, in docs/rlhf_results.md
-    rows = [r for r in every if r["method"] in METHODS or r["method"].startswith("pretrained-")]
+    rows = [r for r in every if (r["method"] in METHODS or r["method"].startswith("pretrained-"))
+            and not r["method"].endswith(ANCESTRAL_SUFFIX)]  # fmt: skip
     selected = [r for r in every if r["method"].startswith("select-")]
     dates = sorted({r["date"] for r in rows})
     machines = sorted({r["machine"] for r in rows})

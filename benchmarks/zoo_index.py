@@ -21,8 +21,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from trajpref.config import load_config, to_dict
+from trajpref.config import GENERATOR_ONLY, load_config, to_dict
 from trajpref.data.registry import SPECS
+from trajpref.models import checkpoint as ckpt
 from trajpref.models import zoo
 from trajpref.results import read_rows
 
@@ -98,8 +99,21 @@ def overrides(dataset: str, kind: str, config: dict[str, Any]) -> list[str]:
     """``--set`` values that turn configs/<dataset>.yaml into the checkpoint's config."""
     base = _flat(to_dict(load_config(ROOT / "configs" / f"{dataset}.yaml")))
     got = _flat(config)
-    keys = [k for k in got if k.split(".")[0] in STAGE_SECTIONS[kind] and base.get(k) != got[k]]
+    skip = {f"model.{k}" for k in GENERATOR_ONLY} if kind == "denoiser" else set()
+    keys = [k for k in got if k.split(".")[0] in STAGE_SECTIONS[kind] and base.get(k) != got[k]
+            and k not in skip]  # fmt: skip
     return [f"{k}={json.dumps(got[k]) if isinstance(got[k], str) else got[k]}" for k in keys]
+
+
+def trained_config(config: dict[str, Any], changes: list[dict[str, Any]]) -> dict[str, Any]:
+    """The config a generator was trained with: its file's config with the sampling changes
+    made after training (``checkpoint.set_stochastic_steps``, logged in ``meta["changes"]``)
+    undone."""
+    out = json.loads(json.dumps(config))
+    for change in reversed(changes):
+        if "stochastic_steps" in change:
+            out["model"]["stochastic_steps"] = not change["stochastic_steps"]
+    return out
 
 
 def machine_short(machine: str | None) -> str:
@@ -143,7 +157,7 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
     entry: dict[str, Any] = {"name": name, "dataset": dataset, "kind": kind,
                              "file": f"{dataset}/{path.name}", "hash": head["hash"]}  # fmt: skip
     spec = SPECS.get(dataset)
-    cfg = head["config"]
+    cfg = to_dict(ckpt.config_of(head))  # resolved (a file older than a default keeps its own)
     entry["data"] = {
         "description": DATA.get(dataset, f"`{dataset}`"),
         "trained_on": meta.get("dataset", cfg["data"]["dataset"]),
@@ -154,7 +168,12 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
         "t_fut": cfg["model"]["t_fut"],
     }
     variant = stem.split("-", 1)[1] if "-" in stem else None
+    changes = meta.get("changes") or []
     if kind == "generator":
+        entry["sampling"] = {"tau": cfg["model"]["tau"],
+                             "stochastic_steps": cfg["model"]["stochastic_steps"],
+                             "changes": changes}  # fmt: skip
+        cfg = trained_config(cfg, changes)  # the training command reproduces the run
         ref = head.get("denoiser_ref") or {}
         entry["denoiser"] = f"{dataset}/{Path(ref['path']).stem}" if ref else None
         entry["sampler"] = "leapfrog"
@@ -220,6 +239,20 @@ def _any_machine(rows: list[dict[str, Any]], dataset: str, variant: str | None) 
     return row["machine"] if row else None
 
 
+def _sampling_lines(sampling: dict[str, Any] | None) -> list[str]:
+    if not sampling:
+        return []
+    how = ("each the posterior mean (no ancestral noise)" if not sampling["stochastic_steps"]
+           else "with DDPM's ancestral noise")  # fmt: skip
+    text = (
+        f"Sampling: the generator's samples, then tau = {sampling['tau']} denoising steps, {how}."
+    )
+    for change in sampling["changes"]:
+        state = "ancestral" if change["stochastic_steps"] else "posterior-mean"
+        text += f" Set to {state} steps after training ({change['note']})."
+    return [text, ""]
+
+
 def card(e: dict[str, Any]) -> str:
     """A short Markdown model card."""
     d, t, test = e["data"], e["train"], e["test"]
@@ -231,6 +264,7 @@ def card(e: dict[str, Any]) -> str:
         f"file `{e['file']}`, weights hash `{e['hash']}`."
         + (f" Its denoiser: `{e['denoiser']}`." if e.get("denoiser") else ""),
         "",
+        *_sampling_lines(e.get("sampling")),
         "```bash",
         f"trajpref evaluate --dataset {e['dataset']} --model {e['name']}",
         "```",

@@ -169,3 +169,18 @@ def test_real_data_stats_and_evaluate(capsys, data_root):
     res = json.loads(out)
     assert code == 0 and res["agents"] == 364 and res["scenes"] == 253
     assert 0.1 < res["min_ade"] < 2.0
+
+
+def test_denoising_step_flags_pick_posterior_means_or_ancestral_noise(capsys, tiny_run, walks):
+    base = ["evaluate", "--dataset", walks, "--split", "test", "--samples", "4", "--json",
+            "--no-progress", "--model", tiny_run / "generator.safetensors"]  # fmt: skip
+    results = {}
+    for flag in ("", "--deterministic", "--stochastic"):
+        code, out, _ = _run(capsys, *base, *([flag] if flag else []))
+        assert code == 0
+        results[flag] = json.loads(out)
+    # a generator trained today has posterior-mean steps by default
+    assert results[""]["min_ade"] == results["--deterministic"]["min_ade"]
+    assert results["--stochastic"]["min_ade"] != results["--deterministic"]["min_ade"]
+    code, _, err = _run(capsys, *base, "--deterministic", "--stochastic")
+    assert code != 0 and "not allowed with argument" in err

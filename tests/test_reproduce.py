@@ -172,6 +172,39 @@ def test_quick_mode_builds_both_tables_with_our_columns_beside_the_papers(setup,
     assert summary["cpu_hours"]["this_invocation_hours"] > 0
 
 
+def test_the_full_sampler_is_capped_to_evenly_spaced_scenes_on_a_large_split(
+    setup, walks, monkeypatch
+):
+    test = load_dataset(str(walks), "test")
+    cap = test.num_agents // 2
+    seen = {}
+
+    def recording(model, data, *args, **kwargs):
+        seen[model.sampler if hasattr(model, "sampler") else "cv"] = data
+        return evaluate(model, data, *args, **kwargs)
+
+    monkeypatch.setattr(reproduce, "evaluate", recording)
+    args = ["--quick", "--datasets", "walks", *SAMPLES, "--full-sampler-agents", str(cap)]
+    out = reproduce.main(args, setup)
+    full = seen["full"]
+    assert full.num_agents <= cap < test.evenly_spaced(len(full) + 1).num_agents  # the most
+    assert len(full) < len(test)
+    assert [s.scene_id for s in full.scenes] == [
+        s.scene_id for s in test.evenly_spaced(len(full)).scenes
+    ]
+    assert seen["leapfrog"].num_agents == seen["cv"].num_agents == test.num_agents
+    cells = out["cells"]["walks"]
+    assert cells["full-sampler"]["subset"] and not cells["pretrained"]["subset"]
+    assert f"{len(full)} scenes of {len(test)}, evenly spaced" in cells["full-sampler"]["detail"]
+    doc = setup.doc.read_text()
+    row = [x for x in doc.splitlines() if x.startswith("| walks |")][0]
+    assert row.count(" ‡") == 1
+    # another cap is another full-sampler measurement; the other columns are untouched
+    calls = _counting(monkeypatch)
+    reproduce.main([*args[:-1], "0"], setup)
+    assert len(calls) == 1
+
+
 def test_a_second_run_does_no_work_and_an_interrupted_run_resumes(setup, monkeypatch):
     args = ["--quick", "--datasets", "walks", "bare", *SAMPLES]
     calls = _counting(monkeypatch, fail_at=3)
@@ -210,6 +243,18 @@ def test_a_changed_checkpoint_is_evaluated_again(setup, tiny_run, monkeypatch):
     calls = _counting(monkeypatch)
     reproduce.main(args, setup)
     assert len(calls) == 2  # full sampler and pretrained; constant velocity is unchanged
+
+
+def test_a_sampling_change_re_evaluates_the_generator_but_not_the_full_sampler(setup, monkeypatch):
+    args = ["--quick", "--datasets", "walks", *SAMPLES]
+    reproduce.main(args, setup)
+    gen = setup.models / "walks" / "generator.safetensors"
+    stochastic = checkpoint.config_of(checkpoint.load(gen)).model.stochastic_steps
+    assert checkpoint.set_stochastic_steps(gen, not stochastic, note="test")
+    calls = _counting(monkeypatch)
+    out = reproduce.main(args, setup)
+    assert len(calls) == 1  # the full sampler runs the denoiser only: still current
+    assert out["jobs"]["skipped"] == 2
 
 
 # ----------------------------------------------------------------------------- full mode

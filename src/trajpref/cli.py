@@ -76,8 +76,14 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
         help="diffusion checkpoints: leapfrog (generator + tau denoising steps; the default for a "
         "generator) or full (all S steps from noise; the default for a bare denoiser)",
     )
-    p.add_argument("--deterministic", action="store_true",
-                   help="diffusion models: no ancestral noise in the denoising steps")  # fmt: skip
+    steps = p.add_mutually_exclusive_group()
+    steps.add_argument("--deterministic", action="store_true",
+                       help="diffusion models: no ancestral noise in the tau denoising steps "
+                       "(each is the posterior mean; the default of generators published "
+                       "since 2026-11-24)")  # fmt: skip
+    steps.add_argument("--stochastic", action="store_true",
+                       help="diffusion models: DDPM's ancestral noise in the tau denoising "
+                       "steps (what the published generators were trained with)")  # fmt: skip
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     p.add_argument("--max-agents", type=int, default=1024,
                    help="agents per batch of whole scenes (default 1024). Lower it to save "
@@ -352,10 +358,11 @@ def _predictor(args):
     _check_model_args(args)
     device = resolve_device(args.device)
     model = load_predictor(args.model, device, args.sampler)
-    if args.deterministic:
+    if args.deterministic or args.stochastic:
+        flag = "--deterministic" if args.deterministic else "--stochastic"
         if not hasattr(model, "stochastic"):
-            raise ConfigError("--deterministic applies to diffusion checkpoints only")
-        model.stochastic = False
+            raise ConfigError(f"{flag} applies to diffusion checkpoints only")
+        model.stochastic = bool(args.stochastic)
     return model, device
 
 

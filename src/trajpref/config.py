@@ -115,9 +115,11 @@ class ModelConfig:
     """K, the samples the generator emits per agent (its heads' output size)."""
     tau: int = 5
     """Denoising steps the leapfrog sampler applies to the generator's output Y^tau."""
-    stochastic_steps: bool = True
-    """Add the ancestral DDPM noise in the tau denoising steps (false: each step is the
-    posterior mean, deterministic given Y^tau; measured in docs/pretraining.md)."""
+    stochastic_steps: bool = False
+    """Add the ancestral DDPM noise in the tau denoising steps (true), or make each step the
+    posterior mean, deterministic given Y^tau (false, the default since 2026-11-24: better on
+    validation for all 12 published generators' minADE20 and 11 of 12 minFDE20;
+    benchmarks/deterministic_steps.py, docs/pretraining.md)."""
 
     def __post_init__(self) -> None:
         _positive(self, "hidden", "encoder_layers", "heads", "denoiser_width", "denoiser_blocks",

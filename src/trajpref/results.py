@@ -28,6 +28,12 @@ diffusion score took part (in training or in selecting the samples)."""
 METHODS = ("cv", "full-sampler", "pretrained", "pretrained-long", "control", "rlhf", "rlhf-res",
            "rlhf-set", "rlhf-res-smooth")  # fmt: skip
 """Known methods, in the order tables list them."""
+FINETUNE_START = "pretrained-ancestral"
+"""The method of the fine-tuning tables' start rows: the published generators with ancestral
+tau steps, as every fine-tuning run to date sampled them (the published files switched to
+posterior-mean steps on 2026-11-24, docs/pretraining.md; their ``pretrained`` rows moved)."""
+ANCESTRAL_SUFFIX = "-ancestral"
+"""Rows of a published generator measured before that switch (kept for the tables above)."""
 
 
 def machine() -> str:

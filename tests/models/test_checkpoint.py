@@ -287,3 +287,56 @@ def test_unknown_kind_is_refused(tmp_path, cfg):
     ckpt.save(tmp_path / "c.safetensors", payload)
     with pytest.raises(TrajprefError, match="unknown checkpoint kind"):
         ckpt.load(tmp_path / "c.safetensors")
+
+
+# ----------------------------------------------------------------------------- sampling setting
+
+
+def test_set_stochastic_steps_rewrites_only_the_setting(tmp_path, cfg):
+    stochastic_cfg = load_config(None, [*TINY_OVERRIDES, "model.stochastic_steps=true"])
+    src = tmp_path / "run" / "g.safetensors"
+    den = ckpt.denoiser_payload(_denoiser(stochastic_cfg), stochastic_cfg, 0.7, {})
+    gen = ckpt.generator_payload(_generator(stochastic_cfg), den, stochastic_cfg, {"epoch": 3})
+    ckpt.save(src, gen)
+    pub = tmp_path / "pub" / "g.safetensors"
+    ckpt.publish(src, pub)  # half precision, denoiser by reference
+    with safe_open(str(pub), "pt") as fh:
+        before = {k: fh.get_tensor(k) for k in fh.keys()}
+    header_before = _header(pub)
+    batch = collate([make_scene(3), make_scene(2, seed=1)])
+    old = ckpt.load_predictor(pub)
+    assert old.stochastic
+    old.stochastic = False  # what --deterministic does at evaluation
+    expected = old.predict(batch, 4, torch.Generator().manual_seed(5))
+
+    assert ckpt.set_stochastic_steps(pub, False, note="test switch")
+    header = _header(pub)
+    assert header["config"]["model"]["stochastic_steps"] is False
+    assert header["hash"] == header_before["hash"]
+    assert header["denoiser_ref"] == header_before["denoiser_ref"]
+    assert header["meta"]["epoch"] == 3
+    assert header["meta"]["changes"] == [{"stochastic_steps": False, "note": "test switch"}]
+    with safe_open(str(pub), "pt") as fh:
+        after = {k: fh.get_tensor(k) for k in fh.keys()}
+    _assert_same_state(before, after)  # same tensors, still half precision
+    assert all(v.dtype != torch.float32 for v in after.values())
+
+    new = ckpt.load_predictor(pub)
+    assert not new.stochastic
+    torch.testing.assert_close(new.predict(batch, 4, torch.Generator().manual_seed(5)), expected,
+                               rtol=0, atol=0)  # fmt: skip
+    # stochastic again: the noise is back, so the same seed gives other samples
+    noisy = ckpt.load_predictor(pub)
+    noisy.stochastic = True
+    assert not torch.equal(noisy.predict(batch, 4, torch.Generator().manual_seed(5)), expected)
+
+    mtime = pub.stat().st_mtime_ns
+    assert not ckpt.set_stochastic_steps(pub, False, note="again")  # nothing to do
+    assert pub.stat().st_mtime_ns == mtime
+
+
+def test_set_stochastic_steps_refuses_a_denoiser(tmp_path, cfg):
+    path = tmp_path / "d.safetensors"
+    ckpt.save(path, ckpt.denoiser_payload(_denoiser(cfg), cfg, 0.7, {}))
+    with pytest.raises(TrajprefError, match="generator setting"):
+        ckpt.set_stochastic_steps(path, False, note="x")

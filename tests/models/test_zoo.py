@@ -177,3 +177,28 @@ def test_the_index_cards_and_readme_listing_are_up_to_date():
 def test_the_repository_models_folder_is_the_packaged_zoo():
     assert (ROOT / "models").resolve() == zoo.ZOO_DIR
     assert (ROOT / "models" / "zara1" / "generator.safetensors").is_file()
+
+
+def _zoo_index():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("bench_zoo_index", ROOT / "benchmarks" /
+                                                  "zoo_index.py")  # fmt: skip
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_a_sampling_change_after_training_shows_on_the_card_not_in_the_training_command():
+    zoo_index = _zoo_index()
+    config = {"model": {"stochastic_steps": False, "tau": 5}}
+    change = {"stochastic_steps": False, "note": "2026-11-24: posterior-mean by default"}
+    # the training command must reproduce the run: trained with ancestral steps
+    assert zoo_index.trained_config(config, [change])["model"]["stochastic_steps"] is True
+    assert zoo_index.trained_config(config, [])["model"]["stochastic_steps"] is False
+    assert config["model"]["stochastic_steps"] is False  # not modified in place
+    lines = zoo_index._sampling_lines({"tau": 5, "stochastic_steps": False, "changes": [change]})
+    assert "tau = 5 denoising steps, each the posterior mean" in lines[0]
+    assert "Set to posterior-mean steps after training (2026-11-24" in lines[0]
+    assert "ancestral noise." in zoo_index._sampling_lines(
+        {"tau": 5, "stochastic_steps": True, "changes": []})[0]  # fmt: skip

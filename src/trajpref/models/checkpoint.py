@@ -205,7 +205,7 @@ def _upgrade_config(payload: dict[str, Any]) -> None:
     already said it is old)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FutureWarning)
-        payload["config"] = to_dict(experiment_from_dict(payload["config"]))
+        payload["config"] = to_dict(config_of(payload))
     if isinstance(payload.get("denoiser"), dict):
         _upgrade_config(payload["denoiser"])
 
@@ -270,11 +270,43 @@ def publish(
     save(dst, payload, half)
 
 
+def set_stochastic_steps(path: str | Path, stochastic: bool, note: str) -> bool:
+    """Rewrite a generator file's ``model.stochastic_steps`` in place: whether its tau
+    denoising steps add ancestral noise (a sampling setting; the weights, their precision and
+    hashes stay as they are). The change is logged in ``meta["changes"]`` with ``note``.
+    Returns False when the file already has the setting (it is then left untouched)."""
+    path = Path(path)
+    payload = _read_file(path)
+    if payload["kind"] != "generator":
+        raise TrajprefError(f"{path}: stochastic_steps is a generator setting, not a denoiser's")
+    if config_of(payload).model.stochastic_steps == stochastic:
+        return False
+    half = any(t.dtype == torch.float16 for t in load_file(str(path)).values())
+    payload["config"]["model"]["stochastic_steps"] = stochastic
+    config_of(payload)  # the edited config must still be valid
+    change = {"stochastic_steps": stochastic, "note": note}
+    payload["meta"] = {**payload["meta"], "changes": [*payload["meta"].get("changes", []), change]}
+    save(path, payload, half)
+    return True
+
+
 # ----------------------------------------------------------------------------- models
 
 
+LEGACY_DEFAULTS = {("model", "stochastic_steps"): True}
+"""Settings whose default changed after checkpoints were written without them: such a file
+keeps the value it was trained and evaluated with (ancestral tau steps before 2026-11-24)."""
+
+
 def config_of(payload: dict[str, Any]) -> ExperimentConfig:
-    return experiment_from_dict(payload["config"])
+    config = payload["config"]
+    missing = {k: v for k, v in LEGACY_DEFAULTS.items() if k[1] not in config.get(k[0], {})}
+    if missing:
+        config = {section: dict(values) if isinstance(values, dict) else values
+                  for section, values in config.items()}  # fmt: skip
+        for (section, name), value in missing.items():
+            config.setdefault(section, {})[name] = value
+    return experiment_from_dict(config)
 
 
 def build_denoiser(payload: dict[str, Any]) -> tuple[Denoiser, ExperimentConfig]:

@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from trajpref.config import ExperimentConfig, load_config
+from trajpref.config import ExperimentConfig, load_config, to_dict
 from trajpref.errors import ConfigError
 from trajpref.models import checkpoint
 
@@ -62,5 +62,7 @@ def finetune_config(
     extra = preset_overrides(preset, method) if preset else [f"finetune.method={method}"]
     if seed is not None:
         extra.append(f"seed={seed}")
-    base = {k: v for k, v in payload["config"].items() if k != "finetune"}
+    # the start's resolved config (a file older than a changed default keeps its own value)
+    resolved = to_dict(checkpoint.config_of(payload))
+    base = {k: v for k, v in resolved.items() if k != "finetune"}
     return load_config(config, [*extra, *(overrides or [])], base=base, sections=("finetune",))
