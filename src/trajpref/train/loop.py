@@ -260,7 +260,7 @@ def fit(
         record: dict[str, Any] = {
             "epoch": epoch + 1, "step": step, "lr": sched.get_last_lr()[0],
             "train_seconds": round(elapsed, 2),
-            f"budget_{optim_cfg.budget_clock}_seconds": round(spent, 2),
+            f"budget_{optim_cfg.budget_clock}_seconds": round(spent, 4),
             "samples_per_second": round(rate, 1),
         }  # fmt: skip
         record.update({f"train_{k}": v / max(1, agents) for k, v in sums.items()})
