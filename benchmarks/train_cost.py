@@ -11,8 +11,10 @@ validation pass, then extrapolates to the config's schedule:
     minutes = (epochs x training agent-windows / throughput + evaluations x one validation) / 60
 
 The generator stage is timed from the dataset's published denoiser. Writes
-benchmarks/results/meta/train_cost.json; ``python benchmarks/update_readme.py`` shows it in the
-README's cost table beside the measured minutes. An estimate, labelled as one: real runs add
+benchmarks/results/meta/train_cost.json (with ``--datasets`` naming a subset, the other
+datasets keep their earlier entries; each entry carries the date it was measured);
+``python benchmarks/update_readme.py`` shows it in the README's cost table beside the
+measured minutes. An estimate, labelled as one: real runs add
 data loading and checkpoint writes (seconds).
 """
 
@@ -20,6 +22,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import datetime
+import json
 import tempfile
 from pathlib import Path
 
@@ -95,8 +99,18 @@ def main() -> None:
                            if isinstance(v, dict))  # fmt: skip
         print(f"{dataset:<9} {parts} = {total:.1f} min (estimated, alone on the machine)",
               flush=True)  # fmt: skip
-    write_meta(args.out, datasets=entries)
-    print(f"wrote {args.out}")
+    out = Path(args.out)
+    kept = {}
+    if out.is_file() and set(args.datasets) != set(DATASETS):
+        # a subset re-estimated (e.g. after its configs changed): the other datasets keep
+        # their earlier entries, each stamped with the date of the run that measured it
+        before = json.loads(out.read_text())
+        kept = {name: {"date": before["date"], **entry}
+                for name, entry in before["datasets"].items() if name not in entries}  # fmt: skip
+    today = datetime.date.today().isoformat()
+    entries = {name: {"date": today, **entry} for name, entry in entries.items()}
+    write_meta(out, datasets={**kept, **entries})
+    print(f"wrote {out}")
 
 
 if __name__ == "__main__":

@@ -105,6 +105,8 @@ def speed_table(meta_dir: Path) -> str:
         est = estimates.get(name.split("/")[0]) if m is not None else None
         guess = "–" if est is None else f"{est['minutes']:.1f}"
         again = repeat["datasets"].get(name.split("/")[0]) if est is not None else None
+        if again is not None and est.get("date", cost_run["date"]) > repeat["date"]:
+            again = None  # the repeat probed an older config than the estimate
         guess += "" if again is None else f" ({again['minutes']:.1f})"
         if m is not None:
             p, secs, r = m["params"], m["stage_seconds"], m["samples_per_second"]
@@ -126,7 +128,7 @@ def speed_table(meta_dir: Path) -> str:
         lines.append(
             f"_Estimated minutes: `{cost_run['command']}`, {cost_run['date']}, "
             f"{cost_run['machine']}: each stage's throughput and one validation pass, measured "
-            "alone, times the config's epochs and evaluations._"
+            "alone, times the config's epochs and evaluations." + _older(estimates, cost_run) + "_"
         )
     if repeat["datasets"]:
         lines.append("")
@@ -143,6 +145,16 @@ def speed_table(meta_dir: Path) -> str:
             f"{speed['samples']} samples, the same test scenes for both samplers._"
         )
     return "\n".join(lines)
+
+
+def _older(estimates: dict, run: dict) -> str:
+    """A note naming the datasets whose estimate comes from an earlier run than ``run``."""
+    by_date: dict[str, list[str]] = {}
+    for name, entry in estimates.items():
+        if entry.get("date", run["date"]) != run["date"]:
+            by_date.setdefault(entry["date"], []).append(name)
+    parts = [f"{', '.join(sorted(names))} from {day}" for day, names in sorted(by_date.items())]
+    return f" Kept from earlier runs of the same script: {'; '.join(parts)}." if parts else ""
 
 
 if __name__ == "__main__":

@@ -169,6 +169,11 @@ class OptimConfig:
     budget_clock: Literal["wall", "cpu"] = "wall"
     """What ``max_minutes`` counts: ``wall`` (elapsed time) or ``cpu`` (this process's CPU
     time, all its threads). ``cpu`` keeps a budget fair when other jobs share the machine."""
+    precision: Literal["fp32", "bf16"] = "fp32"
+    """Arithmetic of the training steps' forward passes: ``fp32``, or ``bf16`` (autocast to
+    bfloat16 on the stage's device; weights, optimiser state and validation stay float32).
+    bf16 is fast where the CPU has bfloat16 instructions (AVX512-BF16, AMX) or on a GPU;
+    elsewhere it can be slower (docs/pretraining.md, "bfloat16 training steps")."""
 
     def __post_init__(self) -> None:
         _positive(self, "epochs", "lr", "grad_clip", "eval_every")

@@ -286,3 +286,37 @@ def test_training_reads_with_the_configs_read_options(tmp_path, folder, capsys, 
     assert code == 2 and len(err.strip().splitlines()) == 1
     assert re.search(message, err), err
     assert not out.exists()  # nothing written
+
+
+@pytest.mark.parametrize("precision", ["fp32", "bf16"])
+def test_bf16_precision_autocasts_the_training_steps_only(tmp_path, cfg, precision):
+    import dataclasses
+
+    seen: list[tuple[bool, torch.dtype]] = []  # (module in training mode, Linear output dtype)
+
+    def hook(module, args, output):
+        if isinstance(module, torch.nn.Linear) and isinstance(output, torch.Tensor):
+            seen.append((module.training, output.dtype))
+
+    denoiser = dataclasses.replace(cfg.denoiser, epochs=1, precision=precision)
+    handle = torch.nn.modules.module.register_module_forward_hook(hook)
+    try:
+        train_stage("diffusion", dataclasses.replace(cfg, denoiser=denoiser), tmp_path,
+                    device="cpu", progress=False, max_steps=2)  # fmt: skip
+    finally:
+        handle.remove()
+    train_dtypes = {d for training, d in seen if training}
+    eval_dtypes = {d for training, d in seen if not training}
+    assert train_dtypes == ({torch.bfloat16} if precision == "bf16" else {torch.float32})
+    assert eval_dtypes == {torch.float32}  # validation is never autocast
+    weights = ckpt.load(tmp_path / f"denoiser{ckpt.SUFFIX}")
+    denoiser_model, _ = ckpt.build_denoiser(weights)
+    assert all(p.dtype == torch.float32 and torch.isfinite(p).all()
+               for p in denoiser_model.parameters())  # fmt: skip
+
+
+def test_an_unknown_precision_is_a_config_error():
+    from trajpref.config import GeneratorTrainConfig
+
+    with pytest.raises(ConfigError, match="precision must be 'fp32' or 'bf16'"):
+        GeneratorTrainConfig(precision="fp16")

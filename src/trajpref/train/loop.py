@@ -207,6 +207,7 @@ def fit(
     nonfinite = 0
     scale_range = (data_cfg.scale_min, data_cfg.scale_max)
     use_scale = scale_range != (1.0, 1.0)
+    bf16 = optim_cfg.precision == "bf16"  # autocast the forward passes (validation stays fp32)
     for epoch in range(start_epoch, optim_cfg.epochs):
         t0, c0 = time.perf_counter(), clock()
         loader.set_epoch(epoch)
@@ -222,7 +223,9 @@ def fit(
                             scale_range=scale_range if use_scale else None).to(device)  # fmt: skip
             collected = () if stage.collect is None else (stage.collect(batch, noise_gen),)
             for _ in range(stage.updates):
-                loss, logs = objective(batch, noise_gen, *collected)
+                with torch.autocast(device.type, dtype=torch.bfloat16, enabled=bf16):
+                    loss, logs = objective(batch, noise_gen, *collected)
+                loss = loss.float()  # autocast may hand back a bfloat16 scalar
                 finite = torch.isfinite(loss.detach()).to(torch.int32)
                 if dist_info.enabled:  # every rank skips together, or DDP's all-reduce would hang
                     torch.distributed.all_reduce(finite, op=torch.distributed.ReduceOp.MIN)
