@@ -93,6 +93,7 @@ def speed_table(meta_dir: Path) -> str:
         "|---|---|---|---|---|---|---|---|---|",
     ]
     defaults = {}
+    used_repeat = False  # whether any row shows the repeat probe in brackets
     for path in sorted(meta_dir.glob("pretrained_*.json")):
         m = json.loads(path.read_text())
         if not m.get("variant"):  # variants: trained elsewhere or off the default config
@@ -107,6 +108,7 @@ def speed_table(meta_dir: Path) -> str:
         again = repeat["datasets"].get(name.split("/")[0]) if est is not None else None
         if again is not None and est.get("date", cost_run["date"]) > repeat["date"]:
             again = None  # the repeat probed an older config than the estimate
+        used_repeat = used_repeat or again is not None
         guess += "" if again is None else f" ({again['minutes']:.1f})"
         if m is not None:
             p, secs, r = m["params"], m["stage_seconds"], m["samples_per_second"]
@@ -130,7 +132,7 @@ def speed_table(meta_dir: Path) -> str:
             f"{cost_run['machine']}: each stage's throughput and one validation pass, measured "
             "alone, times the config's epochs and evaluations." + _older(estimates, cost_run) + "_"
         )
-    if repeat["datasets"]:
+    if used_repeat:
         lines.append("")
         lines.append(
             f"_In brackets: a longer probe right after, `{repeat['command']}`, "
