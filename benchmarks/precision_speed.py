@@ -4,9 +4,9 @@
 
 For each dataset's default config and each pretraining stage (the denoiser by Eq. 2, the
 generator through the published denoiser), the same training batches are stepped in turn with
-``precision=fp32`` and ``precision=bf16`` (the autocast of ``train/loop.py``), round after round,
-so both see the same machine load; the first round is warm-up and not timed. Prints
-agent-windows per second of each and their ratio, and writes
+``precision=fp32`` and ``precision=bf16`` (``train.loop.precision_autocast``, as the loop),
+round after round, so both see the same machine load; the first round is warm-up and not
+timed. Prints agent-windows per second of each and their ratio, and writes
 benchmarks/results/meta/precision_speed.json. A speed ratio only: whether bf16 steps train as
 well is a validation question (docs/pretraining.md, "bfloat16 training steps").
 """
@@ -26,6 +26,7 @@ from trajpref.data import load_dataset
 from trajpref.data.loader import SceneLoader
 from trajpref.models import checkpoint as ckpt
 from trajpref.results import write_meta
+from trajpref.train.loop import precision_autocast
 from trajpref.train.stages import build_denoiser_stage, build_generator_stage
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -42,7 +43,7 @@ def cpu_flags() -> list[str]:
     return sorted(w for w in ("avx512_bf16", "amx_bf16", "amx_tile", "avx512f") if w in words)
 
 
-def time_stage(stage, batches, rounds: int) -> dict[str, float]:
+def time_stage(stage, batches, rounds: int, device: torch.device) -> dict[str, float]:
     """Seconds per precision over ``rounds`` timed rounds (one warm-up round first), stepping
     an AdamW optimiser on the stage's trainable parameters as the loop does."""
     params = [p for p in stage.trainable.parameters() if p.requires_grad]
@@ -54,7 +55,7 @@ def time_stage(stage, batches, rounds: int) -> dict[str, float]:
             for name in seconds:
                 gen = torch.Generator().manual_seed(r)
                 t0 = time.perf_counter()
-                with torch.autocast("cpu", dtype=torch.bfloat16, enabled=name == "bf16"):
+                with precision_autocast(device, name):
                     loss, _ = stage.objective(batch, gen)
                 opt.zero_grad(set_to_none=True)
                 loss.float().backward()
@@ -92,7 +93,7 @@ def main() -> None:
             stages["generator"] = build_generator_stage(cfg, ckpt.load(published), train, device)
         entry = {}
         for name, stage in stages.items():
-            sec = time_stage(stage, batches, args.rounds)
+            sec = time_stage(stage, batches, args.rounds, device)
             entry[name] = {
                 "agent_windows": agents,
                 "fp32_per_second": round(agents / sec["fp32"], 1),

@@ -143,6 +143,12 @@ def _should_stop(step: int, max_steps: int | None, seconds: float, max_minutes: 
     return stop
 
 
+def precision_autocast(device: torch.device, precision: str) -> torch.autocast:
+    """The context a training step's forward pass runs in: bfloat16 autocast on ``device``
+    for ``precision="bf16"``, a no-op for ``"fp32"`` (``OptimConfig.precision``)."""
+    return torch.autocast(device.type, dtype=torch.bfloat16, enabled=precision == "bf16")
+
+
 def fit(
     stage: Stage,
     train: TrajectoryDataset,
@@ -207,7 +213,6 @@ def fit(
     nonfinite = 0
     scale_range = (data_cfg.scale_min, data_cfg.scale_max)
     use_scale = scale_range != (1.0, 1.0)
-    bf16 = optim_cfg.precision == "bf16"  # autocast the forward passes (validation stays fp32)
     for epoch in range(start_epoch, optim_cfg.epochs):
         t0, c0 = time.perf_counter(), clock()
         loader.set_epoch(epoch)
@@ -223,7 +228,7 @@ def fit(
                             scale_range=scale_range if use_scale else None).to(device)  # fmt: skip
             collected = () if stage.collect is None else (stage.collect(batch, noise_gen),)
             for _ in range(stage.updates):
-                with torch.autocast(device.type, dtype=torch.bfloat16, enabled=bf16):
+                with precision_autocast(device, optim_cfg.precision):  # validation stays fp32
                     loss, logs = objective(batch, noise_gen, *collected)
                 loss = loss.float()  # autocast may hand back a bfloat16 scalar
                 finite = torch.isfinite(loss.detach()).to(torch.int32)
