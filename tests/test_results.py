@@ -62,6 +62,19 @@ def test_peers_table_averages_our_folds_only_when_all_five_are_there():
     assert peer == "| Peer | sgan | 0.35 / 0.42 | – | – | – | – | – | – | – | – |"
 
 
+def test_peers_table_gives_each_named_method_its_own_line():
+    rows = [_row(f, ade=0.2, fde=0.4) for f in FOLDS]
+    rows += [_row(f, method="pretrained-long", ade=0.1, fde=0.3) for f in FOLDS]
+    rows.append(_row("eth", method="rlhf", ade=0.9, fde=0.9))  # not named: not shown
+    lines = peers_table({"methods": {}}, rows, methods=("pretrained", "pretrained-long"))
+    ours = lines.splitlines()[2:]
+    assert [line.split("|")[1].strip() for line in ours] == [
+        "**trajpref** (`pretrained`)",
+        "**trajpref** (`pretrained-long`)",
+    ]  # no sgan rows
+    assert "**0.10 / 0.30**" in ours[1] and "0.90" not in lines
+
+
 def test_the_peers_file_has_a_source_and_a_protocol_for_every_method():
     peers = json.loads((ROOT / "benchmarks" / "peers.json").read_text())
     for name, entry in peers["methods"].items():

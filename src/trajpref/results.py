@@ -7,7 +7,7 @@ import os
 import platform
 import shlex
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from datetime import date
 from pathlib import Path
 from typing import Any
@@ -248,29 +248,31 @@ def _pair(values: Any) -> str:
 
 
 def peers_table(peers: dict[str, Any], rows: list[dict[str, Any]],
-                method: str = "pretrained") -> str:  # fmt: skip
-    """Markdown table: our ``method`` rows (test split, K = 20, seed-mean) under each
-    evaluation protocol beside the published peers (``benchmarks/peers.json``), minADE20 /
-    minFDE20 per column. The ETH/UCY average is ours only when all five folds are there."""
+                methods: Sequence[str] = ("pretrained",)) -> str:  # fmt: skip
+    """Markdown table: our rows of each of ``methods`` (test split, K = 20, seed-mean) under
+    each evaluation protocol beside the published peers (``benchmarks/peers.json``), minADE20
+    / minFDE20 per column. The ETH/UCY average is ours only when all five folds are there; a
+    method with no row under a protocol gets no line for it."""
     lines = [
         "| method | protocol | " + " | ".join(PEER_COLUMNS) + " |",
         "|---|---|" + "---|" * len(PEER_COLUMNS),
     ]
     merged = [r for r in merge_rows(rows) if r["split"] == "test" and r["samples"] == 20]
-    for protocol in ("all", "sgan"):
-        cells = {}
-        for col in PEER_COLUMNS:
-            xs = [r for r in merged if r["dataset"] == col and r["method"] == method
-                  and r["protocol"] == protocol]  # fmt: skip
-            if xs:
-                cells[col] = [sum(r[k] for r in xs) / len(xs) for k in ("min_ade", "min_fde")]
-        folds = ("eth", "hotel", "univ", "zara1", "zara2")
-        if all(f in cells for f in folds):
-            cells["avg"] = [sum(cells[f][i] for f in folds) / len(folds) for i in (0, 1)]
-        if cells:
-            lines.append(f"| **trajpref** (`{method}`) | {protocol} | "
-                         + " | ".join(f"**{_pair(cells.get(c))}**" if c in cells else "–"
-                                      for c in PEER_COLUMNS) + " |")  # fmt: skip
+    folds = ("eth", "hotel", "univ", "zara1", "zara2")
+    for method in methods:
+        for protocol in ("all", "sgan"):
+            cells = {}
+            for col in PEER_COLUMNS:
+                xs = [r for r in merged if r["dataset"] == col and r["method"] == method
+                      and r["protocol"] == protocol]  # fmt: skip
+                if xs:
+                    cells[col] = [sum(r[k] for r in xs) / len(xs) for k in ("min_ade", "min_fde")]
+            if all(f in cells for f in folds):
+                cells["avg"] = [sum(cells[f][i] for f in folds) / len(folds) for i in (0, 1)]
+            if cells:
+                lines.append(f"| **trajpref** (`{method}`) | {protocol} | "
+                             + " | ".join(f"**{_pair(cells.get(c))}**" if c in cells else "–"
+                                          for c in PEER_COLUMNS) + " |")  # fmt: skip
     for name, entry in peers["methods"].items():
         lines.append(f"| {name} | {entry.get('protocol', 'unknown')} | "
                      + " | ".join(_pair(entry.get(c)) for c in PEER_COLUMNS) + " |")  # fmt: skip

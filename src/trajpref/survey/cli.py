@@ -10,7 +10,6 @@ from trajpref.errors import ConfigError
 from trajpref.survey.analyze import run_analysis
 from trajpref.survey.build import BuildConfig, build_study
 from trajpref.survey.manifest import DATABASE, load_study
-from trajpref.survey.server import serve
 from trajpref.survey.simulate import SimulateConfig, simulate
 from trajpref.survey.store import AnswerStore
 
@@ -123,6 +122,9 @@ def cmd_build(args) -> int:
 
 
 def cmd_serve(args) -> int:
+
+    # imported here: the web server's packages are needed only to serve a study
+    from trajpref.survey.server import serve
 
     serve(args.study, args.host, args.port, args.db, args.max_body, args.quiet)
     return 0
