@@ -184,3 +184,16 @@ def test_denoising_step_flags_pick_posterior_means_or_ancestral_noise(capsys, ti
     assert results["--stochastic"]["min_ade"] != results["--deterministic"]["min_ade"]
     code, _, err = _run(capsys, *base, "--deterministic", "--stochastic")
     assert code != 0 and "not allowed with argument" in err
+
+
+def test_the_cli_imports_without_the_survey_web_server_packages():
+    # training on a machine without starlette/uvicorn (a bare GPU image) must work: the web
+    # server is imported only by `survey serve`
+    import subprocess
+    import sys
+
+    code = ("import sys; sys.modules['uvicorn'] = None; sys.modules['starlette'] = None; "
+            "import trajpref.cli; print('ok')")  # fmt: skip
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "ok"
