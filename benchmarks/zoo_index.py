@@ -63,7 +63,7 @@ LIMITS = {
         "45-minute budget, so it is "
         "published beside the CPU default, chosen on validation (docs/pretraining.md, "
         "'160 generator epochs on a borrowed GPU')."
-        for d in ("zara1", "eth", "hotel", "zara2", "univ")
+        for d in ("zara1", "zara2")
     },
     "robo/generator-long": "Trained on a borrowed GPU (60-epoch schedule, the best epoch 38); "
     "only slightly better than the CPU default on the test split.",
