@@ -56,15 +56,14 @@ LIMITS = {
     "eth/generator-speedaug": "Speed augmentation (training scenes scaled 0.5-2x) closes part "
     "of eth's gap on the test split, but validation cannot choose it over the default: it is "
     "published beside it, not instead of it.",
-    **{
-        f"{d}/generator-long": "160 generator epochs from the published denoiser (the fold's "
-        "config otherwise), trained on a borrowed H100 (9-19 GPU minutes beside up to 14 other "
-        "runs); the same schedule would take 1.2-1.6 hours on two CPU cores, past the "
-        "45-minute budget, so it is "
+    **dict.fromkeys(
+        ("zara1/generator-long", "zara2/generator-long"),
+        "160 generator epochs from the published denoiser (the fold's config otherwise), trained "
+        "on a borrowed H100 (17-18 GPU minutes beside up to 14 other runs); the same schedule "
+        "would take 1.2-1.4 hours on two CPU cores, past the 45-minute budget, so it is "
         "published beside the CPU default, chosen on validation (docs/pretraining.md, "
-        "'160 generator epochs on a borrowed GPU')."
-        for d in ("zara1", "zara2")
-    },
+        "'160 generator epochs on a borrowed GPU').",
+    ),
     "robo/generator-long": "Trained on a borrowed GPU (60-epoch schedule, the best epoch 38); "
     "only slightly better than the CPU default on the test split.",
     "zara1/generator": "The CPU default schedule (40 bf16 generator epochs) is short of LED's "

@@ -1,6 +1,8 @@
 """The command line: JSON interfaces, and bad input giving one line and a non-zero status."""
 
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -189,9 +191,6 @@ def test_denoising_step_flags_pick_posterior_means_or_ancestral_noise(capsys, ti
 def test_the_cli_imports_without_the_survey_web_server_packages():
     # training on a machine without starlette/uvicorn (a bare GPU image) must work: the web
     # server is imported only by `survey serve`
-    import subprocess
-    import sys
-
     code = ("import sys; sys.modules['uvicorn'] = None; sys.modules['starlette'] = None; "
             "import trajpref.cli; print('ok')")  # fmt: skip
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
