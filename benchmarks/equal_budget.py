@@ -18,6 +18,12 @@ checkpoint chosen on validation and writes its test row. Methods:
 - ``rlhf-res-smooth``: RLHF-ReS exploring in smooth directions (``finetune.explore=smooth``,
   a velocity and an acceleration offset per sample, RMS 0.1 per step).
 
+``--start generator-long`` runs the same methods from a dataset's published longer generator
+(``models/<D>/generator-long.safetensors``); their rows are named ``<method>-long`` and the table
+gives them their own start row (``pretrained-long``) and control. Every job skips the start's
+validation: measure it once per start first, ``python benchmarks/finetune.py --dataset D
+--start-only [--start generator-long --tag long]``.
+
 Jobs run seed-major (every dataset and method of seed 0 first), so that an interrupted table
 is balanced; finished rows are skipped when it is run again, and an interrupted job resumes
 from its ``finetune_last.pt``. The table (mean +- std over seeds, the change of minFDE20
@@ -39,7 +45,8 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from trajpref.results import FINETUNE_START, merge_rows, read_rows, update_readme
+from trajpref.results import finetune_start, merge_rows, read_rows, update_readme
+from trajpref.train import read_metrics
 
 ROOT = Path(__file__).resolve().parent.parent
 METHODS = {
@@ -78,13 +85,19 @@ def main() -> None:
         "leave the RL methods, which fit ~16 steps in 4 CPU minutes, below the full rate)",
     )
     parser.add_argument("--workers", type=int, default=2, help="jobs at once (one thread each)")
+    parser.add_argument(
+        "--start",
+        default="generator",
+        help="the published generator every method starts from (models/<D>/<START>); another "
+        "than the default names its rows <method>-<variant>, e.g. generator-long: control-long",
+    )
     parser.add_argument("--data-root", default=None)
     parser.add_argument("--report", action="store_true", help="only print the table")
     args = parser.parse_args()
     if not args.report:
         run_jobs(args)
-    # the table always shows every method with rows: the control chosen on validation is
-    # chosen among all controls, whichever methods this invocation ran
+    # the table always shows every method with rows, from every start: the control chosen on
+    # validation is chosen among all controls of a start, whichever methods this invocation ran
     table = report(args.datasets, list(METHODS))
     out = ROOT / "benchmarks" / "results" / "meta" / "equal_budget.md"
     out.write_text(table + "\n")
@@ -103,22 +116,56 @@ def _arg(method: str, flag: str) -> str:
     return args[args.index(flag) + 1] if flag in args else ""
 
 
-def _best_val(dataset: str, method: str, seed: int) -> float | None:
+def variant(start: str) -> str:
+    """A start's row suffix: "" for the default generator, "long" for generator-long."""
+    return start.removeprefix("generator").lstrip("-")
+
+
+def _split(name: str) -> tuple[str, str]:
+    """A table row's method name -> (its METHODS entry, its start's variant)."""
+    for suffix in ("long",):
+        if name.endswith("-" + suffix) and name.removesuffix("-" + suffix) in METHODS:
+            return name.removesuffix("-" + suffix), suffix
+    return name, ""
+
+
+def _tag(method: str, var: str) -> str:
+    """The finetune.py --tag of a table method run from a start variant."""
+    return "-".join(t for t in (_arg(method, "--tag"), var) if t)
+
+
+def job_args(method: str, start: str) -> list[str]:
+    """finetune.py's arguments for a table method run from ``start``."""
+    args = [a for a in METHODS[method]]
+    var = variant(start)
+    if var:
+        if "--tag" in args:
+            args[args.index("--tag") + 1] = _tag(method, var)
+        else:
+            args += ["--tag", var]
+        args += ["--start", start]
+    return args
+
+
+def _best_val(dataset: str, name: str, seed: int) -> float | None:
     """The run's best validation score (lower is better); None without its run folder."""
-    tag = _arg(method, "--tag")
+    method, var = _split(name)
+    tag = _tag(method, var)
     run = ROOT / "runs" / f"{dataset}-{_arg(method, '--methods')}-s{seed}{'-' + tag if tag else ''}"
-    log = run / "finetune_metrics.jsonl"
-    if not log.is_file():
+    log = read_metrics(run, "finetune")
+    if not log:
         return None
-    scores = [json.loads(line).get("val_score") for line in log.open()]
+    scores = [epoch.get("val_score") for epoch in log]
     return min((v for v in scores if v is not None), default=None)
 
 
 def _beats_start(dataset: str, method: str, seed: int) -> bool | None:
     """Whether the run's best validation score beats the start's (the fine-tuning stage's
-    own validation of the untouched start, meta/finetune_start_<D>.json); None when the run
-    folder or the start's record is missing (e.g. in a fresh checkout)."""
-    start = ROOT / "benchmarks" / "results" / "meta" / f"finetune_start_{dataset}.json"
+    own validation of the untouched start, meta/finetune_start_<D>[_<start>].json); None when
+    the run folder or the start's record is missing (e.g. in a fresh checkout)."""
+    var = _split(method)[1]
+    name = f"{dataset}_generator-{var}" if var else dataset
+    start = ROOT / "benchmarks" / "results" / "meta" / f"finetune_start_{name}.json"
     best = _best_val(dataset, method, seed)
     if best is None or not start.is_file():
         return None
@@ -136,17 +183,23 @@ def _chosen_control(dataset: str, rows: list[dict], methods: list[str]) -> str:
     return min(scores, key=scores.get) if scores else "control"
 
 
-def _done(dataset: str, method: str, seed: int) -> bool:
-    tag = _arg(method, "--tag")
+def row_name(method: str, start: str) -> str:
+    """The method name of a table method's rows when run from ``start``."""
+    var = variant(start)
+    return f"{method}-{var}" if var else method
+
+
+def _done(dataset: str, method: str, seed: int, start: str) -> bool:
+    tag = _tag(method, variant(start))
     name = f"finetune_{dataset}{'_' + tag if tag else ''}.json"
     path = ROOT / "benchmarks" / "results" / name
     rows = json.loads(path.read_text()) if path.is_file() else []
-    return any((r["method"], r["seed"]) == (method, seed) for r in rows)
+    return any((r["method"], r["seed"]) == (row_name(method, start), seed) for r in rows)
 
 
 def run_jobs(args: argparse.Namespace) -> None:
     jobs = [(d, m, s) for s in args.seeds for d in args.datasets for m in args.methods]
-    todo = [j for j in jobs if not _done(*j)]
+    todo = [j for j in jobs if not _done(*j, args.start)]
     print(f"{len(jobs) - len(todo)} of {len(jobs)} rows already measured; {len(todo)} to run")
     logs = ROOT / "runs" / "logs"
     logs.mkdir(parents=True, exist_ok=True)
@@ -161,10 +214,12 @@ def run_jobs(args: argparse.Namespace) -> None:
     def one(job: tuple[str, str, int]) -> tuple[tuple[str, str, int], int, float]:
         dataset, method, seed = job
         cmd = [sys.executable, str(ROOT / "benchmarks" / "finetune.py"), "--dataset", dataset,
-               *METHODS[method], "--seeds", str(seed), "--skip-done", "--no-start-validation",
+               *job_args(method, args.start), "--seeds", str(seed), "--skip-done",
+               "--no-start-validation",
                *budget, *data]  # fmt: skip
         t0 = time.perf_counter()
-        with open(logs / f"equal_budget-{dataset}-{method}-s{seed}.log", "a") as log:
+        name = row_name(method, args.start)
+        with open(logs / f"equal_budget-{dataset}-{name}-s{seed}.log", "a") as log:
             code = subprocess.call(cmd, env=env, stdout=log, stderr=subprocess.STDOUT)
         return job, code, time.perf_counter() - t0
 
@@ -202,39 +257,48 @@ def report(datasets: list[str], methods: list[str]) -> str:
     for dataset in datasets:
         pick = [r for r in rows if r["dataset"] == dataset and r["split"] == "test"]
         pick = [r for r in pick if r["samples"] == 20]
-        start = next((r for r in pick if r["method"] == FINETUNE_START), None)
-        chosen = _chosen_control(dataset, pick, methods)
-        control = [r["min_fde"] for r in pick if r["method"] == chosen]
-        if start is not None:
-            lines.append(
-                f"| {dataset} | start (pretrained) | – | {_fmt(start['min_ade'])} "
-                f"| {_fmt(start['min_fde'])} | – | – | {_fmt(start['joint_min_ade'])} / "
-                f"{_fmt(start['joint_min_fde'])} | {_fmt(start['max_ats'])} | – | – |"
-            )
-        for method in methods:
-            own = sorted((r for r in pick if r["method"] == method), key=lambda r: r["seed"])
-            if not own:
+        for var in ("", "long"):  # each start with its own methods, start row and control
+            names = [f"{m}-{var}" if var else m for m in methods]
+            if not any(r["method"] in names for r in pick):
                 continue
-            fde = [r["min_fde"] for r in own]
-            beats = [_beats_start(dataset, method, r["seed"]) for r in own]
-            known = [b for b in beats if b is not None]
-            beat = f"{sum(known)} of {len(known)}" if known else "–"
-            vs_start = (
-                f"{100 * (statistics.mean(fde) / start['min_fde'] - 1):+.1f} %" if start else "–"
-            )
-            vs_control = (
-                f"{100 * (statistics.mean(fde) / statistics.mean(control) - 1):+.1f} %"
-                if control and method != chosen
-                else "–"
-            )
-            lines.append(
-                f"| {dataset} | {method} | {','.join(str(r['seed']) for r in own)} "
-                f"| {_ms([r['min_ade'] for r in own])} | {_ms(fde)} | {vs_start} | {vs_control} "
-                f"| {_ms([r['joint_min_ade'] for r in own])} / "
-                f"{_ms([r['joint_min_fde'] for r in own])} | {_ms([r['max_ats'] for r in own])} "
-                f"| {statistics.mean(r['train_seconds'] for r in own) / 60:.1f} | {beat} |"
-            )
+            start = next((r for r in pick if r["method"] == finetune_start(names[0])), None)
+            lines += _rows(dataset, pick, names, start)
     return "\n".join(lines)
+
+
+def _rows(dataset: str, pick: list[dict], names: list[str], start: dict | None) -> list[str]:
+    """One start's lines of the table: the start, then each method with rows."""
+    lines = []
+    chosen = _chosen_control(dataset, pick, names)
+    control = [r["min_fde"] for r in pick if r["method"] == chosen]
+    if start is not None:
+        lines.append(
+            f"| {dataset} | start ({start['method']}) | – | {_fmt(start['min_ade'])} "
+            f"| {_fmt(start['min_fde'])} | – | – | {_fmt(start['joint_min_ade'])} / "
+            f"{_fmt(start['joint_min_fde'])} | {_fmt(start['max_ats'])} | – | – |"
+        )
+    for method in names:
+        own = sorted((r for r in pick if r["method"] == method), key=lambda r: r["seed"])
+        if not own:
+            continue
+        fde = [r["min_fde"] for r in own]
+        beats = [_beats_start(dataset, method, r["seed"]) for r in own]
+        known = [b for b in beats if b is not None]
+        beat = f"{sum(known)} of {len(known)}" if known else "–"
+        vs_start = f"{100 * (statistics.mean(fde) / start['min_fde'] - 1):+.1f} %" if start else "–"
+        vs_control = (
+            f"{100 * (statistics.mean(fde) / statistics.mean(control) - 1):+.1f} %"
+            if control and method != chosen
+            else "–"
+        )
+        lines.append(
+            f"| {dataset} | {method} | {','.join(str(r['seed']) for r in own)} "
+            f"| {_ms([r['min_ade'] for r in own])} | {_ms(fde)} | {vs_start} | {vs_control} "
+            f"| {_ms([r['joint_min_ade'] for r in own])} / "
+            f"{_ms([r['joint_min_fde'] for r in own])} | {_ms([r['max_ats'] for r in own])} "
+            f"| {statistics.mean(r['train_seconds'] for r in own) / 60:.1f} | {beat} |"
+        )
+    return lines
 
 
 if __name__ == "__main__":

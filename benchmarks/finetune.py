@@ -9,7 +9,9 @@ Writes benchmarks/results/finetune_<dataset>[_<tag>].json and, with ``--publish`
 model of the untagged run as models/<dataset>/<method>.safetensors. Every invocation also writes
 benchmarks/results/meta/finetune_start_<dataset>.json: the start's validation exactly as the
 fine-tuning stage computes it each epoch (the "epoch 0" the run logs start from);
-``--start-only`` writes just that.
+``--start-only`` writes just that. ``--start generator-long --tag long`` starts from another
+published generator (its rows are named <method>-long, its start's validation is
+meta/finetune_start_<dataset>_generator-long.json).
 """
 
 from __future__ import annotations
@@ -41,6 +43,13 @@ def main() -> None:
     parser.add_argument("--preset", default=None)
     parser.add_argument("--set", dest="overrides", action="append", default=[])
     parser.add_argument("--tag", default="", help="names an ablation: its own runs and rows")
+    parser.add_argument(
+        "--start",
+        default="generator",
+        help="the published generator to start from, models/<dataset>/<START>.safetensors "
+        "(another than the default needs a --tag ending in its name, e.g. --start "
+        "generator-long --tag long, so that its rows compare with their own start)",
+    )
     parser.add_argument("--data-root", default=None)
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--samples", type=int, default=20)
@@ -67,7 +76,13 @@ def main() -> None:
     )
     args = parser.parse_args()
 
-    start = ROOT / "models" / args.dataset / f"generator{ckpt.SUFFIX}"
+    start = ROOT / "models" / args.dataset / f"{args.start}{ckpt.SUFFIX}"
+    if not start.is_file():
+        parser.error(f"no published {args.start} for {args.dataset}: {start} does not exist")
+    variant = args.start.removeprefix("generator").lstrip("-")
+    if variant and not args.tag.endswith(variant):
+        parser.error(f"--start {args.start} needs a --tag ending in '{variant}' (e.g. --tag "
+                     f"{variant}): its rows are named <method>-<tag>")  # fmt: skip
     if not args.no_start_validation:
         start_validation(args, start)
     if args.start_only:
@@ -133,6 +148,13 @@ def _locked(path: Path):
             fcntl.flock(handle, fcntl.LOCK_UN)
 
 
+def start_meta(dataset: str, start: str = "generator") -> Path:
+    """Where the start's validation is kept: meta/finetune_start_<dataset>.json for the default
+    generator, meta/finetune_start_<dataset>_<start>.json for another published one."""
+    name = dataset if start == "generator" else f"{dataset}_{start}"
+    return ROOT / "benchmarks" / "results" / "meta" / f"finetune_start_{name}.json"
+
+
 def start_validation(args, start: Path) -> dict[str, float]:
     """The fine-tuning stage's validation of the untouched start (its "epoch 0")."""
     cfg = finetune_config(str(start), args.methods[0], args.preset, None, args.overrides, 0)
@@ -141,7 +163,7 @@ def start_validation(args, start: Path) -> dict[str, float]:
     res = stage.validate()
     meta = {"dataset": args.dataset, "start": str(start.relative_to(ROOT)),
             "eval_max_scenes": cfg.finetune.eval_max_scenes, "val": res}  # fmt: skip
-    path = ROOT / "benchmarks" / "results" / "meta" / f"finetune_start_{args.dataset}.json"
+    path = start_meta(args.dataset, args.start)
     path.write_text(json.dumps(meta, indent=2) + "\n")
     print(f"{args.dataset} start (validation): " + " ".join(f"{k} {v:.4f}" for k, v in res.items()))
     return res

@@ -14,9 +14,12 @@ import json
 import statistics
 from pathlib import Path
 
-from trajpref.results import FINETUNE_START, merge_rows, read_rows
+from trajpref.results import ANCESTRAL_SUFFIX, FINETUNE_START, finetune_start, merge_rows, read_rows
+from trajpref.train import read_metrics
 
 ROOT = Path(__file__).resolve().parent.parent
+START_ORDER = (FINETUNE_START + ANCESTRAL_SUFFIX, FINETUNE_START, FINETUNE_START + "-long")
+"""The accuracy table's groups: runs from the generators of before 2026-11-24 first."""
 RUN_SUFFIX = {"rlhf": "rlhf", "rlhf-res": "rlhf-res", "rlhf-res-reg-only": "rlhf-res"}
 
 
@@ -42,16 +45,16 @@ def _pct(new: float, old: float) -> str:
     return f"{100 * (new - old) / old:+.1f} %"
 
 
-def _start(rows: list[dict], dataset: str) -> dict | None:
-    """The pretrained start's test row of a dataset (as the fine-tuning runs sampled it)."""
-    key = (dataset, FINETUNE_START, "test")
+def _start(rows: list[dict], dataset: str, method: str) -> dict | None:
+    """The test row of the start a fine-tuning method's runs began from (as they sampled it:
+    ``pretrained-ancestral`` for the rows of before 2026-11-24, ``pretrained`` since)."""
+    key = (dataset, finetune_start(method), "test")
     return next((r for r in rows if (r["dataset"], r["method"], r["split"]) == key), None)
 
 
 def _log(run: Path) -> list[dict]:
     """A run's finetune_metrics.jsonl, one dict per epoch ([] when missing)."""
-    path = run / "finetune_metrics.jsonl"
-    return [json.loads(line) for line in path.open()] if path.is_file() else []
+    return read_metrics(run, "finetune")
 
 
 def _best_epochs(logs: list[list[dict]]) -> str:
@@ -68,28 +71,30 @@ def accuracy_section(rows: list[dict], datasets: list[str]) -> tuple[str, dict]:
     ]
     fde_change: dict[str, dict[str, float]] = {}
     for d in datasets:
-        s = _start(rows, d)
-        if s is None:
-            continue
-        lines.append(
-            f"| {d} | pretrained (start) | 1 | {s['min_ade']:.3f} | {s['min_fde']:.3f} | – | – "
-            f"| {s['joint_min_ade']:.3f} / {s['joint_min_fde']:.3f} "
-            f"| {_ms(_col([s], 'max_ats'))} / {_ms(_col([s], 'max_fts'))} | – |"
-        )
-        methods = sorted({r["method"] for r in rows if r["dataset"] == d
-                          and r["method"].startswith("rlhf") and r["split"] == "test"})  # fmt: skip
-        for m in methods:
-            g = [r for r in rows if (r["dataset"], r["method"], r["split"]) == (d, m, "test")]
-            ade, fde = [r["min_ade"] for r in g], [r["min_fde"] for r in g]
-            fde_change.setdefault(m, {})[d] = statistics.mean(fde) / s["min_fde"] - 1
+        tuned = {r["method"] for r in rows if r["dataset"] == d
+                 and r["method"].startswith("rlhf") and r["split"] == "test"}  # fmt: skip
+        for start in sorted({finetune_start(m) for m in tuned}, key=START_ORDER.index):
+            methods = sorted(m for m in tuned if finetune_start(m) == start)
+            s = _start(rows, d, methods[0])
+            if s is None:
+                continue
             lines.append(
-                f"| {d} | {m} | {len(g)} | {_ms(ade)} | {_ms(fde)} "
-                f"| {_pct(statistics.mean(ade), s['min_ade'])} "
-                f"| {_pct(statistics.mean(fde), s['min_fde'])} "
-                f"| {_ms(_col(g, 'joint_min_ade'))} / {_ms(_col(g, 'joint_min_fde'))} "
-                f"| {_ms(_col(g, 'max_ats'))} / {_ms(_col(g, 'max_fts'))} "
-                f"| {_ms(_col(g, 'train_seconds'), 0)} |"
+                f"| {d} | {s['method']} (start) | 1 | {s['min_ade']:.3f} | {s['min_fde']:.3f} "
+                f"| – | – | {s['joint_min_ade']:.3f} / {s['joint_min_fde']:.3f} "
+                f"| {_ms(_col([s], 'max_ats'))} / {_ms(_col([s], 'max_fts'))} | – |"
             )
+            for m in methods:
+                g = [r for r in rows if (r["dataset"], r["method"], r["split"]) == (d, m, "test")]
+                ade, fde = [r["min_ade"] for r in g], [r["min_fde"] for r in g]
+                fde_change.setdefault(m, {})[d] = statistics.mean(fde) / s["min_fde"] - 1
+                lines.append(
+                    f"| {d} | {m} | {len(g)} | {_ms(ade)} | {_ms(fde)} "
+                    f"| {_pct(statistics.mean(ade), s['min_ade'])} "
+                    f"| {_pct(statistics.mean(fde), s['min_fde'])} "
+                    f"| {_ms(_col(g, 'joint_min_ade'))} / {_ms(_col(g, 'joint_min_fde'))} "
+                    f"| {_ms(_col(g, 'max_ats'))} / {_ms(_col(g, 'max_fts'))} "
+                    f"| {_ms(_col(g, 'train_seconds'), 0)} |"
+                )
     return "\n".join(lines), fde_change
 
 
@@ -143,12 +148,15 @@ def reward_section(rows: list[dict], datasets: list[str]) -> str:
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for d in datasets:
-        start_path, start = meta / f"finetune_start_{d}.json", _start(rows, d)
+        start_path, start = meta / f"finetune_start_{d}.json", _start(rows, d, "rlhf")
         if not start_path.is_file() or start is None:
             continue
         v0, t0 = json.loads(start_path.read_text())["val"], start["min_fde"]
+        # the run folders hold today's runs only: the older rows' folders are gone (and their
+        # names are today's), so those rows are left to docs/rlhf_results_2026-11-23.md
         tuned = [r for r in rows if r["dataset"] == d and r["split"] == "test"
-                 and r["method"].startswith("rlhf")]  # fmt: skip
+                 and r["method"].startswith("rlhf")
+                 and not r["method"].endswith(ANCESTRAL_SUFFIX)]  # fmt: skip
         for method in sorted({r["method"] for r in tuned}):
             base = "rlhf-res" if method.startswith("rlhf-res") else "rlhf"
             tag = method.removeprefix(base).lstrip("-")

@@ -32,7 +32,7 @@ from trajpref.data import load_dataset
 from trajpref.evaluation import evaluate, time_predictors
 from trajpref.models import checkpoint as ckpt
 from trajpref.results import make_row, upsert_rows
-from trajpref.train.run import train_stage
+from trajpref.train import read_metrics, train_stage
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -44,11 +44,6 @@ def _train(args, run_dir: Path) -> None:
         last = run_dir / f"{name}_last.pt"
         resume = str(last) if last.is_file() else None
         train_stage(stage, cfg, run_dir, args.data_root, args.device, resume)
-
-
-def _metrics_log(run_dir: Path, stage: str) -> list[dict]:
-    path = run_dir / f"{stage}_metrics.jsonl"
-    return [json.loads(line) for line in path.open()] if path.is_file() else []
 
 
 def _is_full_sampler_row(row: dict) -> bool:
@@ -126,7 +121,7 @@ def main() -> None:
     den_ckpt = gen_ckpt["denoiser"]
     train_seconds = den_ckpt["meta"]["train_seconds"] + gen_ckpt["meta"]["train_seconds"]
     # total time of each whole stage (the best checkpoint may come before the last epoch)
-    logs = {s: _metrics_log(run_dir, s) for s in ("denoiser", "generator")}
+    logs = {s: read_metrics(run_dir, s) for s in ("denoiser", "generator")}
     if args.published:
         logs = {s: [] for s in logs}  # the training records are the previous meta file's
     stage_seconds = {s: (log[-1]["train_seconds"] if log else None) for s, log in logs.items()}

@@ -679,9 +679,9 @@ def render(cells: dict, paper: dict, opts, cpu: dict) -> str:
         f"- SDD: {paper['text_only']['sdd']}",
         "- Sampling: the published generators' tau denoising steps are posterior means since "
         '2026-11-24 (docs/pretraining.md, "The switch"), so the evaluated `pretrained` cells '
-        "use them; the RLHF, RLHF-ReS and best cells that come from result rows (†) are "
-        "fine-tuning runs that sampled with the ancestral steps of before, and compare with "
-        "their own start, the `pretrained-ancestral` rows (docs/rlhf.md).",
+        "use them; the RLHF, RLHF-ReS and best cells that come from result rows (†) are the "
+        "equal-budget runs of 2026-11-25 from the current generators (docs/rlhf.md); the "
+        "older runs from the ancestral-step generators are rows with the suffix `-ancestral`.",
         "",
         "## Where each cell comes from",
         "",

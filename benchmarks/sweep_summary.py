@@ -15,11 +15,11 @@ once, by ``benchmarks/pretrain.py`` for what is published.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
 from trajpref.results import write_meta
+from trajpref.train import read_metrics
 
 
 def parse_job(line: str) -> dict[str, Any]:
@@ -31,10 +31,7 @@ def parse_job(line: str) -> dict[str, Any]:
 
 def summarise(run_dir: Path) -> dict[str, Any] | None:
     """Best and last validation of one run folder (None when it has no validation yet)."""
-    path = run_dir / "generator_metrics.jsonl"
-    if not path.is_file():
-        return None
-    log = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    log = read_metrics(run_dir, "generator")
     evals = [r for r in log if "val_min_fde" in r]
     if not evals:
         return None

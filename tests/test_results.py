@@ -8,6 +8,7 @@ import pytest
 from trajpref.results import (
     FIELDS,
     accuracy_table,
+    finetune_start,
     make_row,
     merge_rows,
     peers_table,
@@ -152,3 +153,10 @@ def test_selection_table_gives_a_published_variant_its_own_line():
     assert [line.split("|")[1].strip() for line in lines] == ["eth", "eth (speedaug)"]
     assert "1.200 (`score-fps`) | +20.0 %" in lines[0]
     assert "0.600 (`score-fps`) | -25.0 %" in lines[1]
+
+
+def test_each_finetuning_row_compares_with_the_start_of_its_time():
+    assert finetune_start("rlhf-res") == "pretrained"
+    assert finetune_start("control-lr3e-5") == "pretrained"
+    assert finetune_start("rlhf-res-steps36-ancestral") == "pretrained-ancestral"
+    assert finetune_start("control-lr3e-5-long") == "pretrained-long"

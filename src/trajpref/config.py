@@ -120,6 +120,12 @@ class ModelConfig:
     posterior mean, deterministic given Y^tau (false, the default since 2026-11-24: better on
     validation for all 12 published generators' minADE20 and 11 of 12 minFDE20;
     benchmarks/deterministic_steps.py, docs/pretraining.md)."""
+    agent_frame: Literal["scene", "heading"] = "scene"
+    """The frame the generator sees and predicts in: ``scene`` (each agent's history relative
+    to its last position, axes of the scene; rotation augmentation teaches it every
+    orientation) or ``heading`` (the same, rotated per agent so that its observed displacement
+    points along +x, with its neighbours rotated alike; predictions are rotated back). The
+    denoiser always works in the scene frame, so a published denoiser serves both."""
 
     def __post_init__(self) -> None:
         _positive(self, "hidden", "encoder_layers", "heads", "denoiser_width", "denoiser_blocks",
@@ -130,6 +136,7 @@ class ModelConfig:
             raise ConfigError("ModelConfig.hidden must be even (the sinusoidal step embedding)")
         if self.t_hist < 2:
             raise ConfigError("ModelConfig.t_hist must be >= 2 (velocities need two frames)")
+        check_choices(self)
 
     def denoiser_part(self) -> ModelConfig:
         """This config with the generator-only fields at their defaults: two configs whose
@@ -137,7 +144,7 @@ class ModelConfig:
         return dataclasses.replace(self, **{k: getattr(ModelConfig, k) for k in GENERATOR_ONLY})
 
 
-GENERATOR_ONLY = ("generator_width", "samples", "tau", "stochastic_steps")
+GENERATOR_ONLY = ("generator_width", "samples", "tau", "stochastic_steps", "agent_frame")
 """``ModelConfig`` fields that concern the generator and its sampler, not the denoiser."""
 
 

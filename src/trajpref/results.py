@@ -28,12 +28,28 @@ diffusion score took part (in training or in selecting the samples)."""
 METHODS = ("cv", "full-sampler", "pretrained", "pretrained-long", "control", "rlhf", "rlhf-res",
            "rlhf-set", "rlhf-res-smooth")  # fmt: skip
 """Known methods, in the order tables list them."""
-FINETUNE_START = "pretrained-ancestral"
-"""The method of the fine-tuning tables' start rows: the published generators with ancestral
-tau steps, as every fine-tuning run to date sampled them (the published files switched to
-posterior-mean steps on 2026-11-24, docs/pretraining.md; their ``pretrained`` rows moved)."""
+FINETUNE_START = "pretrained"
+"""The method of the fine-tuning tables' start rows: the published generators as they sample
+today (posterior-mean tau steps since 2026-11-24, docs/pretraining.md)."""
 ANCESTRAL_SUFFIX = "-ancestral"
-"""Rows of a published generator measured before that switch (kept for the tables above)."""
+"""Rows measured before the published generators switched to posterior-mean steps: the old
+``pretrained`` rows, and every fine-tuning row whose run started from those generators (all
+fine-tuning runs of 2026-11-22 and 2026-11-23); they stay in the files for the tables of their
+time and compare with their own start, ``pretrained-ancestral``."""
+
+
+START_SUFFIXES = (ANCESTRAL_SUFFIX, "-long")
+"""Suffixes of fine-tuning rows whose runs began from another start than the published default
+generator: ``-ancestral`` (the generators of before 2026-11-24) and ``-long`` (the published
+``generator-long``, ``benchmarks/finetune.py --start generator-long --tag long``)."""
+
+
+def finetune_start(method: str) -> str:
+    """The method of the start row a fine-tuning row compares with: ``pretrained`` plus the
+    row's start suffix (``rlhf-res-long`` -> ``pretrained-long``, ``control-ancestral`` ->
+    ``pretrained-ancestral``), ``pretrained`` for the runs from the default generator."""
+    suffix = next((s for s in START_SUFFIXES if method.endswith(s)), "")
+    return FINETUNE_START + suffix
 
 
 def machine() -> str:
@@ -144,7 +160,9 @@ def accuracy_table(rows: list[dict[str, Any]], split: str = "test", protocol: st
         if r["split"] == split and r["protocol"] == protocol:
             groups.setdefault((r["dataset"], r["method"], r["samples"]), []).append(r)
     order = {m: i for i, m in enumerate(METHODS)}
-    keys = sorted(groups, key=lambda k: (k[0], order.get(k[1], 99), k[2]))
+    # a method run from a longer start (``control-long``) right after its plain form
+    rank = {m: order.get(m, order.get(m.removesuffix("-long"), 98) + 0.5) for _, m, _ in groups}
+    keys = sorted(groups, key=lambda k: (k[0], rank[k[1]], k[2]))
     cols = ("min_ade", "min_fde", "joint_min_ade", "joint_min_fde", "max_ats", "max_fts",
             "top1_recall_ats", "top5_recall_ats")  # fmt: skip
     lines = [

@@ -1,9 +1,12 @@
+import dataclasses
+
 import pytest
 import torch
 from synthetic import make_scene
 
 from trajpref.config import ModelConfig
-from trajpref.models.encoder import scene_features
+from trajpref.errors import ConfigError
+from trajpref.models.encoder import heading_rotation, scene_features
 from trajpref.models.generator import Generator
 from trajpref.types import collate
 
@@ -51,3 +54,48 @@ def test_samples_follow_config():
     assert gen.samples == 3
     o = gen(scene_features(collate([make_scene(2)]), 1.0))
     assert o.shifts.shape == (3, 2, 12, 2)
+
+
+def _rotated(features, angle: float):
+    """The same scene turned by ``angle`` about the origin (row vectors x -> x @ R.T)."""
+    c, s = torch.cos(torch.tensor(angle)), torch.sin(torch.tensor(angle))
+    rot = torch.stack([torch.stack([c, -s]), torch.stack([s, c])])  # [2, 2]
+    n, t = features.hist.shape[:2]
+    b, p = features.mask.shape
+    hist = (features.hist.view(n, t, 2, 2) @ rot.T).view(n, t, 4)
+    geom = (features.geom.view(b, p, p, 2, 2) @ rot.T).view(b, p, p, 4)
+    return dataclasses.replace(features, hist=hist, geom=geom), rot
+
+
+def test_heading_rotation_turns_the_observed_displacement_onto_x():
+    hist = torch.zeros(3, 8, 4)
+    hist[0, 0, :2] = torch.tensor([-3.0, -4.0])  # came from (-3, -4): moved along (3, 4)
+    hist[1, 0, :2] = torch.tensor([0.0, 2.0])  # moved along -y
+    rot = heading_rotation(hist)  # agent 2 did not move
+    torch.testing.assert_close(rot[0] @ torch.tensor([3.0, 4.0]), torch.tensor([5.0, 0.0]))
+    torch.testing.assert_close(rot[1] @ torch.tensor([0.0, -2.0]), torch.tensor([2.0, 0.0]))
+    torch.testing.assert_close(rot[2], torch.eye(2))
+    torch.testing.assert_close(rot @ rot.mT, torch.eye(2).expand(3, 2, 2))
+
+
+@pytest.mark.parametrize("frame", ["heading", "scene"])
+def test_only_the_heading_frame_turns_its_prediction_with_the_scene(frame):
+    torch.manual_seed(0)
+    gen = Generator(dataclasses.replace(TINY, agent_frame=frame)).eval()
+    features = scene_features(collate([make_scene(3), make_scene(2, seed=1)]), 1.0)
+    turned, rot = _rotated(features, 1.1)
+    with torch.no_grad():
+        a, b = gen(features), gen(turned)
+    equivariant = torch.allclose(b.mean, a.mean @ rot.T, atol=1e-4) and torch.allclose(
+        b.shifts, a.shifts @ rot.T, atol=1e-4
+    )
+    assert equivariant == (frame == "heading")
+    if frame == "heading":  # the scales and the context do not depend on the orientation
+        torch.testing.assert_close(b.log_sigma, a.log_sigma, atol=1e-4, rtol=0)
+        torch.testing.assert_close(b.context, a.context, atol=1e-4, rtol=0)
+
+
+def test_the_agent_frame_is_a_generator_setting_checked_on_construction():
+    assert ModelConfig(agent_frame="heading").denoiser_part() == ModelConfig()
+    with pytest.raises(ConfigError, match="agent_frame"):
+        ModelConfig(agent_frame="polar")

@@ -13,6 +13,7 @@ from trajpref.data import load_dataset
 from trajpref.errors import ConfigError, TrajprefError
 from trajpref.evaluation import evaluate
 from trajpref.models import checkpoint as ckpt
+from trajpref.train import read_metrics
 from trajpref.train.run import train_stage
 from trajpref.train.stages import build_denoiser_stage, build_generator_stage
 from trajpref.types import collate
@@ -100,6 +101,8 @@ def test_run_folder_holds_config_metrics_and_self_sufficient_checkpoints(trained
     assert (trained / "config.yaml").is_file()
     records = [json.loads(line) for line in (trained / "generator_metrics.jsonl").open()]
     assert len(records) == 2 and "val_min_ade" in records[-1]
+    assert read_metrics(trained, "generator") == records  # the reader the benchmarks use
+    assert read_metrics(trained, "finetune") == []  # a stage the run did not train
     payload = ckpt.load(trained / "generator.safetensors")
     assert payload["kind"] == "generator" and payload["denoiser"]["kind"] == "denoiser"
     assert payload["config"]["model"]["samples"] == 4  # K lives in the model section

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import torch
@@ -63,3 +64,30 @@ class SocialEncoder(nn.Module):
         for layer in self.layers:
             padded = layer(padded, f.geom, f.mask)
         return self.norm(padded[f.scene, f.slot])  # [N, H]
+
+
+def heading_rotation(hist: torch.Tensor, eps: float = 1e-4) -> torch.Tensor:
+    """Per-agent rotations R [N, 2, 2] that turn each agent's observed displacement (first to
+    last observed position) onto +x: ``R @ d = (|d|, 0)``. An agent that has not moved
+    (|d| < ``eps``, in model units) keeps the scene's axes (R = I).
+
+    ``hist`` [N, T_h, 4] are the scene features' histories (positions relative to the last
+    observation, then velocities). Row vectors turn with ``x @ R.mT`` into the agent's frame
+    and with ``x @ R`` back."""
+    d = -hist[:, 0, :2]  # [N, 2] displacement over the observed window
+    norm = d.norm(dim=-1, keepdim=True)  # [N, 1]
+    unit = torch.where(norm > eps, d / norm.clamp_min(eps), torch.tensor([1.0, 0.0]).to(d))
+    c, s = unit[:, 0], unit[:, 1]  # [N]
+    return torch.stack([torch.stack([c, s], -1), torch.stack([-s, c], -1)], -2)  # [N, 2, 2]
+
+
+def rotate_features(f: SceneFeatures, rot: torch.Tensor) -> SceneFeatures:
+    """The features in each agent's own frame: its history turned by its R [N, 2, 2], and its
+    neighbours' relative positions and velocities (``geom`` row i) turned by agent i's R."""
+    n, t = f.hist.shape[:2]
+    hist = (f.hist.view(n, t, 2, 2) @ rot[:, None].mT).view(n, t, 4)  # [N, T_h, 4]
+    b, p = f.mask.shape
+    padded = torch.eye(2, dtype=rot.dtype, device=rot.device).repeat(b, p, 1, 1)  # [B, P, 2, 2]
+    padded[f.scene, f.slot] = rot
+    geom = (f.geom.view(b, p, p, 2, 2) @ padded[:, :, None].mT).view(b, p, p, 4)  # [B, P, P, 4]
+    return dataclasses.replace(f, hist=hist, geom=geom)

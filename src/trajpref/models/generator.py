@@ -8,7 +8,12 @@ import torch
 from torch import nn
 
 from trajpref.config import ModelConfig
-from trajpref.models.encoder import SceneFeatures, SocialEncoder
+from trajpref.models.encoder import (
+    SceneFeatures,
+    SocialEncoder,
+    heading_rotation,
+    rotate_features,
+)
 from trajpref.models.layers import mlp
 
 
@@ -44,6 +49,10 @@ class Generator(nn.Module):
         self.shift_head = mlp([h + tf * 2, w, w, samples * tf * 2])
 
     def forward(self, features: SceneFeatures) -> GeneratorOutput:
+        rot = None
+        if self.cfg.agent_frame == "heading":
+            rot = heading_rotation(features.hist)  # [N, 2, 2]
+            features = rotate_features(features, rot)
         ctx = self.encoder(features)  # [N, H]
         n, tf, k = ctx.shape[0], self.cfg.t_fut, self.samples
         mean = self.mean_head(ctx).view(n, tf, 2)  # [N, T_f, 2]
@@ -52,4 +61,8 @@ class Generator(nn.Module):
         raw = self.shift_head(z).view(n, k, tf, 2).transpose(0, 1)  # [K, N, T_f, 2]
         raw = raw - raw.mean(0, keepdim=True)
         spread = raw.pow(2).mean(dim=(0, 2, 3), keepdim=True).add(1e-6).sqrt()  # [1, N, 1, 1]
-        return GeneratorOutput(mean, log_sigma, raw / spread, ctx)
+        shifts = raw / spread  # [K, N, T_f, 2]
+        if rot is not None:  # back to the scene frame, where the denoiser works
+            mean = mean @ rot  # [N, T_f, 2]
+            shifts = shifts @ rot[None]  # [K, N, T_f, 2]
+        return GeneratorOutput(mean, log_sigma, shifts, ctx)

@@ -9,6 +9,7 @@ augmentation, optimisation, DDP, progress bars, metric logs, best checkpoint, re
 from __future__ import annotations
 
 import itertools
+import json
 import math
 import time
 from collections.abc import Callable
@@ -57,6 +58,15 @@ class MetricLog:
                 if isinstance(value, (int, float)) and key != "epoch":
                     self.tb.add_scalar(f"{self.stage}/{key}", value, record["epoch"])
             self.tb.flush()
+
+
+def read_metrics(run_dir: str | Path, stage: str) -> list[dict[str, Any]]:
+    """A run's ``<stage>_metrics.jsonl`` as written by :class:`MetricLog`: one dict per
+    epoch, in order; ``[]`` when the run has not logged that stage (blank lines skipped)."""
+    path = Path(run_dir) / f"{stage}_metrics.jsonl"
+    if not path.is_file():
+        return []
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
 def _lr_lambda(cfg: OptimConfig, total: int) -> Callable[[int], float]:

@@ -1,0 +1,76 @@
+"""benchmarks/equal_budget.py: runs from another published start get their own row names, run
+folders, start row and control, and never mix with the default start's."""
+
+import importlib.util
+import json
+import subprocess
+import sys
+from argparse import Namespace
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture
+def eb(tmp_path, monkeypatch):
+    spec = importlib.util.spec_from_file_location(
+        "bench_equal_budget", ROOT / "benchmarks" / "equal_budget.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    monkeypatch.setattr(module, "ROOT", tmp_path)
+    return module
+
+
+def test_a_longer_start_renames_every_method_and_keeps_each_methods_own_tag(eb):
+    assert eb.job_args("control", "generator") == ["--methods", "control"]
+    assert eb.job_args("control", "generator-long") == [
+        "--methods", "control", "--tag", "long", "--start", "generator-long"]  # fmt: skip
+    args = eb.job_args("rlhf-set", "generator-long")
+    assert args[args.index("--tag") + 1] == "set-long" and "finetune.reward=set" in args
+    assert eb.row_name("control-lr3e-5", "generator-long") == "control-lr3e-5-long"
+    assert eb._split("control-lr3e-5-long") == ("control-lr3e-5", "long")
+    assert eb._split("rlhf-res") == ("rlhf-res", "")
+
+
+def test_run_jobs_skips_only_the_rows_of_the_same_start(eb, tmp_path, monkeypatch):
+    results = tmp_path / "benchmarks" / "results"
+    results.mkdir(parents=True)
+    # the default start's control is measured; the long start's is not
+    (results / "finetune_walks.json").write_text(json.dumps([{"method": "control", "seed": 0}]))
+    seen = []
+    monkeypatch.setattr(subprocess, "call", lambda cmd, **kw: seen.append(cmd) or 0)
+    ns = Namespace(datasets=["walks"], methods=["control"], seeds=[0], minutes=1.0, warmup=4,
+                   workers=1, data_root=None, start="generator")  # fmt: skip
+    eb.run_jobs(ns)
+    assert seen == []
+    eb.run_jobs(Namespace(**{**vars(ns), "start": "generator-long"}))
+    assert len(seen) == 1
+    cmd = seen[0]
+    assert cmd[cmd.index("--start") + 1] == "generator-long"
+    assert cmd[cmd.index("--tag") + 1] == "long"
+
+
+def _row(method: str, seed: int, fde: float) -> dict:
+    return {"dataset": "walks", "split": "test", "protocol": "all", "method": method,
+            "seed": seed, "samples": 20, "min_ade": fde / 2, "min_fde": fde,
+            "joint_min_ade": fde, "joint_min_fde": 2 * fde, "max_ats": 0.1, "max_fts": 0.1,
+            "top1_recall_ats": None, "top5_recall_ats": None, "train_seconds": 240.0,
+            "ms_per_scene": None, "checkpoint": None, "command": None, "date": "2026-11-25",
+            "machine": "test", "uses_score": False}  # fmt: skip
+
+
+def test_each_start_is_compared_with_its_own_start_row(eb, tmp_path):
+    results = tmp_path / "benchmarks" / "results"
+    results.mkdir(parents=True)
+    rows = [_row("pretrained", 0, 0.40), _row("pretrained-long", 0, 0.30),
+            _row("control", 0, 0.44), _row("control-long", 0, 0.33)]  # fmt: skip
+    (results / "rows.json").write_text(json.dumps(rows))
+    table = eb.report(["walks"], ["control"])
+    lines = {line.split(" | ")[1]: line for line in table.splitlines()[2:]}
+    assert set(lines) == {"start (pretrained)", "control", "start (pretrained-long)",
+                          "control-long"}  # fmt: skip
+    assert "+10.0 %" in lines["control"] and "+10.0 %" in lines["control-long"]
