@@ -12,6 +12,7 @@ from trajpref.results import (
     ANCESTRAL_SUFFIX,
     METHODS,
     accuracy_table,
+    base_method,
     peers_table,
     read_rows,
     selection_table,
@@ -21,14 +22,32 @@ from trajpref.results import (
 ROOT = Path(__file__).resolve().parent.parent
 
 
+EQUAL_BUDGET = ("pretrained", "control", "rlhf", "rlhf-res", "rlhf-set")
+"""The equal-budget table's start and methods, as the README shows them."""
+
+
+def _latest_equal_budget(row: dict, current: set[tuple[str, str]]) -> bool:
+    """Whether an ``-ancestral`` row belongs to the latest equal-budget table of its dataset:
+    one of the table's methods (or its start), on a dataset where no run of those methods from
+    the current generator has rows yet."""
+    base = base_method(row["method"])
+    newer = any((row["dataset"], m) in current for m in EQUAL_BUDGET[1:])
+    had = any((row["dataset"], m + ANCESTRAL_SUFFIX) in current for m in EQUAL_BUDGET[1:])
+    return base in EQUAL_BUDGET and had and not newer
+
+
 def main() -> None:
     every = read_rows(ROOT / "benchmarks" / "results")
     # the README keeps the methods users run (also from the longer published generators,
-    # ``control-long``); fine-tuning ablations (tagged runs) and the rows of the generators of
-    # before 2026-11-24 (``-ancestral``) are listed in docs/rlhf_results*.md
-    rows = [r for r in every if (r["method"].removesuffix("-long") in METHODS
+    # ``control-long``); fine-tuning ablations (tagged runs) are listed in docs/rlhf_results*.md.
+    # Rows of the generators of before 2026-11-24 (``-ancestral``) stay only where they are
+    # the latest equal-budget table: its methods and their start, on the datasets where the
+    # table has no rows from a newer start yet
+    current = {(r["dataset"], r["method"]) for r in every}
+    rows = [r for r in every if (base_method(r["method"]) in METHODS
                                  or r["method"].startswith("pretrained-"))
-            and not r["method"].endswith(ANCESTRAL_SUFFIX)]  # fmt: skip
+            and (not r["method"].endswith(ANCESTRAL_SUFFIX)
+                 or _latest_equal_budget(r, current))]  # fmt: skip
     selected = [r for r in every if r["method"].startswith("select-")]
     dates = sorted({r["date"] for r in rows})
     machines = sorted({r["machine"] for r in rows})

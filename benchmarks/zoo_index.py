@@ -178,6 +178,7 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
     if kind == "generator":
         entry["sampling"] = {"tau": cfg["model"]["tau"],
                              "stochastic_steps": cfg["model"]["stochastic_steps"],
+                             "agent_frame": cfg["model"].get("agent_frame", "scene"),
                              "changes": changes}  # fmt: skip
         cfg = trained_config(cfg, changes)  # the training command reproduces the run
         ref = head.get("denoiser_ref") or {}
@@ -253,6 +254,9 @@ def _sampling_lines(sampling: dict[str, Any] | None) -> list[str]:
     text = (
         f"Sampling: the generator's samples, then tau = {sampling['tau']} denoising steps, {how}."
     )
+    if sampling.get("agent_frame") == "heading":
+        text += (" The generator sees and predicts each agent in its heading frame "
+                 "(`model.agent_frame: heading`).")  # fmt: skip
     for change in sampling["changes"]:
         state = "ancestral" if change["stochastic_steps"] else "posterior-mean"
         text += f" Set to {state} steps after training ({change['note']})."

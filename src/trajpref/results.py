@@ -152,6 +152,11 @@ def merge_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return list(merged.values())
 
 
+def base_method(method: str) -> str:
+    """A method without its start suffix (``control-long`` -> ``control``)."""
+    return next((method.removesuffix(x) for x in START_SUFFIXES if method.endswith(x)), method)
+
+
 def accuracy_table(rows: list[dict[str, Any]], split: str = "test", protocol: str = "all") -> str:
     """Markdown table: one line per (dataset, method, samples), mean (+- std) over seeds, of
     the rows measured under ``protocol``."""
@@ -160,8 +165,9 @@ def accuracy_table(rows: list[dict[str, Any]], split: str = "test", protocol: st
         if r["split"] == split and r["protocol"] == protocol:
             groups.setdefault((r["dataset"], r["method"], r["samples"]), []).append(r)
     order = {m: i for i, m in enumerate(METHODS)}
-    # a method run from a longer start (``control-long``) right after its plain form
-    rank = {m: order.get(m, order.get(m.removesuffix("-long"), 98) + 0.5) for _, m, _ in groups}
+    # a method run from another start (``control-long``, ``control-ancestral``) right after
+    # its plain form
+    rank = {m: order.get(m, order.get(base_method(m), 98) + 0.5) for _, m, _ in groups}
     keys = sorted(groups, key=lambda k: (k[0], rank[k[1]], k[2]))
     cols = ("min_ade", "min_fde", "joint_min_ade", "joint_min_fde", "max_ats", "max_fts",
             "top1_recall_ats", "top5_recall_ats")  # fmt: skip
