@@ -99,6 +99,8 @@ def main() -> None:
     # the table always shows every method with rows, from every start: the control chosen on
     # validation is chosen among all controls of a start, whichever methods this invocation ran
     table = report(args.datasets, list(METHODS))
+    if len(table.splitlines()) == 2:  # the header alone
+        table = "_No equal-budget rows from the current generators yet._"
     out = ROOT / "benchmarks" / "results" / "meta" / "equal_budget.md"
     out.write_text(table + "\n")
     note = (
