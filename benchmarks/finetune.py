@@ -102,6 +102,7 @@ def main() -> None:
         run = ROOT / "runs" / f"{args.dataset}-{method}-s{seed}{'-' + args.tag if args.tag else ''}"
         cfg = finetune_config(str(start), method, args.preset, None, args.overrides, seed)
         last = run / "finetune_last.pt"
+        check_start(run, start)
         summary = finetune(cfg, start, run, args.data_root, args.device,
                            str(last) if last.is_file() else None, progress=True)  # fmt: skip
         best = run / f"finetune{ckpt.SUFFIX}"
@@ -146,6 +147,29 @@ def _locked(path: Path):
             yield
         finally:
             fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def check_start(run: Path, start: Path) -> None:
+    """Refuse to resume or reuse a run folder begun from another start: the first run records
+    the start's weights hash in ``<run>/start.json``; a folder with fine-tuning files but no
+    record, or with another hash, is an error (it would silently supply an old run's model)."""
+    record = run / "start.json"
+    want = {"start": str(start.relative_to(ROOT)) if start.is_relative_to(ROOT) else str(start),
+            "hash": ckpt.load(start)["hash"]}  # fmt: skip
+    if record.is_file():
+        have = json.loads(record.read_text())
+        if have.get("hash") != want["hash"]:
+            raise SystemExit(f"{run} was started from {have.get('start')} (weights "
+                             f"{have.get('hash')}), not from {want['start']} ({want['hash']}): "
+                             "move the folder away or name the new runs with --tag")  # fmt: skip
+        return
+    if any(run.glob("finetune*")):
+        raise SystemExit(
+            f"{run} holds a fine-tuning run with no record of its start: move it "
+            "away (it may come from another generator) or name the new runs with --tag"
+        )
+    run.mkdir(parents=True, exist_ok=True)
+    record.write_text(json.dumps(want, indent=2) + "\n")
 
 
 def start_meta(dataset: str, start: str = "generator") -> Path:
