@@ -138,7 +138,7 @@ def _tag(method: str, var: str) -> str:
 
 def job_args(method: str, start: str) -> list[str]:
     """finetune.py's arguments for a table method run from ``start``."""
-    args = [a for a in METHODS[method]]
+    args = list(METHODS[method])
     var = variant(start)
     if var:
         if "--tag" in args:
@@ -187,7 +187,11 @@ def _chosen_control(dataset: str, rows: list[dict], methods: list[str]) -> str:
 
 def row_name(method: str, start: str) -> str:
     """The method name of a table method's rows when run from ``start``."""
-    var = variant(start)
+    return _suffixed(method, variant(start))
+
+
+def _suffixed(method: str, var: str) -> str:
+    """A method's row name from a start variant ("" keeps the plain name)."""
     return f"{method}-{var}" if var else method
 
 
@@ -260,7 +264,7 @@ def report(datasets: list[str], methods: list[str]) -> str:
         pick = [r for r in rows if r["dataset"] == dataset and r["split"] == "test"]
         pick = [r for r in pick if r["samples"] == 20]
         for var in ("", "long"):  # each start with its own methods, start row and control
-            names = [f"{m}-{var}" if var else m for m in methods]
+            names = [_suffixed(m, var) for m in methods]
             if not any(r["method"] in names for r in pick):
                 continue
             start = next((r for r in pick if r["method"] == finetune_start(names[0])), None)
