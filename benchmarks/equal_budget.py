@@ -45,7 +45,15 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from trajpref.results import finetune_start, merge_rows, read_rows, update_readme
+from trajpref.results import (
+    RUNNABLE_STARTS,
+    finetune_start,
+    merge_rows,
+    read_rows,
+    start_record,
+    start_suffix,
+    update_readme,
+)
 from trajpref.train import read_metrics
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -88,6 +96,7 @@ def main() -> None:
     parser.add_argument(
         "--start",
         default="generator",
+        choices=list(RUNNABLE_STARTS),
         help="the published generator every method starts from (models/<D>/<START>); another "
         "than the default names its rows <method>-<variant>, e.g. generator-long: control-long",
     )
@@ -119,15 +128,20 @@ def _arg(method: str, flag: str) -> str:
 
 
 def variant(start: str) -> str:
-    """A start's row suffix: "" for the default generator, "long" for generator-long."""
-    return start.removeprefix("generator").lstrip("-")
+    """A start's row suffix without its dash: "" for the default generator, "long" for
+    generator-long (``results.RUNNABLE_STARTS``)."""
+    return start_suffix(start).lstrip("-")
+
+
+VARIANTS = {variant(start): start for start in RUNNABLE_STARTS}
+"""Each start's variant ("" first, the default generator) -> the start."""
 
 
 def _split(name: str) -> tuple[str, str]:
     """A table row's method name -> (its METHODS entry, its start's variant)."""
-    for suffix in ("long",):
-        if name.endswith("-" + suffix) and name.removesuffix("-" + suffix) in METHODS:
-            return name.removesuffix("-" + suffix), suffix
+    for var in filter(None, VARIANTS):
+        if name.endswith("-" + var) and name.removesuffix("-" + var) in METHODS:
+            return name.removesuffix("-" + var), var
     return name, ""
 
 
@@ -165,9 +179,8 @@ def _beats_start(dataset: str, method: str, seed: int) -> bool | None:
     """Whether the run's best validation score beats the start's (the fine-tuning stage's
     own validation of the untouched start, meta/finetune_start_<D>[_<start>].json); None when
     the run folder or the start's record is missing (e.g. in a fresh checkout)."""
-    var = _split(method)[1]
-    name = f"{dataset}_generator-{var}" if var else dataset
-    start = ROOT / "benchmarks" / "results" / "meta" / f"finetune_start_{name}.json"
+    start = ROOT / "benchmarks" / "results" / "meta"
+    start = start / start_record(dataset, VARIANTS[_split(method)[1]])
     best = _best_val(dataset, method, seed)
     if best is None or not start.is_file():
         return None
@@ -263,7 +276,7 @@ def report(datasets: list[str], methods: list[str]) -> str:
     for dataset in datasets:
         pick = [r for r in rows if r["dataset"] == dataset and r["split"] == "test"]
         pick = [r for r in pick if r["samples"] == 20]
-        for var in ("", "long"):  # each start with its own methods, start row and control
+        for var in VARIANTS:  # each start with its own methods, start row and control
             names = [_suffixed(m, var) for m in methods]
             if not any(r["method"] in names for r in pick):
                 continue

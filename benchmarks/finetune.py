@@ -26,7 +26,7 @@ from trajpref.data import load_dataset
 from trajpref.device import resolve_device
 from trajpref.evaluation import evaluate
 from trajpref.models import checkpoint as ckpt
-from trajpref.results import make_row, write_rows
+from trajpref.results import RUNNABLE_STARTS, make_row, start_record, start_suffix, write_rows
 from trajpref.rl.presets import finetune_config
 from trajpref.score.scorer import TrajectoryScorer
 from trajpref.train.run import finetune
@@ -46,6 +46,7 @@ def main() -> None:
     parser.add_argument(
         "--start",
         default="generator",
+        choices=list(RUNNABLE_STARTS),
         help="the published generator to start from, models/<dataset>/<START>.safetensors "
         "(another than the default needs a --tag ending in its name, e.g. --start "
         "generator-long --tag long, so that its rows compare with their own start)",
@@ -79,7 +80,7 @@ def main() -> None:
     start = ROOT / "models" / args.dataset / f"{args.start}{ckpt.SUFFIX}"
     if not start.is_file():
         parser.error(f"no published {args.start} for {args.dataset}: {start} does not exist")
-    variant = args.start.removeprefix("generator").lstrip("-")
+    variant = start_suffix(args.start).lstrip("-")
     if variant and not args.tag.endswith(variant):
         parser.error(f"--start {args.start} needs a --tag ending in '{variant}' (e.g. --tag "
                      f"{variant}): its rows are named <method>-<tag>")  # fmt: skip
@@ -175,8 +176,7 @@ def check_start(run: Path, start: Path) -> None:
 def start_meta(dataset: str, start: str = "generator") -> Path:
     """Where the start's validation is kept: meta/finetune_start_<dataset>.json for the default
     generator, meta/finetune_start_<dataset>_<start>.json for another published one."""
-    name = dataset if start == "generator" else f"{dataset}_{start}"
-    return ROOT / "benchmarks" / "results" / "meta" / f"finetune_start_{name}.json"
+    return ROOT / "benchmarks" / "results" / "meta" / start_record(dataset, start)
 
 
 def start_validation(args, start: Path) -> dict[str, float]:

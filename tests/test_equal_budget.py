@@ -34,6 +34,29 @@ def test_a_longer_start_renames_every_method_and_keeps_each_methods_own_tag(eb):
     assert eb.row_name("control-lr3e-5", "generator-long") == "control-lr3e-5-long"
     assert eb._split("control-lr3e-5-long") == ("control-lr3e-5", "long")
     assert eb._split("rlhf-res") == ("rlhf-res", "")
+    assert eb.VARIANTS == {"": "generator", "long": "generator-long"}
+
+
+def test_the_start_check_reads_the_validation_record_finetune_py_writes(eb, tmp_path):
+    spec = importlib.util.spec_from_file_location("bench_ft", ROOT / "benchmarks" / "finetune.py")
+    ft = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(ft)
+    for start in ("generator", "generator-long"):
+        record = ft.start_meta("walks", start)
+        assert (
+            record.name == f"finetune_start_walks{'' if start == 'generator' else '_' + start}.json"
+        )
+        # finetune.py keeps it where equal_budget.py looks (both under their ROOT)
+        mine = tmp_path / record.relative_to(ft.ROOT)
+        mine.parent.mkdir(parents=True, exist_ok=True)
+        mine.write_text(json.dumps({"val": {"score": 0.5}}))
+        tag = "" if start == "generator" else "-long"
+        run = tmp_path / "runs" / f"walks-control-s0{tag}"
+        run.mkdir(parents=True)
+        (run / "finetune_metrics.jsonl").write_text(json.dumps({"val_score": 0.4}) + "\n")
+        assert eb._beats_start("walks", "control" + tag, 0) is True
+        mine.write_text(json.dumps({"val": {"score": 0.3}}))
+        assert eb._beats_start("walks", "control" + tag, 0) is False
 
 
 def test_run_jobs_skips_only_the_rows_of_the_same_start(eb, tmp_path, monkeypatch):

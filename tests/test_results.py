@@ -7,6 +7,8 @@ import pytest
 
 from trajpref.results import (
     FIELDS,
+    RUNNABLE_STARTS,
+    START_SUFFIXES,
     accuracy_table,
     finetune_start,
     make_row,
@@ -14,6 +16,8 @@ from trajpref.results import (
     peers_table,
     read_rows,
     selection_table,
+    start_record,
+    start_suffix,
     upsert_rows,
     write_meta,
     write_rows,
@@ -160,3 +164,15 @@ def test_each_finetuning_row_compares_with_the_start_of_its_time():
     assert finetune_start("control-lr3e-5") == "pretrained"
     assert finetune_start("rlhf-res-steps36-ancestral") == "pretrained-ancestral"
     assert finetune_start("control-lr3e-5-long") == "pretrained-long"
+
+
+def test_every_runnable_start_names_its_rows_and_its_validation_record_in_one_place():
+    assert start_suffix("generator") == "" and start_suffix("generator-long") == "-long"
+    assert set(RUNNABLE_STARTS.values()) - {""} <= set(START_SUFFIXES)
+    assert finetune_start("control" + start_suffix("generator-long")) == "pretrained-long"
+    assert start_record("zara1") == "finetune_start_zara1.json"
+    assert start_record("eth", "generator-long") == "finetune_start_eth_generator-long.json"
+    with pytest.raises(ValueError, match="unknown fine-tuning start 'generator-short'"):
+        start_suffix("generator-short")
+    with pytest.raises(ValueError, match="known: generator, generator-long"):
+        start_record("eth", "generator-short")

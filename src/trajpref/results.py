@@ -42,6 +42,27 @@ START_SUFFIXES = (ANCESTRAL_SUFFIX, "-long")
 """Suffixes of fine-tuning rows whose runs began from another start than the published default
 generator: ``-ancestral`` (the generators of before 2026-11-24) and ``-long`` (the published
 ``generator-long``, ``benchmarks/finetune.py --start generator-long --tag long``)."""
+RUNNABLE_STARTS = {"generator": "", "generator-long": "-long"}
+"""The published generators a fine-tuning run can start from, and the suffix of their rows
+(one of ``START_SUFFIXES`` or "" for the default); ``-ancestral`` names a start that no longer
+exists, so no run can begin from it."""
+
+
+def start_suffix(start: str) -> str:
+    """The row suffix of runs from a published generator (``generator-long`` -> ``-long``)."""
+    if start not in RUNNABLE_STARTS:
+        known = ", ".join(RUNNABLE_STARTS)
+        raise ValueError(f"unknown fine-tuning start {start!r}; known: {known}")
+    return RUNNABLE_STARTS[start]
+
+
+def start_record(dataset: str, start: str = "generator") -> str:
+    """The file name, under ``benchmarks/results/meta/``, of a start's validation as the
+    fine-tuning stage measures it: ``finetune_start_<dataset>.json`` for the default generator,
+    ``finetune_start_<dataset>_<start>.json`` for another published one."""
+    start_suffix(start)  # a clear error for an unknown start
+    name = dataset if start == "generator" else f"{dataset}_{start}"
+    return f"finetune_start_{name}.json"
 
 
 def finetune_start(method: str) -> str:
