@@ -113,12 +113,15 @@ def overrides(dataset: str, kind: str, config: dict[str, Any]) -> list[str]:
 
 def trained_config(config: dict[str, Any], changes: list[dict[str, Any]]) -> dict[str, Any]:
     """The config a generator was trained with: its file's config with the sampling changes
-    made after training (``checkpoint.set_stochastic_steps``, logged in ``meta["changes"]``)
-    undone."""
+    made after training (``checkpoint.set_generator_setting`` and ``publish_variant``, logged
+    in ``meta["changes"]``) undone."""
     out = json.loads(json.dumps(config))
     for change in reversed(changes):
-        if "stochastic_steps" in change:
-            out["model"]["stochastic_steps"] = not change["stochastic_steps"]
+        for name in ckpt.POST_HOC_SETTINGS:
+            if name in change and "previous" in change:
+                out["model"][name] = change["previous"]
+            elif name == "stochastic_steps" and name in change:  # logged before "previous"
+                out["model"][name] = not change[name]
     return out
 
 
@@ -179,6 +182,7 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
         entry["sampling"] = {"tau": cfg["model"]["tau"],
                              "stochastic_steps": cfg["model"]["stochastic_steps"],
                              "agent_frame": cfg["model"].get("agent_frame", "scene"),
+                             "max_speed": cfg["model"].get("max_speed", 0.0),
                              "changes": changes}  # fmt: skip
         cfg = trained_config(cfg, changes)  # the training command reproduces the run
         ref = head.get("denoiser_ref") or {}
@@ -257,9 +261,17 @@ def _sampling_lines(sampling: dict[str, Any] | None) -> list[str]:
     if sampling.get("agent_frame") == "heading":
         text += (" The generator sees and predicts each agent in its heading frame "
                  "(`model.agent_frame: heading`).")  # fmt: skip
+    if sampling.get("max_speed"):
+        text += (f" Agents faster than {sampling['max_speed']:.3f} model units per observed step "
+                 "are seen at that speed and their prediction scaled back up "
+                 "(`model.max_speed`).")  # fmt: skip
     for change in sampling["changes"]:
-        state = "ancestral" if change["stochastic_steps"] else "posterior-mean"
-        text += f" Set to {state} steps after training ({change['note']})."
+        if "stochastic_steps" in change:
+            state = "ancestral" if change["stochastic_steps"] else "posterior-mean"
+            text += f" Set to {state} steps after training ({change['note']})."
+        if "max_speed" in change:
+            text += (f" Speed clamp set to {change['max_speed']:.3f} after training, same "
+                     f"weights ({change['note']}).")  # fmt: skip
     return [text, ""]
 
 

@@ -126,8 +126,19 @@ class ModelConfig:
     orientation) or ``heading`` (the same, rotated per agent so that its observed displacement
     points along +x, with its neighbours rotated alike; predictions are rotated back). The
     denoiser always works in the scene frame, so a published denoiser serves both."""
+    max_speed: float = 0.0
+    """Speed clamp of the generator's inputs, in model units per observed step (0: off). An
+    agent whose observed displacement per step (first to last observed position) exceeds it
+    is seen at this speed: its history and its neighbours' relative positions and velocities
+    are divided by c = speed / max_speed, and its mean and spread are multiplied by c. Model
+    units divide by the data scale, so one value serves metres and pixels; a fold's training
+    split puts its 99th percentile at 0.43-0.45 on ETH/UCY (docs/pretraining.md). Agents
+    faster than anything in training are then predicted as scaled-up copies of the fastest
+    ones instead of by extrapolation."""
 
     def __post_init__(self) -> None:
+        if self.max_speed < 0:
+            raise ConfigError("ModelConfig.max_speed must be >= 0 (0 switches the clamp off)")
         _positive(self, "hidden", "encoder_layers", "heads", "denoiser_width", "denoiser_blocks",
                   "generator_width", "t_hist", "t_fut", "samples", "tau")  # fmt: skip
         if self.hidden % self.heads:
@@ -144,7 +155,14 @@ class ModelConfig:
         return dataclasses.replace(self, **{k: getattr(ModelConfig, k) for k in GENERATOR_ONLY})
 
 
-GENERATOR_ONLY = ("generator_width", "samples", "tau", "stochastic_steps", "agent_frame")
+GENERATOR_ONLY = (
+    "generator_width",
+    "samples",
+    "tau",
+    "stochastic_steps",
+    "agent_frame",
+    "max_speed",
+)
 """``ModelConfig`` fields that concern the generator and its sampler, not the denoiser."""
 
 

@@ -8,7 +8,7 @@ from safetensors.torch import save_file
 from synthetic import TINY_OVERRIDES, make_scene
 
 from trajpref.config import load_config, to_dict
-from trajpref.errors import TrajprefError
+from trajpref.errors import ConfigError, TrajprefError
 from trajpref.models import checkpoint as ckpt
 from trajpref.models.denoiser import Denoiser
 from trajpref.models.encoder import scene_features
@@ -315,7 +315,9 @@ def test_set_stochastic_steps_rewrites_only_the_setting(tmp_path, cfg):
     assert header["hash"] == header_before["hash"]
     assert header["denoiser_ref"] == header_before["denoiser_ref"]
     assert header["meta"]["epoch"] == 3
-    assert header["meta"]["changes"] == [{"stochastic_steps": False, "note": "test switch"}]
+    assert header["meta"]["changes"] == [
+        {"stochastic_steps": False, "previous": True, "note": "test switch"}
+    ]
     with safe_open(str(pub), "pt") as fh:
         after = {k: fh.get_tensor(k) for k in fh.keys()}
     _assert_same_state(before, after)  # same tensors, still half precision
@@ -340,3 +342,74 @@ def test_set_stochastic_steps_refuses_a_denoiser(tmp_path, cfg):
     ckpt.save(path, ckpt.denoiser_payload(_denoiser(cfg), cfg, 0.7, {}))
     with pytest.raises(TrajprefError, match="generator setting"):
         ckpt.set_stochastic_steps(path, False, note="x")
+
+
+def test_the_speed_clamp_can_be_set_after_training_and_changes_only_fast_agents(tmp_path, cfg):
+    src = tmp_path / "g.safetensors"
+    den = ckpt.denoiser_payload(_denoiser(cfg), cfg, 1.0, {})
+    ckpt.save(src, ckpt.generator_payload(_generator(cfg), den, cfg, {"epoch": 1}))
+    batch = collate([make_scene(3), make_scene(2, seed=1)])
+    before = ckpt.load_predictor(src).predict(batch, 4, torch.Generator().manual_seed(5))
+    hash_before = _header(src)["hash"]
+
+    assert ckpt.set_generator_setting(src, "max_speed", 1e6, note="above every agent")
+    assert ckpt.config_of(ckpt.load(src)).model.max_speed == 1e6
+    assert _header(src)["hash"] == hash_before
+    same = ckpt.load_predictor(src).predict(batch, 4, torch.Generator().manual_seed(5))
+    torch.testing.assert_close(same, before)
+    assert ckpt.set_generator_setting(src, "max_speed", 1e-3, note="below every agent")
+    clamped = ckpt.load_predictor(src).predict(batch, 4, torch.Generator().manual_seed(5))
+    assert not torch.allclose(clamped, before)
+    assert [c["max_speed"] for c in _header(src)["meta"]["changes"]] == [1e6, 1e-3]
+
+
+def test_only_sampling_settings_can_change_after_training(tmp_path, cfg):
+    src = tmp_path / "g.safetensors"
+    den = ckpt.denoiser_payload(_denoiser(cfg), cfg, 1.0, {})
+    ckpt.save(src, ckpt.generator_payload(_generator(cfg), den, cfg, {}))
+    with pytest.raises(TrajprefError, match="hidden cannot change after training"):
+        ckpt.set_generator_setting(src, "hidden", 64, note="x")
+    with pytest.raises(ConfigError, match="max_speed must be >= 0"):
+        ckpt.set_generator_setting(src, "max_speed", -1.0, note="x")
+
+
+def test_a_settings_variant_names_its_base_weights_instead_of_copying_them(tmp_path, cfg):
+    src = tmp_path / "run" / "g.safetensors"
+    den = ckpt.denoiser_payload(_denoiser(cfg), cfg, 1.0, {})
+    ckpt.save(src, ckpt.generator_payload(_generator(cfg), den, cfg, {"epoch": 2}))
+    base = tmp_path / "pub" / "generator.safetensors"
+    ckpt.publish(src, base)
+    variant = base.parent / "generator-clamp.safetensors"
+    ckpt.publish_variant(base, variant, {"max_speed": 1e-3}, note="clamp everyone")
+    assert variant.stat().st_size < 20_000 < base.stat().st_size
+    batch = collate([make_scene(3), make_scene(2, seed=1)])
+    a, b = ckpt.load(base), ckpt.load(variant)
+    _assert_same_state(a["state_dict"], b["state_dict"])
+    assert ckpt.config_of(b).model.max_speed == 1e-3 and ckpt.config_of(a).model.max_speed == 0
+    assert b["meta"]["epoch"] == 2 and b["meta"]["changes"][-1]["note"] == "clamp everyone"
+    clamped = ckpt.load_predictor(variant).predict(batch, 4, torch.Generator().manual_seed(5))
+    base_pred = ckpt.load_predictor(base)
+    base_pred.generator.cfg = ckpt.config_of(b).model  # the same weights, clamped by hand
+    torch.testing.assert_close(
+        clamped, base_pred.predict(batch, 4, torch.Generator().manual_seed(5))
+    )
+    # a setting can change again in place; the weights stay by reference
+    assert ckpt.set_generator_setting(variant, "max_speed", 2e-3, note="again")
+    assert ckpt.config_of(ckpt.load(variant)).model.max_speed == 2e-3
+    assert variant.stat().st_size < 20_000
+
+    # the base replaced by other weights: refused, not silently used
+    ckpt.save(src, ckpt.generator_payload(_generator(cfg, seed=7), den, cfg, {}))
+    ckpt.publish(src, base)
+    with pytest.raises(TrajprefError, match="do not match the recorded hash"):
+        ckpt.load(variant)
+
+
+def test_a_variant_changes_only_sampling_settings_and_lives_beside_its_base(tmp_path, cfg):
+    base = tmp_path / "generator.safetensors"
+    den = ckpt.denoiser_payload(_denoiser(cfg), cfg, 1.0, {})
+    ckpt.save(base, ckpt.generator_payload(_generator(cfg), den, cfg, {}))
+    with pytest.raises(TrajprefError, match="hidden cannot change after training"):
+        ckpt.publish_variant(base, tmp_path / "g-wide.safetensors", {"hidden": 64}, note="x")
+    with pytest.raises(TrajprefError, match="beside its base"):
+        ckpt.publish_variant(base, tmp_path / "sub" / "g.safetensors", {"max_speed": 1.0}, "x")

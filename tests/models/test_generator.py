@@ -6,7 +6,7 @@ from synthetic import make_scene
 
 from trajpref.config import ModelConfig
 from trajpref.errors import ConfigError
-from trajpref.models.encoder import heading_rotation, scene_features
+from trajpref.models.encoder import heading_rotation, scene_features, speed_factor
 from trajpref.models.generator import Generator
 from trajpref.types import collate
 
@@ -99,3 +99,46 @@ def test_the_agent_frame_is_a_generator_setting_checked_on_construction():
     assert ModelConfig(agent_frame="heading").denoiser_part() == ModelConfig()
     with pytest.raises(ConfigError, match="agent_frame"):
         ModelConfig(agent_frame="polar")
+
+
+def test_speed_factor_brings_fast_agents_down_to_the_clamp_and_leaves_slow_ones():
+    hist = torch.zeros(3, 8, 4)
+    hist[0, 0, :2] = torch.tensor([-7.0, 0.0])  # 1 unit per step over the 7 observed steps
+    hist[1, 0, :2] = torch.tensor([0.0, -1.4])  # 0.2 units per step
+    c = speed_factor(hist, max_speed=0.5)  # agent 2 did not move
+    torch.testing.assert_close(c, torch.tensor([2.0, 1.0, 1.0]))
+
+
+@pytest.mark.parametrize("max_speed", [0.0, 1e-3])
+def test_with_the_clamp_a_faster_copy_of_a_scene_gets_a_scaled_copy_of_the_prediction(max_speed):
+    torch.manual_seed(0)
+    gen = Generator(dataclasses.replace(TINY, agent_frame="heading", max_speed=max_speed)).eval()
+    features = scene_features(collate([make_scene(3), make_scene(2, seed=1)]), 1.0)
+    fast = dataclasses.replace(features, hist=3 * features.hist, geom=3 * features.geom)
+    with torch.no_grad():
+        a, b = gen(features), gen(fast)
+    scaled = torch.allclose(b.mean, 3 * a.mean, atol=1e-4) and torch.allclose(
+        b.initial_sample(), 3 * a.initial_sample(), atol=1e-4
+    )
+    # every agent of the synthetic scenes moves faster than 1e-3 units per step
+    assert scaled == (max_speed > 0)
+    if max_speed > 0:  # the shifts keep unit spread; the scale goes into sigma
+        torch.testing.assert_close(b.shifts, a.shifts, atol=1e-4, rtol=0)
+        torch.testing.assert_close(b.context, a.context, atol=1e-4, rtol=0)
+
+
+def test_a_clamp_above_every_agents_speed_changes_nothing():
+    torch.manual_seed(0)
+    gen = Generator(TINY).eval()
+    clamped = Generator(dataclasses.replace(TINY, max_speed=1e6)).eval()
+    clamped.load_state_dict(gen.state_dict())
+    features = scene_features(collate([make_scene(3)]), 1.0)
+    with torch.no_grad():
+        a, b = gen(features), clamped(features)
+    torch.testing.assert_close(b.initial_sample(), a.initial_sample())
+
+
+def test_the_speed_clamp_is_a_generator_setting_checked_on_construction():
+    assert ModelConfig(max_speed=0.45).denoiser_part() == ModelConfig()
+    with pytest.raises(ConfigError, match="max_speed must be >= 0"):
+        ModelConfig(max_speed=-0.1)

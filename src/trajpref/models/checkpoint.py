@@ -225,6 +225,7 @@ def load(path: str | Path) -> dict[str, Any]:
     refused."""
     path = resolve_path(path)
     payload = _load_file(path)
+    _attach_weights(payload, path)
     ref = payload.get("denoiser_ref")
     if payload["kind"] == "generator" and "denoiser" not in payload and ref is not None:
         den_path = resolve_path(path.parent / ref["path"])
@@ -237,6 +238,49 @@ def load(path: str | Path) -> dict[str, Any]:
             )
         payload["denoiser"] = den
     return payload
+
+
+def _attach_weights(payload: dict[str, Any], path: Path) -> None:
+    """A settings-only variant (``weights_ref``: the file of its weights, relative to its own
+    folder, and their hash) gets those weights loaded in; a mismatch is refused."""
+    ref = payload.get("weights_ref")
+    if ref is None:
+        return
+    base_path = resolve_path(path.parent / ref["path"])
+    base = _load_file(base_path)
+    if base.get("kind") != payload["kind"] or base.get("hash") != ref["hash"]:
+        raise TrajprefError(
+            f"{path}: its weights {base_path} do not match the recorded hash {ref['hash']} "
+            f"(found {base.get('hash')})"
+        )
+    payload["state_dict"] = base["state_dict"]
+
+
+def publish_variant(base: str | Path, dst: str | Path, changes: dict[str, Any], note: str) -> None:
+    """A published generator with other ``POST_HOC_SETTINGS`` and the same weights, written as
+    a few kilobytes that name the base file by path (relative, same folder) and hash instead of
+    copying its weights. ``changes`` maps ``model`` fields to values; each is logged in
+    ``meta["changes"]`` with ``note``."""
+    base, dst = Path(base), Path(dst)
+    if base.parent.resolve() != dst.parent.resolve():
+        raise TrajprefError(f"{dst}: a variant lives beside its base {base}")
+    payload = _read_file(base)
+    if payload["kind"] != "generator" or "weights_ref" in payload:
+        raise TrajprefError(f"{base}: a variant is made from a generator file with its weights")
+    bad = sorted(set(changes) - set(POST_HOC_SETTINGS))
+    if bad:
+        raise TrajprefError(
+            f"model.{bad[0]} cannot change after training; only {', '.join(POST_HOC_SETTINGS)} can"
+        )
+    before = config_of(payload).model
+    payload.pop("state_dict")
+    payload.pop("critic", None)  # a fine-tuning value head is not a sampling setting
+    payload["weights_ref"] = {"path": base.name, "hash": payload["hash"]}
+    payload["config"]["model"].update(changes)
+    config_of(payload)  # the edited config must still be valid
+    logged = [{k: v, "previous": getattr(before, k), "note": note} for k, v in changes.items()]
+    payload["meta"] = {**payload["meta"], "changes": [*payload["meta"].get("changes", []), *logged]}
+    save(dst, payload)
 
 
 def publish(
@@ -270,24 +314,40 @@ def publish(
     save(dst, payload, half)
 
 
-def set_stochastic_steps(path: str | Path, stochastic: bool, note: str) -> bool:
-    """Rewrite a generator file's ``model.stochastic_steps`` in place: whether its tau
-    denoising steps add ancestral noise (a sampling setting; the weights, their precision and
-    hashes stay as they are). The change is logged in ``meta["changes"]`` with ``note``.
-    Returns False when the file already has the setting (it is then left untouched)."""
+POST_HOC_SETTINGS = ("stochastic_steps", "max_speed")
+"""``model`` fields of a generator file that may change after training without retraining:
+how its tau steps sample, and its input speed clamp (the weights are not touched)."""
+
+
+def set_generator_setting(path: str | Path, name: str, value: Any, note: str) -> bool:
+    """Rewrite one of a generator file's ``POST_HOC_SETTINGS`` in place (the weights, their
+    precision and hashes stay as they are). The change is logged in ``meta["changes"]`` with
+    the previous value and ``note``. Returns False when the file already has the value (it is
+    then left untouched)."""
+    if name not in POST_HOC_SETTINGS:
+        raise TrajprefError(
+            f"model.{name} cannot change after training; only {', '.join(POST_HOC_SETTINGS)} can"
+        )
     path = Path(path)
     payload = _read_file(path)
     if payload["kind"] != "generator":
-        raise TrajprefError(f"{path}: stochastic_steps is a generator setting, not a denoiser's")
-    if config_of(payload).model.stochastic_steps == stochastic:
+        raise TrajprefError(f"{path}: {name} is a generator setting, not a denoiser's")
+    previous = getattr(config_of(payload).model, name)
+    if previous == value:
         return False
     half = any(t.dtype == torch.float16 for t in load_file(str(path)).values())
-    payload["config"]["model"]["stochastic_steps"] = stochastic
+    payload["config"]["model"][name] = value
     config_of(payload)  # the edited config must still be valid
-    change = {"stochastic_steps": stochastic, "note": note}
+    change = {name: value, "previous": previous, "note": note}
     payload["meta"] = {**payload["meta"], "changes": [*payload["meta"].get("changes", []), change]}
     save(path, payload, half)
     return True
+
+
+def set_stochastic_steps(path: str | Path, stochastic: bool, note: str) -> bool:
+    """Whether a generator file's tau denoising steps add ancestral noise
+    (``set_generator_setting`` for ``model.stochastic_steps``)."""
+    return set_generator_setting(path, "stochastic_steps", stochastic, note)
 
 
 # ----------------------------------------------------------------------------- models

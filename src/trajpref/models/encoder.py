@@ -91,3 +91,22 @@ def rotate_features(f: SceneFeatures, rot: torch.Tensor) -> SceneFeatures:
     padded[f.scene, f.slot] = rot
     geom = (f.geom.view(b, p, p, 2, 2) @ padded[:, :, None].mT).view(b, p, p, 4)  # [B, P, P, 4]
     return dataclasses.replace(f, hist=hist, geom=geom)
+
+
+def speed_factor(hist: torch.Tensor, max_speed: float) -> torch.Tensor:
+    """Per-agent factors c [N] >= 1 that bring each agent's observed displacement per step
+    (first to last observed position, model units) down to at most ``max_speed``: c = 1 for
+    an agent at or below it, speed / max_speed above."""
+    step = hist[:, 0, :2].norm(dim=-1) / (hist.shape[1] - 1)  # [N]
+    return (step / max_speed).clamp_min(1.0)
+
+
+def scale_features(f: SceneFeatures, c: torch.Tensor) -> SceneFeatures:
+    """The features of each agent divided by its factor c [N]: its history, and its
+    neighbours' relative positions and velocities (``geom`` row i) as agent i sees them."""
+    b, p = f.mask.shape
+    padded = c.new_ones(b, p)  # [B, P]
+    padded[f.scene, f.slot] = c
+    hist = f.hist / c[:, None, None]  # [N, T_h, 4]
+    geom = f.geom / padded[:, :, None, None]  # [B, P(i), P(j), 4]
+    return dataclasses.replace(f, hist=hist, geom=geom)

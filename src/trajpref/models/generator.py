@@ -13,6 +13,8 @@ from trajpref.models.encoder import (
     SocialEncoder,
     heading_rotation,
     rotate_features,
+    scale_features,
+    speed_factor,
 )
 from trajpref.models.layers import mlp
 
@@ -53,6 +55,10 @@ class Generator(nn.Module):
         if self.cfg.agent_frame == "heading":
             rot = heading_rotation(features.hist)  # [N, 2, 2]
             features = rotate_features(features, rot)
+        c = None
+        if self.cfg.max_speed > 0:
+            c = speed_factor(features.hist, self.cfg.max_speed)  # [N]
+            features = scale_features(features, c)
         ctx = self.encoder(features)  # [N, H]
         n, tf, k = ctx.shape[0], self.cfg.t_fut, self.samples
         mean = self.mean_head(ctx).view(n, tf, 2)  # [N, T_f, 2]
@@ -62,6 +68,9 @@ class Generator(nn.Module):
         raw = raw - raw.mean(0, keepdim=True)
         spread = raw.pow(2).mean(dim=(0, 2, 3), keepdim=True).add(1e-6).sqrt()  # [1, N, 1, 1]
         shifts = raw / spread  # [K, N, T_f, 2]
+        if c is not None:  # back to the agent's own speed
+            mean = mean * c[:, None, None]  # [N, T_f, 2]
+            log_sigma = log_sigma + c.log()[None]  # [K, N]
         if rot is not None:  # back to the scene frame, where the denoiser works
             mean = mean @ rot  # [N, T_f, 2]
             shifts = shifts @ rot[None]  # [K, N, T_f, 2]
