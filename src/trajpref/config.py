@@ -65,8 +65,17 @@ class DataConfig:
     as ``--max-gap``."""
     max_coord: float = 1e6
     """Largest accepted |x| or |y| in the dataset's units, as ``--max-coord``."""
+    holdout_scene: str = ""
+    """Validate on a scene the model does not train on ("" : the dataset's own val split):
+    the training files whose name starts with this prefix (e.g. ``biwi_hotel``, ``students``,
+    ``crowds_zara02``) leave training, and that scene's windows of both splits are the
+    validation split (``data.hold_out_scene``). For choosing between settings on ETH/UCY,
+    whose val files come from the training scenes; the published model then trains on all."""
 
     def __post_init__(self) -> None:
+        if self.holdout_scene and self.val_dataset:
+            raise ConfigError("DataConfig.holdout_scene and val_dataset exclude each other: "
+                              "the held-out scene is the validation split")  # fmt: skip
         _positive(self, "max_agents", "scale_min", "scale_max", "max_coord")
         if self.scale_min > self.scale_max:
             raise ConfigError("DataConfig.scale_min must be <= scale_max")

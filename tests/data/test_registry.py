@@ -1,10 +1,19 @@
+import dataclasses
+
 import numpy as np
 import pytest
 from synthetic import make_scene, straight_rows, write_tracks
 
-from trajpref.data import ReadOptions, load_dataset, mean_speed, resolve_data_root
+from trajpref.config import DataConfig
+from trajpref.data import (
+    ReadOptions,
+    hold_out_scene,
+    load_dataset,
+    mean_speed,
+    resolve_data_root,
+)
 from trajpref.data.registry import ETH_UCY, FEET_TO_METRES, apply_protocol, robo_episodes
-from trajpref.errors import DataError, TrajprefError
+from trajpref.errors import ConfigError, DataError, TrajprefError
 from trajpref.types import DatasetInfo, Scene, TrajectoryDataset
 
 FOLD_TEST_AGENTS = {"eth": 364, "hotel": 1197, "univ": 24334, "zara1": 2356, "zara2": 5910}
@@ -242,3 +251,42 @@ def test_mean_speed_is_hand_computable():
     scene = Scene(track[:, :8], track[:, 8:], np.zeros(2, np.int64), "s")
     ds = TrajectoryDataset([scene, scene], DatasetInfo("x", "test", "m", 0.5))
     assert mean_speed(ds) == pytest.approx(1.0)
+
+
+def _from(file: str, seed: int) -> Scene:
+    s = make_scene(2, seed=seed)
+    return Scene(s.history, s.future, s.agent_type, f"{file}@frame={10 * seed}")
+
+
+def test_a_held_out_scene_leaves_training_and_is_the_whole_validation_split():
+    info = DatasetInfo("fold", "train", "m", 0.4, source="fold/train")
+    files = ("biwi_hotel", "students001", "students003", "crowds_zara02")
+    train = TrajectoryDataset([_from(f"{f}_train.txt", i) for i, f in enumerate(files)], info)
+    val = TrajectoryDataset([_from("biwi_hotel_val.txt", 4), _from("students001_val.txt", 5)],
+                            dataclasses.replace(info, split="val"))  # fmt: skip
+    kept, held = hold_out_scene(train, val, "students")
+    assert [s.scene_id for s in kept.scenes] == [
+        "biwi_hotel_train.txt@frame=0", "crowds_zara02_train.txt@frame=30"]  # fmt: skip
+    # the scene's training windows and its validation windows; the other scenes' val is dropped
+    assert [s.scene_id for s in held.scenes] == [
+        "students001_train.txt@frame=10", "students003_train.txt@frame=20",
+        "students001_val.txt@frame=50"]  # fmt: skip
+    assert held.info.split == "val" and "held-out scene students" in held.info.source
+    with pytest.raises(ConfigError, match="no training file of fold starts with 'eth'.*biwi_hotel"):
+        hold_out_scene(train, val, "eth")
+    with pytest.raises(ConfigError, match="leaves fold no training file"):
+        hold_out_scene(TrajectoryDataset(train.scenes[1:3], info), val, "students")
+    with pytest.raises(ConfigError, match="holdout_scene and val_dataset exclude each other"):
+        DataConfig(holdout_scene="students", val_dataset="robo")
+
+
+@pytest.mark.realdata
+def test_holding_out_hotel_in_the_zara1_fold(data_root):
+    train = load_dataset("zara1", "train", data_root)
+    val = load_dataset("zara1", "val", data_root)
+    kept, held = hold_out_scene(train, val, "biwi_hotel")
+    files = {s.scene_id.split("@")[0] for s in held.scenes}
+    assert files == {"biwi_hotel_train.txt", "biwi_hotel_val.txt"}
+    assert len(kept) + sum(f.startswith("biwi_hotel_train") for f in
+                           (s.scene_id for s in held.scenes)) == len(train)  # fmt: skip
+    assert not any(s.scene_id.startswith("biwi_hotel") for s in kept.scenes)

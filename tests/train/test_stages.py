@@ -323,3 +323,28 @@ def test_an_unknown_precision_is_a_config_error():
 
     with pytest.raises(ConfigError, match="precision must be 'fp32' or 'bf16'"):
         GeneratorTrainConfig(precision="fp16")
+
+
+def test_a_run_with_a_held_out_scene_trains_without_it_and_validates_on_it(
+    tmp_path, cfg, monkeypatch
+):
+    import dataclasses
+
+    from trajpref.train import run
+
+    seen, original = {}, run.hold_out_scene
+
+    def spy(train, val, prefix):
+        seen["train"], seen["val"] = original(train, val, prefix)
+        return seen["train"], seen["val"]
+
+    monkeypatch.setattr(run, "hold_out_scene", spy)
+    full = train_stage("diffusion", cfg, tmp_path / "all", device="cpu", progress=False)
+    assert not seen  # no held-out scene: the usual splits
+    held_cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, holdout_scene="walk2"))
+    held = train_stage("diffusion", held_cfg, tmp_path / "held", device="cpu", progress=False)
+    train = load_dataset(cfg.data.dataset, "train")
+    walk2 = sum(s.num_agents for s in train.scenes if s.scene_id.startswith("walk2"))
+    assert 0 < walk2 and held["train_agents"] == full["train_agents"] - walk2
+    assert {s.scene_id.split("@")[0] for s in seen["val"].scenes} == {"walk2.txt"}
+    assert "holdout_scene: walk2" in (tmp_path / "held" / "config.yaml").read_text()

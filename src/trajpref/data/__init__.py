@@ -5,6 +5,7 @@ from trajpref.data.registry import (
     NAMES,
     PROTOCOLS,
     apply_protocol,
+    hold_out_scene,
     load_dataset,
     resolve_data_root,
 )
@@ -19,6 +20,7 @@ __all__ = [
     "GapWarning",
     "ReadOptions",
     "apply_protocol",
+    "hold_out_scene",
     "load_dataset",
     "mean_speed",
     "resolve_data_root",

@@ -16,7 +16,7 @@ import numpy as np
 
 from trajpref.data import arrays, text, trajnet
 from trajpref.data.robo_sim import simulate
-from trajpref.errors import DataError, TrajprefError
+from trajpref.errors import ConfigError, DataError, TrajprefError
 from trajpref.types import DatasetInfo, Scene, TrajectoryDataset
 
 ETH_UCY = ("eth", "hotel", "univ", "zara1", "zara2")
@@ -139,6 +139,39 @@ def apply_protocol(dataset: TrajectoryDataset, protocol: str) -> TrajectoryDatas
             )
     info = dataclasses.replace(dataset.info, protocol=protocol)
     return TrajectoryDataset(scenes, info)
+
+
+def scene_file(scene: Scene) -> str:
+    """The file a window comes from (its ``scene_id`` before ``@``)."""
+    return scene.scene_id.split("@", 1)[0]
+
+
+def hold_out_scene(
+    train: TrajectoryDataset, val: TrajectoryDataset, prefix: str
+) -> tuple[TrajectoryDataset, TrajectoryDataset]:
+    """Model selection on a scene the model has not trained on: the training windows of the
+    files whose name starts with ``prefix`` (one of a fold's training scenes, e.g.
+    ``biwi_hotel`` or ``students``) leave the training split, and that scene's windows of both
+    splits become the validation split (the other scenes' validation windows are dropped).
+    An ETH/UCY fold's usual validation split holds files of the very scenes it trains on; this
+    one asks what the fold's test asks, how a model does on a new scene."""
+    if not prefix:
+        raise ConfigError("hold_out_scene needs a file-name prefix")
+    held = [s for s in train.scenes if scene_file(s).startswith(prefix)]
+    kept = [s for s in train.scenes if not scene_file(s).startswith(prefix)]
+    files = sorted({scene_file(s) for s in train.scenes})
+    if not held:
+        raise ConfigError(
+            f"no training file of {train.info.name} starts with {prefix!r}; its files: "
+            + ", ".join(files)
+        )
+    if not kept:
+        raise ConfigError(f"holding out {prefix!r} leaves {train.info.name} no training file")
+    held += [s for s in val.scenes if scene_file(s).startswith(prefix)]
+    note = f" (held-out scene {prefix})"
+    train_info = dataclasses.replace(train.info, source=train.info.source + f" minus {prefix}*")
+    val_info = dataclasses.replace(val.info, source=train.info.source + note)
+    return TrajectoryDataset(kept, train_info), TrajectoryDataset(held, val_info)
 
 
 def _load(

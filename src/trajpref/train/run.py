@@ -11,7 +11,7 @@ from typing import Any, Literal
 import torch
 
 from trajpref.config import ExperimentConfig, save_config
-from trajpref.data import ReadOptions, load_dataset
+from trajpref.data import ReadOptions, hold_out_scene, load_dataset
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError
 from trajpref.io import check_output_dir
@@ -62,6 +62,8 @@ def _run(
         train = load_dataset(cfg.data.dataset, "train", data_root, options=options)
         val = load_dataset(cfg.data.val_dataset or cfg.data.dataset, "val", data_root,
                            options=options)  # fmt: skip
+        if cfg.data.holdout_scene:
+            train, val = hold_out_scene(train, val, cfg.data.holdout_scene)
         built, optim = build(train, val, dev)
         if state is not None:
             check_resume_matches(state, built.trainable, resume)
