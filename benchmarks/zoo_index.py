@@ -214,6 +214,16 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
                 dsets = "".join(f" --set {s}" for s in overrides(dataset, "denoiser", cfg))
                 train_cmd.insert(0, f"trajpref train diffusion --config configs/{dataset}.yaml "
                                     f"--out {out}{dsets}")  # fmt: skip
+            ref = head.get("weights_ref")
+            if ref:  # a settings-only variant: its base's run, then the settings
+                base = f"{dataset}/{Path(ref['path']).stem}"
+                train_cmd = [
+                    f"# the weights of {base} (its training commands), then, after training:",
+                    *(f"#   model.{k} = {c[k]:.4g} ({c['note']})" if isinstance(c[k], float)
+                      else f"#   model.{k} = {c[k]} ({c['note']})" for c in meta.get("changes", [])
+                      for k in ckpt.POST_HOC_SETTINGS if k in c),
+                ]  # fmt: skip
+                entry["weights_of"] = base
             seconds = (run.get("stage_seconds") or {}).get("generator") or meta.get("train_seconds")
             minutes = {"generator": round(seconds / 60, 1) if seconds else None}
     else:
