@@ -188,6 +188,19 @@ def test_denoising_step_flags_pick_posterior_means_or_ancestral_noise(capsys, ti
     assert code != 0 and "not allowed with argument" in err
 
 
+def test_max_speed_clamps_a_generators_fast_agents_at_prediction(capsys, tiny_run, walks):
+    base = ["evaluate", "--dataset", walks, "--split", "test", "--samples", "4", "--json",
+            "--no-progress", "--model", tiny_run / "generator.safetensors"]  # fmt: skip
+    results = {}
+    for flag in ([], ["--max-speed", "0"], ["--max-speed", "1e6"], ["--max-speed", "1e-3"]):
+        code, out, _ = _run(capsys, *base, *flag)
+        assert code == 0
+        results[" ".join(flag)] = json.loads(out)["min_ade"]
+    # off, or above every agent: the file's own prediction; below every agent: another one
+    assert results[""] == results["--max-speed 0"] == results["--max-speed 1e6"]
+    assert results["--max-speed 1e-3"] != results[""]
+
+
 def test_the_cli_imports_without_the_survey_web_server_packages():
     # training on a machine without starlette/uvicorn (a bare GPU image) must work: the web
     # server is imported only by `survey serve`

@@ -67,6 +67,9 @@ CASES: dict[str, tuple[list[str], str]] = {
     "score selection without scorer": ([*EVAL, "--keep", "5", "--select", "top"],
                                        r"--select top with --model cv needs --scorer"),
     "deterministic cv": ([*EVAL, "--deterministic"], r"--deterministic applies to diffusion"),
+    "max speed for cv": ([*EVAL, "--max-speed", "0.4"], r"--max-speed applies to generator"),
+    "negative max speed": ([*EVAL, "--model", "{run}/generator.safetensors", "--max-speed", "-1"],
+                           r"--max-speed must be >= 0"),
     "leapfrog without generator": (
         [*EVAL, "--model", "{run}/denoiser.safetensors", "--sampler", "leapfrog"],
         r"leapfrog sampler needs a generator"),

@@ -84,6 +84,11 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
     steps.add_argument("--stochastic", action="store_true",
                        help="diffusion models: DDPM's ancestral noise in the tau denoising "
                        "steps (what the published generators were trained with)")  # fmt: skip
+    p.add_argument("--max-speed", type=float, default=None,
+                   help="generators: see agents faster than this many model units per "
+                   "observed step at that speed and scale their prediction back up (0: off; "
+                   "default: the file's model.max_speed; docs/pretraining.md, 'An input speed "
+                   "clamp')")  # fmt: skip
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     p.add_argument("--max-agents", type=int, default=1024,
                    help="agents per batch of whole scenes (default 1024). Lower it to save "
@@ -363,6 +368,13 @@ def _predictor(args):
         if not hasattr(model, "stochastic"):
             raise ConfigError(f"{flag} applies to diffusion checkpoints only")
         model.stochastic = bool(args.stochastic)
+    if getattr(args, "max_speed", None) is not None:
+        if args.max_speed < 0:
+            raise ConfigError("--max-speed must be >= 0 (0 switches the clamp off)")
+        generator = getattr(model, "generator", None)
+        if generator is None:
+            raise ConfigError("--max-speed applies to generator checkpoints only")
+        generator.cfg = dataclasses.replace(generator.cfg, max_speed=args.max_speed)
     return model, device
 
 
