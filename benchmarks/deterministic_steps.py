@@ -28,22 +28,13 @@ import json
 from datetime import date
 from pathlib import Path
 
+from post_hoc import apply_setting, published_generators, validation_metrics, write_study
+
 from trajpref.data import load_dataset
-from trajpref.evaluation import evaluate
 from trajpref.models import checkpoint as ckpt
-from trajpref.results import machine
 
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "benchmarks" / "results" / "meta" / "deterministic_steps_val.json"
-
-
-def published_generators(models: Path) -> list[tuple[str, Path]]:
-    """(dataset, file) of every published generator, in a stable order."""
-    found = []
-    for folder in sorted(p for p in models.iterdir() if p.is_dir()):
-        for path in sorted(folder.glob(f"generator*{ckpt.SUFFIX}")):
-            found.append((folder.name, path))
-    return found
 
 
 def decide(rows: list[dict]) -> dict:
@@ -69,26 +60,19 @@ def main() -> None:
         "validation rows decide (no evaluation)",
     )
     args = parser.parse_args()
-    models = ROOT / "models"
 
     if args.apply:
-        stored = json.loads(OUT.read_text())
-        if not stored["decision"]["switch"]:
+        note = (f"{date.today()}: posterior-mean tau steps by default "
+                "(benchmarks/deterministic_steps.py, docs/pretraining.md)")  # fmt: skip
+        done = apply_setting(ROOT, OUT, "switch", "stochastic_steps", lambda row: False, note)
+        if not done:
             print("the validation rows do not favour deterministic steps: nothing changed")
-            return
-        for row in stored["rows"]:
-            path = ROOT / row["checkpoint"]
-            changed = ckpt.set_stochastic_steps(
-                path,
-                False,
-                note=f"{date.today()}: posterior-mean tau steps by default "
-                "(benchmarks/deterministic_steps.py, docs/pretraining.md)",
-            )
-            print(f"{row['checkpoint']}: {'switched' if changed else 'already deterministic'}")
+        for name, changed in done:
+            print(f"{name}: {'switched' if changed else 'already deterministic'}")
         return
 
     rows, data = [], {}
-    for dataset, path in published_generators(models):
+    for dataset, path in published_generators(ROOT / "models"):
         if dataset not in data:
             data[dataset] = load_dataset(dataset, "val", args.data_root)
         predictor = ckpt.load_predictor(path, "leapfrog", args.device)
@@ -97,10 +81,9 @@ def main() -> None:
                "trained_stochastic": trained}  # fmt: skip
         for name, stochastic in (("stochastic", True), ("deterministic", False)):
             predictor.stochastic = stochastic
-            res = evaluate(predictor, data[dataset], args.samples, args.seed, args.device)
-            row[name] = {k: res[k] for k in ("min_ade", "min_fde", "joint_min_ade",
-                                             "joint_min_fde")}  # fmt: skip
-            row[name]["seconds"] = res.get("seconds")
+            row[name] = validation_metrics(
+                predictor, data[dataset], args.samples, args.seed, args.device
+            )
         rows.append(row)
         s, d = row["stochastic"], row["deterministic"]
         print(f"{row['checkpoint']:<45} stochastic {s['min_ade']:.4f} / {s['min_fde']:.4f}  "
@@ -108,18 +91,8 @@ def main() -> None:
               f"({d['min_ade'] / s['min_ade'] - 1:+.1%} / {d['min_fde'] / s['min_fde'] - 1:+.1%})",
               flush=True)  # fmt: skip
     decision = decide(rows)
-    out = {
-        "date": str(date.today()),
-        "machine": machine(),
-        "command": "python benchmarks/deterministic_steps.py --data-root ../shared/data",
-        "split": "val",
-        "samples": args.samples,
-        "seed": args.seed,
-        "rows": rows,
-        "decision": decision,
-    }
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps(out, indent=2) + "\n")
+    write_study(OUT, "python benchmarks/deterministic_steps.py --data-root ../shared/data",
+                rows, decision, samples=args.samples, seed=args.seed)  # fmt: skip
     print(json.dumps(decision, indent=2))
     print()
     print("| validation minADE20 / minFDE20 | stochastic | deterministic | change |")

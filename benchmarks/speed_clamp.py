@@ -36,11 +36,10 @@ from datetime import date
 from pathlib import Path
 
 import numpy as np
+from post_hoc import apply_setting, published_generators, validation_metrics, write_study
 
 from trajpref.data import load_dataset
-from trajpref.evaluation import evaluate
 from trajpref.models import checkpoint as ckpt
-from trajpref.results import machine
 from trajpref.types import TrajectoryDataset
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -102,28 +101,18 @@ def main() -> None:
         return
 
     if args.apply:
-        stored = json.loads(OUT.read_text())
-        if not stored["decision"]["apply"]:
+        quantile = json.loads(OUT.read_text())["quantile"]
+        note = (f"{date.today()}: input speed clamp at the training split's {quantile:.0%} "
+                "quantile (benchmarks/speed_clamp.py, docs/pretraining.md)")  # fmt: skip
+        done = apply_setting(ROOT, OUT, "apply", "max_speed", lambda row: row["max_speed"], note)
+        if not done:
             print("validation got worse somewhere: nothing changed")
-            return
-        for row in stored["rows"]:
-            changed = ckpt.set_generator_setting(
-                ROOT / row["checkpoint"],
-                "max_speed",
-                row["max_speed"],
-                note=f"{date.today()}: input speed clamp at the training split's "
-                f"{stored['quantile']:.0%} quantile (benchmarks/speed_clamp.py, "
-                "docs/pretraining.md)",
-            )
-            print(f"{row['checkpoint']}: {'clamped' if changed else 'already clamped'}")
+        for name, changed in done:
+            print(f"{name}: {'clamped' if changed else 'already clamped'}")
         return
 
-    names = args.datasets or sorted(p.name for p in models.iterdir() if p.is_dir())
     rows = []
-    for name in names:
-        path = models / name / f"generator{ckpt.SUFFIX}"
-        if not path.is_file():
-            continue
+    for name, path in published_generators(models, args.datasets, variants=False):
         payload = ckpt.load(path)
         cfg, scale = ckpt.config_of(payload), payload["scale"]
         train = load_dataset(cfg.data.dataset, "train", args.data_root)
@@ -138,10 +127,8 @@ def main() -> None:
                "share_clamped": share}  # fmt: skip
         for key, value in (("off", 0.0), ("clamped", bound)):
             predictor = ckpt.predictor_from_payload(_with_clamp(payload, value))
-            res = evaluate(predictor.to(args.device).eval(), val, args.samples, args.seed,
-                           args.device)  # fmt: skip
-            row[key] = {k: res[k] for k in ("min_ade", "min_fde", "joint_min_ade",
-                                            "joint_min_fde")}  # fmt: skip
+            row[key] = validation_metrics(predictor.to(args.device).eval(), val, args.samples,
+                                          args.seed, args.device)  # fmt: skip
         rows.append(row)
         off, on = row["off"], row["clamped"]
         print(f"{name:<9} max_speed {bound:.3f}  clamped train {share['train']:.1%} val "
@@ -149,12 +136,8 @@ def main() -> None:
               f"-> {on['min_fde']:.4f} ({on['min_fde'] / off['min_fde'] - 1:+.2%})",
               flush=True)  # fmt: skip
     decision = decide(rows)
-    out = {"date": str(date.today()), "machine": machine(),
-           "command": "python benchmarks/speed_clamp.py --data-root ../shared/data",
-           "split": "val", "quantile": args.quantile, "samples": args.samples, "seed": args.seed,
-           "rows": rows, "decision": decision}  # fmt: skip
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps(out, indent=2) + "\n")
+    write_study(OUT, "python benchmarks/speed_clamp.py --data-root ../shared/data", rows,
+                decision, quantile=args.quantile, samples=args.samples, seed=args.seed)  # fmt: skip
     print(json.dumps(decision, indent=2))
     print()
     print("| generator | max_speed | agents clamped: train / val / test | validation minADE20 / "

@@ -1,26 +1,20 @@
 """benchmarks/equal_budget.py: runs from another published start get their own row names, run
 folders, start row and control, and never mix with the default start's."""
 
-import importlib.util
 import json
 import subprocess
-import sys
 from argparse import Namespace
 from pathlib import Path
 
 import pytest
+from bench import load_benchmark
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
 @pytest.fixture
 def eb(tmp_path, monkeypatch):
-    spec = importlib.util.spec_from_file_location(
-        "bench_equal_budget", ROOT / "benchmarks" / "equal_budget.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
+    module = load_benchmark("equal_budget")
     monkeypatch.setattr(module, "ROOT", tmp_path)
     return module
 
@@ -38,9 +32,7 @@ def test_a_longer_start_renames_every_method_and_keeps_each_methods_own_tag(eb):
 
 
 def test_the_start_check_reads_the_validation_record_finetune_py_writes(eb, tmp_path):
-    spec = importlib.util.spec_from_file_location("bench_ft", ROOT / "benchmarks" / "finetune.py")
-    ft = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(ft)
+    ft = load_benchmark("finetune")
     for start in ("generator", "generator-long"):
         record = ft.start_meta("walks", start)
         assert (

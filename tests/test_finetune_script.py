@@ -1,22 +1,16 @@
 """benchmarks/finetune.py: a run folder is never resumed or reused from another start."""
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import pytest
+from bench import load_benchmark
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
 @pytest.fixture
 def ft(monkeypatch):
-    spec = importlib.util.spec_from_file_location(
-        "bench_finetune", ROOT / "benchmarks" / "finetune.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
+    module = load_benchmark("finetune")
     hashes = {"a.safetensors": "aaaa", "b.safetensors": "bbbb"}
     monkeypatch.setattr(module.ckpt, "load", lambda path: {"hash": hashes[Path(path).name]})
     return module

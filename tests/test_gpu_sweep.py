@@ -1,23 +1,19 @@
 """benchmarks/gpu_sweep/ and benchmarks/sweep_summary.py: the leave-one-out folders rebuilt from
 the pool of distinct files, and the validation summary of a sweep's runs."""
 
-import importlib.util
 import json
 import shutil
 import subprocess
 from pathlib import Path
 
 import pytest
+from bench import load_benchmark
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
 def _summary_module():
-    spec = importlib.util.spec_from_file_location(
-        "bench_sweep_summary", ROOT / "benchmarks" / "sweep_summary.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_benchmark("sweep_summary")
     return module
 
 

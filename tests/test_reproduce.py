@@ -1,7 +1,6 @@
 """benchmarks/reproduce.py: the paper's numbers file, quick mode's tables, resuming, and full
 mode's training jobs (run by a fake runner), on the tiny synthetic run."""
 
-import importlib.util
 import json
 import shutil
 import subprocess
@@ -10,6 +9,7 @@ from argparse import Namespace
 from pathlib import Path
 
 import pytest
+from bench import load_benchmark
 
 from trajpref.data import load_dataset
 from trajpref.evaluation import evaluate
@@ -20,17 +20,7 @@ from trajpref.score.scorer import TrajectoryScorer
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _load(name: str):
-    spec = importlib.util.spec_from_file_location(
-        f"bench_{name}", ROOT / "benchmarks" / f"{name}.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
-
-
-reproduce = _load("reproduce")
+reproduce = load_benchmark("reproduce")
 SAMPLES = ["--samples", "4"]
 
 
@@ -317,7 +307,7 @@ def test_full_mode_pretrains_a_dataset_that_has_a_config_but_no_model(setup):
 def test_full_mode_trains_with_the_equal_budget_tables_arguments(setup, tmp_path, monkeypatch):
     """The fine-tuning jobs run exactly what benchmarks/equal_budget.py runs, so their rows
     are the equal-budget table's."""
-    equal_budget = _load("equal_budget")
+    equal_budget = load_benchmark("equal_budget")
     monkeypatch.setattr(equal_budget, "ROOT", tmp_path / "eb")
     seen = []
 

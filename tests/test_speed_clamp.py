@@ -1,13 +1,12 @@
 """benchmarks/speed_clamp.py: the clamp each training split implies, the rule, and the
 settings-only variant it publishes."""
 
-import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from bench import load_benchmark
 from synthetic import TINY_OVERRIDES, make_scene
 
 from trajpref.config import load_config
@@ -21,12 +20,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 @pytest.fixture
 def sc(tmp_path, monkeypatch):
-    spec = importlib.util.spec_from_file_location(
-        "bench_speed_clamp", ROOT / "benchmarks" / "speed_clamp.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
+    module = load_benchmark("speed_clamp")
     monkeypatch.setattr(module, "ROOT", tmp_path)
     return module
 

@@ -1,19 +1,14 @@
 """benchmarks/update_readme.py: which rows the README's results table keeps."""
 
-import importlib.util
-import sys
 from pathlib import Path
+
+from bench import load_benchmark
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
 def _module():
-    spec = importlib.util.spec_from_file_location(
-        "bench_update_readme", ROOT / "benchmarks" / "update_readme.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
+    module = load_benchmark("update_readme")
     return module
 
 

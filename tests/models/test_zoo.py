@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from bench import load_benchmark
 
 from trajpref.cli import main
 from trajpref.errors import TrajprefError
@@ -180,13 +181,7 @@ def test_the_repository_models_folder_is_the_packaged_zoo():
 
 
 def _zoo_index():
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("bench_zoo_index", ROOT / "benchmarks" /
-                                                  "zoo_index.py")  # fmt: skip
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("zoo_index")
 
 
 def test_a_sampling_change_after_training_shows_on_the_card_not_in_the_training_command():

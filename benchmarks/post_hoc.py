@@ -1,0 +1,72 @@
+"""What the studies of a post-training generator setting share (``deterministic_steps.py``,
+``speed_clamp.py``): which published generators they cover, the validation metrics they
+compare, the record they store beside the decision, and the ``--apply`` step that writes the
+chosen setting into the published files (``checkpoint.set_generator_setting``; weights
+untouched). Each study keeps its own rule, fixed before its numbers were seen.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from datetime import date
+from pathlib import Path
+from typing import Any
+
+from trajpref.evaluation import evaluate
+from trajpref.models import checkpoint as ckpt
+from trajpref.results import machine
+
+METRICS = ("min_ade", "min_fde", "joint_min_ade", "joint_min_fde")
+"""The validation metrics a study stores for each setting."""
+
+
+def published_generators(
+    models: Path, datasets: list[str] | None = None, variants: bool = True
+) -> list[tuple[str, Path]]:
+    """(dataset, file) of the published generators under ``models``, in a stable order: every
+    ``generator*`` file, or only each folder's default ``generator`` when ``variants`` is
+    false; ``datasets`` keeps only the named folders (an unknown name is an error)."""
+    folders = sorted(p for p in models.iterdir() if p.is_dir())
+    if datasets is not None:
+        unknown = sorted(set(datasets) - {p.name for p in folders})
+        if unknown:
+            raise SystemExit(f"no published models for {', '.join(unknown)} under {models}")
+        folders = [p for p in folders if p.name in datasets]
+    pattern = f"generator*{ckpt.SUFFIX}" if variants else f"generator{ckpt.SUFFIX}"
+    return [(folder.name, path) for folder in folders for path in sorted(folder.glob(pattern))]
+
+
+def validation_metrics(predictor, dataset, samples: int, seed: int, device: str) -> dict:
+    """``METRICS`` (and the seconds it took) of one predictor on one validation split."""
+    res = evaluate(predictor, dataset, samples, seed, device)
+    return {**{k: res[k] for k in METRICS}, "seconds": res.get("seconds")}
+
+
+def write_study(out: Path, command: str, rows: list[dict], decision: dict, **fields: Any) -> None:
+    """Store a study's rows and decision with the date, machine and command that made them."""
+    record = {"date": str(date.today()), "machine": machine(), "command": command,
+              "split": "val", **fields, "rows": rows, "decision": decision}  # fmt: skip
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(record, indent=2) + "\n")
+
+
+def apply_setting(
+    root: Path,
+    out: Path,
+    allowed: str,
+    name: str,
+    value_of: Callable[[dict], Any],
+    note: str,
+) -> list[tuple[str, bool]]:
+    """Write setting ``name`` (``value_of(row)``) into each generator a stored study covers,
+    when its decision's ``allowed`` key is true. Returns (checkpoint, changed) per row; an
+    empty list when the decision does not allow the change (nothing is written)."""
+    stored = json.loads(out.read_text())
+    if not stored["decision"][allowed]:
+        return []
+    return [
+        (row["checkpoint"], ckpt.set_generator_setting(
+            root / row["checkpoint"], name, value_of(row), note=note))
+        for row in stored["rows"]
+    ]  # fmt: skip
