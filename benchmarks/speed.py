@@ -10,7 +10,8 @@ timed in this one process, one after the other, so their latencies compare with 
 the ratio full / leapfrog is the number that does not depend on the machine's load.
 
 Writes benchmarks/results/meta/speed.json (machine, threads, date, command, one entry per
-model); ``python benchmarks/update_readme.py`` puts it in the README's cost table.
+model); ``python benchmarks/update_readme.py`` puts it in the README's cost table. A subset
+(``--datasets``) must go elsewhere (``--out``), so that the file never mixes runs.
 """
 
 from __future__ import annotations
@@ -39,6 +40,11 @@ def main() -> None:
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--out", default=str(OUT))
     args = parser.parse_args()
+    if args.datasets and Path(args.out).resolve() == OUT.resolve():
+        parser.error(
+            f"{OUT.name} holds every published model timed in one run (the README compares "
+            "them); time a subset with --out somewhere else"
+        )
 
     models = zoo.generators(args.datasets)
     if not models:
