@@ -64,7 +64,8 @@ def main() -> None:
     if args.apply:
         note = (f"{date.today()}: posterior-mean tau steps by default "
                 "(benchmarks/deterministic_steps.py, docs/pretraining.md)")  # fmt: skip
-        done = apply_setting(ROOT, OUT, "switch", "stochastic_steps", lambda row: False, note)
+        stored = json.loads(OUT.read_text())
+        done = apply_setting(ROOT, stored, "switch", "stochastic_steps", lambda row: False, note)
         if not done:
             print("the validation rows do not favour deterministic steps: nothing changed")
         for name, changed in done:

@@ -15,6 +15,7 @@ from typing import Any
 
 from trajpref.evaluation import evaluate
 from trajpref.models import checkpoint as ckpt
+from trajpref.models import zoo
 from trajpref.results import machine
 
 METRICS = ("min_ade", "min_fde", "joint_min_ade", "joint_min_fde")
@@ -24,17 +25,17 @@ METRICS = ("min_ade", "min_fde", "joint_min_ade", "joint_min_fde")
 def published_generators(
     models: Path, datasets: list[str] | None = None, variants: bool = True
 ) -> list[tuple[str, Path]]:
-    """(dataset, file) of the published generators under ``models``, in a stable order: every
-    ``generator*`` file, or only each folder's default ``generator`` when ``variants`` is
-    false; ``datasets`` keeps only the named folders (an unknown name is an error)."""
-    folders = sorted(p for p in models.iterdir() if p.is_dir())
+    """(dataset, file) of the published generators under ``models`` (``zoo.generators``), in
+    a stable order: every ``generator*`` file, or only each folder's default ``generator`` when
+    ``variants`` is false; ``datasets`` keeps only the named folders (an unknown name is an
+    error)."""
     if datasets is not None:
-        unknown = sorted(set(datasets) - {p.name for p in folders})
+        unknown = sorted(d for d in datasets if not (models / d).is_dir())
         if unknown:
             raise SystemExit(f"no published models for {', '.join(unknown)} under {models}")
-        folders = [p for p in folders if p.name in datasets]
-    pattern = f"generator*{ckpt.SUFFIX}" if variants else f"generator{ckpt.SUFFIX}"
-    return [(folder.name, path) for folder in folders for path in sorted(folder.glob(pattern))]
+    found = zoo.generators(datasets, root=models)
+    return sorted((name.split("/")[0], path) for name, path in found.items()
+                  if variants or name.endswith("/generator"))  # fmt: skip
 
 
 def validation_metrics(predictor, dataset, samples: int, seed: int, device: str) -> dict:
@@ -53,16 +54,16 @@ def write_study(out: Path, command: str, rows: list[dict], decision: dict, **fie
 
 def apply_setting(
     root: Path,
-    out: Path,
+    stored: dict,
     allowed: str,
     name: str,
     value_of: Callable[[dict], Any],
     note: str,
 ) -> list[tuple[str, bool]]:
-    """Write setting ``name`` (``value_of(row)``) into each generator a stored study covers,
-    when its decision's ``allowed`` key is true. Returns (checkpoint, changed) per row; an
-    empty list when the decision does not allow the change (nothing is written)."""
-    stored = json.loads(out.read_text())
+    """Write setting ``name`` (``value_of(row)``) into each generator a stored study (the
+    record ``write_study`` wrote) covers, when its decision's ``allowed`` key is true. Returns
+    (checkpoint, changed) per row; an empty list when the decision does not allow the change
+    (nothing is written)."""
     if not stored["decision"][allowed]:
         return []
     return [

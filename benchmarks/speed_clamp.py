@@ -101,10 +101,11 @@ def main() -> None:
         return
 
     if args.apply:
-        quantile = json.loads(OUT.read_text())["quantile"]
-        note = (f"{date.today()}: input speed clamp at the training split's {quantile:.0%} "
-                "quantile (benchmarks/speed_clamp.py, docs/pretraining.md)")  # fmt: skip
-        done = apply_setting(ROOT, OUT, "apply", "max_speed", lambda row: row["max_speed"], note)
+        stored = json.loads(OUT.read_text())
+        note = (f"{date.today()}: input speed clamp at the training split's "
+                f"{stored['quantile']:.0%} quantile (benchmarks/speed_clamp.py, "
+                "docs/pretraining.md)")  # fmt: skip
+        done = apply_setting(ROOT, stored, "apply", "max_speed", lambda r: r["max_speed"], note)
         if not done:
             print("validation got worse somewhere: nothing changed")
         for name, changed in done:

@@ -39,21 +39,23 @@ def test_the_covered_generators_are_every_file_or_only_the_defaults_of_the_named
         ph.published_generators(models, ["a", "zz"])
 
 
-def _study(path, allowed: bool) -> None:
+def _study(path, allowed: bool) -> dict:
+    """A stored study as ``write_study`` writes it, read back."""
     rows = [{"checkpoint": "models/a/generator.safetensors", "max_speed": 0.25},
             {"checkpoint": "models/b/generator.safetensors", "max_speed": 0.5}]  # fmt: skip
     path.write_text(json.dumps({"rows": rows, "decision": {"apply": allowed}}))
+    return json.loads(path.read_text())
 
 
 def test_apply_writes_each_rows_value_only_when_the_decision_allows_it(models, tmp_path):
     ph = load_benchmark("post_hoc")
     study = tmp_path / "study.json"
-    _study(study, allowed=False)
-    assert ph.apply_setting(tmp_path, study, "apply", "max_speed", lambda r: r["max_speed"],
+    stored = _study(study, allowed=False)
+    assert ph.apply_setting(tmp_path, stored, "apply", "max_speed", lambda r: r["max_speed"],
                             "n") == []  # fmt: skip
     assert ckpt.config_of(ckpt.load(models / "a" / "generator.safetensors")).model.max_speed == 0
-    _study(study, allowed=True)
-    done = ph.apply_setting(tmp_path, study, "apply", "max_speed", lambda r: r["max_speed"], "n")
+    stored = _study(study, allowed=True)
+    done = ph.apply_setting(tmp_path, stored, "apply", "max_speed", lambda r: r["max_speed"], "n")
     assert done == [("models/a/generator.safetensors", True),
                     ("models/b/generator.safetensors", True)]  # fmt: skip
     speeds = [ckpt.config_of(ckpt.load(models / d / "generator.safetensors")).model.max_speed
@@ -63,7 +65,7 @@ def test_apply_writes_each_rows_value_only_when_the_decision_allows_it(models, t
     assert (
         ckpt.config_of(ckpt.load(models / "a" / "generator-long.safetensors")).model.max_speed == 0
     )
-    again = ph.apply_setting(tmp_path, study, "apply", "max_speed", lambda r: r["max_speed"], "n")
+    again = ph.apply_setting(tmp_path, stored, "apply", "max_speed", lambda r: r["max_speed"], "n")
     assert [changed for _, changed in again] == [False, False]
 
 
