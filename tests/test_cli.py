@@ -209,3 +209,34 @@ def test_the_cli_imports_without_the_survey_web_server_packages():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "ok"
+
+
+def test_holdout_scene_evaluates_the_held_out_files_of_both_splits(capsys, walks):
+    from trajpref.data import load_dataset
+
+    train, val = load_dataset(str(walks), "train"), load_dataset(str(walks), "val")
+    want = sum(s.num_agents for s in train.scenes + val.scenes if s.scene_id.startswith("walk0"))
+    code, out, _ = _run(capsys, "evaluate", "--dataset", walks, "--split", "val", "--samples",
+                        "1", "--json", "--no-progress", "--holdout-scene", "walk0")  # fmt: skip
+    res = json.loads(out)
+    assert code == 0 and res["holdout_scene"] == "walk0"
+    assert res["agents"] == want and want > val.num_agents  # train's walk0 windows came in
+    code, out, _ = _run(capsys, "evaluate", "--dataset", walks, "--split", "val", "--samples",
+                        "1", "--no-progress", "--holdout-scene", "walk0")  # fmt: skip
+    assert code == 0 and "(held-out scene walk0*)" in out
+    code, out, _ = _run(capsys, "evaluate", "--dataset", walks, "--split", "val", "--json",
+                        "--samples", "1", "--no-progress")  # fmt: skip
+    assert "holdout_scene" not in json.loads(out)
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--split", "test", "--holdout-scene", "walk0"], "use it with --split val"),
+        (["--split", "val", "--holdout-scene", ""], "needs a file-name prefix"),
+        (["--split", "val", "--holdout-scene", "nope"], "its files: walk0.txt, walk1.txt"),
+    ],
+)
+def test_holdout_scene_bad_input_is_one_clear_error(capsys, walks, extra, message):
+    code, _, err = _run(capsys, "evaluate", "--dataset", walks, "--no-progress", *extra)
+    assert code == 2 and message in err

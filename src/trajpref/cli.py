@@ -22,7 +22,7 @@ import torch
 from trajpref import __version__
 from trajpref.adapt import ADAPT_OBJECTIVES, ADAPT_PARAMS, AdaptConfig, evaluate_in_context
 from trajpref.config import ExperimentConfig, config_entries, field_docs, load_config
-from trajpref.data import PROTOCOLS, ReadOptions, load_dataset, mean_speed
+from trajpref.data import PROTOCOLS, ReadOptions, hold_out_scene, load_dataset, mean_speed
 from trajpref.data.trajnet import write_trajnet, write_trajnet_truth
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, TrajprefError
@@ -62,6 +62,10 @@ def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> N
                    help="which windows count: all (default: every window with a fully observed "
                    "agent) or sgan (windows with at least two, as Social-GAN's loader keeps; "
                    "docs/data.md)")  # fmt: skip
+    p.add_argument("--holdout-scene", default=None, metavar="PREFIX",
+                   help="with --split val: the windows (train and val files) of the training "
+                   "scene whose file names start with PREFIX, the validation split of a run "
+                   "trained with data.holdout_scene=PREFIX (docs/data.md)")  # fmt: skip
 
 
 def _add_model_args(p: argparse.ArgumentParser) -> None:
@@ -298,6 +302,12 @@ def _check_data_args(args) -> None:
         raise ConfigError(f"--frame-interval must be a number of seconds > 0, "
                           f"got {args.frame_interval}")  # fmt: skip
     _read_options(args)  # --delimiter, --max-gap, --max-coord
+    if args.holdout_scene is not None:
+        if not args.holdout_scene:
+            raise ConfigError("--holdout-scene needs a file-name prefix, e.g. biwi_hotel")
+        if args.split != "val":
+            raise ConfigError(f"--holdout-scene selects a validation split: use it with "
+                              f"--split val, not --split {args.split}")  # fmt: skip
 
 
 def _read_options(args) -> ReadOptions:
@@ -305,15 +315,20 @@ def _read_options(args) -> ReadOptions:
 
 
 def _load(args):
-    return load_dataset(
-        args.dataset,
-        args.split,
-        args.data_root,
-        frame_interval=args.frame_interval,
-        units=args.units,
-        options=_read_options(args),
-        protocol=args.protocol,
-    )
+    def split(name: str):
+        return load_dataset(
+            args.dataset,
+            name,
+            args.data_root,
+            frame_interval=args.frame_interval,
+            units=args.units,
+            options=_read_options(args),
+            protocol=args.protocol,
+        )
+
+    if args.holdout_scene:  # the held-out scene's windows of both splits (_check_data_args)
+        return hold_out_scene(split("train"), split("val"), args.holdout_scene)[1]
+    return split(args.split)
 
 
 def _check_model_args(args) -> None:
@@ -425,8 +440,9 @@ def _parse_bins(text: str | None) -> tuple[int, ...] | None:
     return edges
 
 
-def _protocol_tag(ds) -> str:
-    return "" if ds.info.protocol == "all" else f" (protocol {ds.info.protocol})"
+def _protocol_tag(ds, holdout: str | None = None) -> str:
+    tag = "" if ds.info.protocol == "all" else f" (protocol {ds.info.protocol})"
+    return tag + (f" (held-out scene {holdout}*)" if holdout else "")
 
 
 def _fmt(value) -> str:
@@ -476,6 +492,7 @@ def cmd_evaluate(args) -> int:
         "dataset": ds.info.name,
         "split": ds.info.split,
         "protocol": ds.info.protocol,
+        **({"holdout_scene": args.holdout_scene} if args.holdout_scene else {}),
         "model": args.model,
         "samples": samples,
         "seed": args.seed,
@@ -495,7 +512,8 @@ def cmd_evaluate(args) -> int:
         print(dumps_json(out))
     else:
         print(
-            f"{ds.info.name}/{ds.info.split}{_protocol_tag(ds)}  model={args.model}  K={samples}  "
+            f"{ds.info.name}/{ds.info.split}{_protocol_tag(ds, args.holdout_scene)}  "
+            f"model={args.model}  K={samples}  "
             f"({out['agents']} agents, {out['scenes']} scenes, units {ds.info.units})"
             + ("" if args.keep is None else f", kept by {args.select} of {args.samples}")
         )

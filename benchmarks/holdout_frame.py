@@ -1,0 +1,208 @@
+"""The agent frame of each ETH/UCY fold, chosen on a held-out training location.
+
+    python benchmarks/holdout_frame.py --folds univ zara1 eth zara2 hotel --workers 2 \
+        --data-root ../shared/data
+    python benchmarks/holdout_frame.py --report      # the table only, from the record
+
+The rule (fixed before the runs) is in docs/pretraining.md, "The agent frame re-decided on a
+held-out training location". Per fold, one location of its training split is held out
+(``data.holdout_scene``): hotel (``biwi_hotel``) on every fold but hotel's, Zara
+(``crowds_zara``) on hotel's. Three jobs per fold, each one ``trajpref train`` process on one
+thread, seed 0, the fold's config otherwise:
+
+- ``denoiser``: the diffusion stage without the held-out location;
+- ``scene`` and ``heading``: the generator stage from that denoiser with
+  ``model.agent_frame=scene`` / ``heading``, its checkpoint chosen on the held-out location.
+
+A finished job (its metrics reached the config's last epoch) is skipped when the script runs
+again, and an interrupted one resumes from its ``<stage>_last.pt``. When both generators of a
+fold exist, each is measured by ``trajpref evaluate --split val --holdout-scene H`` (K = 20,
+seed 0) and the fold's row is written to ``benchmarks/results/meta/holdout_frame_val.json``:
+the frame with the lower held-out minFDE20 wins, with no margin. No test split is read.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from datetime import date
+from pathlib import Path
+
+from trajpref.config import load_config
+from trajpref.io import write_json
+from trajpref.results import command_line, machine
+from trajpref.train import read_metrics
+
+ROOT = Path(__file__).resolve().parent.parent
+FOLDS = ("univ", "zara1", "eth", "zara2", "hotel")
+"""The ETH/UCY folds, in the order the rule runs them."""
+HELD_OUT = {"eth": "biwi_hotel", "univ": "biwi_hotel", "zara1": "biwi_hotel",
+            "zara2": "biwi_hotel", "hotel": "crowds_zara"}  # fmt: skip
+"""The training location each fold holds out (a file-name prefix of its training split)."""
+FRAMES = ("scene", "heading")
+RECORD = ROOT / "benchmarks" / "results" / "meta" / "holdout_frame_val.json"
+
+
+def run_dir(fold: str, job: str, runs: Path) -> Path:
+    return runs / fold / job
+
+
+def job_command(fold: str, job: str, runs: Path, data_root: str | None) -> list[str]:
+    """The ``trajpref train`` command of one job (``--resume`` when a state is there)."""
+    stage = "diffusion" if job == "denoiser" else "generator"
+    out = run_dir(fold, job, runs)
+    cmd = [sys.executable, "-m", "trajpref.cli", "train", stage, "--config",
+           str(ROOT / "configs" / f"{fold}.yaml"), "--out", str(out),
+           "--set", f"data.holdout_scene={HELD_OUT[fold]}", "--no-progress"]  # fmt: skip
+    if job != "denoiser":
+        den = run_dir(fold, "denoiser", runs) / "denoiser.safetensors"
+        cmd += ["--denoiser", str(den), "--set", f"model.agent_frame={job}"]
+    state = out / f"{'denoiser' if job == 'denoiser' else 'generator'}_last.pt"
+    if state.is_file():
+        cmd += ["--resume", str(state)]
+    if data_root:
+        cmd += ["--data-root", data_root]
+    return cmd
+
+
+def finished(fold: str, job: str, runs: Path) -> bool:
+    """Whether a job's metrics reached its config's last epoch."""
+    name = "denoiser" if job == "denoiser" else "generator"
+    out = run_dir(fold, job, runs)
+    if not (out / f"{name}_metrics.jsonl").is_file():
+        return False
+    cfg = load_config(ROOT / "configs" / f"{fold}.yaml", [])
+    epochs = (cfg.denoiser if job == "denoiser" else cfg.generator).epochs
+    records = read_metrics(out, name)
+    return bool(records) and records[-1]["epoch"] >= epochs
+
+
+def train(folds: list[str], runs: Path, workers: int, data_root: str | None) -> None:
+    """Run every unfinished job, ``workers`` at a time, each generator after its denoiser."""
+    pending = [(f, j) for f in folds for j in ("denoiser", *FRAMES) if not finished(f, j, runs)]
+    print(f"{3 * len(folds) - len(pending)} of {3 * len(folds)} jobs finished; "
+          f"{len(pending)} to run")  # fmt: skip
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    logs = ROOT / "runs" / "logs"
+    logs.mkdir(parents=True, exist_ok=True)
+    running: dict[tuple[str, str], tuple[subprocess.Popen, float]] = {}
+    failed = []
+    while pending or running:
+        for key, (proc, t0) in list(running.items()):
+            if proc.poll() is None:
+                continue
+            del running[key]
+            status = "ok" if proc.returncode == 0 else f"FAILED (exit {proc.returncode})"
+            print(f"{key[0]} {key[1]}: {status} in {(time.time() - t0) / 60:.1f} min", flush=True)
+            if proc.returncode != 0:
+                failed.append(key)
+        blocked = {f for f, _ in failed}
+        ready = [(f, j) for f, j in pending if f not in blocked
+                 and (j == "denoiser" or finished(f, "denoiser", runs))]  # fmt: skip
+        pending = [k for k in pending if k[0] not in blocked]
+        if pending and not ready and not running:  # a denoiser exited before its last epoch
+            sys.exit(f"jobs waiting on an unfinished denoiser: {pending}")
+        while ready and len(running) < workers:
+            key = ready.pop(0)
+            pending.remove(key)
+            log = open(logs / f"holdout-{key[0]}-{key[1]}.log", "a")  # noqa: SIM115 (closed by exit)
+            cmd = job_command(*key, runs, data_root)
+            running[key] = (subprocess.Popen(cmd, env=env, stdout=log, stderr=log), time.time())
+            print(f"{key[0]} {key[1]}: started", flush=True)
+        time.sleep(5)
+    if failed:
+        sys.exit(f"{len(failed)} jobs failed (logs in runs/logs/holdout-*.log): {failed}")
+
+
+def measure(fold: str, runs: Path, data_root: str | None) -> dict | None:
+    """Both generators of a fold on its held-out location; None until both are trained."""
+    if not all(finished(fold, j, runs) for j in FRAMES):
+        return None
+    row = {"holdout_scene": HELD_OUT[fold]}
+    for frame in FRAMES:
+        out = run_dir(fold, frame, runs)
+        result = out / "holdout_val.json"
+        if not result.is_file():
+            cmd = [sys.executable, "-m", "trajpref.cli", "evaluate", "--dataset", fold, "--split",
+                   "val", "--holdout-scene", HELD_OUT[fold], "--model",
+                   str(out / "generator.safetensors"), "--samples", "20", "--seed", "0",
+                   "--json", "--no-progress", "--out", str(result)]  # fmt: skip
+            if data_root:
+                cmd += ["--data-root", data_root]
+            subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+        res = json.loads(result.read_text())
+        records = read_metrics(out, "generator")
+        best = min((r for r in records if "val_score" in r), key=lambda r: r["val_score"])
+        row[frame] = {
+            **{
+                k: res[k]
+                for k in (
+                    "min_ade",
+                    "min_fde",
+                    "joint_min_ade",
+                    "joint_min_fde",
+                    "agents",
+                    "scenes",
+                )
+            },  # fmt: skip
+            "best_epoch": best["epoch"],
+            "epochs": records[-1]["epoch"],
+            "train_minutes": round(records[-1]["train_seconds"] / 60, 1),
+        }
+    scene, heading = row["scene"]["min_fde"], row["heading"]["min_fde"]
+    row["heading_vs_scene_pct"] = round(100 * (heading / scene - 1), 2)
+    row["chosen"] = "heading" if heading < scene else "scene"
+    return row
+
+
+def report(record: dict) -> str:
+    lines = [
+        "| fold | held out | windows (agents) | scene frame minADE20 / minFDE20 (best epoch) "
+        "| heading frame | heading vs scene | joint minFDE scene -> heading | chosen |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for fold in FOLDS:
+        row = record["folds"].get(fold)
+        if row is None:
+            continue
+        s, h = row["scene"], row["heading"]
+        lines.append(
+            f"| {fold} | {row['holdout_scene']} | {s['scenes']} ({s['agents']}) "
+            f"| {s['min_ade']:.4f} / {s['min_fde']:.4f} ({s['best_epoch']} of {s['epochs']}) "
+            f"| {h['min_ade']:.4f} / {h['min_fde']:.4f} ({h['best_epoch']} of {h['epochs']}) "
+            f"| {row['heading_vs_scene_pct']:+.1f} % "
+            f"| {s['joint_min_fde']:.3f} -> {h['joint_min_fde']:.3f} | {row['chosen']} |"
+        )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--folds", nargs="+", default=list(FOLDS), choices=FOLDS)
+    parser.add_argument("--workers", type=int, default=2, help="jobs at once (one thread each)")
+    parser.add_argument("--runs", default=str(ROOT / "runs" / "holdout"), help="run folders")
+    parser.add_argument("--data-root", default=None, help="data folder ($TRAJPREF_DATA)")
+    parser.add_argument("--report", action="store_true", help="print the recorded table only")
+    args = parser.parse_args(argv)
+    if args.workers < 1:
+        parser.error("--workers must be >= 1")
+    record = json.loads(RECORD.read_text()) if RECORD.is_file() else {"folds": {}}
+    if not args.report:
+        runs = Path(args.runs)
+        train(args.folds, runs, args.workers, args.data_root)
+        for fold in args.folds:
+            row = measure(fold, runs, args.data_root)
+            if row is not None:
+                record["folds"][fold] = row
+        record.update(machine=machine(), date=date.today().isoformat(), command=command_line())
+        write_json(RECORD, record)
+    print(report(record))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,109 @@
+"""benchmarks/holdout_frame.py: the jobs of the held-out-location frame decision, their order,
+resuming, and the rule (the lower held-out minFDE20 wins, no margin)."""
+
+import json
+import sys
+
+import pytest
+from bench import load_benchmark
+
+
+def _metrics(folder, stage, epochs, scores):
+    folder.mkdir(parents=True, exist_ok=True)
+    lines = [{"epoch": e + 1, "train_seconds": 60.0 * (e + 1)} for e in range(epochs)]
+    for epoch, score in scores.items():
+        lines[epoch - 1]["val_score"] = score
+    (folder / f"{stage}_metrics.jsonl").write_text("".join(json.dumps(x) + "\n" for x in lines))
+
+
+def test_a_generator_job_names_its_held_out_denoiser_frame_and_resume_state(tmp_path):
+    hf = load_benchmark("holdout_frame")
+    cmd = hf.job_command("hotel", "heading", tmp_path, "/data")
+    assert "data.holdout_scene=crowds_zara" in cmd and "model.agent_frame=heading" in cmd
+    assert cmd[cmd.index("--denoiser") + 1] == str(tmp_path / "hotel/denoiser/denoiser.safetensors")
+    assert "--resume" not in cmd and cmd[-2:] == ["--data-root", "/data"]
+    (tmp_path / "univ" / "denoiser").mkdir(parents=True)
+    (tmp_path / "univ" / "denoiser" / "denoiser_last.pt").write_bytes(b"")
+    cmd = hf.job_command("univ", "denoiser", tmp_path, None)
+    assert cmd[3:5] == ["train", "diffusion"] and "data.holdout_scene=biwi_hotel" in cmd
+    assert cmd[-2:] == ["--resume", str(tmp_path / "univ/denoiser/denoiser_last.pt")]
+    assert not any(a.startswith("model.agent_frame") for a in cmd)
+
+
+def test_a_job_is_finished_when_its_metrics_reach_the_configs_last_epoch(tmp_path):
+    hf = load_benchmark("holdout_frame")
+    cfg = hf.load_config(hf.ROOT / "configs" / "univ.yaml", [])
+    assert not hf.finished("univ", "scene", tmp_path)
+    _metrics(tmp_path / "univ" / "scene", "generator", cfg.generator.epochs - 1, {})
+    assert not hf.finished("univ", "scene", tmp_path)
+    _metrics(tmp_path / "univ" / "scene", "generator", cfg.generator.epochs, {})
+    assert hf.finished("univ", "scene", tmp_path)
+    assert not hf.finished("univ", "denoiser", tmp_path)
+
+
+def test_generators_wait_for_their_denoiser_and_finished_jobs_are_skipped(tmp_path, monkeypatch):
+    hf = load_benchmark("holdout_frame")
+    order = tmp_path / "order.txt"
+    done = {("zara1", "denoiser")}  # already trained: not run again
+    monkeypatch.setattr(hf, "finished", lambda f, j, runs: (f, j) in done)
+
+    def command(fold, job, runs, data_root):
+        code = f"import sys; open({str(order)!r}, 'a').write(' '.join(sys.argv[1:]) + '\\n')"
+        return [sys.executable, "-c", code, fold, job]
+
+    real_popen = hf.subprocess.Popen
+
+    class Popen(real_popen):  # a job counts as finished once its process has exited
+        def poll(self):
+            code = super().poll()
+            if code == 0:
+                done.add(tuple(self.args[-2:]))
+            return code
+
+    monkeypatch.setattr(hf, "job_command", command)
+    monkeypatch.setattr(hf.subprocess, "Popen", Popen)
+    monkeypatch.setattr(hf.time, "sleep", lambda s: None)
+    monkeypatch.setattr(hf, "ROOT", tmp_path)
+    hf.train(["univ", "zara1"], tmp_path, workers=2, data_root=None)
+    ran = order.read_text().split("\n")[:-1]
+    assert sorted(ran) == ["univ denoiser", "univ heading", "univ scene",
+                           "zara1 heading", "zara1 scene"]  # fmt: skip
+    assert ran.index("univ denoiser") < min(ran.index("univ scene"), ran.index("univ heading"))
+
+
+@pytest.mark.parametrize("scene, heading, chosen", [(0.30, 0.29, "heading"), (0.30, 0.30, "scene")])
+def test_the_lower_held_out_min_fde_wins_and_a_tie_keeps_the_scene_frame(
+    tmp_path, monkeypatch, scene, heading, chosen
+):
+    hf = load_benchmark("holdout_frame")
+    monkeypatch.setattr(hf, "finished", lambda *a: True)
+    monkeypatch.setattr(hf.subprocess, "run", lambda *a, **k: pytest.fail("re-evaluated"))
+    for frame, fde in (("scene", scene), ("heading", heading)):
+        out = tmp_path / "zara2" / frame
+        _metrics(out, "generator", 4, {2: 0.5, 4: 0.4})
+        result = {"min_ade": fde / 2, "min_fde": fde, "joint_min_ade": 1.0,
+                  "joint_min_fde": 2.0, "agents": 10, "scenes": 3}  # fmt: skip
+        (out / "holdout_val.json").write_text(json.dumps(result))
+    row = hf.measure("zara2", tmp_path, None)
+    assert row["chosen"] == chosen and row["holdout_scene"] == "biwi_hotel"
+    assert row["scene"]["best_epoch"] == 4 and row["scene"]["train_minutes"] == 4.0
+    assert row["heading_vs_scene_pct"] == pytest.approx(100 * (heading / scene - 1), abs=0.01)
+    table = hf.report({"folds": {"zara2": row}})
+    assert f"| zara2 | biwi_hotel | 3 (10) | {scene / 2:.4f} / {scene:.4f} (4 of 4)" in table
+    assert table.endswith(f"| {chosen} |")
+
+
+def test_a_fold_is_not_measured_before_both_generators_are_trained(tmp_path, monkeypatch):
+    hf = load_benchmark("holdout_frame")
+    monkeypatch.setattr(hf, "finished", lambda fold, job, runs: job != "heading")
+    assert hf.measure("eth", tmp_path, None) is None
+
+
+def test_generators_whose_denoiser_never_finishes_stop_the_script(tmp_path, monkeypatch):
+    hf = load_benchmark("holdout_frame")
+    monkeypatch.setattr(hf, "finished", lambda *a: False)
+    monkeypatch.setattr(hf, "job_command", lambda *a: [sys.executable, "-c", "pass"])
+    monkeypatch.setattr(hf.time, "sleep", lambda s: None)
+    monkeypatch.setattr(hf, "ROOT", tmp_path)
+    with pytest.raises(SystemExit, match="unfinished denoiser"):
+        hf.train(["eth"], tmp_path, workers=1, data_root=None)
