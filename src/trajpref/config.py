@@ -135,6 +135,11 @@ class ModelConfig:
     orientation) or ``heading`` (the same, rotated per agent so that its observed displacement
     points along +x, with its neighbours rotated alike; predictions are rotated back). The
     denoiser always works in the scene frame, so a published denoiser serves both."""
+    history_encoder: Literal["mlp", "temporal"] = "mlp"
+    """How the generator's encoder reads each agent's history: ``mlp`` (the flattened T_h
+    steps through an MLP, as the denoiser's does) or ``temporal`` (that MLP plus a GRU run
+    over the steps, whose last state is added to the embedding: LED's initializer reads the
+    past with a recurrent encoder as well). The denoiser always uses ``mlp``."""
     max_speed: float = 0.0
     """Speed clamp of the generator's inputs, in model units per observed step (0: off). An
     agent whose observed displacement per step (first to last observed position) exceeds it
@@ -170,6 +175,7 @@ GENERATOR_ONLY = (
     "tau",
     "stochastic_steps",
     "agent_frame",
+    "history_encoder",
     "max_speed",
 )
 """``ModelConfig`` fields that concern the generator and its sampler, not the denoiser."""

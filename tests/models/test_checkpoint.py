@@ -413,3 +413,13 @@ def test_a_variant_changes_only_sampling_settings_and_lives_beside_its_base(tmp_
         ckpt.publish_variant(base, tmp_path / "g-wide.safetensors", {"hidden": 64}, note="x")
     with pytest.raises(TrajprefError, match="beside its base"):
         ckpt.publish_variant(base, tmp_path / "sub" / "g.safetensors", {"max_speed": 1.0}, "x")
+
+
+def test_a_temporal_generator_is_rebuilt_from_its_checkpoint_alone(tmp_path):
+    cfg = load_config(None, [*TINY_OVERRIDES, "model.history_encoder=temporal"])
+    gen = _generator(cfg)
+    den_payload = ckpt.denoiser_payload(_denoiser(cfg), cfg, 0.7, {})
+    ckpt.save(tmp_path / "g.safetensors", ckpt.generator_payload(gen, den_payload, cfg, {}))
+    rebuilt, _ = ckpt.build_generator(ckpt.load(tmp_path / "g.safetensors"))
+    assert rebuilt.cfg.history_encoder == "temporal"
+    _assert_same_state(rebuilt.state_dict(), gen.state_dict())

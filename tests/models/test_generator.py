@@ -142,3 +142,48 @@ def test_the_speed_clamp_is_a_generator_setting_checked_on_construction():
     assert ModelConfig(max_speed=0.45).denoiser_part() == ModelConfig()
     with pytest.raises(ConfigError, match="max_speed must be >= 0"):
         ModelConfig(max_speed=-0.1)
+
+
+def test_the_history_encoder_is_a_generator_setting_checked_on_construction():
+    assert ModelConfig(history_encoder="temporal").denoiser_part() == ModelConfig()
+    with pytest.raises(ConfigError, match="history_encoder"):
+        ModelConfig(history_encoder="lstm")
+
+
+def test_the_temporal_encoder_reads_the_order_of_the_steps_and_learns():
+    torch.manual_seed(0)
+    gen = Generator(dataclasses.replace(TINY, history_encoder="temporal"))
+    assert isinstance(gen.encoder.temporal, torch.nn.GRU)
+    assert Generator(TINY).encoder.temporal is None
+    features = scene_features(collate([make_scene(3), make_scene(2, seed=1)]), 1.0)
+    before = {k: v.clone() for k, v in gen.encoder.temporal.state_dict().items()}
+    opt = torch.optim.SGD(gen.parameters(), lr=0.1)
+    gen(features).mean.pow(2).sum().backward()
+    opt.step()
+    assert all(not torch.equal(v, before[k]) for k, v in gen.encoder.temporal.state_dict().items())
+    # its part of the context: the GRU's last state, which depends on the steps' order
+    with torch.no_grad():
+        _, last = gen.encoder.temporal(features.hist)
+        _, swapped = gen.encoder.temporal(features.hist.flip(1))
+    assert not torch.allclose(last, swapped, atol=1e-3)
+
+
+def test_the_heading_frame_stays_equivariant_with_the_temporal_encoder():
+    torch.manual_seed(0)
+    cfg = dataclasses.replace(TINY, agent_frame="heading", history_encoder="temporal")
+    gen = Generator(cfg).eval()
+    features = scene_features(collate([make_scene(3), make_scene(2, seed=1)]), 1.0)
+    turned, rot = _rotated(features, 0.7)
+    with torch.no_grad():
+        a, b = gen(features), gen(turned)
+    torch.testing.assert_close(b.mean, a.mean @ rot.T, atol=1e-4, rtol=0)
+    torch.testing.assert_close(b.context, a.context, atol=1e-4, rtol=0)
+
+
+def test_a_temporal_generator_runs_under_bf16_autocast():
+    gen = Generator(dataclasses.replace(TINY, history_encoder="temporal"))
+    features = scene_features(collate([make_scene(3)]), 1.0)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        out = gen(features)
+    out.mean.float().sum().backward()
+    assert gen.encoder.temporal.weight_hh_l0.grad is not None

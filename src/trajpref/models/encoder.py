@@ -46,11 +46,16 @@ def scene_features(batch: Batch, scale: float) -> SceneFeatures:
 
 
 class SocialEncoder(nn.Module):
-    """Per-agent MLP over the history, then attention across the agents of each scene."""
+    """Per-agent MLP over the history, then attention across the agents of each scene.
 
-    def __init__(self, t_hist: int, hidden: int, layers: int, heads: int, num_types: int = 2):
+    ``temporal`` adds a GRU over the history's steps; its last state joins the MLP's
+    embedding (``ModelConfig.history_encoder``)."""
+
+    def __init__(self, t_hist: int, hidden: int, layers: int, heads: int, num_types: int = 2,
+                 temporal: bool = False):  # fmt: skip
         super().__init__()
         self.embed = mlp([t_hist * 4, hidden, hidden])
+        self.temporal = nn.GRU(4, hidden, batch_first=True) if temporal else None
         self.type_embed = nn.Embedding(num_types, hidden)
         self.layers = nn.ModuleList(SocialAttention(hidden, heads) for _ in range(layers))
         self.norm = nn.LayerNorm(hidden)
@@ -58,6 +63,9 @@ class SocialEncoder(nn.Module):
     def forward(self, f: SceneFeatures) -> torch.Tensor:
         """-> context [N, H]."""
         h = self.embed(f.hist.flatten(1)) + self.type_embed(f.agent_type)  # [N, H]
+        if self.temporal is not None:
+            _, last = self.temporal(f.hist)  # last: [1, N, H]
+            h = h + last[0].to(h.dtype)  # under autocast the GRU may run in another dtype
         b, p = f.mask.shape
         padded = h.new_zeros(b, p, h.shape[-1])  # [B, P, H]
         padded[f.scene, f.slot] = h

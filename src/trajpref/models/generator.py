@@ -45,7 +45,8 @@ class Generator(nn.Module):
         self.cfg = cfg
         self.samples = samples = cfg.samples
         h, w, tf = cfg.hidden, cfg.generator_width, cfg.t_fut
-        self.encoder = SocialEncoder(cfg.t_hist, h, cfg.encoder_layers, cfg.heads)
+        self.encoder = SocialEncoder(cfg.t_hist, h, cfg.encoder_layers, cfg.heads,
+                                     temporal=cfg.history_encoder == "temporal")  # fmt: skip
         self.mean_head = mlp([h, w, w, tf * 2])
         self.sigma_head = mlp([h + tf * 2, w, samples])
         self.shift_head = mlp([h + tf * 2, w, w, samples * tf * 2])
