@@ -45,6 +45,8 @@ HELD_OUT = {"eth": "biwi_hotel", "univ": "biwi_hotel", "zara1": "biwi_hotel",
 """The training location each fold holds out (a file-name prefix of its training split)."""
 FRAMES = ("scene", "heading")
 RECORD = ROOT / "benchmarks" / "results" / "meta" / "holdout_frame_val.json"
+KNOWN = ROOT / "benchmarks" / "results" / "meta" / "frame_known.json"
+"""The models trained on every scene: file-level validation and test (context for --plot)."""
 
 
 def run_dir(fold: str, job: str, runs: Path) -> Path:
@@ -159,12 +161,28 @@ def measure(fold: str, runs: Path, data_root: str | None) -> dict | None:
     return row
 
 
-def report(record: dict) -> str:
+def known_change(known: dict, which: str, fold: str) -> float | None:
+    """Heading vs scene minFDE20 change (%) of the models trained on every scene, from
+    ``meta/frame_known.json``: ``which`` is ``file_val`` (the fold's usual validation split)
+    or ``test``; None when not recorded."""
+    pair = known.get(which, {}).get(fold)
+    return None if pair is None else 100 * (pair["heading"] / pair["scene"] - 1)
+
+
+def report(record: dict, known: dict | None = None) -> str:
+    """The table of the held-out-location rows; with ``known``, the same change as the
+    file-level validation and the test split measured it (context only, not the rule's)."""
+    known = known or {}
     lines = [
         "| fold | held out | windows (agents) | scene frame minADE20 / minFDE20 (best epoch) "
-        "| heading frame | heading vs scene | joint minFDE scene -> heading | chosen |",
-        "|---|---|---|---|---|---|---|---|",
+        "| heading frame | heading vs scene: held out | file-level val | test "
+        "| joint minFDE scene -> heading | chosen |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
+
+    def pct(x: float | None) -> str:
+        return "–" if x is None else f"{x:+.1f} %"
+
     for fold in FOLDS:
         row = record["folds"].get(fold)
         if row is None:
@@ -174,10 +192,42 @@ def report(record: dict) -> str:
             f"| {fold} | {row['holdout_scene']} | {s['scenes']} ({s['agents']}) "
             f"| {s['min_ade']:.4f} / {s['min_fde']:.4f} ({s['best_epoch']} of {s['epochs']}) "
             f"| {h['min_ade']:.4f} / {h['min_fde']:.4f} ({h['best_epoch']} of {h['epochs']}) "
-            f"| {row['heading_vs_scene_pct']:+.1f} % "
+            f"| {pct(row['heading_vs_scene_pct'])} | {pct(known_change(known, 'file_val', fold))} "
+            f"| {pct(known_change(known, 'test', fold))} "
             f"| {s['joint_min_fde']:.3f} -> {h['joint_min_fde']:.3f} | {row['chosen']} |"
         )
     return "\n".join(lines)
+
+
+def plot(record: dict, known: dict, path: Path) -> None:
+    """Bars per fold: heading vs scene (% minFDE20) by file-level validation, by the held-out
+    location and on the test split; a validator that ranks like the test has bars of the
+    test's sign."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    folds = [f for f in FOLDS if f in record["folds"]]
+    series = [
+        ("file-level validation", [known_change(known, "file_val", f) for f in folds]),
+        ("held-out location", [record["folds"][f]["heading_vs_scene_pct"] for f in folds]),
+        ("test (read once per model)", [known_change(known, "test", f) for f in folds]),
+    ]
+    fig, ax = plt.subplots(figsize=(1.6 + 1.4 * len(folds), 3.6))
+    width = 0.27
+    for i, (name, values) in enumerate(series):
+        xs = [j + (i - 1) * width for j, v in enumerate(values) if v is not None]
+        ax.bar(xs, [v for v in values if v is not None], width, label=name)
+    ax.axhline(0, color="black", lw=0.8)
+    ax.set_xticks(range(len(folds)), folds)
+    ax.set_ylabel("heading vs scene frame,\nminFDE20 change (%)")
+    ax.set_title("heading vs scene frame: three validators", fontsize=10)
+    ax.legend(fontsize=8, frameon=False)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -187,6 +237,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--runs", default=str(ROOT / "runs" / "holdout"), help="run folders")
     parser.add_argument("--data-root", default=None, help="data folder ($TRAJPREF_DATA)")
     parser.add_argument("--report", action="store_true", help="print the recorded table only")
+    parser.add_argument(
+        "--plot", default=None, metavar="PNG", help="also draw each fold's three validators"
+    )
     args = parser.parse_args(argv)
     if args.workers < 1:
         parser.error("--workers must be >= 1")
@@ -200,7 +253,10 @@ def main(argv: list[str] | None = None) -> int:
                 record["folds"][fold] = row
         record.update(machine=machine(), date=date.today().isoformat(), command=command_line())
         write_json(RECORD, record)
-    print(report(record))
+    known = json.loads(KNOWN.read_text()) if KNOWN.is_file() else {}
+    print(report(record, known))
+    if args.plot:
+        plot(record, known, Path(args.plot))
     return 0
 
 

@@ -107,3 +107,18 @@ def test_generators_whose_denoiser_never_finishes_stop_the_script(tmp_path, monk
     monkeypatch.setattr(hf, "ROOT", tmp_path)
     with pytest.raises(SystemExit, match="unfinished denoiser"):
         hf.train(["eth"], tmp_path, workers=1, data_root=None)
+
+
+def test_the_report_sets_the_known_file_level_and_test_changes_beside_and_plots_them(tmp_path):
+    hf = load_benchmark("holdout_frame")
+    res = {"min_ade": 0.1, "min_fde": 0.2, "joint_min_fde": 0.3, "scenes": 4, "agents": 9,
+           "best_epoch": 3, "epochs": 4}  # fmt: skip
+    row = {"holdout_scene": "biwi_hotel", "scene": res, "heading": {**res, "min_fde": 0.19},
+           "heading_vs_scene_pct": -5.0, "chosen": "heading"}  # fmt: skip
+    known = {"file_val": {"eth": {"scene": 0.4, "heading": 0.38}},
+             "test": {"eth": {"scene": 0.5, "heading": 0.55}}}  # fmt: skip
+    record = {"folds": {"eth": row}}
+    assert "| -5.0 % | -5.0 % | +10.0 % |" in hf.report(record, known)
+    assert "| -5.0 % | – | – |" in hf.report(record)  # nothing known: dashes, not zeros
+    hf.plot(record, known, tmp_path / "fig" / "frames.png")
+    assert (tmp_path / "fig" / "frames.png").stat().st_size > 1000
