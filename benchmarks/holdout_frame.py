@@ -3,6 +3,7 @@
     python benchmarks/holdout_frame.py --folds univ zara1 eth zara2 hotel --workers 2 \
         --data-root ../shared/data
     python benchmarks/holdout_frame.py --report      # the table only, from the record
+    python benchmarks/holdout_frame.py --temporal --folds univ zara1 --data-root ../shared/data
 
 The rule (fixed before the runs) is in docs/pretraining.md, "The agent frame re-decided on a
 held-out training location". Per fold, one location of its training split is held out
@@ -19,6 +20,11 @@ again, and an interrupted one resumes from its ``<stage>_last.pt``. When both ge
 fold exist, each is measured by ``trajpref evaluate --split val --holdout-scene H`` (K = 20,
 seed 0) and the fold's row is written to ``benchmarks/results/meta/holdout_frame_val.json``:
 the frame with the lower held-out minFDE20 wins, with no margin. No test split is read.
+
+``--temporal`` runs the next study on the folds whose frame is decided: one more generator
+per fold (``<frame>-temporal``: the chosen frame with ``model.history_encoder=temporal``, from
+the same held-out denoiser), adopted where its held-out minFDE20 is at least 1 % below the
+chosen frame's run (docs/pretraining.md, "a temporal history encoder").
 """
 
 from __future__ import annotations
@@ -61,8 +67,11 @@ def job_command(fold: str, job: str, runs: Path, data_root: str | None) -> list[
            str(ROOT / "configs" / f"{fold}.yaml"), "--out", str(out),
            "--set", f"data.holdout_scene={HELD_OUT[fold]}", "--no-progress"]  # fmt: skip
     if job != "denoiser":
+        frame, _, extra = job.partition("-")  # "heading" or "heading-temporal"
         den = run_dir(fold, "denoiser", runs) / "denoiser.safetensors"
-        cmd += ["--denoiser", str(den), "--set", f"model.agent_frame={job}"]
+        cmd += ["--denoiser", str(den), "--set", f"model.agent_frame={frame}"]
+        if extra == "temporal":
+            cmd += ["--set", "model.history_encoder=temporal"]
     state = out / f"{'denoiser' if job == 'denoiser' else 'generator'}_last.pt"
     if state.is_file():
         cmd += ["--resume", str(state)]
@@ -83,11 +92,16 @@ def finished(fold: str, job: str, runs: Path) -> bool:
     return bool(records) and records[-1]["epoch"] >= epochs
 
 
-def train(folds: list[str], runs: Path, workers: int, data_root: str | None) -> None:
-    """Run every unfinished job, ``workers`` at a time, each generator after its denoiser."""
-    pending = [(f, j) for f in folds for j in ("denoiser", *FRAMES) if not finished(f, j, runs)]
-    print(f"{3 * len(folds) - len(pending)} of {3 * len(folds)} jobs finished; "
-          f"{len(pending)} to run")  # fmt: skip
+def train(
+    folds: list[str], runs: Path, workers: int, data_root: str | None,
+    jobs: dict[str, tuple[str, ...]] | None = None,
+) -> None:  # fmt: skip
+    """Run every unfinished job, ``workers`` at a time, each generator after its denoiser.
+    ``jobs``: each fold's jobs (default: the denoiser and both frames)."""
+    jobs = jobs or {f: ("denoiser", *FRAMES) for f in folds}
+    every = [(f, j) for f in folds for j in jobs[f]]
+    pending = [k for k in every if not finished(*k, runs)]
+    print(f"{len(every) - len(pending)} of {len(every)} jobs finished; {len(pending)} to run")
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     logs = ROOT / "runs" / "logs"
     logs.mkdir(parents=True, exist_ok=True)
@@ -120,45 +134,82 @@ def train(folds: list[str], runs: Path, workers: int, data_root: str | None) -> 
         sys.exit(f"{len(failed)} jobs failed (logs in runs/logs/holdout-*.log): {failed}")
 
 
+def held_out_metrics(fold: str, job: str, runs: Path, data_root: str | None) -> dict:
+    """One generator run on its held-out location (``trajpref evaluate``, cached in the run
+    folder as ``holdout_val.json``), with its best epoch and training minutes."""
+    out = run_dir(fold, job, runs)
+    result = out / "holdout_val.json"
+    if not result.is_file():
+        cmd = [sys.executable, "-m", "trajpref.cli", "evaluate", "--dataset", fold, "--split",
+               "val", "--holdout-scene", HELD_OUT[fold], "--model",
+               str(out / "generator.safetensors"), "--samples", "20", "--seed", "0",
+               "--json", "--no-progress", "--out", str(result)]  # fmt: skip
+        if data_root:
+            cmd += ["--data-root", data_root]
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    res = json.loads(result.read_text())
+    records = read_metrics(out, "generator")
+    best = min((r for r in records if "val_score" in r), key=lambda r: r["val_score"])
+    return {
+        **{
+            k: res[k]
+            for k in ("min_ade", "min_fde", "joint_min_ade", "joint_min_fde", "agents", "scenes")
+        },  # fmt: skip
+        "best_epoch": best["epoch"],
+        "epochs": records[-1]["epoch"],
+        "train_minutes": round(records[-1]["train_seconds"] / 60, 1),
+    }
+
+
 def measure(fold: str, runs: Path, data_root: str | None) -> dict | None:
     """Both generators of a fold on its held-out location; None until both are trained."""
     if not all(finished(fold, j, runs) for j in FRAMES):
         return None
     row = {"holdout_scene": HELD_OUT[fold]}
     for frame in FRAMES:
-        out = run_dir(fold, frame, runs)
-        result = out / "holdout_val.json"
-        if not result.is_file():
-            cmd = [sys.executable, "-m", "trajpref.cli", "evaluate", "--dataset", fold, "--split",
-                   "val", "--holdout-scene", HELD_OUT[fold], "--model",
-                   str(out / "generator.safetensors"), "--samples", "20", "--seed", "0",
-                   "--json", "--no-progress", "--out", str(result)]  # fmt: skip
-            if data_root:
-                cmd += ["--data-root", data_root]
-            subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-        res = json.loads(result.read_text())
-        records = read_metrics(out, "generator")
-        best = min((r for r in records if "val_score" in r), key=lambda r: r["val_score"])
-        row[frame] = {
-            **{
-                k: res[k]
-                for k in (
-                    "min_ade",
-                    "min_fde",
-                    "joint_min_ade",
-                    "joint_min_fde",
-                    "agents",
-                    "scenes",
-                )
-            },  # fmt: skip
-            "best_epoch": best["epoch"],
-            "epochs": records[-1]["epoch"],
-            "train_minutes": round(records[-1]["train_seconds"] / 60, 1),
-        }
+        row[frame] = held_out_metrics(fold, frame, runs, data_root)
     scene, heading = row["scene"]["min_fde"], row["heading"]["min_fde"]
     row["heading_vs_scene_pct"] = round(100 * (heading / scene - 1), 2)
     row["chosen"] = "heading" if heading < scene else "scene"
     return row
+
+
+TEMPORAL_BAR_PCT = -1.0
+"""The temporal encoder is adopted for a fold at this change of held-out minFDE20 or below."""
+
+
+def measure_temporal(fold: str, row: dict, runs: Path, data_root: str | None) -> dict | None:
+    """The chosen frame with ``history_encoder=temporal`` against that frame's own run (the
+    rule of docs/pretraining.md); None until it is trained."""
+    job = f"{row['chosen']}-temporal"
+    if not finished(fold, job, runs):
+        return None
+    metrics = held_out_metrics(fold, job, runs, data_root)
+    change = round(100 * (metrics["min_fde"] / row[row["chosen"]]["min_fde"] - 1), 2)
+    return {**metrics, "frame": row["chosen"], "vs_frame_pct": change,
+            "adopted": change <= TEMPORAL_BAR_PCT}  # fmt: skip
+
+
+def temporal_report(record: dict) -> str:
+    lines = [
+        "| fold | frame | its held-out minADE20 / minFDE20 | + temporal encoder (best epoch) "
+        "| change | training min (frame -> temporal) | adopted (<= -1 %) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for fold in FOLDS:
+        row = record["folds"].get(fold, {})
+        tmp = row.get("temporal")
+        if tmp is None:
+            continue
+        base = row[tmp["frame"]]
+        lines.append(
+            f"| {fold} | {tmp['frame']} | {base['min_ade']:.4f} / {base['min_fde']:.4f} "
+            f"| {tmp['min_ade']:.4f} / {tmp['min_fde']:.4f} ({tmp['best_epoch']} of "
+            f"{tmp['epochs']}) | {tmp['vs_frame_pct']:+.1f} % "
+            f"| {base['train_minutes']} -> {tmp['train_minutes']} "
+            f"| {'yes' if tmp['adopted'] else 'no'} |"
+        )
+    return "\n".join(lines)
 
 
 def known_change(known: dict, which: str, fold: str) -> float | None:
@@ -238,6 +289,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--data-root", default=None, help="data folder ($TRAJPREF_DATA)")
     parser.add_argument("--report", action="store_true", help="print the recorded table only")
     parser.add_argument(
+        "--temporal",
+        action="store_true",
+        help="the next study: each fold's chosen frame with model.history_encoder=temporal "
+        "(folds whose frame is decided only)",
+    )
+    parser.add_argument(
         "--plot", default=None, metavar="PNG", help="also draw each fold's three validators"
     )
     args = parser.parse_args(argv)
@@ -246,15 +303,29 @@ def main(argv: list[str] | None = None) -> int:
     record = json.loads(RECORD.read_text()) if RECORD.is_file() else {"folds": {}}
     if not args.report:
         runs = Path(args.runs)
-        train(args.folds, runs, args.workers, args.data_root)
-        for fold in args.folds:
-            row = measure(fold, runs, args.data_root)
-            if row is not None:
-                record["folds"][fold] = row
+        if args.temporal:
+            decided = [f for f in args.folds if f in record["folds"]]
+            if not decided:
+                parser.error("--temporal needs folds whose frame is decided: run without it first")
+            jobs = {f: (f"{record['folds'][f]['chosen']}-temporal",) for f in decided}
+            train(decided, runs, args.workers, args.data_root, jobs)
+            for fold in decided:
+                tmp = measure_temporal(fold, record["folds"][fold], runs, args.data_root)
+                if tmp is not None:
+                    record["folds"][fold]["temporal"] = tmp
+        else:
+            train(args.folds, runs, args.workers, args.data_root)
+            for fold in args.folds:
+                row = measure(fold, runs, args.data_root)
+                if row is not None:
+                    record["folds"][fold] = {**record["folds"].get(fold, {}), **row}
         record.update(machine=machine(), date=date.today().isoformat(), command=command_line())
         write_json(RECORD, record)
     known = json.loads(KNOWN.read_text()) if KNOWN.is_file() else {}
     print(report(record, known))
+    if any("temporal" in row for row in record["folds"].values()):
+        print()
+        print(temporal_report(record))
     if args.plot:
         plot(record, known, Path(args.plot))
     return 0

@@ -122,3 +122,41 @@ def test_the_report_sets_the_known_file_level_and_test_changes_beside_and_plots_
     assert "| -5.0 % | – | – |" in hf.report(record)  # nothing known: dashes, not zeros
     hf.plot(record, known, tmp_path / "fig" / "frames.png")
     assert (tmp_path / "fig" / "frames.png").stat().st_size > 1000
+
+
+def test_a_temporal_job_keeps_its_frame_and_adds_the_encoder(tmp_path):
+    hf = load_benchmark("holdout_frame")
+    cmd = hf.job_command("zara1", "heading-temporal", tmp_path, None)
+    assert "model.agent_frame=heading" in cmd and "model.history_encoder=temporal" in cmd
+    assert cmd[cmd.index("--out") + 1] == str(tmp_path / "zara1" / "heading-temporal")
+    assert "model.history_encoder=temporal" not in hf.job_command(
+        "zara1", "heading", tmp_path, None
+    )
+
+
+@pytest.mark.parametrize("fde, adopted", [(0.198, True), (0.1985, False)])
+def test_the_temporal_encoder_needs_one_percent_below_its_frame(
+    tmp_path, monkeypatch, fde, adopted
+):
+    hf = load_benchmark("holdout_frame")
+    monkeypatch.setattr(hf, "finished", lambda *a: True)
+    out = tmp_path / "eth" / "scene-temporal"
+    _metrics(out, "generator", 4, {4: 0.3})
+    result = {"min_ade": 0.1, "min_fde": fde, "joint_min_ade": 1.0, "joint_min_fde": 2.0,
+              "agents": 10, "scenes": 3}  # fmt: skip
+    (out / "holdout_val.json").write_text(json.dumps(result))
+    base = {**result, "min_fde": 0.2, "best_epoch": 4, "epochs": 4, "train_minutes": 9.0}
+    row = {"chosen": "scene", "scene": base}
+    tmp = hf.measure_temporal("eth", row, tmp_path, None)
+    assert tmp["adopted"] is adopted and tmp["frame"] == "scene"
+    assert "| eth | scene | 0.1000 / 0.2000 |" in hf.temporal_report(
+        {"folds": {"eth": {**row, "temporal": tmp}}}
+    )
+
+
+def test_the_temporal_study_needs_a_decided_frame(tmp_path, monkeypatch, capsys):
+    hf = load_benchmark("holdout_frame")
+    monkeypatch.setattr(hf, "RECORD", tmp_path / "none.json")
+    with pytest.raises(SystemExit):
+        hf.main(["--temporal", "--folds", "hotel"])
+    assert "needs folds whose frame is decided" in capsys.readouterr().err
