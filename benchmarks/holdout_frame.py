@@ -38,6 +38,8 @@ import time
 from datetime import date
 from pathlib import Path
 
+import numpy as np
+
 from trajpref.config import load_config
 from trajpref.io import write_json
 from trajpref.results import command_line, machine
@@ -212,6 +214,36 @@ def temporal_report(record: dict) -> str:
     return "\n".join(lines)
 
 
+LOCATIONS = {"biwi_eth": "eth", "biwi_hotel": "hotel", "crowds_zara": "zara",
+             "students": "univ", "uni_examples": "univ"}  # fmt: skip
+"""Recording location of each ETH/UCY file-name prefix."""
+
+
+def direction_shares(fold: str, data_root: str | None, min_speed: float = 0.1) -> dict:
+    """Per location of a fold's training split, and for its test split: the agents moving
+    faster than ``min_speed`` (m per step, first to last observed position) and the share of
+    them whose direction lies within 45 degrees of the x axis (either way). Held-out
+    locations differ from the rest in more than their people: hotel's walkers move along y.
+    """
+    from trajpref.data import load_dataset
+    from trajpref.data.registry import scene_file
+
+    def share(scenes) -> dict:
+        d = np.concatenate([s.history[:, -1] - s.history[:, 0] for s in scenes])  # [N, 2]
+        moving = d[np.linalg.norm(d, axis=-1) / 7 > min_speed]  # 7 observed steps
+        along_x = np.abs(moving[:, 0]) >= np.abs(moving[:, 1])  # within 45 degrees of x
+        return {"agents": int(len(moving)), "along_x": round(float(along_x.mean()), 3)}
+
+    train = load_dataset(fold, "train", data_root)
+    by_loc: dict[str, list] = {}
+    for s in train.scenes:
+        prefix = next(p for p in LOCATIONS if scene_file(s).startswith(p))
+        by_loc.setdefault(LOCATIONS[prefix], []).append(s)
+    out = {loc: share(scenes) for loc, scenes in sorted(by_loc.items())}
+    out[f"{fold} (test)"] = share(load_dataset(fold, "test", data_root).scenes)
+    return out
+
+
 def known_change(known: dict, which: str, fold: str) -> float | None:
     """Heading vs scene minFDE20 change (%) of the models trained on every scene, from
     ``meta/frame_known.json``: ``which`` is ``file_val`` (the fold's usual validation split)
@@ -289,6 +321,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--data-root", default=None, help="data folder ($TRAJPREF_DATA)")
     parser.add_argument("--report", action="store_true", help="print the recorded table only")
     parser.add_argument(
+        "--directions",
+        action="store_true",
+        help="print, per location of each fold's training split and for its test split, the "
+        "share of moving agents that walk along x (no training)",
+    )
+    parser.add_argument(
         "--temporal",
         action="store_true",
         help="the next study: each fold's chosen frame with model.history_encoder=temporal "
@@ -300,6 +338,12 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.workers < 1:
         parser.error("--workers must be >= 1")
+    if args.directions:
+        for fold in args.folds:
+            shares = direction_shares(fold, args.data_root)
+            cells = [f"{loc} {v['along_x']:.2f} of {v['agents']}" for loc, v in shares.items()]
+            print(f"{fold} fold: " + ", ".join(cells))
+        return 0
     record = json.loads(RECORD.read_text()) if RECORD.is_file() else {"folds": {}}
     if not args.report:
         runs = Path(args.runs)

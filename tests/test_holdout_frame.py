@@ -160,3 +160,32 @@ def test_the_temporal_study_needs_a_decided_frame(tmp_path, monkeypatch, capsys)
     with pytest.raises(SystemExit):
         hf.main(["--temporal", "--folds", "hotel"])
     assert "needs folds whose frame is decided" in capsys.readouterr().err
+
+
+def test_direction_shares_count_moving_agents_along_x_per_location(monkeypatch):
+    import numpy as np
+
+    from trajpref.types import Scene, TrajectoryDataset
+
+    hf = load_benchmark("holdout_frame")
+
+    def walkers(file, steps):  # one agent per step vector, 20 frames of straight walking
+        t = np.arange(20)[None, :, None]
+        track = (np.array(steps, np.float32)[:, None, :] * t).astype(np.float32)  # [P, 20, 2]
+        return Scene(track[:, :8], track[:, 8:], np.zeros(len(steps), np.int64), f"{file}@0")
+
+    splits = {
+        "train": [walkers("biwi_hotel_train.txt", [(0.0, 0.5), (0.1, -0.4), (0.01, 0.0)]),
+                  walkers("crowds_zara02_train.txt", [(0.5, 0.2), (-0.3, 0.1)])],
+        "test": [walkers("crowds_zara01.txt", [(0.4, 0.5), (0.6, 0.0)])],
+    }  # fmt: skip
+
+    def load(name, split, root):
+        return TrajectoryDataset(splits[split], None)
+
+    monkeypatch.setattr("trajpref.data.load_dataset", load)
+    shares = hf.direction_shares("zara1", None)
+    # hotel: two movers along y (the third is below 0.1 per step); zara: both along x
+    assert shares["hotel"] == {"agents": 2, "along_x": 0.0}
+    assert shares["zara"] == {"agents": 2, "along_x": 1.0}
+    assert shares["zara1 (test)"] == {"agents": 2, "along_x": 0.5}
