@@ -42,7 +42,7 @@ import numpy as np
 
 from trajpref.config import load_config
 from trajpref.io import write_json
-from trajpref.results import command_line, machine
+from trajpref.results import command_line, machine, update_readme
 from trajpref.train import read_metrics
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -53,6 +53,8 @@ HELD_OUT = {"eth": "biwi_hotel", "univ": "biwi_hotel", "zara1": "biwi_hotel",
 """The training location each fold holds out (a file-name prefix of its training split)."""
 FRAMES = ("scene", "heading")
 RECORD = ROOT / "benchmarks" / "results" / "meta" / "holdout_frame_val.json"
+DOC = ROOT / "docs" / "pretraining.md"
+"""Its tables' block (``holdout-frame``) is rewritten from the record on every run."""
 KNOWN = ROOT / "benchmarks" / "results" / "meta" / "frame_known.json"
 """The models trained on every scene: file-level validation and test (context for --plot)."""
 
@@ -366,10 +368,12 @@ def main(argv: list[str] | None = None) -> int:
         record.update(machine=machine(), date=date.today().isoformat(), command=command_line())
         write_json(RECORD, record)
     known = json.loads(KNOWN.read_text()) if KNOWN.is_file() else {}
-    print(report(record, known))
+    table = report(record, known)
     if any("temporal" in row for row in record["folds"].values()):
-        print()
-        print(temporal_report(record))
+        table += "\n\n" + temporal_report(record)
+    print(table)
+    if record["folds"]:
+        update_readme(DOC, "holdout-frame", table)
     if args.plot:
         plot(record, known, Path(args.plot))
     return 0
