@@ -30,6 +30,7 @@ chosen frame's run (docs/pretraining.md, "a temporal history encoder").
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import subprocess
@@ -44,6 +45,7 @@ from trajpref.config import load_config
 from trajpref.io import write_json
 from trajpref.results import command_line, machine, update_readme
 from trajpref.train import read_metrics
+from trajpref.train.run import STAGE_NAMES, last_state_path
 
 ROOT = Path(__file__).resolve().parent.parent
 FOLDS = ("univ", "zara1", "eth", "zara2", "hotel")
@@ -63,9 +65,14 @@ def run_dir(fold: str, job: str, runs: Path) -> Path:
     return runs / fold / job
 
 
+def stage_of(job: str) -> str:
+    """The ``trajpref train`` stage of a job: ``diffusion`` for the denoiser, else ``generator``."""
+    return "diffusion" if job == "denoiser" else "generator"
+
+
 def job_command(fold: str, job: str, runs: Path, data_root: str | None) -> list[str]:
     """The ``trajpref train`` command of one job (``--resume`` when a state is there)."""
-    stage = "diffusion" if job == "denoiser" else "generator"
+    stage = stage_of(job)
     out = run_dir(fold, job, runs)
     cmd = [sys.executable, "-m", "trajpref.cli", "train", stage, "--config",
            str(ROOT / "configs" / f"{fold}.yaml"), "--out", str(out),
@@ -76,7 +83,7 @@ def job_command(fold: str, job: str, runs: Path, data_root: str | None) -> list[
         cmd += ["--denoiser", str(den), "--set", f"model.agent_frame={frame}"]
         if extra == "temporal":
             cmd += ["--set", "model.history_encoder=temporal"]
-    state = out / f"{'denoiser' if job == 'denoiser' else 'generator'}_last.pt"
+    state = last_state_path(out, stage)
     if state.is_file():
         cmd += ["--resume", str(state)]
     if data_root:
@@ -84,16 +91,21 @@ def job_command(fold: str, job: str, runs: Path, data_root: str | None) -> list[
     return cmd
 
 
+@functools.cache
+def last_epoch(fold: str, stage: str) -> int:
+    """The epochs of a stage in the fold's config (read once: the scheduler asks every poll)."""
+    cfg = load_config(ROOT / "configs" / f"{fold}.yaml", [])
+    return (cfg.denoiser if stage == "diffusion" else cfg.generator).epochs
+
+
 def finished(fold: str, job: str, runs: Path) -> bool:
     """Whether a job's metrics reached its config's last epoch."""
-    name = "denoiser" if job == "denoiser" else "generator"
+    stage = stage_of(job)
     out = run_dir(fold, job, runs)
-    if not (out / f"{name}_metrics.jsonl").is_file():
+    if not (out / f"{STAGE_NAMES[stage]}_metrics.jsonl").is_file():
         return False
-    cfg = load_config(ROOT / "configs" / f"{fold}.yaml", [])
-    epochs = (cfg.denoiser if job == "denoiser" else cfg.generator).epochs
-    records = read_metrics(out, name)
-    return bool(records) and records[-1]["epoch"] >= epochs
+    records = read_metrics(out, STAGE_NAMES[stage])
+    return bool(records) and records[-1]["epoch"] >= last_epoch(fold, stage)
 
 
 def train(
@@ -129,9 +141,9 @@ def train(
         while ready and len(running) < workers:
             key = ready.pop(0)
             pending.remove(key)
-            log = open(logs / f"holdout-{key[0]}-{key[1]}.log", "a")  # noqa: SIM115 (closed by exit)
             cmd = job_command(*key, runs, data_root)
-            running[key] = (subprocess.Popen(cmd, env=env, stdout=log, stderr=log), time.time())
+            with open(logs / f"holdout-{key[0]}-{key[1]}.log", "a") as log:  # the child keeps it
+                running[key] = (subprocess.Popen(cmd, env=env, stdout=log, stderr=log), time.time())
             print(f"{key[0]} {key[1]}: started", flush=True)
         time.sleep(5)
     if failed:
