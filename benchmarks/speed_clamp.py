@@ -11,6 +11,10 @@ with and without it; with ``--apply``, the clamp written into the published file
     python benchmarks/speed_clamp.py --variant eth
     python benchmarks/pretrain.py --dataset eth --variant clamp --published \
         --data-root ../shared/data
+    # the lower-clamp study of the ETH/UCY folds: several quantiles, the lowest that
+    # validation tolerates (docs/pretraining.md, "A lower clamp"), then write it in
+    python benchmarks/speed_clamp.py --sweep 0.99 0.95 0.9 0.8 0.7 0.5 --data-root ../shared/data
+    python benchmarks/speed_clamp.py --apply-sweep
 
 The clamp of a generator is the ``--quantile`` (0.99) of its training split's observed
 displacement per step (first to last observed position over T_h - 1 steps), in the model's
@@ -48,6 +52,9 @@ VARIANT = "clamp"
 """The variant name of a generator published with its clamp beside the default."""
 TOLERANCE = 0.005
 """The largest relative worsening of a generator's validation minFDE20 the rule accepts."""
+SWEEP_OUT = ROOT / "benchmarks" / "results" / "meta" / "speed_clamp_sweep_val.json"
+PEDESTRIAN = ("eth", "hotel", "univ", "zara1", "zara2")
+"""The generators the lower-clamp study covers (``--sweep`` without ``--datasets``)."""
 
 
 def observed_step(dataset: TrajectoryDataset, scale: float) -> np.ndarray:
@@ -64,6 +71,24 @@ def decide(rows: list[dict]) -> dict:
     """The rule: apply when no generator's validation minFDE20 worsens by more than 0.5 %."""
     change = {r["checkpoint"]: r["clamped"]["min_fde"] / r["off"]["min_fde"] - 1 for r in rows}
     return {"change_min_fde": change, "apply": all(v <= TOLERANCE for v in change.values())}
+
+
+def decide_sweep(rows: list[dict]) -> dict:
+    """The lower-clamp rule: the lowest quantile at which no generator's validation minFDE20
+    is more than ``TOLERANCE`` worse than unclamped (None when no quantile qualifies)."""
+    quantiles = sorted({float(q) for r in rows for q in r["by_quantile"]})
+    change = {
+        str(q): {r["checkpoint"]: r["by_quantile"][str(q)]["min_fde"] / r["off"]["min_fde"] - 1
+                 for r in rows}
+        for q in quantiles
+    }  # fmt: skip
+    ok = [q for q in quantiles if all(v <= TOLERANCE for v in change[str(q)].values())]
+    return {"change_min_fde": change, "quantile": min(ok) if ok else None, "apply": bool(ok)}
+
+
+def clamp_shares(splits: dict[str, TrajectoryDataset], scale: float, bound: float) -> dict:
+    """The share of each split's agents whose observed step exceeds ``bound``."""
+    return {name: float((observed_step(ds, scale) > bound).mean()) for name, ds in splits.items()}
 
 
 def main() -> None:
@@ -88,8 +113,43 @@ def main() -> None:
         help="publish each named dataset's default generator with its stored clamp as "
         "models/<D>/generator-clamp.safetensors (the same weights and training records)",
     )
+    parser.add_argument(
+        "--sweep",
+        nargs="+",
+        type=float,
+        default=None,
+        metavar="Q",
+        help="the lower-clamp study: validation at each training-split quantile Q (default "
+        "generators: the ETH/UCY folds), into meta/speed_clamp_sweep_val.json",
+    )
+    parser.add_argument(
+        "--apply-sweep",
+        action="store_true",
+        help="write the quantile the stored sweep chose into its generators (no evaluation)",
+    )
     args = parser.parse_args()
     models = ROOT / "models"
+    if args.sweep is not None and not all(0 < q < 1 for q in args.sweep):
+        parser.error("--sweep quantiles must lie strictly between 0 and 1")
+
+    if args.apply_sweep:
+        stored = json.loads(SWEEP_OUT.read_text())
+        q = stored["decision"]["quantile"]
+        note = (
+            f"{date.today()}: input speed clamp at the training split's {q:.0%} quantile "
+            '(benchmarks/speed_clamp.py --sweep, docs/pretraining.md, "A lower clamp")'
+        )
+        done = apply_setting(ROOT, stored, "apply", "max_speed",
+                             lambda r: r["by_quantile"][str(q)]["max_speed"], note)  # fmt: skip
+        if not done:
+            print("no quantile passed the rule: nothing changed")
+        for name, changed in done:
+            print(f"{name}: {'clamped' if changed else 'already clamped'} at the {q:.0%} quantile")
+        return
+
+    if args.sweep is not None:
+        sweep(args, models)
+        return
 
     if args.variant:
         stored = {r["dataset"]: r for r in json.loads(OUT.read_text())["rows"]}
@@ -120,16 +180,11 @@ def main() -> None:
         val = load_dataset(name, "val", args.data_root)
         test = load_dataset(name, "test", args.data_root)
         bound = float(np.quantile(observed_step(train, scale), args.quantile))
-        share = {
-            split: float((observed_step(ds, scale) > bound).mean())
-            for split, ds in (("train", train), ("val", val), ("test", test))
-        }
+        share = clamp_shares({"train": train, "val": val, "test": test}, scale, bound)
         row = {"dataset": name, "checkpoint": str(path.relative_to(ROOT)), "max_speed": bound,
                "share_clamped": share}  # fmt: skip
         for key, value in (("off", 0.0), ("clamped", bound)):
-            predictor = ckpt.predictor_from_payload(_with_clamp(payload, value))
-            row[key] = validation_metrics(predictor.to(args.device).eval(), val, args.samples,
-                                          args.seed, args.device)  # fmt: skip
+            row[key] = _clamped_metrics(args, payload, val, value)
         rows.append(row)
         off, on = row["off"], row["clamped"]
         print(f"{name:<9} max_speed {bound:.3f}  clamped train {share['train']:.1%} val "
@@ -150,6 +205,63 @@ def main() -> None:
               f"{s['train']:.1%} / {s['val']:.1%} / {s['test']:.1%} | {off['min_ade']:.4f} / "
               f"{off['min_fde']:.4f} -> {on['min_ade']:.4f} / {on['min_fde']:.4f} | "
               f"{on['min_fde'] / off['min_fde'] - 1:+.2%} |")  # fmt: skip
+
+
+def sweep(args: argparse.Namespace, models: Path) -> None:
+    """Validation of each generator unclamped and at each ``--sweep`` quantile's clamp."""
+    rows = []
+    for name, path in published_generators(models, args.datasets or list(PEDESTRIAN),
+                                           variants=False):  # fmt: skip
+        payload = ckpt.load(path)
+        cfg, scale = ckpt.config_of(payload), payload["scale"]
+        splits = {"train": load_dataset(cfg.data.dataset, "train", args.data_root),
+                  "val": load_dataset(name, "val", args.data_root),
+                  "test": load_dataset(name, "test", args.data_root)}  # fmt: skip
+        steps = observed_step(splits["train"], scale)
+        off = _clamped_metrics(args, payload, splits["val"], 0.0)
+        row = {"dataset": name, "checkpoint": str(path.relative_to(ROOT)), "off": off,
+               "by_quantile": {}}  # fmt: skip
+        for q in sorted(args.sweep, reverse=True):
+            bound = float(np.quantile(steps, q))
+            on = _clamped_metrics(args, payload, splits["val"], bound)
+            share = clamp_shares(splits, scale, bound)
+            row["by_quantile"][str(q)] = {"max_speed": bound, **on, "share_clamped": share}
+            print(f"{name:<6} q {q:.2f} max_speed {bound:.3f}  val minFDE20 "
+                  f"{off['min_fde']:.4f} -> {on['min_fde']:.4f} "
+                  f"({on['min_fde'] / off['min_fde'] - 1:+.2%})", flush=True)  # fmt: skip
+        rows.append(row)
+    decision = decide_sweep(rows)
+    qs = " ".join(f"{q:g}" for q in sorted(args.sweep, reverse=True))
+    write_study(SWEEP_OUT, f"python benchmarks/speed_clamp.py --sweep {qs} --data-root "
+                "../shared/data", rows, decision, samples=args.samples, seed=args.seed)  # fmt: skip
+    print(sweep_table(rows, decision))
+
+
+def _clamped_metrics(args: argparse.Namespace, payload: dict, val, max_speed: float) -> dict:
+    """Validation metrics of a generator payload with ``model.max_speed`` set."""
+    predictor = ckpt.predictor_from_payload(_with_clamp(payload, max_speed))
+    return validation_metrics(predictor.to(args.device).eval(), val, args.samples, args.seed,
+                              args.device)  # fmt: skip
+
+
+def sweep_table(rows: list[dict], decision: dict) -> str:
+    """The docs table: validation minFDE20 change per fold and quantile, and the choice."""
+    quantiles = sorted({float(q) for r in rows for q in r["by_quantile"]}, reverse=True)
+    head = "| generator | unclamped minADE20 / minFDE20 | " + " | ".join(
+        f"q = {q:g}" for q in quantiles) + " |"  # fmt: skip
+    lines = [head, "|" + "---|" * (2 + len(quantiles))]
+    for r in rows:
+        cells = []
+        for q in quantiles:
+            m = r["by_quantile"][str(q)]
+            cells.append(f"{m['min_fde'] / r['off']['min_fde'] - 1:+.2%} (test "
+                         f"{m['share_clamped']['test']:.0%} clamped)")  # fmt: skip
+        lines.append(f"| `{r['checkpoint'].removeprefix('models/')}` | {r['off']['min_ade']:.4f}"
+                     f" / {r['off']['min_fde']:.4f} | " + " | ".join(cells) + " |")  # fmt: skip
+    chosen = decision["quantile"]
+    lines.append("")
+    lines.append(f"Chosen: q = {chosen:g}" if chosen is not None else "Chosen: none")
+    return "\n".join(lines)
 
 
 def publish_variant(dataset: str, max_speed: float) -> Path:

@@ -63,3 +63,55 @@ def test_a_variant_is_the_defaults_weights_with_the_clamp_and_its_training_recor
     (meta / "pretrained_walks_clamp.json").write_text(json.dumps({"variant": "clamp", "ms": 9}))
     sc.publish_variant("walks", 0.3)
     assert json.loads((meta / "pretrained_walks_clamp.json").read_text())["ms"] == 9
+
+
+def _sweep_row(name, off, by_q):
+    by_quantile = {
+        str(q): {"min_fde": v, "max_speed": q / 2, "share_clamped": {"test": 1 - q}}
+        for q, v in by_q.items()
+    }
+    return {"checkpoint": f"models/{name}/generator.safetensors",
+            "off": {"min_ade": 0.5, "min_fde": off}, "by_quantile": by_quantile}  # fmt: skip
+
+
+def test_the_lower_clamp_rule_takes_the_lowest_quantile_that_no_fold_rejects(sc):
+    rows = [_sweep_row("a", 1.0, {0.99: 0.99, 0.9: 1.004, 0.5: 1.02}),
+            _sweep_row("b", 2.0, {0.99: 2.0, 0.9: 1.99, 0.5: 1.9})]  # fmt: skip
+    decision = sc.decide_sweep(rows)
+    assert decision["quantile"] == 0.9  # 0.5 is 2 % worse on a
+    assert decision["apply"]
+    assert decision["change_min_fde"]["0.5"]["models/a/generator.safetensors"] == pytest.approx(
+        0.02
+    )
+    # a fold worse at every quantile: nothing is chosen, nothing applied
+    worse = [*rows, _sweep_row("c", 1.0, {0.99: 1.01, 0.9: 1.01, 0.5: 1.01})]
+    assert sc.decide_sweep(worse) == {**sc.decide_sweep(worse), "quantile": None, "apply": False}
+
+
+def test_the_sweep_table_has_one_column_per_quantile_and_names_the_choice(sc):
+    rows = [_sweep_row("a", 1.0, {0.99: 0.99, 0.5: 1.02})]
+    table = sc.sweep_table(rows, sc.decide_sweep(rows))
+    assert "| q = 0.99 | q = 0.5 |" in table
+    assert "-1.00% (test 1% clamped)" in table and "+2.00% (test 50% clamped)" in table
+    assert table.endswith("Chosen: q = 0.99")
+
+
+def test_apply_sweep_writes_the_chosen_quantiles_clamp_into_each_generator(
+    sc, tmp_path, monkeypatch
+):
+    cfg = load_config(None, TINY_OVERRIDES)
+    den = ckpt.denoiser_payload(Denoiser(cfg.model), cfg, 1.0, {})
+    rows = []
+    for name in ("a", "b"):
+        folder = tmp_path / "models" / name
+        folder.mkdir(parents=True)
+        ckpt.save(folder / "generator.safetensors",
+                  ckpt.generator_payload(Generator(cfg.model), den, cfg, {}))  # fmt: skip
+        rows.append(_sweep_row(name, 1.0, {0.99: 0.99, 0.9: 1.0, 0.5: 1.1}))
+    sc.SWEEP_OUT = tmp_path / "sweep.json"
+    sc.SWEEP_OUT.write_text(json.dumps({"rows": rows, "decision": sc.decide_sweep(rows)}))
+    monkeypatch.setattr("sys.argv", ["speed_clamp.py", "--apply-sweep"])
+    sc.main()
+    for name in ("a", "b"):
+        path = tmp_path / "models" / name / "generator.safetensors"
+        assert ckpt.config_of(ckpt.load(path)).model.max_speed == pytest.approx(0.45)
