@@ -120,7 +120,8 @@ def main() -> None:
         default=None,
         metavar="Q",
         help="the lower-clamp study: validation at each training-split quantile Q (default "
-        "generators: the ETH/UCY folds), into meta/speed_clamp_sweep_val.json",
+        "generators: the ETH/UCY folds), into meta/speed_clamp_sweep_val.json; with "
+        "--datasets, those generators' rows replace theirs in the stored record",
     )
     parser.add_argument(
         "--apply-sweep",
@@ -230,11 +231,25 @@ def sweep(args: argparse.Namespace, models: Path) -> None:
                   f"{off['min_fde']:.4f} -> {on['min_fde']:.4f} "
                   f"({on['min_fde'] / off['min_fde'] - 1:+.2%})", flush=True)  # fmt: skip
         rows.append(row)
+    rows = merge_sweep_rows(json.loads(SWEEP_OUT.read_text())["rows"], rows) if (
+        args.datasets and SWEEP_OUT.is_file()) else rows  # fmt: skip
     decision = decide_sweep(rows)
     qs = " ".join(f"{q:g}" for q in sorted(args.sweep, reverse=True))
     write_study(SWEEP_OUT, f"python benchmarks/speed_clamp.py --sweep {qs} --data-root "
                 "../shared/data", rows, decision, samples=args.samples, seed=args.seed)  # fmt: skip
     print(sweep_table(rows, decision))
+
+
+def merge_sweep_rows(stored: list[dict], new: list[dict]) -> list[dict]:
+    """The stored sweep's rows with each newly measured generator's row replaced (a
+    ``--datasets`` sweep re-measures some generators and the rule re-decides over all)."""
+    quantiles = {q for r in stored for q in r["by_quantile"]}
+    for r in new:
+        if set(r["by_quantile"]) != quantiles:
+            raise SystemExit(f"{r['dataset']}: swept at {sorted(r['by_quantile'])}, the stored "
+                             f"sweep at {sorted(quantiles)}: sweep the same quantiles")  # fmt: skip
+    replaced = {r["dataset"] for r in new}
+    return [r for r in stored if r["dataset"] not in replaced] + new
 
 
 def _clamped_metrics(args: argparse.Namespace, payload: dict, val, max_speed: float) -> dict:

@@ -115,3 +115,17 @@ def test_apply_sweep_writes_the_chosen_quantiles_clamp_into_each_generator(
     for name in ("a", "b"):
         path = tmp_path / "models" / name / "generator.safetensors"
         assert ckpt.config_of(ckpt.load(path)).model.max_speed == pytest.approx(0.45)
+
+
+def test_a_partial_sweep_replaces_its_generators_rows_and_the_rule_re_decides(sc):
+    def named(name, off, by_q):
+        return {**_sweep_row(name, off, by_q), "dataset": name}
+
+    stored = [named("a", 1.0, {0.9: 1.0, 0.5: 1.0}), named("b", 1.0, {0.9: 1.0, 0.5: 1.0})]
+    new = [named("b", 1.0, {0.9: 1.0, 0.5: 1.2})]
+    merged = sc.merge_sweep_rows(stored, new)
+    assert [r["dataset"] for r in merged] == ["a", "b"]
+    assert sc.decide_sweep(stored)["quantile"] == 0.5
+    assert sc.decide_sweep(merged)["quantile"] == 0.9
+    with pytest.raises(SystemExit, match="sweep the same quantiles"):
+        sc.merge_sweep_rows(stored, [named("b", 1.0, {0.9: 1.0})])
