@@ -136,14 +136,15 @@ def main() -> None:
     if args.apply_sweep:
         stored = json.loads(SWEEP_OUT.read_text())
         q = stored["decision"]["quantile"]
+        if q is None:
+            print("no quantile passed the rule: nothing changed")
+            return
         note = (
             f"{date.today()}: input speed clamp at the training split's {q:.0%} quantile "
             '(benchmarks/speed_clamp.py --sweep, docs/pretraining.md, "A lower clamp")'
         )
         done = apply_setting(ROOT, stored, "apply", "max_speed",
                              lambda r: r["by_quantile"][str(q)]["max_speed"], note)  # fmt: skip
-        if not done:
-            print("no quantile passed the rule: nothing changed")
         for name, changed in done:
             print(f"{name}: {'clamped' if changed else 'already clamped'} at the {q:.0%} quantile")
         return
@@ -235,7 +236,8 @@ def sweep(args: argparse.Namespace, models: Path) -> None:
         args.datasets and SWEEP_OUT.is_file()) else rows  # fmt: skip
     decision = decide_sweep(rows)
     qs = " ".join(f"{q:g}" for q in sorted(args.sweep, reverse=True))
-    write_study(SWEEP_OUT, f"python benchmarks/speed_clamp.py --sweep {qs} --data-root "
+    only = f" --datasets {' '.join(args.datasets)}" if args.datasets else ""
+    write_study(SWEEP_OUT, f"python benchmarks/speed_clamp.py --sweep {qs}{only} --data-root "
                 "../shared/data", rows, decision, samples=args.samples, seed=args.seed)  # fmt: skip
     print(sweep_table(rows, decision))
 

@@ -129,3 +129,12 @@ def test_a_partial_sweep_replaces_its_generators_rows_and_the_rule_re_decides(sc
     assert sc.decide_sweep(merged)["quantile"] == 0.9
     with pytest.raises(SystemExit, match="sweep the same quantiles"):
         sc.merge_sweep_rows(stored, [named("b", 1.0, {0.9: 1.0})])
+
+
+def test_apply_sweep_changes_nothing_when_no_quantile_passed(sc, tmp_path, monkeypatch, capsys):
+    rows = [{**_sweep_row("a", 1.0, {0.9: 1.1}), "dataset": "a"}]
+    sc.SWEEP_OUT = tmp_path / "sweep.json"
+    sc.SWEEP_OUT.write_text(json.dumps({"rows": rows, "decision": sc.decide_sweep(rows)}))
+    monkeypatch.setattr("sys.argv", ["speed_clamp.py", "--apply-sweep"])
+    sc.main()  # no generator file exists: nothing may be opened
+    assert "nothing changed" in capsys.readouterr().out
