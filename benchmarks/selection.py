@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from trajpref.data import load_dataset
+from trajpref.data import hold_out_scene, load_dataset
 from trajpref.data.loader import SceneLoader
 from trajpref.data.transforms import scene_speeds
 from trajpref.evaluation import sampled_batches
@@ -98,6 +98,14 @@ def main() -> None:
         help="validation only: multiply every coordinate by this (a scene moving this much "
         "faster, as eth's test split does against its training folds)",
     )
+    parser.add_argument(
+        "--holdout-scene",
+        default=None,
+        metavar="PREFIX",
+        help="validation on a training location the model did not see: that scene's windows "
+        "of the train and val splits (trajpref.data.hold_out_scene); use a generator and "
+        "denoiser trained with data.holdout_scene=PREFIX (runs/holdout/<D>/)",
+    )
     parser.add_argument("--tag", default="", help="suffix of the meta file (validation runs)")
     parser.add_argument(
         "--draws",
@@ -110,6 +118,8 @@ def main() -> None:
     torch.manual_seed(args.seed)
     if args.stretch != 1.0 and args.split == "test":
         parser.error("--stretch simulates a shift on validation data; not on a test split")
+    if args.holdout_scene is not None and (args.split != "val" or not args.holdout_scene):
+        parser.error("--holdout-scene needs a file-name prefix and --split val")
 
     stem = f"generator-{args.variant}" if args.variant else "generator"
     path = Path(args.model or ROOT / "models" / args.dataset / f"{stem}.safetensors")
@@ -122,7 +132,11 @@ def main() -> None:
               "training split's scene speeds)")  # fmt: skip
     scorer = TrajectoryScorer(model.denoiser, model.schedule, model.scale, steps,
                               speed_ref=speed_ref)  # fmt: skip
-    data = load_dataset(args.dataset, args.split, args.data_root).evenly_spaced(args.max_scenes)
+    data = load_dataset(args.dataset, args.split, args.data_root)
+    if args.holdout_scene:  # the held-out location's windows of both splits
+        train = load_dataset(args.dataset, "train", args.data_root)
+        data = hold_out_scene(train, data, args.holdout_scene)[1]
+    data = data.evenly_spaced(args.max_scenes)
     if args.stretch != 1.0:
         data = stretched(data, args.stretch)
 
@@ -187,6 +201,7 @@ def main() -> None:
     meta = {"header": header, "ms_predict_per_scene": ms_predict, "ms_score_per_scene": ms_score,
             "score_every": args.score_every, "final": args.final, "scenes": scenes,
             "speed_ref": speed_ref, "stretch": args.stretch, "draws": args.draws,
+            "holdout_scene": args.holdout_scene,
             "command": command_line(), "machine": machine()}  # fmt: skip
     out_dir = ROOT / "benchmarks" / "results"
     variant = f"_{args.variant}" if args.variant else ""
