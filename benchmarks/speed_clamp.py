@@ -15,6 +15,10 @@ with and without it; with ``--apply``, the clamp written into the published file
     # validation tolerates (docs/pretraining.md, "A lower clamp"), then write it in
     python benchmarks/speed_clamp.py --sweep 0.99 0.95 0.9 0.8 0.7 0.5 --data-root ../shared/data
     python benchmarks/speed_clamp.py --apply-sweep
+    # a generator trained with a clamp on, swept beside the published default (the rule of
+    # docs/pretraining.md, "Training eth's generator with a low clamp on")
+    python benchmarks/speed_clamp.py --sweep 0.9 0.8 0.7 0.5 --tag trained-clamp \
+        --checkpoints RUN/generator.safetensors models/eth/generator.safetensors
 
 The clamp of a generator is the ``--quantile`` (0.99) of its training split's observed
 displacement per step (first to last observed position over T_h - 1 steps), in the model's
@@ -53,6 +57,9 @@ VARIANT = "clamp"
 TOLERANCE = 0.005
 """The largest relative worsening of a generator's validation minFDE20 the rule accepts."""
 SWEEP_OUT = ROOT / "benchmarks" / "results" / "meta" / "speed_clamp_sweep_val.json"
+TRAINED_TOLERANCE = 0.01
+"""A clamp-trained generator's allowance against the published default (a retrain's seed
+spread, ``meta/retrain_seed_spread.json``): both are trained, so 0.5 % would be noise."""
 PEDESTRIAN = ("eth", "hotel", "univ", "zara1", "zara2")
 """The generators the lower-clamp study covers (``--sweep`` without ``--datasets``)."""
 
@@ -124,6 +131,16 @@ def main() -> None:
         "--datasets, those generators' rows replace theirs in the stored record",
     )
     parser.add_argument(
+        "--checkpoints",
+        nargs="+",
+        default=None,
+        metavar="PATH",
+        help="with --sweep: sweep these generators instead of the published ones; the first is "
+        "the candidate, the last the reference (the rule for a generator trained with a clamp "
+        "on), into meta/speed_clamp_sweep_val_<tag>.json",
+    )
+    parser.add_argument("--tag", default="checkpoints", help="the --checkpoints record's name")
+    parser.add_argument(
         "--apply-sweep",
         action="store_true",
         help="write the quantile the stored sweep chose into its generators (no evaluation)",
@@ -132,6 +149,9 @@ def main() -> None:
     models = ROOT / "models"
     if args.sweep is not None and not all(0 < q < 1 for q in args.sweep):
         parser.error("--sweep quantiles must lie strictly between 0 and 1")
+    if args.checkpoints is not None and (args.sweep is None or len(args.checkpoints) < 2):
+        parser.error("--checkpoints needs --sweep and two generators: the candidate, then the "
+                     "reference")  # fmt: skip
 
     if args.apply_sweep:
         stored = json.loads(SWEEP_OUT.read_text())
@@ -149,6 +169,9 @@ def main() -> None:
             print(f"{name}: {'clamped' if changed else 'already clamped'} at the {q:.0%} quantile")
         return
 
+    if args.checkpoints is not None:
+        sweep_checkpoints(args)
+        return
     if args.sweep is not None:
         sweep(args, models)
         return
@@ -211,9 +234,59 @@ def main() -> None:
 
 def sweep(args: argparse.Namespace, models: Path) -> None:
     """Validation of each generator unclamped and at each ``--sweep`` quantile's clamp."""
+    found = published_generators(models, args.datasets or list(PEDESTRIAN), variants=False)
+    rows = sweep_rows(args, found)
+    rows = merge_sweep_rows(json.loads(SWEEP_OUT.read_text())["rows"], rows) if (
+        args.datasets and SWEEP_OUT.is_file()) else rows  # fmt: skip
+    decision = decide_sweep(rows)
+    qs = " ".join(f"{q:g}" for q in sorted(args.sweep, reverse=True))
+    only = f" --datasets {' '.join(args.datasets)}" if args.datasets else ""
+    write_study(SWEEP_OUT, f"python benchmarks/speed_clamp.py --sweep {qs}{only} --data-root "
+                "../shared/data", rows, decision, samples=args.samples, seed=args.seed)  # fmt: skip
+    print(sweep_table(rows, decision))
+
+
+def sweep_checkpoints(args: argparse.Namespace) -> None:
+    """The rule for a generator trained with a clamp on: the candidate (first checkpoint)
+    swept beside the reference (last), both on the candidate's dataset's validation split."""
+    paths = [Path(p).resolve() for p in args.checkpoints]
+    for p in paths:
+        if not p.is_file():
+            raise SystemExit(f"{p}: no such generator")
+    name = ckpt.config_of(ckpt.load(paths[0])).data.dataset
+    rows = sweep_rows(args, [(name, p) for p in paths])
+    decision = decide_trained(rows[0], rows[-1])
+    out = SWEEP_OUT.with_name(f"speed_clamp_sweep_val_{args.tag}.json")
+    qs = " ".join(f"{q:g}" for q in sorted(args.sweep, reverse=True))
+    given = " ".join(_relative(p) for p in paths)
+    write_study(out, f"python benchmarks/speed_clamp.py --sweep {qs} --checkpoints {given} "
+                f"--tag {args.tag} --data-root ../shared/data", rows, decision,
+                samples=args.samples, seed=args.seed)  # fmt: skip
+    print(sweep_table(rows, decision))
+    print(json.dumps(decision, indent=2))
+
+
+def decide_trained(candidate: dict, reference: dict, reference_q: str = "0.9") -> dict:
+    """The lowest quantile at which the candidate's validation minFDE20 is within
+    ``TRAINED_TOLERANCE`` of the reference's at its own clamp (``reference_q``); None if
+    none is."""
+    ref = reference["by_quantile"][reference_q]["min_fde"]
+    change = {q: m["min_fde"] / ref - 1 for q, m in candidate["by_quantile"].items()}
+    ok = [float(q) for q, c in change.items() if c <= TRAINED_TOLERANCE]
+    return {"reference": reference["checkpoint"], "reference_quantile": float(reference_q),
+            "reference_min_fde": ref, "change_min_fde": change,
+            "quantile": min(ok) if ok else None, "apply": bool(ok)}  # fmt: skip
+
+
+def _relative(path: Path) -> str:
+    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
+
+
+def sweep_rows(args: argparse.Namespace, generators) -> list[dict]:
+    """One row per (name, path): validation unclamped and at each ``--sweep`` quantile of the
+    generator's training split."""
     rows = []
-    for name, path in published_generators(models, args.datasets or list(PEDESTRIAN),
-                                           variants=False):  # fmt: skip
+    for name, path in generators:
         payload = ckpt.load(path)
         cfg, scale = ckpt.config_of(payload), payload["scale"]
         splits = {"train": load_dataset(cfg.data.dataset, "train", args.data_root),
@@ -221,7 +294,7 @@ def sweep(args: argparse.Namespace, models: Path) -> None:
                   "test": load_dataset(name, "test", args.data_root)}  # fmt: skip
         steps = observed_step(splits["train"], scale)
         off = _clamped_metrics(args, payload, splits["val"], 0.0)
-        row = {"dataset": name, "checkpoint": str(path.relative_to(ROOT)), "off": off,
+        row = {"dataset": name, "checkpoint": _relative(path), "off": off,
                "by_quantile": {}}  # fmt: skip
         for q in sorted(args.sweep, reverse=True):
             bound = float(np.quantile(steps, q))
@@ -232,14 +305,7 @@ def sweep(args: argparse.Namespace, models: Path) -> None:
                   f"{off['min_fde']:.4f} -> {on['min_fde']:.4f} "
                   f"({on['min_fde'] / off['min_fde'] - 1:+.2%})", flush=True)  # fmt: skip
         rows.append(row)
-    rows = merge_sweep_rows(json.loads(SWEEP_OUT.read_text())["rows"], rows) if (
-        args.datasets and SWEEP_OUT.is_file()) else rows  # fmt: skip
-    decision = decide_sweep(rows)
-    qs = " ".join(f"{q:g}" for q in sorted(args.sweep, reverse=True))
-    only = f" --datasets {' '.join(args.datasets)}" if args.datasets else ""
-    write_study(SWEEP_OUT, f"python benchmarks/speed_clamp.py --sweep {qs}{only} --data-root "
-                "../shared/data", rows, decision, samples=args.samples, seed=args.seed)  # fmt: skip
-    print(sweep_table(rows, decision))
+    return rows
 
 
 def merge_sweep_rows(stored: list[dict], new: list[dict]) -> list[dict]:

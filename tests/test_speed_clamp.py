@@ -2,6 +2,7 @@
 settings-only variant it publishes."""
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -138,3 +139,22 @@ def test_apply_sweep_changes_nothing_when_no_quantile_passed(sc, tmp_path, monke
     monkeypatch.setattr("sys.argv", ["speed_clamp.py", "--apply-sweep"])
     sc.main()  # no generator file exists: nothing may be opened
     assert "nothing changed" in capsys.readouterr().out
+
+
+def test_a_clamp_trained_generator_is_judged_against_the_reference_at_its_own_clamp(sc):
+    candidate = _sweep_row("cand", 1.2, {0.9: 0.995, 0.7: 1.009, 0.5: 1.02})
+    reference = _sweep_row("ref", 0.9, {0.9: 1.0, 0.5: 0.5})  # its 90 % row is the bar
+    decision = sc.decide_trained(candidate, reference)
+    assert decision["reference_min_fde"] == 1.0
+    assert decision["quantile"] == 0.7  # 0.5 is 2 % worse, beyond the 1 % allowance
+    assert decision["change_min_fde"]["0.5"] == pytest.approx(0.02)
+    worse = _sweep_row("cand", 1.2, {0.9: 1.02, 0.5: 1.03})
+    assert sc.decide_trained(worse, reference) | {"change_min_fde": None} == {
+        **decision, "change_min_fde": None, "quantile": None, "apply": False}  # fmt: skip
+
+
+def test_checkpoints_need_a_sweep_and_a_reference(sc, monkeypatch, capsys):
+    monkeypatch.setattr(sys, "argv", ["speed_clamp.py", "--sweep", "0.9", "--checkpoints", "a"])
+    with pytest.raises(SystemExit) as exc:
+        sc.main()
+    assert exc.value.code == 2 and "the candidate, then the reference" in capsys.readouterr().err
