@@ -398,9 +398,27 @@ def test_a_settings_variant_names_its_base_weights_instead_of_copying_them(tmp_p
     assert ckpt.config_of(ckpt.load(variant)).model.max_speed == 2e-3
     assert variant.stat().st_size < 20_000
 
-    # the base replaced by other weights: refused, not silently used
+    # publishing other weights over the base is refused while a variant names them
+    weights = ckpt.load(base)["state_dict"]
     ckpt.save(src, ckpt.generator_payload(_generator(cfg, seed=7), den, cfg, {}))
+    with pytest.raises(ckpt.WeightsConflict, match="generator-clamp.safetensors"):
+        ckpt.publish(src, base)
+    _assert_same_state(ckpt.load(variant)["state_dict"], weights)
+    # ... until the weights move to a name of their own, the variants following them
+    kept = base.parent / "generator-old.safetensors"
+    assert ckpt.move_weights(base, kept) == [variant]
     ckpt.publish(src, base)
+    _assert_same_state(ckpt.load(variant)["state_dict"], weights)
+    _assert_same_state(ckpt.load(kept)["state_dict"], weights)
+    assert ckpt.config_of(ckpt.load(variant)).model.max_speed == 2e-3
+    with pytest.raises(TrajprefError, match="exists already"):
+        ckpt.move_weights(base, kept)
+    with pytest.raises(TrajprefError, match="own weights can move"):
+        ckpt.move_weights(variant, base.parent / "v2.safetensors")
+
+    # a base replaced behind the library's back: refused at loading, not silently used
+    kept.unlink()
+    ckpt.save(kept, ckpt.load(base))
     with pytest.raises(TrajprefError, match="do not match the recorded hash"):
         ckpt.load(variant)
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import shutil
 import warnings
 from pathlib import Path
 from typing import Any
@@ -47,6 +48,10 @@ _GROUPS = {"state_dict": "model", "critic": "critic"}
 
 class DenoiserConflict(TrajprefError):
     """Publishing would replace a different denoiser that other checkpoints may name."""
+
+
+class WeightsConflict(TrajprefError):
+    """Publishing would replace the weights that settings-only variants beside it name."""
 
 
 def state_hash(state: dict[str, torch.Tensor]) -> str:
@@ -295,6 +300,8 @@ def publish(
     payload = load(src)
     payload.pop("denoiser_ref", None)
     dst = Path(dst)
+    if payload["kind"] == "generator" and dst.is_file():
+        _check_no_variant_loses_its_weights(dst, payload["hash"])
     if payload["kind"] != "generator":
         save(dst, payload, half)
         return
@@ -312,6 +319,53 @@ def publish(
         save(den_path, den, half)
     payload["denoiser_ref"] = {"path": denoiser_name, "hash": den["hash"]}
     save(dst, payload, half)
+
+
+def variants_of(path: str | Path) -> list[Path]:
+    """The settings-only variants (``publish_variant``) beside ``path`` that take their weights
+    from it."""
+    path = Path(path)
+    found = []
+    for other in sorted(path.parent.glob(f"*{SUFFIX}")):
+        if other.name == path.name:
+            continue
+        ref = _read_file(other).get("weights_ref")
+        if ref is not None and ref["path"] == path.name:
+            found.append(other)
+    return found
+
+
+def _check_no_variant_loses_its_weights(dst: Path, new_hash: str) -> None:
+    if _read_file(dst).get("hash") == new_hash:
+        return
+    names = [v.name for v in variants_of(dst)]
+    if names:
+        raise WeightsConflict(
+            f"{dst} holds the weights of {', '.join(names)}: move them first "
+            "(checkpoint.move_weights) or remove those variants"
+        )
+
+
+def move_weights(src: str | Path, dst: str | Path) -> list[Path]:
+    """Copy a published generator file to a new name in the same folder and point every
+    settings-only variant that takes its weights from ``src`` at the copy (the way to keep a
+    default's weights as a named variant before another generator is published over it).
+    Returns the re-pointed variants; ``src`` itself is left in place."""
+    src, dst = Path(src), Path(dst)
+    if src.parent.resolve() != dst.parent.resolve():
+        raise TrajprefError(f"{dst}: weights move within their folder ({src.parent})")
+    if dst.exists():
+        raise TrajprefError(f"{dst} exists already")
+    payload = _read_file(src)
+    if payload.get("kind") != "generator" or "weights_ref" in payload:
+        raise TrajprefError(f"{src}: only a generator file with its own weights can move")
+    moved = variants_of(src)
+    shutil.copyfile(src, dst)
+    for variant in moved:
+        record = _read_file(variant)
+        record["weights_ref"] = {**record["weights_ref"], "path": dst.name}
+        save(variant, record)
+    return moved
 
 
 POST_HOC_SETTINGS = ("stochastic_steps", "max_speed")
