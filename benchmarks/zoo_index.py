@@ -149,6 +149,18 @@ def _meta(dataset: str, variant: str | None) -> dict[str, Any]:
     return json.loads(path.read_text()) if path.is_file() else {}
 
 
+def newest_rows(rows: list[dict[str, Any]]) -> dict[tuple, dict[str, Any]]:
+    """(zoo name, method) -> the newest row naming that file with that method: other studies
+    (the score's, the selection's) keep a copy of the row they started from, which must not
+    stand for the file once it has been re-measured (ties: the later row)."""
+    out: dict[tuple, dict[str, Any]] = {}
+    for r in rows:
+        key = (_zoo_file(r.get("checkpoint")), r["method"])
+        if key not in out or (r.get("date") or "") >= (out[key].get("date") or ""):
+            out[key] = r
+    return out
+
+
 def _test_row(row: dict[str, Any]) -> dict[str, Any]:
     keys = ("split", "samples", "seed", "min_ade", "min_fde", "joint_min_ade", "joint_min_fde",
             "date", "machine", "command")  # fmt: skip
@@ -162,7 +174,7 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
     dataset, stem = name.split("/")
     head = zoo.header(path)
     kind, meta = head["kind"], head.get("meta") or {}
-    by_file = {(_zoo_file(r.get("checkpoint")), r["method"]): r for r in rows}
+    by_file = newest_rows(rows)
     entry: dict[str, Any] = {"name": name, "dataset": dataset, "kind": kind,
                              "file": f"{dataset}/{path.name}", "hash": head["hash"]}  # fmt: skip
     spec = SPECS.get(dataset)

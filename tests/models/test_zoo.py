@@ -197,3 +197,16 @@ def test_a_sampling_change_after_training_shows_on_the_card_not_in_the_training_
     assert "Set to posterior-mean steps after training (2026-11-24" in lines[0]
     assert "ancestral noise." in zoo_index._sampling_lines(
         {"tau": 5, "stochastic_steps": True, "changes": []})[0]  # fmt: skip
+
+
+def test_a_files_test_row_is_its_newest_not_a_studys_older_copy():
+    zi = _zoo_index()
+    ck = "models/eth/generator.safetensors"
+    rows = [
+        {"checkpoint": ck, "method": "pretrained", "date": "2026-11-26", "min_fde": 0.7},
+        {"checkpoint": ck, "method": "pretrained", "date": "2026-11-25", "min_fde": 0.8},
+        {"checkpoint": "models/eth/generator.pt", "method": "rlhf", "date": None, "min_fde": 1},
+    ]
+    newest = zi.newest_rows(rows)
+    assert newest[("eth/generator", "pretrained")]["min_fde"] == 0.7
+    assert newest[("eth/generator", "rlhf")]["min_fde"] == 1
