@@ -300,8 +300,9 @@ def publish(
     payload = load(src)
     payload.pop("denoiser_ref", None)
     dst = Path(dst)
-    if payload["kind"] == "generator" and dst.is_file():
-        _check_no_variant_loses_its_weights(dst, payload["hash"])
+    if payload["kind"] == "generator" and dst.is_file():  # the hash the file would record
+        new_hash = state_hash(_rounded(payload)["state_dict"]) if half else payload["hash"]
+        _check_no_variant_loses_its_weights(dst, new_hash)
     if payload["kind"] != "generator":
         save(dst, payload, half)
         return
