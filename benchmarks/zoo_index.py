@@ -287,11 +287,16 @@ def _sampling_lines(sampling: dict[str, Any] | None) -> list[str]:
         text += (f" Agents faster than {sampling['max_speed']:.3f} model units per observed step "
                  "are seen at that speed and their prediction scaled back up "
                  "(`model.max_speed`).")  # fmt: skip
+    clamps = [c for c in sampling["changes"] if "max_speed" in c]
+    trained_clamp = clamps[0].get("previous") if clamps else None  # before any change
     for change in sampling["changes"]:
         if "stochastic_steps" in change:
             state = "ancestral" if change["stochastic_steps"] else "posterior-mean"
             text += f" Set to {state} steps after training ({change['note']})."
-        if "max_speed" in change:
+        if "max_speed" in change and trained_clamp:  # trained with a clamp on
+            text += (f" Trained with the speed clamp at {trained_clamp:.4f}, set to "
+                     f"{change['max_speed']:.4f} ({change['note']}).")  # fmt: skip
+        elif "max_speed" in change:
             text += (f" Speed clamp set to {change['max_speed']:.3f} after training, same "
                      f"weights ({change['note']}).")  # fmt: skip
     return [text, ""]

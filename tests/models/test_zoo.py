@@ -210,3 +210,20 @@ def test_a_files_test_row_is_its_newest_not_a_studys_older_copy():
     newest = zi.newest_rows(rows)
     assert newest[("eth/generator", "pretrained")]["min_fde"] == 0.7
     assert newest[("eth/generator", "rlhf")]["min_fde"] == 1
+
+
+def test_a_card_tells_a_clamp_set_after_training_from_one_trained_with():
+    zi = _zoo_index()
+
+    def text(*changes):
+        sampling = {"tau": 5, "stochastic_steps": False, "max_speed": 0.3, "changes": changes}
+        return zi._sampling_lines(sampling)[0]
+
+    after = text({"max_speed": 0.3, "previous": 0.0, "note": "n"})
+    assert "Speed clamp set to 0.300 after training, same weights (n)." in after
+    trained = text({"max_speed": 0.14714, "previous": 0.1471, "note": "m"})
+    assert "Trained with the speed clamp at 0.1471, set to 0.1471 (m)." in trained
+    # a post-hoc clamp changed again stays a post-hoc clamp
+    twice = text({"max_speed": 0.4, "previous": 0.0, "note": "a"},
+                 {"max_speed": 0.3, "previous": 0.4, "note": "b"})  # fmt: skip
+    assert "Trained with" not in twice and "set to 0.300 after training" in twice
