@@ -300,9 +300,8 @@ def publish(
     payload = load(src)
     payload.pop("denoiser_ref", None)
     dst = Path(dst)
-    if payload["kind"] == "generator" and dst.is_file():  # the hash the file would record
-        new_hash = state_hash(_rounded(payload)["state_dict"]) if half else payload["hash"]
-        _check_no_variant_loses_its_weights(dst, new_hash)
+    if payload["kind"] == "generator" and dst.is_file():
+        _check_no_variant_loses_its_weights(dst, payload, half)
     if payload["kind"] != "generator":
         save(dst, payload, half)
         return
@@ -330,17 +329,20 @@ def variants_of(path: str | Path) -> list[Path]:
     for other in sorted(path.parent.glob(f"*{SUFFIX}")):
         if other.name == path.name:
             continue
-        ref = _read_file(other).get("weights_ref")
+        ref = read_checkpoint_header(other).get("weights_ref")  # headers only: no weights read
         if ref is not None and ref["path"] == path.name:
             found.append(other)
     return found
 
 
-def _check_no_variant_loses_its_weights(dst: Path, new_hash: str) -> None:
-    if _read_file(dst).get("hash") == new_hash:
-        return
+def _check_no_variant_loses_its_weights(dst: Path, payload: dict[str, Any], half: bool) -> None:
+    """Refuse to publish ``payload`` over ``dst`` when variants name ``dst``'s weights and the
+    new file would hold other weights (compared by the hash the file would record)."""
     names = [v.name for v in variants_of(dst)]
-    if names:
+    if not names:
+        return
+    new_hash = state_hash(_rounded(payload)["state_dict"]) if half else payload["hash"]
+    if read_checkpoint_header(dst).get("hash") != new_hash:
         raise WeightsConflict(
             f"{dst} holds the weights of {', '.join(names)}: move them first "
             "(checkpoint.move_weights) or remove those variants"
