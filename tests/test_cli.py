@@ -201,6 +201,18 @@ def test_max_speed_clamps_a_generators_fast_agents_at_prediction(capsys, tiny_ru
     assert results["--max-speed 1e-3"] != results[""]
 
 
+def test_spread_scale_changes_a_generators_samples_at_prediction(capsys, tiny_run, walks):
+    base = ["evaluate", "--dataset", walks, "--split", "test", "--samples", "4", "--json",
+            "--no-progress", "--model", tiny_run / "generator.safetensors"]  # fmt: skip
+    results = {}
+    for flag in ([], ["--spread-scale", "1"], ["--spread-scale", "3"]):
+        code, out, _ = _run(capsys, *base, *flag)
+        assert code == 0
+        results[" ".join(flag)] = json.loads(out)["min_ade"]
+    assert results[""] == results["--spread-scale 1"]
+    assert results["--spread-scale 3"] != results[""]
+
+
 def test_the_cli_imports_without_the_survey_web_server_packages():
     # training on a machine without starlette/uvicorn (a bare GPU image) must work: the web
     # server is imported only by `survey serve`

@@ -70,6 +70,9 @@ CASES: dict[str, tuple[list[str], str]] = {
     "max speed for cv": ([*EVAL, "--max-speed", "0.4"], r"--max-speed applies to generator"),
     "negative max speed": ([*EVAL, "--model", "{run}/generator.safetensors", "--max-speed", "-1"],
                            r"--max-speed must be >= 0"),
+    "spread scale for cv": ([*EVAL, "--spread-scale", "1.2"], r"--spread-scale applies to gen"),
+    "zero spread scale": ([*EVAL, "--model", "{run}/generator.safetensors", "--spread-scale", "0"],
+                          r"--spread-scale must be > 0"),
     "leapfrog without generator": (
         [*EVAL, "--model", "{run}/denoiser.safetensors", "--sampler", "leapfrog"],
         r"leapfrog sampler needs a generator"),

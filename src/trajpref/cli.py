@@ -93,6 +93,10 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
                    "observed step at that speed and scale their prediction back up (0: off; "
                    "default: the file's model.max_speed; docs/pretraining.md, 'An input speed "
                    "clamp')")  # fmt: skip
+    p.add_argument("--spread-scale", type=float, default=None,
+                   help="generators: multiply the spread of the K initial samples about their "
+                   "mean by this (1: as trained; default: the file's model.spread_scale; "
+                   "docs/pretraining.md, 'The samples' spread at prediction time')")  # fmt: skip
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     p.add_argument("--max-agents", type=int, default=1024,
                    help="agents per batch of whole scenes (default 1024). Lower it to save "
@@ -386,11 +390,21 @@ def _predictor(args):
     if getattr(args, "max_speed", None) is not None:
         if args.max_speed < 0:
             raise ConfigError("--max-speed must be >= 0 (0 switches the clamp off)")
-        generator = getattr(model, "generator", None)
-        if generator is None:
-            raise ConfigError("--max-speed applies to generator checkpoints only")
-        generator.cfg = dataclasses.replace(generator.cfg, max_speed=args.max_speed)
+        _set_generator(model, "--max-speed", max_speed=args.max_speed)
+    if getattr(args, "spread_scale", None) is not None:
+        if not args.spread_scale > 0:
+            raise ConfigError("--spread-scale must be > 0 (1: the spread as trained)")
+        _set_generator(model, "--spread-scale", spread_scale=args.spread_scale)
     return model, device
+
+
+def _set_generator(model, flag: str, **setting) -> None:
+    """Change a sampling setting of a leapfrog predictor's generator (ConfigError for other
+    models)."""
+    generator = getattr(model, "generator", None)
+    if generator is None:
+        raise ConfigError(f"{flag} applies to generator checkpoints only")
+    generator.cfg = dataclasses.replace(generator.cfg, **setting)
 
 
 def _scorer(path: str, device):

@@ -149,10 +149,20 @@ class ModelConfig:
     split puts its 99th percentile at 0.43-0.45 on ETH/UCY (docs/pretraining.md). Agents
     faster than anything in training are then predicted as scaled-up copies of the fastest
     ones instead of by extrapolation."""
+    spread_scale: float = 1.0
+    """A sampling setting: multiplies each agent's sigma, the spread of its K initial samples
+    about their mean (Y^tau = mu + spread_scale * sigma * S), before the tau denoising steps.
+    1 changes nothing; it may be set on published weights without retraining
+    (docs/pretraining.md, "The samples' spread at prediction time")."""
 
     def __post_init__(self) -> None:
         if self.max_speed < 0:
             raise ConfigError("ModelConfig.max_speed must be >= 0 (0 switches the clamp off)")
+        if not self.spread_scale > 0:
+            raise ConfigError(
+                f"ModelConfig.spread_scale must be > 0 (1: the trained spread), "
+                f"got {self.spread_scale}"
+            )
         _positive(self, "hidden", "encoder_layers", "heads", "denoiser_width", "denoiser_blocks",
                   "generator_width", "t_hist", "t_fut", "samples", "tau")  # fmt: skip
         if self.hidden % self.heads:
@@ -177,6 +187,7 @@ GENERATOR_ONLY = (
     "agent_frame",
     "history_encoder",
     "max_speed",
+    "spread_scale",
 )
 """``ModelConfig`` fields that concern the generator and its sampler, not the denoiser."""
 

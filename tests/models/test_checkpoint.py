@@ -371,6 +371,10 @@ def test_only_sampling_settings_can_change_after_training(tmp_path, cfg):
         ckpt.set_generator_setting(src, "hidden", 64, note="x")
     with pytest.raises(ConfigError, match="max_speed must be >= 0"):
         ckpt.set_generator_setting(src, "max_speed", -1.0, note="x")
+    with pytest.raises(ConfigError, match="spread_scale must be > 0"):
+        ckpt.set_generator_setting(src, "spread_scale", 0.0, note="x")
+    assert ckpt.set_generator_setting(src, "spread_scale", 1.2, note="wider")
+    assert ckpt.config_of(ckpt.load(src)).model.spread_scale == 1.2
 
 
 def test_a_settings_variant_names_its_base_weights_instead_of_copying_them(tmp_path, cfg):

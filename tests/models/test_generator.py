@@ -144,6 +144,28 @@ def test_the_speed_clamp_is_a_generator_setting_checked_on_construction():
         ModelConfig(max_speed=-0.1)
 
 
+@pytest.mark.parametrize("frame", ["scene", "heading"])
+def test_the_spread_scale_widens_the_samples_about_an_unchanged_mean(frame):
+    torch.manual_seed(0)
+    gen = Generator(dataclasses.replace(TINY, agent_frame=frame, max_speed=1e-3)).eval()
+    wide = Generator(dataclasses.replace(gen.cfg, spread_scale=2.0)).eval()
+    wide.load_state_dict(gen.state_dict())
+    features = scene_features(collate([make_scene(3), make_scene(2, seed=1)]), 1.0)
+    with torch.no_grad():
+        a, b = gen(features), wide(features)
+    torch.testing.assert_close(b.mean, a.mean)
+    torch.testing.assert_close(b.shifts, a.shifts)
+    # every sample twice as far from the mean: sigma doubled, also for clamped agents
+    torch.testing.assert_close(b.initial_sample() - b.mean, 2 * (a.initial_sample() - a.mean))
+
+
+def test_the_spread_scale_is_a_generator_setting_checked_on_construction():
+    assert ModelConfig(spread_scale=1.2).denoiser_part() == ModelConfig()
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ConfigError, match="spread_scale must be > 0"):
+            ModelConfig(spread_scale=bad)
+
+
 def test_the_history_encoder_is_a_generator_setting_checked_on_construction():
     assert ModelConfig(history_encoder="temporal").denoiser_part() == ModelConfig()
     with pytest.raises(ConfigError, match="history_encoder"):

@@ -371,9 +371,10 @@ def move_weights(src: str | Path, dst: str | Path) -> list[Path]:
     return moved
 
 
-POST_HOC_SETTINGS = ("stochastic_steps", "max_speed")
+POST_HOC_SETTINGS = ("stochastic_steps", "max_speed", "spread_scale")
 """``model`` fields of a generator file that may change after training without retraining:
-how its tau steps sample, and its input speed clamp (the weights are not touched)."""
+how its tau steps sample, its input speed clamp and its samples' spread (the weights are not
+touched)."""
 
 
 def set_generator_setting(path: str | Path, name: str, value: Any, note: str) -> bool:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import torch
@@ -72,6 +73,8 @@ class Generator(nn.Module):
         if c is not None:  # back to the agent's own speed
             mean = mean * c[:, None, None]  # [N, T_f, 2]
             log_sigma = log_sigma + c.log()[None]  # [K, N]
+        if self.cfg.spread_scale != 1.0:  # a sampling setting (ModelConfig.spread_scale)
+            log_sigma = log_sigma + math.log(self.cfg.spread_scale)  # [K, N]
         if rot is not None:  # back to the scene frame, where the denoiser works
             mean = mean @ rot  # [N, T_f, 2]
             shifts = shifts @ rot[None]  # [K, N, T_f, 2]
