@@ -23,12 +23,17 @@ docs/pretraining.md.
 
 from __future__ import annotations
 
-import argparse
 import json
 from datetime import date
 from pathlib import Path
 
-from post_hoc import apply_setting, published_generators, validation_metrics, write_study
+from post_hoc import (
+    apply_setting,
+    published_generators,
+    study_parser,
+    validation_metrics,
+    write_study,
+)
 
 from trajpref.data import load_dataset
 from trajpref.models import checkpoint as ckpt
@@ -48,11 +53,7 @@ def decide(rows: list[dict]) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data-root", default=None)
-    parser.add_argument("--device", default="cpu")
-    parser.add_argument("--samples", type=int, default=20)
-    parser.add_argument("--seed", type=int, default=0)
+    parser = study_parser(__doc__)
     parser.add_argument(
         "--apply",
         action="store_true",

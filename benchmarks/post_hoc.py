@@ -1,12 +1,14 @@
 """What the studies of a post-training generator setting share (``deterministic_steps.py``,
-``speed_clamp.py``): which published generators they cover, the validation metrics they
-compare, the record they store beside the decision, and the ``--apply`` step that writes the
-chosen setting into the published files (``checkpoint.set_generator_setting``; weights
-untouched). Each study keeps its own rule, fixed before its numbers were seen.
+``speed_clamp.py``, ``spread_scale.py``): their common options, which published generators
+they cover, the validation metrics they compare, the record they store beside the decision,
+and the ``--apply`` step that writes the chosen setting into the published files
+(``checkpoint.set_generator_setting``; weights untouched). Each study keeps its own rule,
+fixed before its numbers were seen.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 from collections.abc import Callable
 from datetime import date
@@ -20,6 +22,17 @@ from trajpref.results import machine
 
 METRICS = ("min_ade", "min_fde", "joint_min_ade", "joint_min_fde")
 """The validation metrics a study stores for each setting."""
+
+
+def study_parser(doc: str) -> argparse.ArgumentParser:
+    """A study's parser with the options every study takes: ``--data-root``, ``--device``,
+    ``--samples`` (K) and ``--seed``."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument("--data-root", default=None)
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--samples", type=int, default=20)
+    parser.add_argument("--seed", type=int, default=0)
+    return parser
 
 
 def published_generators(

@@ -44,7 +44,13 @@ from datetime import date
 from pathlib import Path
 
 import numpy as np
-from post_hoc import apply_setting, published_generators, validation_metrics, write_study
+from post_hoc import (
+    apply_setting,
+    published_generators,
+    study_parser,
+    validation_metrics,
+    write_study,
+)
 
 from trajpref.data import load_dataset
 from trajpref.models import checkpoint as ckpt
@@ -99,11 +105,7 @@ def clamp_shares(splits: dict[str, TrajectoryDataset], scale: float, bound: floa
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data-root", default=None)
-    parser.add_argument("--device", default="cpu")
-    parser.add_argument("--samples", type=int, default=20)
-    parser.add_argument("--seed", type=int, default=0)
+    parser = study_parser(__doc__)
     parser.add_argument("--quantile", type=float, default=0.99)
     parser.add_argument("--datasets", nargs="+", default=None, help="default: every folder")
     parser.add_argument(

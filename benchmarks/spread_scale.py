@@ -22,14 +22,13 @@ Writes benchmarks/results/meta/spread_scale_val.json and prints the table for do
 
 from __future__ import annotations
 
-import argparse
 import json
 from datetime import date
 from pathlib import Path
 
 import numpy as np
 from holdout_frame import HELD_OUT
-from post_hoc import apply_setting, validation_metrics, write_study
+from post_hoc import apply_setting, study_parser, validation_metrics, write_study
 
 from trajpref.data import hold_out_scene, load_dataset
 from trajpref.models import checkpoint as ckpt
@@ -117,11 +116,7 @@ def table(rows: list[dict], decision: dict) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data-root", default=None)
-    parser.add_argument("--device", default="cpu")
-    parser.add_argument("--samples", type=int, default=20)
-    parser.add_argument("--seed", type=int, default=0)
+    parser = study_parser(__doc__)
     parser.add_argument(
         "--runs",
         type=Path,
