@@ -191,6 +191,8 @@ def main() -> None:
     for (method, keep), v in merged.items():
         method = method if args.draws == 1 else f"{method}-x{args.draws}"
         method += f"-{args.variant}" if args.variant else ""
+        if args.speed_norm is not None and v["uses_score"]:  # the score-free rows are as before
+            method += f"-sn{round(args.speed_norm * 100)}"
         rows.append(make_row(
             dataset=args.dataset, split=args.split, method=method, seed=args.seed, samples=keep,
             min_ade=v["min_ade"], min_fde=v["min_fde"], joint_min_ade=v["joint_min_ade"],
@@ -210,13 +212,14 @@ def main() -> None:
     )
     suffix += f"_seed{args.seed}" if args.seed else ""  # seed 0 keeps the files' old names
     (out_dir / "meta").mkdir(exist_ok=True)
-    (out_dir / "meta" / f"select_{args.dataset}{suffix}.json").write_text(
+    label = Path(args.dataset).name  # a user folder's name, not its whole path
+    (out_dir / "meta" / f"select_{label}{suffix}.json").write_text(
         json.dumps(meta | {"rows": rows}, indent=2) + "\n"
     )
     if args.split == "test":
         draws = "" if args.draws == 1 else f"_x{args.draws}"
         # rows of other seeds stay: each seed adds its own (results.upsert_rows)
-        upsert_rows(out_dir / f"select_{args.dataset}{variant}{draws}.json", rows)
+        upsert_rows(out_dir / f"select_{label}{variant}{draws}.json", rows)
 
 
 def training_speed(dataset: str, data_root: str | None, quantile: float) -> float:
