@@ -51,6 +51,15 @@ def published_generators(
                   if variants or name.endswith("/generator"))  # fmt: skip
 
 
+def with_model_setting(payload: dict, name: str, value: Any) -> dict:
+    """A copy of a generator payload whose config sets ``model.<name>`` (the payload itself,
+    its config sections included, is left as it was)."""
+    config = {section: dict(values) if isinstance(values, dict) else values
+              for section, values in payload["config"].items()}  # fmt: skip
+    config["model"][name] = value
+    return {**payload, "config": config}
+
+
 def validation_metrics(predictor, dataset, samples: int, seed: int, device: str) -> dict:
     """``METRICS`` (and the seconds it took) of one predictor on one validation split."""
     res = evaluate(predictor, dataset, samples, seed, device)

@@ -49,6 +49,7 @@ from post_hoc import (
     published_generators,
     study_parser,
     validation_metrics,
+    with_model_setting,
     write_study,
 )
 
@@ -324,7 +325,7 @@ def merge_sweep_rows(stored: list[dict], new: list[dict]) -> list[dict]:
 
 def _clamped_metrics(args: argparse.Namespace, payload: dict, val, max_speed: float) -> dict:
     """Validation metrics of a generator payload with ``model.max_speed`` set."""
-    predictor = ckpt.predictor_from_payload(_with_clamp(payload, max_speed))
+    predictor = ckpt.predictor_from_payload(with_model_setting(payload, "max_speed", max_speed))
     return validation_metrics(predictor.to(args.device).eval(), val, args.samples, args.seed,
                               args.device)  # fmt: skip
 
@@ -367,14 +368,6 @@ def publish_variant(dataset: str, max_speed: float) -> Path:
         record = json.loads((meta / f"pretrained_{dataset}.json").read_text())
         target.write_text(json.dumps({**record, "variant": VARIANT}, indent=2) + "\n")
     return variant
-
-
-def _with_clamp(payload: dict, max_speed: float) -> dict:
-    """A copy of a generator payload whose config sets ``model.max_speed``."""
-    config = {section: dict(values) if isinstance(values, dict) else values
-              for section, values in payload["config"].items()}  # fmt: skip
-    config["model"]["max_speed"] = max_speed
-    return {**payload, "config": config}
 
 
 if __name__ == "__main__":

@@ -28,7 +28,13 @@ from pathlib import Path
 
 import numpy as np
 from holdout_frame import HELD_OUT
-from post_hoc import apply_setting, study_parser, validation_metrics, write_study
+from post_hoc import (
+    apply_setting,
+    study_parser,
+    validation_metrics,
+    with_model_setting,
+    write_study,
+)
 
 from trajpref.data import hold_out_scene, load_dataset
 from trajpref.models import checkpoint as ckpt
@@ -48,20 +54,12 @@ TOLERANCE = 0.01
 minADE20) may take."""
 
 
-def with_spread(payload: dict, gamma: float) -> dict:
-    """A copy of a generator payload whose config sets ``model.spread_scale``."""
-    config = {section: dict(values) if isinstance(values, dict) else values
-              for section, values in payload["config"].items()}  # fmt: skip
-    config["model"]["spread_scale"] = gamma
-    return {**payload, "config": config}
-
-
 def sweep(path: Path, split, args) -> dict[str, dict]:
     """Metrics of one generator file on one split at gamma = 1 and every candidate."""
     payload = ckpt.load(path)
     out = {}
     for gamma in (1.0, *CANDIDATES):
-        predictor = ckpt.predictor_from_payload(with_spread(payload, gamma))
+        predictor = ckpt.predictor_from_payload(with_model_setting(payload, "spread_scale", gamma))
         out[str(gamma)] = validation_metrics(predictor.to(args.device).eval(), split,
                                              args.samples, args.seed, args.device)  # fmt: skip
     return out

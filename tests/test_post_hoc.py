@@ -1,5 +1,6 @@
-"""benchmarks/post_hoc.py: which published generators a post-training setting study covers, and
-its ``--apply`` step, which writes nothing unless the stored decision allows it."""
+"""benchmarks/post_hoc.py: which published generators a post-training setting study covers, the
+payload copy it evaluates a setting on, and its ``--apply`` step, which writes nothing unless
+the stored decision allows it."""
 
 import json
 
@@ -76,3 +77,11 @@ def test_a_study_record_names_its_machine_command_and_split(tmp_path):
     record = json.loads(out.read_text())
     assert record["split"] == "val" and record["command"] == "python x.py"
     assert record["seed"] == 3 and record["rows"] == [{"a": 1}] and record["machine"]
+
+
+def test_with_model_setting_copies_the_config_and_leaves_the_payload_alone():
+    ph = load_benchmark("post_hoc")
+    payload = {"config": {"model": {"spread_scale": 1.0, "hidden": 8}, "seed": 0}, "kind": "g"}
+    out = ph.with_model_setting(payload, "spread_scale", 1.2)
+    assert out["config"]["model"] == {"spread_scale": 1.2, "hidden": 8}
+    assert payload["config"]["model"]["spread_scale"] == 1.0 and out["kind"] == "g"
