@@ -195,6 +195,9 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
                              "stochastic_steps": cfg["model"]["stochastic_steps"],
                              "agent_frame": cfg["model"].get("agent_frame", "scene"),
                              "max_speed": cfg["model"].get("max_speed", 0.0),
+                             "history_encoder": cfg["model"].get("history_encoder", "mlp"),
+                             "spread_scale": cfg["model"].get("spread_scale", 1.0),
+                             "ema_epochs": meta.get("ema_epochs"),
                              "changes": changes}  # fmt: skip
         cfg = trained_config(cfg, changes)  # the training command reproduces the run
         ref = head.get("denoiser_ref") or {}
@@ -283,6 +286,15 @@ def _sampling_lines(sampling: dict[str, Any] | None) -> list[str]:
     if sampling.get("agent_frame") == "heading":
         text += (" The generator sees and predicts each agent in its heading frame "
                  "(`model.agent_frame: heading`).")  # fmt: skip
+    if sampling.get("history_encoder") == "temporal":
+        text += (" Its encoder reads each agent's history with a GRU beside the MLP "
+                 "(`model.history_encoder: temporal`).")  # fmt: skip
+    if sampling.get("spread_scale", 1.0) != 1.0:
+        text += (f" Its samples' spread about their mean is scaled by "
+                 f"{sampling['spread_scale']:g} (`model.spread_scale`).")  # fmt: skip
+    if sampling.get("ema_epochs"):
+        text += (f" Its weights are a moving average of the training iterates (time constant "
+                 f"{sampling['ema_epochs']:g} epochs, `generator.ema_epochs`).")  # fmt: skip
     if sampling.get("max_speed"):
         text += (f" Agents faster than {sampling['max_speed']:.3f} model units per observed step "
                  "are seen at that speed and their prediction scaled back up "

@@ -8,6 +8,7 @@ import copy
 import dataclasses
 import difflib
 import inspect
+import math
 import textwrap
 import typing
 import warnings
@@ -225,9 +226,17 @@ class OptimConfig:
     bfloat16 on the stage's device; weights, optimiser state and validation stay float32).
     bf16 is fast where the CPU has bfloat16 instructions (AVX512-BF16, AMX) or on a GPU;
     elsewhere it can be slower (docs/pretraining.md, "bfloat16 training steps")."""
+    ema_epochs: float = 0.0
+    """Time constant, in epochs, of an exponential moving average of the trained weights
+    (0: off). When on, validation and the best checkpoint use the average, the raw weights
+    are validated too (logged as ``val_raw_*``, one more validation pass), and the decay per
+    step is ``exp(-1 / (ema_epochs * steps_per_epoch))``, warmed up over the first steps
+    (``train/ema.py``; docs/pretraining.md, "A moving average of the weights")."""
 
     def __post_init__(self) -> None:
         _positive(self, "epochs", "lr", "grad_clip", "eval_every")
+        if not (self.ema_epochs >= 0 and math.isfinite(self.ema_epochs)):
+            raise ConfigError(f"ema_epochs must be >= 0 (0: off), got {self.ema_epochs}")
         if self.steps_per_epoch is not None and self.steps_per_epoch < 1:
             raise ConfigError("steps_per_epoch must be >= 1 or null")
         if self.max_minutes is not None and self.max_minutes <= 0:

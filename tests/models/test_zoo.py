@@ -227,3 +227,15 @@ def test_a_card_tells_a_clamp_set_after_training_from_one_trained_with():
     twice = text({"max_speed": 0.4, "previous": 0.0, "note": "a"},
                  {"max_speed": 0.3, "previous": 0.4, "note": "b"})  # fmt: skip
     assert "Trained with" not in twice and "set to 0.300 after training" in twice
+
+
+def test_a_card_names_the_history_encoder_the_spread_and_the_weight_average():
+    zi = _zoo_index()
+    base = {"tau": 5, "stochastic_steps": False, "changes": []}
+    plain = zi._sampling_lines(base)[0]
+    assert "GRU" not in plain and "spread" not in plain and "moving average" not in plain
+    text = zi._sampling_lines({**base, "history_encoder": "temporal", "spread_scale": 0.9,
+                               "ema_epochs": 4.0})[0]  # fmt: skip
+    assert "(`model.history_encoder: temporal`)" in text
+    assert "scaled by 0.9 (`model.spread_scale`)" in text
+    assert "time constant 4 epochs, `generator.ema_epochs`" in text

@@ -8,6 +8,7 @@ augmentation, optimisation, DDP, progress bars, metric logs, best checkpoint, re
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import json
 import math
@@ -28,6 +29,7 @@ from trajpref.errors import ConfigError, TrajprefError
 from trajpref.io import atomic_path, dumps_json, load_tensors
 from trajpref.models import checkpoint as ckpt
 from trajpref.train.distributed import DistInfo
+from trajpref.train.ema import WeightAverage, ema_decay
 from trajpref.train.stages import Stage
 from trajpref.types import TrajectoryDataset
 
@@ -159,6 +161,11 @@ def precision_autocast(device: torch.device, precision: str) -> torch.autocast:
     return torch.autocast(device.type, dtype=torch.bfloat16, enabled=precision == "bf16")
 
 
+def _averaged(average: WeightAverage | None, module: nn.Module):
+    """The averaged weights swapped into ``module`` for a block, or nothing without one."""
+    return average.swapped_in(module) if average is not None else contextlib.nullcontext()
+
+
 def fit(
     stage: Stage,
     train: TrajectoryDataset,
@@ -194,6 +201,10 @@ def fit(
     sched = torch.optim.lr_scheduler.LambdaLR(optimizer, _lr_lambda(optim_cfg, total))
     noise_gen = torch.Generator().manual_seed(seed * 1000 + dist_info.rank)
     aug_gen = torch.Generator().manual_seed(seed * 1000 + 500 + dist_info.rank)
+    average = None  # the weights' moving average (every rank keeps it: weights agree under DDP)
+    if optim_cfg.ema_epochs > 0:
+        decay = ema_decay(optim_cfg.ema_epochs, steps_per_epoch * stage.updates)
+        average = WeightAverage(stage.trainable, decay)
 
     start_epoch, step, best, elapsed = 0, 0, {"score": math.inf}, 0.0
     # what max_minutes counts: elapsed time, or this process's CPU time (fair under sharing)
@@ -212,6 +223,12 @@ def fit(
         start_epoch, step, best = state["epoch"] + 1, state["step"], state["best"]
         elapsed = state["elapsed"]
         spent = state.get("spent", elapsed)  # states written before budget_clock: wall time
+        if average is not None:
+            if "ema" not in state:
+                raise ConfigError("this run averages its weights (ema_epochs > 0) but the "
+                                  "resume state has no average; resume with the run's own "
+                                  "config.yaml")  # fmt: skip
+            average.load_state_dict(state["ema"])
 
     objective: nn.Module = stage.objective
     if dist_info.enabled:
@@ -259,6 +276,8 @@ def fit(
                 grad_norm = torch.nn.utils.clip_grad_norm_(params, optim_cfg.grad_clip)
                 optimizer.step()
                 sched.step()
+                if average is not None:
+                    average.update(stage.trainable)
                 step += 1
                 logs = {"loss": float(loss.detach()), "grad_norm": float(grad_norm), **logs}
                 for key, value in logs.items():
@@ -285,14 +304,20 @@ def fit(
         last = epoch + 1 == optim_cfg.epochs or stop
         if main and ((epoch + 1) % optim_cfg.eval_every == 0 or last):
             stage.objective.eval()
-            val = stage.validate()
-            record.update({f"val_{k}": v for k, v in val.items()})
-            if val["score"] < best["score"]:
-                best = {**val, "epoch": epoch + 1}
-                meta = {"epoch": epoch + 1, "step": step, "val": val,
-                        "train_seconds": round(elapsed, 2), "dataset": train.info.name}  # fmt: skip
-                ckpt.save(out_dir / f"{stage.name}{ckpt.SUFFIX}", stage.payload(meta))
-                record["best"] = True
+            if average is not None:  # the raw weights too, for the comparison
+                record.update({f"val_raw_{k}": v for k, v in stage.validate().items()})
+            with _averaged(average, stage.trainable):
+                val = stage.validate()
+                record.update({f"val_{k}": v for k, v in val.items()})
+                if val["score"] < best["score"]:
+                    best = {**val, "epoch": epoch + 1}
+                    meta = {"epoch": epoch + 1, "step": step, "val": val,
+                            "train_seconds": round(elapsed, 2),
+                            "dataset": train.info.name}  # fmt: skip
+                    if average is not None:
+                        meta["ema_epochs"] = optim_cfg.ema_epochs
+                    ckpt.save(out_dir / f"{stage.name}{ckpt.SUFFIX}", stage.payload(meta))
+                    record["best"] = True
             stage.objective.train()
         if main:
             log.write(record)
@@ -301,6 +326,7 @@ def fit(
                 "optimizer": optimizer.state_dict(), "scheduler": sched.state_dict(),
                 "noise_gen": noise_gen.get_state(), "aug_gen": aug_gen.get_state(),
                 "epoch": epoch, "step": step, "best": best, "elapsed": elapsed, "spent": spent,
+                **({"ema": average.state_dict()} if average is not None else {}),
             })  # fmt: skip
             summary = {k: (round(v, 4) if isinstance(v, float) else v) for k, v in record.items()}
             tqdm.write(f"[{stage.name}] " + " ".join(f"{k}={v}" for k, v in summary.items()))
