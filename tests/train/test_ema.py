@@ -147,3 +147,15 @@ def test_resuming_an_averaging_run_from_a_state_without_average_is_refused(tmp_p
     with pytest.raises(ConfigError, match="no average"):
         train_stage("generator", _with_ema(tiny_cfg), tmp_path, device="cpu", progress=False,
                     denoiser=denoiser, resume=str(tmp_path / "generator_last.pt"))  # fmt: skip
+
+
+def test_only_trained_parameters_are_averaged():
+    layer = _linear(1.0)
+    layer.bias.requires_grad_(False)
+    layer.register_buffer("table", torch.tensor([0.1, 0.2]))
+    average = WeightAverage(layer, decay=0.5)
+    assert set(average.shadow) == {"weight"}
+    with torch.no_grad():
+        layer.bias.fill_(4.0)
+    with average.swapped_in(layer):
+        assert layer.bias.item() == 4.0 and layer.table.tolist() == pytest.approx([0.1, 0.2])

@@ -36,18 +36,18 @@ def warmed_decay(decay: float, updates: int) -> float:
 
 
 class WeightAverage:
-    """EMA of the floating-point entries of ``module.state_dict()`` (parameters and float
-    buffers; other entries are left to the module). The average is kept in float32."""
+    """EMA of a module's trained parameters (those that require gradients), kept in float32.
+    Buffers and frozen parameters stay the module's own: constants such as a noise schedule's
+    are not averaged into rounding noise."""
 
     def __init__(self, module: nn.Module, decay: float):
         if not 0.0 <= decay < 1.0:
             raise ConfigError(f"EMA decay must be in [0, 1), got {decay}")
         self.decay = decay
         self.updates = 0
+        trained = {name for name, p in module.named_parameters() if p.requires_grad}
         self.shadow: dict[str, torch.Tensor] = {
-            k: v.detach().float().clone()
-            for k, v in module.state_dict().items()
-            if v.is_floating_point()
+            k: v.detach().float().clone() for k, v in module.state_dict().items() if k in trained
         }
 
     @torch.no_grad()
@@ -82,8 +82,7 @@ class WeightAverage:
 
     def load_state_dict(self, state: dict[str, object]) -> None:
         shadow = state["shadow"]
-        assert isinstance(shadow, dict)
-        if set(shadow) != set(self.shadow):
+        if not isinstance(shadow, dict) or set(shadow) != set(self.shadow):
             raise ConfigError("the resume state's weight average does not fit this model")
         for key, value in shadow.items():
             self.shadow[key].copy_(value)
