@@ -41,12 +41,12 @@ def test_update_matches_a_hand_computed_average():
     average = WeightAverage(layer, decay=0.5)
     with torch.no_grad():
         layer.weight.fill_(3.0)
-    assert average.update(layer) == pytest.approx(2 / 11)  # warm-up: min(0.5, 2/11)
+    assert average.update() == pytest.approx(2 / 11)  # warm-up: min(0.5, 2/11)
     first = 2 / 11 * 1.0 + 9 / 11 * 3.0
     assert average.shadow["weight"].item() == pytest.approx(first)
     with torch.no_grad():
         layer.weight.fill_(5.0)
-    assert average.update(layer) == pytest.approx(3 / 12)
+    assert average.update() == pytest.approx(3 / 12)
     assert average.shadow["weight"].item() == pytest.approx(0.25 * first + 0.75 * 5.0)
 
 
@@ -55,10 +55,10 @@ def test_swapped_in_holds_the_average_then_restores_the_raw_weights_even_on_erro
     average = WeightAverage(layer, decay=0.5)
     with torch.no_grad():
         layer.weight.fill_(7.0)
-    with average.swapped_in(layer):
+    with average.swapped_in():
         assert layer.weight.item() == 1.0
     assert layer.weight.item() == 7.0
-    with pytest.raises(RuntimeError), average.swapped_in(layer):
+    with pytest.raises(RuntimeError), average.swapped_in():
         raise RuntimeError("validation failed")
     assert layer.weight.item() == 7.0
 
@@ -157,5 +157,5 @@ def test_only_trained_parameters_are_averaged():
     assert set(average.shadow) == {"weight"}
     with torch.no_grad():
         layer.bias.fill_(4.0)
-    with average.swapped_in(layer):
+    with average.swapped_in():
         assert layer.bias.item() == 4.0 and layer.table.tolist() == pytest.approx([0.1, 0.2])

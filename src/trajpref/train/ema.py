@@ -38,47 +38,47 @@ def warmed_decay(decay: float, updates: int) -> float:
 class WeightAverage:
     """EMA of a module's trained parameters (those that require gradients), kept in float32.
     Buffers and frozen parameters stay the module's own: constants such as a noise schedule's
-    are not averaged into rounding noise."""
+    are not averaged into rounding noise. The parameters are looked up once, here: the
+    optimiser and ``load_state_dict`` change them in place, so the references stay valid."""
 
     def __init__(self, module: nn.Module, decay: float):
         if not 0.0 <= decay < 1.0:
             raise ConfigError(f"EMA decay must be in [0, 1), got {decay}")
         self.decay = decay
         self.updates = 0
-        trained = {name for name, p in module.named_parameters() if p.requires_grad}
+        self.params = {name: p for name, p in module.named_parameters() if p.requires_grad}
         self.shadow: dict[str, torch.Tensor] = {
-            k: v.detach().float().clone() for k, v in module.state_dict().items() if k in trained
+            name: p.detach().float().clone() for name, p in self.params.items()
         }
 
     @torch.no_grad()
-    def update(self, module: nn.Module) -> float:
+    def update(self) -> float:
         """Fold the module's current weights in; returns the decay used."""
         self.updates += 1
         d = warmed_decay(self.decay, self.updates)
-        state = module.state_dict()
-        for key, avg in self.shadow.items():
-            avg.mul_(d).add_(state[key].detach().float(), alpha=1.0 - d)
+        for name, avg in self.shadow.items():
+            avg.mul_(d).add_(self.params[name].float(), alpha=1.0 - d)
         return d
 
     @contextmanager
-    def swapped_in(self, module: nn.Module) -> Iterator[None]:
+    def swapped_in(self) -> Iterator[None]:
         """Within the block the module holds the averaged weights; the raw ones come back
         after it, exactly, even when the block raises."""
-        raw = {k: v.detach().clone() for k, v in module.state_dict().items() if k in self.shadow}
-        state = module.state_dict()
         with torch.no_grad():
-            for key, avg in self.shadow.items():
-                state[key].copy_(avg)
+            raw = {name: p.clone() for name, p in self.params.items()}
+            for name, avg in self.shadow.items():
+                self.params[name].copy_(avg)
         try:
             yield
         finally:
             with torch.no_grad():
-                for key, value in raw.items():
-                    state[key].copy_(value)
+                for name, value in raw.items():
+                    self.params[name].copy_(value)
 
     def state_dict(self) -> dict[str, object]:
-        """Tensors and plain values, for a resume state loaded with ``weights_only=True``."""
-        return {"decay": self.decay, "updates": self.updates, "shadow": self.shadow}
+        """Tensors and plain values, for a resume state loaded with ``weights_only=True`` (the
+        decay is not among them: it follows from the run's config)."""
+        return {"updates": self.updates, "shadow": self.shadow}
 
     def load_state_dict(self, state: dict[str, object]) -> None:
         shadow = state["shadow"]

@@ -161,9 +161,9 @@ def precision_autocast(device: torch.device, precision: str) -> torch.autocast:
     return torch.autocast(device.type, dtype=torch.bfloat16, enabled=precision == "bf16")
 
 
-def _averaged(average: WeightAverage | None, module: nn.Module):
-    """The averaged weights swapped into ``module`` for a block, or nothing without one."""
-    return average.swapped_in(module) if average is not None else contextlib.nullcontext()
+def _averaged(average: WeightAverage | None):
+    """The averaged weights swapped into their module for a block, or nothing without one."""
+    return average.swapped_in() if average is not None else contextlib.nullcontext()
 
 
 def fit(
@@ -277,7 +277,7 @@ def fit(
                 optimizer.step()
                 sched.step()
                 if average is not None:
-                    average.update(stage.trainable)
+                    average.update()
                 step += 1
                 logs = {"loss": float(loss.detach()), "grad_norm": float(grad_norm), **logs}
                 for key, value in logs.items():
@@ -306,7 +306,7 @@ def fit(
             stage.objective.eval()
             if average is not None:  # the raw weights too, for the comparison
                 record.update({f"val_raw_{k}": v for k, v in stage.validate().items()})
-            with _averaged(average, stage.trainable):
+            with _averaged(average):
                 val = stage.validate()
                 record.update({f"val_{k}": v for k, v in val.items()})
                 if val["score"] < best["score"]:
