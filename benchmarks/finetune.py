@@ -119,7 +119,7 @@ def main() -> None:
                 "min_ade", "min_fde", "joint_min_ade", "joint_min_fde", "max_ats",
                 "max_fts", "top1_recall_ats", "top5_recall_ats")},
             train_seconds=round(summary["train_seconds"], 1),
-            checkpoint=str(best.relative_to(ROOT)),
+            checkpoint=str(best.relative_to(ROOT)), model_hash=ckpt.model_hash(best),
             uses_score=cfg.finetune.method != "control"
             and (cfg.finetune.policy_weight > 0 or cfg.finetune.value_weight > 0),
         )  # fmt: skip

@@ -164,6 +164,7 @@ def main() -> None:
             ms_per_scene=round(ms, 3),
             uses_score=False,
             checkpoint=str(published.relative_to(ROOT)),
+            model_hash=ckpt.model_hash(published, "full" if "full" in method else "leapfrog"),
         ))  # fmt: skip
         print(f"{args.dataset} {method:>12}: minADE {res['min_ade']:.3f} minFDE "
               f"{res['min_fde']:.3f}  joint {res['joint_min_ade']:.3f}/"

@@ -70,6 +70,7 @@ def main() -> None:
                 dataset=fold, split="test", protocol="sgan", method=method, seed=args.seed,
                 samples=args.samples, uses_score=False, ms_per_scene=round(ms, 3),
                 checkpoint=None if path is None else str(path.relative_to(ROOT)),
+                model_hash=None if path is None else ckpt.model_hash(path),
                 **{k: res[k] for k in METRICS},
             ))  # fmt: skip
             print(f"  {method:<20} minADE {res['min_ade']:.3f}  minFDE {res['min_fde']:.3f}  "

@@ -124,6 +124,9 @@ def main() -> None:
                 "top1_recall_ats", "top5_recall_ats")},
             uses_score=False,
             checkpoint=None if method == "cv" else str(gen_path.relative_to(ROOT)),
+            model_hash=None if method == "cv" else ckpt.model_hash(
+                gen_path, "full" if method == "full-sampler" else "leapfrog"
+            ),
         ))  # fmt: skip
         extra["methods"][method] = res
         print(f"{method:>12}: minADE {res['min_ade']:.3f} minFDE {res['min_fde']:.3f} "

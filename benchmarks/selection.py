@@ -198,6 +198,7 @@ def main() -> None:
             min_ade=v["min_ade"], min_fde=v["min_fde"], joint_min_ade=v["joint_min_ade"],
             joint_min_fde=v["joint_min_fde"], ms_per_scene=round(v["ms"], 3),
             checkpoint=str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path),
+            model_hash=ckpt.model_hash(path),
             uses_score=v["uses_score"],
         ))  # fmt: skip
     meta = {"header": header, "ms_predict_per_scene": ms_predict, "ms_score_per_scene": ms_score,

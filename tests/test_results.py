@@ -9,6 +9,7 @@ from trajpref.results import (
     FIELDS,
     RUNNABLE_STARTS,
     START_SUFFIXES,
+    ResultConflict,
     accuracy_table,
     finetune_start,
     make_row,
@@ -46,6 +47,29 @@ def test_rows_default_to_the_all_protocol_and_keep_the_schema(tmp_path):
 def test_the_same_measurement_under_two_protocols_is_not_merged():
     rows = merge_rows([_row("eth", ade=0.2), _row("eth", protocol="sgan", ade=0.3)])
     assert sorted(r["min_ade"] for r in rows) == [0.2, 0.3]
+
+
+def _scored(model_hash, max_ats=0.7):
+    return make_row(dataset="zara1", split="test", method="pretrained", seed=0, samples=20,
+                    max_ats=max_ats, model_hash=model_hash, date="2026-11-25",
+                    command="score")  # fmt: skip
+
+
+def test_rows_of_one_checkpoint_merge_and_unknown_hashes_merge_as_before():
+    acc = {**_row("zara1", ade=0.18, fde=0.33), "model_hash": "aaaaaaaaaaaa"}
+    (merged,) = merge_rows([acc, _scored("aaaaaaaaaaaa")])
+    assert (merged["min_fde"], merged["max_ats"]) == (0.33, 0.7)
+    (merged,) = merge_rows([_row("zara1", ade=0.18, fde=0.33), _scored("aaaaaaaaaaaa")])
+    assert merged["max_ats"] == 0.7 and merged["model_hash"] == "aaaaaaaaaaaa"
+
+
+def test_rows_of_one_measurement_on_different_checkpoints_are_refused():
+    acc = {**_row("zara1", ade=0.18, fde=0.33), "model_hash": "aaaaaaaaaaaa"}
+    with pytest.raises(ResultConflict, match="bbbbbbbbbbbb .2026-11-25: score.*re-run the stale"):
+        merge_rows([acc, _scored("bbbbbbbbbbbb")])
+    # another seed is another measurement, whatever its checkpoint
+    other_seed = {**_scored("bbbbbbbbbbbb"), "seed": 1}
+    assert len(merge_rows([acc, other_seed])) == 2
 
 
 def test_accuracy_table_shows_one_protocol():

@@ -14,16 +14,21 @@ from typing import Any
 
 import torch
 
+from trajpref.errors import TrajprefError
 from trajpref.io import write_json
 
 FIELDS = (
     "dataset", "split", "protocol", "method", "seed", "samples", "min_ade", "min_fde",
     "joint_min_ade", "joint_min_fde", "max_ats", "max_fts", "top1_recall_ats", "top5_recall_ats",
-    "train_seconds", "ms_per_scene", "checkpoint", "command", "date", "machine", "uses_score",
+    "train_seconds", "ms_per_scene", "checkpoint", "model_hash", "command", "date", "machine",
+    "uses_score",
 )  # fmt: skip
 """Every row has exactly these keys (null where not measured). ``protocol``: which test windows
-count (``data.PROTOCOLS``; ``make_row`` defaults it to ``all``). ``uses_score``: whether the
-diffusion score took part (in training or in selecting the samples)."""
+count (``data.PROTOCOLS``; ``make_row`` defaults it to ``all``). ``model_hash``: the digest of
+the checkpoint measured (``models.checkpoint.model_hash``: weights, denoiser, scale and model
+settings), null for rows without a checkpoint or written before 2026-11-26 and not traced
+back to their weights. ``uses_score``: whether the diffusion score took part (in training or
+in selecting the samples)."""
 
 METHODS = ("cv", "full-sampler", "pretrained", "pretrained-long", "control", "rlhf", "rlhf-res",
            "rlhf-set", "rlhf-res-smooth")  # fmt: skip
@@ -157,19 +162,34 @@ def _fmt(x: Any, digits: int = 3) -> str:
     return str(x)
 
 
+class ResultConflict(TrajprefError):
+    """Two rows of one measurement were taken on different checkpoints (``model_hash``): one
+    of them is stale and must be measured again before the rows can be merged."""
+
+
 def merge_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Rows of the same measurement (dataset, split, protocol, method, seed, samples) written
     by different scripts (e.g. accuracy by one, scores by another) merged field by field; the
-    first non-null value wins."""
+    first non-null value wins. Rows whose ``model_hash`` is known and differs measured
+    different weights or settings: merging them is refused (:class:`ResultConflict`)."""
     merged: dict[tuple, dict[str, Any]] = {}
     for r in rows:
         key = tuple(r[k] for k in ROW_KEY)
         if key not in merged:
             merged[key] = dict(r)
-        else:
-            for field, value in r.items():
-                if merged[key].get(field) is None:
-                    merged[key][field] = value
+            continue
+        into = merged[key]
+        mine, theirs = into.get("model_hash"), r.get("model_hash")
+        if mine is not None and theirs is not None and mine != theirs:
+            what = ", ".join(f"{k}={v}" for k, v in zip(ROW_KEY, key, strict=True))
+            raise ResultConflict(
+                f"rows of one measurement ({what}) measured different checkpoints: "
+                f"{mine} ({into.get('date')}: {into.get('command')}) and {theirs} "
+                f"({r.get('date')}: {r.get('command')}); re-run the stale one"
+            )
+        for field, value in r.items():
+            if into.get(field) is None:
+                into[field] = value
     return list(merged.values())
 
 

@@ -448,3 +448,37 @@ def test_a_temporal_generator_is_rebuilt_from_its_checkpoint_alone(tmp_path):
     rebuilt, _ = ckpt.build_generator(ckpt.load(tmp_path / "g.safetensors"))
     assert rebuilt.cfg.history_encoder == "temporal"
     _assert_same_state(rebuilt.state_dict(), gen.state_dict())
+
+
+# ----------------------------------------------------------------------------- model_hash
+
+
+def test_model_hash_follows_weights_and_settings_not_the_file(tmp_path, cfg):
+    run_file = _publish_generator(tmp_path, cfg, 1, name="a")
+    pub = tmp_path / "pub" / "a.safetensors"
+    ckpt.publish(run_file, pub, half=False)
+    # the same weights, embedded denoiser or named one: the same model
+    assert ckpt.model_hash(run_file) == ckpt.model_hash(pub)
+    assert len(ckpt.model_hash(pub)) == 12
+    # other generator weights, same denoiser: another leapfrog model, the same full sampler
+    other = tmp_path / "pub" / "b.safetensors"
+    ckpt.publish(_publish_generator(tmp_path, cfg, 2, name="b"), other, half=False)
+    assert ckpt.model_hash(other) != ckpt.model_hash(pub)
+    assert ckpt.model_hash(other, "full") == ckpt.model_hash(pub, "full")
+    assert ckpt.model_hash(pub, "full") == ckpt.model_hash(pub.parent / ckpt.DENOISER_NAME, "full")
+    # a sampling setting changes what the file predicts, so its digest
+    before = ckpt.model_hash(pub)
+    ckpt.set_generator_setting(pub, "max_speed", 0.5, note="test")
+    assert ckpt.model_hash(pub) != before
+    assert ckpt.model_hash(pub, "full") == ckpt.model_hash(other, "full")
+    # a settings-only variant of the same weights with the same settings is the same model
+    variant = tmp_path / "pub" / "a-v.safetensors"
+    ckpt.publish_variant(pub, variant, {"spread_scale": 1.0}, note="no change")
+    assert ckpt.model_hash(variant) == ckpt.model_hash(pub)
+    ckpt.publish_variant(pub, variant, {"spread_scale": 0.9}, note="narrower")
+    assert ckpt.model_hash(variant) != ckpt.model_hash(pub)
+
+
+def test_model_hash_of_a_header_without_weights_is_a_clear_error():
+    with pytest.raises(TrajprefError, match="without"):
+        ckpt.header_model_hash({"kind": "generator", "config": {"model": {}}, "scale": 1.0})

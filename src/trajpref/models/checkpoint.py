@@ -66,6 +66,38 @@ def state_hash(state: dict[str, torch.Tensor]) -> str:
     return h.hexdigest()[:16]
 
 
+def header_model_hash(header: dict[str, Any], sampler: Sampler = "leapfrog") -> str:
+    """What a checkpoint predicts with, as a 12-digit digest: its weights' hash, its
+    denoiser's (named or embedded), its data scale and its model settings (the sampling
+    settings such as ``max_speed`` included). Two checkpoints with the same digest predict the
+    same; a results row records it (``model_hash``) so that rows of different weights are
+    never merged. ``sampler="full"``: the digest of what the full sampler runs, the denoiser
+    and the data scale alone (a generator file and its denoiser's file give the same one).
+    ``header`` is a checkpoint's metadata or payload (tensors are not read)."""
+    den = header.get("denoiser_ref") or header.get("denoiser") or {}
+    try:
+        if sampler == "full":
+            weights = header["hash"] if header["kind"] == "denoiser" else den.get("hash")
+            parts = {"sampler": "full", "denoiser": weights, "scale": float(header["scale"])}
+        else:
+            parts = {"kind": header["kind"], "weights": header["hash"],
+                     "denoiser": den.get("hash"), "scale": float(header["scale"]),
+                     "model": header["config"]["model"]}  # fmt: skip
+    except (KeyError, TypeError) as exc:
+        raise TrajprefError(f"a checkpoint header without {exc}") from None
+    text = json.dumps(parts, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+def model_hash(path: str | Path, sampler: Sampler = "leapfrog") -> str:
+    """:func:`header_model_hash` of a checkpoint file or published name (header only for
+    ``.safetensors``; a legacy ``.pt`` file is loaded)."""
+    path = resolve_path(path)
+    if path.suffix == LEGACY_SUFFIX:
+        return header_model_hash(_read_legacy(path), sampler)
+    return header_model_hash(read_checkpoint_header(path), sampler)
+
+
 def _cpu_state(module: torch.nn.Module) -> dict[str, torch.Tensor]:
     return {k: v.detach().cpu().clone() for k, v in module.state_dict().items()}
 

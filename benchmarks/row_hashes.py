@@ -1,0 +1,160 @@
+"""Which checkpoint did each results row measure? Fill and check the rows' ``model_hash``.
+
+Rows written since 2026-11-26 carry ``model_hash`` (``trajpref.models.checkpoint.model_hash``
+of the checkpoint they measured: weights, denoiser, data scale and model settings), and
+``results.merge_rows`` refuses to merge rows of one measurement taken on different
+checkpoints. Older rows were written without it; ``--backfill`` traces each of them through the
+git history of its results file: the commit from which the row has stood unchanged in the file
+is taken as the one that recorded it, and the checkpoint file committed at that commit (its
+``checkpoint`` path, or the ``git show REV:PATH`` it names) gives the hash. A row whose
+checkpoint was never tracked (``runs/...``) keeps null. Assumption, stated: the weights
+committed with a row are the ones it measured (true when a measurement and its weights land in
+one commit, or the weights landed first).
+
+    python benchmarks/row_hashes.py --backfill   # once: add the field to every row
+    python benchmarks/row_hashes.py              # report rows that cannot be merged, and rows
+                                                 # whose checkpoint file now holds other weights
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import tempfile
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+from trajpref.errors import TrajprefError
+from trajpref.models import checkpoint as ckpt
+from trajpref.results import FIELDS, ROW_KEY
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "benchmarks" / "results"
+ZOO = "src/trajpref/zoo/"
+"""Where ``models/`` (a link) points: the path git tracks the published files under."""
+
+
+def _git(*args: str) -> bytes:
+    return subprocess.run(["git", "-C", str(ROOT), *args], check=True, capture_output=True).stdout
+
+
+def _identity(row: dict[str, Any]) -> str:
+    """A row's content without ``model_hash`` (to follow it through history)."""
+    return json.dumps({k: v for k, v in row.items() if k != "model_hash"}, sort_keys=True)
+
+
+def sampler_of(row: dict[str, Any]) -> str:
+    """The sampler a row measured: the full sampler for ``full-sampler*`` rows."""
+    return "full" if row["method"].startswith("full-sampler") else "leapfrog"
+
+
+def recorded_at(path: Path) -> dict[str, str]:
+    """For each row now in ``path`` (by content), the commit from which it has stood there
+    unchanged. Rows not committed yet are absent."""
+    rel = str(path.relative_to(ROOT))
+    commits = _git("log", "--format=%H", "--reverse", "--", rel).decode().split()
+    since: dict[str, str] = {}
+    for commit in commits:
+        try:
+            rows = json.loads(_git("show", f"{commit}:{rel}"))
+        except subprocess.CalledProcessError:  # the file was removed in this commit
+            rows = []
+        present = {_identity(r) for r in rows}
+        since = {i: since.get(i, commit) for i in present}
+    return since
+
+
+class Blobs:
+    """``model_hash`` of checkpoint files as committed, cached by git blob."""
+
+    def __init__(self) -> None:
+        self.by_blob: dict[tuple[str, str], str | None] = {}
+
+    def hash_at(self, commit: str, checkpoint: str, sampler: str = "leapfrog") -> str | None:
+        if checkpoint.startswith("git show "):
+            commit, _, checkpoint = checkpoint.removeprefix("git show ").partition(":")
+        candidates = [checkpoint]
+        if checkpoint.startswith("models/"):
+            candidates.append(ZOO + checkpoint.removeprefix("models/"))
+        for rel in candidates:
+            try:
+                blob = _git("rev-parse", "--verify", "-q", f"{commit}:{rel}").decode().strip()
+            except subprocess.CalledProcessError:
+                continue
+            if (blob, sampler) not in self.by_blob:
+                self.by_blob[blob, sampler] = self._digest(blob, Path(rel).suffix, sampler)
+            return self.by_blob[blob, sampler]
+        return None  # never tracked at that commit (a run folder)
+
+    @staticmethod
+    def _digest(blob: str, suffix: str, sampler: str) -> str | None:
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / f"checkpoint{suffix}"
+            path.write_bytes(_git("cat-file", "blob", blob))
+            try:
+                return ckpt.model_hash(path, sampler)
+            except TrajprefError:
+                return None  # a git-lfs pointer or a damaged file
+
+
+def backfill() -> None:
+    blobs = Blobs()
+    for path in sorted(RESULTS.glob("*.json")):
+        rows = json.loads(path.read_text())
+        since = recorded_at(path)
+        filled = 0
+        out = []
+        for row in rows:
+            value = row.get("model_hash")
+            commit = since.get(_identity(row))
+            if value is None and row.get("checkpoint") and commit is not None:
+                value = blobs.hash_at(commit, row["checkpoint"], sampler_of(row))
+                filled += value is not None
+            out.append({k: value if k == "model_hash" else row.get(k) for k in FIELDS})
+        path.write_text(json.dumps(out, indent=2) + "\n")
+        print(f"{path.name:<44} {len(rows):>3} rows, {filled:>3} traced to their checkpoint")
+
+
+def check() -> int:
+    """Print rows of one measurement with different hashes, and rows whose checkpoint file
+    now holds other weights or settings; 1 when any of the first kind exists."""
+    groups: dict[tuple, list[tuple[str, dict[str, Any]]]] = defaultdict(list)
+    stale = []
+    for path in sorted(RESULTS.glob("*.json")):
+        for row in json.loads(path.read_text()):
+            groups[tuple(row[k] for k in ROW_KEY)].append((path.name, row))
+            file = ROOT / (row.get("checkpoint") or "-")
+            if row.get("model_hash") and file.is_file():
+                now = ckpt.model_hash(file, sampler_of(row))
+                if now != row["model_hash"]:
+                    stale.append((path.name, row, now))
+    conflicts = 0
+    for key, members in groups.items():
+        hashes = {r["model_hash"] for _, r in members if r.get("model_hash")}
+        if len(hashes) > 1:
+            conflicts += 1
+            print("cannot merge", dict(zip(ROW_KEY, key, strict=True)))
+            for name, r in members:
+                print(f"    {r.get('model_hash')}  {name}  {r['date']}  {r['command']}")
+    for name, row, now in stale:
+        print(f"{name}: {row['dataset']} {row['method']} seed {row['seed']} measured "
+              f"{row['model_hash']}; {row['checkpoint']} is now {now}")  # fmt: skip
+    print(f"{conflicts} measurements with rows of different checkpoints; {len(stale)} rows "
+          "whose checkpoint file has changed since")  # fmt: skip
+    return 1 if conflicts else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--backfill", action="store_true",
+                        help="add model_hash to every row, traced through git history")  # fmt: skip
+    args = parser.parse_args(argv)
+    if args.backfill:
+        backfill()
+    return check()
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,96 @@
+"""benchmarks/row_hashes.py: tracing old results rows to the checkpoint committed with them,
+and the repository's own rows (no two rows of one measurement on different checkpoints)."""
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+import torch
+from bench import load_benchmark
+from synthetic import TINY_OVERRIDES
+
+from trajpref.config import load_config
+from trajpref.models import checkpoint as ckpt
+from trajpref.models.denoiser import Denoiser
+from trajpref.models.generator import Generator
+from trajpref.results import make_row, read_rows
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _generator_file(path: Path, seed: int) -> str:
+    cfg = load_config(None, TINY_OVERRIDES)
+    torch.manual_seed(0)
+    den = ckpt.denoiser_payload(Denoiser(cfg.model), cfg, 0.7, {})
+    torch.manual_seed(seed)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    ckpt.save(path, ckpt.generator_payload(Generator(cfg.model), den, cfg, {}))
+    return ckpt.model_hash(path)
+
+
+def _row(method, checkpoint, fde):
+    return make_row(dataset="d", split="test", method=method, seed=0, samples=20, min_fde=fde,
+                    checkpoint=checkpoint, date="2026-11-20", machine="m", command="c")  # fmt: skip
+
+
+def _commit(repo: Path, message: str) -> None:
+    git = ["git", "-C", str(repo), "-c", "user.name=t", "-c", "user.email=t@t"]
+    subprocess.run([*git, "add", "-A"], check=True, capture_output=True)
+    subprocess.run([*git, "commit", "-qm", message], check=True, capture_output=True)
+
+
+@pytest.mark.skipif(shutil.which("git") is None, reason="needs git")
+def test_backfill_takes_the_checkpoint_committed_when_the_row_last_changed(tmp_path, monkeypatch):
+    rh = load_benchmark("row_hashes")
+    repo = tmp_path / "repo"
+    results = repo / "benchmarks" / "results"
+    results.mkdir(parents=True)
+    subprocess.run(["git", "init", "-q", str(repo)], check=True)
+    monkeypatch.setattr(rh, "ROOT", repo)
+    monkeypatch.setattr(rh, "RESULTS", results)
+    gen = "models/d/generator.safetensors"
+    first = _generator_file(repo / gen, seed=1)
+    rows = [_row("pretrained", gen, 0.40), _row("control", "runs/x/finetune.safetensors", 0.5),
+            _row("pretrained-old", gen, 0.45)]  # fmt: skip
+    for r in rows:
+        del r["model_hash"]  # written before the field existed
+    (results / "r.json").write_text(json.dumps(rows))
+    _commit(repo, "first weights and rows")
+    second = _generator_file(repo / gen, seed=2)  # new weights; the rows stay as they were
+    _commit(repo, "new weights")
+    rows[0]["min_fde"] = 0.38  # re-measured on the new weights
+    (results / "r.json").write_text(json.dumps(rows))
+    _commit(repo, "re-measured")
+    assert first != second
+
+    rh.backfill()
+    got = {r["method"]: r["model_hash"] for r in json.loads((results / "r.json").read_text())}
+    assert got == {"pretrained": second, "control": None, "pretrained-old": first}
+    assert rh.check() == 0  # three methods: nothing to merge
+
+
+def test_no_two_rows_of_one_measurement_name_different_checkpoints(capsys):
+    rh = load_benchmark("row_hashes")
+    assert rh.check() == 0, capsys.readouterr().out
+
+
+def test_published_rows_measured_the_weights_the_repository_ships():
+    """Every row of a published model (``pretrained``, ``pretrained-long``, variants) whose
+    checkpoint file is tracked names that file's weights and settings as they are now; the
+    only exceptions are the ``-ancestral`` rows, kept on purpose for the tables of their time
+    (measured before the sampling switch rewrote the files' settings)."""
+    stale, untraced = [], []
+    for row in read_rows(ROOT / "benchmarks" / "results"):
+        path = ROOT / (row["checkpoint"] or "-")
+        if not row["method"].startswith("pretrained") or not path.is_file():
+            continue
+        if row["model_hash"] is None:
+            untraced.append((row["dataset"], row["method"]))
+        elif row["model_hash"] != ckpt.model_hash(path) and not row["method"].endswith(
+            "-ancestral"
+        ):
+            stale.append((row["dataset"], row["method"], row["protocol"]))
+    assert not stale, f"rows measured other weights than their checkpoint holds: {stale}"
+    assert not untraced, f"published rows without a model_hash: {untraced}"
