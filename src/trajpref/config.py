@@ -229,7 +229,8 @@ class OptimConfig:
     ema_epochs: float = 0.0
     """Time constant, in epochs, of an exponential moving average of the trained weights
     (0: off). When on, validation and the best checkpoint use the average, the raw weights
-    are validated too (logged as ``val_raw_*``, one more validation pass), and the decay per
+    are validated too (logged as ``val_raw_*``, one more validation pass; their best is kept
+    as ``<stage>_raw.safetensors``, the run's own control), and the decay per
     step is ``exp(-1 / (ema_epochs * steps_per_epoch))``, warmed up over the first steps
     (``train/ema.py``; docs/pretraining.md, "A moving average of the weights")."""
 

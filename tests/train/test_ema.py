@@ -117,6 +117,13 @@ def test_the_checkpoint_holds_the_average_and_training_continues_from_the_raw_we
     assert any(not torch.equal(raw[k].float(), v) for k, v in shadow.items())
     for key, value in stage.trainable.state_dict().items():  # the raw weights came back
         torch.testing.assert_close(value, raw[key])
+    # the raw weights' own best (here the last epoch's) is kept beside it: the run's control
+    control = ckpt.load(tmp_path / "generator_raw.safetensors")
+    assert control["meta"]["epoch"] == cfg.generator.epochs
+    assert control["meta"]["weights"].startswith("raw")
+    for key, value in raw.items():
+        torch.testing.assert_close(control["state_dict"][key].float(), value.float())
+    assert last["best_raw"]["epoch"] == cfg.generator.epochs
 
 
 def test_a_resumed_run_continues_the_same_average(tmp_path, tiny_cfg, tiny_run):

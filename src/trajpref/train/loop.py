@@ -182,7 +182,10 @@ def fit(
     """Train ``stage`` and keep the checkpoint with the best validation ``score``.
 
     Writes ``<stage>.safetensors`` (best), ``<stage>_last.pt`` (for ``resume``) and
-    ``<stage>_metrics.jsonl`` into ``out_dir`` (rank 0 only). ``max_steps`` stops early
+    ``<stage>_metrics.jsonl`` into ``out_dir`` (rank 0 only). With a moving average of the
+    weights (``ema_epochs > 0``) the best checkpoint holds the average, and
+    ``<stage>_raw.safetensors`` keeps the best raw weights by the same validation: the run's
+    own control, same seed and batches. ``max_steps`` stops early
     (for tests). Returns a summary with the best validation metrics and the wall time.
     """
     dist_info = dist_info or DistInfo()
@@ -207,6 +210,7 @@ def fit(
         average = WeightAverage(stage.trainable, decay)
 
     start_epoch, step, best, elapsed = 0, 0, {"score": math.inf}, 0.0
+    best_raw: dict[str, Any] = {"score": math.inf}  # the raw weights' best, when averaging
     # what max_minutes counts: elapsed time, or this process's CPU time (fair under sharing)
     clock = time.process_time if optim_cfg.budget_clock == "cpu" else time.perf_counter
     spent = 0.0  # seconds of the budget's clock used by training steps
@@ -221,6 +225,7 @@ def fit(
         noise_gen.set_state(state["noise_gen"])
         aug_gen.set_state(state["aug_gen"])
         start_epoch, step, best = state["epoch"] + 1, state["step"], state["best"]
+        best_raw = state.get("best_raw", best_raw)
         elapsed = state["elapsed"]
         spent = state.get("spent", elapsed)  # states written before budget_clock: wall time
         if average is not None:
@@ -305,7 +310,15 @@ def fit(
         if main and ((epoch + 1) % optim_cfg.eval_every == 0 or last):
             stage.objective.eval()
             if average is not None:  # the raw weights too, for the comparison
-                record.update({f"val_raw_{k}": v for k, v in stage.validate().items()})
+                raw = stage.validate()
+                record.update({f"val_raw_{k}": v for k, v in raw.items()})
+                if raw["score"] < best_raw["score"]:
+                    best_raw = {**raw, "epoch": epoch + 1}
+                    meta = {"epoch": epoch + 1, "step": step, "val": raw,
+                            "train_seconds": round(elapsed, 2), "dataset": train.info.name,
+                            "weights": "raw (this run's best averaged weights are "
+                                       f"{stage.name}{ckpt.SUFFIX})"}  # fmt: skip
+                    ckpt.save(out_dir / f"{stage.name}_raw{ckpt.SUFFIX}", stage.payload(meta))
             with _averaged(average):
                 val = stage.validate()
                 record.update({f"val_{k}": v for k, v in val.items()})
@@ -326,7 +339,8 @@ def fit(
                 "optimizer": optimizer.state_dict(), "scheduler": sched.state_dict(),
                 "noise_gen": noise_gen.get_state(), "aug_gen": aug_gen.get_state(),
                 "epoch": epoch, "step": step, "best": best, "elapsed": elapsed, "spent": spent,
-                **({"ema": average.state_dict()} if average is not None else {}),
+                **({"ema": average.state_dict(), "best_raw": best_raw}
+                   if average is not None else {}),
             })  # fmt: skip
             summary = {k: (round(v, 4) if isinstance(v, float) else v) for k, v in record.items()}
             tqdm.write(f"[{stage.name}] " + " ".join(f"{k}={v}" for k, v in summary.items()))
