@@ -29,6 +29,7 @@ import yaml
 
 from trajpref.results import write_meta
 from trajpref.train import read_metrics
+from trajpref.viz import plot_curves
 
 KEEP_BAR = -0.5
 """Percent: an adopted fold keeps the average when its mean paired change is at most this."""
@@ -80,6 +81,30 @@ def by_fold(runs: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     return folds
 
 
+def curves(run_dir: Path) -> dict[str, np.ndarray]:
+    """A run's validation minFDE20 per evaluated epoch, raw and averaged: [E] each."""
+    evals = [r for r in read_metrics(run_dir, "generator") if "val_raw_min_fde" in r]
+    return {"epoch": np.array([r["epoch"] for r in evals]),
+            "raw": np.array([r["val_raw_min_fde"] for r in evals]),
+            "averaged": np.array([r["val_min_fde"] for r in evals])}  # fmt: skip
+
+
+def plot(runs: list[dict[str, Any]], out: Path) -> None:
+    """One panel per dataset: each seed's raw (dashed) and averaged (solid) validation curve,
+    one colour per seed."""
+    panels: dict[str, list] = {}
+    for r in sorted(runs, key=lambda r: (r["dataset"], r["seed"])):
+        c = curves(Path(r["run"]))
+        color = f"C{r['seed'] % 10}"
+        panels.setdefault(r["dataset"], []).extend([
+            (c["epoch"], c["raw"], {"color": color, "linestyle": "--",
+                                    "label": f"seed {r['seed']} raw"}),
+            (c["epoch"], c["averaged"], {"color": color, "label": f"seed {r['seed']} averaged"}),
+        ])  # fmt: skip
+    title = "Generator weights, raw (dashed) and moving average (solid), per seed"
+    plot_curves(panels, out, "epoch", "validation minFDE20", title=title)
+
+
 def parse_machine(text: str) -> tuple[str, str]:
     prefix, sep, what = text.partition("=")
     if not sep or not prefix or not what:
@@ -95,6 +120,10 @@ def main(argv: list[str] | None = None) -> int:
         help="PATH_PREFIX=DESCRIPTION: where the runs under a prefix trained",
     )  # fmt: skip
     parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument(
+        "--plot", type=Path, default=None,
+        help="also draw every run's raw and averaged validation curves (PNG)",
+    )  # fmt: skip
     args = parser.parse_args(argv)
     runs = [paired(d) for d in args.runs if d.is_dir()]
     if not runs:
@@ -115,6 +144,9 @@ def main(argv: list[str] | None = None) -> int:
               f"{f['mean_ade_pct']:+.2f} ± {f['std_ade_pct']:.2f} % | "
               f"{'yes' if f['replicates'] else 'no'} |")  # fmt: skip
     write_meta(args.out, split="val", keep_bar_pct=KEEP_BAR, folds=folds, runs=runs)
+    if args.plot is not None:
+        plot(runs, args.plot)
+        print(f"wrote {args.plot}")
     print(f"wrote {args.out}")
     return 0
 

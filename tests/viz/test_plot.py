@@ -1,9 +1,16 @@
 import numpy as np
+import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from PIL import Image
 
-from trajpref.viz import plot_panel, plot_scene, plot_scene_scored, plot_survey_summary
+from trajpref.viz import (
+    plot_curves,
+    plot_panel,
+    plot_scene,
+    plot_scene_scored,
+    plot_survey_summary,
+)
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -63,3 +70,17 @@ def test_long_titles_and_labels_are_not_clipped(tmp_path):
                 plot_scene_scored(hist, fut, pred, np.zeros((5, 3)), tmp_path / "b.png", "m",
                                   title)):  # fmt: skip
         assert Image.open(out).size[0] >= title_px
+
+
+def test_plot_curves_lays_panels_in_a_grid_and_refuses_none(tmp_path):
+    x = np.arange(4, 44, 4)
+    line = (x, 0.3 + 1 / x, {"label": "raw", "linestyle": "--"})
+    gap = (x, np.where(x == 20, np.nan, 0.31 + 1 / x), {"label": "averaged"})
+    one = plot_curves({"zara1": [line, gap]}, tmp_path / "one.png", "epoch", "minFDE")
+    four = plot_curves({n: [line] for n in "abcd"}, tmp_path / "four.png", "epoch", "minFDE",
+                       title="t", columns=3)  # fmt: skip
+    assert one.read_bytes()[:8] == PNG and four.read_bytes()[:8] == PNG
+    (w1, h1), (w4, h4) = Image.open(one).size, Image.open(four).size
+    assert w4 > 2 * w1 and h4 > 1.5 * h1  # three columns, two rows
+    with pytest.raises(ValueError, match="at least one panel"):
+        plot_curves({}, tmp_path / "none.png", "x", "y")

@@ -191,6 +191,42 @@ def plot_survey_summary(
     return _save(fig, out)
 
 
+def plot_curves(
+    panels: dict[str, list[tuple[np.ndarray, np.ndarray, dict]]],
+    out: str | Path,
+    xlabel: str,
+    ylabel: str,
+    title: str = "",
+    columns: int = 3,
+) -> Path:
+    """Line plots in a grid, one axis per panel (e.g. validation curves per dataset).
+
+    panels: title -> lines, each ``(x [E], y [E], style)`` where ``style`` holds matplotlib
+    keywords (``label``, ``color``, ``linestyle``, ...); NaN values leave gaps. Each panel
+    has its own y range; the first panel carries the legend."""
+    if not panels:
+        raise ValueError("plot_curves needs at least one panel")
+    n = len(panels)
+    cols = min(columns, n)
+    rows = -(-n // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 2.8 * rows), dpi=120,
+                             squeeze=False)  # fmt: skip
+    for ax, (name, lines) in zip(axes.flat, panels.items(), strict=False):
+        for x, y, style in lines:
+            ax.plot(np.asarray(x, dtype=float), np.asarray(y, dtype=float), lw=1.2, **style)
+        ax.set_title(name, fontsize=9)
+        ax.set_xlabel(xlabel, fontsize=8)
+        ax.set_ylabel(ylabel, fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    for ax in list(axes.flat)[n:]:
+        ax.set_visible(False)
+    axes.flat[0].legend(fontsize=7)
+    if title:
+        fig.suptitle(title, fontsize=9)
+    return _save(fig, out)
+
+
 def _save(fig, out: str | Path) -> Path:
     """Lay out, write as PNG through a temporary file, close. The saved canvas grows to hold
     every title and label (``bbox_inches="tight"``), so nothing is clipped however long the
