@@ -810,8 +810,8 @@ def main(argv: list[str] | None = None, setup: Setup | None = None) -> dict:
         entry = {"date": date.today().isoformat(), "command": command_line(),
                  "machine": machine(), "mode": "quick" if opts.quick else "full",
                  "datasets": opts.datasets, "wall_seconds": round(time.perf_counter() - wall0, 1),
-                 "cpu_seconds_own": round(own - own0, 1),
-                 "cpu_seconds_children": round(kids - kids0, 1),
+                 "cpu_seconds_own": round(own - own0, 3),
+                 "cpu_seconds_children": round(kids - kids0, 3),
                  "jobs_run": len(done), "jobs_failed": len(failed), "jobs_skipped": skipped,
                  "interrupted": interrupted}  # fmt: skip
         cpu = log_invocation(setup, None if opts.report else entry)
