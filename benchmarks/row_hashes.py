@@ -7,7 +7,8 @@ checkpoints. Older rows were written without it; ``--backfill`` traces each of t
 git history of its results file: the commit from which the row has stood unchanged in the file
 is taken as the one that recorded it, and the checkpoint file committed at that commit (its
 ``checkpoint`` path, or the ``git show REV:PATH`` it names) gives the hash. A row whose
-checkpoint was never tracked (``runs/...``) keeps null. Assumption, stated: the weights
+checkpoint was never tracked (``runs/...``) keeps null, and so does every ``-ancestral`` row
+(measured before the sampling switch rewrote its file's settings). Assumption, stated: the weights
 committed with a row are the ones it measured (true when a measurement and its weights land in
 one commit, or the weights landed first).
 
@@ -28,7 +29,7 @@ from typing import Any
 
 from trajpref.errors import TrajprefError
 from trajpref.models import checkpoint as ckpt
-from trajpref.results import FIELDS, ROW_KEY
+from trajpref.results import ANCESTRAL_SUFFIX, FIELDS, ROW_KEY
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
@@ -109,7 +110,11 @@ def backfill() -> None:
         for row in rows:
             value = row.get("model_hash")
             commit = since.get(_identity(row))
-            if value is None and row.get("checkpoint") and commit is not None:
+            # an -ancestral row measured its file before the sampling switch rewrote the
+            # file's settings, often in the commit that renamed the row: no committed file
+            # holds what it measured, so it stays untraced
+            measurable = not row["method"].endswith(ANCESTRAL_SUFFIX)
+            if value is None and row.get("checkpoint") and commit is not None and measurable:
                 value = blobs.hash_at(commit, row["checkpoint"], sampler_of(row))
                 filled += value is not None
             out.append({k: value if k == "model_hash" else row.get(k) for k in FIELDS})

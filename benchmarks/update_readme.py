@@ -124,7 +124,10 @@ def speed_table(meta_dir: Path) -> str:
     used_repeat = False  # whether any row shows the repeat probe in brackets
     for path in sorted(meta_dir.glob("pretrained_*.json")):
         m = json.loads(path.read_text())
-        if not m.get("variant"):  # variants: trained elsewhere or off the default config
+        # only the default's own record: variants (trained elsewhere or off the default
+        # config) and the records of replaced defaults (``pretrained_<D>_raw.json``, ...)
+        # carry a suffix after the dataset's name
+        if not m.get("variant") and path.stem == f"pretrained_{m['dataset']}":
             defaults[f"{m['dataset']}/generator"] = m
     for name in sorted(set(defaults) | set(timed)):
         m, t = defaults.get(name), timed.get(name)

@@ -24,3 +24,26 @@ def test_old_equal_budget_rows_stay_only_until_a_newer_start_has_rows():
     # a dataset that never had the table keeps no old rows
     assert not keep({"dataset": "hotel", "method": "pretrained-ancestral"},
                     {("hotel", "pretrained-ancestral")})  # fmt: skip
+
+
+def test_the_cost_table_reads_the_defaults_record_not_a_replaced_ones(tmp_path):
+    """``pretrained_<D>_raw.json`` (the record of a replaced default) sorts after the
+    default's own ``pretrained_<D>.json`` and must not stand in for it."""
+    import json
+
+    def record(minutes):
+        return {"dataset": "zara1", "params": {"denoiser": 1e6, "generator": 7e5},
+                "stage_seconds": {"denoiser": 600.0, "generator": 60.0 * minutes},
+                "samples_per_second": {"denoiser": 3000.0, "generator": 800.0},
+                "ms_per_scene": {"leapfrog": 6.0, "full": 80.0},
+                "speedup_full_over_leapfrog": 13.3}  # fmt: skip
+
+    (tmp_path / "pretrained_zara1.json").write_text(json.dumps(record(21.6)))
+    (tmp_path / "pretrained_zara1_raw.json").write_text(json.dumps(record(60.9)))
+    (tmp_path / "pretrained_robo-mix.json").write_text(
+        json.dumps({**record(18.1), "dataset": "robo-mix"})
+    )
+    table = _module().speed_table(tmp_path)
+    assert "| zara1/generator | 1.00 M / 0.70 M | 10.0 / 21.6 |" in table
+    assert "60.9" not in table
+    assert "| robo-mix/generator |" in table  # a hyphen in the name is not a suffix
