@@ -308,25 +308,24 @@ def fit(
         record.update({f"train_{k}": v / max(1, agents) for k, v in sums.items()})
         last = epoch + 1 == optim_cfg.epochs or stop
         if main and ((epoch + 1) % optim_cfg.eval_every == 0 or last):
+            # what each checkpoint written at this evaluation records beside its validation
+            at = {"epoch": epoch + 1, "step": step, "train_seconds": round(elapsed, 2),
+                  "dataset": train.info.name}  # fmt: skip
             stage.objective.eval()
             if average is not None:  # the raw weights too, for the comparison
                 raw = stage.validate()
                 record.update({f"val_raw_{k}": v for k, v in raw.items()})
                 if raw["score"] < best_raw["score"]:
                     best_raw = {**raw, "epoch": epoch + 1}
-                    meta = {"epoch": epoch + 1, "step": step, "val": raw,
-                            "train_seconds": round(elapsed, 2), "dataset": train.info.name,
-                            "weights": "raw (this run's best averaged weights are "
-                                       f"{stage.name}{ckpt.SUFFIX})"}  # fmt: skip
+                    meta = {**at, "val": raw, "weights": "raw (this run's best averaged "
+                            f"weights are {stage.name}{ckpt.SUFFIX})"}  # fmt: skip
                     ckpt.save(out_dir / f"{stage.name}_raw{ckpt.SUFFIX}", stage.payload(meta))
             with _averaged(average):
                 val = stage.validate()
                 record.update({f"val_{k}": v for k, v in val.items()})
                 if val["score"] < best["score"]:
                     best = {**val, "epoch": epoch + 1}
-                    meta = {"epoch": epoch + 1, "step": step, "val": val,
-                            "train_seconds": round(elapsed, 2),
-                            "dataset": train.info.name}  # fmt: skip
+                    meta = {**at, "val": val}
                     if average is not None:
                         meta["ema_epochs"] = optim_cfg.ema_epochs
                     ckpt.save(out_dir / f"{stage.name}{ckpt.SUFFIX}", stage.payload(meta))
