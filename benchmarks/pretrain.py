@@ -31,7 +31,7 @@ from trajpref.config import load_config
 from trajpref.data import load_dataset
 from trajpref.evaluation import evaluate, time_predictors
 from trajpref.models import checkpoint as ckpt
-from trajpref.results import make_row, upsert_rows
+from trajpref.results import make_row, sampler_of, upsert_rows
 from trajpref.train import read_metrics, train_stage
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -164,7 +164,7 @@ def main() -> None:
             ms_per_scene=round(ms, 3),
             uses_score=False,
             checkpoint=str(published.relative_to(ROOT)),
-            model_hash=ckpt.model_hash(published, "full" if "full" in method else "leapfrog"),
+            model_hash=ckpt.model_hash(published, sampler_of(method)),
         ))  # fmt: skip
         print(f"{args.dataset} {method:>12}: minADE {res['min_ade']:.3f} minFDE "
               f"{res['min_fde']:.3f}  joint {res['joint_min_ade']:.3f}/"

@@ -29,7 +29,7 @@ from typing import Any
 
 from trajpref.errors import TrajprefError
 from trajpref.models import checkpoint as ckpt
-from trajpref.results import ANCESTRAL_SUFFIX, FIELDS, ROW_KEY
+from trajpref.results import ANCESTRAL_SUFFIX, FIELDS, ROW_KEY, sampler_of
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
@@ -44,11 +44,6 @@ def _git(*args: str) -> bytes:
 def _identity(row: dict[str, Any]) -> str:
     """A row's content without ``model_hash`` (to follow it through history)."""
     return json.dumps({k: v for k, v in row.items() if k != "model_hash"}, sort_keys=True)
-
-
-def sampler_of(row: dict[str, Any]) -> str:
-    """The sampler a row measured: the full sampler for ``full-sampler*`` rows."""
-    return "full" if row["method"].startswith("full-sampler") else "leapfrog"
 
 
 def recorded_at(path: Path) -> dict[str, str]:
@@ -115,7 +110,7 @@ def backfill() -> None:
             # holds what it measured, so it stays untraced
             measurable = not row["method"].endswith(ANCESTRAL_SUFFIX)
             if value is None and row.get("checkpoint") and commit is not None and measurable:
-                value = blobs.hash_at(commit, row["checkpoint"], sampler_of(row))
+                value = blobs.hash_at(commit, row["checkpoint"], sampler_of(row["method"]))
                 filled += value is not None
             out.append({k: value if k == "model_hash" else row.get(k) for k in FIELDS})
         path.write_text(json.dumps(out, indent=2) + "\n")
@@ -132,7 +127,7 @@ def check() -> int:
             groups[tuple(row[k] for k in ROW_KEY)].append((path.name, row))
             file = ROOT / (row.get("checkpoint") or "-")
             if row.get("model_hash") and file.is_file():
-                now = ckpt.model_hash(file, sampler_of(row))
+                now = ckpt.model_hash(file, sampler_of(row["method"]))
                 if now != row["model_hash"]:
                     stale.append((path.name, row, now))
     conflicts = 0

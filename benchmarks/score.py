@@ -26,7 +26,7 @@ from trajpref.data.loader import SceneLoader
 from trajpref.evaluation import evaluate
 from trajpref.models import checkpoint as ckpt
 from trajpref.models.baseline import ConstantVelocity
-from trajpref.results import command_line, machine, make_row, write_rows
+from trajpref.results import command_line, machine, make_row, sampler_of, write_rows
 from trajpref.score.scorer import ScoreAccumulator, TrajectoryScorer, score_timesteps
 from trajpref.types import collate
 
@@ -124,9 +124,7 @@ def main() -> None:
                 "top1_recall_ats", "top5_recall_ats")},
             uses_score=False,
             checkpoint=None if method == "cv" else str(gen_path.relative_to(ROOT)),
-            model_hash=None if method == "cv" else ckpt.model_hash(
-                gen_path, "full" if method == "full-sampler" else "leapfrog"
-            ),
+            model_hash=None if method == "cv" else ckpt.model_hash(gen_path, sampler_of(method)),
         ))  # fmt: skip
         extra["methods"][method] = res
         print(f"{method:>12}: minADE {res['min_ade']:.3f} minFDE {res['min_fde']:.3f} "

@@ -53,6 +53,12 @@ RUNNABLE_STARTS = {"generator": "", "generator-long": "-long"}
 exists, so no run can begin from it."""
 
 
+def sampler_of(method: str) -> str:
+    """The sampler a row's method ran: ``full`` for ``full-sampler*`` rows (the denoiser alone,
+    which is what their ``model_hash`` describes), ``leapfrog`` for every other model row."""
+    return "full" if method.startswith("full-sampler") else "leapfrog"
+
+
 def start_suffix(start: str) -> str:
     """The row suffix of runs from a published generator (``generator-long`` -> ``-long``)."""
     if start not in RUNNABLE_STARTS:
