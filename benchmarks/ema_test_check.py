@@ -19,7 +19,6 @@ Writes benchmarks/results/meta/ema_test_check.json and prints the table for docs
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +28,7 @@ from trajpref.data import load_dataset
 from trajpref.evaluation import evaluate
 from trajpref.io import read_checkpoint_header
 from trajpref.models import checkpoint as ckpt
-from trajpref.results import write_meta
+from trajpref.results import read_rows, write_meta
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
@@ -48,16 +47,13 @@ def match_settings(run_file: Path, published: Path) -> dict[str, Any]:
 
 def published_pair(dataset: str) -> dict[str, dict[str, float]]:
     """Seed 0: the published averaged default's test row and the raw one it replaced."""
+    rows = read_rows(RESULTS, protocol="all")
     out = {}
-    sources = (("averaged", f"pretrained_{dataset}.json", "pretrained"),
-               ("raw", f"pretrained_{dataset}_raw.json", "pretrained-raw"))  # fmt: skip
-    for weights, name, method in sources:
-        path = RESULTS / name
-        rows = json.loads(path.read_text()) if path.is_file() else []
-        row = next((r for r in rows if r["method"] == method and r["split"] == "test"
-                    and r["protocol"] == "all" and r["seed"] == 0), None)  # fmt: skip
+    for weights, method in (("averaged", "pretrained"), ("raw", "pretrained-raw")):
+        row = next((r for r in rows if r["dataset"] == dataset and r["method"] == method
+                    and r["split"] == "test" and r["seed"] == 0), None)  # fmt: skip
         if row is None:
-            raise SystemExit(f"{dataset}: no {method} test row in {path.name}")
+            raise SystemExit(f"{dataset}: no {method} test row in benchmarks/results")
         out[weights] = {k: row[k] for k in METRICS}
     return out
 
