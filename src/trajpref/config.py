@@ -117,6 +117,10 @@ class ModelConfig:
     """Residual blocks in the denoiser."""
     generator_width: int = 256
     """Width of the generator's heads."""
+    generator_hidden: int = 0
+    """Width of the generator's own social encoder (0: ``hidden``, the denoiser's width). The
+    generator's encoder is its own network, so it may be wider than the frozen denoiser's
+    (LED's initializer uses 256)."""
     t_hist: int = 8
     """Observed frames (T_h)."""
     t_fut: int = 12
@@ -168,6 +172,9 @@ class ModelConfig:
                   "generator_width", "t_hist", "t_fut", "samples", "tau")  # fmt: skip
         if self.hidden % self.heads:
             raise ConfigError("ModelConfig.hidden must be divisible by heads")
+        if self.generator_hidden < 0 or self.generator_hidden % self.heads:
+            raise ConfigError("ModelConfig.generator_hidden must be 0 (the denoiser's width) or "
+                              "a positive multiple of heads")  # fmt: skip
         if self.hidden % 2:
             raise ConfigError("ModelConfig.hidden must be even (the sinusoidal step embedding)")
         if self.t_hist < 2:
@@ -179,9 +186,15 @@ class ModelConfig:
         ``denoiser_part`` agree describe the same denoiser."""
         return dataclasses.replace(self, **{k: getattr(ModelConfig, k) for k in GENERATOR_ONLY})
 
+    @property
+    def generator_encoder_width(self) -> int:
+        """H of the generator's social encoding (``generator_hidden``, else ``hidden``)."""
+        return self.generator_hidden or self.hidden
+
 
 GENERATOR_ONLY = (
     "generator_width",
+    "generator_hidden",
     "samples",
     "tau",
     "stochastic_steps",

@@ -16,6 +16,7 @@ from trajpref.models import checkpoint as ckpt
 from trajpref.train import read_metrics
 from trajpref.train.run import train_stage
 from trajpref.train.stages import build_denoiser_stage, build_generator_stage
+from trajpref.data.loader import SceneLoader
 from trajpref.types import collate
 
 
@@ -73,11 +74,29 @@ def test_generator_width_may_differ_from_the_denoiser_config_but_nothing_else(cf
     longer = dataclasses.replace(
         cfg, model=dataclasses.replace(cfg.model, t_fut=cfg.model.t_fut + 1)
     )
-    with pytest.raises(ConfigError, match="generator_width"):
+    with pytest.raises(ConfigError, match="GENERATOR_ONLY"):
         build_generator_stage(longer, payload, train, torch.device("cpu"))
     more = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, samples=6, tau=3))
     stage = build_generator_stage(more, payload, train, torch.device("cpu"))  # G-only fields
     assert stage.trainable.samples == 6
+
+
+def test_the_generator_encoder_may_be_wider_than_the_denoisers(cfg, folder, trained):
+    import dataclasses
+
+    train = load_dataset(str(folder), "train")
+    payload = ckpt.load(trained / "denoiser.safetensors")
+    h = 2 * cfg.model.hidden
+    wide = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, generator_hidden=h))
+    stage = build_generator_stage(wide, payload, train, torch.device("cpu"))
+    assert stage.trainable.encoder.norm.normalized_shape == (h,)
+    assert stage.objective.denoiser.encoder.norm.normalized_shape == (cfg.model.hidden,)
+    rebuilt, _ = ckpt.build_generator(stage.payload({"epoch": 0}))  # the checkpoint says h
+    assert rebuilt.encoder.norm.normalized_shape == (h,)
+    batch = next(iter(SceneLoader(train, max_agents=64, shuffle=False)))
+    y = stage.objective.sampler.rollout(batch).y  # [K, N, T_f, 2]
+    assert y.shape == (cfg.model.samples, batch.num_agents, cfg.model.t_fut, 2)
+    assert torch.isfinite(y).all()
 
 
 def test_a_generator_step_changes_the_generator_not_the_denoiser(cfg, folder, trained):

@@ -45,7 +45,7 @@ class Generator(nn.Module):
         super().__init__()
         self.cfg = cfg
         self.samples = samples = cfg.samples
-        h, w, tf = cfg.hidden, cfg.generator_width, cfg.t_fut
+        h, w, tf = cfg.generator_encoder_width, cfg.generator_width, cfg.t_fut
         self.encoder = SocialEncoder(cfg.t_hist, h, cfg.encoder_layers, cfg.heads,
                                      temporal=cfg.history_encoder == "temporal")  # fmt: skip
         self.mean_head = mlp([h, w, w, tf * 2])

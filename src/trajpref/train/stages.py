@@ -154,7 +154,7 @@ def _check_matches_denoiser(cfg: ExperimentConfig, denoiser_cfg: ExperimentConfi
             or cfg.diffusion != denoiser_cfg.diffusion):  # fmt: skip
         raise ConfigError(
             "the generator config's model/diffusion sections differ from the denoiser "
-            "checkpoint's (only model.generator_width, samples and tau may differ)"
+            "checkpoint's (only the generator's fields, config.GENERATOR_ONLY, may differ)"
         )
 
 
@@ -205,7 +205,8 @@ def build_finetune_stage(
     torch.manual_seed(cfg.seed)
     sampler = ckpt.predictor_from_payload(start, "leapfrog").to(device)
     assert sampler.generator is not None
-    critic = Critic(cfg.model.hidden, cfg.model.t_fut, cfg.model.generator_width).to(device)
+    width = cfg.model.generator_encoder_width
+    critic = Critic(width, cfg.model.t_fut, cfg.model.generator_width).to(device)
     objective = RLObjective(sampler, critic, cfg.finetune, cfg.generator)
     val_set = val.evenly_spaced(cfg.finetune.eval_max_scenes)
     metric_scorer = TrajectoryScorer(sampler.denoiser, sampler.schedule, sampler.scale)
