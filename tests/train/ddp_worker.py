@@ -32,6 +32,7 @@ def main(folder: str, out: str) -> None:
     fit(gen, train, cfg.data, cfg.generator, out_dir, device, cfg.seed, dist_info=info,
         progress=False, max_steps=3)  # fmt: skip
     torch.save(gen.trainable.state_dict(), out_dir / f"generator_rank{info.rank}.pt")
+    barrier(info)  # both ranks done before gloo is torn down (distributed.cleanup)
     cleanup(info)
 
 

@@ -35,3 +35,24 @@ def test_two_process_ddp_ranks_agree(tmp_path):
     # rank 0 alone wrote the run files, after the 3 steps it was given
     assert torch.load(out / "denoiser_last.pt", weights_only=True)["step"] == 3
     assert (out / "denoiser_metrics.jsonl").read_text().count("\n") == 1
+
+
+def test_the_readme_torchrun_command_trains_both_stages(tmp_path):
+    """The README's launch, ``torchrun -m trajpref.cli train ...``, through the CLI and
+    ``train.run`` (which waits for every rank before leaving the process group)."""
+    from synthetic import TINY_OVERRIDES
+
+    folder = write_dataset(tmp_path / "walks")
+    out = tmp_path / "run"
+    sets = [arg for o in [*TINY_OVERRIDES, f"data.dataset={folder}"] for arg in ("--set", o)]
+    for stage in ("diffusion", "generator"):
+        cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node=2",
+               "--master_addr=127.0.0.1", f"--master_port={_free_port()}", "-m",
+               "trajpref.cli", "train", stage, "--out", str(out), "--device", "cpu",
+               "--no-progress", *sets]  # fmt: skip
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        assert "terminate called" not in proc.stderr
+    for name in ("denoiser", "generator"):
+        assert (out / f"{name}.safetensors").is_file()
+        assert (out / f"{name}_metrics.jsonl").read_text().count("\n") == 2  # 2 epochs, rank 0

@@ -50,5 +50,9 @@ def barrier(info: DistInfo) -> None:
 
 
 def cleanup(info: DistInfo) -> None:
+    """Leave the process group. Call ``barrier`` first on the normal path: a rank that tears
+    gloo down while another is still writing files can abort in gloo's threads ("terminate
+    called without an active exception", seen once in CI); on an error path no barrier is
+    taken, so that a failed rank does not wait for one that will never come."""
     if info.enabled and dist.is_initialized():
         dist.destroy_process_group()

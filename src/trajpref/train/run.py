@@ -75,6 +75,7 @@ def _run(
         summary = fit(built, train, cfg.data, optim, out_dir, dev, cfg.seed, state, info,
                       progress, max_steps)  # fmt: skip
         summary["wall_seconds"] = time.perf_counter() - start
+        barrier(info)  # every rank done (rank 0 may still have been writing) before teardown
         summary["train_agents"] = train.num_agents
         summary["rank"] = info.rank  # only rank 0 validates: other ranks' "best" is empty
         return summary
