@@ -10,13 +10,13 @@ from synthetic import TINY_OVERRIDES
 
 from trajpref.cli import main
 from trajpref.data import load_dataset
+from trajpref.data.loader import SceneLoader
 from trajpref.errors import ConfigError, TrajprefError
 from trajpref.evaluation import evaluate
 from trajpref.models import checkpoint as ckpt
 from trajpref.train import read_metrics
 from trajpref.train.run import train_stage
 from trajpref.train.stages import build_denoiser_stage, build_generator_stage
-from trajpref.data.loader import SceneLoader
 from trajpref.types import collate
 
 
