@@ -52,6 +52,16 @@ def test_protocol_option_reaches_stats_and_evaluate(capsys, tmp_path):
     assert code == 2 and "invalid choice: 'x'" in err
 
 
+def test_time_step_option_reaches_stats(capsys, tmp_path):
+    write_tracks(tmp_path / "d" / "a.txt", [(f * 10, 1, f * 0.1, 0) for f in range(80)])
+    code, out, _ = _run(capsys, "data", "stats", "--dataset", tmp_path / "d", "--json",
+                        "--frame-interval", "0.1", "--time-step", "4")  # fmt: skip
+    stats = json.loads(out)
+    assert code == 0 and stats["scenes"] == 1
+    code, _, err = _run(capsys, "data", "stats", "--dataset", tmp_path / "d", "--time-step", "0")
+    assert code == 2 and "time_step must be a number of frame steps" in err
+
+
 def test_evaluate_json_and_out_file(capsys, folder, tmp_path):
     out_file = tmp_path / "res" / "eval.json"
     code, out, _ = _run(

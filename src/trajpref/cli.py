@@ -58,6 +58,10 @@ def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> N
                    "span (default: any, with a warning; 0: none; docs/data_format.md)")  # fmt: skip
     p.add_argument("--max-coord", type=float, default=1e6, help="largest accepted |x| or |y| "
                    "in the dataset's units (default 1e6); larger is an error")  # fmt: skip
+    p.add_argument("--time-step", type=float, default=1.0, metavar="F",
+                   help="read text track files every F frame steps, positions interpolated "
+                   "in time (e.g. 4 for 10 Hz data and a 2.5 Hz model; default 1: as "
+                   "recorded; docs/data_format.md)")  # fmt: skip
     p.add_argument("--protocol", default="all", choices=list(PROTOCOLS),
                    help="which windows count: all (default: every window with a fully observed "
                    "agent) or sgan (windows with at least two, as Social-GAN's loader keeps; "
@@ -305,7 +309,7 @@ def _check_data_args(args) -> None:
     if not (math.isfinite(args.frame_interval) and args.frame_interval > 0):
         raise ConfigError(f"--frame-interval must be a number of seconds > 0, "
                           f"got {args.frame_interval}")  # fmt: skip
-    _read_options(args)  # --delimiter, --max-gap, --max-coord
+    _read_options(args)  # --delimiter, --max-gap, --max-coord, --time-step
     if args.holdout_scene is not None:
         if not args.holdout_scene:
             raise ConfigError("--holdout-scene needs a file-name prefix, e.g. biwi_hotel")
@@ -315,7 +319,8 @@ def _check_data_args(args) -> None:
 
 
 def _read_options(args) -> ReadOptions:
-    return ReadOptions(delimiter=args.delimiter, max_gap=args.max_gap, max_coord=args.max_coord)
+    return ReadOptions(delimiter=args.delimiter, max_gap=args.max_gap, max_coord=args.max_coord,
+                       time_step=args.time_step)  # fmt: skip
 
 
 def _load(args):

@@ -66,6 +66,9 @@ class DataConfig:
     as ``--max-gap``."""
     max_coord: float = 1e6
     """Largest accepted |x| or |y| in the dataset's units, as ``--max-coord``."""
+    time_step: float = 1.0
+    """Read text track files every this many frame steps, positions interpolated in time
+    (1: as recorded), as ``--time-step``; both splits are read alike."""
     holdout_scene: str = ""
     """Validate on a scene the model does not train on ("" : the dataset's own val split):
     the training files whose name starts with this prefix (e.g. ``biwi_hotel``, ``students``,
@@ -77,7 +80,7 @@ class DataConfig:
         if self.holdout_scene and self.val_dataset:
             raise ConfigError("DataConfig.holdout_scene and val_dataset exclude each other: "
                               "the held-out scene is the validation split")  # fmt: skip
-        _positive(self, "max_agents", "scale_min", "scale_max", "max_coord")
+        _positive(self, "max_agents", "scale_min", "scale_max", "max_coord", "time_step")
         if self.scale_min > self.scale_max:
             raise ConfigError("DataConfig.scale_min must be <= scale_max")
         if self.max_gap is not None and self.max_gap < 0:

@@ -290,3 +290,18 @@ def test_holding_out_hotel_in_the_zara1_fold(data_root):
     assert len(kept) + sum(f.startswith("biwi_hotel_train") for f in
                            (s.scene_id for s in held.scenes)) == len(train)  # fmt: skip
     assert not any(s.scene_id.startswith("biwi_hotel") for s in kept.scenes)
+
+
+def test_time_step_scales_the_frame_interval_and_refuses_cut_windows(tmp_path, data_root):
+    write_tracks(tmp_path / "a.txt", [(f * 10, 1, f * 0.3, 0) for f in range(80)])
+    ds = load_dataset(str(tmp_path), "test", frame_interval=0.1,
+                      options=ReadOptions(time_step=4))  # fmt: skip
+    assert ds.info.frame_interval == pytest.approx(0.4)
+    for name in ("sdd", "robo-sim"):
+        with pytest.raises(ConfigError, match="time_step"):
+            load_dataset(name, "val", data_root, options=ReadOptions(time_step=2))
+    # eth's validation read as if annotated every 5/3 steps: fewer, longer-lived windows
+    plain = load_dataset("eth", "val", data_root)
+    slow = load_dataset("eth", "val", data_root, options=ReadOptions(time_step=5 / 3))
+    assert 0 < slow.num_agents < plain.num_agents
+    assert slow.info.frame_interval == pytest.approx(0.4 * 5 / 3)

@@ -258,3 +258,42 @@ def test_a_folder_warns_once_about_gaps_and_max_gap_drops_those_windows(tmp_path
     assert len(record) == 1 and len(scenes) == 2
     with pytest.raises(DataError, match="no agent is observed in 20 consecutive frames"):
         read_folder(tmp_path, 8, 12, options=ReadOptions(max_gap=0))
+
+
+def _rows(tracks):
+    """{(agent id, frame): xy} of every row of ``tracks``."""
+    keys = zip(tracks.agents[tracks.agent_index], tracks.frames[tracks.frame_index], strict=True)
+    return dict(zip(keys, tracks.xy, strict=True))
+
+
+def test_resampling_reads_every_f_frame_steps_with_positions_interpolated(tmp_path):
+    from trajpref.data.text import resample_tracks
+
+    # agent 1: frames 0..30 every 10, x = frame / 10; agent 2: frames 0, 10, then a gap, 40, 50
+    rows = [(f, 1, f / 10, 0) for f in (0, 10, 20, 30)]
+    rows += [(f, 2, f / 10, 5) for f in (0, 10, 40, 50)]
+    tracks = read_tracks(write_tracks(tmp_path / "r.txt", rows))
+    assert resample_tracks(tracks, 1.0) is tracks
+    two = resample_tracks(tracks, 2.0)  # frames 0, 20, 40: exact rows, no interpolation
+    np.testing.assert_array_equal(two.frames, [0, 20, 40])
+    rows_of = _rows(two)
+    assert set(rows_of) == {(1, 0), (1, 20), (2, 0), (2, 40)}  # agent 2 never at 20: a gap
+    np.testing.assert_allclose(rows_of[(1, 20)], [2, 0])
+    half = resample_tracks(tracks, 1.5)  # frames 0, 15, 30, 45
+    np.testing.assert_allclose(half.frames, [0, 15, 30, 45])
+    got = _rows(half)
+    assert set(got) == {(1, 0), (1, 15), (1, 30), (2, 0), (2, 45)}  # 15 and 30 lie in the gap
+    np.testing.assert_allclose(got[(1, 15)], [1.5, 0])  # halfway between frames 10 and 20
+    np.testing.assert_allclose(got[(2, 45)], [4.5, 5])
+
+
+def test_time_step_windows_span_more_frames(tmp_path):
+    rows = [(f * 10, 1, f * 0.3, 0) for f in range(40)]  # 0.3 per frame step, 40 frames
+    path = write_tracks(tmp_path / "w.txt", rows)
+    scenes = read_folder(tmp_path, 8, 12, options=ReadOptions(time_step=2))
+    assert len(scenes) == 1  # 40 frames read every 2nd: 20 steps, one window
+    np.testing.assert_allclose(np.diff(scenes[0].future[0, :, 0]), 0.6, rtol=1e-5)
+    assert scenes[0].scene_id == f"{path.name}@frame=0"
+    for bad in (0, -1, float("nan"), 1000):
+        with pytest.raises(ConfigError, match="time_step"):
+            ReadOptions(time_step=bad)

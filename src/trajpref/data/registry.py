@@ -113,7 +113,12 @@ def load_dataset(
     """
     _check_split(split)
     check_protocol(protocol)
-    return apply_protocol(_load(name, split, root, frame_interval, units, options), protocol)
+    data = _load(name, split, root, frame_interval, units, options)
+    step = options.time_step if options is not None else 1.0
+    if step != 1.0:  # read every ``step`` frame steps: each window step spans that much more
+        info = dataclasses.replace(data.info, frame_interval=data.info.frame_interval * step)
+        data = TrajectoryDataset(data.scenes, info)
+    return apply_protocol(data, protocol)
 
 
 def check_protocol(protocol: str) -> None:
@@ -183,6 +188,9 @@ def _load(
     options: text.ReadOptions | None,
 ) -> TrajectoryDataset:
     options = options or text.ReadOptions()
+    if options.time_step != 1.0 and name in ("sdd", "robo", "robo-sim", "robo-mix"):
+        raise ConfigError(f"time_step resamples text track files; {name} comes as windows "
+                          "already cut (or simulated)")  # fmt: skip
     if name == "robo-sim":
         return _robo_sim(split)
     if name == "robo-mix":
@@ -252,6 +260,8 @@ def _trajnet(
     source: Path,
 ) -> TrajectoryDataset:
     """TrajNet++ scene files: metres by the format's convention, the interval from their fps."""
+    if options.time_step != 1.0:
+        raise ConfigError("time_step resamples text track files, not TrajNet++ scenes")
     units = "m" if units == "unknown" else units
     scenes: list[Scene] = []
     fps: set[float] = set()

@@ -63,6 +63,12 @@ class ReadOptions:
     max_coord: float = DEFAULT_MAX_COORD
     """Largest accepted |x| or |y| in the dataset's units (after unit scaling); a larger
     coordinate is a ``DataError``."""
+    time_step: float = 1.0
+    """Read each file as if it had been annotated every ``time_step`` of its frame steps
+    (``resample_tracks``: positions interpolated in time; 1: as recorded; an integer picks
+    every n-th frame exactly). For data recorded faster than a model's step (10 Hz data and a
+    0.4 s model: 4), and for simulating a file whose steps span more time than their label
+    says, as eth's test file does (docs/data.md)."""
 
     def __post_init__(self) -> None:
         if self.delimiter is not None:
@@ -74,6 +80,9 @@ class ReadOptions:
             raise ConfigError(f"max_gap must be None or an integer >= 0, got {self.max_gap!r}")
         if not (np.isfinite(self.max_coord) and self.max_coord > 0):
             raise ConfigError(f"max_coord must be a positive finite number, got {self.max_coord}")
+        if not (np.isfinite(self.time_step) and 0.1 <= self.time_step <= 100):
+            raise ConfigError(f"time_step must be a number of frame steps in [0.1, 100], "
+                              f"got {self.time_step}")  # fmt: skip
 
 
 @dataclass
@@ -465,6 +474,52 @@ def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int |
     return out
 
 
+def resample_tracks(tracks: Tracks, factor: float) -> Tracks:
+    """The tracks as if annotated every ``factor`` frame steps: frames ``f_0 + j * factor *
+    step`` (``step`` the file's frame step), each agent's position linearly interpolated
+    between its two annotated rows around each such frame. An agent has no row at a frame
+    before its first row, after its last, or inside a jump of more than one frame step in its
+    own rows (a gap is not bridged). ``factor`` 1 returns ``tracks`` itself."""
+    if factor == 1.0:
+        return tracks
+    _, step = _missing_frames(tracks.frames)
+    if step <= 0:
+        return tracks
+    tol = step * 1e-6
+    grid = np.arange(tracks.frames[0], tracks.frames[-1] + tol, step * factor)  # [G]
+    time = tracks.frames[tracks.frame_index]  # [R] frame number of each row
+    cuts = np.flatnonzero(np.diff(tracks.agent_index)) + 1  # [A'-1] where a new agent begins
+    bounds = np.concatenate([[0], cuts, [tracks.num_rows]])
+    g_parts, a_parts, xy_parts = [], [], []
+    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+        t = time[a:b]  # [r] this agent's frames, increasing
+        lo = np.searchsorted(grid, t[0] - tol, side="left")
+        hi = np.searchsorted(grid, t[-1] + tol, side="right")
+        g = np.arange(lo, hi)  # [g] grid frames inside its span
+        if len(g) == 0:
+            continue
+        i = np.clip(np.searchsorted(t, grid[g], side="right") - 1, 0, len(t) - 1)  # [g] row before
+        j = np.minimum(i + 1, len(t) - 1)  # [g] row after
+        span = t[j] - t[i]  # [g]
+        exact = np.abs(grid[g] - t[i]) <= tol  # [g] on an annotated frame
+        keep = exact | (span <= step * 1.5)  # [g] no gap bridged
+        w = np.where(span > 0, (grid[g] - t[i]) / np.where(span > 0, span, 1), 0.0)  # [g]
+        w = np.where(exact, 0.0, w)[:, None]  # [g, 1]
+        xy = (1 - w) * tracks.xy[a + i] + w * tracks.xy[a + j]  # [g, 2]
+        g_parts.append(g[keep])
+        a_parts.append(np.full(int(keep.sum()), tracks.agent_index[a]))
+        xy_parts.append(xy[keep].astype(np.float32))
+    if not g_parts:
+        raise DataError(f"no agent spans two frames {factor:g} steps apart", tracks.path)
+    f_idx = np.concatenate(g_parts)  # [R'] grid index per new row (sorted within agents)
+    a_idx = np.concatenate(a_parts)  # [R'] agent index per new row (non-decreasing)
+    used = np.unique(f_idx)  # [F'] grid frames that hold a row
+    frame_index = np.searchsorted(used, f_idx).astype(tracks.frame_index.dtype)
+    return Tracks(tracks.path, grid[used], tracks.agents, frame_index,
+                  a_idx.astype(tracks.agent_index.dtype), np.concatenate(xy_parts),
+                  tracks.agent_type)  # fmt: skip
+
+
 def _gap_message(where: Path, gap_scenes: int, gap_agents: int, max_missing: int) -> str:
     return (
         f"{where}: {gap_scenes} windows ({gap_agents} agent-windows) span missing frames "
@@ -532,6 +587,7 @@ def read_files(
     gap = [0, 0, 0]  # scenes, agent-windows, largest run of missing frames
     for path in files:
         tracks = read_tracks(path, with_type, options, scale, units)
+        tracks = resample_tracks(tracks, options.time_step)
         out = _window(tracks, t_hist, t_fut, stride, options.max_gap)
         scenes.extend(out.scenes)
         gap = [gap[0] + out.gap_scenes, gap[1] + out.gap_agents, max(gap[2], out.max_missing)]

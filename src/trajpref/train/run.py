@@ -53,7 +53,8 @@ def _run(
     anything is written (a failed check leaves nothing behind)."""
     check_output_dir(out_dir)
     state = load_resume_state(resume, name) if resume is not None else None
-    options = ReadOptions(cfg.data.delimiter, cfg.data.max_gap, cfg.data.max_coord)
+    options = ReadOptions(cfg.data.delimiter, cfg.data.max_gap, cfg.data.max_coord,
+                          cfg.data.time_step)  # fmt: skip
     dev = resolve_device(device)
     info, dev = init_from_env(dev)
     torch.set_num_threads(max(1, torch.get_num_threads() // max(1, info.world_size)))
