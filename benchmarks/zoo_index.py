@@ -53,9 +53,6 @@ LIMITS = {
     "eth": "eth's test walkers are faster than any training scene: a quarter move above 2 m/s "
     "and carry 42 % of the error, so the default model is far from the paper's LED row "
     "(0.33 / 0.60); validation (the other scenes) does not see that shift.",
-    "eth/generator-speedaug": "Speed augmentation (training scenes scaled 0.5-2x) closes part "
-    "of eth's gap on the test split, but validation cannot choose it over the default: it is "
-    "published beside it, not instead of it.",
     **dict.fromkeys(
         ("zara1/generator-long", "zara2/generator-long"),
         "160 generator epochs from the published denoiser (the fold's config otherwise), trained "
