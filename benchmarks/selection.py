@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from speed_clamp import observed_step  # the clamp rule's measure of an agent's pace
 
 from trajpref.data import hold_out_scene, load_dataset
 from trajpref.data.loader import SceneLoader
@@ -34,7 +35,13 @@ from trajpref.metrics import MetricAccumulator
 from trajpref.models import checkpoint as ckpt
 from trajpref.results import command_line, machine, make_row, upsert_rows
 from trajpref.score.scorer import TrajectoryScorer, score_timesteps
-from trajpref.score.selection import METHODS, SelectionConfig, gather, select_samples
+from trajpref.score.selection import (
+    METHODS,
+    SelectionConfig,
+    gather,
+    select_samples,
+    within_pace,
+)
 from trajpref.types import TrajectoryDataset
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -92,6 +99,15 @@ def main() -> None:
         "split's scene speeds (docs/selection.md)",
     )
     parser.add_argument(
+        "--trust-quantile",
+        type=float,
+        default=None,
+        metavar="Q",
+        help="score methods fall back to their score-free counterpart for agents observed "
+        "faster than the Q-quantile of the training split's observed step (model units; "
+        "SelectionConfig.trust_speed); their rows carry the suffix -gate",
+    )
+    parser.add_argument(
         "--stretch",
         type=float,
         default=1.0,
@@ -132,6 +148,12 @@ def main() -> None:
               "training split's scene speeds)")  # fmt: skip
     scorer = TrajectoryScorer(model.denoiser, model.schedule, model.scale, steps,
                               speed_ref=speed_ref)  # fmt: skip
+    trust_speed = 0.0
+    if args.trust_quantile is not None:
+        train = load_dataset(args.dataset, "train", args.data_root)
+        trust_speed = float(np.quantile(observed_step(train, model.scale), args.trust_quantile))
+        print(f"trust_speed = {trust_speed:.4f} model units/step (the {args.trust_quantile:g}"
+              "-quantile of the training split's observed step)")  # fmt: skip
     data = load_dataset(args.dataset, args.split, args.data_root)
     if args.holdout_scene:  # the held-out location's windows of both splits
         train = load_dataset(args.dataset, "train", args.data_root)
@@ -157,9 +179,11 @@ def main() -> None:
         d = scorer.residual(batch, pred)  # [K, N, T_f]; the ground truth is not read
         residual = d[..., -1] if args.final else d.sum(-1)  # [K, N]
         seconds["score"] += time.perf_counter() - t1
+        trusted = within_pace(batch, model.scale, trust_speed)  # [N] or None
         for i, cfg in enumerate(configs):
             t2 = time.perf_counter()
-            idx = select_samples(pred, cfg, residual if cfg.uses_score else None, batch, rng)
+            idx = select_samples(pred, cfg, residual if cfg.uses_score else None, batch, rng,
+                                 trusted if cfg.uses_score else None)  # fmt: skip
             seconds[i] += time.perf_counter() - t2
             accs[i].update(gather(pred, idx), batch.future, batch.scene, batch.num_scenes)
         scenes += batch.num_scenes
@@ -193,6 +217,8 @@ def main() -> None:
         method += f"-{args.variant}" if args.variant else ""
         if args.speed_norm is not None and v["uses_score"]:  # the score-free rows are as before
             method += f"-sn{round(args.speed_norm * 100)}"
+        if trust_speed and v["uses_score"]:
+            method += "-gate"
         rows.append(make_row(
             dataset=args.dataset, split=args.split, method=method, seed=args.seed, samples=keep,
             min_ade=v["min_ade"], min_fde=v["min_fde"], joint_min_ade=v["joint_min_ade"],
@@ -204,6 +230,7 @@ def main() -> None:
     meta = {"header": header, "ms_predict_per_scene": ms_predict, "ms_score_per_scene": ms_score,
             "score_every": args.score_every, "final": args.final, "scenes": scenes,
             "speed_ref": speed_ref, "stretch": args.stretch, "draws": args.draws,
+            "trust_speed": trust_speed, "trust_quantile": args.trust_quantile,
             "holdout_scene": args.holdout_scene,
             "command": command_line(), "machine": machine()}  # fmt: skip
     out_dir = ROOT / "benchmarks" / "results"

@@ -38,3 +38,28 @@ def test_speed_normalised_scoring_names_the_score_rows_only(tmp_path, monkeypatc
     (rows_file,) = (tmp_path / "benchmarks" / "results").glob("select_*.json")
     methods = {r["method"]: r["uses_score"] for r in json.loads(rows_file.read_text())}
     assert methods == {"select-kmeans": False, "select-score-facility-d30-t2-sn50": True}
+
+
+def test_trust_quantile_gates_the_score_rows_only(tmp_path, monkeypatch, tiny_run, walks):
+    sel = load_benchmark("selection")
+    monkeypatch.setattr(sel, "ROOT", tmp_path)
+    (tmp_path / "benchmarks" / "results").mkdir(parents=True)
+    argv = ["selection.py", "--dataset", str(walks), "--model",
+            str(tiny_run / "generator.safetensors"), "--split", "test", "--samples", "4",
+            "--keep", "2", "--methods", "facility", "score-facility", "--drop", "0.3",
+            "--temperature", "2", "--bandwidth", "0.5", "--score-every", "40",
+            "--trust-quantile", "0.0"]  # fmt: skip
+    monkeypatch.setattr(sys, "argv", argv)
+    sel.main()
+    (rows_file,) = (tmp_path / "benchmarks" / "results").glob("select_*.json")
+    rows = {r["method"]: r for r in json.loads(rows_file.read_text())}
+    assert set(rows) == {"select-facility", "select-score-facility-d30-t2-gate"}
+    assert rows["select-score-facility-d30-t2-gate"]["uses_score"] is True
+    # at the 0-quantile nearly every walker is faster than the slowest: the gated rows are
+    # the score-free facility selection (same bandwidth)
+    gated, free = rows["select-score-facility-d30-t2-gate"], rows["select-facility"]
+    assert gated["min_fde"] == pytest.approx(free["min_fde"], rel=0.05)
+    meta = json.loads(
+        next((tmp_path / "benchmarks" / "results" / "meta").glob("*.json")).read_text()
+    )
+    assert meta["trust_quantile"] == 0.0 and meta["trust_speed"] >= 0.0

@@ -129,6 +129,10 @@ def _add_selection_args(p: argparse.ArgumentParser) -> None:
                    help="per agent, or one set of indices per scene (joint metrics)")  # fmt: skip
     p.add_argument("--score-every", type=int, default=9,
                    help="selection's score steps: every this many of the S (9)")  # fmt: skip
+    p.add_argument("--trust-speed", type=float, default=0.0, metavar="V",
+                   help="score-* selections: agents observed faster than V (the scorer's "
+                   "model units per step, as --max-speed) are selected without the score, "
+                   "which never saw their pace (0: off; docs/selection.md)")  # fmt: skip
 
 
 def _add_run_args(p: argparse.ArgumentParser, example: str, last: str) -> None:
@@ -422,7 +426,8 @@ def _selecting(args, model, device):
     if args.keep is None:
         return model, args.samples
     cfg = SelectionConfig(keep=args.keep, method=args.select, drop=args.drop,
-                          per=args.select_per, seed=args.seed)  # fmt: skip
+                          per=args.select_per, seed=args.seed,
+                          trust_speed=args.trust_speed)  # fmt: skip
     scorer = None
     if cfg.uses_score:
         if args.scorer is None and args.model == "cv":
@@ -436,7 +441,8 @@ def _selecting(args, model, device):
 def _selection_fields(args) -> dict:
     if args.keep is None:
         return {}
-    return {"candidates": args.samples, "select": args.select, "select_per": args.select_per}
+    return {"candidates": args.samples, "select": args.select, "select_per": args.select_per,
+            "trust_speed": args.trust_speed}  # fmt: skip
 
 
 SCORE_LINE = (("max_ats", "maxATS"), ("max_fts", "maxFTS"), ("mean_ats", "meanATS"))

@@ -18,6 +18,7 @@ from trajpref.score.selection import (
     gather,
     select_indices,
     select_samples,
+    within_pace,
 )
 from trajpref.types import collate
 
@@ -142,3 +143,75 @@ def test_cli_keep_selects_and_reports(tiny_run, walks, capsys, tmp_path):
     code = main(["evaluate", "--dataset", str(walks), "--model", "cv", "--keep", "2",
                  "--select", "top", "--no-progress"])  # fmt: skip
     assert code == 2 and "needs --scorer" in capsys.readouterr().err
+
+
+def test_untrusted_agents_fall_back_to_the_score_free_counterpart():
+    g = torch.Generator().manual_seed(0)
+    feats = torch.randn(20, 6, 2, generator=g)  # [K, M, F]
+    residual = torch.rand(20, 6, generator=g)
+    trusted = torch.tensor([True, False, True, True, False, True])
+    pairs = [("score-facility", "facility"), ("score-kmeans", "kmeans"), ("score-fps", "fps"),
+             ("top", "first"), ("score-first", "first")]  # fmt: skip
+    for method, free in pairs:
+        cfg = SelectionConfig(method=method, keep=5, drop=0.3)
+        gated = select_indices(feats, 5, cfg, residual, trusted=trusted)
+        scored = select_indices(feats, 5, cfg, residual)
+        plain = select_indices(feats, 5, SelectionConfig(method=free, keep=5))
+        assert torch.equal(gated[:, trusted], scored[:, trusted]), method
+        assert torch.equal(gated[:, ~trusted], plain[:, ~trusted]), method
+        # the untrusted agents' picks do not depend on the residual at all
+        shuffled = select_indices(feats, 5, cfg, residual.flip(0), trusted=trusted)
+        assert torch.equal(shuffled[:, ~trusted], gated[:, ~trusted]), method
+    # all trusted, or a score-free method: the gate changes nothing
+    cfg = SelectionConfig(method="score-facility", keep=5)
+    everyone = torch.ones(6, dtype=torch.bool)
+    assert torch.equal(select_indices(feats, 5, cfg, residual, trusted=everyone),
+                       select_indices(feats, 5, cfg, residual))  # fmt: skip
+
+
+def test_within_pace_measures_first_to_last_observed_step_in_model_units():
+    scene = make_scene(3, seed=4)
+    batch = collate([scene])
+    hist = batch.history.clone()  # [N, T_h, 2]
+    t = torch.arange(hist.shape[1], dtype=hist.dtype)
+    hist[0] = torch.stack([0.5 * t, 0 * t], -1)  # 0.5 data units per step
+    hist[1] = torch.stack([0 * t, 2.0 * t], -1)  # 2.0
+    hist[2] = 0.0  # standing
+    batch.history = hist
+    assert within_pace(batch, scale=1.0, trust_speed=0.0) is None  # off
+    assert within_pace(batch, scale=1.0, trust_speed=1.0).tolist() == [True, False, True]
+    # in model units: with a data scale of 4, 2.0 units/step is 0.5 model units/step
+    assert within_pace(batch, scale=4.0, trust_speed=0.5).tolist() == [True, True, True]
+    with pytest.raises(ConfigError, match="trust_speed"):
+        SelectionConfig(trust_speed=-1.0)
+
+
+def test_per_scene_gate_falls_back_for_a_scene_with_one_fast_agent():
+    batch = collate([make_scene(3, seed=1), make_scene(2, seed=2)])
+    g = torch.Generator().manual_seed(0)
+    pred = torch.randn(12, batch.num_agents, 12, 2, generator=g)
+    residual = torch.rand(12, batch.num_agents, generator=g)
+    cfg = SelectionConfig(method="score-kmeans", keep=3, per="scene", drop=0.5)
+    trusted = torch.ones(batch.num_agents, dtype=torch.bool)
+    trusted[0] = False  # one agent of scene 0 is too fast
+    gated = select_samples(pred, cfg, residual, batch, trusted=trusted)
+    scored = select_samples(pred, cfg, residual, batch)
+    plain = select_samples(pred, SelectionConfig(method="kmeans", keep=3, per="scene"), None,
+                           batch)  # fmt: skip
+    s0, s1 = batch.scene == 0, batch.scene == 1
+    assert torch.equal(gated[:, s0], plain[:, s0])
+    assert torch.equal(gated[:, s1], scored[:, s1])
+
+
+def test_cli_trust_speed_is_reported(tiny_run, walks, capsys):
+    gen = str(tiny_run / "generator.safetensors")
+    code = main(["evaluate", "--dataset", str(walks), "--model", gen, "--samples", "4",
+                 "--keep", "2", "--select", "score-kmeans", "--trust-speed", "1e-6",
+                 "--json", "--no-progress"])  # fmt: skip
+    gated = json.loads(capsys.readouterr().out)
+    code2 = main(["evaluate", "--dataset", str(walks), "--model", gen, "--samples", "4",
+                  "--keep", "2", "--select", "kmeans", "--json", "--no-progress"])  # fmt: skip
+    plain = json.loads(capsys.readouterr().out)
+    assert code == code2 == 0 and gated["trust_speed"] == 1e-6
+    # every walker moves faster than 1e-6 model units per step: kmeans for all of them
+    assert gated["min_fde"] == pytest.approx(plain["min_fde"])

@@ -12,6 +12,7 @@ human-like), the result idx [K', N] (sample indices per agent, in selection orde
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import typing
 from dataclasses import dataclass
@@ -30,6 +31,9 @@ Method = Literal["first", "random", "kmeans", "fps", "facility", "top", "score-f
 METHODS: tuple[str, ...] = typing.get_args(Method)
 USES_SCORE = {m: m == "top" or m.startswith("score-") for m in METHODS}
 """Methods that read the diffusion score (the others select by the samples alone)."""
+SCORE_FREE = {"top": "first", "score-first": "first", "score-kmeans": "kmeans",
+              "score-fps": "fps", "score-facility": "facility"}  # fmt: skip
+"""Each score method's counterpart without the score (``trust_speed`` falls back to it)."""
 
 
 @dataclass
@@ -63,6 +67,11 @@ class SelectionConfig:
     seed: int = 0
     """Seed of the ``random`` method's own generator (it never draws from the sampler's, so
     every method sees the same candidates)."""
+    trust_speed: float = 0.0
+    """Score methods only: an agent observed faster than this (the scorer's model units per
+    observed step, first to last observed position, as ``model.max_speed`` measures it) is
+    selected by the method's score-free counterpart (``SCORE_FREE``): the scorer never saw
+    such a pace. With ``per="scene"`` a scene with any such agent falls back. 0: off."""
 
     def __post_init__(self) -> None:
         check_choices(self)
@@ -74,6 +83,8 @@ class SelectionConfig:
             raise ConfigError("selection iters must be >= 0")
         if self.bandwidth <= 0 or self.temperature <= 0:
             raise ConfigError("selection bandwidth and temperature must be > 0")
+        if not self.trust_speed >= 0:
+            raise ConfigError(f"selection trust_speed must be >= 0, got {self.trust_speed}")
 
     @property
     def uses_score(self) -> bool:
@@ -148,15 +159,31 @@ def _facility(x: torch.Tensor, valid: torch.Tensor, weight: torch.Tensor, keep: 
 
 def select_indices(features: torch.Tensor, keep: int, cfg: SelectionConfig,
                    residual: torch.Tensor | None = None,
-                   generator: torch.Generator | None = None) -> torch.Tensor:  # fmt: skip
+                   generator: torch.Generator | None = None,
+                   trusted: torch.Tensor | None = None) -> torch.Tensor:  # fmt: skip
     """The core: ``keep`` of K samples per item. features [K, M, F] (what coverage is measured
-    on), residual [K, M] (lower is better; needed by the score methods) -> idx [keep, M]."""
+    on), residual [K, M] (lower is better; needed by the score methods) -> idx [keep, M].
+    ``trusted`` [M] bool (score methods; None: all): the other items are selected by the
+    method's score-free counterpart."""
     k, m_items, _ = features.shape
     if keep > k:
         raise ConfigError(f"cannot keep {keep} of {k} samples")
     method = cfg.method
     if USES_SCORE.get(method) and residual is None:
         raise ConfigError(f"selection {method!r} needs the diffusion score (a scorer)")
+    if trusted is not None and USES_SCORE.get(method) and not bool(trusted.all()):
+        with_score = _select(features, keep, cfg, residual, generator)  # [keep, M]
+        free = dataclasses.replace(cfg, method=SCORE_FREE[method])
+        without = _select(features, keep, free, None, generator)  # [keep, M]
+        return torch.where(trusted.to(features.device)[None], with_score, without)
+    return _select(features, keep, cfg, residual, generator)
+
+
+def _select(features: torch.Tensor, keep: int, cfg: SelectionConfig,
+            residual: torch.Tensor | None, generator: torch.Generator | None) -> torch.Tensor:  # fmt: skip
+    """``select_indices`` for every item by ``cfg.method``: [K, M, F] -> [keep, M]."""
+    k, m_items, _ = features.shape
+    method = cfg.method
     device = features.device
     if method == "first":
         return torch.arange(keep, device=device)[:, None].expand(-1, m_items)
@@ -189,15 +216,18 @@ def select_indices(features: torch.Tensor, keep: int, cfg: SelectionConfig,
 
 def select_samples(pred: torch.Tensor, cfg: SelectionConfig, residual: torch.Tensor | None = None,
                    batch: Batch | None = None,
-                   generator: torch.Generator | None = None) -> torch.Tensor:  # fmt: skip
+                   generator: torch.Generator | None = None,
+                   trusted: torch.Tensor | None = None) -> torch.Tensor:  # fmt: skip
     """Keep ``cfg.keep`` of the K samples pred [K, N, T_f, 2] -> idx [K', N].
 
     Coverage is measured on the endpoints. ``residual`` [K, N] is each sample's residual
     per agent. With ``per="scene"`` (``batch`` needed for the scene index), a scene's agents
-    share one set of indices, chosen on their stacked endpoints and summed residuals."""
+    share one set of indices, chosen on their stacked endpoints and summed residuals.
+    ``trusted`` [N] bool (None: all): agents whose score is used (``within_pace``); a scene
+    is trusted when all its agents are."""
     ends = pred[..., -1, :]  # [K, N, 2]
     if cfg.per == "agent":
-        return select_indices(ends, cfg.keep, cfg, residual, generator)
+        return select_indices(ends, cfg.keep, cfg, residual, generator, trusted)
     if batch is None:
         raise ConfigError("per-scene selection needs the batch (its scene index)")
     slot, mask = batch.padded_index()  # [N], [B, P]
@@ -206,8 +236,24 @@ def select_samples(pred: torch.Tensor, cfg: SelectionConfig, residual: torch.Ten
     feats = ends.new_zeros(k, b, p, 2)  # padding is zero for every sample: no distance
     feats[:, batch.scene, slot] = ends
     scene_res = None if residual is None else scene_sum(residual, batch.scene, b)  # [K, B]
-    idx = select_indices(feats.flatten(2), cfg.keep, cfg, scene_res, generator)  # [K', B]
+    scene_ok = None
+    if trusted is not None:  # a scene with any untrusted agent falls back
+        bad = (~trusted).to(torch.int64)  # [N]
+        scene_ok = torch.zeros(b, dtype=torch.int64, device=bad.device).index_add_(
+            0, batch.scene, bad) == 0  # fmt: skip
+    idx = select_indices(feats.flatten(2), cfg.keep, cfg, scene_res, generator, scene_ok)
     return idx[:, batch.scene]  # [K', N]
+
+
+def within_pace(batch: Batch, scale: float, trust_speed: float) -> torch.Tensor | None:
+    """Agents [N] bool whose observed displacement per step (first to last observed
+    position, in model units: data units / ``scale``) is at most ``trust_speed``; None when
+    the gate is off (``trust_speed`` 0)."""
+    if trust_speed <= 0:
+        return None
+    hist = batch.history  # [N, T_h, 2]
+    step = (hist[:, -1] - hist[:, 0]).norm(dim=-1) / (hist.shape[1] - 1) / scale  # [N]
+    return step <= trust_speed
 
 
 def gather(pred: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
@@ -237,11 +283,12 @@ class SelectingPredictor:
     @torch.no_grad()
     def select(self, batch: Batch, pred: torch.Tensor) -> torch.Tensor:
         """Indices [K', N] of the samples pred [K, N, T_f, 2] to keep."""
-        residual = None
+        residual, trusted = None, None
         if self.cfg.uses_score:
             d = self.scorer.residual(batch, pred)  # [K, N, T_f]
             residual = d[..., -1] if self.cfg.final else d.sum(-1)  # [K, N]
-        return select_samples(pred, self.cfg, residual, batch, self.generator)
+            trusted = within_pace(batch, self.scorer.scale, self.cfg.trust_speed)
+        return select_samples(pred, self.cfg, residual, batch, self.generator, trusted)
 
     @torch.no_grad()
     def predict(self, batch: Batch, num_samples: int | None = None,
