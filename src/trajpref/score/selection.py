@@ -180,7 +180,8 @@ def select_indices(features: torch.Tensor, keep: int, cfg: SelectionConfig,
 
 
 def _select(features: torch.Tensor, keep: int, cfg: SelectionConfig,
-            residual: torch.Tensor | None, generator: torch.Generator | None) -> torch.Tensor:  # fmt: skip
+            residual: torch.Tensor | None,
+            generator: torch.Generator | None) -> torch.Tensor:  # fmt: skip
     """``select_indices`` for every item by ``cfg.method``: [K, M, F] -> [keep, M]."""
     k, m_items, _ = features.shape
     method = cfg.method
