@@ -25,41 +25,39 @@ def test_validation_only_options_refuse_before_reading_anything(argv, message, m
     assert message in capsys.readouterr().err
 
 
-def test_speed_normalised_scoring_names_the_score_rows_only(tmp_path, monkeypatch, tiny_run, walks):
+def _test_rows(tmp_path, monkeypatch, tiny_run, walks, *extra) -> tuple[list[dict], dict]:
+    """Run the script on the test split of the tiny fixture: its rows and its meta record."""
     sel = load_benchmark("selection")
     monkeypatch.setattr(sel, "ROOT", tmp_path)
-    (tmp_path / "benchmarks" / "results").mkdir(parents=True)
+    results = tmp_path / "benchmarks" / "results"
+    results.mkdir(parents=True)
     argv = ["selection.py", "--dataset", str(walks), "--model",
             str(tiny_run / "generator.safetensors"), "--split", "test", "--samples", "4",
-            "--keep", "2", "--methods", "kmeans", "score-facility", "--drop", "0.3",
-            "--temperature", "2", "--score-every", "40", "--speed-norm", "0.5"]  # fmt: skip
+            "--keep", "2", "--drop", "0.3", "--temperature", "2", "--score-every", "40",
+            *extra]  # fmt: skip
     monkeypatch.setattr(sys, "argv", argv)
     sel.main()
-    (rows_file,) = (tmp_path / "benchmarks" / "results").glob("select_*.json")
-    methods = {r["method"]: r["uses_score"] for r in json.loads(rows_file.read_text())}
+    (rows_file,) = results.glob("select_*.json")
+    (meta_file,) = (results / "meta").glob("*.json")
+    return json.loads(rows_file.read_text()), json.loads(meta_file.read_text())
+
+
+def test_speed_normalised_scoring_names_the_score_rows_only(tmp_path, monkeypatch, tiny_run, walks):
+    extra = ["--methods", "kmeans", "score-facility", "--speed-norm", "0.5"]
+    rows, _ = _test_rows(tmp_path, monkeypatch, tiny_run, walks, *extra)
+    methods = {r["method"]: r["uses_score"] for r in rows}
     assert methods == {"select-kmeans": False, "select-score-facility-d30-t2-sn50": True}
 
 
 def test_trust_quantile_gates_the_score_rows_only(tmp_path, monkeypatch, tiny_run, walks):
-    sel = load_benchmark("selection")
-    monkeypatch.setattr(sel, "ROOT", tmp_path)
-    (tmp_path / "benchmarks" / "results").mkdir(parents=True)
-    argv = ["selection.py", "--dataset", str(walks), "--model",
-            str(tiny_run / "generator.safetensors"), "--split", "test", "--samples", "4",
-            "--keep", "2", "--methods", "facility", "score-facility", "--drop", "0.3",
-            "--temperature", "2", "--bandwidth", "0.5", "--score-every", "40",
-            "--trust-quantile", "0.0"]  # fmt: skip
-    monkeypatch.setattr(sys, "argv", argv)
-    sel.main()
-    (rows_file,) = (tmp_path / "benchmarks" / "results").glob("select_*.json")
-    rows = {r["method"]: r for r in json.loads(rows_file.read_text())}
+    rows, meta = _test_rows(tmp_path, monkeypatch, tiny_run, walks,
+                            "--methods", "facility", "score-facility", "--bandwidth", "0.5",
+                            "--trust-quantile", "0.0")  # fmt: skip
+    rows = {r["method"]: r for r in rows}
     assert set(rows) == {"select-facility", "select-score-facility-d30-t2-gate"}
     assert rows["select-score-facility-d30-t2-gate"]["uses_score"] is True
     # at the 0-quantile nearly every walker is faster than the slowest: the gated rows are
     # the score-free facility selection (same bandwidth)
     gated, free = rows["select-score-facility-d30-t2-gate"], rows["select-facility"]
     assert gated["min_fde"] == pytest.approx(free["min_fde"], rel=0.05)
-    meta = json.loads(
-        next((tmp_path / "benchmarks" / "results" / "meta").glob("*.json")).read_text()
-    )
     assert meta["trust_quantile"] == 0.0 and meta["trust_speed"] >= 0.0
