@@ -99,6 +99,12 @@ def main() -> None:
         "split's scene speeds (docs/selection.md)",
     )
     parser.add_argument(
+        "--score-precision",
+        default="fp32",
+        choices=["fp32", "bf16"],
+        help="arithmetic of the score passes; bf16 rows of score methods carry the suffix -bf16",
+    )
+    parser.add_argument(
         "--trust-quantile",
         type=float,
         default=None,
@@ -147,7 +153,7 @@ def main() -> None:
         print(f"speed_ref = {speed_ref:.4f} units/step (the {args.speed_norm:g}-quantile of the "
               "training split's scene speeds)")  # fmt: skip
     scorer = TrajectoryScorer(model.denoiser, model.schedule, model.scale, steps,
-                              speed_ref=speed_ref)  # fmt: skip
+                              speed_ref=speed_ref, precision=args.score_precision)  # fmt: skip
     trust_speed = 0.0
     if args.trust_quantile is not None:
         train = load_dataset(args.dataset, "train", args.data_root)
@@ -219,6 +225,8 @@ def main() -> None:
             method += f"-sn{round(args.speed_norm * 100)}"
         if trust_speed and v["uses_score"]:
             method += "-gate"
+        if args.score_precision != "fp32" and v["uses_score"]:
+            method += f"-{args.score_precision}"
         rows.append(make_row(
             dataset=args.dataset, split=args.split, method=method, seed=args.seed, samples=keep,
             min_ade=v["min_ade"], min_fde=v["min_fde"], joint_min_ade=v["joint_min_ade"],
@@ -231,6 +239,7 @@ def main() -> None:
             "score_every": args.score_every, "final": args.final, "scenes": scenes,
             "speed_ref": speed_ref, "stretch": args.stretch, "draws": args.draws,
             "trust_speed": trust_speed, "trust_quantile": args.trust_quantile,
+            "score_precision": args.score_precision,
             "holdout_scene": args.holdout_scene,
             "command": command_line(), "machine": machine()}  # fmt: skip
     out_dir = ROOT / "benchmarks" / "results"

@@ -1,11 +1,13 @@
 """What keeping K' of K samples with the diffusion score costs beside the prediction itself,
 measured side by side (interleaved, one scene per call) on a split's largest scenes.
 
-    python benchmarks/selection_cost.py --dataset univ --scenes 20 --data-root ../shared/data
+    python benchmarks/selection_cost.py --dataset univ --scenes 20 --precision fp32 bf16 \
+        --data-root ../shared/data
 
-For each score-step spacing, prints ms per scene of: the prediction (K = 20 leapfrog
-samples), the score of its samples, the selection itself, and the ratio (score + selection) /
-prediction. Writes benchmarks/results/meta/selection_cost_<dataset>.json.
+For each score-step spacing and score precision (``--precision fp32 bf16``), prints ms per
+scene of: the prediction (K = 20 leapfrog samples, fp32), the score of its samples, the
+selection itself, and the ratio (score + selection) / prediction. Writes
+benchmarks/results/meta/selection_cost_<dataset>.json.
 """
 
 from __future__ import annotations
@@ -36,27 +38,29 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=20)
     parser.add_argument("--every", type=int, nargs="+", default=[3, 9, 13, 20, 33])
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--precision", nargs="+", default=["fp32"], choices=["fp32", "bf16"],
+                        help="score precisions, timed side by side")  # fmt: skip
     args = parser.parse_args()
 
     path = ROOT / "models" / args.dataset / "generator.safetensors"
     model = ckpt.load_predictor(path, "leapfrog")
     test = load_dataset(args.dataset, "test", args.data_root)
     largest = sorted(test.scenes, key=lambda s: -s.num_agents)[: args.scenes]
-    scorers = {e: TrajectoryScorer(model.denoiser, model.schedule, model.scale,
-                                   score_timesteps(model.schedule.num_steps, e))
-               for e in args.every}  # fmt: skip
+    scorers = {(p, e): TrajectoryScorer(model.denoiser, model.schedule, model.scale,
+                                        score_timesteps(model.schedule.num_steps, e), precision=p)
+               for p in args.precision for e in args.every}  # fmt: skip
     cfg = SelectionConfig(keep=5, method="score-fps", drop=0.4)
-    ms = {"predict": 0.0, "select": 0.0} | {e: 0.0 for e in args.every}
+    ms = {"predict": 0.0, "select": 0.0} | {key: 0.0 for key in scorers}
     for _ in range(args.repeats):
         for i, scene in enumerate(largest):
             batch = collate([scene])
             t0 = time.perf_counter()
             pred = model.predict(batch, args.samples, torch.Generator().manual_seed(i))
             ms["predict"] += time.perf_counter() - t0
-            for e, scorer in scorers.items():
+            for key, scorer in scorers.items():
                 t0 = time.perf_counter()
                 residual = scorer.residual(batch, pred).sum(-1)  # [K, N]
-                ms[e] += time.perf_counter() - t0
+                ms[key] += time.perf_counter() - t0
             t0 = time.perf_counter()
             select_samples(pred, cfg, residual, batch)
             ms["select"] += time.perf_counter() - t0
@@ -69,11 +73,12 @@ def main() -> None:
         f"repeats: predict {ms['predict']:.1f} ms/scene, select {ms['select']:.2f} ms/scene"
     )
     rows = []
-    for e in args.every:
+    for p, e in scorers:
         steps = len(score_timesteps(model.schedule.num_steps, e))
-        ratio = (ms[e] + ms["select"]) / ms["predict"]
-        rows.append({"every": e, "steps": steps, "ms_score": ms[e], "ratio": ratio})
-        print(f"  score every {e:>2} ({steps:>2} steps): {ms[e]:7.1f} ms/scene, "
+        ratio = (ms[p, e] + ms["select"]) / ms["predict"]
+        rows.append({"precision": p, "every": e, "steps": steps, "ms_score": ms[p, e],
+                     "ratio": ratio})  # fmt: skip
+        print(f"  {p} score every {e:>2} ({steps:>2} steps): {ms[p, e]:7.1f} ms/scene, "
               f"(score + select) / predict = {ratio:.2f}x")  # fmt: skip
     out = {"dataset": args.dataset, "scene_sizes": sizes, "ms_predict": ms["predict"],
            "ms_select": ms["select"], "settings": rows, "command": command_line(),

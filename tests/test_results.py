@@ -183,12 +183,15 @@ def test_selection_table_gives_a_published_variant_its_own_line():
     assert "0.600 (`score-fps`) | -25.0 %" in lines[1]
 
 
-def test_selection_table_shows_the_gated_selection_even_where_the_ungated_is_better():
+def test_selection_table_shows_the_chosen_selection_even_where_another_is_better():
     rows = [_sel("eth", "facility", 0, 1.0, False), _sel("eth", "score-facility", 0, 0.9, True),
             _sel("eth", "score-facility-gate", 0, 0.95, True)]  # fmt: skip
-    line = selection_table(rows).splitlines()[2]
+    line = selection_table(rows, chosen={"eth": "select-score-facility-gate"}).splitlines()[2]
     assert "0.950 (`score-facility-gate`) | -5.0 %" in line
-    assert "0.900" not in line  # the ungated row is not picked on the test split
+    assert "0.900" not in line  # the other setting is not picked on the test split
+    assert "0.900 (`score-facility`)" in selection_table(rows).splitlines()[2]  # no choice
+    with pytest.raises(ValueError, match="no test rows"):
+        selection_table(rows, chosen={"eth": "select-top"})
 
 
 def test_each_finetuning_row_compares_with_the_start_of_its_time():

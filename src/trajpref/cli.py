@@ -129,6 +129,9 @@ def _add_selection_args(p: argparse.ArgumentParser) -> None:
                    help="per agent, or one set of indices per scene (joint metrics)")  # fmt: skip
     p.add_argument("--score-every", type=int, default=9,
                    help="selection's score steps: every this many of the S (9)")  # fmt: skip
+    p.add_argument("--score-precision", default="fp32", choices=["fp32", "bf16"],
+                   help="arithmetic of selection's score passes (bf16: about 3x faster on a "
+                   "CPU with bfloat16 instructions; docs/selection.md)")  # fmt: skip
     p.add_argument("--trust-speed", type=float, default=0.0, metavar="V",
                    help="score-* selections: agents observed faster than V (the scorer's "
                    "model units per step, as --max-speed) are selected without the score, "
@@ -434,7 +437,8 @@ def _selecting(args, model, device):
             raise ConfigError(f"--select {args.select} with --model cv needs --scorer")
         every = TrajectoryScorer.from_checkpoint(args.scorer or args.model, device)
         steps = score_timesteps(every.schedule.num_steps, args.score_every)
-        scorer = TrajectoryScorer(every.denoiser, every.schedule, every.scale, steps)
+        scorer = TrajectoryScorer(every.denoiser, every.schedule, every.scale, steps,
+                                  precision=args.score_precision)  # fmt: skip
     return SelectingPredictor(model, cfg, args.samples, scorer), args.keep
 
 
@@ -442,7 +446,7 @@ def _selection_fields(args) -> dict:
     if args.keep is None:
         return {}
     return {"candidates": args.samples, "select": args.select, "select_per": args.select_per,
-            "trust_speed": args.trust_speed}  # fmt: skip
+            "trust_speed": args.trust_speed, "score_precision": args.score_precision}  # fmt: skip
 
 
 SCORE_LINE = (("max_ats", "maxATS"), ("max_fts", "maxFTS"), ("mean_ats", "meanATS"))

@@ -247,13 +247,15 @@ def _variant(checkpoint: str | None) -> str:
     return Path(checkpoint).stem.removeprefix("generator").lstrip("-") if checkpoint else ""
 
 
-def selection_table(rows: list[dict[str, Any]], split: str = "test") -> str:
+def selection_table(rows: list[dict[str, Any]], split: str = "test",
+                    chosen: dict[str, str] | None = None) -> str:  # fmt: skip
     """Markdown table of the ``select-*`` rows: per dataset and K', minFDE_K' of the
     score-free selections, the best of them, the score-using selection and the change, each
     the mean over the seeds measured; the change is computed within each seed and shown as
-    mean +- std when there are several. Where a group has gated score rows (``-gate``: the
-    score methods that fall back outside the scorer's training pace), those are its chosen
-    score-using selection (docs/selection.md) and the ungated ones are not shown."""
+    mean +- std when there are several. ``chosen`` maps a line's label (the dataset, or
+    ``"eth (speedaug)"`` for a variant) to its score-using method chosen on validation
+    (``benchmarks/selection_chosen.json``); a line without an entry shows its best
+    score-using row, which is the chosen one only when a single setting was read on test."""
     sel = [r for r in merge_rows(rows) if r["split"] == split and r["method"].startswith("select-")]
     groups: dict[tuple, dict[str, list[dict[str, Any]]]] = {}
     for r in sel:
@@ -275,8 +277,11 @@ def selection_table(rows: list[dict[str, Any]], split: str = "test") -> str:
     for (dataset, keep), by_method in sorted(groups.items()):
         free = {m: g for m, g in by_method.items() if not g[0]["uses_score"]}
         scored = {m: g for m, g in by_method.items() if g[0]["uses_score"]}
-        gated = {m: g for m, g in scored.items() if m.endswith("-gate")}
-        scored = gated or scored  # the rule's choice, not the better of the two on test
+        pick = (chosen or {}).get(dataset)
+        if pick is not None:  # the rule's choice, never the better of several on test
+            if pick not in scored:
+                raise ValueError(f"{dataset}: chosen selection {pick!r} has no {split} rows")
+            scored = {pick: scored[pick]}
         if not free or not scored:
             continue
         best_free = min(free, key=lambda m: mean(free[m], "min_fde"))

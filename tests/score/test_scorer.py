@@ -170,3 +170,21 @@ def test_speed_normalisation_leaves_slow_scenes_alone_and_rescales_fast_ones(tin
     assert not torch.allclose(expected, plain.residual(batch, samples))
     with pytest.raises(ConfigError, match="speed_ref must be > 0"):
         TrajectoryScorer.from_checkpoint(path, speed_ref=0.0)
+
+
+def test_bf16_scoring_stays_close_to_fp32_and_returns_fp32(tiny_run, batch):
+    pred = _samples(batch, k=8)
+    full = TrajectoryScorer.from_checkpoint(tiny_run / "denoiser.safetensors")
+    low = TrajectoryScorer.from_checkpoint(tiny_run / "denoiser.safetensors", precision="bf16")
+    d32, d16 = full.residual(batch, pred), low.residual(batch, pred)  # [K, N, T_f]
+    assert d16.dtype == torch.float32 and d16.shape == d32.shape
+    assert not torch.equal(d16, d32)  # the passes really ran in another arithmetic
+    # bfloat16 keeps 8 bits of mantissa: the residuals agree to a few percent ...
+    assert torch.allclose(d16, d32, rtol=0.1, atol=0.05)
+    # ... and so does the per-agent order of the samples (rank correlation per agent)
+    a = d32.sum(-1).argsort(0).argsort(0).float()  # [K, N] ranks
+    b = d16.sum(-1).argsort(0).argsort(0).float()
+    corr = torch.nn.functional.cosine_similarity(a - a.mean(0), b - b.mean(0), dim=0)  # [N]
+    assert corr.mean() > 0.9
+    with pytest.raises(ConfigError, match="precision"):
+        TrajectoryScorer.from_checkpoint(tiny_run / "denoiser.safetensors", precision="fp16")
