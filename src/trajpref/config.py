@@ -157,6 +157,12 @@ class ModelConfig:
     split puts its 99th percentile at 0.43-0.45 on ETH/UCY (docs/pretraining.md). Agents
     faster than anything in training are then predicted as scaled-up copies of the fastest
     ones instead of by extrapolation."""
+    generator_social: bool = True
+    """Whether the generator's encoder attends across each scene's agents (its
+    ``encoder_layers`` attention layers). False: each agent's initial samples come from its own
+    history alone, as in LED's and MoFlow's single-agent ETH/UCY windows; the frozen denoiser
+    the tau steps run still attends across agents (docs/pretraining.md, "A generator without
+    attention across agents")."""
     spread_scale: float = 1.0
     """A sampling setting: multiplies each agent's sigma, the spread of its K initial samples
     about their mean (Y^tau = mu + spread_scale * sigma * S), before the tau denoising steps.
@@ -203,6 +209,7 @@ GENERATOR_ONLY = (
     "stochastic_steps",
     "agent_frame",
     "history_encoder",
+    "generator_social",
     "max_speed",
     "spread_scale",
 )

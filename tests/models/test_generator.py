@@ -209,3 +209,21 @@ def test_a_temporal_generator_runs_under_bf16_autocast():
         out = gen(features)
     out.mean.float().sum().backward()
     assert gen.encoder.temporal.weight_hh_l0.grad is not None
+
+
+@pytest.mark.parametrize("social", [True, False])
+def test_without_social_attention_an_agents_samples_ignore_its_neighbours(social):
+    torch.manual_seed(0)
+    gen = Generator(dataclasses.replace(TINY, generator_social=social)).eval()
+    assert len(gen.encoder.layers) == (TINY.encoder_layers if social else 0)
+    scene = make_scene(3)
+    alone = dataclasses.replace(scene, history=scene.history[:1], future=scene.future[:1],
+                                agent_type=scene.agent_type[:1])  # fmt: skip
+    with torch.no_grad():
+        crowd = gen(scene_features(collate([scene]), 1.0))
+        single = gen(scene_features(collate([alone]), 1.0))
+    same = torch.allclose(crowd.mean[0], single.mean[0], atol=1e-5) and torch.allclose(
+        crowd.shifts[:, 0], single.shifts[:, 0], atol=1e-5
+    )
+    assert same == (not social)  # agent 0's samples depend on the others only with attention
+    assert ModelConfig(generator_social=False).denoiser_part() == ModelConfig()

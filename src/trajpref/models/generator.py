@@ -46,7 +46,8 @@ class Generator(nn.Module):
         self.cfg = cfg
         self.samples = samples = cfg.samples
         h, w, tf = cfg.generator_encoder_width, cfg.generator_width, cfg.t_fut
-        self.encoder = SocialEncoder(cfg.t_hist, h, cfg.encoder_layers, cfg.heads,
+        layers = cfg.encoder_layers if cfg.generator_social else 0  # 0: own history only
+        self.encoder = SocialEncoder(cfg.t_hist, h, layers, cfg.heads,
                                      temporal=cfg.history_encoder == "temporal")  # fmt: skip
         self.mean_head = mlp([h, w, w, tf * 2])
         self.sigma_head = mlp([h + tf * 2, w, samples])
