@@ -39,6 +39,7 @@ from trajpref.score.selection import (
     METHODS,
     SelectionConfig,
     gather,
+    observed_pace,
     select_samples,
     within_pace,
 )
@@ -99,6 +100,15 @@ def main() -> None:
         "split's scene speeds (docs/selection.md)",
     )
     parser.add_argument(
+        "--pace-bins",
+        type=float,
+        nargs="+",
+        default=None,
+        metavar="Q",
+        help="diagnosis: also report per-agent minFDE_K' within bins of observed pace cut at "
+        "these quantiles of the training split's observed step (meta file only; no rows)",
+    )
+    parser.add_argument(
         "--score-precision",
         default="fp32",
         choices=["fp32", "bf16"],
@@ -154,10 +164,13 @@ def main() -> None:
               "training split's scene speeds)")  # fmt: skip
     scorer = TrajectoryScorer(model.denoiser, model.schedule, model.scale, steps,
                               speed_ref=speed_ref, precision=args.score_precision)  # fmt: skip
-    trust_speed = 0.0
+    trust_speed, cuts = 0.0, []
+    if args.trust_quantile is not None or args.pace_bins:
+        train_pace = observed_step(load_dataset(args.dataset, "train", args.data_root),
+                                   model.scale)  # fmt: skip
+        cuts = [float(np.quantile(train_pace, q)) for q in sorted(args.pace_bins or [])]
     if args.trust_quantile is not None:
-        train = load_dataset(args.dataset, "train", args.data_root)
-        trust_speed = float(np.quantile(observed_step(train, model.scale), args.trust_quantile))
+        trust_speed = float(np.quantile(train_pace, args.trust_quantile))
         print(f"trust_speed = {trust_speed:.4f} model units/step (the {args.trust_quantile:g}"
               "-quantile of the training split's observed step)")  # fmt: skip
     data = load_dataset(args.dataset, args.split, args.data_root)
@@ -170,6 +183,9 @@ def main() -> None:
 
     configs = settings(args)
     accs = {i: MetricAccumulator() for i in range(len(configs))}
+    bins = len(cuts) + 1
+    bin_fde = {i: torch.zeros(bins, dtype=torch.float64) for i in range(len(configs))}
+    bin_agents = torch.zeros(bins, dtype=torch.float64)
     seconds = {"predict": 0.0, "score": 0.0} | {i: 0.0 for i in range(len(configs))}
     scenes = 0
     rng = torch.Generator().manual_seed(args.seed)
@@ -186,12 +202,19 @@ def main() -> None:
         residual = d[..., -1] if args.final else d.sum(-1)  # [K, N]
         seconds["score"] += time.perf_counter() - t1
         trusted = within_pace(batch, model.scale, trust_speed)  # [N] or None
+        pace_bin = torch.bucketize(observed_pace(batch, model.scale), torch.tensor(cuts))  # [N]
+        bin_agents += torch.bincount(pace_bin, minlength=bins).double()
         for i, cfg in enumerate(configs):
             t2 = time.perf_counter()
             idx = select_samples(pred, cfg, residual if cfg.uses_score else None, batch, rng,
                                  trusted if cfg.uses_score else None)  # fmt: skip
             seconds[i] += time.perf_counter() - t2
-            accs[i].update(gather(pred, idx), batch.future, batch.scene, batch.num_scenes)
+            kept = gather(pred, idx)  # [K', N, T_f, 2]
+            accs[i].update(kept, batch.future, batch.scene, batch.num_scenes)
+            if cuts and cfg.per == "agent":
+                fde = (kept[:, :, -1] - batch.future[None, :, -1]).norm(dim=-1).min(0).values
+                bin_fde[i] += torch.zeros(bins, dtype=torch.float64).index_add_(
+                    0, pace_bin, fde.double())  # fmt: skip
         scenes += batch.num_scenes
         t0 = time.perf_counter()
 
@@ -218,15 +241,35 @@ def main() -> None:
             merged.setdefault(key, {}).update(joint_min_ade=ade, joint_min_fde=fde)
         lines.append(f"{key[0]:<26} {cfg.per:<6} {cfg.keep:>2} {ade:7.4f} {fde:7.4f} {ms:8.2f}")
         print(lines[-1])
-    for (method, keep), v in merged.items():
+
+    def row_method(method: str, uses_score: bool) -> str:
+        """A row's method: the setting's name with the suffixes of this run's options."""
         method = method if args.draws == 1 else f"{method}-x{args.draws}"
         method += f"-{args.variant}" if args.variant else ""
-        if args.speed_norm is not None and v["uses_score"]:  # the score-free rows are as before
+        if args.speed_norm is not None and uses_score:  # the score-free rows are as before
             method += f"-sn{round(args.speed_norm * 100)}"
-        if trust_speed and v["uses_score"]:
+        if trust_speed and uses_score:
             method += "-gate"
-        if args.score_precision != "fp32" and v["uses_score"]:
+        if args.score_precision != "fp32" and uses_score:
             method += f"-{args.score_precision}"
+        return method
+
+    pace = None
+    if cuts:
+        edges = [0.0, *cuts, float("inf")]
+        names = [f"{lo:.3f}-{hi:.3f}" for lo, hi in zip(edges, edges[1:], strict=False)]
+        pace = {"quantiles": sorted(args.pace_bins), "cuts_model_units": cuts, "bins": names,
+                "agents": bin_agents.tolist(), "min_fde": {}}  # fmt: skip
+        print(f"per-agent minFDE by observed pace (model units/step; agents {bin_agents.tolist()})")
+        for i, cfg in enumerate(configs):
+            if cfg.per != "agent":
+                continue
+            per_bin = (bin_fde[i] / bin_agents.clamp(min=1)).tolist()
+            pace["min_fde"][f"{row_method(name_of(cfg), cfg.uses_score)}@{cfg.keep}"] = per_bin
+            cells = "  ".join(f"{n}: {v:.4f}" for n, v in zip(names, per_bin, strict=True))
+            print(f"{name_of(cfg):<30} K'={cfg.keep}  {cells}")
+    for (method, keep), v in merged.items():
+        method = row_method(method, v["uses_score"])
         rows.append(make_row(
             dataset=args.dataset, split=args.split, method=method, seed=args.seed, samples=keep,
             min_ade=v["min_ade"], min_fde=v["min_fde"], joint_min_ade=v["joint_min_ade"],
@@ -239,7 +282,7 @@ def main() -> None:
             "score_every": args.score_every, "final": args.final, "scenes": scenes,
             "speed_ref": speed_ref, "stretch": args.stretch, "draws": args.draws,
             "trust_speed": trust_speed, "trust_quantile": args.trust_quantile,
-            "score_precision": args.score_precision,
+            "score_precision": args.score_precision, "pace_bins": pace,
             "holdout_scene": args.holdout_scene,
             "command": command_line(), "machine": machine()}  # fmt: skip
     out_dir = ROOT / "benchmarks" / "results"
@@ -253,7 +296,7 @@ def main() -> None:
     (out_dir / "meta" / f"select_{label}{suffix}.json").write_text(
         json.dumps(meta | {"rows": rows}, indent=2) + "\n"
     )
-    if args.split == "test":
+    if args.split == "test" and not cuts:  # a --pace-bins diagnosis writes its meta file only
         draws = "" if args.draws == 1 else f"_x{args.draws}"
         # rows of other seeds stay: each seed adds its own (results.upsert_rows)
         upsert_rows(out_dir / f"select_{label}{variant}{draws}.json", rows)

@@ -61,3 +61,27 @@ def test_trust_quantile_gates_the_score_rows_only(tmp_path, monkeypatch, tiny_ru
     gated, free = rows["select-score-facility-d30-t2-gate"], rows["select-facility"]
     assert gated["min_fde"] == pytest.approx(free["min_fde"], rel=0.05)
     assert meta["trust_quantile"] == 0.0 and meta["trust_speed"] >= 0.0
+
+
+def test_pace_bins_split_the_agents_and_write_no_rows(tmp_path, monkeypatch, tiny_run, walks):
+    sel = load_benchmark("selection")
+    monkeypatch.setattr(sel, "ROOT", tmp_path)
+    results = tmp_path / "benchmarks" / "results"
+    results.mkdir(parents=True)
+    argv = ["selection.py", "--dataset", str(walks), "--model",
+            str(tiny_run / "generator.safetensors"), "--split", "test", "--samples", "4",
+            "--keep", "2", "--methods", "kmeans", "score-kmeans", "--drop", "0.3",
+            "--score-every", "40", "--pace-bins", "0.5", "--tag", "pace"]  # fmt: skip
+    monkeypatch.setattr(sys, "argv", argv)
+    sel.main()
+    assert not list(results.glob("select_*.json"))  # a diagnosis: no result rows
+    meta = json.loads(next((results / "meta").glob("*.json")).read_text())
+    pace = meta["pace_bins"]
+    assert len(pace["bins"]) == 2 and min(pace["agents"]) > 0
+    # the agent-weighted mean of the bins is the overall per-agent minFDE
+    for row in meta["rows"]:
+        per_bin = pace["min_fde"][f"{row['method']}@{row['samples']}"]
+        total = sum(v * n for v, n in zip(per_bin, pace["agents"], strict=True)) / sum(
+            pace["agents"]
+        )
+        assert total == pytest.approx(row["min_fde"], rel=1e-5)

@@ -246,15 +246,19 @@ def select_samples(pred: torch.Tensor, cfg: SelectionConfig, residual: torch.Ten
     return idx[:, batch.scene]  # [K', N]
 
 
+def observed_pace(batch: Batch, scale: float) -> torch.Tensor:
+    """Each agent's observed displacement per step [N], first to last observed position, in
+    model units (data units / ``scale``): the measure of ``model.max_speed``."""
+    hist = batch.history  # [N, T_h, 2]
+    return (hist[:, -1] - hist[:, 0]).norm(dim=-1) / (hist.shape[1] - 1) / scale  # [N]
+
+
 def within_pace(batch: Batch, scale: float, trust_speed: float) -> torch.Tensor | None:
-    """Agents [N] bool whose observed displacement per step (first to last observed
-    position, in model units: data units / ``scale``) is at most ``trust_speed``; None when
-    the gate is off (``trust_speed`` 0)."""
+    """Agents [N] bool whose ``observed_pace`` is at most ``trust_speed``; None when the gate
+    is off (``trust_speed`` 0)."""
     if trust_speed <= 0:
         return None
-    hist = batch.history  # [N, T_h, 2]
-    step = (hist[:, -1] - hist[:, 0]).norm(dim=-1) / (hist.shape[1] - 1) / scale  # [N]
-    return step <= trust_speed
+    return observed_pace(batch, scale) <= trust_speed
 
 
 def gather(pred: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
