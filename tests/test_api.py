@@ -51,6 +51,10 @@ def test_readme_example_runs_as_written(data_root, tmp_path, monkeypatch):
     assert order.dtype == np.int64 and residual.dtype == np.float32
     assert sorted(order.tolist()) == list(range(20))
     assert np.isfinite(residual).all() and (np.diff(residual[order]) >= 0).all()
+    idx, kept = namespace["idx"], namespace["kept"]
+    samples = namespace["samples"]
+    assert idx.shape == (5, samples.shape[1]) and kept.shape == (5, *samples.shape[1:])
+    assert all(len(set(col)) == 5 for col in idx.T.tolist())  # five distinct futures per agent
     # the same numbers from tensors (the scorer's noise is seeded)
     pred = np.load("pred.npz")
     agents = pred["scene"] == 0

@@ -215,3 +215,27 @@ def test_cli_trust_speed_is_reported(tiny_run, walks, capsys):
     assert code == code2 == 0 and gated["trust_speed"] == 1e-6
     # every walker moves faster than 1e-6 model units per step: kmeans for all of them
     assert gated["min_fde"] == pytest.approx(plain["min_fde"])
+
+
+def test_select_for_scene_keeps_k_of_numpy_samples_without_the_future(tiny_run, walks):
+    from trajpref.data import load_dataset
+    from trajpref.score.selection import select_for_scene
+
+    scorer = TrajectoryScorer.from_checkpoint(tiny_run / "denoiser.safetensors")
+    scene = load_dataset(str(walks), "test").scenes[0]
+    g = np.random.default_rng(0)
+    samples = scene.future[None] + 0.3 * g.standard_normal((8, *scene.future.shape))  # [K,P,T,2]
+    cfg = SelectionConfig(method="score-facility", keep=3, drop=0.25)
+    idx = select_for_scene(scorer, scene.history, samples, cfg)
+    assert isinstance(idx, np.ndarray) and idx.shape == (3, scene.history.shape[0])
+    for p in range(idx.shape[1]):
+        assert len(set(idx[:, p].tolist())) == 3
+    # the same as the batch path, and a tensor in gives a tensor out
+    batch = collate([scene])
+    d = scorer.residual(batch, torch.as_tensor(samples, dtype=torch.float32)).sum(-1)
+    ref = select_samples(torch.as_tensor(samples, dtype=torch.float32), cfg, d, batch)
+    assert np.array_equal(idx, ref.numpy())
+    out = select_for_scene(scorer, torch.as_tensor(scene.history), torch.as_tensor(samples), cfg)
+    assert isinstance(out, torch.Tensor)
+    kept = samples[idx, np.arange(idx.shape[1])]  # [K', P, T_f, 2]
+    assert kept.shape == (3, *scene.future.shape)

@@ -300,6 +300,21 @@ def rank_samples(
     arrays when neither ``history`` nor ``samples`` is a tensor, else tensors on the scorer's
     device. Wrong shapes, non-numbers and non-finite values raise ``DataError``.
     """
+    batch, futs = scene_batch(scorer, history, samples, agent_type)
+    d = scorer.residual(batch, futs)  # [K, P, T_f]
+    total = (d[..., -1] if final else d.sum(-1)).sum(-1)  # [K]
+    order = total.argsort()  # [K]
+    if isinstance(history, torch.Tensor) or isinstance(samples, torch.Tensor):
+        return order, total
+    return order.cpu().numpy(), total.cpu().numpy()
+
+
+def scene_batch(scorer: TrajectoryScorer, history: ArrayLike, samples: ArrayLike,
+                agent_type: ArrayLike | None = None) -> tuple[Batch, torch.Tensor]:  # fmt: skip
+    """One scene's history [P, T_h, 2] and samples [K, P, T_f, 2] (arrays or tensors, the
+    scorer's units and lengths) as a one-scene Batch with an unknown (NaN) future, and the
+    samples as a float32 tensor on the scorer's device. DataError for wrong shapes and
+    non-finite values (``rank_samples`` documents the conventions)."""
     device = scorer.device
     hist = _float_tensor("history", history, device)  # [P, T_h, 2]
     futs = _float_tensor("samples", samples, device)  # [K, P, T_f, 2]
@@ -323,12 +338,7 @@ def rank_samples(
         agent_type=_agent_types(agent_type, p, device),
         num_scenes=1,
     )
-    d = scorer.residual(batch, futs)  # [K, P, T_f]
-    total = (d[..., -1] if final else d.sum(-1)).sum(-1)  # [K]
-    order = total.argsort()  # [K]
-    if isinstance(history, torch.Tensor) or isinstance(samples, torch.Tensor):
-        return order, total
-    return order.cpu().numpy(), total.cpu().numpy()
+    return batch, futs
 
 
 def recall_hits(

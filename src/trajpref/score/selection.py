@@ -23,7 +23,7 @@ import torch
 from trajpref.config import check_choices
 from trajpref.errors import ConfigError
 from trajpref.metrics import scene_sum
-from trajpref.score.scorer import TrajectoryScorer
+from trajpref.score.scorer import TrajectoryScorer, scene_batch
 from trajpref.types import Batch
 
 Method = Literal["first", "random", "kmeans", "fps", "facility", "top", "score-first",
@@ -259,6 +259,28 @@ def within_pace(batch: Batch, scale: float, trust_speed: float) -> torch.Tensor 
     if trust_speed <= 0:
         return None
     return observed_pace(batch, scale) <= trust_speed
+
+
+def select_for_scene(scorer: TrajectoryScorer, history, samples, cfg: SelectionConfig,
+                     agent_type=None):  # fmt: skip
+    """Keep ``cfg.keep`` of the K sampled futures of ONE scene given only its history (the
+    planning use, beside ``rank_samples``): history [P, T_h, 2], samples [K, P, T_f, 2]
+    (numpy arrays or tensors, in the scorer's units and lengths; the scorer checks them, and
+    its score is computed only for the methods that read it). Returns idx [K', P], sample
+    indices per agent in selection order (with ``cfg.per="scene"`` the P columns are equal):
+    numpy when neither input is a tensor, else a tensor. Take the futures with
+    ``samples[idx, np.arange(P)]``."""
+    batch, pred = scene_batch(scorer, history, samples, agent_type)  # pred [K, P, T_f, 2]
+    residual = trusted = None
+    if cfg.uses_score:
+        d = scorer.residual(batch, pred)  # [K, P, T_f]
+        residual = d[..., -1] if cfg.final else d.sum(-1)  # [K, P]
+        trusted = within_pace(batch, scorer.scale, cfg.trust_speed)  # [P] or None
+    generator = torch.Generator().manual_seed(cfg.seed)
+    idx = select_samples(pred, cfg, residual, batch, generator, trusted)  # [K', P]
+    if isinstance(history, torch.Tensor) or isinstance(samples, torch.Tensor):
+        return idx
+    return idx.cpu().numpy()
 
 
 def gather(pred: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
