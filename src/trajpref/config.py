@@ -293,6 +293,10 @@ class GeneratorTrainConfig(OptimConfig):
     denoiser."""
     fde_weight: float = 1.0
     """Weight of the endpoint error inside the best-of-K term (1: ADE + FDE)."""
+    time_weights: Literal["uniform", "decreasing"] = "uniform"
+    """How the best-of-K term averages a sample's error over the T_f steps: ``uniform`` (the
+    ADE), or ``decreasing`` (step t of T_f weighted T_f + 1 - t, normalised to mean 1, as
+    LED's initializer loss weights its steps: the near future counts most)."""
     mean_weight: float = 0.5
     """Weight of the ADE of the generator's mean mu (keeps mu meaningful for RL)."""
     uncertainty_weight: float = 0.1

@@ -41,6 +41,10 @@ def generator_loss(
     Returns ``(loss, logs)``."""
     err = torch.linalg.vector_norm(y - target, dim=-1)  # [K, N, T_f]
     ade, fde = err.mean(-1), err[..., -1]  # [K, N]
+    if c.time_weights == "decreasing":  # LED's step weights T_f, ..., 1, mean 1
+        t_f = err.shape[-1]
+        w = torch.arange(t_f, 0, -1, dtype=err.dtype, device=err.device)  # [T_f]
+        ade = (err * (w / w.mean())).mean(-1)  # [K, N]
     best = (ade + c.fde_weight * fde).min(0).values.mean()
     mean_err = torch.linalg.vector_norm(out.mean - target, dim=-1).mean(-1)  # [N]
     log_sigma = out.log_sigma.mean(0)  # [N]
