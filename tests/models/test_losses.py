@@ -50,3 +50,20 @@ def test_fde_weight_moves_the_choice_of_the_best_sample():
 def test_fde_weight_must_not_be_negative():
     with pytest.raises(ConfigError, match="fde_weight must be >= 0"):
         GeneratorTrainConfig(fde_weight=-1.0)
+
+
+def test_decreasing_time_weights_favour_the_sample_right_at_first():
+    out, y, target = _case()
+    # T_f = 2: weights (2, 1) / 1.5. Sample 0: (2*1 + 1*1) / 3 = 1; sample 1: (2*0 + 1*3) / 3 = 1
+    cfg = GeneratorTrainConfig(time_weights="decreasing", fde_weight=0.0, mean_weight=0.0,
+                               uncertainty_weight=0.0)  # fmt: skip
+    loss, _ = generator_loss(out, y, target, cfg)
+    assert loss.item() == pytest.approx(1.0)
+    # a sample exact at the first step and off by 2 m at the last: uniform 1.0, decreasing 2/3
+    y2 = torch.tensor([[[1.0, 0.0], [1.0, 0.0]], [[0.0, 0.0], [0.0, 2.0]]])[:, None]
+    loss, _ = generator_loss(out, y2, target, cfg)
+    assert loss.item() == pytest.approx(2.0 / 3.0)
+    uniform = GeneratorTrainConfig(fde_weight=0.0, mean_weight=0.0, uncertainty_weight=0.0)
+    assert generator_loss(out, y2, target, uniform)[0].item() == pytest.approx(1.0)
+    with pytest.raises(ConfigError, match="time_weights"):
+        GeneratorTrainConfig(time_weights="increasing")
