@@ -3,6 +3,7 @@ rows a run writes."""
 
 import json
 import sys
+from pathlib import Path
 
 import pytest
 from bench import load_benchmark
@@ -25,8 +26,8 @@ def test_validation_only_options_refuse_before_reading_anything(argv, message, m
     assert message in capsys.readouterr().err
 
 
-def _test_rows(tmp_path, monkeypatch, tiny_run, walks, *extra) -> tuple[list[dict], dict]:
-    """Run the script on the test split of the tiny fixture: its rows and its meta record."""
+def _run(tmp_path, monkeypatch, tiny_run, walks, *extra) -> Path:
+    """Run the script on the test split of the tiny fixture; its results folder."""
     sel = load_benchmark("selection")
     monkeypatch.setattr(sel, "ROOT", tmp_path)
     results = tmp_path / "benchmarks" / "results"
@@ -37,6 +38,12 @@ def _test_rows(tmp_path, monkeypatch, tiny_run, walks, *extra) -> tuple[list[dic
             *extra]  # fmt: skip
     monkeypatch.setattr(sys, "argv", argv)
     sel.main()
+    return results
+
+
+def _test_rows(tmp_path, monkeypatch, tiny_run, walks, *extra) -> tuple[list[dict], dict]:
+    """The rows and the meta record of one run (``_run``)."""
+    results = _run(tmp_path, monkeypatch, tiny_run, walks, *extra)
     (rows_file,) = results.glob("select_*.json")
     (meta_file,) = (results / "meta").glob("*.json")
     return json.loads(rows_file.read_text()), json.loads(meta_file.read_text())
@@ -64,16 +71,8 @@ def test_trust_quantile_gates_the_score_rows_only(tmp_path, monkeypatch, tiny_ru
 
 
 def test_pace_bins_split_the_agents_and_write_no_rows(tmp_path, monkeypatch, tiny_run, walks):
-    sel = load_benchmark("selection")
-    monkeypatch.setattr(sel, "ROOT", tmp_path)
-    results = tmp_path / "benchmarks" / "results"
-    results.mkdir(parents=True)
-    argv = ["selection.py", "--dataset", str(walks), "--model",
-            str(tiny_run / "generator.safetensors"), "--split", "test", "--samples", "4",
-            "--keep", "2", "--methods", "kmeans", "score-kmeans", "--drop", "0.3",
-            "--score-every", "40", "--pace-bins", "0.5", "--tag", "pace"]  # fmt: skip
-    monkeypatch.setattr(sys, "argv", argv)
-    sel.main()
+    extra = ["--methods", "kmeans", "score-kmeans", "--pace-bins", "0.5", "--tag", "pace"]
+    results = _run(tmp_path, monkeypatch, tiny_run, walks, *extra)
     assert not list(results.glob("select_*.json"))  # a diagnosis: no result rows
     meta = json.loads(next((results / "meta").glob("*.json")).read_text())
     pace = meta["pace_bins"]
