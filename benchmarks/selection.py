@@ -34,7 +34,7 @@ from trajpref.evaluation import sampled_batches
 from trajpref.metrics import MetricAccumulator
 from trajpref.models import checkpoint as ckpt
 from trajpref.results import command_line, machine, make_row, upsert_rows
-from trajpref.score.scorer import TrajectoryScorer, score_timesteps
+from trajpref.score.scorer import PRECISIONS, TrajectoryScorer, score_timesteps
 from trajpref.score.selection import (
     METHODS,
     SelectionConfig,
@@ -111,7 +111,7 @@ def main() -> None:
     parser.add_argument(
         "--score-precision",
         default="fp32",
-        choices=["fp32", "bf16"],
+        choices=PRECISIONS,
         help="arithmetic of the score passes; bf16 rows of score methods carry the suffix -bf16",
     )
     parser.add_argument(
@@ -202,8 +202,9 @@ def main() -> None:
         residual = d[..., -1] if args.final else d.sum(-1)  # [K, N]
         seconds["score"] += time.perf_counter() - t1
         trusted = within_pace(batch, model.scale, trust_speed)  # [N] or None
-        pace_bin = torch.bucketize(observed_pace(batch, model.scale), torch.tensor(cuts))  # [N]
-        bin_agents += torch.bincount(pace_bin, minlength=bins).double()
+        if cuts:
+            pace_bin = torch.bucketize(observed_pace(batch, model.scale), torch.tensor(cuts))
+            bin_agents += torch.bincount(pace_bin, minlength=bins).double()  # [bins]
         for i, cfg in enumerate(configs):
             t2 = time.perf_counter()
             idx = select_samples(pred, cfg, residual if cfg.uses_score else None, batch, rng,
@@ -213,8 +214,7 @@ def main() -> None:
             accs[i].update(kept, batch.future, batch.scene, batch.num_scenes)
             if cuts and cfg.per == "agent":
                 fde = (kept[:, :, -1] - batch.future[None, :, -1]).norm(dim=-1).min(0).values
-                bin_fde[i] += torch.zeros(bins, dtype=torch.float64).index_add_(
-                    0, pace_bin, fde.double())  # fmt: skip
+                bin_fde[i].index_add_(0, pace_bin, fde.double())  # [bins]
         scenes += batch.num_scenes
         t0 = time.perf_counter()
 

@@ -22,7 +22,7 @@ import torch
 from trajpref.data import load_dataset
 from trajpref.models import checkpoint as ckpt
 from trajpref.results import command_line, machine
-from trajpref.score.scorer import TrajectoryScorer, score_timesteps
+from trajpref.score.scorer import PRECISIONS, TrajectoryScorer, score_timesteps
 from trajpref.score.selection import SelectionConfig, select_samples
 from trajpref.types import collate
 
@@ -38,7 +38,7 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=20)
     parser.add_argument("--every", type=int, nargs="+", default=[3, 9, 13, 20, 33])
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--precision", nargs="+", default=["fp32"], choices=["fp32", "bf16"],
+    parser.add_argument("--precision", nargs="+", default=["fp32"], choices=PRECISIONS,
                         help="score precisions, timed side by side")  # fmt: skip
     args = parser.parse_args()
 

@@ -33,6 +33,7 @@ from trajpref.models import zoo
 from trajpref.models.registry import load_predictor
 from trajpref.rl.presets import finetune_config
 from trajpref.score import TrajectoryScorer, score_timesteps
+from trajpref.score.scorer import PRECISIONS
 from trajpref.score.selection import METHODS, SelectingPredictor, SelectionConfig
 from trajpref.survey.cli import add_parser as add_survey_parser
 from trajpref.train.run import finetune, last_state_path, train_stage
@@ -129,7 +130,7 @@ def _add_selection_args(p: argparse.ArgumentParser) -> None:
                    help="per agent, or one set of indices per scene (joint metrics)")  # fmt: skip
     p.add_argument("--score-every", type=int, default=9,
                    help="selection's score steps: every this many of the S (9)")  # fmt: skip
-    p.add_argument("--score-precision", default="fp32", choices=["fp32", "bf16"],
+    p.add_argument("--score-precision", default="fp32", choices=PRECISIONS,
                    help="arithmetic of selection's score passes (bf16: about 3x faster on a "
                    "CPU with bfloat16 instructions; docs/selection.md)")  # fmt: skip
     p.add_argument("--trust-speed", type=float, default=0.0, metavar="V",

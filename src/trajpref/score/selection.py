@@ -237,11 +237,9 @@ def select_samples(pred: torch.Tensor, cfg: SelectionConfig, residual: torch.Ten
     feats = ends.new_zeros(k, b, p, 2)  # padding is zero for every sample: no distance
     feats[:, batch.scene, slot] = ends
     scene_res = None if residual is None else scene_sum(residual, batch.scene, b)  # [K, B]
-    scene_ok = None
-    if trusted is not None:  # a scene with any untrusted agent falls back
-        bad = (~trusted).to(torch.int64)  # [N]
-        scene_ok = torch.zeros(b, dtype=torch.int64, device=bad.device).index_add_(
-            0, batch.scene, bad) == 0  # fmt: skip
+    scene_ok = None  # a scene with any untrusted agent falls back
+    if trusted is not None:
+        scene_ok = scene_sum((~trusted).to(ends.dtype), batch.scene, b) == 0  # [B]
     idx = select_indices(feats.flatten(2), cfg.keep, cfg, scene_res, generator, scene_ok)
     return idx[:, batch.scene]  # [K', N]
 
@@ -261,6 +259,20 @@ def within_pace(batch: Batch, scale: float, trust_speed: float) -> torch.Tensor 
     return observed_pace(batch, scale) <= trust_speed
 
 
+@torch.no_grad()
+def select_with_scorer(pred: torch.Tensor, cfg: SelectionConfig, batch: Batch,
+                       scorer: TrajectoryScorer | None,
+                       generator: torch.Generator | None = None) -> torch.Tensor:  # fmt: skip
+    """``select_samples`` with the residual and the pace gate computed by ``scorer`` (only for
+    the methods that read the score): pred [K, N, T_f, 2] -> idx [K', N]."""
+    residual = trusted = None
+    if cfg.uses_score:
+        d = scorer.residual(batch, pred)  # [K, N, T_f]
+        residual = d[..., -1] if cfg.final else d.sum(-1)  # [K, N]
+        trusted = within_pace(batch, scorer.scale, cfg.trust_speed)  # [N] or None
+    return select_samples(pred, cfg, residual, batch, generator, trusted)
+
+
 def select_for_scene(scorer: TrajectoryScorer, history, samples, cfg: SelectionConfig,
                      agent_type=None):  # fmt: skip
     """Keep ``cfg.keep`` of the K sampled futures of ONE scene given only its history (the
@@ -271,13 +283,8 @@ def select_for_scene(scorer: TrajectoryScorer, history, samples, cfg: SelectionC
     numpy when neither input is a tensor, else a tensor. Take the futures with
     ``samples[idx, np.arange(P)]``."""
     batch, pred = scene_batch(scorer, history, samples, agent_type)  # pred [K, P, T_f, 2]
-    residual = trusted = None
-    if cfg.uses_score:
-        d = scorer.residual(batch, pred)  # [K, P, T_f]
-        residual = d[..., -1] if cfg.final else d.sum(-1)  # [K, P]
-        trusted = within_pace(batch, scorer.scale, cfg.trust_speed)  # [P] or None
     generator = torch.Generator().manual_seed(cfg.seed)
-    idx = select_samples(pred, cfg, residual, batch, generator, trusted)  # [K', P]
+    idx = select_with_scorer(pred, cfg, batch, scorer, generator)  # [K', P]
     if isinstance(history, torch.Tensor) or isinstance(samples, torch.Tensor):
         return idx
     return idx.cpu().numpy()
@@ -310,12 +317,7 @@ class SelectingPredictor:
     @torch.no_grad()
     def select(self, batch: Batch, pred: torch.Tensor) -> torch.Tensor:
         """Indices [K', N] of the samples pred [K, N, T_f, 2] to keep."""
-        residual, trusted = None, None
-        if self.cfg.uses_score:
-            d = self.scorer.residual(batch, pred)  # [K, N, T_f]
-            residual = d[..., -1] if self.cfg.final else d.sum(-1)  # [K, N]
-            trusted = within_pace(batch, self.scorer.scale, self.cfg.trust_speed)
-        return select_samples(pred, self.cfg, residual, batch, self.generator, trusted)
+        return select_with_scorer(pred, self.cfg, batch, self.scorer, self.generator)
 
     @torch.no_grad()
     def predict(self, batch: Batch, num_samples: int | None = None,
