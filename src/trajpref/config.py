@@ -256,6 +256,11 @@ class OptimConfig:
     as ``<stage>_raw.safetensors``, the run's own control), and the decay per
     step is ``exp(-1 / (ema_epochs * steps_per_epoch))``, warmed up over the first steps
     (``train/ema.py``; docs/pretraining.md, "A moving average of the weights")."""
+    keep_checkpoints: bool = False
+    """Also save the weights of every validated epoch as ``<stage>_epoch<E>.safetensors``
+    (E zero-padded to three digits; the averaged weights when ``ema_epochs > 0``), beside the
+    best one: for studies of how the choice of epoch matters (``benchmarks/
+    checkpoint_choice.py``). Off by default: each file is a full checkpoint."""
 
     def __post_init__(self) -> None:
         _positive(self, "epochs", "lr", "grad_clip", "eval_every")

@@ -367,3 +367,29 @@ def test_a_run_with_a_held_out_scene_trains_without_it_and_validates_on_it(
     assert 0 < walk2 and held["train_agents"] == full["train_agents"] - walk2
     assert {s.scene_id.split("@")[0] for s in seen["val"].scenes} == {"walk2.txt"}
     assert "holdout_scene: walk2" in (tmp_path / "held" / "config.yaml").read_text()
+
+
+def test_keep_checkpoints_saves_every_validated_epoch_and_the_best_is_one_of_them(tmp_path, cfg,
+                                                                                   trained):  # fmt: skip
+    import dataclasses
+
+    generator = dataclasses.replace(cfg.generator, epochs=3, eval_every=1, keep_checkpoints=True)
+    run = dataclasses.replace(cfg, generator=generator)
+    train_stage("generator", run, tmp_path, device="cpu", progress=False,
+                denoiser=str(trained / "denoiser.safetensors"))  # fmt: skip
+    kept = sorted(p.name for p in tmp_path.glob("generator_epoch*.safetensors"))
+    assert kept == ["generator_epoch001.safetensors", "generator_epoch002.safetensors",
+                    "generator_epoch003.safetensors"]  # fmt: skip
+    records = read_metrics(tmp_path, "generator")
+    best = ckpt.load(tmp_path / "generator.safetensors")
+    same = ckpt.load(tmp_path / f"generator_epoch{best['meta']['epoch']:03d}.safetensors")
+    assert all(torch.equal(best["state_dict"][k], same["state_dict"][k]) for k in best["state_dict"])
+    for record in records:  # each file records the validation its epoch logged
+        meta = ckpt.load(tmp_path / f"generator_epoch{record['epoch']:03d}.safetensors")["meta"]
+        assert meta["val"]["score"] == pytest.approx(record["val_score"])
+
+
+def test_checkpoints_are_not_kept_by_default(tmp_path, cfg, trained):
+    train_stage("generator", cfg, tmp_path, device="cpu", progress=False,
+                denoiser=str(trained / "denoiser.safetensors"))  # fmt: skip
+    assert list(tmp_path.glob("generator_epoch*")) == []

@@ -330,6 +330,9 @@ def fit(
                         meta["ema_epochs"] = optim_cfg.ema_epochs
                     ckpt.save(out_dir / f"{stage.name}{ckpt.SUFFIX}", stage.payload(meta))
                     record["best"] = True
+                if optim_cfg.keep_checkpoints:  # what was validated: the average, if any
+                    name = f"{stage.name}_epoch{epoch + 1:03d}{ckpt.SUFFIX}"
+                    ckpt.save(out_dir / name, stage.payload({**at, "val": val}))
             stage.objective.train()
         if main:
             log.write(record)
