@@ -369,8 +369,9 @@ def test_a_run_with_a_held_out_scene_trains_without_it_and_validates_on_it(
     assert "holdout_scene: walk2" in (tmp_path / "held" / "config.yaml").read_text()
 
 
-def test_keep_checkpoints_saves_every_validated_epoch_and_the_best_is_one_of_them(tmp_path, cfg,
-                                                                                   trained):  # fmt: skip
+def test_keep_checkpoints_saves_every_validated_epoch_and_the_best_is_one_of_them(
+    tmp_path, cfg, trained
+):
     import dataclasses
 
     generator = dataclasses.replace(cfg.generator, epochs=3, eval_every=1, keep_checkpoints=True)
@@ -383,7 +384,9 @@ def test_keep_checkpoints_saves_every_validated_epoch_and_the_best_is_one_of_the
     records = read_metrics(tmp_path, "generator")
     best = ckpt.load(tmp_path / "generator.safetensors")
     same = ckpt.load(tmp_path / f"generator_epoch{best['meta']['epoch']:03d}.safetensors")
-    assert all(torch.equal(best["state_dict"][k], same["state_dict"][k]) for k in best["state_dict"])
+    assert all(
+        torch.equal(best["state_dict"][k], same["state_dict"][k]) for k in best["state_dict"]
+    )
     for record in records:  # each file records the validation its epoch logged
         meta = ckpt.load(tmp_path / f"generator_epoch{record['epoch']:03d}.safetensors")["meta"]
         assert meta["val"]["score"] == pytest.approx(record["val_score"])
