@@ -44,6 +44,7 @@ from datetime import date
 from pathlib import Path
 
 import numpy as np
+import torch
 from post_hoc import (
     apply_setting,
     published_generators,
@@ -54,6 +55,7 @@ from post_hoc import (
 )
 
 from trajpref.data import load_dataset
+from trajpref.data.transforms import observed_pace
 from trajpref.models import checkpoint as ckpt
 from trajpref.types import TrajectoryDataset
 
@@ -74,11 +76,8 @@ PEDESTRIAN = ("eth", "hotel", "univ", "zara1", "zara2")
 def observed_step(dataset: TrajectoryDataset, scale: float) -> np.ndarray:
     """Each agent's observed displacement per step, first to last observed position, in model
     units: [N over the split]."""
-    steps = [
-        np.linalg.norm(s.history[:, -1] - s.history[:, 0], axis=-1) / (s.history.shape[1] - 1)
-        for s in dataset.scenes
-    ]
-    return np.concatenate(steps) / scale
+    history = torch.from_numpy(np.concatenate([s.history for s in dataset.scenes]))  # [N, T_h, 2]
+    return observed_pace(history, scale).numpy()
 
 
 def decide(rows: list[dict]) -> dict:

@@ -1,3 +1,4 @@
+import pytest
 import torch
 from synthetic import make_scene
 
@@ -5,6 +6,7 @@ from trajpref.data.transforms import (
     augment,
     backward_velocity,
     from_relative,
+    observed_pace,
     scene_speeds,
     speed_normaliser,
     to_relative,
@@ -70,3 +72,18 @@ def test_scene_speeds_is_the_median_agent_step_length():
     centre = batch.history[:3, -1].mean(0)  # scene 0's mean last observed position
     assert torch.allclose(scaled.history[:3], (batch.history[:3] - centre) * 0.5 + centre)
     assert torch.equal(scaled.history[3], batch.history[3])
+
+
+def test_observed_pace_is_first_to_last_displacement_per_step_over_the_scale():
+    hist = torch.zeros(2, 8, 2)
+    hist[0, :, 0] = torch.arange(8.0) * 0.5  # 0.5 per step
+    hist[1, 0] = torch.tensor([3.0, 4.0])  # 5 units back to the origin over 7 steps
+    hist[1, 3] = torch.tensor([100.0, 0.0])  # the path between does not count
+    torch.testing.assert_close(observed_pace(hist), torch.tensor([0.5, 5 / 7]))
+    torch.testing.assert_close(observed_pace(hist, scale=2.0), torch.tensor([0.25, 5 / 14]))
+    assert observed_pace(hist[None].expand(3, -1, -1, -1)).shape == (3, 2)
+
+
+def test_observed_pace_needs_two_steps():
+    with pytest.raises(ValueError, match="two observed steps"):
+        observed_pace(torch.zeros(3, 1, 2))

@@ -19,6 +19,18 @@ def backward_velocity(positions: torch.Tensor) -> torch.Tensor:
     return vel
 
 
+def observed_pace(history: torch.Tensor, scale: float = 1.0) -> torch.Tensor:
+    """Each agent's observed displacement per step, first to last observed position, divided
+    by ``scale``: history [..., N, T_h, 2] -> [..., N]. The one measure of an agent's pace
+    that the generator's speed clamp (``model.max_speed``), the selection's pace gate
+    (``SelectionConfig.trust_speed``) and the studies that set them all use (model units when
+    ``scale`` is the model's data scale)."""
+    if history.shape[-2] < 2:
+        raise ValueError(f"a pace needs at least two observed steps, got {history.shape[-2]}")
+    moved = history[..., -1, :] - history[..., 0, :]  # [..., N, 2]
+    return moved.norm(dim=-1) / (history.shape[-2] - 1) / scale  # [..., N]
+
+
 def to_relative(batch: Batch) -> tuple[torch.Tensor, torch.Tensor]:
     """History and future relative to each agent's last observed position.
 

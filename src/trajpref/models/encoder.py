@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from trajpref.data.transforms import backward_velocity, to_model_frame
+from trajpref.data.transforms import backward_velocity, observed_pace, to_model_frame
 from trajpref.models.layers import SocialAttention, mlp
 from trajpref.types import Batch
 
@@ -104,9 +104,9 @@ def rotate_features(f: SceneFeatures, rot: torch.Tensor) -> SceneFeatures:
 def speed_factor(hist: torch.Tensor, max_speed: float) -> torch.Tensor:
     """Per-agent factors c [N] >= 1 that bring each agent's observed displacement per step
     (first to last observed position, model units) down to at most ``max_speed``: c = 1 for
-    an agent at or below it, speed / max_speed above."""
-    step = hist[:, 0, :2].norm(dim=-1) / (hist.shape[1] - 1)  # [N]
-    return (step / max_speed).clamp_min(1.0)
+    an agent at or below it, speed / max_speed above. ``hist`` [N, T_h, 4] are the model's
+    history features (positions relative to the last observation, in model units, first)."""
+    return (observed_pace(hist[..., :2]) / max_speed).clamp_min(1.0)  # [N]
 
 
 def scale_features(f: SceneFeatures, c: torch.Tensor) -> SceneFeatures:

@@ -21,6 +21,7 @@ from typing import Literal
 import torch
 
 from trajpref.config import check_choices
+from trajpref.data import transforms
 from trajpref.errors import ConfigError
 from trajpref.metrics import scene_sum
 from trajpref.score.scorer import TrajectoryScorer, scene_batch
@@ -247,8 +248,7 @@ def select_samples(pred: torch.Tensor, cfg: SelectionConfig, residual: torch.Ten
 def observed_pace(batch: Batch, scale: float) -> torch.Tensor:
     """Each agent's observed displacement per step [N], first to last observed position, in
     model units (data units / ``scale``): the measure of ``model.max_speed``."""
-    hist = batch.history  # [N, T_h, 2]
-    return (hist[:, -1] - hist[:, 0]).norm(dim=-1) / (hist.shape[1] - 1) / scale  # [N]
+    return transforms.observed_pace(batch.history, scale)  # [N]
 
 
 def within_pace(batch: Batch, scale: float, trust_speed: float) -> torch.Tensor | None:
