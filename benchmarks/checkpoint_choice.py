@@ -139,27 +139,27 @@ def table(studies: list[dict[str, Any]]) -> str:
 
 
 def plot(studies: list[dict[str, Any]], out: Path) -> None:
+    """Per fold, validation and test minFDE20 by epoch (two panels: their scales differ),
+    with the epoch each protocol keeps marked on the test curve."""
     panels = {}
+    marks = {"validation": ("o", "kept by validation (ours)"),
+             "test_min_ade": ("X", "kept by test minADE (MoFlow's)"),
+             "test_min_fde": ("s", "kept by test minFDE")}  # fmt: skip
     for s in studies:
         e = sorted(s["epochs"], key=lambda r: r["epoch"])
         x = np.array([r["epoch"] for r in e])
-        c = s["choices"]
-        panels[s["dataset"]] = [
-            (x, [r["val_min_fde"] for r in e], {"label": "validation (unclamped, as trained)",
-                                                "color": "tab:blue"}),
-            (x, [r["test_min_fde"] for r in e], {"label": "test", "color": "tab:red"}),
-            ([c["validation"]["epoch"]], [c["validation"]["test_min_fde"]],
-             {"label": "kept by validation", "marker": "o", "color": "tab:blue", "ls": ""}),
-            ([c["test_min_ade"]["epoch"]], [c["test_min_ade"]["test_min_fde"]],
-             {"label": "kept by test minADE", "marker": "x", "color": "tab:red", "ls": ""}),
-        ]  # fmt: skip
-    plot_curves(
-        panels,
-        out,
-        "epoch",
-        "minFDE20",
-        title="Choosing the epoch on validation or on test (one run per fold, seed 0)",
-    )
+        test = [(x, [r["test_min_fde"] for r in e], {"label": "minFDE20", "color": "tab:red"})]
+        for by, (marker, label) in marks.items():
+            c = s["choices"][by]
+            test.append(([c["epoch"]], [c["test_min_fde"]],
+                          {"label": label, "marker": marker, "markersize": 8, "ls": "",
+                           "color": "black", "zorder": 3}))  # fmt: skip
+        panels[f"{s['dataset']}: test"] = test  # first: the legend goes on the first panel
+        panels[f"{s['dataset']}: validation (as trained)"] = [
+            (x, [r["val_min_fde"] for r in e], {"label": "minFDE20", "color": "tab:blue"})
+        ]
+    title = "Choosing the epoch on validation or on test (one run per fold, seed 0)"
+    plot_curves(panels, out, "epoch", "minFDE20", title=title, columns=2)
 
 
 def main(argv: list[str] | None = None) -> int:
