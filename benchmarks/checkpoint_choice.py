@@ -12,7 +12,9 @@ settings: its speed clamp) and reports the test numbers of the epoch chosen
 - by test minADE20 (MoFlow's protocol),
 - by test minFDE20,
 
-with the mean and standard deviation of test minFDE20 over the second half of training.
+with the mean and standard deviation of test minFDE20 over the second half of training and
+its correlation with validation minFDE20 there (does validation track the test from epoch to
+epoch?).
 Nothing published changes whatever it shows; its test numbers are read for this study alone.
 
     python benchmarks/checkpoint_choice.py runs/ckchoice/zara1 runs/ckchoice/eth \\
@@ -50,9 +52,10 @@ def first_min(epochs: list[dict[str, Any]], key: str) -> dict[str, Any]:
 
 
 def choices(epochs: list[dict[str, Any]]) -> dict[str, Any]:
-    """From per-epoch records (``epoch``, ``val_score``, ``test_min_ade``, ``test_min_fde``),
-    the test numbers of the epoch each protocol keeps, and the spread of test minFDE20 over
-    the second half of the epochs (the later half when the count is odd)."""
+    """From per-epoch records (``epoch``, ``val_score``, ``val_min_fde``, ``test_min_ade``,
+    ``test_min_fde``), the test numbers of the epoch each protocol keeps, and over the second
+    half of the epochs (the later half when the count is odd) the spread of test minFDE20 and
+    its correlation with validation minFDE20."""
     picks = {"validation": first_min(epochs, "val_score"),
              "test_min_ade": first_min(epochs, "test_min_ade"),
              "test_min_fde": first_min(epochs, "test_min_fde")}  # fmt: skip
@@ -62,9 +65,13 @@ def choices(epochs: list[dict[str, Any]]) -> dict[str, Any]:
         for by, e in picks.items()
     }  # fmt: skip
     ordered = sorted(epochs, key=lambda e: e["epoch"])
-    late = np.array([e["test_min_fde"] for e in ordered[len(ordered) // 2 :]])
+    half = ordered[len(ordered) // 2 :]
+    late = np.array([e["test_min_fde"] for e in half])
+    val = np.array([e["val_min_fde"] for e in half])
+    # does validation track the test from epoch to epoch? (NaN with fewer than two epochs)
+    corr = float(np.corrcoef(val, late)[0, 1]) if len(half) > 1 else float("nan")
     out["late_test_min_fde"] = {"mean": float(late.mean()), "std": float(late.std()),
-                                "epochs": len(late)}  # fmt: skip
+                                "epochs": len(late), "corr_with_val_min_fde": corr}  # fmt: skip
     base = out["validation"]["test_min_fde"]
     for by in ("test_min_ade", "test_min_fde"):
         out[by]["change_pct"] = 100.0 * (out[by]["test_min_fde"] / base - 1.0)
@@ -128,13 +135,15 @@ def _cell(choice: dict[str, Any]) -> str:
 def table(studies: list[dict[str, Any]]) -> str:
     """The docs table: test minADE20 / minFDE20 of the epoch each protocol keeps."""
     lines = ["| fold | epoch chosen by validation (ours) | by test minADE20 (MoFlow's) | "
-             "by test minFDE20 | test minFDE20 over the second half, mean +- std |",
-             "|---|---|---|---|---|"]  # fmt: skip
+             "by test minFDE20 | test minFDE20 over the second half, mean +- std | "
+             "its correlation with validation minFDE20 |",
+             "|---|---|---|---|---|---|"]  # fmt: skip
     for s in studies:
         c = s["choices"]
         late = c["late_test_min_fde"]
         cells = " | ".join(_cell(c[by]) for by in ("validation", "test_min_ade", "test_min_fde"))
-        lines.append(f"| {s['dataset']} | {cells} | {late['mean']:.3f} +- {late['std']:.3f} |")
+        lines.append(f"| {s['dataset']} | {cells} | {late['mean']:.3f} +- {late['std']:.3f} | "
+                     f"{late['corr_with_val_min_fde']:+.2f} |")  # fmt: skip
     return "\n".join(lines)
 
 

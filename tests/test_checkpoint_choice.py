@@ -14,7 +14,8 @@ from trajpref.train.run import train_stage
 
 
 def _epoch(e, val, ade, fde):
-    return {"epoch": e, "val_score": val, "test_min_ade": ade, "test_min_fde": fde}
+    return {"epoch": e, "val_score": val, "val_min_fde": val / 2, "test_min_ade": ade,
+            "test_min_fde": fde}  # fmt: skip
 
 
 def test_each_protocol_keeps_its_own_epoch_and_ties_go_to_the_earlier():
@@ -33,6 +34,19 @@ def test_each_protocol_keeps_its_own_epoch_and_ties_go_to_the_earlier():
     # the second half: epochs 3 and 4
     assert got["late_test_min_fde"]["mean"] == pytest.approx(0.425)
     assert got["late_test_min_fde"]["std"] == pytest.approx(0.025)
+    # validation 0.3 -> 0.25 while the test goes 0.45 -> 0.40: perfectly correlated
+    assert got["late_test_min_fde"]["corr_with_val_min_fde"] == pytest.approx(1.0)
+
+
+def test_validation_against_the_test_correlation_over_the_second_half():
+    mod = load_benchmark("checkpoint_choice")
+    epochs = [_epoch(e, 1.0, 0.3, 0.6) for e in (1, 2, 3)] + [
+        _epoch(4, 0.2, 0.3, 0.5), _epoch(5, 0.4, 0.3, 0.7), _epoch(6, 0.6, 0.3, 0.6),
+    ]  # fmt: skip
+    # second half: validation 0.1, 0.2, 0.3 against the test 0.5, 0.7, 0.6 -> r = 0.5
+    got = mod.choices(epochs)["late_test_min_fde"]
+    assert got["corr_with_val_min_fde"] == pytest.approx(0.5)
+    assert got["epochs"] == 3
 
 
 def test_no_epochs_is_an_error():
