@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 import yaml
+from post_hoc import with_model_setting
 from tqdm import tqdm
 
 from trajpref.data import load_dataset
@@ -89,10 +90,9 @@ def published_settings(dataset: str, models: Path) -> dict[str, Any]:
 
 def with_settings(payload: dict, settings: dict[str, Any]) -> dict:
     """A copy of a generator payload whose model config takes ``settings``."""
-    config = {section: dict(values) if isinstance(values, dict) else values
-              for section, values in payload["config"].items()}  # fmt: skip
-    config["model"].update(settings)
-    return {**payload, "config": config}
+    for name, value in settings.items():
+        payload = with_model_setting(payload, name, value)  # copies; the input stays as it was
+    return payload
 
 
 def study_run(run: Path, args: argparse.Namespace) -> dict[str, Any]:

@@ -31,7 +31,7 @@ from trajpref.data import hold_out_scene, load_dataset
 from trajpref.data.loader import SceneLoader
 from trajpref.data.transforms import scene_speeds
 from trajpref.evaluation import sampled_batches
-from trajpref.metrics import MetricAccumulator
+from trajpref.metrics import MetricAccumulator, min_ade_fde
 from trajpref.models import checkpoint as ckpt
 from trajpref.results import command_line, machine, make_row, upsert_rows
 from trajpref.score.scorer import PRECISIONS, TrajectoryScorer, score_timesteps
@@ -213,7 +213,7 @@ def main() -> None:
             kept = gather(pred, idx)  # [K', N, T_f, 2]
             accs[i].update(kept, batch.future, batch.scene, batch.num_scenes)
             if cuts and cfg.per == "agent":
-                fde = (kept[:, :, -1] - batch.future[None, :, -1]).norm(dim=-1).min(0).values
+                fde = min_ade_fde(kept, batch.future)[1]  # [N]
                 bin_fde[i].index_add_(0, pace_bin, fde.double())  # [bins]
         scenes += batch.num_scenes
         t0 = time.perf_counter()
