@@ -131,7 +131,9 @@ class ModelConfig:
     samples: int = 20
     """K, the samples the generator emits per agent (its heads' output size)."""
     tau: int = 5
-    """Denoising steps the leapfrog sampler applies to the generator's output Y^tau."""
+    """Denoising steps the leapfrog sampler applies to the generator's output Y^tau; 0 makes
+    the generator's samples the prediction itself, with no pass of the denoiser (which the
+    diffusion score still uses)."""
     stochastic_steps: bool = False
     """Add the ancestral DDPM noise in the tau denoising steps (true), or make each step the
     posterior mean, deterministic given Y^tau (false, the default since 2026-11-24: better on
@@ -178,7 +180,9 @@ class ModelConfig:
                 f"got {self.spread_scale}"
             )
         _positive(self, "hidden", "encoder_layers", "heads", "denoiser_width", "denoiser_blocks",
-                  "generator_width", "t_hist", "t_fut", "samples", "tau")  # fmt: skip
+                  "generator_width", "t_hist", "t_fut", "samples")  # fmt: skip
+        if self.tau < 0:
+            raise ConfigError(f"ModelConfig.tau must be >= 0 (0: no denoising steps), got {self.tau}")
         if self.hidden % self.heads:
             raise ConfigError("ModelConfig.hidden must be divisible by heads")
         if self.generator_hidden < 0 or self.generator_hidden % self.heads:

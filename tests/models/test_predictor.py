@@ -121,6 +121,23 @@ def test_bad_sampler_and_tau():
         DiffusionPredictor(Denoiser(TINY), schedule, 1.0, Generator(TINY), sampler="bogus")
     with pytest.raises(ConfigError, match="tau"):
         DiffusionPredictor(Denoiser(TINY), schedule, 1.0, Generator(TINY), tau=11)
+    with pytest.raises(ConfigError, match="tau"):
+        DiffusionPredictor(Denoiser(TINY), schedule, 1.0, Generator(TINY), tau=-1)
+    with pytest.raises(ConfigError, match="tau must be >= 0"):
+        ModelConfig(tau=-1)
+
+
+def test_tau_zero_predicts_the_generator_samples_without_the_denoiser(batch):
+    pred = _predictor()
+    pred.tau = 0
+    calls = []
+    pred.denoiser.register_forward_hook(lambda *a: calls.append(1))
+    roll = pred.rollout(batch, torch.Generator().manual_seed(0))
+    assert calls == []  # no denoising pass
+    assert torch.equal(roll.y, roll.initial)  # the prediction is mu + sigma S itself
+    loss = roll.y.square().sum()
+    loss.backward()  # gradients reach the generator directly
+    assert any(p.grad is not None for p in pred.generator.parameters())
 
 
 @pytest.mark.parametrize("with_generator", [False, True])

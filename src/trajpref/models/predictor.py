@@ -77,8 +77,8 @@ class DiffusionPredictor(nn.Module):
             raise ConfigError(f"unknown sampler {sampler!r}; choose {' or '.join(SAMPLERS)}")
         if sampler == "leapfrog" and generator is None:
             raise ConfigError("the leapfrog sampler needs a generator checkpoint")
-        if not 1 <= tau <= schedule.num_steps:
-            raise ConfigError(f"tau must lie in 1..{schedule.num_steps}, got {tau}")
+        if not 0 <= tau <= schedule.num_steps:
+            raise ConfigError(f"tau must lie in 0..{schedule.num_steps}, got {tau}")
         self.schedule = schedule
         self.scale = float(scale)
         self.denoiser = denoiser
@@ -103,7 +103,10 @@ class DiffusionPredictor(nn.Module):
         self, cond: Condition, y_tau: torch.Tensor, generator: torch.Generator | None = None
     ) -> torch.Tensor:
         """tau ancestral steps of the denoiser from y_tau [K, N, T_f, 2] (differentiable in
-        y_tau); without noise when the predictor is not ``stochastic``."""
+        y_tau); without noise when the predictor is not ``stochastic``. With ``tau = 0``
+        the generator's samples are returned as they are."""
+        if self.tau == 0:
+            return y_tau
         return denoise(self.schedule, lambda y, s: self.denoiser(y, s, cond.context), y_tau,
                        self.tau, generator, self.stochastic)  # fmt: skip
 
