@@ -165,6 +165,10 @@ class ModelConfig:
     history alone, as in LED's and MoFlow's single-agent ETH/UCY windows; the frozen denoiser
     the tau steps run still attends across agents (docs/pretraining.md, "A generator without
     attention across agents")."""
+    generator_dropout: float = 0.0
+    """Dropout probability in the generator during training: on its encoder's output before
+    the heads, and after each hidden layer of the mean, sigma and shift heads (0: none; LED's
+    transformer layers drop 0.1). Evaluation and sampling never drop."""
     spread_scale: float = 1.0
     """A sampling setting: multiplies each agent's sigma, the spread of its K initial samples
     about their mean (Y^tau = mu + spread_scale * sigma * S), before the tau denoising steps.
@@ -174,6 +178,10 @@ class ModelConfig:
     def __post_init__(self) -> None:
         if self.max_speed < 0:
             raise ConfigError("ModelConfig.max_speed must be >= 0 (0 switches the clamp off)")
+        if not 0 <= self.generator_dropout < 1:
+            raise ConfigError(
+                f"ModelConfig.generator_dropout must lie in [0, 1), got {self.generator_dropout}"
+            )
         if not self.spread_scale > 0:
             raise ConfigError(
                 f"ModelConfig.spread_scale must be > 0 (1: the trained spread), "
@@ -182,7 +190,8 @@ class ModelConfig:
         _positive(self, "hidden", "encoder_layers", "heads", "denoiser_width", "denoiser_blocks",
                   "generator_width", "t_hist", "t_fut", "samples")  # fmt: skip
         if self.tau < 0:
-            raise ConfigError(f"ModelConfig.tau must be >= 0 (0: no denoising steps), got {self.tau}")
+            raise ConfigError(f"ModelConfig.tau must be >= 0 (0: no denoising steps), "
+                              f"got {self.tau}")  # fmt: skip
         if self.hidden % self.heads:
             raise ConfigError("ModelConfig.hidden must be divisible by heads")
         if self.generator_hidden < 0 or self.generator_hidden % self.heads:
@@ -214,6 +223,7 @@ GENERATOR_ONLY = (
     "agent_frame",
     "history_encoder",
     "generator_social",
+    "generator_dropout",
     "max_speed",
     "spread_scale",
 )

@@ -227,3 +227,32 @@ def test_without_social_attention_an_agents_samples_ignore_its_neighbours(social
     )
     assert same == (not social)  # agent 0's samples depend on the others only with attention
     assert ModelConfig(generator_social=False).denoiser_part() == ModelConfig()
+
+
+def test_dropout_acts_in_training_only_and_keeps_the_parameter_names():
+    batch = collate([make_scene(3), make_scene(2, seed=1)])
+    f = scene_features(batch, 1.0)
+    torch.manual_seed(0)
+    plain = Generator(TINY)
+    torch.manual_seed(0)
+    dropped = Generator(dataclasses.replace(TINY, generator_dropout=0.5))
+    # same parameters under the same names: a published file without dropout still loads
+    assert plain.state_dict().keys() == dropped.state_dict().keys()
+    dropped.load_state_dict(plain.state_dict())
+    plain.eval()
+    dropped.eval()  # evaluation never drops: the two agree exactly
+    torch.testing.assert_close(dropped(f).initial_sample(), plain(f).initial_sample())
+    dropped.train()
+    torch.manual_seed(1)
+    a = dropped(f).mean
+    torch.manual_seed(2)
+    b = dropped(f).mean
+    assert not torch.allclose(a, b)  # training draws a fresh mask each pass
+    # the encoding the critic reads is not dropped
+    torch.testing.assert_close(dropped(f).context, plain(f).context)
+
+
+@pytest.mark.parametrize("p", [-0.1, 1.0])
+def test_dropout_is_checked_on_construction(p):
+    with pytest.raises(ConfigError, match="generator_dropout"):
+        dataclasses.replace(TINY, generator_dropout=p)

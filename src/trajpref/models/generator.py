@@ -49,9 +49,11 @@ class Generator(nn.Module):
         layers = cfg.encoder_layers if cfg.generator_social else 0  # 0: own history only
         self.encoder = SocialEncoder(cfg.t_hist, h, layers, cfg.heads,
                                      temporal=cfg.history_encoder == "temporal")  # fmt: skip
-        self.mean_head = mlp([h, w, w, tf * 2])
-        self.sigma_head = mlp([h + tf * 2, w, samples])
-        self.shift_head = mlp([h + tf * 2, w, w, samples * tf * 2])
+        p = cfg.generator_dropout
+        self.dropout = nn.Dropout(p) if p > 0 else nn.Identity()
+        self.mean_head = mlp([h, w, w, tf * 2], dropout=p)
+        self.sigma_head = mlp([h + tf * 2, w, samples], dropout=p)
+        self.shift_head = mlp([h + tf * 2, w, w, samples * tf * 2], dropout=p)
 
     def forward(self, features: SceneFeatures) -> GeneratorOutput:
         rot = None
@@ -64,8 +66,9 @@ class Generator(nn.Module):
             features = scale_features(features, c)
         ctx = self.encoder(features)  # [N, H]
         n, tf, k = ctx.shape[0], self.cfg.t_fut, self.samples
-        mean = self.mean_head(ctx).view(n, tf, 2)  # [N, T_f, 2]
-        z = torch.cat([ctx, mean.detach().flatten(1)], -1)  # [N, H + 2T_f]
+        dropped = self.dropout(ctx)  # [N, H]; ctx itself when not training
+        mean = self.mean_head(dropped).view(n, tf, 2)  # [N, T_f, 2]
+        z = torch.cat([dropped, mean.detach().flatten(1)], -1)  # [N, H + 2T_f]
         log_sigma = self.sigma_head(z).T  # [K, N]
         raw = self.shift_head(z).view(n, k, tf, 2).transpose(0, 1)  # [K, N, T_f, 2]
         raw = raw - raw.mean(0, keepdim=True)

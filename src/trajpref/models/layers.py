@@ -10,12 +10,19 @@ from torch import nn
 from trajpref.errors import ConfigError
 
 
-def mlp(sizes: list[int], act: type[nn.Module] = nn.SiLU, final_act: bool = False) -> nn.Sequential:
-    """Linear layers with ``act`` between them (and after the last when ``final_act``)."""
+def mlp(
+    sizes: list[int], act: type[nn.Module] = nn.SiLU, final_act: bool = False,
+    dropout: float = 0.0,
+) -> nn.Sequential:  # fmt: skip
+    """Linear layers with ``act`` between them (and after the last when ``final_act``); with
+    ``dropout`` > 0, each hidden activation is followed by dropout, in the activation's slot,
+    so the parameter names are those of the same MLP without dropout."""
     layers: list[nn.Module] = []
     for i in range(len(sizes) - 1):
         layers.append(nn.Linear(sizes[i], sizes[i + 1]))
-        if i < len(sizes) - 2 or final_act:
+        if i < len(sizes) - 2 and dropout > 0:
+            layers.append(nn.Sequential(act(), nn.Dropout(dropout)))
+        elif i < len(sizes) - 2 or final_act:
             layers.append(act())
     return nn.Sequential(*layers)
 
