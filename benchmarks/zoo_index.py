@@ -193,6 +193,7 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
                              "agent_frame": cfg["model"].get("agent_frame", "scene"),
                              "max_speed": cfg["model"].get("max_speed", 0.0),
                              "history_encoder": cfg["model"].get("history_encoder", "mlp"),
+                             "dropout": cfg["model"].get("generator_dropout", 0.0),
                              "spread_scale": cfg["model"].get("spread_scale", 1.0),
                              "ema_epochs": meta.get("ema_epochs"),
                              "changes": changes}  # fmt: skip
@@ -277,15 +278,21 @@ def _sampling_lines(sampling: dict[str, Any] | None) -> list[str]:
         return []
     how = ("each the posterior mean (no ancestral noise)" if not sampling["stochastic_steps"]
            else "with DDPM's ancestral noise")  # fmt: skip
-    text = (
-        f"Sampling: the generator's samples, then tau = {sampling['tau']} denoising steps, {how}."
-    )
+    if sampling["tau"] == 0:
+        text = ("Sampling: the generator's samples are the prediction, with no denoising step "
+                "(`model.tau: 0`; the denoiser serves the diffusion score).")  # fmt: skip
+    else:
+        text = (f"Sampling: the generator's samples, then tau = {sampling['tau']} denoising "
+                f"steps, {how}.")  # fmt: skip
     if sampling.get("agent_frame") == "heading":
         text += (" The generator sees and predicts each agent in its heading frame "
                  "(`model.agent_frame: heading`).")  # fmt: skip
     if sampling.get("history_encoder") == "temporal":
         text += (" Its encoder reads each agent's history with a GRU beside the MLP "
                  "(`model.history_encoder: temporal`).")  # fmt: skip
+    if sampling.get("dropout"):
+        text += (f" It was trained with dropout {sampling['dropout']:g} "
+                 "(`model.generator_dropout`).")  # fmt: skip
     if sampling.get("spread_scale", 1.0) != 1.0:
         text += (f" Its samples' spread about their mean is scaled by "
                  f"{sampling['spread_scale']:g} (`model.spread_scale`).")  # fmt: skip

@@ -239,3 +239,13 @@ def test_a_card_names_the_history_encoder_the_spread_and_the_weight_average():
     assert "(`model.history_encoder: temporal`)" in text
     assert "scaled by 0.9 (`model.spread_scale`)" in text
     assert "time constant 4 epochs, `generator.ema_epochs`" in text
+
+
+def test_a_card_says_when_there_are_no_denoising_steps_and_names_the_dropout():
+    zi = _zoo_index()
+    base = {"tau": 5, "stochastic_steps": False, "changes": []}
+    assert "tau = 5 denoising steps" in zi._sampling_lines(base)[0]
+    assert "dropout" not in zi._sampling_lines(base)[0]
+    text = zi._sampling_lines({**base, "tau": 0, "dropout": 0.1})[0]
+    assert "no denoising step (`model.tau: 0`" in text and "tau = 0" not in text
+    assert "trained with dropout 0.1 (`model.generator_dropout`)" in text
