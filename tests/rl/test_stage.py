@@ -238,3 +238,22 @@ def test_smooth_exploration_explores_in_the_smooth_span_and_steps(tiny_run, walk
     opt.step()
     assert torch.isfinite(loss) and any(not torch.equal(before[k], v)
                                         for k, v in obj.policy.state_dict().items())  # fmt: skip
+
+
+def test_a_policy_trained_with_dropout_fine_tunes_without_it(tiny_run, walks):
+    """The PPO ratio of the first update epoch is exactly 1 even when the start was trained
+    with dropout: the loop's ``train()`` leaves the policy's dropout layers off."""
+    start = ckpt.load(tiny_run / "generator.safetensors")
+    start["config"]["model"]["generator_dropout"] = 0.5  # same parameter names, so it loads
+    train = load_dataset(str(walks), "train")
+    cfg = _cfg(start, "finetune.ppo_epochs=2", "finetune.ratio_against=rollout",
+               "finetune.likelihood=sample", "finetune.explore_std=0.05")  # fmt: skip
+    stage = build_finetune_stage(cfg, start, train, torch.device("cpu"))
+    obj = stage.objective.train()
+    drops = [m for m in obj.policy.modules() if isinstance(m, torch.nn.Dropout)]
+    assert drops and not any(m.training for m in drops)
+    assert obj.policy.training  # the rest of the policy trains
+    batch = collate(train.scenes[:6])
+    gen = torch.Generator().manual_seed(0)
+    _, logs = obj(batch, gen, stage.collect(batch, gen))
+    assert logs["approx_kl"] == 0.0 and logs["clip_fraction"] == 0.0

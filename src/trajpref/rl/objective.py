@@ -171,6 +171,11 @@ class RLObjective(nn.Module):
         super().train(mode)
         self.reference.eval()
         self.denoiser.eval()
+        # a policy trained with dropout (model.generator_dropout) fine-tunes without it, as
+        # TRL does: the PPO ratio compares the same network on the rollout and in the update
+        for m in self.policy.modules():
+            if isinstance(m, nn.Dropout):
+                m.eval()
         return self
 
     def forward(self, batch: Batch, generator: torch.Generator | None = None,
