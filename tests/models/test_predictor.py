@@ -128,8 +128,8 @@ def test_bad_sampler_and_tau():
 
 
 def test_tau_zero_predicts_the_generator_samples_without_the_denoiser(batch):
-    pred = _predictor()
-    pred.tau = 0
+    base = _predictor()
+    pred = DiffusionPredictor(base.denoiser, base.schedule, SCALE, base.generator, tau=0)
     calls = []
     pred.denoiser.register_forward_hook(lambda *a: calls.append(1))
     roll = pred.rollout(batch, torch.Generator().manual_seed(0))
