@@ -14,12 +14,20 @@ import json
 import statistics
 from pathlib import Path
 
-from trajpref.results import ANCESTRAL_SUFFIX, FINETUNE_START, finetune_start, merge_rows, read_rows
+from trajpref.results import (
+    ANCESTRAL_SUFFIX,
+    FINETUNE_START,
+    RETIRED_STARTS,
+    finetune_start,
+    merge_rows,
+    read_rows,
+)
 from trajpref.train import read_metrics
 
 ROOT = Path(__file__).resolve().parent.parent
-START_ORDER = (FINETUNE_START + ANCESTRAL_SUFFIX, FINETUNE_START, FINETUNE_START + "-long")
-"""The accuracy table's groups: runs from the generators of before 2026-11-24 first."""
+START_ORDER = tuple(FINETUNE_START + s for s in (ANCESTRAL_SUFFIX, *RETIRED_STARTS, "", "-long"))
+"""The accuracy table's groups, oldest start first: the generators of before 2026-11-24, the
+later defaults that were replaced, today's default, then its longer sibling."""
 RUN_SUFFIX = {"rlhf": "rlhf", "rlhf-res": "rlhf-res", "rlhf-res-reg-only": "rlhf-res"}
 
 

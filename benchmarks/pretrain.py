@@ -10,6 +10,9 @@ publish the checkpoints, evaluate on the test split, and time the two samplers s
     python benchmarks/pretrain.py --dataset zara1 --published --data-root ../shared/data
     # univ's test split is large: skip the full sampler's accuracy (its speed is still timed)
     python benchmarks/pretrain.py --dataset univ --train --no-full-eval --data-root ../shared/data
+    # a retrained default that replaces the published one: keep the old test row beside it
+    python benchmarks/pretrain.py --dataset zara1 --run-dir runs/new --keep-replaced tau5 \
+        --no-full-eval --data-root ../shared/data
     # a variant trained elsewhere (e.g. a longer schedule on a GPU), published beside the default
     python benchmarks/pretrain.py --dataset zara1 --run-dir runs/zara1-g100 --variant long \
         --train-machine "1x H100" --no-full-eval --data-root ../shared/data
@@ -19,19 +22,22 @@ benchmarks/results/pretrained_<dataset>.json (methods ``pretrained`` and ``full-
 prints the numbers for docs/pretraining.md. With ``--variant NAME``:
 models/<dataset>/generator-NAME.safetensors, method ``pretrained-NAME`` in
 pretrained_<dataset>_NAME.json; the README's cost table (this machine, default configs) skips it.
+With ``--keep-replaced NAME`` the default's ``pretrained`` row (and its meta file) is first
+kept as ``pretrained-NAME``, its checkpoint named by the commit that holds its weights.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import subprocess
 from pathlib import Path
 
 from trajpref.config import load_config
 from trajpref.data import load_dataset
 from trajpref.evaluation import evaluate, time_predictors
 from trajpref.models import checkpoint as ckpt
-from trajpref.results import make_row, sampler_of, upsert_rows
+from trajpref.results import make_row, sampler_of, upsert_rows, write_rows
 from trajpref.train import read_metrics, train_stage
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -44,6 +50,48 @@ def _train(args, run_dir: Path) -> None:
         last = run_dir / f"{name}_last.pt"
         resume = str(last) if last.is_file() else None
         train_stage(stage, cfg, run_dir, args.data_root, args.device, resume)
+
+
+def _git(root: Path, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True)
+
+
+def keep_replaced(root: Path, dataset: str, name: str) -> Path:
+    """Keep the published default's test row before a retrained generator replaces it: the
+    ``pretrained`` row of ``pretrained_<dataset>.json`` is written as ``pretrained-<name>`` to
+    ``pretrained_<dataset>_<name>.json`` (its checkpoint named as ``git show <commit>:<path>``,
+    the commit that holds the weights it measured) and its meta file is copied beside, so
+    docs and tables can still compare with it. Refuses when the published generator differs
+    from its last commit (the row would name other weights) or the name holds another row;
+    calling it again for the same row is a no-op."""
+    results = root / "benchmarks" / "results"
+    rows_path = results / f"pretrained_{dataset}.json"
+    kept_rows = results / f"pretrained_{dataset}_{name}.json"
+    kept_meta = results / "meta" / kept_rows.name
+    rows = json.loads(rows_path.read_text()) if rows_path.is_file() else []
+    row = next((r for r in rows if r["method"] == "pretrained"), None)
+    if row is None:
+        raise SystemExit(f"--keep-replaced: no 'pretrained' row in {rows_path} to keep")
+    weights = (root / "models" / dataset / f"generator{ckpt.SUFFIX}").resolve()
+    rel = weights.relative_to(root.resolve()).as_posix()
+    commit = _git(root, "log", "-1", "--format=%h", "--", rel).stdout.strip()
+    if not commit:
+        raise SystemExit(f"--keep-replaced: {rel} has no commit to name the kept row's weights")
+    kept = {**row, "method": f"pretrained-{name}", "checkpoint": f"git show {commit}:{rel}"}
+    if kept_rows.exists():  # a second call for the same replacement (a rerun) is fine
+        if json.loads(kept_rows.read_text()) == [kept]:
+            return kept_rows
+        raise SystemExit(f"--keep-replaced {name}: {kept_rows.name} exists already with "
+                         "another row; pick another name")  # fmt: skip
+    if _git(root, "diff", "--quiet", "HEAD", "--", rel).returncode != 0:
+        raise SystemExit(f"--keep-replaced: {rel} differs from its last commit; commit or "
+                         "restore it first (the kept row must name the weights it "
+                         "measured)")  # fmt: skip
+    write_rows(kept_rows, [kept])
+    meta = results / "meta" / rows_path.name
+    if meta.is_file():
+        kept_meta.write_text(meta.read_text())
+    return kept_rows
 
 
 def _is_full_sampler_row(row: dict) -> bool:
@@ -83,7 +131,19 @@ def main() -> None:
         help="re-measure the published generator (and its leapfrog row) as it is: no "
         "training or publishing; the training records come from the previous meta file",
     )
+    parser.add_argument(
+        "--keep-replaced",
+        default=None,
+        metavar="NAME",
+        help="first keep the published default's test row (and meta file) as "
+        "pretrained-NAME in pretrained_<dataset>_NAME.json",
+    )
     args = parser.parse_args()
+    if args.keep_replaced is not None and (args.variant or args.published):
+        parser.error("--keep-replaced keeps the default a retrained one replaces: no "
+                     "--variant or --published")  # fmt: skip
+    if args.keep_replaced is not None and not args.keep_replaced.replace("-", "").isalnum():
+        parser.error("--keep-replaced takes letters, digits and '-'")
     if args.published and (args.train or args.run_dir or args.train_machine):
         parser.error("--published re-measures a published file: no --train, --run-dir or "
                      "--train-machine")  # fmt: skip
@@ -113,6 +173,8 @@ def main() -> None:
         args.train_machine = previous.get("train_machine")
         args.no_full_eval = True  # the full sampler does not depend on the generator
     else:
+        if args.keep_replaced is not None:
+            print(f"kept the replaced row: {keep_replaced(ROOT, args.dataset, args.keep_replaced)}")
         try:
             ckpt.publish(run_generator, published, replace_denoiser=not args.variant)
         except ckpt.DenoiserConflict:

@@ -122,6 +122,13 @@ def trained_config(config: dict[str, Any], changes: list[dict[str, Any]]) -> dic
     return out
 
 
+def change_note(change: dict[str, Any]) -> str:
+    """A logged settings change's note, with its date in front when the file recorded one
+    (``checkpoint.set_generator_setting`` stamps it since 2026-11-27) and the note lacks it."""
+    date, note = change.get("date"), change["note"]
+    return f"{date}: {note}" if date and date not in note else note
+
+
 def machine_short(machine: str | None) -> str:
     if not machine:
         return "-"
@@ -232,8 +239,9 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
                 base = f"{dataset}/{Path(ref['path']).stem}"
                 train_cmd = [
                     f"# the weights of {base} (its training commands), then, after training:",
-                    *(f"#   model.{k} = {c[k]:.4g} ({c['note']})" if isinstance(c[k], float)
-                      else f"#   model.{k} = {c[k]} ({c['note']})" for c in meta.get("changes", [])
+                    *(f"#   model.{k} = {c[k]:.4g} ({change_note(c)})" if isinstance(c[k], float)
+                      else f"#   model.{k} = {c[k]} ({change_note(c)})"
+                      for c in meta.get("changes", [])
                       for k in ckpt.POST_HOC_SETTINGS if k in c),
                 ]  # fmt: skip
                 entry["weights_of"] = base
@@ -308,13 +316,13 @@ def _sampling_lines(sampling: dict[str, Any] | None) -> list[str]:
     for change in sampling["changes"]:
         if "stochastic_steps" in change:
             state = "ancestral" if change["stochastic_steps"] else "posterior-mean"
-            text += f" Set to {state} steps after training ({change['note']})."
+            text += f" Set to {state} steps after training ({change_note(change)})."
         if "max_speed" in change and trained_clamp:  # trained with a clamp on
             text += (f" Trained with the speed clamp at {trained_clamp:.4f}, set to "
-                     f"{change['max_speed']:.4f} ({change['note']}).")  # fmt: skip
+                     f"{change['max_speed']:.4f} ({change_note(change)}).")  # fmt: skip
         elif "max_speed" in change:
             text += (f" Speed clamp set to {change['max_speed']:.3f} after training, same "
-                     f"weights ({change['note']}).")  # fmt: skip
+                     f"weights ({change_note(change)}).")  # fmt: skip
     return [text, ""]
 
 

@@ -4,6 +4,7 @@ import json
 from pathlib import Path
 
 import pytest
+from bench import load_benchmark
 
 from trajpref.results import (
     FIELDS,
@@ -11,6 +12,7 @@ from trajpref.results import (
     START_SUFFIXES,
     ResultConflict,
     accuracy_table,
+    base_method,
     finetune_start,
     make_row,
     merge_rows,
@@ -199,6 +201,15 @@ def test_each_finetuning_row_compares_with_the_start_of_its_time():
     assert finetune_start("control-lr3e-5") == "pretrained"
     assert finetune_start("rlhf-res-steps36-ancestral") == "pretrained-ancestral"
     assert finetune_start("control-lr3e-5-long") == "pretrained-long"
+    # the runs from a default that was replaced later compare with that default's row
+    assert finetune_start("control-lr3e-5-tau5") == "pretrained-tau5"
+    assert finetune_start("rlhf-set-h128") == "pretrained-h128"
+    assert base_method("rlhf-res-raw") == "rlhf-res"
+
+
+def test_the_rlhf_report_orders_every_start_it_can_meet():
+    report = load_benchmark("finetune_report")
+    assert {finetune_start("rlhf" + s) for s in (*START_SUFFIXES, "")} <= set(report.START_ORDER)
 
 
 def test_every_runnable_start_names_its_rows_and_its_validation_record_in_one_place():

@@ -1,4 +1,5 @@
 import json
+import re
 import warnings
 
 import pytest
@@ -309,14 +310,14 @@ def test_set_stochastic_steps_rewrites_only_the_setting(tmp_path, cfg):
     old.stochastic = False  # what --deterministic does at evaluation
     expected = old.predict(batch, 4, torch.Generator().manual_seed(5))
 
-    assert ckpt.set_stochastic_steps(pub, False, note="test switch")
+    assert ckpt.set_stochastic_steps(pub, False, note="test switch", date="2026-11-24")
     header = _header(pub)
     assert header["config"]["model"]["stochastic_steps"] is False
     assert header["hash"] == header_before["hash"]
     assert header["denoiser_ref"] == header_before["denoiser_ref"]
     assert header["meta"]["epoch"] == 3
     assert header["meta"]["changes"] == [
-        {"stochastic_steps": False, "previous": True, "note": "test switch"}
+        {"stochastic_steps": False, "previous": True, "date": "2026-11-24", "note": "test switch"}
     ]
     with safe_open(str(pub), "pt") as fh:
         after = {k: fh.get_tensor(k) for k in fh.keys()}
@@ -353,6 +354,10 @@ def test_the_speed_clamp_can_be_set_after_training_and_changes_only_fast_agents(
     hash_before = _header(src)["hash"]
 
     assert ckpt.set_generator_setting(src, "max_speed", 1e6, note="above every agent")
+    stamped = _header(src)["meta"]["changes"][0]["date"]  # today's, stamped by the function
+    assert re.fullmatch(r"\d{4}-\d{2}-\d{2}", stamped), stamped
+    with pytest.raises(TrajprefError, match="YYYY-MM-DD"):
+        ckpt.set_generator_setting(src, "max_speed", 2.0, note="x", date="27 Nov")
     assert ckpt.config_of(ckpt.load(src)).model.max_speed == 1e6
     assert _header(src)["hash"] == hash_before
     same = ckpt.load_predictor(src).predict(batch, 4, torch.Generator().manual_seed(5))

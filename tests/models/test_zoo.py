@@ -249,3 +249,12 @@ def test_a_card_says_when_there_are_no_denoising_steps_and_names_the_dropout():
     text = zi._sampling_lines({**base, "tau": 0, "dropout": 0.1})[0]
     assert "no denoising step (`model.tau: 0`" in text and "tau = 0" not in text
     assert "trained with dropout 0.1 (`model.generator_dropout`)" in text
+
+
+def test_a_change_shows_its_stamped_date_once_on_the_card():
+    zoo_index = _zoo_index()
+    stamped = {"max_speed": 0.3, "previous": 0.0, "date": "2026-11-27", "note": "90 % clamp"}
+    assert zoo_index.change_note(stamped) == "2026-11-27: 90 % clamp"
+    dated_by_hand = {**stamped, "note": "2026-11-27: 90 % clamp"}  # not repeated
+    assert zoo_index.change_note(dated_by_hand) == "2026-11-27: 90 % clamp"
+    assert zoo_index.change_note({"max_speed": 0.3, "note": "old file"}) == "old file"

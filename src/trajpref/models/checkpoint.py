@@ -15,8 +15,10 @@ loads, with a deprecation warning.
 
 from __future__ import annotations
 
+import datetime
 import hashlib
 import json
+import re
 import shutil
 import warnings
 from pathlib import Path
@@ -409,11 +411,17 @@ how its tau steps sample, its input speed clamp and its samples' spread (the wei
 touched)."""
 
 
-def set_generator_setting(path: str | Path, name: str, value: Any, note: str) -> bool:
+def set_generator_setting(
+    path: str | Path, name: str, value: Any, note: str, date: str | None = None
+) -> bool:
     """Rewrite one of a generator file's ``POST_HOC_SETTINGS`` in place (the weights, their
     precision and hashes stay as they are). The change is logged in ``meta["changes"]`` with
-    the previous value and ``note``. Returns False when the file already has the value (it is
-    then left untouched)."""
+    the previous value, ``note`` and ``date`` (ISO, today's when not given). Returns False
+    when the file already has the value (it is then left untouched)."""
+    if date is None:
+        date = datetime.date.today().isoformat()
+    elif not re.fullmatch(r"\d{4}-\d{2}-\d{2}", date):
+        raise TrajprefError(f"date must be YYYY-MM-DD, got {date!r}")
     if name not in POST_HOC_SETTINGS:
         raise TrajprefError(
             f"model.{name} cannot change after training; only {', '.join(POST_HOC_SETTINGS)} can"
@@ -428,16 +436,18 @@ def set_generator_setting(path: str | Path, name: str, value: Any, note: str) ->
     half = any(t.dtype == torch.float16 for t in load_file(str(path)).values())
     payload["config"]["model"][name] = value
     config_of(payload)  # the edited config must still be valid
-    change = {name: value, "previous": previous, "note": note}
+    change = {name: value, "previous": previous, "date": date, "note": note}
     payload["meta"] = {**payload["meta"], "changes": [*payload["meta"].get("changes", []), change]}
     save(path, payload, half)
     return True
 
 
-def set_stochastic_steps(path: str | Path, stochastic: bool, note: str) -> bool:
+def set_stochastic_steps(
+    path: str | Path, stochastic: bool, note: str, date: str | None = None
+) -> bool:
     """Whether a generator file's tau denoising steps add ancestral noise
     (``set_generator_setting`` for ``model.stochastic_steps``)."""
-    return set_generator_setting(path, "stochastic_steps", stochastic, note)
+    return set_generator_setting(path, "stochastic_steps", stochastic, note, date)
 
 
 # ----------------------------------------------------------------------------- models

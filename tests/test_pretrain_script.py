@@ -1,0 +1,68 @@
+"""benchmarks/pretrain.py --keep-replaced: the replaced default's row is kept under its own
+name, pointing at the commit that holds the weights it measured."""
+
+import json
+import subprocess
+
+import pytest
+from bench import load_benchmark
+
+from trajpref.results import FIELDS
+
+
+def _git(root, *args):
+    subprocess.run(["git", "-C", str(root), *args], check=True, capture_output=True)
+
+
+def _repo(tmp_path):
+    """A tiny repository laid out like ours: models -> src/trajpref/zoo, one published row."""
+    root = tmp_path / "repo"
+    zoo = root / "src" / "trajpref" / "zoo" / "zara1"
+    zoo.mkdir(parents=True)
+    (root / "models").symlink_to(root / "src" / "trajpref" / "zoo")
+    (zoo / "generator.safetensors").write_bytes(b"old weights")
+    results = root / "benchmarks" / "results"
+    (results / "meta").mkdir(parents=True)
+    row = {k: None for k in FIELDS} | {"dataset": "zara1", "method": "pretrained",
+                                        "min_fde": 0.318, "checkpoint": "x"}  # fmt: skip
+    other = row | {"method": "full-sampler", "min_fde": 0.5}
+    (results / "pretrained_zara1.json").write_text(json.dumps([row, other]))
+    (results / "meta" / "pretrained_zara1.json").write_text('{"val": 1}\n')
+    _git(root, "init", "-q")
+    _git(root, "-c", "user.name=t", "-c", "user.email=t@t", "add", ".")
+    _git(root, "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "old default")
+    return root
+
+
+def test_keep_replaced_writes_the_old_row_under_its_name_with_its_commit(tmp_path):
+    mod = load_benchmark("pretrain")
+    root = _repo(tmp_path)
+    commit = subprocess.run(["git", "-C", str(root), "log", "-1", "--format=%h"],
+                            capture_output=True, text=True).stdout.strip()  # fmt: skip
+    out = mod.keep_replaced(root, "zara1", "tau5")
+    rows = json.loads(out.read_text())
+    assert out.name == "pretrained_zara1_tau5.json"
+    assert [r["method"] for r in rows] == ["pretrained-tau5"]  # the full sampler's row stays
+    assert rows[0]["min_fde"] == 0.318
+    weights = "src/trajpref/zoo/zara1/generator.safetensors"
+    assert rows[0]["checkpoint"] == f"git show {commit}:{weights}"
+    meta = root / "benchmarks" / "results" / "meta" / "pretrained_zara1_tau5.json"
+    assert meta.read_text() == '{"val": 1}\n'
+    assert mod.keep_replaced(root, "zara1", "tau5") == out  # a rerun is a no-op
+
+
+def test_keep_replaced_refuses_uncommitted_weights_and_a_taken_name(tmp_path):
+    mod = load_benchmark("pretrain")
+    root = _repo(tmp_path)
+    weights = root / "models" / "zara1" / "generator.safetensors"
+    weights.write_bytes(b"new weights, not committed")
+    with pytest.raises(SystemExit, match="differs from its last commit"):
+        mod.keep_replaced(root, "zara1", "tau5")
+    assert not (root / "benchmarks" / "results" / "pretrained_zara1_tau5.json").exists()
+    _git(root, "checkout", "--", "src/trajpref/zoo/zara1/generator.safetensors")
+    taken = root / "benchmarks" / "results" / "pretrained_zara1_tau5.json"
+    taken.write_text("[]")
+    with pytest.raises(SystemExit, match="exists already with another row"):
+        mod.keep_replaced(root, "zara1", "tau5")
+    with pytest.raises(SystemExit, match="no 'pretrained' row"):
+        mod.keep_replaced(root, "eth", "tau5")
