@@ -487,3 +487,11 @@ def test_model_hash_follows_weights_and_settings_not_the_file(tmp_path, cfg):
 def test_model_hash_of_a_header_without_weights_is_a_clear_error():
     with pytest.raises(TrajprefError, match="without"):
         ckpt.header_model_hash({"kind": "generator", "config": {"model": {}}, "scale": 1.0})
+
+
+def test_a_predictor_built_from_a_payload_predicts_in_eval_mode(tiny_run):
+    payload = ckpt.load(tiny_run / "generator.safetensors")
+    payload["config"]["model"]["generator_dropout"] = 0.5  # dropout modules to switch off
+    predictor = ckpt.predictor_from_payload(payload)
+    assert any(isinstance(m, torch.nn.Dropout) for m in predictor.modules())
+    assert not any(m.training for m in predictor.modules())

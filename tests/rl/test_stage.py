@@ -257,3 +257,18 @@ def test_a_policy_trained_with_dropout_fine_tunes_without_it(tiny_run, walks):
     gen = torch.Generator().manual_seed(0)
     _, logs = obj(batch, gen, stage.collect(batch, gen))
     assert logs["approx_kl"] == 0.0 and logs["clip_fraction"] == 0.0
+
+
+def test_validation_samples_without_dropout_whatever_mode_the_caller_left(tiny_run, walks):
+    start = ckpt.load(tiny_run / "generator.safetensors")
+    start["config"]["model"]["generator_dropout"] = 0.5  # as if trained with dropout
+    val = load_dataset(str(walks), "val")
+    stage = _stage(start, val, "finetune.eval_max_scenes=4")
+    drops = [m for m in stage.objective.policy.modules() if isinstance(m, torch.nn.Dropout)]
+    assert drops and not any(m.training for m in drops)  # built for prediction: eval mode
+    stage.objective.policy.train()  # a caller that leaves dropout on
+    first, second = stage.validate(), stage.validate()
+    assert first == second  # no dropout noise: the same seed gives the same samples
+    assert all(m.training for m in drops)  # the caller's modes are restored
+    stage.objective.eval()
+    assert stage.validate() == first  # as the training loop validates

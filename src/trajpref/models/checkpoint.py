@@ -495,15 +495,18 @@ def denoiser_of(payload: dict[str, Any]) -> dict[str, Any]:
 
 
 def predictor_from_payload(payload: dict[str, Any], sampler: Sampler | None = None):
-    """A ``DiffusionPredictor`` from a denoiser (full sampler only) or generator payload."""
+    """A ``DiffusionPredictor`` from a denoiser (full sampler only) or generator payload, in
+    eval mode (a generator trained with dropout predicts without it; training code sets its
+    own mode)."""
     denoiser, cfg = build_denoiser(denoiser_of(payload))
     generator = None
     if payload["kind"] == "generator":
         generator, cfg = build_generator(payload)
     sampler = sampler or ("leapfrog" if generator is not None else "full")
     schedule = DDPMSchedule.from_config(cfg.diffusion)
-    return DiffusionPredictor(denoiser, schedule, payload["scale"], generator, cfg.model.tau,
-                              sampler, cfg.model.stochastic_steps)  # fmt: skip
+    predictor = DiffusionPredictor(denoiser, schedule, payload["scale"], generator,
+                                   cfg.model.tau, sampler, cfg.model.stochastic_steps)  # fmt: skip
+    return predictor.eval()
 
 
 def load_predictor(path: str | Path, sampler: Sampler | None = None, device: Any = "cpu"):

@@ -69,8 +69,16 @@ def _leapfrog_validation(predictor: DiffusionPredictor, val: TrajectoryDataset, 
     better), plus ``keys`` of the evaluation's result."""
 
     def validate() -> dict[str, float]:
-        res = evaluate(predictor, val, samples, seed=0, device=device, max_agents=max_agents,
-                       progress=False, scorer=scorer)  # fmt: skip
+        # in eval mode whoever calls it (a generator trained with dropout samples without it
+        # at prediction time), each module's mode restored after
+        modes = [(m, m.training) for m in predictor.modules()]
+        predictor.eval()
+        try:
+            res = evaluate(predictor, val, samples, seed=0, device=device, max_agents=max_agents,
+                           progress=False, scorer=scorer)  # fmt: skip
+        finally:
+            for module, mode in modes:
+                module.training = mode
         return {k: res[k] for k in keys} | {"score": res["min_ade"] + res["min_fde"]}
 
     return validate
