@@ -7,8 +7,10 @@
 Each job (dataset, method, seed) is one ``benchmarks/finetune.py`` process on one thread,
 starting from ``models/<dataset>/generator.safetensors``, that trains until ``--minutes`` of its
 own CPU time are spent on training steps (``finetune.budget_clock=cpu``: validation and the test
-evaluation are not counted, and other jobs sharing the machine do not eat into it), keeps the
-checkpoint chosen on validation and writes its test row. Methods:
+evaluation are not counted, and other jobs sharing the machine do not eat into it), validates
+after every ``--eval-minutes`` of that time (the same number of chosen-from checkpoints for every
+method; until 2026-11-27 every 3 epochs), keeps the checkpoint chosen on validation and writes
+its test row. Methods:
 
 - ``control``: the supervised generator loss alone (no score), the equal-budget control;
 - ``rlhf``, ``rlhf-res``: the paper's methods at the fine-tuning defaults;
@@ -91,6 +93,14 @@ def main() -> None:
         default=4,
         help="learning-rate warm-up steps, the same for every method (the default 20 would "
         "leave the RL methods, which fit ~16 steps in 4 CPU minutes, below the full rate)",
+    )
+    parser.add_argument(
+        "--eval-minutes",
+        type=float,
+        default=1.0,
+        help="validate after every this many CPU minutes of training (and at the end), the "
+        "same for every method; before 2026-11-27 every 3 epochs, which gave a supervised "
+        "control with cheap epochs many more checkpoints to choose from than the RL methods",
     )
     parser.add_argument("--workers", type=int, default=2, help="jobs at once (one thread each)")
     parser.add_argument(
@@ -225,7 +235,8 @@ def run_jobs(args: argparse.Namespace) -> None:
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     budget = [
         "--set", f"finetune.max_minutes={args.minutes}", "--set", "finetune.budget_clock=cpu",
-        "--set", "finetune.epochs=100000", "--set", "finetune.eval_every=3",
+        "--set", "finetune.epochs=100000",
+        "--set", f"finetune.eval_every_minutes={args.eval_minutes}",
         "--set", f"finetune.warmup_steps={args.warmup}",
     ]  # fmt: skip
     data = ["--data-root", args.data_root] if args.data_root else []

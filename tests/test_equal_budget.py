@@ -59,7 +59,7 @@ def test_run_jobs_skips_only_the_rows_of_the_same_start(eb, tmp_path, monkeypatc
     seen = []
     monkeypatch.setattr(subprocess, "call", lambda cmd, **kw: seen.append(cmd) or 0)
     ns = Namespace(datasets=["walks"], methods=["control"], seeds=[0], minutes=1.0, warmup=4,
-                   workers=1, data_root=None, start="generator")  # fmt: skip
+                   eval_minutes=0.5, workers=1, data_root=None, start="generator")  # fmt: skip
     eb.run_jobs(ns)
     assert seen == []
     eb.run_jobs(Namespace(**{**vars(ns), "start": "generator-long"}))
@@ -67,6 +67,7 @@ def test_run_jobs_skips_only_the_rows_of_the_same_start(eb, tmp_path, monkeypatc
     cmd = seen[0]
     assert cmd[cmd.index("--start") + 1] == "generator-long"
     assert cmd[cmd.index("--tag") + 1] == "long"
+    assert "finetune.eval_every_minutes=0.5" in cmd  # every method validates by CPU time
 
 
 def _row(method: str, seed: int, fde: float) -> dict:

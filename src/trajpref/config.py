@@ -246,6 +246,12 @@ class OptimConfig:
     """Gradient-norm clip."""
     eval_every: int = 5
     """Validate every this many epochs (and after the last)."""
+    eval_every_minutes: float | None = None
+    """Instead of ``eval_every``: validate at the end of the first epoch after which this many
+    minutes of the ``budget_clock`` have passed since the last validation (and after the
+    last epoch); None: by epochs. In an equal-budget table it gives methods whose epochs cost
+    differently (a supervised control and the RL methods) equally many validations, so
+    equally many checkpoints to choose from."""
     eval_max_scenes: int | None = None
     """Validate on at most this many scenes (None: the whole split)."""
     steps_per_epoch: int | None = None
@@ -284,6 +290,12 @@ class OptimConfig:
             raise ConfigError("steps_per_epoch must be >= 1 or null")
         if self.max_minutes is not None and self.max_minutes <= 0:
             raise ConfigError("max_minutes must be > 0 or null")
+        if self.eval_every_minutes is not None and not (
+            self.eval_every_minutes > 0 and math.isfinite(self.eval_every_minutes)
+        ):
+            raise ConfigError(
+                f"eval_every_minutes must be > 0 or null, got {self.eval_every_minutes}"
+            )
         if self.weight_decay < 0 or self.warmup_steps < 0:
             raise ConfigError("OptimConfig.weight_decay and warmup_steps must be >= 0")
         check_choices(self)

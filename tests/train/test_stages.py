@@ -396,3 +396,26 @@ def test_checkpoints_are_not_kept_by_default(tmp_path, cfg, trained):
     train_stage("generator", cfg, tmp_path, device="cpu", progress=False,
                 denoiser=str(trained / "denoiser.safetensors"))  # fmt: skip
     assert list(tmp_path.glob("generator_epoch*")) == []
+
+
+@pytest.mark.parametrize("minutes, validated", [(1e-9, [1, 2, 3, 4]), (1e3, [4])])
+def test_eval_every_minutes_validates_by_the_budget_clock(tmp_path, cfg, trained, minutes,
+                                                          validated):  # fmt: skip
+    import dataclasses
+
+    generator = dataclasses.replace(cfg.generator, epochs=4, eval_every=2,
+                                    eval_every_minutes=minutes, budget_clock="cpu")  # fmt: skip
+    run = dataclasses.replace(cfg, generator=generator)
+    train_stage("generator", run, tmp_path, device="cpu", progress=False,
+                denoiser=str(trained / "denoiser.safetensors"))  # fmt: skip
+    records = read_metrics(tmp_path, "generator")
+    # every epoch passes a tiny interval; a long one leaves only the last epoch's validation
+    assert [r["epoch"] for r in records if "val_score" in r] == validated
+
+
+def test_eval_every_minutes_must_be_positive():
+    from trajpref.config import GeneratorTrainConfig
+
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ConfigError, match="eval_every_minutes must be > 0"):
+            GeneratorTrainConfig(eval_every_minutes=bad)

@@ -214,6 +214,7 @@ def fit(
     # what max_minutes counts: elapsed time, or this process's CPU time (fair under sharing)
     clock = time.process_time if optim_cfg.budget_clock == "cpu" else time.perf_counter
     spent = 0.0  # seconds of the budget's clock used by training steps
+    validated_at = 0.0  # ``spent`` at the last validation (for ``eval_every_minutes``)
     if resume is not None:
         state = resume if isinstance(resume, dict) else load_resume_state(resume, stage.name)
         check_resume_matches(
@@ -228,6 +229,7 @@ def fit(
         best_raw = state.get("best_raw", best_raw)
         elapsed = state["elapsed"]
         spent = state.get("spent", elapsed)  # states written before budget_clock: wall time
+        validated_at = state.get("validated_at", spent)
         if average is not None:
             if "ema" not in state:
                 raise ConfigError("this run averages its weights (ema_epochs > 0) but the "
@@ -307,7 +309,12 @@ def fit(
         }  # fmt: skip
         record.update({f"train_{k}": v / max(1, agents) for k, v in sums.items()})
         last = epoch + 1 == optim_cfg.epochs or stop
-        if main and ((epoch + 1) % optim_cfg.eval_every == 0 or last):
+        if optim_cfg.eval_every_minutes is not None:
+            due = spent - validated_at >= 60 * optim_cfg.eval_every_minutes
+        else:
+            due = (epoch + 1) % optim_cfg.eval_every == 0
+        if main and (due or last):
+            validated_at = spent
             # what each checkpoint written at this evaluation records beside its validation
             at = {"epoch": epoch + 1, "step": step, "train_seconds": round(elapsed, 2),
                   "dataset": train.info.name}  # fmt: skip
@@ -341,6 +348,7 @@ def fit(
                 "optimizer": optimizer.state_dict(), "scheduler": sched.state_dict(),
                 "noise_gen": noise_gen.get_state(), "aug_gen": aug_gen.get_state(),
                 "epoch": epoch, "step": step, "best": best, "elapsed": elapsed, "spent": spent,
+                "validated_at": validated_at,
                 **({"ema": average.state_dict(), "best_raw": best_raw}
                    if average is not None else {}),
             })  # fmt: skip
