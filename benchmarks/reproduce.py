@@ -384,11 +384,12 @@ def run_evaluation(job: Job, opts: argparse.Namespace, setup: Setup, splits: Spl
     write_json(state_file(setup, job.dataset, job.column), record)
 
 
-def budget_args(minutes: float, warmup: int) -> list[str]:
+def budget_args(minutes: float, warmup: int, eval_minutes: float) -> list[str]:
     """The equal-budget table's training budget (benchmarks/equal_budget.py)."""
     return [
         "--set", f"finetune.max_minutes={minutes}", "--set", "finetune.budget_clock=cpu",
-        "--set", "finetune.epochs=100000", "--set", "finetune.eval_every=3",
+        "--set", "finetune.epochs=100000",
+        "--set", f"finetune.eval_every_minutes={eval_minutes}",
         "--set", f"finetune.warmup_steps={warmup}",
     ]  # fmt: skip
 
@@ -404,7 +405,8 @@ def training_command(job: Job, opts: argparse.Namespace, setup: Setup) -> list[s
     return [sys.executable, str(scripts / "finetune.py"), "--dataset", job.dataset,
             *TRAIN_ARGS[job.column], "--seeds", str(job.seed), "--skip-done",
             *(["--no-start-validation"] if start.is_file() else []),
-            *budget_args(opts.minutes, opts.warmup), "--device", opts.device, *data]  # fmt: skip
+            *budget_args(opts.minutes, opts.warmup, opts.eval_minutes),
+            "--device", opts.device, *data]  # fmt: skip
 
 
 def run_command(cmd: list[str], log: Path) -> int:
@@ -733,6 +735,12 @@ def parse_args(argv: list[str] | None, setup: Setup) -> argparse.Namespace:
         type=int,
         default=4,
         help="full mode: learning-rate warm-up steps (equal_budget.py's)",
+    )
+    parser.add_argument(
+        "--eval-minutes",
+        type=float,
+        default=1.0,
+        help="full mode: validate after every this many CPU minutes (equal_budget.py's)",
     )
     parser.add_argument("--samples", type=int, default=20)
     parser.add_argument("--seed", type=int, default=0, help="evaluation seed")

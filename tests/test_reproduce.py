@@ -317,7 +317,7 @@ def test_full_mode_trains_with_the_equal_budget_tables_arguments(setup, tmp_path
 
     monkeypatch.setattr(subprocess, "call", fake_call)
     ns = Namespace(datasets=["walks"], methods=list(reproduce.TRAIN_ARGS), seeds=[0],
-                   minutes=4.0, warmup=4, workers=1, data_root="/data",
+                   minutes=4.0, warmup=4, eval_minutes=1.0, workers=1, data_root="/data",
                    start="generator")  # fmt: skip
     equal_budget.run_jobs(ns)
     start = setup.results / "meta" / "finetune_start_walks.json"
