@@ -56,6 +56,7 @@ from trajpref.results import (
     start_suffix,
     update_readme,
 )
+from trajpref.rl.presets import equal_budget_overrides
 from trajpref.train import read_metrics
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -233,12 +234,9 @@ def run_jobs(args: argparse.Namespace) -> None:
     logs = ROOT / "runs" / "logs"
     logs.mkdir(parents=True, exist_ok=True)
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-    budget = [
-        "--set", f"finetune.max_minutes={args.minutes}", "--set", "finetune.budget_clock=cpu",
-        "--set", "finetune.epochs=100000",
-        "--set", f"finetune.eval_every_minutes={args.eval_minutes}",
-        "--set", f"finetune.warmup_steps={args.warmup}",
-    ]  # fmt: skip
+    budget = [arg for override in equal_budget_overrides(args.minutes, args.warmup,
+                                                         args.eval_minutes)
+              for arg in ("--set", override)]  # fmt: skip
     data = ["--data-root", args.data_root] if args.data_root else []
 
     def one(job: tuple[str, str, int]) -> tuple[tuple[str, str, int], int, float]:

@@ -65,6 +65,7 @@ from trajpref.io import read_checkpoint_header, write_json
 from trajpref.models import checkpoint as ckpt
 from trajpref.models.baseline import ConstantVelocity
 from trajpref.results import command_line, machine
+from trajpref.rl.presets import equal_budget_overrides
 from trajpref.score.scorer import TrajectoryScorer
 from trajpref.types import TrajectoryDataset
 
@@ -386,12 +387,8 @@ def run_evaluation(job: Job, opts: argparse.Namespace, setup: Setup, splits: Spl
 
 def budget_args(minutes: float, warmup: int, eval_minutes: float) -> list[str]:
     """The equal-budget table's training budget (benchmarks/equal_budget.py)."""
-    return [
-        "--set", f"finetune.max_minutes={minutes}", "--set", "finetune.budget_clock=cpu",
-        "--set", "finetune.epochs=100000",
-        "--set", f"finetune.eval_every_minutes={eval_minutes}",
-        "--set", f"finetune.warmup_steps={warmup}",
-    ]  # fmt: skip
+    return [arg for override in equal_budget_overrides(minutes, warmup, eval_minutes)
+            for arg in ("--set", override)]  # fmt: skip
 
 
 def training_command(job: Job, opts: argparse.Namespace, setup: Setup) -> list[str]:
