@@ -30,9 +30,10 @@ EQUAL_BUDGET = ("pretrained", "control", "rlhf", "rlhf-res", "rlhf-set")
 def _latest_equal_budget(row: dict, current: set[tuple[str, str]]) -> bool:
     """Whether an ``-ancestral`` row belongs to the latest equal-budget table of its dataset:
     one of the table's methods (or its start), on a dataset where no run of those methods from
-    the current generator has rows yet."""
+    a later generator (today's default or a retired one, ``RETIRED_STARTS``) has rows yet."""
     base = base_method(row["method"])
-    newer = any((row["dataset"], m) in current for m in EQUAL_BUDGET[1:])
+    newer = any((row["dataset"], m + s) in current
+                for m in EQUAL_BUDGET[1:] for s in ("", *RETIRED_STARTS))  # fmt: skip
     had = any((row["dataset"], m + ANCESTRAL_SUFFIX) in current for m in EQUAL_BUDGET[1:])
     return base in EQUAL_BUDGET and had and not newer
 

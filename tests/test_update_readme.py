@@ -21,6 +21,11 @@ def test_old_equal_budget_rows_stay_only_until_a_newer_start_has_rows():
     assert not keep({"dataset": "robo", "method": "rlhf-res-steps36-ancestral"}, old)  # ablation
     newer = old | {("robo", "control")}
     assert not keep({"dataset": "robo", "method": "rlhf-ancestral"}, newer)
+    # runs from a later default that was itself replaced since also supersede the old table
+    # (their own rows are kept out of the README, so the dataset then shows none)
+    retired = old | {("robo", "rlhf-set-noclamp")}
+    assert not keep({"dataset": "robo", "method": "control-ancestral"}, retired)
+    assert not keep({"dataset": "robo", "method": "pretrained-ancestral"}, retired)
     # a dataset that never had the table keeps no old rows
     assert not keep({"dataset": "hotel", "method": "pretrained-ancestral"},
                     {("hotel", "pretrained-ancestral")})  # fmt: skip
