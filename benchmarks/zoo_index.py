@@ -63,18 +63,21 @@ LIMITS = {
     ),
     "robo/generator-long": "Trained on a borrowed GPU (60-epoch schedule, the best epoch 38); "
     "only slightly better than the CPU default on the test split.",
-    "zara1/generator": "The CPU default schedule (40 bf16 generator epochs) is short of LED's "
-    "own row (0.18 / 0.26); `zara1/generator-long` (160 epochs, GPU) narrows the gap.",
+    "zara1/generator": "The CPU default (160 generator epochs without denoising steps, dropout "
+    "0.2; best validation epoch 72) is 0.04 m short of LED's own minFDE20 (0.18 / 0.26); the "
+    "GPU-trained `zara1/generator-long` (160 epochs with the tau = 5 steps) is no better on the "
+    "test split (docs/pretraining.md).",
     "robo": "Trained on our simulator only, so short of the paper's Robo numbers "
     "(0.22 / 0.35); see docs/robo_sim.md for how the simulator differs.",
-    "robo-mix": "One seed. Its held-out validation (4 real recordings, 135 windows) does not "
-    "prefer it to the sim-only `robo/generator` (0.450 against 0.430 minFDE) although its test "
-    "row is better (0.420 against 0.458), so it is published beside the default, not instead "
-    "(docs/pretraining.md).",
-    "nba": "Short schedules (denoiser 6 + generator 3 epochs over 203,511 windows) to fit the "
-    "45-minute CPU budget; validation was still falling at the last epoch, and the longer 12 + "
-    "5 epoch schedule trained first (~67 min) reached 0.222 / 0.376 on the test split "
-    "(docs/pretraining.md). No full-sampler test row (56,386 test windows).",
+    "robo-mix": "One seed. Its held-out validation (4 real recordings, 135 windows) moves by "
+    "about 0.02 m between epochs, too little data to rank close candidates (docs/pretraining.md). "
+    "Its test row is better than the sim-only `robo/generator`'s and 0.009 m short of the "
+    "paper's LED minFDE20 (0.35); it is published beside the sim-only default, which trains on "
+    "our simulator alone.",
+    "nba": "A 6-epoch denoiser and 40 generator epochs without denoising steps over 203,511 "
+    "windows, to fit the 45-minute CPU budget; twice the generator epochs did not improve "
+    "validation (docs/pretraining.md). Our 8 + 12 split is not LED's 10 + 20, so LED's NBA "
+    "numbers are not comparable. No full-sampler test row (56,386 test windows).",
     "univ": "No full-sampler test row: univ's test split is large (24,334 agent-windows) and "
     "the 100-step sampler was only timed on it.",
     "denoiser": "As a predictor it runs the full 100-step sampler (about 15x slower than a "
