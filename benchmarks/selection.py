@@ -31,6 +31,7 @@ from trajpref.data import hold_out_scene, load_dataset
 from trajpref.data.loader import SceneLoader
 from trajpref.data.transforms import scene_speeds
 from trajpref.evaluation import sampled_batches
+from trajpref.io import read_checkpoint_header
 from trajpref.metrics import MetricAccumulator, min_ade_fde
 from trajpref.models import checkpoint as ckpt
 from trajpref.results import command_line, machine, make_row, upsert_rows
@@ -157,16 +158,17 @@ def main() -> None:
     path = Path(args.model or ROOT / "models" / args.dataset / f"{stem}.safetensors")
     model = ckpt.load_predictor(path, "leapfrog")
     steps = score_timesteps(model.schedule.num_steps, args.score_every)
+    trained_on = training_dataset(path)  # robo's models train on robo-sim: robo has no train split
     speed_ref = None
     if args.speed_norm is not None:
-        speed_ref = training_speed(args.dataset, args.data_root, args.speed_norm)
+        speed_ref = training_speed(trained_on, args.data_root, args.speed_norm)
         print(f"speed_ref = {speed_ref:.4f} units/step (the {args.speed_norm:g}-quantile of the "
               "training split's scene speeds)")  # fmt: skip
     scorer = TrajectoryScorer(model.denoiser, model.schedule, model.scale, steps,
                               speed_ref=speed_ref, precision=args.score_precision)  # fmt: skip
     trust_speed, cuts = 0.0, []
     if args.trust_quantile is not None or args.pace_bins:
-        train_pace = observed_step(load_dataset(args.dataset, "train", args.data_root),
+        train_pace = observed_step(load_dataset(trained_on, "train", args.data_root),
                                    model.scale)  # fmt: skip
         cuts = [float(np.quantile(train_pace, q)) for q in sorted(args.pace_bins or [])]
     if args.trust_quantile is not None:
@@ -300,6 +302,13 @@ def main() -> None:
         draws = "" if args.draws == 1 else f"_x{args.draws}"
         # rows of other seeds stay: each seed adds its own (results.upsert_rows)
         upsert_rows(out_dir / f"select_{label}{variant}{draws}.json", rows)
+
+
+def training_dataset(path: Path) -> str:
+    """The dataset whose training split trained the model at ``path`` (its recorded config):
+    the split the pace gate and the speed normalisation read (``robo``'s models train on
+    ``robo-sim``; the ETH/UCY folds on their own leave-one-out training split)."""
+    return read_checkpoint_header(path)["config"]["data"]["dataset"]
 
 
 def training_speed(dataset: str, data_root: str | None, quantile: float) -> float:

@@ -84,3 +84,13 @@ def test_pace_bins_split_the_agents_and_write_no_rows(tmp_path, monkeypatch, tin
             pace["agents"]
         )
         assert total == pytest.approx(row["min_fde"], rel=1e-5)
+
+
+def test_the_pace_gate_reads_the_training_split_the_model_was_trained_on():
+    """``robo`` has no public training split; its models train on ``robo-sim``, and the gate's
+    quantile must come from there (it failed with an error before)."""
+    sel = load_benchmark("selection")
+    root = Path(__file__).resolve().parent.parent / "models"
+    assert sel.training_dataset(root / "robo" / "generator.safetensors") == "robo-sim"
+    assert sel.training_dataset(root / "robo-mix" / "generator.safetensors") == "robo-mix"
+    assert sel.training_dataset(root / "zara1" / "generator.safetensors") == "zara1"
