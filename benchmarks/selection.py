@@ -64,9 +64,17 @@ def settings(args) -> list[SelectionConfig]:
     return out
 
 
+PAPER_SCORE_EVERY = 3
+"""The paper's spacing of the score steps (34 of 100); other spacings name their rows."""
+FACILITY_BANDWIDTH = 0.5
+"""score-facility's bandwidth in the rows before 2026-11-27; others name their rows."""
+
+
 def name_of(cfg: SelectionConfig) -> str:
     drop = f"-d{round(cfg.drop * 100):02d}" if cfg.method.startswith("score-") else ""
     temp = f"-t{cfg.temperature:g}" if cfg.method == "score-facility" else ""
+    if cfg.method == "score-facility" and cfg.bandwidth != FACILITY_BANDWIDTH:
+        temp += f"-b{cfg.bandwidth:g}"
     return f"select-{cfg.method}{drop}{temp}"
 
 
@@ -85,7 +93,12 @@ def main() -> None:
     parser.add_argument("--drop", type=float, nargs="+", default=[0.25, 0.3, 0.4, 0.5, 0.6])
     parser.add_argument("--methods", nargs="+", default=None, choices=METHODS)
     parser.add_argument("--temperature", type=float, nargs="+", default=[0.5, 1.0, 2.0])
-    parser.add_argument("--bandwidth", type=float, default=1.0, help="score-facility's")
+    parser.add_argument(
+        "--bandwidth",
+        type=float,
+        default=FACILITY_BANDWIDTH,
+        help="score-facility's (other values name the rows, -b<value>)",
+    )
     parser.add_argument("--free-bandwidth", type=float, default=None,
                         help="facility's (default: --bandwidth)")  # fmt: skip
     parser.add_argument("--final", action="store_true", help="score by the final step (FTS)")
@@ -248,6 +261,8 @@ def main() -> None:
         """A row's method: the setting's name with the suffixes of this run's options."""
         method = method if args.draws == 1 else f"{method}-x{args.draws}"
         method += f"-{args.variant}" if args.variant else ""
+        if args.score_every != PAPER_SCORE_EVERY and uses_score:
+            method += f"-s{len(steps)}"  # the number of score steps
         if args.speed_norm is not None and uses_score:  # the score-free rows are as before
             method += f"-sn{round(args.speed_norm * 100)}"
         if trust_speed and uses_score:

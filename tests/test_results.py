@@ -222,3 +222,15 @@ def test_every_runnable_start_names_its_rows_and_its_validation_record_in_one_pl
         start_suffix("generator-short")
     with pytest.raises(ValueError, match="known: generator, generator-long"):
         start_record("eth", "generator-short")
+
+
+def test_selection_table_gives_each_chosen_setting_of_a_list_its_own_line():
+    rows = [_sel("zara1", "facility", 0, 1.0, False), _sel("zara1", "score-fps", 0, 0.9, True),
+            _sel("zara1", "score-fps-s2", 0, 0.95, True),
+            _sel("zara1", "top", 0, 0.5, True)]  # fmt: skip
+    picks = {"zara1": ["select-score-fps", "select-score-fps-s2"]}
+    lines = selection_table(rows, chosen=picks).splitlines()[2:]
+    assert len(lines) == 2
+    assert "0.900 (`score-fps`) | -10.0 %" in lines[0]
+    assert "0.950 (`score-fps-s2`) | -5.0 %" in lines[1]
+    assert not any("0.500" in line for line in lines)  # the unchosen setting is not shown

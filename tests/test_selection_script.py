@@ -34,7 +34,7 @@ def _run(tmp_path, monkeypatch, tiny_run, walks, *extra) -> Path:
     results.mkdir(parents=True)
     argv = ["selection.py", "--dataset", str(walks), "--model",
             str(tiny_run / "generator.safetensors"), "--split", "test", "--samples", "4",
-            "--keep", "2", "--drop", "0.3", "--temperature", "2", "--score-every", "40",
+            "--keep", "2", "--drop", "0.3", "--temperature", "2", "--score-every", "3",
             *extra]  # fmt: skip
     monkeypatch.setattr(sys, "argv", argv)
     sel.main()
@@ -94,3 +94,21 @@ def test_the_pace_gate_reads_the_training_split_the_model_was_trained_on():
     assert sel.training_dataset(root / "robo" / "generator.safetensors") == "robo-sim"
     assert sel.training_dataset(root / "robo-mix" / "generator.safetensors") == "robo-mix"
     assert sel.training_dataset(root / "zara1" / "generator.safetensors") == "zara1"
+
+
+def test_rows_name_their_score_steps_and_bandwidth_when_not_the_papers(
+    tmp_path, monkeypatch, tiny_run, walks
+):
+    rows, meta = _test_rows(tmp_path, monkeypatch, tiny_run, walks,
+                            "--methods", "facility", "score-facility", "--bandwidth", "1",
+                            "--score-every", "50")  # fmt: skip
+    from trajpref.models import checkpoint as ckpt
+    from trajpref.score.scorer import score_timesteps
+
+    model = ckpt.load_predictor(tiny_run / "generator.safetensors", "leapfrog")
+    steps = len(score_timesteps(model.schedule.num_steps, 50))
+    methods = {r["method"]: r["uses_score"] for r in rows}
+    # the number of score steps and the bandwidth name the row; the score-free rows as before
+    assert methods == {"select-facility": False,
+                       f"select-score-facility-d30-t2-b1-s{steps}": True}  # fmt: skip
+    assert meta["score_every"] == 50

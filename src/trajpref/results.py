@@ -257,14 +257,19 @@ def _variant(checkpoint: str | None) -> str:
     return Path(checkpoint).stem.removeprefix("generator").lstrip("-") if checkpoint else ""
 
 
+SELECTION_FREE = ("first", "random", "kmeans", "fps", "facility")
+"""The score-free selections, the selection table's columns."""
+
+
 def selection_table(rows: list[dict[str, Any]], split: str = "test",
-                    chosen: dict[str, str] | None = None) -> str:  # fmt: skip
+                    chosen: dict[str, str | list[str]] | None = None) -> str:  # fmt: skip
     """Markdown table of the ``select-*`` rows: per dataset and K', minFDE_K' of the
     score-free selections, the best of them, the score-using selection and the change, each
     the mean over the seeds measured; the change is computed within each seed and shown as
     mean +- std when there are several. ``chosen`` maps a line's label (the dataset, or
     ``"eth (speedaug)"`` for a variant) to its score-using method chosen on validation
-    (``benchmarks/selection_chosen.json``); a line without an entry shows its best
+    (``benchmarks/selection_chosen.json``), or to a list of them (the chosen setting and, for
+    example, its cheaper version), one line each; a line without an entry shows its best
     score-using row, which is the chosen one only when a single setting was read on test."""
     sel = [r for r in merge_rows(rows) if r["split"] == split and r["method"].startswith("select-")]
     groups: dict[tuple, dict[str, list[dict[str, Any]]]] = {}
@@ -273,48 +278,57 @@ def selection_table(rows: list[dict[str, Any]], split: str = "test",
         method = r["method"].removesuffix(f"-{variant}") if variant else r["method"]
         label = f"{r['dataset']} ({variant})" if variant else r["dataset"]
         groups.setdefault((label, r["samples"]), {}).setdefault(method, []).append(r)
-    free_cols = ("first", "random", "kmeans", "fps", "facility")
     lines = [
-        "| dataset | K' | seeds | " + " | ".join(free_cols) + " | best without score "
+        "| dataset | K' | seeds | " + " | ".join(SELECTION_FREE) + " | best without score "
         "| with the score | change | joint minFDE, without / with | ms/scene (score + select) |",
-        "|---|---|---|" + "---|" * len(free_cols) + "---|---|---|---|---|",
+        "|---|---|---|" + "---|" * len(SELECTION_FREE) + "---|---|---|---|---|",
     ]
+    for (dataset, keep), by_method in sorted(groups.items()):
+        free = {m: g for m, g in by_method.items() if not g[0]["uses_score"]}
+        every_scored = {m: g for m, g in by_method.items() if g[0]["uses_score"]}
+        picks = (chosen or {}).get(dataset)
+        picks = [picks] if isinstance(picks, str) else picks
+        for pick in picks or [None]:
+            if pick is None:
+                scored = every_scored
+            elif pick in every_scored:  # the rule's choice, never the better of several on test
+                scored = {pick: every_scored[pick]}
+            else:
+                raise ValueError(f"{dataset}: chosen selection {pick!r} has no {split} rows")
+            if free and scored:
+                lines.append(_selection_line(dataset, keep, by_method, free, scored))
+    return "\n".join(lines)
+
+
+def _selection_line(dataset: str, keep: int, by_method: dict[str, list[dict[str, Any]]],
+                    free: dict[str, list[dict[str, Any]]],
+                    scored: dict[str, list[dict[str, Any]]]) -> str:  # fmt: skip
+    """One line of ``selection_table``: the best of ``free`` against the best of ``scored``."""
 
     def mean(runs: list[dict[str, Any]], field: str) -> float | None:
         values = [r[field] for r in runs if r[field] is not None]
         return sum(values) / len(values) if values else None
 
-    for (dataset, keep), by_method in sorted(groups.items()):
-        free = {m: g for m, g in by_method.items() if not g[0]["uses_score"]}
-        scored = {m: g for m, g in by_method.items() if g[0]["uses_score"]}
-        pick = (chosen or {}).get(dataset)
-        if pick is not None:  # the rule's choice, never the better of several on test
-            if pick not in scored:
-                raise ValueError(f"{dataset}: chosen selection {pick!r} has no {split} rows")
-            scored = {pick: scored[pick]}
-        if not free or not scored:
-            continue
-        best_free = min(free, key=lambda m: mean(free[m], "min_fde"))
-        best = min(scored, key=lambda m: mean(scored[m], "min_fde"))
-        free_by_seed = {r["seed"]: r["min_fde"] for r in free[best_free]}
-        changes = torch.tensor([100 * (r["min_fde"] / free_by_seed[r["seed"]] - 1)
-                                for r in scored[best] if r["seed"] in free_by_seed])  # fmt: skip
-        change = f"{changes.mean():+.1f} %" if len(changes) else "–"
-        if len(changes) > 1:
-            change = f"{changes.mean():+.1f} ± {changes.std():.1f} %"
-        seeds = len({r["seed"] for r in scored[best]})
-        cells = [_fmt(mean(by_method[f"select-{c}"], "min_fde")) if f"select-{c}" in by_method
-                 else "–" for c in free_cols]  # fmt: skip
-        lines.append(
-            f"| {dataset} | {keep} | {seeds} | " + " | ".join(cells)
-            + f" | {_fmt(mean(free[best_free], 'min_fde'))} "
-            f"| {_fmt(mean(scored[best], 'min_fde'))} "
-            f"(`{best.removeprefix('select-')}`) | {change} "
-            f"| {_fmt(mean(free[best_free], 'joint_min_fde'))} / "
-            f"{_fmt(mean(scored[best], 'joint_min_fde'))} "
-            f"| {_fmt(mean(scored[best], 'ms_per_scene'), 1)} |"
-        )  # fmt: skip
-    return "\n".join(lines)
+    best_free = min(free, key=lambda m: mean(free[m], "min_fde"))
+    best = min(scored, key=lambda m: mean(scored[m], "min_fde"))
+    free_by_seed = {r["seed"]: r["min_fde"] for r in free[best_free]}
+    changes = torch.tensor([100 * (r["min_fde"] / free_by_seed[r["seed"]] - 1)
+                            for r in scored[best] if r["seed"] in free_by_seed])  # fmt: skip
+    change = f"{changes.mean():+.1f} %" if len(changes) else "–"
+    if len(changes) > 1:
+        change = f"{changes.mean():+.1f} ± {changes.std():.1f} %"
+    seeds = len({r["seed"] for r in scored[best]})
+    cells = [_fmt(mean(by_method[f"select-{c}"], "min_fde")) if f"select-{c}" in by_method
+             else "–" for c in SELECTION_FREE]  # fmt: skip
+    return (
+        f"| {dataset} | {keep} | {seeds} | " + " | ".join(cells)
+        + f" | {_fmt(mean(free[best_free], 'min_fde'))} "
+        f"| {_fmt(mean(scored[best], 'min_fde'))} "
+        f"(`{best.removeprefix('select-')}`) | {change} "
+        f"| {_fmt(mean(free[best_free], 'joint_min_fde'))} / "
+        f"{_fmt(mean(scored[best], 'joint_min_fde'))} "
+        f"| {_fmt(mean(scored[best], 'ms_per_scene'), 1)} |"
+    )  # fmt: skip
 
 
 def update_readme(readme: str | Path, marker: str, content: str) -> None:
