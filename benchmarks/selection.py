@@ -307,6 +307,8 @@ def main() -> None:
     suffix = (
         variant + ("" if args.split == "test" else "_val") + (f"_{args.tag}" if args.tag else "")
     )
+    if args.score_every != PAPER_SCORE_EVERY and args.split == "test":
+        suffix += f"_s{len(steps)}"  # beside the paper's spacing's record, not over it
     suffix += f"_seed{args.seed}" if args.seed else ""  # seed 0 keeps the files' old names
     (out_dir / "meta").mkdir(exist_ok=True)
     label = Path(args.dataset).name  # a user folder's name, not its whole path
