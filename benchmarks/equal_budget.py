@@ -200,13 +200,17 @@ def _beats_start(dataset: str, method: str, seed: int) -> bool | None:
 
 def _chosen_control(dataset: str, rows: list[dict], methods: list[str]) -> str:
     """Of the control variants in the table, the one with the best mean validation score
-    over its seeds (``control`` when the run folders are missing)."""
+    over its seeds; the start's plain supervised control (``control``, ``control-long``) when
+    the run folders are missing (a fresh checkout)."""
+    controls = [m for m in methods if m.startswith("control")]
     scores = {}
-    for method in (m for m in methods if m.startswith("control")):
+    for method in controls:
         vals = [_best_val(dataset, method, r["seed"]) for r in rows if r["method"] == method]
         if vals and None not in vals:
             scores[method] = statistics.mean(vals)
-    return min(scores, key=scores.get) if scores else "control"
+    if scores:
+        return min(scores, key=scores.get)
+    return min(controls, key=len) if controls else "control"  # no -lr3e-5: the plain one
 
 
 def row_name(method: str, start: str) -> str:

@@ -90,3 +90,21 @@ def test_each_start_is_compared_with_its_own_start_row(eb, tmp_path):
     assert set(lines) == {"start (pretrained)", "control", "start (pretrained-long)",
                           "control-long"}  # fmt: skip
     assert "+10.0 %" in lines["control"] and "+10.0 %" in lines["control-long"]
+
+
+def test_each_start_is_compared_with_its_own_control_when_no_run_folder_is_left(eb, tmp_path):
+    """Without run folders (a fresh checkout) the control cannot be chosen on validation;
+    a longer start's rows are then compared with that start's own plain control, never with
+    the default start's (the report did that until 2026-11-27)."""
+    results = tmp_path / "benchmarks" / "results"
+    results.mkdir(parents=True)
+    rows = [_row("pretrained", 0, 0.40), _row("pretrained-long", 0, 0.30),
+            _row("control", 0, 0.50), _row("control-long", 0, 0.30),
+            _row("control-lr3e-5-long", 0, 0.32), _row("rlhf-long", 0, 0.33)]  # fmt: skip
+    (results / "rows.json").write_text(json.dumps(rows))
+    table = eb.report(["walks"], ["control", "control-lr3e-5", "rlhf"])
+    lines = {line.split(" | ")[1]: line.split(" | ") for line in table.splitlines()[2:]}
+    # columns: dataset, method, seeds, ADE, FDE, vs start, vs the control chosen on val
+    assert lines["control-long"][6] == "–"  # it is the control
+    assert lines["rlhf-long"][6] == "+10.0 %"  # against control-long (0.30), not control (0.50)
+    assert lines["control-lr3e-5-long"][6] == "+6.7 %"
