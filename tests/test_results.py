@@ -152,7 +152,8 @@ def test_upsert_rows_drops_the_old_rows_the_caller_marks_stale(tmp_path):
 
 def _sel(dataset, method, seed, fde, uses_score):
     return make_row(dataset=dataset, split="test", method=f"select-{method}", seed=seed,
-                    samples=5, min_fde=fde, joint_min_fde=2 * fde, ms_per_scene=10.0,
+                    samples=5, min_fde=fde, joint_min_fde=2 * fde, min_ade=fde / 2,
+                    joint_min_ade=fde, ms_per_scene=10.0,
                     uses_score=uses_score, date="2026-11-23", machine="m", command="c")  # fmt: skip
 
 
@@ -169,6 +170,8 @@ def test_selection_table_averages_seeds_and_computes_the_change_within_each_seed
     assert cells[9] == "0.670 (`score-fps`)"
     assert cells[10] == "-5.0 ± 7.1 %"
     assert cells[11] == "1.400 / 1.340"
+    # the same two selections' per-agent and joint minADE
+    assert cells[13] == "0.350 / 0.335" and cells[14] == "0.700 / 0.670"
 
 
 def test_selection_table_gives_a_published_variant_its_own_line():
@@ -227,10 +230,10 @@ def test_every_runnable_start_names_its_rows_and_its_validation_record_in_one_pl
 def test_selection_table_gives_each_chosen_setting_of_a_list_its_own_line():
     rows = [_sel("zara1", "facility", 0, 1.0, False), _sel("zara1", "score-fps", 0, 0.9, True),
             _sel("zara1", "score-fps-s2", 0, 0.95, True),
-            _sel("zara1", "top", 0, 0.5, True)]  # fmt: skip
+            _sel("zara1", "top", 0, 0.33, True)]  # fmt: skip
     picks = {"zara1": ["select-score-fps", "select-score-fps-s2"]}
     lines = selection_table(rows, chosen=picks).splitlines()[2:]
     assert len(lines) == 2
     assert "0.900 (`score-fps`) | -10.0 %" in lines[0]
     assert "0.950 (`score-fps-s2`) | -5.0 %" in lines[1]
-    assert not any("0.500" in line for line in lines)  # the unchosen setting is not shown
+    assert not any("0.330" in line for line in lines)  # the unchosen setting is not shown

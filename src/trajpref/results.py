@@ -264,7 +264,8 @@ SELECTION_FREE = ("first", "random", "kmeans", "fps", "facility")
 def selection_table(rows: list[dict[str, Any]], split: str = "test",
                     chosen: dict[str, str | list[str]] | None = None) -> str:  # fmt: skip
     """Markdown table of the ``select-*`` rows: per dataset and K', minFDE_K' of the
-    score-free selections, the best of them, the score-using selection and the change, each
+    score-free selections, the best of them, the score-using selection and the change (then
+    the joint minFDE, the cost, and the per-agent and joint minADE of the same two), each
     the mean over the seeds measured; the change is computed within each seed and shown as
     mean +- std when there are several. ``chosen`` maps a line's label (the dataset, or
     ``"eth (speedaug)"`` for a variant) to its score-using method chosen on validation
@@ -280,8 +281,9 @@ def selection_table(rows: list[dict[str, Any]], split: str = "test",
         groups.setdefault((label, r["samples"]), {}).setdefault(method, []).append(r)
     lines = [
         "| dataset | K' | seeds | " + " | ".join(SELECTION_FREE) + " | best without score "
-        "| with the score | change | joint minFDE, without / with | ms/scene (score + select) |",
-        "|---|---|---|" + "---|" * len(SELECTION_FREE) + "---|---|---|---|---|",
+        "| with the score | change | joint minFDE, without / with | ms/scene (score + select) "
+        "| minADE, without / with | joint minADE, without / with |",
+        "|---|---|---|" + "---|" * len(SELECTION_FREE) + "---|---|---|---|---|---|---|",
     ]
     for (dataset, keep), by_method in sorted(groups.items()):
         free = {m: g for m, g in by_method.items() if not g[0]["uses_score"]}
@@ -327,7 +329,10 @@ def _selection_line(dataset: str, keep: int, by_method: dict[str, list[dict[str,
         f"(`{best.removeprefix('select-')}`) | {change} "
         f"| {_fmt(mean(free[best_free], 'joint_min_fde'))} / "
         f"{_fmt(mean(scored[best], 'joint_min_fde'))} "
-        f"| {_fmt(mean(scored[best], 'ms_per_scene'), 1)} |"
+        f"| {_fmt(mean(scored[best], 'ms_per_scene'), 1)} "
+        f"| {_fmt(mean(free[best_free], 'min_ade'))} / {_fmt(mean(scored[best], 'min_ade'))} "
+        f"| {_fmt(mean(free[best_free], 'joint_min_ade'))} / "
+        f"{_fmt(mean(scored[best], 'joint_min_ade'))} |"
     )  # fmt: skip
 
 
