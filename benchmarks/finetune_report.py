@@ -168,11 +168,14 @@ def reward_section(rows: list[dict], datasets: list[str]) -> str:
         for method in sorted({r["method"] for r in tuned}):
             base = "rlhf-res" if method.startswith("rlhf-res") else "rlhf"
             tag = method.removeprefix(base).lstrip("-")
-            runs = []
+            runs, steps = [], []
             for r in sorted((r for r in tuned if r["method"] == method), key=lambda r: r["seed"]):
                 log = _log(ROOT / "runs" / f"{d}-{base}-s{r['seed']}{'-' + tag if tag else ''}")
-                if log and "val_mean_ats" in log[0]:
-                    runs.append((r, log))
+                # the validated epochs (validation by the budget clock skips some epochs)
+                validated = [e for e in log or [] if "val_mean_ats" in e]
+                if validated:
+                    runs.append((r, validated))
+                    steps.append(log[-1]["step"])
             if not runs:
                 continue
             logs = [lg for _, lg in runs]
@@ -182,7 +185,7 @@ def reward_section(rows: list[dict], datasets: list[str]) -> str:
             gpu = "GPU" if "NVIDIA" in r0["machine"] else "CPU"
             lines.append(
                 f"| {d} | {method} | {_settings(r0['command'] or '')} | {len(runs)} "
-                f"| {logs[0][-1]['step']} | {v0['mean_ats']:.3f} -> "
+                f"| {steps[0]} | {v0['mean_ats']:.3f} -> "
                 f"{_ms(_at(logs, 0, 'val_mean_ats'))} -> {_ms(_at(logs, -1, 'val_mean_ats'))} "
                 f"({_ms(peak)}) | {v0['max_ats']:.3f} -> {_ms(_at(logs, -1, 'val_max_ats'))} "
                 f"| {v0['min_fde']:.3f} -> {_ms(_at(logs, -1, 'val_min_fde'))} "

@@ -237,3 +237,27 @@ def test_selection_table_gives_each_chosen_setting_of_a_list_its_own_line():
     assert "0.900 (`score-fps`) | -10.0 %" in lines[0]
     assert "0.950 (`score-fps-s2`) | -5.0 %" in lines[1]
     assert not any("0.330" in line for line in lines)  # the unchosen setting is not shown
+
+
+def test_the_reward_report_reads_only_the_validated_epochs(tmp_path, monkeypatch):
+    """Validation by the budget clock (``eval_every_minutes``) leaves epochs without
+    validation keys; the report crashed on them (KeyError 'val_mean_ats') until 2026-11-27."""
+    report = load_benchmark("finetune_report")
+    monkeypatch.setattr(report, "ROOT", tmp_path)
+    meta = tmp_path / "benchmarks" / "results" / "meta"
+    meta.mkdir(parents=True)
+    val = {"mean_ats": -0.5, "max_ats": 0.3, "min_fde": 0.33}
+    (meta / "finetune_start_zara1.json").write_text(json.dumps({"val": val}))
+    run = tmp_path / "runs" / "zara1-rlhf-s0"
+    run.mkdir(parents=True)
+    epochs = [{"epoch": 1, "step": 3, "val_mean_ats": -0.4, "val_max_ats": 0.31,
+               "val_min_fde": 0.34, "best": True},
+              {"epoch": 2, "step": 6},  # not validated
+              {"epoch": 3, "step": 9, "val_mean_ats": -0.2, "val_max_ats": 0.32,
+               "val_min_fde": 0.35}]  # fmt: skip
+    (run / "finetune_metrics.jsonl").write_text("\n".join(json.dumps(e) for e in epochs))
+    rows = [_row("zara1", fde=0.30), _row("zara1", method="rlhf", fde=0.33)]
+    line = report.reward_section(rows, ["zara1"]).splitlines()[2]
+    assert "| 9 |" in line  # the run's steps, from its last epoch
+    assert "-0.500 -> -0.400 -> -0.200 (-0.200)" in line  # start -> first -> last (peak)
+    assert "+10.0 %" in line
