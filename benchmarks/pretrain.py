@@ -240,6 +240,8 @@ def main() -> None:
         "dataset": args.dataset,
         "variant": args.variant,
         "train_machine": args.train_machine,
+        # the training process's own machine and threads (checkpoints since 2026-11-27)
+        "trained_on": gen_ckpt["meta"].get("machine"),
         "stochastic_steps": ckpt.config_of(gen_ckpt).model.stochastic_steps,
         "params": params,
         "stage_seconds": stage_seconds,

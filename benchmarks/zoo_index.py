@@ -224,7 +224,8 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
             entry["method"] = "pretrained" + (f"-{variant}" if variant else "")
             row = by_file.get((name, entry["method"]))
             run = _meta(dataset, variant)
-            machine = run.get("train_machine") or (row or {}).get("machine")
+            machine = (run.get("train_machine") or run.get("trained_on")
+                       or (row or {}).get("machine"))  # fmt: skip
             out = f"runs/{dataset}" + (f"-{variant}" if variant else "")
             den = ""
             if variant and entry["denoiser"] == f"{dataset}/denoiser":

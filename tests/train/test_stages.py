@@ -125,6 +125,8 @@ def test_run_folder_holds_config_metrics_and_self_sufficient_checkpoints(trained
     payload = ckpt.load(trained / "generator.safetensors")
     assert payload["kind"] == "generator" and payload["denoiser"]["kind"] == "denoiser"
     assert payload["config"]["model"]["samples"] == 4  # K lives in the model section
+    # where the training process ran, threads included (the zoo cards name it)
+    assert re.search(r"CPU cores.*\d+ threads", payload["meta"]["machine"])
     assert sorted(p.name for p in trained.glob("*.pt")) == ["denoiser_last.pt",
                                                             "generator_last.pt"]  # fmt: skip
 

@@ -28,6 +28,7 @@ from trajpref.data.transforms import augment
 from trajpref.errors import ConfigError, TrajprefError
 from trajpref.io import atomic_path, dumps_json, load_tensors
 from trajpref.models import checkpoint as ckpt
+from trajpref.results import machine
 from trajpref.train.distributed import DistInfo
 from trajpref.train.ema import WeightAverage, ema_decay
 from trajpref.train.stages import Stage
@@ -317,7 +318,7 @@ def fit(
             validated_at = spent
             # what each checkpoint written at this evaluation records beside its validation
             at = {"epoch": epoch + 1, "step": step, "train_seconds": round(elapsed, 2),
-                  "dataset": train.info.name}  # fmt: skip
+                  "dataset": train.info.name, "machine": machine()}  # fmt: skip
             stage.objective.eval()
             if average is not None:  # the raw weights too, for the comparison
                 raw = stage.validate()
