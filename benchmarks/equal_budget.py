@@ -56,7 +56,7 @@ from trajpref.results import (
     start_suffix,
     update_readme,
 )
-from trajpref.rl.presets import equal_budget_overrides
+from trajpref.rl.presets import equal_budget_args
 from trajpref.train import read_metrics
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -238,9 +238,7 @@ def run_jobs(args: argparse.Namespace) -> None:
     logs = ROOT / "runs" / "logs"
     logs.mkdir(parents=True, exist_ok=True)
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-    budget = [arg for override in equal_budget_overrides(args.minutes, args.warmup,
-                                                         args.eval_minutes)
-              for arg in ("--set", override)]  # fmt: skip
+    budget = equal_budget_args(args.minutes, args.warmup, args.eval_minutes)
     data = ["--data-root", args.data_root] if args.data_root else []
 
     def one(job: tuple[str, str, int]) -> tuple[tuple[str, str, int], int, float]:

@@ -65,7 +65,7 @@ from trajpref.io import read_checkpoint_header, write_json
 from trajpref.models import checkpoint as ckpt
 from trajpref.models.baseline import ConstantVelocity
 from trajpref.results import command_line, machine
-from trajpref.rl.presets import equal_budget_overrides
+from trajpref.rl.presets import equal_budget_args
 from trajpref.score.scorer import TrajectoryScorer
 from trajpref.types import TrajectoryDataset
 
@@ -385,12 +385,6 @@ def run_evaluation(job: Job, opts: argparse.Namespace, setup: Setup, splits: Spl
     write_json(state_file(setup, job.dataset, job.column), record)
 
 
-def budget_args(minutes: float, warmup: int, eval_minutes: float) -> list[str]:
-    """The equal-budget table's training budget (benchmarks/equal_budget.py)."""
-    return [arg for override in equal_budget_overrides(minutes, warmup, eval_minutes)
-            for arg in ("--set", override)]  # fmt: skip
-
-
 def training_command(job: Job, opts: argparse.Namespace, setup: Setup) -> list[str]:
     """The benchmark script that trains a job's missing model or rows."""
     data = ["--data-root", opts.data_root] if opts.data_root else []
@@ -402,7 +396,7 @@ def training_command(job: Job, opts: argparse.Namespace, setup: Setup) -> list[s
     return [sys.executable, str(scripts / "finetune.py"), "--dataset", job.dataset,
             *TRAIN_ARGS[job.column], "--seeds", str(job.seed), "--skip-done",
             *(["--no-start-validation"] if start.is_file() else []),
-            *budget_args(opts.minutes, opts.warmup, opts.eval_minutes),
+            *equal_budget_args(opts.minutes, opts.warmup, opts.eval_minutes),
             "--device", opts.device, *data]  # fmt: skip
 
 

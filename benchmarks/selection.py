@@ -171,6 +171,8 @@ def main() -> None:
     path = Path(args.model or ROOT / "models" / args.dataset / f"{stem}.safetensors")
     model = ckpt.load_predictor(path, "leapfrog")
     steps = score_timesteps(model.schedule.num_steps, args.score_every)
+    # rows and test records of another spacing than the paper's name their number of steps
+    steps_tag = f"s{len(steps)}" if args.score_every != PAPER_SCORE_EVERY else ""
     trained_on = training_dataset(path)  # robo's models train on robo-sim: robo has no train split
     speed_ref = None
     if args.speed_norm is not None:
@@ -261,8 +263,8 @@ def main() -> None:
         """A row's method: the setting's name with the suffixes of this run's options."""
         method = method if args.draws == 1 else f"{method}-x{args.draws}"
         method += f"-{args.variant}" if args.variant else ""
-        if args.score_every != PAPER_SCORE_EVERY and uses_score:
-            method += f"-s{len(steps)}"  # the number of score steps
+        if steps_tag and uses_score:
+            method += f"-{steps_tag}"
         if args.speed_norm is not None and uses_score:  # the score-free rows are as before
             method += f"-sn{round(args.speed_norm * 100)}"
         if trust_speed and uses_score:
@@ -307,8 +309,8 @@ def main() -> None:
     suffix = (
         variant + ("" if args.split == "test" else "_val") + (f"_{args.tag}" if args.tag else "")
     )
-    if args.score_every != PAPER_SCORE_EVERY and args.split == "test":
-        suffix += f"_s{len(steps)}"  # beside the paper's spacing's record, not over it
+    if steps_tag and args.split == "test":
+        suffix += f"_{steps_tag}"  # beside the paper's spacing's record, not over it
     suffix += f"_seed{args.seed}" if args.seed else ""  # seed 0 keeps the files' old names
     (out_dir / "meta").mkdir(exist_ok=True)
     label = Path(args.dataset).name  # a user folder's name, not its whole path

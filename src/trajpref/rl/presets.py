@@ -41,13 +41,15 @@ def preset_overrides(preset: str, method: str) -> list[str]:
     return [f"finetune.{k}={'null' if v is None else v}" for k, v in values.items()]
 
 
-def equal_budget_overrides(minutes: float, warmup: int, eval_minutes: float) -> list[str]:
-    """``key=value`` overrides of the equal-budget table's runs (``benchmarks/equal_budget.py``
-    and ``benchmarks/reproduce.py``): ``minutes`` of this process's CPU time on training steps,
-    no epoch limit, validation after every ``eval_minutes`` of that time, ``warmup`` steps."""
-    return [f"finetune.max_minutes={minutes}", "finetune.budget_clock=cpu",
-            "finetune.epochs=100000", f"finetune.eval_every_minutes={eval_minutes}",
-            f"finetune.warmup_steps={warmup}"]  # fmt: skip
+def equal_budget_args(minutes: float, warmup: int, eval_minutes: float) -> list[str]:
+    """``--set key=value`` arguments of ``benchmarks/finetune.py`` for the equal-budget table's
+    runs (``benchmarks/equal_budget.py`` and ``benchmarks/reproduce.py``): ``minutes`` of this
+    process's CPU time on training steps, no epoch limit, validation after every
+    ``eval_minutes`` of that time, ``warmup`` steps."""
+    overrides = [f"finetune.max_minutes={minutes}", "finetune.budget_clock=cpu",
+                 "finetune.epochs=100000", f"finetune.eval_every_minutes={eval_minutes}",
+                 f"finetune.warmup_steps={warmup}"]  # fmt: skip
+    return [arg for override in overrides for arg in ("--set", override)]
 
 
 def finetune_config(

@@ -216,6 +216,7 @@ def fit(
     clock = time.process_time if optim_cfg.budget_clock == "cpu" else time.perf_counter
     spent = 0.0  # seconds of the budget's clock used by training steps
     validated_at = 0.0  # ``spent`` at the last validation (for ``eval_every_minutes``)
+    trained_on = machine()  # recorded with every checkpoint (the zoo cards name it)
     if resume is not None:
         state = resume if isinstance(resume, dict) else load_resume_state(resume, stage.name)
         check_resume_matches(
@@ -318,7 +319,7 @@ def fit(
             validated_at = spent
             # what each checkpoint written at this evaluation records beside its validation
             at = {"epoch": epoch + 1, "step": step, "train_seconds": round(elapsed, 2),
-                  "dataset": train.info.name, "machine": machine()}  # fmt: skip
+                  "dataset": train.info.name, "machine": trained_on}  # fmt: skip
             stage.objective.eval()
             if average is not None:  # the raw weights too, for the comparison
                 raw = stage.validate()
