@@ -75,11 +75,25 @@ class DataConfig:
     ``crowds_zara02``) leave training, and that scene's windows of both splits are the
     validation split (``data.hold_out_scene``). For choosing between settings on ETH/UCY,
     whose val files come from the training scenes; the published model then trains on all."""
+    val_cut: float = 0.0
+    """Share of each validation file's earliest windows (in time) taken out of the validation
+    split, with the windows that would share a frame with them (0: none); what is left is the
+    validation split. Text-track datasets only (``data.split_validation_in_time``)."""
+    val_cut_to_train: bool = False
+    """The windows cut by ``val_cut`` join the training split (otherwise they are dropped, so
+    that a control validates on the same windows without training on more)."""
 
     def __post_init__(self) -> None:
         if self.holdout_scene and self.val_dataset:
             raise ConfigError("DataConfig.holdout_scene and val_dataset exclude each other: "
                               "the held-out scene is the validation split")  # fmt: skip
+        if not 0.0 <= self.val_cut < 1.0:
+            raise ConfigError(f"DataConfig.val_cut must be in [0, 1), got {self.val_cut}")
+        if self.val_cut_to_train and not self.val_cut:
+            raise ConfigError("DataConfig.val_cut_to_train needs val_cut > 0")
+        if self.val_cut and self.holdout_scene:
+            raise ConfigError("DataConfig.val_cut and holdout_scene exclude each other: the "
+                              "held-out scene is the validation split")  # fmt: skip
         _positive(self, "max_agents", "scale_min", "scale_max", "max_coord", "time_step")
         if self.scale_min > self.scale_max:
             raise ConfigError("DataConfig.scale_min must be <= scale_max")

@@ -11,6 +11,7 @@ from trajpref.data import (
     load_dataset,
     mean_speed,
     resolve_data_root,
+    split_validation_in_time,
 )
 from trajpref.data.registry import ETH_UCY, FEET_TO_METRES, apply_protocol, robo_episodes
 from trajpref.errors import ConfigError, DataError, TrajprefError
@@ -278,6 +279,44 @@ def test_a_held_out_scene_leaves_training_and_is_the_whole_validation_split():
         hold_out_scene(TrajectoryDataset(train.scenes[1:3], info), val, "students")
     with pytest.raises(ConfigError, match="holdout_scene and val_dataset exclude each other"):
         DataConfig(holdout_scene="students", val_dataset="robo")
+
+
+def _window(file: str, frame: int) -> Scene:
+    s = make_scene(1, seed=frame)  # T_h + T_f = 20 steps
+    return Scene(s.history, s.future, s.agent_type, f"{file}@frame={frame}")
+
+
+def test_validation_cut_in_time_keeps_no_shared_frame():
+    info = DatasetInfo("fold", "val", "m", 0.4, source="fold/val")
+    # file a: 50 windows every 10 frames; file b: 4 windows, listed out of order
+    val = TrajectoryDataset([_window("a_val.txt", 10 * i) for i in range(50)]
+                            + [_window("b_val.txt", f) for f in (30, 0, 20, 10)], info)  # fmt: skip
+    train = TrajectoryDataset([_window("a_train.txt", 0)], dataclasses.replace(info, split="train"))
+    more, late = split_validation_in_time(train, val, 0.5, to_train=True)
+    # a: the first 25 windows (frames 0..240) train; the last of them ends at frame 240 + 19 * 10
+    # = 430, so validation starts at 440; b: 0 and 10 train, 20 and 30 overlap them: dropped
+    assert [s.scene_id for s in more.scenes[1:]] == (
+        [f"a_val.txt@frame={10 * i}" for i in range(25)]
+        + ["b_val.txt@frame=0", "b_val.txt@frame=10"]
+    )
+    assert [s.scene_id for s in late.scenes] == [
+        f"a_val.txt@frame={f}" for f in range(440, 500, 10)
+    ]
+    assert "after its first 50% in time" in late.info.source
+    same, late2 = split_validation_in_time(train, val, 0.5, to_train=False)
+    assert same.scenes == train.scenes and late2.scenes == late.scenes  # the control's own split
+    with pytest.raises(ConfigError, match="leaves none to validate on"):
+        split_validation_in_time(train, TrajectoryDataset(val.scenes[50:], info), 0.5, True)
+    with pytest.raises(ConfigError, match="must be in"):
+        split_validation_in_time(train, val, 1.0, True)
+    robo = TrajectoryDataset([Scene(s.history, s.future, s.agent_type, "robo-sim#0:1")
+                              for s in val.scenes[:2]], info)  # fmt: skip
+    with pytest.raises(ConfigError, match="text track files"):
+        split_validation_in_time(train, robo, 0.5, True)
+    with pytest.raises(ConfigError, match="val_cut_to_train needs val_cut"):
+        DataConfig(val_cut_to_train=True)
+    with pytest.raises(ConfigError, match="val_cut and holdout_scene exclude each other"):
+        DataConfig(val_cut=0.5, holdout_scene="students")
 
 
 @pytest.mark.realdata

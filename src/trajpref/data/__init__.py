@@ -8,6 +8,7 @@ from trajpref.data.registry import (
     hold_out_scene,
     load_dataset,
     resolve_data_root,
+    split_validation_in_time,
 )
 from trajpref.data.stats import mean_speed
 from trajpref.data.text import GapWarning, ReadOptions
@@ -24,6 +25,7 @@ __all__ = [
     "load_dataset",
     "mean_speed",
     "resolve_data_root",
+    "split_validation_in_time",
     "write_trajnet",
     "write_trajnet_truth",
 ]

@@ -179,6 +179,55 @@ def hold_out_scene(
     return TrajectoryDataset(kept, train_info), TrajectoryDataset(held, val_info)
 
 
+def _start_frame(scene: Scene) -> int:
+    """The first frame of a text-track window (its ``scene_id`` ends ``@frame=N``)."""
+    _, _, tail = scene.scene_id.partition("@frame=")
+    if not tail.lstrip("-").isdigit():
+        raise ConfigError(f"{scene.scene_id}: splitting validation in time needs windows "
+                          "cut from text track files (scene ids ending '@frame=N')")  # fmt: skip
+    return int(tail)
+
+
+def split_validation_in_time(
+    train: TrajectoryDataset, val: TrajectoryDataset, share: float, to_train: bool
+) -> tuple[TrajectoryDataset, TrajectoryDataset]:
+    """Cut each validation file in time: its earliest ``share`` of windows leave the
+    validation split, and so do the windows after them that would share a frame with them
+    (a gap of one window's length); what is left is the validation split. With ``to_train``
+    the early windows join the training split, otherwise they are dropped, so that a run
+    with more training data and its control validate on the very same windows."""
+    if not 0.0 < share < 1.0:
+        raise ConfigError(f"the validation share to cut must be in (0, 1), got {share}")
+    files: dict[str, list[Scene]] = {}
+    for scene in val.scenes:
+        files.setdefault(scene_file(scene), []).append(scene)
+    early: list[Scene] = []
+    late: list[Scene] = []
+    for name in sorted(files):
+        scenes = sorted(files[name], key=_start_frame)  # windows in time order
+        starts = [_start_frame(s) for s in scenes]
+        cut = round(share * len(scenes))
+        if cut == 0:
+            late += scenes
+            continue
+        steps = [b - a for a, b in zip(starts[:-1], starts[1:], strict=True) if b > a]
+        step = min(steps) if steps else 1  # the file's frame spacing between windows
+        length = scenes[0].history.shape[1] + scenes[0].future.shape[1]  # T_h + T_f
+        last_shared = starts[cut - 1] + (length - 1) * step  # the last early window's end
+        early += scenes[:cut]
+        late += [s for s, f in zip(scenes[cut:], starts[cut:], strict=True) if f > last_shared]
+    if not late:
+        raise ConfigError(f"cutting {share:.0%} of {val.info.name}'s validation windows "
+                          "leaves none to validate on")  # fmt: skip
+    tag = f" (validation after its first {share:.0%} in time)"
+    val_info = dataclasses.replace(val.info, source=val.info.source + tag)
+    if to_train:
+        note = f" plus the first {share:.0%} of {val.info.source}"
+        train_info = dataclasses.replace(train.info, source=train.info.source + note)
+        train = TrajectoryDataset(list(train.scenes) + early, train_info)
+    return train, TrajectoryDataset(late, val_info)
+
+
 def _load(
     name: str,
     split: str,

@@ -11,7 +11,7 @@ from typing import Any, Literal
 import torch
 
 from trajpref.config import ExperimentConfig, save_config
-from trajpref.data import ReadOptions, hold_out_scene, load_dataset
+from trajpref.data import ReadOptions, hold_out_scene, load_dataset, split_validation_in_time
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError
 from trajpref.io import check_output_dir
@@ -65,6 +65,9 @@ def _run(
                            options=options)  # fmt: skip
         if cfg.data.holdout_scene:
             train, val = hold_out_scene(train, val, cfg.data.holdout_scene)
+        if cfg.data.val_cut:
+            train, val = split_validation_in_time(train, val, cfg.data.val_cut,
+                                                  cfg.data.val_cut_to_train)  # fmt: skip
         built, optim = build(train, val, dev)
         if state is not None:
             check_resume_matches(state, built.trainable, resume)
