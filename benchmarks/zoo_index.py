@@ -269,6 +269,7 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
         "machine": machine,
         "machine_short": machine_short(machine),
         "minutes": minutes,
+        "estimate": None if variant else _cost_estimate(dataset, kind, cfg),
         "epochs": meta.get("epoch"),
         "validation": meta.get("val"),
         "commands": train_cmd,
@@ -279,10 +280,45 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
     return entry
 
 
+def _cost_estimate(dataset: str, kind: str, cfg: dict[str, Any]) -> dict[str, Any] | None:
+    """The training minutes ``benchmarks/train_cost.py`` estimated for the fold's default
+    config alone on this CPU, when that record measured the epochs this file was trained
+    with (a stale record, from before a config change, is not quoted)."""
+    path = RESULTS / "meta" / "train_cost.json"
+    if not path.exists():
+        return None
+    record = json.loads(path.read_text())
+    cost = record.get("datasets", {}).get(dataset)
+    if not cost:
+        return None
+    stages = ("denoiser", "generator") if kind == "generator" else ("denoiser",)
+    epochs = {"denoiser": cfg["denoiser"]["epochs"], "generator": cfg["generator"]["epochs"]}
+    if any(cost.get(k, {}).get("epochs") != epochs[k] for k in stages):
+        return None
+    return {"date": cost.get("date") or record.get("date"), "machine": record.get("machine"),
+            "minutes": {k: cost[k]["minutes"] for k in stages}}  # fmt: skip
+
+
 def _any_machine(rows: list[dict[str, Any]], dataset: str, variant: str | None) -> str | None:
     method = "pretrained" + (f"-{variant}" if variant else "")
     row = next((r for r in rows if r["dataset"] == dataset and r["method"] == method), None)
     return row["machine"] if row else None
+
+
+def _estimate_lines(estimate: dict[str, Any] | None) -> list[str]:
+    """The card's line on the cost alone (the minutes above are as run, often beside other
+    jobs on the same two cores)."""
+    if not estimate:
+        return []
+    parts = [f"{k} {v} min" for k, v in estimate["minutes"].items()]
+    total = round(sum(estimate["minutes"].values()), 1)
+    return [
+        "",
+        f"Estimated alone on {machine_short(estimate['machine'])} by `python "
+        f"benchmarks/train_cost.py` ({estimate['date']}): {' + '.join(parts)}"
+        + (f" = {total} min" if len(parts) > 1 else "")
+        + "; the minutes above are as run, when other jobs may have shared the machine.",
+    ]
 
 
 def _sampling_lines(sampling: dict[str, Any] | None) -> list[str]:
@@ -357,6 +393,7 @@ def card(e: dict[str, Any]) -> str:
         + ", ".join(f"{k} stage {v} min" for k, v in t["minutes"].items() if v is not None)
         + (f", best validation epoch {t['epochs']}" if t.get("epochs") else "")
         + ".",
+        *_estimate_lines(t.get("estimate")),
         "",
         "```bash",
         *t["commands"],

@@ -24,3 +24,27 @@ def test_a_card_names_the_training_process_machine_before_the_publishing_one(mon
     assert zoo.describe("zara2/generator", path, rows)["train"]["machine"] == "trainer, 1 threads"
     meta["train_machine"] = "1x H100"  # stated by hand for a run trained elsewhere
     assert zoo.describe("zara2/generator", path, rows)["train"]["machine"] == "1x H100"
+
+
+def test_a_card_quotes_the_cost_estimate_only_for_the_epochs_it_measured(tmp_path, monkeypatch):
+    """The card adds train_cost.py's minutes alone beside the as-run minutes, and leaves them
+    out when the record measured another number of epochs (a config changed since)."""
+    import json
+
+    zoo = load_benchmark("zoo_index")
+    (tmp_path / "meta").mkdir()
+    record = {"machine": "Linux, 2 CPU cores, 2 threads", "date": "2026-11-27", "datasets": {
+        "zara2": {"denoiser": {"epochs": 60, "minutes": 6.0},
+                  "generator": {"epochs": 160, "minutes": 9.5}}}}  # fmt: skip
+    (tmp_path / "meta" / "train_cost.json").write_text(json.dumps(record))
+    monkeypatch.setattr(zoo, "RESULTS", tmp_path)
+    cfg = {"denoiser": {"epochs": 60}, "generator": {"epochs": 160}}
+    estimate = zoo._cost_estimate("zara2", "generator", cfg)
+    assert estimate["minutes"] == {"denoiser": 6.0, "generator": 9.5}
+    line = zoo._estimate_lines(estimate)[1]
+    assert "denoiser 6.0 min + generator 9.5 min = 15.5 min" in line and "CPU (2 cores)" in line
+    assert zoo._cost_estimate("zara2", "denoiser", cfg)["minutes"] == {"denoiser": 6.0}
+    cfg["generator"]["epochs"] = 320  # the record is stale for this file
+    assert zoo._cost_estimate("zara2", "generator", cfg) is None
+    assert zoo._cost_estimate("zara2", "denoiser", cfg) is not None  # its own stage still holds
+    assert zoo._cost_estimate("eth", "generator", cfg) is None and zoo._estimate_lines(None) == []
