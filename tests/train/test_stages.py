@@ -6,7 +6,7 @@ import re
 
 import pytest
 import torch
-from synthetic import TINY_OVERRIDES
+from synthetic import TINY_OVERRIDES, write_dataset
 
 from trajpref.cli import main
 from trajpref.data import load_dataset
@@ -369,6 +369,40 @@ def test_a_run_with_a_held_out_scene_trains_without_it_and_validates_on_it(
     assert 0 < walk2 and held["train_agents"] == full["train_agents"] - walk2
     assert {s.scene_id.split("@")[0] for s in seen["val"].scenes} == {"walk2.txt"}
     assert "holdout_scene: walk2" in (tmp_path / "held" / "config.yaml").read_text()
+
+
+def test_a_run_with_a_validation_cut_trains_on_its_early_windows_and_validates_on_the_rest(
+    tmp_path, cfg, monkeypatch
+):
+    import dataclasses
+
+    from trajpref.train import run
+
+    seen, original = [], run.split_validation_in_time
+
+    def spy(train, val, share, to_train):
+        seen.append(original(train, val, share, to_train))
+        return seen[-1]
+
+    monkeypatch.setattr(run, "split_validation_in_time", spy)
+    root = write_dataset(tmp_path / "long", frames=70)  # 51 windows per file, room for the gap
+    cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, dataset=str(root)))
+    full = train_stage("diffusion", cfg, tmp_path / "all", device="cpu", progress=False)
+    assert not seen  # no cut: the usual splits
+    data = dataclasses.replace(cfg.data, val_cut=0.5, val_cut_to_train=True)
+    more = train_stage("diffusion", dataclasses.replace(cfg, data=data), tmp_path / "more",
+                       device="cpu", progress=False)  # fmt: skip
+    data = dataclasses.replace(data, val_cut_to_train=False)
+    same = train_stage("diffusion", dataclasses.replace(cfg, data=data), tmp_path / "same",
+                       device="cpu", progress=False)  # fmt: skip
+    val = load_dataset(cfg.data.dataset, "val")
+    (train_more, val_more), (_, val_same) = seen
+    added = train_more.num_agents - full["train_agents"]
+    assert 0 < added < val.num_agents and more["train_agents"] == full["train_agents"] + added
+    assert same["train_agents"] == full["train_agents"]  # the control trains on the same data
+    assert [s.scene_id for s in val_more.scenes] == [s.scene_id for s in val_same.scenes]
+    assert 0 < val_more.num_agents < val.num_agents
+    assert "val_cut: 0.5" in (tmp_path / "more" / "config.yaml").read_text()
 
 
 def test_keep_checkpoints_saves_every_validated_epoch_and_the_best_is_one_of_them(
