@@ -179,6 +179,23 @@ def test_resume_continues_to_the_same_result(tmp_path, cfg):
         torch.testing.assert_close(last_stop["trainable"][key], value)
 
 
+def test_a_fresh_run_in_a_used_folder_moves_the_earlier_log_aside(tmp_path, cfg):
+    """A resumed run appends to its own log; a run started anew in the same folder keeps
+    its log to its own epochs and moves the earlier one aside (it was appended to before)."""
+    from trajpref.train import read_metrics
+
+    out = tmp_path / "run"
+    train_stage("diffusion", cfg, out, device="cpu", progress=False, max_steps=_steps(cfg))
+    train_stage("diffusion", cfg, out, device="cpu", progress=False,
+                resume=str(out / "denoiser_last.pt"))  # fmt: skip
+    epochs = [r["epoch"] for r in read_metrics(out, "denoiser")]
+    assert epochs == list(range(1, cfg.denoiser.epochs + 1))  # stopped, then resumed: one log
+    train_stage("diffusion", cfg, out, device="cpu", progress=False)
+    assert [r["epoch"] for r in read_metrics(out, "denoiser")] == epochs
+    aside = out / "denoiser_metrics.replaced-1.jsonl"
+    assert [json.loads(line)["epoch"] for line in aside.read_text().splitlines()] == epochs
+
+
 def _steps(cfg):
     from trajpref.data.loader import SceneLoader
 

@@ -12,6 +12,7 @@ import contextlib
 import itertools
 import json
 import math
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -38,11 +39,21 @@ from trajpref.types import TrajectoryDataset
 class MetricLog:
     """Per-epoch metrics to ``metrics.jsonl`` (and TensorBoard when it is installed)."""
 
-    def __init__(self, out_dir: Path, stage: str, enabled: bool):
+    def __init__(self, out_dir: Path, stage: str, enabled: bool, fresh: bool = True):
+        """``fresh``: a run that starts from its first epoch moves an earlier run's log in
+        the same folder aside (``<stage>_metrics.replaced-<k>.jsonl``), so that the log holds
+        this run's epochs only; a resumed run appends to its own."""
         self.enabled = enabled
         self.path = out_dir / f"{stage}_metrics.jsonl"
         self.stage = stage
         self.tb = None
+        if enabled and fresh and self.path.exists():
+            k = 1
+            while (aside := out_dir / f"{stage}_metrics.replaced-{k}.jsonl").exists():
+                k += 1
+            self.path.rename(aside)
+            print(f"[{stage}] {out_dir} held an earlier run's log: moved to {aside.name}; "
+                  "its other files are replaced as this run writes", file=sys.stderr)  # fmt: skip
         if enabled:
             try:
                 from torch.utils.tensorboard import SummaryWriter
@@ -244,7 +255,7 @@ def fit(
         device_ids = [device] if device.type == "cuda" else None
         objective = DistributedDataParallel(objective, device_ids=device_ids)
 
-    log = MetricLog(out_dir, stage.name, main)
+    log = MetricLog(out_dir, stage.name, main, fresh=resume is None)
     rate = None  # agent-windows per second of the last epoch run here
     nonfinite = 0
     scale_range = (data_cfg.scale_min, data_cfg.scale_max)
