@@ -53,14 +53,11 @@ LIMITS = {
     "eth": "eth's test walkers are faster than any training scene: a quarter move above 2 m/s "
     "and carry 42 % of the error, so the default model is far from the paper's LED row "
     "(0.33 / 0.60); validation (the other scenes) does not see that shift.",
-    **dict.fromkeys(
-        ("zara1/generator-long",),
-        "160 generator epochs from the published denoiser (the fold's config otherwise), trained "
-        "on a borrowed H100 (17-18 GPU minutes beside up to 14 other runs); the same schedule "
-        "would take 1.2-1.4 hours on two CPU cores, past the 45-minute budget, so it is "
-        "published beside the CPU default, chosen on validation (docs/pretraining.md, "
-        "'160 generator epochs on a borrowed GPU').",
-    ),
+    "zara1/generator-long": "160 generator epochs from the published denoiser (the fold's "
+    "config otherwise), trained on a borrowed H100 (17-18 GPU minutes beside up to 14 other "
+    "runs); the same schedule would take 1.2-1.4 hours on two CPU cores, past the 45-minute "
+    "budget, so it is published beside the CPU default, chosen on validation "
+    "(docs/pretraining.md, '160 generator epochs on a borrowed GPU').",
     "robo/generator-long": "Trained on a borrowed GPU (60-epoch schedule, the best epoch 38); "
     "only slightly better than the CPU default on the test split.",
     "zara1/generator": "The CPU default (160 generator epochs without denoising steps, dropout "

@@ -204,8 +204,9 @@ def split_validation_in_time(
     early: list[Scene] = []
     late: list[Scene] = []
     for name in sorted(files):
-        scenes = sorted(files[name], key=_start_frame)  # windows in time order
-        starts = [_start_frame(s) for s in scenes]
+        timed = sorted(((_start_frame(s), s) for s in files[name]), key=lambda fs: fs[0])
+        starts = [f for f, _ in timed]  # windows in time order
+        scenes = [s for _, s in timed]
         cut = round(share * len(scenes))
         if cut == 0:
             late += scenes
