@@ -207,7 +207,9 @@ def test_each_finetuning_row_compares_with_the_start_of_its_time():
     # the runs from a default that was replaced later compare with that default's row
     assert finetune_start("control-lr3e-5-tau5") == "pretrained-tau5"
     assert finetune_start("rlhf-set-h128") == "pretrained-h128"
+    assert finetune_start("rlhf-set-noflip") == "pretrained-noflip"
     assert base_method("rlhf-res-raw") == "rlhf-res"
+    assert base_method("control-lr3e-5-noflip") == "control-lr3e-5"
 
 
 def test_the_rlhf_report_orders_every_start_it_can_meet():
