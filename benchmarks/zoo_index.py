@@ -201,6 +201,7 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
                              "max_speed": cfg["model"].get("max_speed", 0.0),
                              "history_encoder": cfg["model"].get("history_encoder", "mlp"),
                              "dropout": cfg["model"].get("generator_dropout", 0.0),
+                             "flip": cfg["data"].get("flip", False),
                              "spread_scale": cfg["model"].get("spread_scale", 1.0),
                              "ema_epochs": meta.get("ema_epochs"),
                              "changes": changes}  # fmt: skip
@@ -338,6 +339,8 @@ def _sampling_lines(sampling: dict[str, Any] | None) -> list[str]:
     if sampling.get("dropout"):
         text += (f" It was trained with dropout {sampling['dropout']:g} "
                  "(`model.generator_dropout`).")  # fmt: skip
+    if sampling.get("flip"):
+        text += " It was trained on scenes mirrored at random (`data.flip`)."
     if sampling.get("spread_scale", 1.0) != 1.0:
         text += (f" Its samples' spread about their mean is scaled by "
                  f"{sampling['spread_scale']:g} (`model.spread_scale`).")  # fmt: skip

@@ -48,3 +48,13 @@ def test_a_card_quotes_the_cost_estimate_only_for_the_epochs_it_measured(tmp_pat
     assert zoo._cost_estimate("zara2", "generator", cfg) is None
     assert zoo._cost_estimate("zara2", "denoiser", cfg) is not None  # its own stage still holds
     assert zoo._cost_estimate("eth", "generator", cfg) is None and zoo._estimate_lines(None) == []
+
+
+def test_a_card_says_when_its_generator_trained_on_mirrored_scenes():
+    """The training-time settings that shape a generator are on its card; the mirror is one
+    (configs/zara1.yaml since 2026-11-27) and is stated only when the file was trained so."""
+    zoo = load_benchmark("zoo_index")
+    base = {"tau": 0, "stochastic_steps": False, "dropout": 0.2, "changes": []}
+    assert "mirrored" in " ".join(zoo._sampling_lines({**base, "flip": True}))
+    assert "mirrored" not in " ".join(zoo._sampling_lines({**base, "flip": False}))
+    assert "mirrored" not in " ".join(zoo._sampling_lines(base))  # files from before the field
