@@ -6,7 +6,8 @@ set -e
 data=${TRAJPREF_DATA:?set TRAJPREF_DATA to the data folder}
 repo=$(cd "$(dirname "$0")/../.." && pwd)
 grep -qx "/.gpu/" "$repo/.git/info/exclude" 2>/dev/null || echo "/.gpu/" >> "$repo/.git/info/exclude"
-mkdir -p "$repo/.gpu/pool" "$repo/.gpu/sdd"
+mkdir -p "$repo/.gpu/pool" "$repo/.gpu/sdd" "$repo/.gpu/robo"
 for f in "$data"/eth_ucy/*/train/*.txt "$data"/eth_ucy/*/val/*.txt; do cp -n "$f" "$repo/.gpu/pool/"; done
 cp "$data"/sdd/*.npz "$repo/.gpu/sdd/"
+cp "$data"/robo/val.npz "$repo/.gpu/robo/"  # Robo trains on the simulator; its test split stays here
 du -sh "$repo/.gpu"

@@ -18,3 +18,4 @@ for fold in eth hotel univ zara1 zara2; do
   mkdir -p "$root/eth_ucy/$fold/test"  # test splits are read here, on the CPU, never there
 done
 mkdir -p "$root/sdd" && cp "$repo"/.gpu/sdd/* "$root/sdd/"
+if [ -d "$repo/.gpu/robo" ]; then mkdir -p "$root/robo" && cp "$repo"/.gpu/robo/* "$root/robo/"; fi
