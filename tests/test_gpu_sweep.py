@@ -63,6 +63,8 @@ def test_unpack_rebuilds_each_fold_without_its_own_scenes(tmp_path):
     pool.mkdir(parents=True)
     (repo / ".gpu" / "sdd").mkdir()
     (repo / ".gpu" / "sdd" / "train.npz").write_bytes(b"x")
+    (repo / ".gpu" / "robo").mkdir()
+    (repo / ".gpu" / "robo" / "val.npz").write_bytes(b"x")  # Robo's test split never travels
     scenes = ("biwi_eth", "biwi_hotel", "students001", "students003", "uni_examples",
               "crowds_zara01", "crowds_zara02", "crowds_zara03")  # fmt: skip
     for s in scenes:
@@ -77,3 +79,4 @@ def test_unpack_rebuilds_each_fold_without_its_own_scenes(tmp_path):
     eth_val = sorted(p.name for p in (out / "eth_ucy" / "eth" / "val").iterdir())
     assert len(eth_val) == 7 and "biwi_eth_val.txt" not in eth_val
     assert (out / "sdd" / "train.npz").is_file()
+    assert [p.name for p in (out / "robo").iterdir()] == ["val.npz"]
