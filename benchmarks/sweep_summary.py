@@ -3,9 +3,12 @@
 The sweep's runs come back as ``meta.tgz`` (each run's config, metrics and log); unpack it
 into a folder and point this script at it. For each run it reads the job line (fold, epochs,
 seed, ``--set`` overrides) and the validation history, and writes one measurement file with
-the validation minADE20 / minFDE20 at the best and at the last evaluation, and the training
-seconds as run on the GPU. Validation only: a sweep chooses; the test split is read later,
-once, by ``benchmarks/pretrain.py`` for what is published.
+the validation minADE20 / minFDE20 at the evaluation with the lowest minFDE20 (``best``), at
+the one whose checkpoint the run keeps (``kept``: the lowest minADE20 + minFDE20, as the
+training loop chooses), and at the last one, and the training seconds as run on the GPU.
+Validation only: a sweep chooses; the test split is read later, once, by
+``benchmarks/pretrain.py`` for what is published. Runs unpacked from several calls of one
+lease go into one folder, their ``jobs*.txt`` concatenated into ``jobs.txt``.
 
     tar xzf meta.tgz -C runs/sweep
     python benchmarks/sweep_summary.py runs/sweep --gpu "one NVIDIA H100 80GB (borrowed)" \\
@@ -36,12 +39,13 @@ def summarise(run_dir: Path) -> dict[str, Any] | None:
     if not evals:
         return None
     best = min(evals, key=lambda r: r["val_min_fde"])
+    kept = min(evals, key=lambda r: r["val_min_ade"] + r["val_min_fde"])  # the loop's choice
 
     def pick(r: dict[str, Any]) -> dict[str, Any]:
         return {"epoch": r["epoch"], "min_ade": r["val_min_ade"], "min_fde": r["val_min_fde"]}
 
-    return {"epochs_done": log[-1]["epoch"], "best": pick(best), "last": pick(evals[-1]),
-            "train_seconds": log[-1]["train_seconds"]}  # fmt: skip
+    return {"epochs_done": log[-1]["epoch"], "best": pick(best), "kept": pick(kept),
+            "last": pick(evals[-1]), "train_seconds": log[-1]["train_seconds"]}  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -60,10 +64,10 @@ def main(argv: list[str] | None = None) -> int:
         got = summarise(args.runs / job["name"])
         runs.append({**job, **(got or {"skipped": True})})
         if got:
-            b, last = got["best"], got["last"]
+            k, last = got["kept"], got["last"]
             sets = " ".join(job["overrides"]) or "-"
-            print(f"{job['name']:<18} {job['fold']:<6} {sets:<34} best {b['min_ade']:.4f} / "
-                  f"{b['min_fde']:.4f} (ep {b['epoch']})  last {last['min_ade']:.4f} / "
+            print(f"{job['name']:<18} {job['fold']:<8} {sets:<34} kept {k['min_ade']:.4f} / "
+                  f"{k['min_fde']:.4f} (ep {k['epoch']})  last {last['min_ade']:.4f} / "
                   f"{last['min_fde']:.4f}  {got['train_seconds']:.0f} s")  # fmt: skip
     write_meta(args.out, train_machine=args.gpu, split="val", runs=runs)
     print(f"wrote {args.out}")

@@ -22,7 +22,7 @@ def _log(path: Path, rows: list[dict]) -> None:
     path.write_text("".join(json.dumps(r) + "\n" for r in rows))
 
 
-def test_summary_keeps_the_best_and_last_validation_and_marks_skipped_jobs(tmp_path):
+def test_summary_keeps_the_best_kept_and_last_validation_and_marks_skipped_jobs(tmp_path):
     runs = tmp_path / "runs"
     (runs).mkdir()
     (runs / "jobs.txt").write_text(
@@ -34,14 +34,16 @@ def test_summary_keeps_the_best_and_last_validation_and_marks_skipped_jobs(tmp_p
         {"epoch": 4, "train_seconds": 10.0, "val_min_ade": 0.3, "val_min_fde": 0.5},
         {"epoch": 6, "train_seconds": 15.0},
         {"epoch": 8, "train_seconds": 20.0, "val_min_ade": 0.31, "val_min_fde": 0.55},
+        {"epoch": 12, "train_seconds": 30.0, "val_min_ade": 0.2, "val_min_fde": 0.52},
     ])  # fmt: skip
     out = tmp_path / "sweep.json"
     assert _summary_module().main([str(runs), "--gpu", "a GPU", "--out", str(out)]) == 0
     meta = json.loads(out.read_text())
     a, b = meta["runs"]
     assert meta["train_machine"] == "a GPU" and meta["split"] == "val"
-    assert a["best"] == {"epoch": 4, "min_ade": 0.3, "min_fde": 0.5}
-    assert a["last"]["epoch"] == 8 and a["train_seconds"] == 20.0 and a["epochs_done"] == 8
+    assert a["best"] == {"epoch": 4, "min_ade": 0.3, "min_fde": 0.5}  # the lowest minFDE
+    assert a["kept"] == {"epoch": 12, "min_ade": 0.2, "min_fde": 0.52}  # the lowest sum
+    assert a["last"]["epoch"] == 12 and a["train_seconds"] == 30.0 and a["epochs_done"] == 12
     assert b["skipped"] is True and b["seed"] == 1
     assert b["overrides"] == ["generator.lr=0.002", "data.max_agents=256"]
 
