@@ -39,7 +39,7 @@ def summarise(run_dir: Path) -> dict[str, Any] | None:
     if not evals:
         return None
     best = min(evals, key=lambda r: r["val_min_fde"])
-    kept = min(evals, key=lambda r: r["val_min_ade"] + r["val_min_fde"])  # the loop's choice
+    kept = min(evals, key=lambda r: r["val_score"])  # the score the loop kept its checkpoint by
 
     def pick(r: dict[str, Any]) -> dict[str, Any]:
         return {"epoch": r["epoch"], "min_ade": r["val_min_ade"], "min_fde": r["val_min_fde"]}

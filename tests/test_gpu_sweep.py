@@ -31,10 +31,13 @@ def test_summary_keeps_the_best_kept_and_last_validation_and_marks_skipped_jobs(
         "B hotel 8 4 1 generator.lr=0.002 data.max_agents=256\n"
     )
     _log(runs / "A" / "generator_metrics.jsonl", [
-        {"epoch": 4, "train_seconds": 10.0, "val_min_ade": 0.3, "val_min_fde": 0.5},
+        {"epoch": 4, "train_seconds": 10.0, "val_min_ade": 0.3, "val_min_fde": 0.5,
+         "val_score": 0.8},
         {"epoch": 6, "train_seconds": 15.0},
-        {"epoch": 8, "train_seconds": 20.0, "val_min_ade": 0.31, "val_min_fde": 0.55},
-        {"epoch": 12, "train_seconds": 30.0, "val_min_ade": 0.2, "val_min_fde": 0.52},
+        {"epoch": 8, "train_seconds": 20.0, "val_min_ade": 0.31, "val_min_fde": 0.55,
+         "val_score": 0.86},
+        {"epoch": 12, "train_seconds": 30.0, "val_min_ade": 0.2, "val_min_fde": 0.52,
+         "val_score": 0.72},
     ])  # fmt: skip
     out = tmp_path / "sweep.json"
     assert _summary_module().main([str(runs), "--gpu", "a GPU", "--out", str(out)]) == 0
