@@ -12,13 +12,16 @@ record ``meta/finetune_start_<D>.json`` to ``finetune_start_<D>-NAME.json``, and
 folders begun from another generator than today's (``runs/<D>-<method>-s<seed>[-<tag>]``, by the
 weights hash in their ``start.json``) to ``<folder>-NAME``, so that new runs from today's
 default start afresh instead of being refused. Rows renamed earlier by hand are left as they
-are; their folders are still moved.
+are; their folders are still moved. A retired row's checkpoint path is given the folder's new
+name whether or not the folder is on this machine (``runs/`` is not tracked, and a new checkout
+lacks it), so that it never names the folder a later run from today's default writes to.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
 from pathlib import Path
 
 from trajpref.io import read_checkpoint_header
@@ -34,6 +37,16 @@ def _is_tuned(method: str) -> bool:
     return method.split("-")[0] in TUNED
 
 
+def _retired_checkpoint(checkpoint: str, dataset: str, suffix: str) -> str:
+    """``runs/<D>-<method>-s<seed>[-<tag>]/<file>`` -> the same in ``<folder><suffix>``; any other
+    path (a model file, a folder already suffixed) is returned as it is."""
+    folder, _, file = checkpoint.rpartition("/")
+    match = re.fullmatch(rf"runs/{re.escape(dataset)}-(.+)-s\d+(-.+)?", folder)
+    if not match or not _is_tuned(match.group(1)) or folder.endswith(suffix):
+        return checkpoint
+    return f"{folder}{suffix}/{file}"
+
+
 def retire(root: Path, dataset: str, name: str, dry_run: bool = False) -> dict[str, list[str]]:
     """Rename the rows, the start record and the run folders (see the module docstring).
     Returns what was (or, with ``dry_run``, would be) done, by kind."""
@@ -45,8 +58,7 @@ def retire(root: Path, dataset: str, name: str, dry_run: bool = False) -> dict[s
     if not kept.is_file():
         raise SystemExit(f"no {kept.name}: keep the replaced default's row first "
                          "(benchmarks/pretrain.py --keep-replaced)")  # fmt: skip
-    done: dict[str, list[str]] = {"rows": [], "records": [], "folders": []}
-    moved: dict[str, str] = {}
+    done: dict[str, list[str]] = {"rows": [], "paths": [], "records": [], "folders": []}
     today = read_checkpoint_header(root / "models" / dataset / f"generator{ckpt.SUFFIX}")["hash"]
     for record in sorted((root / "runs").glob(f"{dataset}-*-s[0-9]*/start.json")):
         folder = record.parent
@@ -58,7 +70,6 @@ def retire(root: Path, dataset: str, name: str, dry_run: bool = False) -> dict[s
         target = folder.with_name(folder.name + suffix)
         if target.exists():
             raise SystemExit(f"{target} exists already: move it away first")
-        moved[folder.relative_to(root).as_posix()] = target.relative_to(root).as_posix()
         done["folders"].append(f"{folder.name} -> {target.name}")
         if not dry_run:
             folder.rename(target)
@@ -72,9 +83,10 @@ def retire(root: Path, dataset: str, name: str, dry_run: bool = False) -> dict[s
                 row["method"] += suffix
                 changed = True
             if row["method"].endswith(suffix) and row["checkpoint"]:
-                folder, _, file = row["checkpoint"].rpartition("/")
-                if folder in moved:
-                    row["checkpoint"] = f"{moved[folder]}/{file}"
+                path_now = _retired_checkpoint(row["checkpoint"], dataset, suffix)
+                if path_now != row["checkpoint"]:
+                    done["paths"].append(f"{path.name}: {row['checkpoint']} -> {path_now}")
+                    row["checkpoint"] = path_now
                     changed = True
         if changed and not dry_run:
             write_rows(path, rows)

@@ -64,7 +64,31 @@ def test_retire_renames_rows_record_and_old_folders_only(tmp_path):
     assert (results / "meta" / "finetune_start_robo-tau5.json").read_text() == '{"val": 1}'
     assert not (results / "meta" / "finetune_start_robo.json").exists()
     again = mod.retire(root, "robo", "tau5")  # nothing left to do
-    assert again == {"rows": [], "records": [], "folders": []}
+    assert again == {"rows": [], "paths": [], "records": [], "folders": []}
+
+
+def test_retire_suffixes_a_retired_rows_path_when_its_folder_is_missing(tmp_path):
+    # a new checkout has no runs/: the path must still move off the folder new runs will use
+    mod = load_benchmark("retire_start")
+    root = _tree(tmp_path)
+    results = root / "benchmarks" / "results"
+    (results / "finetune_robo_set.json").write_text(json.dumps([
+        _row("rlhf-set-tau5", 2, "runs/robo-rlhf-s2-set/finetune.safetensors"),  # no folder
+        _row("rlhf-set-tau5", 3, "runs/robo-rlhf-s3-set-tau5/finetune.safetensors"),  # done before
+        _row("rlhf-set-ancestral", 2, "runs/robo-rlhf-s2-set/finetune.safetensors"),  # other start
+        _row("pretrained-tau5", 0, "models/robo/generator.safetensors"),
+    ]))  # fmt: skip
+    done = mod.retire(root, "robo", "tau5")
+    rows = json.loads((results / "finetune_robo_set.json").read_text())
+    assert [r["checkpoint"] for r in rows] == [
+        "runs/robo-rlhf-s2-set-tau5/finetune.safetensors",
+        "runs/robo-rlhf-s3-set-tau5/finetune.safetensors",
+        "runs/robo-rlhf-s2-set/finetune.safetensors",
+        "models/robo/generator.safetensors",
+    ]
+    assert "finetune_robo_set.json: runs/robo-rlhf-s2-set/finetune.safetensors -> " \
+        "runs/robo-rlhf-s2-set-tau5/finetune.safetensors" in done["paths"]  # fmt: skip
+    assert not (root / "runs" / "robo-rlhf-s2-set-tau5").exists()  # nothing invented on disk
 
 
 def test_retire_needs_a_known_suffix_and_the_kept_start_row(tmp_path):
