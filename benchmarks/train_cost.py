@@ -5,10 +5,19 @@
 The training minutes that ``benchmarks/pretrain.py`` records are those of the real runs, which
 often shared the two cores with other jobs. This script measures every dataset's two stages
 alone, one after the other in one process: ``--steps`` training steps of each stage
-(throughput in agent-windows per second, the first ``--skip`` steps' warm-up excluded) and one
-validation pass, then extrapolates to the config's schedule:
+(throughput in agent-windows per second, the steps' own warm-up included, so the rate errs
+low) and one validation pass, then extrapolates to the config's schedule:
 
     minutes = (epochs x training agent-windows / throughput + evaluations x one validation) / 60
+
+``--set KEY=VALUE`` changes every measured config (``--set generator.epochs=80`` estimates a
+longer schedule). ``--warm`` times a second short epoch and validation instead of the first and
+adds the first's extra time once, as ``warmup_seconds`` (what a compiled run spends compiling).
+``--compiled`` measures each dataset a second time with both stages compiled
+(``denoiser.compile=true generator.compile=true``), side by side in the same process, always
+warm, and records both estimates and their ratio in ``meta/train_cost_compile.json``:
+
+    python benchmarks/train_cost.py --datasets eth zara1 --compiled
 
 The generator stage is timed from the dataset's published denoiser. Writes
 benchmarks/results/meta/train_cost.json (with ``--datasets`` naming a subset, the other
@@ -29,10 +38,13 @@ from pathlib import Path
 
 from trajpref.config import load_config
 from trajpref.results import write_meta
+from trajpref.train import read_metrics
 from trajpref.train.run import train_stage
 
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "benchmarks" / "results" / "meta" / "train_cost.json"
+OUT_COMPILE = ROOT / "benchmarks" / "results" / "meta" / "train_cost_compile.json"
+COMPILED = ("denoiser.compile=true", "generator.compile=true")
 DATASETS = ("eth", "hotel", "univ", "zara1", "zara2", "sdd", "nba", "robo", "robo-mix")
 
 
@@ -41,21 +53,67 @@ def evaluations(epochs: int, every: int) -> int:
     return epochs // every + (0 if epochs % every == 0 else 1)
 
 
-def probe(cfg, stage: str, data_root, steps: int, denoiser: Path | None) -> dict:
+def probe(cfg, stage: str, data_root, steps: int, denoiser: Path | None,
+          warm: bool = False) -> dict:  # fmt: skip
     """Time ``steps`` training steps of one stage (one short epoch; its first steps' warm-up
-    counts, so the rate errs low) and the validation pass that follows them."""
+    counts, so the rate errs low) and the validation pass that follows them. ``warm``: two
+    such epochs, each validated; the second is timed, and what the first took beyond it is
+    returned as ``warmup_seconds`` (compilation, caches)."""
     section = "denoiser" if stage == "diffusion" else "generator"
-    short = dataclasses.replace(getattr(cfg, section), epochs=1, steps_per_epoch=steps,
-                                eval_every=1)  # fmt: skip
+    short = dataclasses.replace(getattr(cfg, section), epochs=2 if warm else 1,
+                                steps_per_epoch=steps, eval_every=1)  # fmt: skip
     with tempfile.TemporaryDirectory() as tmp:
-        summary = train_stage(stage, dataclasses.replace(cfg, **{section: short}),
-                              Path(tmp) / "run", data_root, "cpu", denoiser=denoiser,
-                              progress=False)  # fmt: skip
+        run = Path(tmp) / "run"
+        summary = train_stage(stage, dataclasses.replace(cfg, **{section: short}), run,
+                              data_root, "cpu", denoiser=denoiser, progress=False)  # fmt: skip
+        records = read_metrics(run, "denoiser" if stage == "diffusion" else "generator")
+    if not warm:
+        return {
+            "rate": summary["samples_per_second"],  # agent-windows per second of the steps
+            "val_seconds": summary["wall_seconds"] - summary["train_seconds"],
+            "train_agents": summary["train_agents"],
+        }
+    first, second = records
+    train_first = first["train_seconds"]
+    train_second = second["train_seconds"] - first["train_seconds"]
     return {
-        "rate": summary["samples_per_second"],  # agent-windows per second of the timed steps
-        "val_seconds": summary["wall_seconds"] - summary["train_seconds"],
+        "rate": summary["samples_per_second"],  # of the second epoch
+        "val_seconds": second["val_seconds"],
         "train_agents": summary["train_agents"],
+        "warmup_seconds": max(0.0, train_first - train_second)
+        + max(0.0, first["val_seconds"] - second["val_seconds"]),
     }
+
+
+def estimate(cfg, dataset: str, data_root, steps: tuple[int, int], warm: bool) -> dict:
+    """Both stages' estimated minutes for ``cfg`` (see the module docstring)."""
+    denoiser = ROOT / "models" / dataset / "denoiser.safetensors"
+    entry = {}
+    for stage, n, optim in (("diffusion", steps[0], cfg.denoiser),
+                            ("generator", steps[1], cfg.generator)):  # fmt: skip
+        key = "denoiser" if stage == "diffusion" else "generator"
+        if stage == "generator" and not denoiser.is_file():
+            entry[key] = None
+            continue
+        p = probe(cfg, stage, data_root, n, denoiser if stage == "generator" else None, warm)
+        n_eval = evaluations(optim.epochs, optim.eval_every)
+        seconds = optim.epochs * p["train_agents"] / p["rate"] + n_eval * p["val_seconds"]
+        seconds += p.get("warmup_seconds", 0.0)
+        entry[key] = {
+            "epochs": optim.epochs, "train_agents": p["train_agents"],
+            "agents_per_second": round(p["rate"], 1), "evaluations": n_eval,
+            "val_seconds": round(p["val_seconds"], 1), "minutes": round(seconds / 60, 1),
+        }  # fmt: skip
+        if warm:
+            entry[key]["warmup_seconds"] = round(p["warmup_seconds"], 1)
+    entry["minutes"] = round(sum(v["minutes"] for v in entry.values() if v is not None), 1)
+    return entry
+
+
+def _line(entry: dict) -> str:
+    parts = " + ".join(f"{k[0].upper()} {v['minutes']:.1f}" for k, v in entry.items()
+                       if isinstance(v, dict))  # fmt: skip
+    return f"{parts} = {entry['minutes']:.1f} min"
 
 
 def main() -> None:
@@ -70,36 +128,38 @@ def main() -> None:
         metavar=("D", "G"),
         help="timed training steps of the denoiser and generator stages",
     )
-    parser.add_argument("--out", default=str(OUT))
+    parser.add_argument(
+        "--set",
+        nargs="+",
+        default=[],
+        metavar="KEY=VALUE",
+        help="config overrides for every dataset, e.g. generator.epochs=80",
+    )
+    parser.add_argument(
+        "--warm",
+        action="store_true",
+        help="time a second short epoch; add the first's extra time once",
+    )
+    parser.add_argument("--compiled", action="store_true",
+                        help="also estimate with both stages compiled, side by side (warm); "
+                        f"writes {OUT_COMPILE.relative_to(ROOT)}")  # fmt: skip
+    parser.add_argument("--out", default=None, help=f"default: {OUT.relative_to(ROOT)}")
     args = parser.parse_args()
+    if args.compiled:
+        compare(args)
+        return
+    out = Path(args.out or OUT)
+    if (args.set or args.warm) and out.resolve() == OUT.resolve():
+        raise SystemExit(f"--set/--warm estimate other settings than {OUT.name}'s: name --out")
 
     entries = {}
     for dataset in args.datasets:
-        cfg = load_config(ROOT / "configs" / f"{dataset}.yaml")
-        denoiser = ROOT / "models" / dataset / "denoiser.safetensors"
-        entry = {}
-        for stage, steps, optim in (("diffusion", args.steps[0], cfg.denoiser),
-                                    ("generator", args.steps[1], cfg.generator)):  # fmt: skip
-            if stage == "generator" and not denoiser.is_file():
-                entry["generator"] = None
-                continue
-            p = probe(cfg, stage, args.data_root, steps,
-                      denoiser if stage == "generator" else None)  # fmt: skip
-            n_eval = evaluations(optim.epochs, optim.eval_every)
-            seconds = optim.epochs * p["train_agents"] / p["rate"] + n_eval * p["val_seconds"]
-            entry["denoiser" if stage == "diffusion" else "generator"] = {
-                "epochs": optim.epochs, "train_agents": p["train_agents"],
-                "agents_per_second": round(p["rate"], 1), "evaluations": n_eval,
-                "val_seconds": round(p["val_seconds"], 1), "minutes": round(seconds / 60, 1),
-            }  # fmt: skip
-        total = sum(v["minutes"] for v in entry.values() if v is not None)
-        entry["minutes"] = round(total, 1)
+        cfg = load_config(ROOT / "configs" / f"{dataset}.yaml", args.set)
+        entry = estimate(cfg, dataset, args.data_root, args.steps, args.warm)
+        if args.set or args.warm:
+            entry["settings"] = {"set": args.set, "warm": args.warm}
         entries[dataset] = entry
-        parts = " + ".join(f"{k[0].upper()} {v['minutes']:.1f}" for k, v in entry.items()
-                           if isinstance(v, dict))  # fmt: skip
-        print(f"{dataset:<9} {parts} = {total:.1f} min (estimated, alone on the machine)",
-              flush=True)  # fmt: skip
-    out = Path(args.out)
+        print(f"{dataset:<9} {_line(entry)} (estimated, alone on the machine)", flush=True)
     kept = {}
     if out.is_file() and set(args.datasets) != set(DATASETS):
         # a subset re-estimated (e.g. after its configs changed): the other datasets keep
@@ -110,6 +170,28 @@ def main() -> None:
     today = datetime.date.today().isoformat()
     entries = {name: {"date": today, **entry} for name, entry in entries.items()}
     write_meta(out, datasets={**kept, **entries})
+    print(f"wrote {out}")
+
+
+def compare(args) -> None:
+    """Eager and compiled estimates of each dataset, one after the other in one process."""
+    out = Path(args.out or OUT_COMPILE)
+    entries = json.loads(out.read_text())["datasets"] if out.is_file() else {}
+    for dataset in args.datasets:
+        runs = {}
+        for name, extra in (("eager", []), ("compiled", list(COMPILED))):
+            cfg = load_config(ROOT / "configs" / f"{dataset}.yaml", [*args.set, *extra])
+            runs[name] = estimate(cfg, dataset, args.data_root, args.steps, warm=True)
+            print(f"{dataset:<9} {name:<8} {_line(runs[name])}", flush=True)
+        speedup = {
+            key: round(runs["compiled"][key]["agents_per_second"]
+                       / runs["eager"][key]["agents_per_second"], 2)
+            for key in ("denoiser", "generator") if runs["eager"].get(key)
+        }  # fmt: skip
+        print(f"{dataset:<9} compiled steps / eager steps (throughput): {speedup}", flush=True)
+        entries[dataset] = {"date": datetime.date.today().isoformat(), "set": args.set, **runs,
+                            "step_speedup": speedup}  # fmt: skip
+    write_meta(out, datasets=entries)
     print(f"wrote {out}")
 
 

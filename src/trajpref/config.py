@@ -283,6 +283,11 @@ class OptimConfig:
     bfloat16 on the stage's device; weights, optimiser state and validation stay float32).
     bf16 is fast where the CPU has bfloat16 instructions (AVX512-BF16, AMX) or on a GPU;
     elsewhere it can be slower (docs/pretraining.md, "bfloat16 training steps")."""
+    compile: bool = False
+    """Compile the stage's networks with ``torch.compile`` (dynamic shapes) before its first
+    step: faster steps once compiled, at a one-off cost of minutes on a CPU (and a C++
+    compiler on the machine). Weights, checkpoints and resume states are the same as without
+    it (``Stage.networks``; docs/pretraining.md, "Compiled training steps")."""
     ema_epochs: float = 0.0
     """Time constant, in epochs, of an exponential moving average of the trained weights
     (0: off). When on, validation and the best checkpoint use the average, the raw weights

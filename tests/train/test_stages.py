@@ -492,3 +492,39 @@ def test_eval_every_minutes_must_be_positive():
     for bad in (0.0, -1.0, float("nan")):
         with pytest.raises(ConfigError, match="eval_every_minutes must be > 0"):
             GeneratorTrainConfig(eval_every_minutes=bad)
+
+
+def test_a_compiled_generator_stage_trains_the_same_weights(tmp_path, cfg, trained, monkeypatch):
+    # generator.compile compiles the generator and the frozen denoiser in place: the run's
+    # checkpoint has the same keys and, up to the compiler's rounding, the same weights. The
+    # graphs are captured by TorchDynamo as in a real run, but run without generating code
+    # (backend eager): inductor's code generation takes minutes on a CPU.
+    compiled_modules = []
+    original = torch.nn.Module.compile
+
+    def capture(module, **kwargs):
+        compiled_modules.append(type(module).__name__)
+        original(module, backend="eager", **kwargs)
+
+    monkeypatch.setattr(torch.nn.Module, "compile", capture)
+    denoiser = str(trained / "denoiser.safetensors")
+    options = {"device": "cpu", "progress": False, "denoiser": denoiser, "max_steps": 2}
+    weights = {}
+    for run, compiled in (("eager", "false"), ("compiled", "true")):
+        run_cfg = load_config(None, [*TINY_OVERRIDES, f"data.dataset={cfg.data.dataset}",
+                                     f"generator.compile={compiled}"])  # fmt: skip
+        train_stage("generator", run_cfg, tmp_path / run, **options)
+        weights[run] = torch.load(tmp_path / run / "generator_last.pt", weights_only=True)
+    assert compiled_modules == ["Generator", "Denoiser"]
+    eager, compiled = weights["eager"]["trainable"], weights["compiled"]["trainable"]
+    assert eager.keys() == compiled.keys()  # no "_orig_mod." prefixes
+    start = build_generator_stage(cfg, ckpt.load(denoiser), load_dataset(cfg.data.dataset, "val"),
+                                  torch.device("cpu")).trainable.state_dict()  # fmt: skip
+    assert any(not torch.equal(start[k], v) for k, v in compiled.items())  # it trained
+    for key, value in eager.items():
+        torch.testing.assert_close(compiled[key], value, rtol=1e-3, atol=1e-4)
+
+
+def test_compile_must_be_a_boolean():
+    with pytest.raises(ConfigError, match="compile"):
+        load_config(None, ["generator.compile=sometimes"])

@@ -250,6 +250,9 @@ def fit(
                                   "config.yaml")  # fmt: skip
             average.load_state_dict(state["ema"])
 
+    if optim_cfg.compile:
+        for network in stage.networks:
+            network.compile(dynamic=True)  # in place: same parameters, same state-dict keys
     objective: nn.Module = stage.objective
     if dist_info.enabled:
         device_ids = [device] if device.type == "cuda" else None
@@ -328,6 +331,7 @@ def fit(
             due = (epoch + 1) % optim_cfg.eval_every == 0
         if main and (due or last):
             validated_at = spent
+            v0 = time.perf_counter()
             # what each checkpoint written at this evaluation records beside its validation
             at = {"epoch": epoch + 1, "step": step, "train_seconds": round(elapsed, 2),
                   "dataset": train.info.name, "machine": trained_on}  # fmt: skip
@@ -354,6 +358,7 @@ def fit(
                     name = f"{stage.name}_epoch{epoch + 1:03d}{ckpt.SUFFIX}"
                     ckpt.save(out_dir / name, stage.payload({**at, "val": val}))
             stage.objective.train()
+            record["val_seconds"] = round(time.perf_counter() - v0, 2)
         if main:
             log.write(record)
             save_resume_state(out_dir / f"{stage.name}_last.pt", {

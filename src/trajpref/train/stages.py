@@ -48,6 +48,10 @@ class Stage:
     ``objective(batch, generator, collected)`` for each of ``updates`` optimiser steps."""
     updates: int = 1
     """Optimiser steps per batch (PPO's update epochs on one rollout)."""
+    networks: tuple[nn.Module, ...] = ()
+    """The networks whose forward passes the steps spend their time in: compiled in place
+    (``nn.Module.compile``, parameters and state-dict keys unchanged) when the stage's
+    ``OptimConfig.compile`` is on."""
 
 
 def data_scale(dataset: TrajectoryDataset) -> float:
@@ -130,7 +134,8 @@ def build_denoiser_stage(
     def payload(meta: dict[str, Any]) -> dict[str, Any]:
         return ckpt.denoiser_payload(denoiser, cfg, scale, meta)
 
-    return Stage("denoiser", objective, denoiser, validate, payload), scale
+    return Stage("denoiser", objective, denoiser, validate, payload,
+                 networks=(denoiser,)), scale  # fmt: skip
 
 
 # ----------------------------------------------------------------------------- stage 2
@@ -187,7 +192,8 @@ def build_generator_stage(
     def payload(meta: dict[str, Any]) -> dict[str, Any]:
         return ckpt.generator_payload(generator, denoiser_payload, cfg, meta)
 
-    return Stage("generator", objective, generator, validate, payload)
+    return Stage("generator", objective, generator, validate, payload,
+                 networks=(generator, sampler.denoiser))  # fmt: skip
 
 
 # ----------------------------------------------------------------------------- stage 3
@@ -228,4 +234,5 @@ def build_finetune_stage(
 
     epochs = cfg.finetune.ppo_epochs if cfg.finetune.method != "control" else 1
     return Stage("finetune", objective, PolicyAndCritic(sampler.generator, critic), validate,
-                 payload, objective.collect_frozen if epochs > 1 else None, epochs)  # fmt: skip
+                 payload, objective.collect_frozen if epochs > 1 else None, epochs,
+                 networks=(sampler.generator, sampler.denoiser))  # fmt: skip
