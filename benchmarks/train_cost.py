@@ -191,8 +191,8 @@ def compare(args) -> None:
         print(f"{dataset:<9} compiled steps / eager steps (throughput): {speedup}", flush=True)
         entries[dataset] = {"date": datetime.date.today().isoformat(), "set": args.set, **runs,
                             "step_speedup": speedup}  # fmt: skip
-    write_meta(out, datasets=entries)
-    print(f"wrote {out}")
+        write_meta(out, datasets=entries)  # after each dataset: a stopped run keeps its part
+        print(f"wrote {out}", flush=True)
 
 
 if __name__ == "__main__":
