@@ -10,7 +10,8 @@ low) and one validation pass, then extrapolates to the config's schedule:
 
     minutes = (epochs x training agent-windows / throughput + evaluations x one validation) / 60
 
-``--set KEY=VALUE`` changes every measured config (``--set generator.epochs=80`` estimates a
+A stage whose config compiles it (``compile: true``) is always probed warm (below). ``--set
+KEY=VALUE`` changes every measured config (``--set generator.epochs=80`` estimates a
 longer schedule). ``--warm`` times a second short epoch and validation instead of the first and
 adds the first's extra time once, as ``warmup_seconds`` (what a compiled run spends compiling).
 ``--compiled`` measures each dataset a second time with both stages compiled
@@ -95,7 +96,9 @@ def estimate(cfg, dataset: str, data_root, steps: tuple[int, int], warm: bool) -
         if stage == "generator" and not denoiser.is_file():
             entry[key] = None
             continue
-        p = probe(cfg, stage, data_root, n, denoiser if stage == "generator" else None, warm)
+        warm_here = warm or optim.compile  # a compiled stage's first epoch is its compilation
+        p = probe(cfg, stage, data_root, n, denoiser if stage == "generator" else None,
+                  warm_here)  # fmt: skip
         n_eval = evaluations(optim.epochs, optim.eval_every)
         seconds = optim.epochs * p["train_agents"] / p["rate"] + n_eval * p["val_seconds"]
         seconds += p.get("warmup_seconds", 0.0)
@@ -104,7 +107,7 @@ def estimate(cfg, dataset: str, data_root, steps: tuple[int, int], warm: bool) -
             "agents_per_second": round(p["rate"], 1), "evaluations": n_eval,
             "val_seconds": round(p["val_seconds"], 1), "minutes": round(seconds / 60, 1),
         }  # fmt: skip
-        if warm:
+        if warm_here:
             entry[key]["warmup_seconds"] = round(p["warmup_seconds"], 1)
     entry["minutes"] = round(sum(v["minutes"] for v in entry.values() if v is not None), 1)
     return entry

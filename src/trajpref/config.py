@@ -285,9 +285,10 @@ class OptimConfig:
     elsewhere it can be slower (docs/pretraining.md, "bfloat16 training steps")."""
     compile: bool = False
     """Compile the stage's networks with ``torch.compile`` (dynamic shapes) before its first
-    step: faster steps once compiled, at a one-off cost of minutes on a CPU (and a C++
-    compiler on the machine). Weights, checkpoints and resume states are the same as without
-    it (``Stage.networks``; docs/pretraining.md, "Compiled training steps")."""
+    step, at a one-off cost of minutes on a CPU; without a C++ compiler the stage trains
+    eagerly, with a warning. Weights, checkpoints and resume states are the same as without it
+    (``Stage.networks``). On the 2-core CPU its speed-up was not separable from the machine's
+    drift (docs/pretraining.md, "Compiled training steps"), so every config leaves it off."""
     ema_epochs: float = 0.0
     """Time constant, in epochs, of an exponential moving average of the trained weights
     (0: off). When on, validation and the best checkpoint use the average, the raw weights

@@ -528,3 +528,16 @@ def test_a_compiled_generator_stage_trains_the_same_weights(tmp_path, cfg, train
 def test_compile_must_be_a_boolean():
     with pytest.raises(ConfigError, match="compile"):
         load_config(None, ["generator.compile=sometimes"])
+
+
+def test_without_a_cpp_compiler_a_compiled_config_trains_eagerly(
+    tmp_path, cfg, monkeypatch, capsys
+):
+    monkeypatch.setattr("trajpref.train.loop.shutil.which", lambda name: None)
+    monkeypatch.delenv("CXX", raising=False)
+    monkeypatch.setattr(torch.nn.Module, "compile", lambda *a, **k: pytest.fail("compiled"))
+    run_cfg = load_config(None, [*TINY_OVERRIDES, f"data.dataset={cfg.data.dataset}",
+                                 "denoiser.compile=true"])  # fmt: skip
+    train_stage("diffusion", run_cfg, tmp_path / "run", device="cpu", progress=False,
+                max_steps=1)  # fmt: skip
+    assert "no C++ compiler" in capsys.readouterr().out

@@ -12,6 +12,8 @@ import contextlib
 import itertools
 import json
 import math
+import os
+import shutil
 import sys
 import time
 from collections.abc import Callable
@@ -167,6 +169,15 @@ def _should_stop(step: int, max_steps: int | None, seconds: float, max_minutes: 
     return stop
 
 
+def can_compile(device: torch.device) -> bool:
+    """Whether ``torch.compile`` can generate code for ``device`` here: on a CPU it needs a
+    C++ compiler (``$CXX``, ``c++``, ``g++`` or ``clang++`` on the PATH); a GPU uses Triton."""
+    if device.type != "cpu":
+        return True
+    names = [os.environ.get("CXX", ""), "c++", "g++", "clang++"]
+    return any(name and shutil.which(name) for name in names)
+
+
 def precision_autocast(device: torch.device, precision: str) -> torch.autocast:
     """The context a training step's forward pass runs in: bfloat16 autocast on ``device``
     for ``precision="bf16"``, a no-op for ``"fp32"`` (``OptimConfig.precision``)."""
@@ -250,9 +261,12 @@ def fit(
                                   "config.yaml")  # fmt: skip
             average.load_state_dict(state["ema"])
 
-    if optim_cfg.compile:
+    if optim_cfg.compile and can_compile(device):
         for network in stage.networks:
             network.compile(dynamic=True)  # in place: same parameters, same state-dict keys
+    elif optim_cfg.compile and main:
+        tqdm.write(f"[{stage.name}] compile: no C++ compiler on this machine (CXX, c++, g++, "
+                   "clang++); training without compiling")  # fmt: skip
     objective: nn.Module = stage.objective
     if dist_info.enabled:
         device_ids = [device] if device.type == "cuda" else None
