@@ -40,7 +40,7 @@ from pathlib import Path
 from trajpref.config import load_config
 from trajpref.results import write_meta
 from trajpref.train import read_metrics
-from trajpref.train.run import train_stage
+from trajpref.train.run import STAGE_NAMES, train_stage
 
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "benchmarks" / "results" / "meta" / "train_cost.json"
@@ -60,14 +60,14 @@ def probe(cfg, stage: str, data_root, steps: int, denoiser: Path | None,
     counts, so the rate errs low) and the validation pass that follows them. ``warm``: two
     such epochs, each validated; the second is timed, and what the first took beyond it is
     returned as ``warmup_seconds`` (compilation, caches)."""
-    section = "denoiser" if stage == "diffusion" else "generator"
+    section = STAGE_NAMES[stage]  # the config section and the stage's file names
     short = dataclasses.replace(getattr(cfg, section), epochs=2 if warm else 1,
                                 steps_per_epoch=steps, eval_every=1)  # fmt: skip
     with tempfile.TemporaryDirectory() as tmp:
         run = Path(tmp) / "run"
         summary = train_stage(stage, dataclasses.replace(cfg, **{section: short}), run,
                               data_root, "cpu", denoiser=denoiser, progress=False)  # fmt: skip
-        records = read_metrics(run, "denoiser" if stage == "diffusion" else "generator")
+        records = read_metrics(run, section) if warm else []
     if not warm:
         return {
             "rate": summary["samples_per_second"],  # agent-windows per second of the steps
@@ -92,7 +92,7 @@ def estimate(cfg, dataset: str, data_root, steps: tuple[int, int], warm: bool) -
     entry = {}
     for stage, n, optim in (("diffusion", steps[0], cfg.denoiser),
                             ("generator", steps[1], cfg.generator)):  # fmt: skip
-        key = "denoiser" if stage == "diffusion" else "generator"
+        key = STAGE_NAMES[stage]
         if stage == "generator" and not denoiser.is_file():
             entry[key] = None
             continue
