@@ -202,6 +202,7 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
                              "history_encoder": cfg["model"].get("history_encoder", "mlp"),
                              "dropout": cfg["model"].get("generator_dropout", 0.0),
                              "flip": cfg["data"].get("flip", False),
+                             **({"reverse": True} if cfg["data"].get("reverse") else {}),
                              "spread_scale": cfg["model"].get("spread_scale", 1.0),
                              "ema_epochs": meta.get("ema_epochs"),
                              "changes": changes}  # fmt: skip
@@ -341,6 +342,8 @@ def _sampling_lines(sampling: dict[str, Any] | None) -> list[str]:
                  "(`model.generator_dropout`).")  # fmt: skip
     if sampling.get("flip"):
         text += " It was trained on scenes mirrored at random (`data.flip`)."
+    if sampling.get("reverse"):
+        text += " It was trained on scenes played backwards at random (`data.reverse`)."
     if sampling.get("spread_scale", 1.0) != 1.0:
         text += (f" Its samples' spread about their mean is scaled by "
                  f"{sampling['spread_scale']:g} (`model.spread_scale`).")  # fmt: skip

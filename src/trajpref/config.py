@@ -54,6 +54,10 @@ class DataConfig:
     """Randomly rotate each training scene."""
     flip: bool = False
     """Randomly mirror training scenes."""
+    reverse: bool = False
+    """Randomly play training scenes backwards in time (probability 1/2 per scene, all its
+    agents together: the window's last T_h positions, reversed, become the history and the
+    rest, reversed, the future; docs/pretraining.md, "Scenes played backwards")."""
     scale_min: float = 1.0
     """Lower bound of the random per-scene scale factor (1.0 with scale_max = 1.0: off)."""
     scale_max: float = 1.0

@@ -7,6 +7,7 @@ from trajpref.data.transforms import (
     backward_velocity,
     from_relative,
     observed_pace,
+    reverse_time,
     scene_speeds,
     speed_normaliser,
     to_relative,
@@ -87,3 +88,56 @@ def test_observed_pace_is_first_to_last_displacement_per_step_over_the_scale():
 def test_observed_pace_needs_two_steps():
     with pytest.raises(ValueError, match="two observed steps"):
         observed_pace(torch.zeros(3, 1, 2))
+
+
+def _window_batch():
+    # scene 0: two agents, scene 1: one agent; agent i's position at step t is (t, i)
+    t = torch.arange(20, dtype=torch.float32)  # [T_h + T_f]
+    window = torch.stack([torch.stack([t, torch.full_like(t, i)], -1) for i in range(3)])
+    return Batch(history=window[:, :8], future=window[:, 8:], scene=torch.tensor([0, 0, 1]),
+                 agent_type=torch.zeros(3, dtype=torch.int64), num_scenes=2)  # fmt: skip
+
+
+def test_reverse_time_plays_flagged_scenes_backwards():
+    batch = _window_batch()
+    out = reverse_time(batch, torch.tensor([True, False]))
+    # scene 0: history is steps 19..12, future 11..0; scene 1 untouched
+    assert out.history[0, :, 0].tolist() == [19.0, 18, 17, 16, 15, 14, 13, 12]
+    assert out.future[1, :, 0].tolist() == [11.0, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0]
+    assert torch.equal(out.history[:, :, 1], batch.history[:, :, 1])  # agents keep their rows
+    assert torch.equal(out.history[2], batch.history[2])
+    assert torch.equal(out.future[2], batch.future[2])
+    twice = reverse_time(out, torch.tensor([True, False]))
+    assert torch.equal(twice.history, batch.history) and torch.equal(twice.future, batch.future)
+
+
+def test_reverse_time_needs_one_flag_per_scene():
+    with pytest.raises(ValueError, match="one flag per scene"):
+        reverse_time(_window_batch(), torch.tensor([True]))
+
+
+def test_augment_reverse_flips_whole_scenes_and_leaves_other_draws_alone():
+    scenes = [make_scene(2, seed=s) for s in range(40)]
+    batch = collate(scenes)
+    plain = augment(batch, torch.Generator().manual_seed(3), rotate=True, flip=True)
+    out = augment(batch, torch.Generator().manual_seed(3), rotate=True, flip=True, reverse=True)
+    first = torch.cat([batch.history, batch.future], 1)  # [N, T, 2]
+    reversed_agents = []
+    for i in range(batch.num_agents):
+        # the rotation and mirror are the same draws: a kept agent matches the plain run, a
+        # reversed one keeps its step lengths in reverse order
+        steps = (first[i, 1:] - first[i, :-1]).norm(dim=-1)  # [T - 1]
+        got = torch.cat([out.history[i], out.future[i]], 0)  # [T, 2]
+        got_steps = (got[1:] - got[:-1]).norm(dim=-1)  # [T - 1]
+        if torch.allclose(
+            out.history[i] - out.history[i, -1], plain.history[i] - plain.history[i, -1], atol=1e-5
+        ):
+            torch.testing.assert_close(got_steps, steps, atol=1e-4, rtol=1e-4)
+            reversed_agents.append(False)
+        else:
+            torch.testing.assert_close(got_steps, steps.flip(0), atol=1e-4, rtol=1e-4)
+            reversed_agents.append(True)
+    flags = torch.tensor(reversed_agents)
+    for b in range(batch.num_scenes):  # a scene is reversed as a whole
+        assert flags[batch.scene == b].unique().numel() == 1
+    assert 5 < int(flags.sum()) < 75  # about half of the 80 agents

@@ -176,12 +176,14 @@ def test_seeded_generator_runs_with_the_pedestrian_recipe_are_identical(tmp_path
     denoiser = str(trained / "denoiser.safetensors")
     options = {"device": "cpu", "progress": False, "denoiser": denoiser}
     hashes = []
-    for run, seed in (("a", 0), ("b", 0), ("c", 1)):
-        cfg = load_config(None, [*recipe, f"seed={seed}"])
+    runs = (("a", 0, []), ("b", 0, []), ("c", 1, []), ("d", 0, ["data.reverse=true"]))
+    for run, seed, extra in runs:
+        cfg = load_config(None, [*recipe, f"seed={seed}", *extra])
         train_stage("generator", cfg, tmp_path / run, **options)
         hashes.append(ckpt.load(tmp_path / run / "generator.safetensors")["hash"])
     assert hashes[0] == hashes[1]  # same seed, same weights
     assert hashes[2] != hashes[0]  # and the seed matters
+    assert hashes[3] != hashes[0]  # the loop plays scenes backwards when the config says so
 
 
 def test_resume_continues_to_the_same_result(tmp_path, cfg):

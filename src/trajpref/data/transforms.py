@@ -69,12 +69,15 @@ def augment(
     rotate: bool = True,
     flip: bool = False,
     scale_range: tuple[float, float] | None = None,
+    reverse: bool = False,
 ) -> Batch:
     """Random rigid transform per scene (all agents of a scene move together).
 
     Each scene is rotated by a uniform angle about its mean last observed position, optionally
     mirrored (x -> -x) with probability 1/2, and optionally scaled by a factor drawn uniformly
-    from ``scale_range``. Relative geometry between agents is kept (up to the scale).
+    from ``scale_range``. Relative geometry between agents is kept (up to the scale). With
+    ``reverse`` each scene is also played backwards in time with probability 1/2
+    (``reverse_time``); its coin is drawn last, so the other draws do not depend on it.
     """
     device = batch.history.device
     b = batch.num_scenes
@@ -91,7 +94,34 @@ def augment(
         lo, hi = scale_range
         factor = (lo + (hi - lo) * torch.rand(b, generator=generator)).to(device)  # [B]
         rot = rot * factor[:, None, None]
+    if reverse:
+        backwards = torch.rand(b, generator=generator) < 0.5  # [B]
+        batch = reverse_time(batch, backwards.to(device))
     return transform_scenes(batch, rot)
+
+
+def reverse_time(batch: Batch, scenes: torch.Tensor) -> Batch:
+    """The batch with the scenes flagged in ``scenes`` [B] bool played backwards in time.
+
+    An agent's window of T_h + T_f positions is reversed and cut again at T_h: its new history
+    is its last T_h positions in reverse order, its new future the first T_f in reverse order.
+    Agents of unflagged scenes are unchanged. Applying it twice gives the batch back.
+    """
+    if scenes.shape != (batch.num_scenes,):
+        raise ValueError(f"reverse_time needs one flag per scene ({batch.num_scenes}), "
+                         f"got shape {tuple(scenes.shape)}")  # fmt: skip
+    t_h = batch.history.shape[1]
+    window = torch.cat([batch.history, batch.future], dim=1)  # [N, T_h + T_f, 2]
+    flagged = scenes[batch.scene][:, None, None]  # [N, 1, 1]
+    window = torch.where(flagged, window.flip(1), window)  # [N, T_h + T_f, 2]
+    return Batch(
+        history=window[:, :t_h],
+        future=window[:, t_h:],
+        scene=batch.scene,
+        agent_type=batch.agent_type,
+        num_scenes=batch.num_scenes,
+        scene_ids=batch.scene_ids,
+    )
 
 
 def transform_scenes(batch: Batch, mats: torch.Tensor) -> Batch:

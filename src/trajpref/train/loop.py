@@ -289,7 +289,8 @@ def fit(
                    disable=not (progress and main), leave=False)  # fmt: skip
         for batch in bar:
             batch = augment(batch, aug_gen, rotate=data_cfg.rotate, flip=data_cfg.flip,
-                            scale_range=scale_range if use_scale else None).to(device)  # fmt: skip
+                            scale_range=scale_range if use_scale else None,
+                            reverse=data_cfg.reverse).to(device)  # fmt: skip
             collected = () if stage.collect is None else (stage.collect(batch, noise_gen),)
             for _ in range(stage.updates):
                 with precision_autocast(device, optim_cfg.precision):  # validation stays fp32
