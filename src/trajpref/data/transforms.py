@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import torch
 
@@ -114,26 +115,13 @@ def reverse_time(batch: Batch, scenes: torch.Tensor) -> Batch:
     window = torch.cat([batch.history, batch.future], dim=1)  # [N, T_h + T_f, 2]
     flagged = scenes[batch.scene][:, None, None]  # [N, 1, 1]
     window = torch.where(flagged, window.flip(1), window)  # [N, T_h + T_f, 2]
-    return Batch(
-        history=window[:, :t_h],
-        future=window[:, t_h:],
-        scene=batch.scene,
-        agent_type=batch.agent_type,
-        num_scenes=batch.num_scenes,
-        scene_ids=batch.scene_ids,
-    )
+    return replace(batch, history=window[:, :t_h], future=window[:, t_h:])
 
 
 def transform_scenes(batch: Batch, mats: torch.Tensor) -> Batch:
     """Apply one linear map per scene, mats [B, 2, 2], about the scene's centroid."""
-    return Batch(
-        history=transform_positions(batch.history, batch, mats),
-        future=transform_positions(batch.future, batch, mats),
-        scene=batch.scene,
-        agent_type=batch.agent_type,
-        num_scenes=batch.num_scenes,
-        scene_ids=batch.scene_ids,
-    )
+    return replace(batch, history=transform_positions(batch.history, batch, mats),
+                   future=transform_positions(batch.future, batch, mats))  # fmt: skip
 
 
 def transform_positions(positions: torch.Tensor, batch: Batch, mats: torch.Tensor) -> torch.Tensor:
