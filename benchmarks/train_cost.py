@@ -114,8 +114,9 @@ def estimate(cfg, dataset: str, data_root, steps: tuple[int, int], warm: bool) -
 
 
 def _line(entry: dict) -> str:
+    # the stages' entries only: an estimate of other settings also holds a "settings" dict
     parts = " + ".join(f"{k[0].upper()} {v['minutes']:.1f}" for k, v in entry.items()
-                       if isinstance(v, dict))  # fmt: skip
+                       if isinstance(v, dict) and "minutes" in v)  # fmt: skip
     return f"{parts} = {entry['minutes']:.1f} min"
 
 

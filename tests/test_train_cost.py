@@ -29,3 +29,10 @@ def test_other_settings_into_the_defaults_file_are_refused_before_anything_is_ti
     monkeypatch.setattr("sys.argv", ["train_cost.py", "--datasets", "eth", *flag])
     with pytest.raises(SystemExit, match="name --out"):
         cost.main()
+
+
+def test_the_printed_line_of_an_estimate_with_other_settings_names_only_the_stages():
+    cost = load_benchmark("train_cost")
+    entry = {"denoiser": {"minutes": 7.5}, "generator": {"minutes": 26.6}, "minutes": 34.1,
+             "settings": {"set": ["data.reverse=true"], "warm": False}}  # fmt: skip
+    assert cost._line(entry) == "D 7.5 + G 26.6 = 34.1 min"
