@@ -234,7 +234,12 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
             train_cmd = [f"trajpref train generator --config configs/{dataset}.yaml "
                          f"--out {out}{den}{sets}{gpu}"]  # fmt: skip
             if not den:  # trained with its own denoiser, in the same run folder
-                dsets = "".join(f" --set {s}" for s in overrides(dataset, "denoiser", cfg))
+                # the denoiser's own settings: a data flag adopted for the generator stage only
+                # (data.flip, data.reverse) is off in the published denoiser's file
+                den_file = path.parent / f"{Path(ref['path']).stem}.safetensors" if ref else None
+                den_cfg = (to_dict(ckpt.config_of(zoo.header(den_file)))
+                           if den_file is not None and den_file.is_file() else cfg)  # fmt: skip
+                dsets = "".join(f" --set {s}" for s in overrides(dataset, "denoiser", den_cfg))
                 train_cmd.insert(0, f"trajpref train diffusion --config configs/{dataset}.yaml "
                                     f"--out {out}{dsets}")  # fmt: skip
             ref = head.get("weights_ref")

@@ -58,3 +58,17 @@ def test_a_card_says_when_its_generator_trained_on_mirrored_scenes():
     assert "mirrored" in " ".join(zoo._sampling_lines({**base, "flip": True}))
     assert "mirrored" not in " ".join(zoo._sampling_lines({**base, "flip": False}))
     assert "mirrored" not in " ".join(zoo._sampling_lines(base))  # files from before the field
+
+
+def test_a_generator_cards_denoiser_command_rebuilds_the_published_denoiser(monkeypatch):
+    """univ's config turns on data flags for its generator stage (data.flip, data.reverse)
+    that its published denoiser was not trained with; the card's diffusion command must switch
+    them off, as the denoiser's own card does, or it trains a different denoiser."""
+    zoo = load_benchmark("zoo_index")
+    monkeypatch.setattr(zoo, "_meta", lambda dataset, variant: {})
+    path = ROOT / "models" / "univ" / "generator.safetensors"
+    gen = zoo.describe("univ/generator", path, [])["train"]["commands"]
+    den = zoo.describe("univ/denoiser", path.with_name("denoiser.safetensors"), [])
+    assert gen[0].startswith("trajpref train diffusion") and gen[0] == den["train"]["commands"][0]
+    assert "--set data.flip=False" in gen[0] and "--set data.reverse=False" in gen[0]
+    assert "--set data" not in gen[1]  # the generator's own stage keeps the config's flags
