@@ -7,7 +7,7 @@ from synthetic import make_scene
 from trajpref.config import ModelConfig
 from trajpref.errors import ConfigError
 from trajpref.models.encoder import heading_rotation, scene_features, speed_factor
-from trajpref.models.generator import Generator
+from trajpref.models.generator import Generator, time_projection
 from trajpref.types import collate
 
 K = 6
@@ -256,3 +256,53 @@ def test_dropout_acts_in_training_only_and_keeps_the_parameter_names():
 def test_dropout_is_checked_on_construction(p):
     with pytest.raises(ConfigError, match="generator_dropout"):
         dataclasses.replace(TINY, generator_dropout=p)
+
+
+def test_time_projection_keeps_polynomial_paths_and_removes_the_rest():
+    t = torch.arange(1, 13, dtype=torch.float32)  # [T_f]
+    pi = time_projection(12, 3)  # [T_f, T_f]
+    torch.testing.assert_close(pi @ pi, pi, atol=1e-5, rtol=0)  # a projection
+    assert torch.linalg.matrix_rank(pi) == 3
+    path = 0.3 * t - 0.02 * t**2 + 0.001 * t**3  # a cubic through the last position
+    torch.testing.assert_close(pi @ path, path, atol=1e-4, rtol=0)
+    zigzag = torch.tensor([1.0, -1.0] * 6)  # alternating steps: not smooth
+    assert (pi @ zigzag).norm() < 0.3 * zigzag.norm()
+    constant = torch.ones(12)  # a jump away from the last position is not a path
+    assert (pi @ constant - constant).norm() > 0.1
+    torch.testing.assert_close(time_projection(12, 0), torch.eye(12))
+
+
+@pytest.mark.parametrize("frame", ["scene", "heading"])
+def test_a_low_rank_generator_emits_smooth_paths_and_keeps_its_frame(frame):
+    torch.manual_seed(0)
+    cfg = dataclasses.replace(TINY, future_rank=3, agent_frame=frame)
+    gen = Generator(cfg).eval()
+    features = scene_features(collate([make_scene(3), make_scene(2, seed=1)]), 1.0)
+    with torch.no_grad():
+        out = gen(features)
+    pi = time_projection(12, 3)
+    y = out.initial_sample()  # [K, N, T_f, 2]
+    torch.testing.assert_close(pi @ y, y, atol=1e-5, rtol=0)  # every sample in the span
+    s = out.shifts
+    torch.testing.assert_close(s.mean(0), torch.zeros(5, 12, 2), atol=1e-5, rtol=0)
+    # unit spread up to the 1e-6 guard (the projected raw shifts of an untrained net are small)
+    torch.testing.assert_close(s.pow(2).mean(dim=(0, 2, 3)).sqrt(), torch.ones(5), atol=1e-3,
+                               rtol=0)  # fmt: skip
+    # the free generator with the same weights does not emit paths in the span
+    free = Generator(dataclasses.replace(cfg, future_rank=0)).eval()
+    free.load_state_dict(gen.state_dict())  # the projection is not in the state dict
+    with torch.no_grad():
+        y_free = free(features).initial_sample()
+    assert (pi @ y_free - y_free).abs().max() > 1e-3
+    if frame == "heading":  # still rotation-equivariant
+        turned, rot = _rotated(features, 0.7)
+        with torch.no_grad():
+            b = gen(turned)
+        torch.testing.assert_close(b.mean, out.mean @ rot.T, atol=1e-4, rtol=0)
+
+
+@pytest.mark.parametrize("rank", [-1, 13])
+def test_the_future_rank_is_checked_on_construction(rank):
+    with pytest.raises(ConfigError, match="future_rank"):
+        dataclasses.replace(TINY, future_rank=rank)
+    assert ModelConfig(future_rank=4).denoiser_part() == ModelConfig()

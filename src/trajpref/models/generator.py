@@ -38,6 +38,18 @@ class GeneratorOutput:
         return self.mean[None] + self.log_sigma.exp()[..., None, None] * self.shifts
 
 
+def time_projection(t_fut: int, rank: int) -> torch.Tensor:
+    """The [T_f, T_f] orthogonal projection onto the polynomials t, ..., t^rank of the future
+    steps t = 1..T_f (no constant: a path starts at the last observed position). Rank 0 gives
+    the identity (no projection)."""
+    if rank == 0:
+        return torch.eye(t_fut)
+    t = torch.arange(1, t_fut + 1, dtype=torch.float64) / t_fut  # [T_f], scaled for conditioning
+    powers = torch.stack([t**j for j in range(1, rank + 1)], 1)  # [T_f, r]
+    basis, _ = torch.linalg.qr(powers)  # [T_f, r], orthonormal columns
+    return (basis @ basis.T).float()  # [T_f, T_f]
+
+
 class Generator(nn.Module):
     """Social encoder + heads for the mean, the K scales and the K shifts (LED's initializer)."""
 
@@ -54,6 +66,10 @@ class Generator(nn.Module):
         self.mean_head = mlp([h, w, w, tf * 2], dropout=p)
         self.sigma_head = mlp([h + tf * 2, w, samples], dropout=p)
         self.shift_head = mlp([h + tf * 2, w, w, samples * tf * 2], dropout=p)
+        # [T_f, T_f] projection onto smooth paths (identity when future_rank is 0); rebuilt
+        # from the config, so it is not part of the state dict
+        self.register_buffer("time_projection", time_projection(tf, cfg.future_rank),
+                             persistent=False)  # fmt: skip
 
     def forward(self, features: SceneFeatures) -> GeneratorOutput:
         rot = None
@@ -68,9 +84,13 @@ class Generator(nn.Module):
         n, tf, k = ctx.shape[0], self.cfg.t_fut, self.samples
         dropped = self.dropout(ctx)  # [N, H]; ctx itself when not training
         mean = self.mean_head(dropped).view(n, tf, 2)  # [N, T_f, 2]
+        if self.cfg.future_rank:
+            mean = self.time_projection @ mean  # [N, T_f, 2]
         z = torch.cat([dropped, mean.detach().flatten(1)], -1)  # [N, H + 2T_f]
         log_sigma = self.sigma_head(z).T  # [K, N]
         raw = self.shift_head(z).view(n, k, tf, 2).transpose(0, 1)  # [K, N, T_f, 2]
+        if self.cfg.future_rank:
+            raw = self.time_projection @ raw  # [K, N, T_f, 2]
         raw = raw - raw.mean(0, keepdim=True)
         spread = raw.pow(2).mean(dim=(0, 2, 3), keepdim=True).add(1e-6).sqrt()  # [1, N, 1, 1]
         shifts = raw / spread  # [K, N, T_f, 2]
