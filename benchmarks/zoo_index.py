@@ -203,6 +203,8 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
                              "dropout": cfg["model"].get("generator_dropout", 0.0),
                              "flip": cfg["data"].get("flip", False),
                              **({"reverse": True} if cfg["data"].get("reverse") else {}),
+                             **({"future_rank": r} if (r := cfg["model"].get("future_rank"))
+                                else {}),
                              "spread_scale": cfg["model"].get("spread_scale", 1.0),
                              "ema_epochs": meta.get("ema_epochs"),
                              "changes": changes}  # fmt: skip
@@ -349,6 +351,9 @@ def _sampling_lines(sampling: dict[str, Any] | None) -> list[str]:
         text += " It was trained on scenes mirrored at random (`data.flip`)."
     if sampling.get("reverse"):
         text += " It was trained on scenes played backwards at random (`data.reverse`)."
+    if sampling.get("future_rank"):
+        text += (f" Its mean and shifts are polynomial paths of degree at most "
+                 f"{sampling['future_rank']} in time (`model.future_rank`).")  # fmt: skip
     if sampling.get("spread_scale", 1.0) != 1.0:
         text += (f" Its samples' spread about their mean is scaled by "
                  f"{sampling['spread_scale']:g} (`model.spread_scale`).")  # fmt: skip

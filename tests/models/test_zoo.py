@@ -239,6 +239,9 @@ def test_a_card_names_the_history_encoder_the_spread_and_the_weight_average():
     assert "(`model.history_encoder: temporal`)" in text
     assert "scaled by 0.9 (`model.spread_scale`)" in text
     assert "time constant 4 epochs, `generator.ema_epochs`" in text
+    assert "polynomial" not in text
+    smooth = zi._sampling_lines({**base, "future_rank": 5})[0]
+    assert "degree at most 5 in time (`model.future_rank`)" in smooth
 
 
 def test_a_card_says_when_there_are_no_denoising_steps_and_names_the_dropout():
