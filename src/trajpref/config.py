@@ -371,10 +371,23 @@ class GeneratorTrainConfig(OptimConfig):
     """Weight of the term tying log sigma to the mean's error (LED's uncertainty loss)."""
     reg_weight: float = 0.0
     """Weight of Eq. 4 as written (mean over K of squared error; collapses diversity)."""
+    wta_temperature: float = 0.0
+    """Starting temperature of an annealed best-of-K term (annealed winner-takes-all), in the
+    networks' units of ADE_k + fde_weight FDE_k: each sample's distance is weighted by the
+    softmin of the K distances at this temperature (weights without gradient), so samples
+    that seldom win still learn early on. 0 (the default): the hard minimum throughout."""
+    wta_anneal: float = 0.5
+    """Fraction of the run's optimiser steps over which ``wta_temperature`` decays
+    geometrically to a thousandth of itself; the hard minimum after that."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        if not 0.0 < self.wta_anneal <= 1.0:
+            raise ConfigError(
+                f"GeneratorTrainConfig.wta_anneal must lie in (0, 1], got {self.wta_anneal}"
+            )
         for name in (
+            "wta_temperature",
             "best_of_k_weight",
             "fde_weight",
             "mean_weight",

@@ -1,10 +1,12 @@
+import math
+
 import pytest
 import torch
 
 from trajpref.config import GeneratorTrainConfig
 from trajpref.errors import ConfigError
 from trajpref.models.generator import GeneratorOutput
-from trajpref.models.losses import generator_loss
+from trajpref.models.losses import generator_loss, soft_best, wta_temperature
 
 
 def _case():
@@ -67,3 +69,46 @@ def test_decreasing_time_weights_favour_the_sample_right_at_first():
     assert generator_loss(out, y2, target, uniform)[0].item() == pytest.approx(1.0)
     with pytest.raises(ConfigError, match="time_weights"):
         GeneratorTrainConfig(time_weights="increasing")
+
+
+def test_annealed_best_of_k_is_hand_computable_and_reaches_every_sample():
+    out, y, target = _case()
+    y = y.clone().requires_grad_(True)
+    only_best = GeneratorTrainConfig(mean_weight=0.0, uncertainty_weight=0.0)
+    # distances 2 and 4.5; at temperature 1 the softmin weights are 1 / (1 + e^-2.5) and the rest
+    w0 = 1.0 / (1.0 + math.exp(-2.5))
+    loss, _ = generator_loss(out, y, target, only_best, temperature=1.0)
+    assert loss.item() == pytest.approx(w0 * 2.0 + (1.0 - w0) * 4.5)
+    loss.backward()
+    assert y.grad[1].abs().sum() > 0  # the losing sample learns too
+    # temperature 0 is the hard minimum, where only the winner learns
+    y.grad = None
+    loss, _ = generator_loss(out, y, target, only_best, temperature=0.0)
+    assert loss.item() == pytest.approx(2.0)
+    loss.backward()
+    assert y.grad[1].abs().sum() == 0
+
+
+def test_soft_best_tends_to_the_minimum_and_to_the_mean():
+    d = torch.tensor([[1.0, 5.0], [3.0, 2.0], [2.0, 8.0]])  # [K, N]
+    assert torch.allclose(soft_best(d, 0.0), torch.tensor([1.0, 2.0]))
+    assert torch.allclose(soft_best(d, 1e-3), torch.tensor([1.0, 2.0]))
+    assert torch.allclose(soft_best(d, 1e6), d.mean(0), atol=1e-4)
+
+
+def test_wta_temperature_decays_geometrically_then_is_hard():
+    c = GeneratorTrainConfig(wta_temperature=2.0, wta_anneal=0.5)
+    assert wta_temperature(c, 0.0) == pytest.approx(2.0)
+    assert wta_temperature(c, 0.25) == pytest.approx(2.0 * 1e-3**0.5)  # halfway: sqrt(1e-3)
+    assert wta_temperature(c, 0.5) == 0.0 and wta_temperature(c, 0.9) == 0.0
+    assert wta_temperature(GeneratorTrainConfig(), 0.0) == 0.0  # off by default
+
+
+@pytest.mark.parametrize("field, value, match", [
+    ("wta_temperature", -1.0, "wta_temperature must be >= 0"),
+    ("wta_anneal", 0.0, "wta_anneal must lie in"),
+    ("wta_anneal", 1.5, "wta_anneal must lie in"),
+])  # fmt: skip
+def test_wta_settings_are_checked(field, value, match):
+    with pytest.raises(ConfigError, match=match):
+        GeneratorTrainConfig(**{field: value})

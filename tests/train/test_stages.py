@@ -543,3 +543,19 @@ def test_without_a_cpp_compiler_a_compiled_config_trains_eagerly(
     train_stage("diffusion", run_cfg, tmp_path / "run", device="cpu", progress=False,
                 max_steps=1)  # fmt: skip
     assert "no C++ compiler" in capsys.readouterr().out
+
+
+def test_an_annealed_best_of_k_run_cools_to_the_hard_minimum(tmp_path, folder, trained):
+    # four epochs, annealed over the first half: the logged temperature falls from epoch to
+    # epoch and is 0 (the hard minimum) once half the steps are done
+    cfg = load_config(None, [*TINY_OVERRIDES, f"data.dataset={folder}", "generator.epochs=4",
+                             "generator.wta_temperature=1.0",
+                             "generator.wta_anneal=0.5"])  # fmt: skip
+    train_stage("generator", cfg, tmp_path, device="cpu", progress=False,
+                denoiser=str(trained / "denoiser.safetensors"))  # fmt: skip
+    temps = [r["train_wta_temperature"] for r in read_metrics(tmp_path, "generator")]
+    assert len(temps) == 4
+    assert temps[0] < 1.0 and temps[0] > temps[1] > 0  # epoch means of a falling schedule
+    assert temps[2] == temps[3] == 0.0
+    # and the hard-minimum default logs no temperature at all
+    assert "train_wta_temperature" not in read_metrics(trained, "generator")[0]

@@ -29,15 +29,37 @@ def denoiser_loss(
     return (eps - z).pow(2).mean()
 
 
+def wta_temperature(c: GeneratorTrainConfig, progress: float) -> float:
+    """The annealed best-of-K temperature at ``progress`` (fraction of the run's optimiser
+    steps done, 0..1): ``c.wta_temperature`` decaying geometrically to a thousandth of itself
+    over the first ``c.wta_anneal`` of the run, then 0 (the hard minimum)."""
+    if c.wta_temperature == 0 or progress >= c.wta_anneal:
+        return 0.0
+    return c.wta_temperature * 1e-3 ** (max(progress, 0.0) / c.wta_anneal)
+
+
+def soft_best(distance: torch.Tensor, temperature: float) -> torch.Tensor:
+    """Per agent, the best-of-K distance of ``distance`` [K, N]: the minimum over K when the
+    temperature is 0, else the K distances weighted by their softmin at that temperature
+    (weights without gradient: annealed winner-takes-all). Returns [N]."""
+    if temperature == 0:
+        return distance.min(0).values
+    weights = torch.softmax(-distance.detach() / temperature, dim=0)  # [K, N]
+    return (weights * distance).sum(0)
+
+
 def generator_loss(
-    out: GeneratorOutput, y: torch.Tensor, target: torch.Tensor, c: GeneratorTrainConfig
-) -> tuple[torch.Tensor, dict[str, float]]:
+    out: GeneratorOutput, y: torch.Tensor, target: torch.Tensor, c: GeneratorTrainConfig,
+    temperature: float = 0.0,
+) -> tuple[torch.Tensor, dict[str, float]]:  # fmt: skip
     """The generator's supervised loss on denoised samples y [K, N, T_f, 2] against the
     target [N, T_f, 2]:
 
         w_best * min_k (ADE_k + w_fde FDE_k) + w_mean * ADE(mu) + w_unc * (e^{-l} ADE(mu) + l)
         + w_reg * Eq. 4,   with l the agent's mean log sigma.
 
+    With a ``temperature`` > 0 the minimum is the softmin-weighted mean of ``soft_best``
+    (annealed winner-takes-all; ``wta_temperature`` gives its schedule).
     Returns ``(loss, logs)``."""
     err = torch.linalg.vector_norm(y - target, dim=-1)  # [K, N, T_f]
     ade, fde = err.mean(-1), err[..., -1]  # [K, N]
@@ -45,7 +67,7 @@ def generator_loss(
         t_f = err.shape[-1]
         w = torch.arange(t_f, 0, -1, dtype=err.dtype, device=err.device)  # [T_f]
         ade = (err * (w / w.mean())).mean(-1)  # [K, N]
-    best = (ade + c.fde_weight * fde).min(0).values.mean()
+    best = soft_best(ade + c.fde_weight * fde, temperature).mean()  # [K, N] -> scalar
     mean_err = torch.linalg.vector_norm(out.mean - target, dim=-1).mean(-1)  # [N]
     log_sigma = out.log_sigma.mean(0)  # [N]
     unc = (torch.exp(-log_sigma) * mean_err.detach() + log_sigma).mean()

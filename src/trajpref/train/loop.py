@@ -293,6 +293,8 @@ def fit(
                             reverse=data_cfg.reverse).to(device)  # fmt: skip
             collected = () if stage.collect is None else (stage.collect(batch, noise_gen),)
             for _ in range(stage.updates):
+                if stage.on_progress is not None:
+                    stage.on_progress(step / total)
                 with precision_autocast(device, optim_cfg.precision):  # validation stays fp32
                     loss, logs = objective(batch, noise_gen, *collected)
                 loss = loss.float()  # autocast may hand back a bfloat16 scalar

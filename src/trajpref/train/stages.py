@@ -22,7 +22,7 @@ from trajpref.models.critic import Critic
 from trajpref.models.denoiser import Denoiser
 from trajpref.models.encoder import scene_features
 from trajpref.models.generator import Generator
-from trajpref.models.losses import denoiser_loss, generator_loss
+from trajpref.models.losses import denoiser_loss, generator_loss, wta_temperature
 from trajpref.models.predictor import DiffusionPredictor
 from trajpref.rl.objective import RLObjective
 from trajpref.score.scorer import TrajectoryScorer
@@ -48,6 +48,9 @@ class Stage:
     ``objective(batch, generator, collected)`` for each of ``updates`` optimiser steps."""
     updates: int = 1
     """Optimiser steps per batch (PPO's update epochs on one rollout)."""
+    on_progress: Callable[[float], None] | None = None
+    """When set, called before each optimiser step with the fraction of the run's steps
+    done (0..1; a resumed run continues from its step), for schedules inside the loss."""
     networks: tuple[nn.Module, ...] = ()
     """The networks whose forward passes the steps spend their time in: compiled in place
     (``nn.Module.compile``, parameters and state-dict keys unchanged) when the stage's
@@ -150,6 +153,12 @@ class GeneratorObjective(nn.Module):
         self.sampler = sampler
         self.denoiser = sampler.denoiser.requires_grad_(False).eval()
         self.cfg = cfg
+        self.progress = 0.0
+        """Fraction of the run's optimiser steps done: sets the annealed best-of-K
+        temperature (``losses.wta_temperature``)."""
+
+    def set_progress(self, progress: float) -> None:
+        self.progress = progress
 
     def train(self, mode: bool = True):
         super().train(mode)
@@ -159,7 +168,11 @@ class GeneratorObjective(nn.Module):
     def forward(self, batch: Batch, generator: torch.Generator | None = None):
         roll = self.sampler.rollout(batch, generator)  # [K, N, T_f, 2] samples
         target = to_model_frame(batch.future, batch, self.sampler.scale)  # [N, T_f, 2]
-        return generator_loss(roll.out, roll.y, target, self.cfg)
+        temperature = wta_temperature(self.cfg, self.progress)
+        loss, logs = generator_loss(roll.out, roll.y, target, self.cfg, temperature)
+        if self.cfg.wta_temperature > 0:
+            logs["wta_temperature"] = temperature
+        return loss, logs
 
 
 def _check_matches_denoiser(cfg: ExperimentConfig, denoiser_cfg: ExperimentConfig) -> None:
@@ -193,6 +206,7 @@ def build_generator_stage(
         return ckpt.generator_payload(generator, denoiser_payload, cfg, meta)
 
     return Stage("generator", objective, generator, validate, payload,
+                 on_progress=objective.set_progress,
                  networks=(generator, sampler.denoiser))  # fmt: skip
 
 
