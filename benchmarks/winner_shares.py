@@ -15,12 +15,13 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import torch
 from post_hoc import study_parser, write_study
 
 from trajpref.data import load_dataset
 from trajpref.evaluation import predict_dataset
+from trajpref.metrics import ade_fde
 from trajpref.models import checkpoint as ckpt
-from trajpref.models import zoo
 
 OUT = Path(__file__).parent / "results" / "meta"
 
@@ -30,10 +31,10 @@ def winner_shares(pred: np.ndarray, future: np.ndarray) -> dict[str, np.ndarray 
     by path (``ade``), from samples ``pred`` [K, N, T_f, 2] and futures [N, T_f, 2]; with the
     minADE / minFDE over the same agents and the entropy of each share in bits."""
     seen = np.isfinite(future).all(axis=(1, 2))  # [N]
-    err = np.linalg.norm(pred[:, seen] - future[None, seen], axis=-1)  # [K, N', T_f]
+    ade, fde = ade_fde(torch.from_numpy(pred[:, seen]), torch.from_numpy(future[seen]))
     k = pred.shape[0]
     out: dict[str, np.ndarray | float] = {"agents": int(seen.sum())}
-    for name, dist in (("ade", err.mean(-1)), ("fde", err[..., -1])):  # [K, N'] each
+    for name, dist in (("ade", ade.numpy()), ("fde", fde.numpy())):  # [K, N'] each
         share = np.bincount(dist.argmin(0), minlength=k) / dist.shape[1]  # [K]
         nonzero = share[share > 0]
         out[f"{name}_share"] = share
@@ -50,9 +51,9 @@ def main() -> None:
     args = parser.parse_args()
     rows = []
     for spec in args.models:
-        path = zoo.resolve(spec) if zoo.is_name(spec) else Path(spec)
-        model = ckpt.load_predictor(path, device=args.device)
-        dataset = ckpt.load(path)["config"]["data"]["dataset"]
+        payload = ckpt.load(spec)  # a published name or a file (checkpoint.resolve_path)
+        model = ckpt.predictor_from_payload(payload).to(args.device)
+        dataset = payload["config"]["data"]["dataset"]
         data = load_dataset(dataset, args.split, args.data_root)
         arrays = predict_dataset(model, data, args.samples, args.seed, args.device, progress=False)
         res = winner_shares(arrays["pred"], arrays["future"])
