@@ -196,6 +196,15 @@ class ModelConfig:
     the speed clamp are unaffected. Validation futures of zara1, hotel and eth lie within
     0.012 m ADE / 0.005 m FDE of that span at r = 5 (benchmarks/future_span.py;
     docs/pretraining.md, "Smooth outputs")."""
+    scene_position: bool = False
+    """Whether the generator also sees where each agent is and which way it heads in the
+    scene's own coordinates (its last observed position, divided by the data scale, and the
+    unit vector of its observed displacement), as LED's and MoFlow's ETH/UCY inputs include
+    absolute positions. It can learn a location's layout (doors, sidewalks) only where the
+    test location shares its coordinates with training files (the zara files with each other,
+    the students files with uni_examples); it ties the model to those coordinates, and training
+    requires ``data.rotate``, ``data.flip`` and ``data.reverse`` off, which would move the
+    scene or its motion away from its place (docs/pretraining.md, "Where the agents are")."""
     spread_scale: float = 1.0
     """A sampling setting: multiplies each agent's sigma, the spread of its K initial samples
     about their mean (Y^tau = mu + spread_scale * sigma * S), before the tau denoising steps.
@@ -257,6 +266,7 @@ GENERATOR_ONLY = (
     "max_speed",
     "spread_scale",
     "future_rank",
+    "scene_position",
 )
 """``ModelConfig`` fields that concern the generator and its sampler, not the denoiser."""
 

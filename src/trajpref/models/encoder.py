@@ -29,6 +29,9 @@ class SceneFeatures:
     """[N] slot of each agent in its scene."""
     agent_type: torch.Tensor
     """[N] agent-type flags."""
+    position: torch.Tensor
+    """[N, 2] each agent's last observed position in the scene's own coordinates (not
+    relative to anything), divided by the scale: only ``ModelConfig.scene_position`` reads it."""
 
 
 def scene_features(batch: Batch, scale: float) -> SceneFeatures:
@@ -37,32 +40,41 @@ def scene_features(batch: Batch, scale: float) -> SceneFeatures:
     vel = backward_velocity(batch.history) / scale  # [N, T_h, 2]
     slot, mask = batch.padded_index()
     b, p = mask.shape
-    state = torch.cat([batch.origin / scale, vel[:, -1]], -1)  # [N, 4] last position, velocity
+    position = batch.origin / scale  # [N, 2]
+    state = torch.cat([position, vel[:, -1]], -1)  # [N, 4] last position, velocity
     padded = state.new_zeros(b, p, 4)
     padded[batch.scene, slot] = state
     geom = padded[:, None, :, :] - padded[:, :, None, :]  # [B, P(i), P(j), 4]: j relative to i
     return SceneFeatures(torch.cat([rel, vel], -1), geom, mask, batch.scene, slot,
-                         batch.agent_type)  # fmt: skip
+                         batch.agent_type, position)  # fmt: skip
 
 
 class SocialEncoder(nn.Module):
     """Per-agent MLP over the history, then attention across the agents of each scene.
 
     ``temporal`` adds a GRU over the history's steps; its last state joins the MLP's
-    embedding (``ModelConfig.history_encoder``)."""
+    embedding (``ModelConfig.history_encoder``). ``site`` adds an embedding of each agent's
+    place and heading in the scene's coordinates, passed to ``forward`` as [N, 4]
+    (``ModelConfig.scene_position``)."""
 
     def __init__(self, t_hist: int, hidden: int, layers: int, heads: int, num_types: int = 2,
-                 temporal: bool = False):  # fmt: skip
+                 temporal: bool = False, site: bool = False):  # fmt: skip
         super().__init__()
         self.embed = mlp([t_hist * 4, hidden, hidden])
         self.temporal = nn.GRU(4, hidden, batch_first=True) if temporal else None
+        self.site_embed = mlp([4, hidden, hidden]) if site else None
         self.type_embed = nn.Embedding(num_types, hidden)
         self.layers = nn.ModuleList(SocialAttention(hidden, heads) for _ in range(layers))
         self.norm = nn.LayerNorm(hidden)
 
-    def forward(self, f: SceneFeatures) -> torch.Tensor:
-        """-> context [N, H]."""
+    def forward(self, f: SceneFeatures, site: torch.Tensor | None = None) -> torch.Tensor:
+        """-> context [N, H]. ``site`` [N, 4] is required exactly when the encoder was built
+        with ``site=True``."""
+        if (site is None) != (self.site_embed is None):
+            raise ValueError("SocialEncoder: pass site [N, 4] exactly when built with site=True")
         h = self.embed(f.hist.flatten(1)) + self.type_embed(f.agent_type)  # [N, H]
+        if self.site_embed is not None:
+            h = h + self.site_embed(site)  # [N, H]
         if self.temporal is not None:
             _, last = self.temporal(f.hist)  # last: [1, N, H]
             h = h + last[0].to(h.dtype)  # under autocast the GRU may run in another dtype
@@ -87,6 +99,15 @@ def heading_rotation(hist: torch.Tensor, eps: float = 1e-4) -> torch.Tensor:
     unit = torch.where(norm > eps, d / norm.clamp_min(eps), torch.tensor([1.0, 0.0]).to(d))
     c, s = unit[:, 0], unit[:, 1]  # [N]
     return torch.stack([torch.stack([c, s], -1), torch.stack([-s, c], -1)], -2)  # [N, 2, 2]
+
+
+def agent_site(f: SceneFeatures, rot: torch.Tensor | None) -> torch.Tensor:
+    """[N, 4] where each agent is and which way it heads, in the scene's own coordinates: its
+    last observed position (``f.position``) and the unit vector of its observed displacement,
+    taken from its heading rotation ``rot`` [N, 2, 2] (whose first row it is; computed from
+    ``f.hist`` when None). An agent that has not moved heads along +x."""
+    rot = heading_rotation(f.hist) if rot is None else rot  # [N, 2, 2]
+    return torch.cat([f.position, rot[:, 0]], -1)  # [N, 4]
 
 
 def rotate_features(f: SceneFeatures, rot: torch.Tensor) -> SceneFeatures:

@@ -12,6 +12,7 @@ from trajpref.config import ModelConfig
 from trajpref.models.encoder import (
     SceneFeatures,
     SocialEncoder,
+    agent_site,
     heading_rotation,
     rotate_features,
     scale_features,
@@ -60,7 +61,8 @@ class Generator(nn.Module):
         h, w, tf = cfg.generator_encoder_width, cfg.generator_width, cfg.t_fut
         layers = cfg.encoder_layers if cfg.generator_social else 0  # 0: own history only
         self.encoder = SocialEncoder(cfg.t_hist, h, layers, cfg.heads,
-                                     temporal=cfg.history_encoder == "temporal")  # fmt: skip
+                                     temporal=cfg.history_encoder == "temporal",
+                                     site=cfg.scene_position)  # fmt: skip
         p = cfg.generator_dropout
         self.dropout = nn.Dropout(p) if p > 0 else nn.Identity()
         self.mean_head = mlp([h, w, w, tf * 2], dropout=p)
@@ -75,12 +77,15 @@ class Generator(nn.Module):
         rot = None
         if self.cfg.agent_frame == "heading":
             rot = heading_rotation(features.hist)  # [N, 2, 2]
+        # [N, 4] place and heading in the scene's coordinates, before any frame change
+        site = agent_site(features, rot) if self.cfg.scene_position else None
+        if rot is not None:
             features = rotate_features(features, rot)
         c = None
         if self.cfg.max_speed > 0:
             c = speed_factor(features.hist, self.cfg.max_speed)  # [N]
             features = scale_features(features, c)
-        ctx = self.encoder(features)  # [N, H]
+        ctx = self.encoder(features, site)  # [N, H]
         n, tf, k = ctx.shape[0], self.cfg.t_fut, self.samples
         dropped = self.dropout(ctx)  # [N, H]; ctx itself when not training
         mean = self.mean_head(dropped).view(n, tf, 2)  # [N, T_f, 2]

@@ -11,7 +11,7 @@ from typing import Any
 import torch
 from torch import nn
 
-from trajpref.config import ExperimentConfig, GeneratorTrainConfig
+from trajpref.config import DataConfig, ExperimentConfig, GeneratorTrainConfig, ModelConfig
 from trajpref.data.loader import SceneLoader
 from trajpref.data.transforms import to_model_frame
 from trajpref.diffusion.schedule import DDPMSchedule
@@ -184,11 +184,22 @@ def _check_matches_denoiser(cfg: ExperimentConfig, denoiser_cfg: ExperimentConfi
         )
 
 
+def _check_site_augmentation(model: ModelConfig, data: DataConfig) -> None:
+    """A generator that sees where its agents are (``scene_position``) must train on scenes
+    left in their place: no rotation, mirror, time reversal or scaling."""
+    moved = data.rotate or data.flip or data.reverse or (data.scale_min, data.scale_max) != (1, 1)
+    if model.scene_position and moved:
+        raise ConfigError("model.scene_position learns from where the agents are in the "
+                          "scene's coordinates: train it with data.rotate, data.flip and "
+                          "data.reverse false and no scale range")  # fmt: skip
+
+
 def build_generator_stage(
     cfg: ExperimentConfig, denoiser_payload: dict[str, Any], val: TrajectoryDataset,
     device: torch.device,
 ) -> Stage:  # fmt: skip
     """Stage 2. Validation: minADE_K + minFDE_K of the leapfrog sampler (lower is better)."""
+    _check_site_augmentation(cfg.model, cfg.data)
     torch.manual_seed(cfg.seed)
     denoiser, dcfg = ckpt.build_denoiser(denoiser_payload)
     _check_matches_denoiser(cfg, dcfg)
@@ -233,6 +244,7 @@ def build_finetune_stage(
     torch.manual_seed(cfg.seed)
     sampler = ckpt.predictor_from_payload(start, "leapfrog").to(device)
     assert sampler.generator is not None
+    _check_site_augmentation(sampler.generator.cfg, cfg.data)
     width = cfg.model.generator_encoder_width
     critic = Critic(width, cfg.model.t_fut, cfg.model.generator_width).to(device)
     objective = RLObjective(sampler, critic, cfg.finetune, cfg.generator)
