@@ -6,7 +6,7 @@ from synthetic import make_scene
 
 from trajpref.config import ModelConfig
 from trajpref.errors import ConfigError
-from trajpref.models.encoder import heading_rotation, scene_features, speed_factor
+from trajpref.models.encoder import agent_site, heading_rotation, scene_features, speed_factor
 from trajpref.models.generator import Generator, time_projection
 from trajpref.types import collate
 
@@ -306,3 +306,38 @@ def test_the_future_rank_is_checked_on_construction(rank):
     with pytest.raises(ConfigError, match="future_rank"):
         dataclasses.replace(TINY, future_rank=rank)
     assert ModelConfig(future_rank=4).denoiser_part() == ModelConfig()
+
+
+def test_agent_site_is_the_last_position_and_the_unit_heading_in_scene_coordinates():
+    # agent 0 walks up (+y) and ends at (3, 4); agent 1 stands at (-1, 2)
+    t = torch.arange(8, dtype=torch.float32)
+    walker = torch.stack([torch.full((8,), 3.0), 4.0 - 0.5 * (7 - t)], -1)  # [T_h, 2]
+    stander = torch.tensor([-1.0, 2.0]).repeat(8, 1)  # [T_h, 2]
+    scene = dataclasses.replace(make_scene(2), history=torch.stack([walker, stander]).numpy())
+    f = scene_features(collate([scene]), 2.0)  # scale 2: positions halve
+    site = agent_site(f, None)  # [N, 4]
+    expected = torch.tensor([[1.5, 2.0, 0.0, 1.0], [-0.5, 1.0, 1.0, 0.0]])
+    torch.testing.assert_close(site, expected, atol=1e-6, rtol=0)
+
+
+@pytest.mark.parametrize("site", [False, True])
+def test_only_a_generator_with_scene_position_depends_on_where_the_scene_is(site):
+    torch.manual_seed(0)
+    gen = Generator(dataclasses.replace(TINY, scene_position=site)).eval()
+    scene = make_scene(3)
+    moved = dataclasses.replace(scene, history=scene.history + 5.0, future=scene.future + 5.0)
+    with torch.no_grad():
+        a = gen(scene_features(collate([scene]), 1.0))
+        b = gen(scene_features(collate([moved]), 1.0))
+    same = torch.allclose(a.mean, b.mean, atol=1e-5) and torch.allclose(a.shifts, b.shifts,
+                                                                        atol=1e-5)  # fmt: skip
+    assert same == (not site)
+    assert ModelConfig(scene_position=True).denoiser_part() == ModelConfig()
+
+
+def test_the_encoder_wants_a_site_exactly_when_built_with_one():
+    f = scene_features(collate([make_scene(2)]), 1.0)
+    with pytest.raises(ValueError, match="site"):
+        Generator(dataclasses.replace(TINY, scene_position=True)).encoder(f)
+    with pytest.raises(ValueError, match="site"):
+        Generator(TINY).encoder(f, agent_site(f, None))

@@ -559,3 +559,24 @@ def test_an_annealed_best_of_k_run_cools_to_the_hard_minimum(tmp_path, folder, t
     assert temps[2] == temps[3] == 0.0
     # and the hard-minimum default logs no temperature at all
     assert "train_wta_temperature" not in read_metrics(trained, "generator")[0]
+
+
+@pytest.mark.parametrize("moved", [{"rotate": True}, {"flip": True}, {"reverse": True},
+                                   {"scale_min": 0.8}])  # fmt: skip
+def test_a_generator_that_sees_scene_positions_refuses_augmentations_that_move_the_scene(
+    cfg, folder, trained, moved
+):
+    import dataclasses
+
+    train = load_dataset(str(folder), "train")
+    payload = ckpt.load(trained / "denoiser.safetensors")
+    model = dataclasses.replace(cfg.model, scene_position=True)
+    still = dataclasses.replace(cfg.data, rotate=False, flip=False, reverse=False)
+    stage = build_generator_stage(dataclasses.replace(cfg, model=model, data=still), payload,
+                                  train, torch.device("cpu"))  # fmt: skip
+    assert stage.trainable.encoder.site_embed is not None
+    rebuilt, _ = ckpt.build_generator(stage.payload({"epoch": 0}))  # the checkpoint says so
+    assert rebuilt.cfg.scene_position and rebuilt.encoder.site_embed is not None
+    moving = dataclasses.replace(cfg, model=model, data=dataclasses.replace(still, **moved))
+    with pytest.raises(ConfigError, match="scene_position"):
+        build_generator_stage(moving, payload, train, torch.device("cpu"))
