@@ -148,3 +148,21 @@ def test_full_sampler_accepts_any_k(batch, with_generator):
     assert torch.isfinite(out).all()
     again = pred.predict(batch, 3 * K + 1, torch.Generator().manual_seed(0))
     assert torch.equal(out, again)
+
+
+@pytest.mark.parametrize("tau", [0, 3])
+def test_the_denoisers_context_is_computed_only_when_a_rollout_denoises_and_then_once(batch, tau):
+    base = _predictor()
+    pred = DiffusionPredictor(base.denoiser, base.schedule, SCALE, base.generator, tau=tau)
+    calls = []
+    pred.denoiser.encoder.register_forward_hook(lambda *a: calls.append(1))
+    cond = pred.condition(batch)
+    assert calls == []  # nothing yet
+    first = pred.rollout(batch, torch.Generator().manual_seed(0), cond=cond)
+    again = pred.rollout(batch, torch.Generator().manual_seed(0), cond=cond)
+    assert len(calls) == (1 if tau else 0)  # shared by both rollouts on the same condition
+    assert torch.equal(first.y, again.y)
+    if tau:  # the same context as computing it by hand
+        with torch.no_grad():
+            expected = pred.denoiser.context(cond.features)
+        torch.testing.assert_close(cond.context, expected)

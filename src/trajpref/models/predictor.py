@@ -28,15 +28,26 @@ Sampler = Literal["leapfrog", "full"]
 SAMPLERS: tuple[str, ...] = typing.get_args(Sampler)
 
 
-@dataclass
 class Condition:
-    """What the networks see of a batch, computed once and shared by every rollout on it."""
+    """What the networks see of a batch, computed once and shared by every rollout on it.
 
-    features: SceneFeatures
-    """The normalised history features."""
-    context: torch.Tensor
-    """[N, H] the denoiser's social encoding (never differentiated: the denoiser is frozen
-    wherever a rollout is trained through)."""
+    The denoiser's context is computed on first use: a leapfrog rollout with tau = 0 never
+    runs the denoiser, so it never pays for its encoder."""
+
+    def __init__(self, features: SceneFeatures, denoiser: Denoiser):
+        self.features = features
+        """The normalised history features."""
+        self._denoiser = denoiser
+        self._context: torch.Tensor | None = None
+
+    @property
+    def context(self) -> torch.Tensor:
+        """[N, H] the denoiser's social encoding (never differentiated: the denoiser is frozen
+        wherever a rollout is trained through)."""
+        if self._context is None:
+            with torch.no_grad():
+                self._context = self._denoiser.context(self.features)  # [N, H]
+        return self._context
 
 
 @dataclass
@@ -93,11 +104,9 @@ class DiffusionPredictor(nn.Module):
         return next(self.denoiser.parameters()).device
 
     def condition(self, batch: Batch) -> Condition:
-        """Features and the denoiser's context of a batch (no gradient into the denoiser)."""
-        features = scene_features(batch, self.scale)
-        with torch.no_grad():
-            context = self.denoiser.context(features)  # [N, H]
-        return Condition(features, context)
+        """Features and (on first use) the denoiser's context of a batch (no gradient into
+        the denoiser)."""
+        return Condition(scene_features(batch, self.scale), self.denoiser)
 
     def denoise(
         self, cond: Condition, y_tau: torch.Tensor, generator: torch.Generator | None = None
