@@ -58,6 +58,11 @@ class DataConfig:
     """Randomly play training scenes backwards in time (probability 1/2 per scene, all its
     agents together: the window's last T_h positions, reversed, become the history and the
     rest, reversed, the future; docs/pretraining.md, "Scenes played backwards")."""
+    history_noise: float = 0.0
+    """Std of Gaussian noise added to each training window's observed positions except the
+    last, in the dataset's units (0: off): the inputs jitter, the targets (futures relative to
+    the last observed position) stay exact. Against fitting the training histories exactly
+    (docs/pretraining.md, "Jittered histories")."""
     scale_min: float = 1.0
     """Lower bound of the random per-scene scale factor (1.0 with scale_max = 1.0: off)."""
     scale_max: float = 1.0
@@ -99,6 +104,9 @@ class DataConfig:
             raise ConfigError("DataConfig.val_cut and holdout_scene exclude each other: the "
                               "held-out scene is the validation split")  # fmt: skip
         _positive(self, "max_agents", "scale_min", "scale_max", "max_coord", "time_step")
+        if self.history_noise < 0:
+            raise ConfigError(f"DataConfig.history_noise must be >= 0 (0: off), "
+                              f"got {self.history_noise}")  # fmt: skip
         if self.scale_min > self.scale_max:
             raise ConfigError("DataConfig.scale_min must be <= scale_max")
         if self.max_gap is not None and self.max_gap < 0:

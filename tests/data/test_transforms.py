@@ -141,3 +141,24 @@ def test_augment_reverse_flips_whole_scenes_and_leaves_other_draws_alone():
     for b in range(batch.num_scenes):  # a scene is reversed as a whole
         assert flags[batch.scene == b].unique().numel() == 1
     assert 5 < int(flags.sum()) < 75  # about half of the 80 agents
+
+
+def test_history_noise_jitters_all_observed_positions_but_the_last_and_no_other_draw():
+    batch = collate([make_scene(3, seed=s) for s in range(200)])  # N = 600
+    plain = augment(batch, torch.Generator().manual_seed(5), rotate=True, flip=True)
+    out = augment(batch, torch.Generator().manual_seed(5), rotate=True, flip=True,
+                  history_noise=0.1)  # fmt: skip
+    # the rotation and mirror are the same draws; the last observation and the future exact
+    assert torch.equal(out.history[:, -1], plain.history[:, -1])
+    assert torch.equal(out.future, plain.future)
+    jitter = out.history[:, :-1] - plain.history[:, :-1]  # [N, T_h - 1, 2]
+    assert abs(float(jitter.std()) - 0.1) < 0.005
+    assert abs(float(jitter.mean())) < 0.005
+
+
+def test_negative_history_noise_is_a_config_error():
+    from trajpref.config import DataConfig
+    from trajpref.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="history_noise must be >= 0"):
+        DataConfig(history_noise=-0.1)

@@ -71,6 +71,7 @@ def augment(
     flip: bool = False,
     scale_range: tuple[float, float] | None = None,
     reverse: bool = False,
+    history_noise: float = 0.0,
 ) -> Batch:
     """Random rigid transform per scene (all agents of a scene move together).
 
@@ -78,7 +79,9 @@ def augment(
     mirrored (x -> -x) with probability 1/2, and optionally scaled by a factor drawn uniformly
     from ``scale_range``. Relative geometry between agents is kept (up to the scale). With
     ``reverse`` each scene is also played backwards in time with probability 1/2
-    (``reverse_time``); its coin is drawn last, so the other draws do not depend on it.
+    (``reverse_time``); its coin is drawn after the others, so they do not depend on it.
+    With ``history_noise`` > 0, Gaussian noise of that std is added to every observed position
+    but the last (drawn last of all), after the scene's transform.
     """
     device = batch.history.device
     b = batch.num_scenes
@@ -98,7 +101,13 @@ def augment(
     if reverse:
         backwards = torch.rand(b, generator=generator) < 0.5  # [B]
         batch = reverse_time(batch, backwards.to(device))
-    return transform_scenes(batch, rot)
+    batch = transform_scenes(batch, rot)
+    if history_noise > 0:
+        n, t_h, _ = batch.history.shape
+        noise = torch.randn(n, t_h - 1, 2, generator=generator) * history_noise  # [N, T_h-1, 2]
+        jittered = batch.history[:, :-1] + noise.to(batch.history)  # [N, T_h - 1, 2]
+        batch = replace(batch, history=torch.cat([jittered, batch.history[:, -1:]], 1))
+    return batch
 
 
 def reverse_time(batch: Batch, scenes: torch.Tensor) -> Batch:

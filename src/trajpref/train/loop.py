@@ -290,7 +290,8 @@ def fit(
         for batch in bar:
             batch = augment(batch, aug_gen, rotate=data_cfg.rotate, flip=data_cfg.flip,
                             scale_range=scale_range if use_scale else None,
-                            reverse=data_cfg.reverse).to(device)  # fmt: skip
+                            reverse=data_cfg.reverse,
+                            history_noise=data_cfg.history_noise).to(device)  # fmt: skip
             collected = () if stage.collect is None else (stage.collect(batch, noise_gen),)
             for _ in range(stage.updates):
                 if stage.on_progress is not None:
