@@ -146,3 +146,13 @@ def test_denoiser_part_ignores_generator_only_fields():
     assert ModelConfig(hidden=32, heads=2, denoiser_blocks=1).denoiser_part() != (
         base.denoiser_part()
     )
+
+
+def test_negative_history_noise_is_a_config_error():
+    with pytest.raises(ConfigError, match="history_noise must be >= 0"):
+        load_config(None, ["data.history_noise=-0.1"])
+
+
+def test_the_scale_range_is_none_when_the_scale_augmentation_is_off():
+    assert load_config(None).data.scale_range is None
+    assert load_config(None, ["data.scale_min=0.8"]).data.scale_range == (0.8, 1.0)

@@ -112,6 +112,12 @@ class DataConfig:
         if self.max_gap is not None and self.max_gap < 0:
             raise ConfigError("DataConfig.max_gap must be >= 0 or null")
 
+    @property
+    def scale_range(self) -> tuple[float, float] | None:
+        """The per-scene scale augmentation's range, None when it is off (both bounds 1)."""
+        bounds = (self.scale_min, self.scale_max)
+        return None if bounds == (1.0, 1.0) else bounds
+
 
 @dataclass
 class DiffusionConfig:

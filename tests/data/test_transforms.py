@@ -154,11 +154,3 @@ def test_history_noise_jitters_all_observed_positions_but_the_last_and_no_other_
     jitter = out.history[:, :-1] - plain.history[:, :-1]  # [N, T_h - 1, 2]
     assert abs(float(jitter.std()) - 0.1) < 0.005
     assert abs(float(jitter.mean())) < 0.005
-
-
-def test_negative_history_noise_is_a_config_error():
-    from trajpref.config import DataConfig
-    from trajpref.errors import ConfigError
-
-    with pytest.raises(ConfigError, match="history_noise must be >= 0"):
-        DataConfig(history_noise=-0.1)

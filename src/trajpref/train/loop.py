@@ -275,8 +275,6 @@ def fit(
     log = MetricLog(out_dir, stage.name, main, fresh=resume is None)
     rate = None  # agent-windows per second of the last epoch run here
     nonfinite = 0
-    scale_range = (data_cfg.scale_min, data_cfg.scale_max)
-    use_scale = scale_range != (1.0, 1.0)
     for epoch in range(start_epoch, optim_cfg.epochs):
         t0, c0 = time.perf_counter(), clock()
         loader.set_epoch(epoch)
@@ -289,7 +287,7 @@ def fit(
                    disable=not (progress and main), leave=False)  # fmt: skip
         for batch in bar:
             batch = augment(batch, aug_gen, rotate=data_cfg.rotate, flip=data_cfg.flip,
-                            scale_range=scale_range if use_scale else None,
+                            scale_range=data_cfg.scale_range,
                             reverse=data_cfg.reverse,
                             history_noise=data_cfg.history_noise).to(device)  # fmt: skip
             collected = () if stage.collect is None else (stage.collect(batch, noise_gen),)

@@ -187,7 +187,7 @@ def _check_matches_denoiser(cfg: ExperimentConfig, denoiser_cfg: ExperimentConfi
 def _check_site_augmentation(model: ModelConfig, data: DataConfig) -> None:
     """A generator that sees where its agents are (``scene_position``) must train on scenes
     left in their place: no rotation, mirror, time reversal or scaling."""
-    moved = data.rotate or data.flip or data.reverse or (data.scale_min, data.scale_max) != (1, 1)
+    moved = data.rotate or data.flip or data.reverse or data.scale_range is not None
     if model.scene_position and moved:
         raise ConfigError("model.scene_position learns from where the agents are in the "
                           "scene's coordinates: train it with data.rotate, data.flip and "
