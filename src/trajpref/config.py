@@ -219,6 +219,15 @@ class ModelConfig:
     the students files with uni_examples); it ties the model to those coordinates, and training
     requires ``data.rotate``, ``data.flip`` and ``data.reverse`` off, which would move the
     scene or its motion away from its place (docs/pretraining.md, "Where the agents are")."""
+    query_layers: int = 0
+    """How the generator proposes its K shifts: 0 (the default) maps each agent's encoding and
+    mean to all K x T_f x 2 numbers with one MLP (LED's head); L > 0 makes K tokens instead
+    (a projection of [encoding, mean] plus one learned embedding per sample), runs L pre-norm
+    transformer layers over each agent's K tokens, and reads each token out with one shared
+    layer as its shift and its log sigma (MoFlow's decoder proposes its K futures as queries
+    that attend to each other; docs/pretraining.md, "K query tokens")."""
+    query_width: int = 64
+    """Width of the K query tokens when ``query_layers`` > 0 (a multiple of ``heads``)."""
     spread_scale: float = 1.0
     """A sampling setting: multiplies each agent's sigma, the spread of its K initial samples
     about their mean (Y^tau = mu + spread_scale * sigma * S), before the tau denoising steps.
@@ -251,6 +260,12 @@ class ModelConfig:
             raise ConfigError("ModelConfig.hidden must be even (the sinusoidal step embedding)")
         if self.t_hist < 2:
             raise ConfigError("ModelConfig.t_hist must be >= 2 (velocities need two frames)")
+        if self.query_layers < 0:
+            raise ConfigError(f"ModelConfig.query_layers must be >= 0 (0: the MLP head), "
+                              f"got {self.query_layers}")  # fmt: skip
+        if self.query_width <= 0 or self.query_width % self.heads:
+            raise ConfigError(f"ModelConfig.query_width must be a positive multiple of heads "
+                              f"({self.heads}), got {self.query_width}")  # fmt: skip
         if not 0 <= self.future_rank <= self.t_fut:
             raise ConfigError(f"ModelConfig.future_rank must lie in [0, t_fut={self.t_fut}] "
                               f"(0: free outputs), got {self.future_rank}")  # fmt: skip
@@ -281,6 +296,8 @@ GENERATOR_ONLY = (
     "spread_scale",
     "future_rank",
     "scene_position",
+    "query_layers",
+    "query_width",
 )
 """``ModelConfig`` fields that concern the generator and its sampler, not the denoiser."""
 

@@ -341,3 +341,64 @@ def test_the_encoder_wants_a_site_exactly_when_built_with_one():
         Generator(dataclasses.replace(TINY, scene_position=True)).encoder(f)
     with pytest.raises(ValueError, match="site"):
         Generator(TINY).encoder(f, agent_site(f, None))
+
+
+QUERIES = dataclasses.replace(TINY, query_layers=2, query_width=8)
+
+
+def test_the_query_decoder_keeps_the_outputs_contract_and_its_frame():
+    torch.manual_seed(0)
+    gen = Generator(QUERIES).eval()
+    scene = make_scene(3)
+    f = scene_features(collate([scene]), 1.0)
+    with torch.no_grad():
+        out = gen(f)
+    assert out.log_sigma.shape == (K, 3) and out.shifts.shape == (K, 3, 12, 2)
+    torch.testing.assert_close(out.shifts.mean(0), torch.zeros(3, 12, 2), atol=1e-5, rtol=0)
+    rms = out.shifts.pow(2).mean(dim=(0, 2, 3)).sqrt()  # [N]
+    torch.testing.assert_close(rms, torch.ones(3), atol=1e-4, rtol=0)
+    assert out.shifts.std(0).min() > 0  # the K learned embeddings make K different proposals
+    # one shared read-out: the MLP heads are not built, and the denoiser part is unchanged
+    assert not hasattr(gen, "shift_head") and not hasattr(gen, "sigma_head")
+    assert QUERIES.denoiser_part() == TINY.denoiser_part()
+
+
+def test_the_default_head_keeps_its_parameter_names():
+    # published generators (query_layers = 0) must load unchanged
+    names = set(Generator(TINY).state_dict())
+    assert {n.split(".")[0] for n in names} == {"encoder", "mean_head", "sigma_head",
+                                                 "shift_head"}  # fmt: skip
+
+
+def test_the_query_tokens_train_and_see_each_other():
+    torch.manual_seed(0)
+    gen = Generator(QUERIES)
+    f = scene_features(collate([make_scene(3), make_scene(2, seed=1)]), 1.0)
+    before = {n: p.detach().clone() for n, p in gen.named_parameters()}
+    opt = torch.optim.SGD(gen.parameters(), lr=0.1)
+    gen(f).initial_sample().pow(2).sum().backward()
+    opt.step()
+    for name in ("queries", "query_in.weight", "query_out.1.weight"):
+        assert not torch.equal(before[name], dict(gen.named_parameters())[name]), name
+    # attention across the K tokens: moving one sample's embedding moves the other samples
+    gen.eval()
+    with torch.no_grad():
+        a = gen(f).shifts
+        gen.queries[0] += torch.randn(8)  # (a constant would vanish in the layer norms)
+        b = gen(f).shifts
+    assert not torch.allclose(a[1:], b[1:], atol=1e-6)
+
+
+def test_a_query_decoder_runs_under_bf16_autocast():
+    gen = Generator(QUERIES)
+    f = scene_features(collate([make_scene(3)]), 1.0)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        out = gen(f)
+    assert torch.isfinite(out.initial_sample().float()).all()
+
+
+@pytest.mark.parametrize(("field", "value"), [("query_layers", -1), ("query_width", 7),
+                                              ("query_width", 0)])  # fmt: skip
+def test_the_query_decoder_is_checked_on_construction(field, value):
+    with pytest.raises(ConfigError, match=field):
+        dataclasses.replace(TINY, **{field: value})

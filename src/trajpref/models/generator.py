@@ -18,7 +18,7 @@ from trajpref.models.encoder import (
     scale_features,
     speed_factor,
 )
-from trajpref.models.layers import mlp
+from trajpref.models.layers import SetAttention, mlp
 
 
 @dataclass
@@ -66,8 +66,17 @@ class Generator(nn.Module):
         p = cfg.generator_dropout
         self.dropout = nn.Dropout(p) if p > 0 else nn.Identity()
         self.mean_head = mlp([h, w, w, tf * 2], dropout=p)
-        self.sigma_head = mlp([h + tf * 2, w, samples], dropout=p)
-        self.shift_head = mlp([h + tf * 2, w, w, samples * tf * 2], dropout=p)
+        if cfg.query_layers:  # K tokens that attend to each other, one shared read-out
+            qw = cfg.query_width
+            self.query_in = nn.Linear(h + tf * 2, qw)
+            self.queries = nn.Parameter(torch.randn(samples, qw))  # [K, W_q]
+            self.query_blocks = nn.Sequential(
+                *(SetAttention(qw, cfg.heads) for _ in range(cfg.query_layers))
+            )
+            self.query_out = nn.Sequential(nn.LayerNorm(qw), nn.Linear(qw, tf * 2 + 1))
+        else:
+            self.sigma_head = mlp([h + tf * 2, w, samples], dropout=p)
+            self.shift_head = mlp([h + tf * 2, w, w, samples * tf * 2], dropout=p)
         # [T_f, T_f] projection onto smooth paths (identity when future_rank is 0); rebuilt
         # from the config, so it is not part of the state dict
         self.register_buffer("time_projection", time_projection(tf, cfg.future_rank),
@@ -86,14 +95,13 @@ class Generator(nn.Module):
             c = speed_factor(features.hist, self.cfg.max_speed)  # [N]
             features = scale_features(features, c)
         ctx = self.encoder(features, site)  # [N, H]
-        n, tf, k = ctx.shape[0], self.cfg.t_fut, self.samples
+        n, tf = ctx.shape[0], self.cfg.t_fut
         dropped = self.dropout(ctx)  # [N, H]; ctx itself when not training
         mean = self.mean_head(dropped).view(n, tf, 2)  # [N, T_f, 2]
         if self.cfg.future_rank:
             mean = self.time_projection @ mean  # [N, T_f, 2]
         z = torch.cat([dropped, mean.detach().flatten(1)], -1)  # [N, H + 2T_f]
-        log_sigma = self.sigma_head(z).T  # [K, N]
-        raw = self.shift_head(z).view(n, k, tf, 2).transpose(0, 1)  # [K, N, T_f, 2]
+        log_sigma, raw = self._heads(z)  # [K, N], [K, N, T_f, 2]
         if self.cfg.future_rank:
             raw = self.time_projection @ raw  # [K, N, T_f, 2]
         raw = raw - raw.mean(0, keepdim=True)
@@ -108,3 +116,16 @@ class Generator(nn.Module):
             mean = mean @ rot  # [N, T_f, 2]
             shifts = shifts @ rot[None]  # [K, N, T_f, 2]
         return GeneratorOutput(mean, log_sigma, shifts, ctx)
+
+    def _heads(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """z [N, H + 2T_f] -> log sigma [K, N] and the raw (uncentred) shifts [K, N, T_f, 2]."""
+        n, tf, k = z.shape[0], self.cfg.t_fut, self.samples
+        if not self.cfg.query_layers:
+            log_sigma = self.sigma_head(z).T  # [K, N]
+            return log_sigma, self.shift_head(z).view(n, k, tf, 2).transpose(0, 1)
+        # dropout once, on the shared projection ([N, W_q]): masks on the [N, K, 4 W_q]
+        # hidden layers inside the blocks cost more than the rest of a training step
+        tokens = self.dropout(self.query_in(z))[:, None] + self.queries  # [N, K, W_q]
+        out = self.query_out(self.query_blocks(tokens))  # [N, K, 2T_f + 1]
+        raw = out[..., :-1].reshape(n, k, tf, 2).transpose(0, 1)  # [K, N, T_f, 2]
+        return out[..., -1].T, raw  # [K, N], [K, N, T_f, 2]
