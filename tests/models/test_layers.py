@@ -5,7 +5,7 @@ import torch
 from torch import nn
 
 from trajpref.errors import ConfigError
-from trajpref.models.layers import SocialAttention, mlp, timestep_embedding
+from trajpref.models.layers import SetAttention, SocialAttention, mlp, timestep_embedding
 
 
 def test_mlp_sizes_and_activations():
@@ -91,3 +91,28 @@ def test_no_attention_across_scenes():
 def test_hidden_not_divisible_by_heads_is_a_config_error():
     with pytest.raises(ConfigError, match="divisible"):
         SocialAttention(10, 3)
+
+
+def test_set_attention_matches_torchs_attention_and_permutes_with_its_tokens():
+    torch.manual_seed(0)
+    layer = SetAttention(8, 2).eval()
+    x = torch.randn(3, 5, 8)  # 3 sets of 5 tokens
+    # the same layer through torch's own attention kernel
+    s, k, w = x.shape
+    q, key, v = layer.qkv(layer.norm1(x)).view(s, k, 3, 2, 4).unbind(2)
+    heads = [t.transpose(1, 2) for t in (q, key, v)]  # [S, nh, K, d] each
+    att = nn.functional.scaled_dot_product_attention(*heads).transpose(1, 2).reshape(s, k, w)
+    ref = x + layer.out(att)
+    ref = ref + layer.ff(layer.norm2(ref))
+    torch.testing.assert_close(layer(x), ref, atol=1e-5, rtol=1e-5)
+    # no positions: permuting a set's tokens permutes its outputs, and sets stay apart
+    perm = torch.tensor([4, 0, 3, 1, 2])
+    torch.testing.assert_close(layer(x[:, perm]), layer(x)[:, perm], atol=1e-5, rtol=1e-5)
+    y = x.clone()
+    y[0] += torch.randn(5, 8)
+    torch.testing.assert_close(layer(y)[1:], layer(x)[1:])
+
+
+def test_set_attention_width_not_divisible_by_heads_is_a_config_error():
+    with pytest.raises(ConfigError, match="divisible"):
+        SetAttention(6, 4)
