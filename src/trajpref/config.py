@@ -199,8 +199,9 @@ class ModelConfig:
     attention across agents")."""
     generator_dropout: float = 0.0
     """Dropout probability in the generator during training: on its encoder's output before
-    the heads, and after each hidden layer of the mean, sigma and shift heads (0: none; LED's
-    transformer layers drop 0.1). Evaluation and sampling never drop."""
+    the heads, and after each hidden layer of the mean, sigma and shift heads (with
+    ``query_layers`` > 0: on the tokens' shared projection instead of inside the query layers;
+    0: none; LED's transformer layers drop 0.1). Evaluation and sampling never drop."""
     future_rank: int = 0
     """Rank of the generator's outputs in time (0: free, T_f numbers per coordinate). r > 0
     projects the mean and each of the K shifts, per coordinate, onto the polynomials
@@ -227,7 +228,8 @@ class ModelConfig:
     layer as its shift and its log sigma (MoFlow's decoder proposes its K futures as queries
     that attend to each other; docs/pretraining.md, "K query tokens")."""
     query_width: int = 64
-    """Width of the K query tokens when ``query_layers`` > 0 (a multiple of ``heads``)."""
+    """Width of the K query tokens when ``query_layers`` > 0 (then a positive multiple of
+    ``heads``; unused and unchecked otherwise)."""
     spread_scale: float = 1.0
     """A sampling setting: multiplies each agent's sigma, the spread of its K initial samples
     about their mean (Y^tau = mu + spread_scale * sigma * S), before the tau denoising steps.
@@ -263,7 +265,7 @@ class ModelConfig:
         if self.query_layers < 0:
             raise ConfigError(f"ModelConfig.query_layers must be >= 0 (0: the MLP head), "
                               f"got {self.query_layers}")  # fmt: skip
-        if self.query_width <= 0 or self.query_width % self.heads:
+        if self.query_layers and (self.query_width <= 0 or self.query_width % self.heads):
             raise ConfigError(f"ModelConfig.query_width must be a positive multiple of heads "
                               f"({self.heads}), got {self.query_width}")  # fmt: skip
         if not 0 <= self.future_rank <= self.t_fut:

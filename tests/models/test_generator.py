@@ -346,7 +346,7 @@ def test_the_encoder_wants_a_site_exactly_when_built_with_one():
 QUERIES = dataclasses.replace(TINY, query_layers=2, query_width=8)
 
 
-def test_the_query_decoder_keeps_the_outputs_contract_and_its_frame():
+def test_the_query_decoder_keeps_the_outputs_contract():
     torch.manual_seed(0)
     gen = Generator(QUERIES).eval()
     scene = make_scene(3)
@@ -401,4 +401,12 @@ def test_a_query_decoder_runs_under_bf16_autocast():
                                               ("query_width", 0)])  # fmt: skip
 def test_the_query_decoder_is_checked_on_construction(field, value):
     with pytest.raises(ConfigError, match=field):
-        dataclasses.replace(TINY, **{field: value})
+        dataclasses.replace(QUERIES, **{field: value})
+
+
+def test_the_query_width_is_not_checked_when_there_is_no_query_decoder():
+    # a config with 3 heads was valid before the query decoder existed and stays valid
+    cfg = dataclasses.replace(TINY, hidden=18, heads=3)
+    assert cfg.query_layers == 0 and cfg.query_width % cfg.heads
+    with pytest.raises(ConfigError, match="query_width"):
+        dataclasses.replace(cfg, query_layers=1)
