@@ -13,6 +13,7 @@ from trajpref.results import (
     ResultConflict,
     accuracy_table,
     base_method,
+    cpu_name,
     finetune_start,
     make_row,
     merge_rows,
@@ -126,6 +127,18 @@ def test_write_meta_records_where_and_how_then_the_fields(tmp_path, monkeypatch)
     assert loaded["command"] == "python benchmarks/speed.py --scenes 5"
     assert loaded["threads"] >= 1 and "CPU cores" in loaded["machine"]
     assert loaded["models"]["a/generator"]["ratio"] == 12.5
+
+
+def test_the_cpu_is_named_by_its_model_and_falls_back_when_the_system_does_not_say(tmp_path):
+    info = tmp_path / "cpuinfo"
+    info.write_text("processor\t: 0\nvendor_id\t: GenuineIntel\n"
+                    "model name\t: Intel(R)  Xeon(R) Processor\nflags\t: avx2\n\n"
+                    "processor\t: 1\nmodel name\t: Intel(R) Xeon(R) Processor\n")  # fmt: skip
+    assert cpu_name(info) == "Intel(R) Xeon(R) Processor"
+    fallback = cpu_name(tmp_path / "missing")
+    assert fallback and "model name" not in fallback
+    info.write_text("processor\t: 0\nmodel name\t:   \n")  # an empty name is not a name
+    assert cpu_name(info) == fallback
 
 
 def test_upsert_rows_adds_other_seeds_and_replaces_the_same_measurement(tmp_path):

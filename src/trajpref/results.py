@@ -96,9 +96,24 @@ def finetune_start(method: str) -> str:
     return FINETUNE_START + suffix
 
 
+def cpu_name(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
+    """The processor's model name where the system says it (Linux: the first ``model name``
+    line of ``cpuinfo``), else what ``platform`` knows. Hosts of the same kind can differ in
+    their CPU, and a training step's speed with them (docs/pretraining.md, "hotel's budget on a
+    slower host"), so a measurement names the model."""
+    try:
+        for line in cpuinfo.read_text(errors="replace").splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "model name" and value.strip():
+                return " ".join(value.split())
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
 def machine() -> str:
     """A short description of where a number was measured."""
-    cpu = platform.processor() or platform.machine()
+    cpu = cpu_name()
     gpu = f", {torch.cuda.get_device_name(0)}" if torch.cuda.is_available() else ""
     return (
         f"{platform.system()} {platform.machine()} ({cpu}), {os.cpu_count()} CPU cores{gpu}, "
