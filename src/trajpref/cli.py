@@ -36,6 +36,7 @@ from trajpref.score import TrajectoryScorer, score_timesteps
 from trajpref.score.scorer import PRECISIONS
 from trajpref.score.selection import METHODS, SelectingPredictor, SelectionConfig
 from trajpref.survey.cli import add_parser as add_survey_parser
+from trajpref.train import compare
 from trajpref.train.run import finetune, last_state_path, train_stage
 from trajpref.types import collate
 from trajpref.viz.plot import plot_scene, plot_scene_scored
@@ -310,6 +311,22 @@ def build_parser() -> argparse.ArgumentParser:
                     help="DATASET/NAME (e.g. zara1/generator): print its model card")  # fmt: skip
     mo.add_argument("--json", action="store_true", help="print the index entries as JSON")
     mo.set_defaults(func=cmd_models)
+
+    co = sub.add_parser("compare", help="validation of training runs side by side: kept "
+                        "epochs, seed means and spreads, curves at equal shares of the "
+                        "schedule")  # fmt: skip
+    co.add_argument("groups", nargs="+", metavar="NAME=DIR[,DIR...]",
+                    help="a group of runs (e.g. the seeds of one setting) or one run folder; "
+                    "changes are against the first group")  # fmt: skip
+    co.add_argument("--stage", choices=compare.STAGES, default="generator")
+    co.add_argument("--metrics", nargs="+", default=["val_min_ade", "val_min_fde"],
+                    help="validated metrics to show (keys of <stage>_metrics.jsonl); the "
+                    "kept epoch is always the lowest val_score, as the training loop keeps "
+                    "it")  # fmt: skip
+    co.add_argument("--shares", nargs="+", type=float, default=[0.25, 0.5, 0.75, 1.0],
+                    help="shares of each run's schedule at which to show its curve")  # fmt: skip
+    co.add_argument("--json", action="store_true", help="print the numbers as JSON")
+    co.set_defaults(func=cmd_compare)
     return parser
 
 
@@ -764,6 +781,25 @@ def cmd_models(args) -> int:
         return 0
     rows = zoo.entries()
     print(json.dumps(rows) if args.json else zoo.table(rows))
+    return 0
+
+
+def cmd_compare(args) -> int:
+    """Runs' validation side by side (``train/compare.py``): what each kept, each group's mean
+    and spread over its runs and its change against the first group, and the curves."""
+    groups: dict[str, list] = {}
+    metrics = tuple(args.metrics)
+    for text in args.groups:
+        name, runs = compare.parse_group(text)
+        if name in groups:
+            raise ConfigError(f"group {name!r} is given twice")
+        groups[name] = [compare.read_curve(r, args.stage, metrics) for r in runs]
+    shares = tuple(args.shares)
+    if args.json:
+        print(dumps_json({"stage": args.stage, "groups": compare.summarise(groups, metrics),
+                          "curves": compare.curve_rows(groups, metrics, shares)}))  # fmt: skip
+    else:
+        print(compare.format_report(groups, metrics, shares))
     return 0
 
 

@@ -1,0 +1,160 @@
+"""Validation curves of several training runs side by side, grouped by seed.
+
+A candidate is judged against a control by the validation its runs kept (the epoch with the
+lowest ``val_score``, the checkpoint the loop saved), over seeds, and by where its curve runs
+at the same share of the schedule (docs/pretraining.md compares candidates this way). This
+module reads each run's ``<stage>_metrics.jsonl`` and ``config.yaml`` and computes exactly
+that; ``trajpref compare`` prints it.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from trajpref.config import load_config
+from trajpref.errors import TrajprefError
+from trajpref.train.loop import read_metrics
+
+STAGES = ("denoiser", "generator", "finetune")
+"""Stages whose runs can be compared (each is also the config section with its ``epochs``)."""
+
+
+@dataclass(frozen=True)
+class RunCurve:
+    """One run's validation record."""
+
+    run: str
+    """The run folder, as given."""
+    epochs: int
+    """The stage's scheduled epochs (the run's ``config.yaml``; without one, its last logged
+    epoch)."""
+    points: tuple[tuple[int, dict[str, float]], ...]
+    """(epoch, {metric: value}) at each validated epoch, in order."""
+    kept: int
+    """The validated epoch with the lowest ``val_score``: the checkpoint the loop kept."""
+
+    def at(self, epoch: int) -> dict[str, float]:
+        """The metrics validated at ``epoch``."""
+        return dict(self.points)[epoch]
+
+    def nearest(self, share: float) -> int:
+        """The validated epoch closest to ``share`` of the schedule (the earlier on a tie)."""
+        target = share * self.epochs
+        return min((e for e, _ in self.points), key=lambda e: (abs(e - target), e))
+
+
+def read_curve(run_dir: str | Path, stage: str, metrics: tuple[str, ...]) -> RunCurve:
+    """The validation curve of ``stage`` in ``run_dir`` for the named ``metrics`` (keys of the
+    metrics log such as ``val_min_fde``). A clear error when the run has no log of that stage,
+    no validation, or lacks a metric."""
+    if stage not in STAGES:
+        raise TrajprefError(f"stage must be one of {', '.join(STAGES)}, got {stage!r}")
+    rows = read_metrics(run_dir, stage)
+    if not rows:
+        raise TrajprefError(f"{run_dir}: no {stage}_metrics.jsonl (is it a {stage} run folder?)")
+    validated = [r for r in rows if "val_score" in r]
+    if not validated:
+        raise TrajprefError(f"{run_dir}: the {stage} stage has not validated yet")
+    for name in metrics:
+        if name not in validated[0]:
+            known = sorted(k for k in validated[0] if k.startswith("val_"))
+            raise TrajprefError(f"{run_dir}: no metric {name!r}; validated: {', '.join(known)}")
+    points = tuple((int(r["epoch"]), {m: float(r[m]) for m in metrics}) for r in validated)
+    kept = int(min(validated, key=lambda r: r["val_score"])["epoch"])
+    config = Path(run_dir) / "config.yaml"
+    if config.is_file():
+        epochs = int(getattr(load_config(config), stage).epochs)
+    else:
+        epochs = int(rows[-1]["epoch"])
+    return RunCurve(str(run_dir), epochs, points, kept)
+
+
+def parse_group(text: str) -> tuple[str, list[str]]:
+    """``NAME=DIR[,DIR...]`` (a named group of seeds) or ``DIR`` (a group of one, named by it)."""
+    name, sep, dirs = text.partition("=")
+    if not sep:
+        return text, [text]
+    runs = [d for d in dirs.split(",") if d]
+    if not name or not runs:
+        raise TrajprefError(f"a group is NAME=DIR[,DIR...] or DIR, got {text!r}")
+    return name, runs
+
+
+def summarise(groups: dict[str, list[RunCurve]], metrics: tuple[str, ...]) -> dict[str, Any]:
+    """Each group's kept values: mean and sample standard deviation (None for one run) per
+    metric, and the relative change of the mean against the first group's."""
+    if not groups:
+        raise TrajprefError("nothing to compare: give at least one run")
+    out: dict[str, Any] = {}
+    first: dict[str, float] | None = None
+    for name, curves in groups.items():
+        kept = {m: [c.at(c.kept)[m] for c in curves] for m in metrics}
+        mean = {m: statistics.fmean(v) for m, v in kept.items()}
+        sd = {m: statistics.stdev(v) if len(v) > 1 else None for m, v in kept.items()}
+        if first is None:
+            first = mean
+        change = {m: (mean[m] / first[m] - 1) if first[m] else math.nan for m in metrics}
+        out[name] = {
+            "runs": [
+                {"run": c.run, "kept_epoch": c.kept, "epochs": c.epochs, **c.at(c.kept)}
+                for c in curves
+            ],
+            "mean": mean,
+            "sd": sd,
+            "change": change,
+        }
+    return out
+
+
+def curve_rows(
+    groups: dict[str, list[RunCurve]], metrics: tuple[str, ...], shares: tuple[float, ...]
+) -> list[dict[str, Any]]:
+    """For each share of the schedule, every run's metrics at its nearest validated epoch."""
+    for s in shares:
+        if not 0 < s <= 1:
+            raise TrajprefError(f"shares lie in (0, 1], got {s}")
+    rows = []
+    for s in shares:
+        row: dict[str, Any] = {"share": s, "runs": []}
+        for name, curves in groups.items():
+            for c in curves:
+                e = c.nearest(s)
+                row["runs"].append({"group": name, "run": c.run, "epoch": e, **c.at(e)})
+        rows.append(row)
+    return rows
+
+
+def _values(values: dict[str, Any], metrics: tuple[str, ...]) -> str:
+    return " / ".join(f"{values[m]:.4f}" for m in metrics)
+
+
+def format_report(
+    groups: dict[str, list[RunCurve]], metrics: tuple[str, ...], shares: tuple[float, ...]
+) -> str:
+    """The kept values per run and per group, then the curves at the shares, as Markdown."""
+    summary = summarise(groups, metrics)
+    head = " / ".join(metrics)
+    lines = [f"| group | run | kept epoch | {head} |", "|---|---|---|---|"]
+    for name, g in summary.items():
+        for r in g["runs"]:
+            epoch = f"{r['kept_epoch']} of {r['epochs']}"
+            lines.append(f"| {name} | {r['run']} | {epoch} | {_values(r, metrics)} |")
+    lines += ["", f"| group | runs | mean {head} | sd | change against the first |"]
+    lines.append("|---|---|---|---|---|")
+    for name, g in summary.items():
+        sd = " / ".join("-" if g["sd"][m] is None else f"{g['sd'][m]:.4f}" for m in metrics)
+        change = " / ".join(f"{100 * g['change'][m]:+.1f} %" for m in metrics)
+        n = len(g["runs"])
+        lines.append(f"| {name} | {n} | {_values(g['mean'], metrics)} | {sd} | {change} |")
+    rows = curve_rows(groups, metrics, shares)
+    names = [f"{r['group']}: {r['run']}" for r in rows[0]["runs"]]
+    lines += ["", "| share of the schedule | " + " | ".join(names) + " |"]
+    lines.append("|---" * (len(names) + 1) + "|")
+    for row in rows:
+        cells = [f"{_values(r, metrics)} ({r['epoch']})" for r in row["runs"]]
+        lines.append(f"| {row['share']:.2f} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)

@@ -1,0 +1,120 @@
+"""Runs compared side by side: kept epochs, seed means and spreads, curves at equal shares."""
+
+from __future__ import annotations
+
+import json
+import statistics
+from pathlib import Path
+
+import pytest
+
+from trajpref.cli import main
+from trajpref.config import ExperimentConfig, save_config
+from trajpref.errors import TrajprefError
+from trajpref.train import compare
+
+
+def _run(path: Path, epochs: int, curve: dict[int, tuple[float, float]], config=True) -> Path:
+    """A run folder: a training row every epoch, validation at ``curve``'s epochs, whose
+    ``val_score`` is minADE + minFDE as the generator stage logs it."""
+    path.mkdir(parents=True)
+    rows = []
+    for epoch in range(1, epochs + 1):
+        row = {"epoch": epoch, "train_loss": 1.0 / epoch}
+        if epoch in curve:
+            ade, fde = curve[epoch]
+            row |= {"val_min_ade": ade, "val_min_fde": fde, "val_score": ade + fde}
+        rows.append(json.dumps(row))
+    (path / "generator_metrics.jsonl").write_text("\n".join(rows) + "\n")
+    if config:
+        cfg = ExperimentConfig()
+        cfg.generator.epochs = epochs
+        save_config(cfg, path / "config.yaml")
+    return path
+
+
+def test_the_kept_epoch_is_the_lowest_validation_score_not_the_lowest_fde(tmp_path):
+    curve = {2: (0.30, 0.50), 4: (0.20, 0.45), 6: (0.25, 0.44), 8: (0.22, 0.46)}
+    run = _run(tmp_path / "a", 8, curve)
+    curve = compare.read_curve(run, "generator", ("val_min_ade", "val_min_fde"))
+    assert curve.kept == 4  # 0.65 < 0.68 (epoch 8) < 0.69 (epoch 6), though 6 has the lower FDE
+    assert curve.epochs == 8 and [e for e, _ in curve.points] == [2, 4, 6, 8]
+    assert curve.at(6) == {"val_min_ade": 0.25, "val_min_fde": 0.44}
+
+
+def test_group_means_spreads_and_changes_are_the_hand_computed_ones(tmp_path):
+    a = _run(tmp_path / "a", 4, {2: (0.20, 0.40), 4: (0.21, 0.41)})
+    b = _run(tmp_path / "b", 4, {2: (0.22, 0.44), 4: (0.23, 0.46)})
+    c = _run(tmp_path / "c", 4, {2: (0.25, 0.42), 4: (0.19, 0.38)})
+    metrics = ("val_min_ade", "val_min_fde")
+    groups = {
+        "control": [compare.read_curve(r, "generator", metrics) for r in (a, b)],
+        "candidate": [compare.read_curve(c, "generator", metrics)],
+    }
+    out = compare.summarise(groups, metrics)
+    control = out["control"]
+    assert control["mean"]["val_min_fde"] == pytest.approx(0.42)  # kept epochs 2 and 2
+    assert control["sd"]["val_min_fde"] == pytest.approx(statistics.stdev([0.40, 0.44]))
+    assert control["change"]["val_min_fde"] == pytest.approx(0.0)
+    candidate = out["candidate"]
+    assert candidate["runs"][0]["kept_epoch"] == 4 and candidate["sd"]["val_min_fde"] is None
+    assert candidate["change"]["val_min_fde"] == pytest.approx(0.38 / 0.42 - 1)
+    assert candidate["change"]["val_min_ade"] == pytest.approx(0.19 / 0.21 - 1)
+
+
+def test_curves_meet_at_equal_shares_of_schedules_of_different_lengths(tmp_path):
+    long = _run(tmp_path / "long", 160, {e: (0.2, 0.3 + e / 1000) for e in range(8, 161, 8)})
+    short = _run(tmp_path / "short", 80, {e: (0.2, 0.3 + e / 1000) for e in range(4, 81, 4)})
+    metrics = ("val_min_fde",)
+    groups = {"160": [compare.read_curve(long, "generator", metrics)],
+              "80": [compare.read_curve(short, "generator", metrics)]}  # fmt: skip
+    rows = compare.curve_rows(groups, metrics, (0.25, 0.5, 1.0))
+    assert [[r["epoch"] for r in row["runs"]] for row in rows] == [[40, 20], [80, 40], [160, 80]]
+    assert rows[1]["runs"][1]["val_min_fde"] == pytest.approx(0.34)
+    # between two validations the earlier one is shown on a tie, the nearer one otherwise
+    assert groups["160"][0].nearest(0.275) == 40 and groups["160"][0].nearest(0.29) == 48
+
+
+def test_a_run_without_its_config_takes_its_last_logged_epoch_as_the_schedule(tmp_path):
+    run = _run(tmp_path / "a", 12, {6: (0.2, 0.3), 12: (0.2, 0.31)}, config=False)
+    assert compare.read_curve(run, "generator", ("val_min_fde",)).epochs == 12
+
+
+def test_missing_logs_metrics_and_bad_groups_are_clear_errors(tmp_path):
+    with pytest.raises(TrajprefError, match="no generator_metrics.jsonl"):
+        compare.read_curve(tmp_path, "generator", ("val_min_fde",))
+    run = _run(tmp_path / "a", 2, {})
+    with pytest.raises(TrajprefError, match="has not validated yet"):
+        compare.read_curve(run, "generator", ("val_min_fde",))
+    run = _run(tmp_path / "b", 2, {2: (0.2, 0.3)})
+    with pytest.raises(TrajprefError, match=r"no metric 'val_ade'.*val_min_ade, val_min_fde"):
+        compare.read_curve(run, "generator", ("val_ade",))
+    with pytest.raises(TrajprefError, match="stage must be one of"):
+        compare.read_curve(run, "diffusion", ("val_min_fde",))
+    with pytest.raises(TrajprefError, match="NAME=DIR"):
+        compare.parse_group("name=")
+    assert compare.parse_group("c=r/a,r/b") == ("c", ["r/a", "r/b"])
+    assert compare.parse_group("r/a") == ("r/a", ["r/a"])
+    curve = compare.read_curve(run, "generator", ("val_min_fde",))
+    with pytest.raises(TrajprefError, match=r"shares lie in \(0, 1\]"):
+        compare.curve_rows({"a": [curve]}, ("val_min_fde",), (0.0,))
+
+
+def test_the_command_prints_the_tables_and_the_same_numbers_as_json(tmp_path, capsys):
+    a = _run(tmp_path / "a", 4, {2: (0.20, 0.40), 4: (0.21, 0.41)})
+    b = _run(tmp_path / "b", 4, {2: (0.22, 0.44), 4: (0.19, 0.37)})
+    assert main(["compare", f"control={a}", str(b)]) == 0
+    text = capsys.readouterr().out
+    assert f"| control | {a} | 2 of 4 | 0.2000 / 0.4000 |" in text
+    assert f"| {b} | 1 | 0.1900 / 0.3700 | - / - | -5.0 % / -7.5 % |" in text
+    assert "| 0.50 | 0.2000 / 0.4000 (2) | 0.2200 / 0.4400 (2) |" in text
+    assert main(["compare", f"control={a}", str(b), "--json", "--shares", "1"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["groups"][str(b)]["change"]["val_min_fde"] == pytest.approx(0.37 / 0.40 - 1)
+    assert [r["epoch"] for r in out["curves"][0]["runs"]] == [4, 4]
+
+
+def test_the_command_refuses_a_group_named_twice(tmp_path, capsys):
+    a = _run(tmp_path / "a", 2, {2: (0.2, 0.3)})
+    assert main(["compare", f"x={a}", f"x={a}"]) == 2
+    assert "group 'x' is given twice" in capsys.readouterr().err
