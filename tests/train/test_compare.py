@@ -38,7 +38,7 @@ def test_the_kept_epoch_is_the_lowest_validation_score_not_the_lowest_fde(tmp_pa
     run = _run(tmp_path / "a", 8, curve)
     curve = compare.read_curve(run, "generator", ("val_min_ade", "val_min_fde"))
     assert curve.kept == 4  # 0.65 < 0.68 (epoch 8) < 0.69 (epoch 6), though 6 has the lower FDE
-    assert curve.epochs == 8 and [e for e, _ in curve.points] == [2, 4, 6, 8]
+    assert curve.epochs == 8 and list(curve.points) == [2, 4, 6, 8]
     assert curve.at(6) == {"val_min_ade": 0.25, "val_min_fde": 0.44}
 
 

@@ -18,9 +18,11 @@ from typing import Any
 from trajpref.config import load_config
 from trajpref.errors import TrajprefError
 from trajpref.train.loop import read_metrics
+from trajpref.train.run import STAGE_NAMES
 
-STAGES = ("denoiser", "generator", "finetune")
-"""Stages whose runs can be compared (each is also the config section with its ``epochs``)."""
+STAGES = tuple(STAGE_NAMES.values())
+"""Stages whose runs can be compared, by the name their files carry (each is also the config
+section with its ``epochs``)."""
 
 
 @dataclass(frozen=True)
@@ -32,19 +34,19 @@ class RunCurve:
     epochs: int
     """The stage's scheduled epochs (the run's ``config.yaml``; without one, its last logged
     epoch)."""
-    points: tuple[tuple[int, dict[str, float]], ...]
-    """(epoch, {metric: value}) at each validated epoch, in order."""
+    points: dict[int, dict[str, float]]
+    """{epoch: {metric: value}} at each validated epoch, in order."""
     kept: int
     """The validated epoch with the lowest ``val_score``: the checkpoint the loop kept."""
 
     def at(self, epoch: int) -> dict[str, float]:
         """The metrics validated at ``epoch``."""
-        return dict(self.points)[epoch]
+        return self.points[epoch]
 
     def nearest(self, share: float) -> int:
         """The validated epoch closest to ``share`` of the schedule (the earlier on a tie)."""
         target = share * self.epochs
-        return min((e for e, _ in self.points), key=lambda e: (abs(e - target), e))
+        return min(self.points, key=lambda e: (abs(e - target), e))
 
 
 def read_curve(run_dir: str | Path, stage: str, metrics: tuple[str, ...]) -> RunCurve:
@@ -63,7 +65,7 @@ def read_curve(run_dir: str | Path, stage: str, metrics: tuple[str, ...]) -> Run
         if name not in validated[0]:
             known = sorted(k for k in validated[0] if k.startswith("val_"))
             raise TrajprefError(f"{run_dir}: no metric {name!r}; validated: {', '.join(known)}")
-    points = tuple((int(r["epoch"]), {m: float(r[m]) for m in metrics}) for r in validated)
+    points = {int(r["epoch"]): {m: float(r[m]) for m in metrics} for r in validated}
     kept = int(min(validated, key=lambda r: r["val_score"])["epoch"])
     config = Path(run_dir) / "config.yaml"
     if config.is_file():
