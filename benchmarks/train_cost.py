@@ -13,7 +13,10 @@ low) and one validation pass, then extrapolates to the config's schedule:
 A stage whose config compiles it (``compile: true``) is always probed warm (below). ``--set
 KEY=VALUE`` changes every measured config (``--set generator.epochs=80`` estimates a
 longer schedule). ``--warm`` times a second short epoch and validation instead of the first and
-adds the first's extra time once, as ``warmup_seconds`` (what a compiled run spends compiling).
+adds the first's extra time once, as ``warmup_seconds`` (what a compiled run spends compiling);
+``--warm N`` trains N epochs before the timed one (bf16 steps keep getting faster over the first
+epochs while oneDNN builds a kernel for each new batch shape; docs/pretraining.md, "oneDNN's
+kernel cache").
 ``--compiled`` measures each dataset a second time with both stages compiled
 (``denoiser.compile=true generator.compile=true``), side by side in the same process, always
 warm, and records both estimates and their ratio in ``meta/train_cost_compile.json``:
@@ -55,13 +58,14 @@ def evaluations(epochs: int, every: int) -> int:
 
 
 def probe(cfg, stage: str, data_root, steps: int, denoiser: Path | None,
-          warm: bool = False) -> dict:  # fmt: skip
+          warm: int = 0) -> dict:  # fmt: skip
     """Time ``steps`` training steps of one stage (one short epoch; its first steps' warm-up
-    counts, so the rate errs low) and the validation pass that follows them. ``warm``: two
-    such epochs, each validated; the second is timed, and what the first took beyond it is
-    returned as ``warmup_seconds`` (compilation, caches)."""
+    counts, so the rate errs low) and the validation pass that follows them. ``warm`` > 0:
+    ``warm`` such epochs before the timed one, each validated; the last is timed, and what the
+    first ``warm`` took beyond it is returned once as ``warmup_seconds`` (compilation, and the
+    kernels oneDNN builds for each new batch shape, which later epochs mostly find cached)."""
     section = STAGE_NAMES[stage]  # the config section and the stage's file names
-    short = dataclasses.replace(getattr(cfg, section), epochs=2 if warm else 1,
+    short = dataclasses.replace(getattr(cfg, section), epochs=1 + warm,
                                 steps_per_epoch=steps, eval_every=1)  # fmt: skip
     with tempfile.TemporaryDirectory() as tmp:
         run = Path(tmp) / "run"
@@ -74,19 +78,20 @@ def probe(cfg, stage: str, data_root, steps: int, denoiser: Path | None,
             "val_seconds": summary["wall_seconds"] - summary["train_seconds"],
             "train_agents": summary["train_agents"],
         }
-    first, second = records
-    train_first = first["train_seconds"]
-    train_second = second["train_seconds"] - first["train_seconds"]
+    cumulative = [0.0] + [r["train_seconds"] for r in records]
+    train = [b - a for a, b in zip(cumulative, cumulative[1:], strict=False)]  # per epoch
+    last, last_val = train[-1], records[-1]["val_seconds"]
+    extra = [max(0.0, t - last) + max(0.0, r["val_seconds"] - last_val)
+             for t, r in zip(train[:-1], records[:-1], strict=True)]  # fmt: skip
     return {
-        "rate": summary["samples_per_second"],  # of the second epoch
-        "val_seconds": second["val_seconds"],
+        "rate": summary["samples_per_second"],  # of the last epoch
+        "val_seconds": last_val,
         "train_agents": summary["train_agents"],
-        "warmup_seconds": max(0.0, train_first - train_second)
-        + max(0.0, first["val_seconds"] - second["val_seconds"]),
+        "warmup_seconds": sum(extra),  # the untimed epochs' time beyond the timed one's
     }
 
 
-def estimate(cfg, dataset: str, data_root, steps: tuple[int, int], warm: bool) -> dict:
+def estimate(cfg, dataset: str, data_root, steps: tuple[int, int], warm: int) -> dict:
     """Both stages' estimated minutes for ``cfg`` (see the module docstring)."""
     denoiser = ROOT / "models" / dataset / "denoiser.safetensors"
     entry = {}
@@ -96,7 +101,8 @@ def estimate(cfg, dataset: str, data_root, steps: tuple[int, int], warm: bool) -
         if stage == "generator" and not denoiser.is_file():
             entry[key] = None
             continue
-        warm_here = warm or optim.compile  # a compiled stage's first epoch is its compilation
+        # a compiled stage's first epoch is its compilation
+        warm_here = warm or (1 if optim.compile else 0)
         p = probe(cfg, stage, data_root, n, denoiser if stage == "generator" else None,
                   warm_here)  # fmt: skip
         n_eval = evaluations(optim.epochs, optim.eval_every)
@@ -141,8 +147,13 @@ def main() -> None:
     )
     parser.add_argument(
         "--warm",
-        action="store_true",
-        help="time a second short epoch; add the first's extra time once",
+        type=int,
+        nargs="?",
+        const=1,
+        default=0,
+        metavar="N",
+        help="train N short epochs (1 when no N is given) before the timed one; add their "
+        "extra time once",
     )
     parser.add_argument("--compiled", action="store_true",
                         help="also estimate with both stages compiled, side by side (warm); "
@@ -185,7 +196,7 @@ def compare(args) -> None:
         runs = {}
         for name, extra in (("eager", []), ("compiled", list(COMPILED))):
             cfg = load_config(ROOT / "configs" / f"{dataset}.yaml", [*args.set, *extra])
-            runs[name] = estimate(cfg, dataset, args.data_root, args.steps, warm=True)
+            runs[name] = estimate(cfg, dataset, args.data_root, args.steps, warm=1)
             print(f"{dataset:<9} {name:<8} {_line(runs[name])}", flush=True)
         speedup = {
             key: round(runs["compiled"][key]["agents_per_second"]

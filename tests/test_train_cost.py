@@ -8,9 +8,11 @@ from bench import load_benchmark
 def test_a_warm_probe_times_the_second_epoch_and_books_the_first_ones_extra_time(tiny_cfg):
     cost = load_benchmark("train_cost")
     cold = cost.probe(tiny_cfg, "diffusion", None, steps=2, denoiser=None)
-    warm = cost.probe(tiny_cfg, "diffusion", None, steps=2, denoiser=None, warm=True)
+    warm = cost.probe(tiny_cfg, "diffusion", None, steps=2, denoiser=None, warm=1)
+    warmer = cost.probe(tiny_cfg, "diffusion", None, steps=2, denoiser=None, warm=2)
     assert "warmup_seconds" not in cold and warm["warmup_seconds"] >= 0.0
-    for p in (cold, warm):
+    assert warmer["warmup_seconds"] >= 0.0
+    for p in (cold, warm, warmer):
         assert p["rate"] > 0 and p["val_seconds"] > 0 and p["train_agents"] > 0
 
 
@@ -36,3 +38,19 @@ def test_the_printed_line_of_an_estimate_with_other_settings_names_only_the_stag
     entry = {"denoiser": {"minutes": 7.5}, "generator": {"minutes": 26.6}, "minutes": 34.1,
              "settings": {"set": ["data.reverse=true"], "warm": False}}  # fmt: skip
     assert cost._line(entry) == "D 7.5 + G 26.6 = 34.1 min"
+
+
+def test_a_warmer_probe_times_the_last_epoch_and_books_every_earlier_ones_extra(
+    monkeypatch, tiny_cfg
+):
+    cost = load_benchmark("train_cost")
+    # three epochs of 5, 3 and 2 s of training (cumulative 5, 8, 10), validations 1.5, 1, 1 s
+    records = [{"train_seconds": 5.0, "val_seconds": 1.5},
+               {"train_seconds": 8.0, "val_seconds": 1.0},
+               {"train_seconds": 10.0, "val_seconds": 1.0}]  # fmt: skip
+    summary = {"samples_per_second": 100.0, "train_agents": 40}
+    monkeypatch.setattr(cost, "train_stage", lambda *a, **k: summary)
+    monkeypatch.setattr(cost, "read_metrics", lambda *a: records)
+    p = cost.probe(tiny_cfg, "diffusion", None, steps=2, denoiser=None, warm=2)
+    assert p["val_seconds"] == 1.0
+    assert p["warmup_seconds"] == (5 - 2) + (1.5 - 1) + (3 - 2)  # 4.5 s, booked once
