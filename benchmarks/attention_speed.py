@@ -26,6 +26,7 @@ from trajpref.data.registry import load_dataset
 from trajpref.models import checkpoint as ckpt
 from trajpref.models import layers
 from trajpref.results import write_meta
+from trajpref.train.loop import precision_autocast
 from trajpref.train.stages import build_denoiser_stage, build_generator_stage
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -62,8 +63,7 @@ def time_stage(dataset: str, stage: str, data_root, batches: int, repeats: int) 
                 layers.SocialAttention.forward = forms[name]
                 start = time.perf_counter()
                 for batch in chosen:
-                    with torch.autocast("cpu", dtype=torch.bfloat16,
-                                        enabled=optim.precision == "bf16"):  # fmt: skip
+                    with precision_autocast(cpu, optim.precision):  # as the loop's steps
                         loss, _ = built.objective(batch, noise)
                     opt.zero_grad()
                     loss.backward()

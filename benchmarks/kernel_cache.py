@@ -26,27 +26,19 @@ ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "benchmarks" / "results" / "meta" / "kernel_cache.json"
 DEFAULT_RUNS = ("hotel:generator", "zara1:generator", "eth:generator", "hotel:diffusion")
 
-# run in the child process: a short training of one stage; prints its epochs' training seconds
+# run in the child process: train_cost's short run of one stage; prints its epochs' seconds
 _CHILD = """
-import dataclasses, json, sys, tempfile
+import json, sys
 from pathlib import Path
-from trajpref.config import load_config
-from trajpref.train import read_metrics
-from trajpref.train.run import STAGE_NAMES, train_stage
 root, dataset, stage, epochs, steps, data_root = sys.argv[1:7]
+sys.path.insert(0, str(Path(root) / "benchmarks"))
+from train_cost import epoch_seconds, short_run
+from trajpref.config import load_config
 cfg = load_config(Path(root) / "configs" / f"{dataset}.yaml")
-section = STAGE_NAMES[stage]
-# validated every epoch: the records carry the cumulative training seconds, validation excluded
-short = dataclasses.replace(getattr(cfg, section), epochs=int(epochs),
-                            steps_per_epoch=int(steps), eval_every=1)
-cfg = dataclasses.replace(cfg, **{section: short})
 denoiser = Path(root) / "models" / dataset / "denoiser.safetensors"
-with tempfile.TemporaryDirectory() as tmp:
-    train_stage(stage, cfg, Path(tmp) / "run", data_root or None, "cpu",
-                denoiser=denoiser if stage == "generator" else None, progress=False)
-    records = read_metrics(Path(tmp) / "run", section)
-seconds = [r["train_seconds"] for r in records]
-print(json.dumps([seconds[0]] + [b - a for a, b in zip(seconds, seconds[1:])]))
+_, records = short_run(cfg, stage, data_root or None, int(steps), int(epochs),
+                       denoiser if stage == "generator" else None)
+print(json.dumps(epoch_seconds(records)))
 """
 
 

@@ -57,6 +57,26 @@ def evaluations(epochs: int, every: int) -> int:
     return epochs // every + (0 if epochs % every == 0 else 1)
 
 
+def short_run(cfg, stage: str, data_root, steps: int, epochs: int,
+              denoiser: Path | None) -> tuple[dict, list[dict]]:  # fmt: skip
+    """Train ``epochs`` short epochs of ``steps`` steps of one stage, each validated, in a
+    temporary folder: the loop's summary and its metric records (one per epoch)."""
+    section = STAGE_NAMES[stage]  # the config section and the stage's file names
+    short = dataclasses.replace(getattr(cfg, section), epochs=epochs,
+                                steps_per_epoch=steps, eval_every=1)  # fmt: skip
+    with tempfile.TemporaryDirectory() as tmp:
+        run = Path(tmp) / "run"
+        summary = train_stage(stage, dataclasses.replace(cfg, **{section: short}), run,
+                              data_root, "cpu", denoiser=denoiser, progress=False)  # fmt: skip
+        return summary, read_metrics(run, section)
+
+
+def epoch_seconds(records: list[dict]) -> list[float]:
+    """Each epoch's own training seconds, from the records' cumulative ``train_seconds``."""
+    cumulative = [0.0] + [r["train_seconds"] for r in records]
+    return [b - a for a, b in zip(cumulative, cumulative[1:], strict=False)]
+
+
 def probe(cfg, stage: str, data_root, steps: int, denoiser: Path | None,
           warm: int = 0) -> dict:  # fmt: skip
     """Time ``steps`` training steps of one stage (one short epoch; its first steps' warm-up
@@ -64,22 +84,14 @@ def probe(cfg, stage: str, data_root, steps: int, denoiser: Path | None,
     ``warm`` such epochs before the timed one, each validated; the last is timed, and what the
     first ``warm`` took beyond it is returned once as ``warmup_seconds`` (compilation, and the
     kernels oneDNN builds for each new batch shape, which later epochs mostly find cached)."""
-    section = STAGE_NAMES[stage]  # the config section and the stage's file names
-    short = dataclasses.replace(getattr(cfg, section), epochs=1 + warm,
-                                steps_per_epoch=steps, eval_every=1)  # fmt: skip
-    with tempfile.TemporaryDirectory() as tmp:
-        run = Path(tmp) / "run"
-        summary = train_stage(stage, dataclasses.replace(cfg, **{section: short}), run,
-                              data_root, "cpu", denoiser=denoiser, progress=False)  # fmt: skip
-        records = read_metrics(run, section) if warm else []
+    summary, records = short_run(cfg, stage, data_root, steps, 1 + warm, denoiser)
     if not warm:
         return {
             "rate": summary["samples_per_second"],  # agent-windows per second of the steps
             "val_seconds": summary["wall_seconds"] - summary["train_seconds"],
             "train_agents": summary["train_agents"],
         }
-    cumulative = [0.0] + [r["train_seconds"] for r in records]
-    train = [b - a for a, b in zip(cumulative, cumulative[1:], strict=False)]  # per epoch
+    train = epoch_seconds(records)
     last, last_val = train[-1], records[-1]["val_seconds"]
     extra = [max(0.0, t - last) + max(0.0, r["val_seconds"] - last_val)
              for t, r in zip(train[:-1], records[:-1], strict=True)]  # fmt: skip
