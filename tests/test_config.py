@@ -153,6 +153,12 @@ def test_negative_history_noise_is_a_config_error():
         load_config(None, ["data.history_noise=-0.1"])
 
 
+@pytest.mark.parametrize("rate", ["-0.1", "1.0"])
+def test_a_drop_rate_outside_zero_to_one_is_a_config_error(rate):
+    with pytest.raises(ConfigError, match=r"drop_agents must be in \[0, 1\)"):
+        load_config(None, [f"data.drop_agents={rate}"])
+
+
 def test_the_scale_range_is_none_when_the_scale_augmentation_is_off():
     assert load_config(None).data.scale_range is None
     assert load_config(None, ["data.scale_min=0.8"]).data.scale_range == (0.8, 1.0)

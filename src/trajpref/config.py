@@ -63,6 +63,11 @@ class DataConfig:
     last, in the dataset's units (0: off): the inputs jitter, the targets (futures relative to
     the last observed position) stay exact. Against fitting the training histories exactly
     (docs/pretraining.md, "Jittered histories")."""
+    drop_agents: float = 0.0
+    """Rate at which agents are left out of each training batch, as targets and as
+    neighbours, after the other augmentations (0: off; every scene keeps at least one agent).
+    Shows each window with a random subset of its neighbours (docs/pretraining.md, "Fewer
+    neighbours")."""
     scale_min: float = 1.0
     """Lower bound of the random per-scene scale factor (1.0 with scale_max = 1.0: off)."""
     scale_max: float = 1.0
@@ -107,6 +112,9 @@ class DataConfig:
         if self.history_noise < 0:
             raise ConfigError(f"DataConfig.history_noise must be >= 0 (0: off), "
                               f"got {self.history_noise}")  # fmt: skip
+        if not 0.0 <= self.drop_agents < 1.0:
+            raise ConfigError(f"DataConfig.drop_agents must be in [0, 1) (0: off), "
+                              f"got {self.drop_agents}")  # fmt: skip
         if self.scale_min > self.scale_max:
             raise ConfigError("DataConfig.scale_min must be <= scale_max")
         if self.max_gap is not None and self.max_gap < 0:

@@ -5,6 +5,7 @@ from synthetic import make_scene
 from trajpref.data.transforms import (
     augment,
     backward_velocity,
+    drop_agents_at_random,
     from_relative,
     observed_pace,
     reverse_time,
@@ -154,3 +155,39 @@ def test_history_noise_jitters_all_observed_positions_but_the_last_and_no_other_
     jitter = out.history[:, :-1] - plain.history[:, :-1]  # [N, T_h - 1, 2]
     assert abs(float(jitter.std()) - 0.1) < 0.005
     assert abs(float(jitter.mean())) < 0.005
+
+
+def test_dropping_agents_keeps_whole_rows_and_at_least_one_agent_per_scene():
+    scenes = [make_scene(size, seed=s) for s, size in enumerate([1, 2, 5, 3, 8] * 40)]
+    batch = collate(scenes)  # B = 200, N = 760
+    out = drop_agents_at_random(batch, 0.6, torch.Generator().manual_seed(3))
+    assert out.num_scenes == batch.num_scenes
+    assert torch.equal(out.scene_sizes() >= 1, torch.ones(200, dtype=torch.bool))
+    assert bool((out.scene[1:] >= out.scene[:-1]).all())  # still packed scene by scene
+    assert 0.3 < out.num_agents / batch.num_agents < 0.55  # about 40 % kept, plus the rescued
+    # every kept agent is one of the batch's rows, unchanged, with its own scene and type
+    rows = torch.cat([batch.history.flatten(1), batch.future.flatten(1)], 1)  # [N, 40]
+    kept = torch.cat([out.history.flatten(1), out.future.flatten(1)], 1)  # [N', 40]
+    match = (kept[:, None] == rows[None]).all(-1)  # [N', N]
+    assert bool((match.sum(1) == 1).all())
+    src = match.float().argmax(1)  # [N']
+    assert torch.equal(batch.scene[src], out.scene)
+    assert torch.equal(batch.agent_type[src], out.agent_type)
+    assert bool((src[1:] > src[:-1]).all())  # order kept
+
+
+def test_dropping_agents_is_seeded_and_off_at_zero():
+    batch = collate([make_scene(4, seed=s) for s in range(50)])
+    a = drop_agents_at_random(batch, 0.3, torch.Generator().manual_seed(1))
+    b = drop_agents_at_random(batch, 0.3, torch.Generator().manual_seed(1))
+    assert torch.equal(a.history, b.history) and a.num_agents < batch.num_agents
+    gen = torch.Generator().manual_seed(2)
+    plain = augment(batch, torch.Generator().manual_seed(2), flip=True)
+    same = augment(batch, gen, flip=True, drop_agents=0.0)
+    assert torch.equal(plain.history, same.history)
+    # dropping is drawn last: the kept agents have the transform of the run without it
+    dropped = augment(batch, torch.Generator().manual_seed(2), flip=True, drop_agents=0.3)
+    rows = plain.history.flatten(1)
+    assert bool((dropped.history.flatten(1)[:, None] == rows[None]).all(-1).any(1).all())
+    with pytest.raises(ValueError, match=r"drop_agents needs a rate in \[0, 1\)"):
+        drop_agents_at_random(batch, 1.0)

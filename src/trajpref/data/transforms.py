@@ -72,6 +72,7 @@ def augment(
     scale_range: tuple[float, float] | None = None,
     reverse: bool = False,
     history_noise: float = 0.0,
+    drop_agents: float = 0.0,
 ) -> Batch:
     """Random rigid transform per scene (all agents of a scene move together).
 
@@ -81,7 +82,8 @@ def augment(
     ``reverse`` each scene is also played backwards in time with probability 1/2
     (``reverse_time``); its coin is drawn after the others, so they do not depend on it.
     With ``history_noise`` > 0, Gaussian noise of that std is added to every observed position
-    but the last (drawn last of all), after the scene's transform.
+    but the last, after the scene's transform. With ``drop_agents`` > 0, agents are then left
+    out at that rate (``drop_agents``, drawn last of all).
     """
     device = batch.history.device
     b = batch.num_scenes
@@ -107,7 +109,28 @@ def augment(
         noise = torch.randn(n, t_h - 1, 2, generator=generator) * history_noise  # [N, T_h-1, 2]
         jittered = batch.history[:, :-1] + noise.to(batch.history)  # [N, T_h - 1, 2]
         batch = replace(batch, history=torch.cat([jittered, batch.history[:, -1:]], 1))
+    if drop_agents > 0:
+        batch = drop_agents_at_random(batch, drop_agents, generator)
     return batch
+
+
+def drop_agents_at_random(batch: Batch, p: float, generator: torch.Generator | None = None) -> Batch:
+    """The batch without a random subset of its agents: each agent is left out with
+    probability ``p`` (one uniform draw per agent, on the CPU), as a target and as everyone's
+    neighbour. A scene whose agents were all drawn keeps its first one, so every scene keeps
+    at least one agent and the scene indices stay valid."""
+    if not 0.0 <= p < 1.0:
+        raise ValueError(f"drop_agents needs a rate in [0, 1), got {p}")
+    n = batch.num_agents
+    keep = (torch.rand(n, generator=generator) >= p).to(batch.scene.device)  # [N]
+    sizes = batch.scene_sizes()  # [B]
+    firsts = torch.cumsum(sizes, 0) - sizes  # [B] index of each scene's first agent
+    kept = torch.zeros_like(sizes).index_add_(0, batch.scene, keep.long())  # [B]
+    empty = (kept == 0) & (sizes > 0)  # [B] scenes that would lose every agent
+    keep[firsts[empty]] = True
+    idx = keep.nonzero().squeeze(1)  # [N'] in order, so scenes stay non-decreasing
+    return replace(batch, history=batch.history[idx], future=batch.future[idx],
+                   scene=batch.scene[idx], agent_type=batch.agent_type[idx])  # fmt: skip
 
 
 def reverse_time(batch: Batch, scenes: torch.Tensor) -> Batch:

@@ -289,7 +289,8 @@ def fit(
             batch = augment(batch, aug_gen, rotate=data_cfg.rotate, flip=data_cfg.flip,
                             scale_range=data_cfg.scale_range,
                             reverse=data_cfg.reverse,
-                            history_noise=data_cfg.history_noise).to(device)  # fmt: skip
+                            history_noise=data_cfg.history_noise,
+                            drop_agents=data_cfg.drop_agents).to(device)  # fmt: skip
             collected = () if stage.collect is None else (stage.collect(batch, noise_gen),)
             for _ in range(stage.updates):
                 if stage.on_progress is not None:
