@@ -114,7 +114,9 @@ def augment(
     return batch
 
 
-def drop_agents_at_random(batch: Batch, p: float, generator: torch.Generator | None = None) -> Batch:
+def drop_agents_at_random(
+    batch: Batch, p: float, generator: torch.Generator | None = None
+) -> Batch:
     """The batch without a random subset of its agents: each agent is left out with
     probability ``p`` (one uniform draw per agent, on the CPU), as a target and as everyone's
     neighbour. A scene whose agents were all drawn keeps its first one, so every scene keeps
