@@ -580,3 +580,26 @@ def test_a_generator_that_sees_scene_positions_refuses_augmentations_that_move_t
     moving = dataclasses.replace(cfg, model=model, data=dataclasses.replace(still, **moved))
     with pytest.raises(ConfigError, match="scene_position"):
         build_generator_stage(moving, payload, train, torch.device("cpu"))
+
+
+
+def test_a_run_with_dropped_agents_trains_on_fewer_agents_than_it_reads(
+    tmp_path, cfg, monkeypatch
+):
+    import dataclasses
+
+    from trajpref.data import transforms
+
+    seen = []  # (agents read, agents kept) per training batch
+    original = transforms.drop_agents_at_random
+
+    def spy(batch, p, generator=None):
+        out = original(batch, p, generator)
+        seen.append((batch.num_agents, out.num_agents))
+        return out
+
+    monkeypatch.setattr(transforms, "drop_agents_at_random", spy)
+    c = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, drop_agents=0.5))
+    train_stage("diffusion", c, tmp_path, device="cpu", progress=False)
+    read, kept = sum(r for r, _ in seen), sum(k for _, k in seen)
+    assert 0 < kept < read
