@@ -582,10 +582,7 @@ def test_a_generator_that_sees_scene_positions_refuses_augmentations_that_move_t
         build_generator_stage(moving, payload, train, torch.device("cpu"))
 
 
-
-def test_a_run_with_dropped_agents_trains_on_fewer_agents_than_it_reads(
-    tmp_path, cfg, monkeypatch
-):
+def test_a_run_with_dropped_agents_trains_on_fewer_agents_than_it_reads(tmp_path, cfg, monkeypatch):
     import dataclasses
 
     from trajpref.data import transforms
