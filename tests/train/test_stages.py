@@ -1,6 +1,7 @@
 """Both pretraining stages on tiny synthetic data: they learn, freeze what they should,
 checkpoint, resume and reproduce."""
 
+import dataclasses
 import json
 import re
 
@@ -10,7 +11,7 @@ from synthetic import TINY_OVERRIDES, write_dataset
 
 from trajpref.cli import main
 from trajpref.config import load_config
-from trajpref.data import load_dataset
+from trajpref.data import load_dataset, transforms
 from trajpref.data.loader import SceneLoader
 from trajpref.errors import ConfigError, TrajprefError
 from trajpref.evaluation import evaluate
@@ -583,10 +584,6 @@ def test_a_generator_that_sees_scene_positions_refuses_augmentations_that_move_t
 
 
 def test_a_run_with_dropped_agents_trains_on_fewer_agents_than_it_reads(tmp_path, cfg, monkeypatch):
-    import dataclasses
-
-    from trajpref.data import transforms
-
     seen = []  # (agents read, agents kept) per training batch
     original = transforms.drop_agents_at_random
 
