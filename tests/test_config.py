@@ -76,6 +76,15 @@ def test_type_errors(override):
         load_config(None, [override])
 
 
+def test_generator_layers_default_to_the_encoders_depth_and_reject_negatives():
+    assert load_config(None, []).model.generator_encoder_layers == 2
+    cfg = load_config(None, ["model.generator_layers=3"])
+    assert (cfg.model.generator_encoder_layers, cfg.model.encoder_layers) == (3, 2)
+    assert cfg.model.denoiser_part() == load_config(None, []).model.denoiser_part()
+    with pytest.raises(ConfigError, match="generator_layers must be >= 0"):
+        load_config(None, ["model.generator_layers=-1"])
+
+
 def test_whole_floats_are_accepted_as_integers():
     assert load_config(None, ["denoiser.epochs=3.0"]).denoiser.epochs == 3
 

@@ -164,6 +164,9 @@ class ModelConfig:
     """Width of the generator's own social encoder (0: ``hidden``, the denoiser's width). The
     generator's encoder is its own network, so it may be wider than the frozen denoiser's
     (LED's initializer uses 256)."""
+    generator_layers: int = 0
+    """Social attention layers in the generator's own encoder (0: ``encoder_layers``, the
+    denoiser's depth). Like ``generator_hidden``, it sizes the generator alone."""
     t_hist: int = 8
     """Observed frames (T_h)."""
     t_fut: int = 12
@@ -266,6 +269,9 @@ class ModelConfig:
         if self.generator_hidden < 0 or self.generator_hidden % self.heads:
             raise ConfigError("ModelConfig.generator_hidden must be 0 (the denoiser's width) or "
                               "a positive multiple of heads")  # fmt: skip
+        if self.generator_layers < 0:
+            raise ConfigError(f"ModelConfig.generator_layers must be >= 0 (0: encoder_layers), "
+                              f"got {self.generator_layers}")  # fmt: skip
         if self.hidden % 2:
             raise ConfigError("ModelConfig.hidden must be even (the sinusoidal step embedding)")
         if self.t_hist < 2:
@@ -291,10 +297,17 @@ class ModelConfig:
         """H of the generator's social encoding (``generator_hidden``, else ``hidden``)."""
         return self.generator_hidden or self.hidden
 
+    @property
+    def generator_encoder_layers(self) -> int:
+        """Social attention layers of the generator's encoder (``generator_layers``, else
+        ``encoder_layers``)."""
+        return self.generator_layers or self.encoder_layers
+
 
 GENERATOR_ONLY = (
     "generator_width",
     "generator_hidden",
+    "generator_layers",
     "samples",
     "tau",
     "stochastic_steps",

@@ -101,6 +101,18 @@ def test_the_generator_encoder_may_be_wider_than_the_denoisers(cfg, folder, trai
     assert torch.isfinite(y).all()
 
 
+def test_the_generator_encoder_may_be_deeper_than_the_denoisers(cfg, folder, trained):
+    train = load_dataset(str(folder), "train")
+    payload = ckpt.load(trained / "denoiser.safetensors")
+    depth = cfg.model.encoder_layers + 1
+    deep = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, generator_layers=depth))
+    stage = build_generator_stage(deep, payload, train, torch.device("cpu"))
+    assert len(stage.trainable.encoder.layers) == depth
+    assert len(stage.objective.denoiser.encoder.layers) == cfg.model.encoder_layers
+    rebuilt, _ = ckpt.build_generator(stage.payload({"epoch": 0}))  # the checkpoint says depth
+    assert len(rebuilt.encoder.layers) == depth
+
+
 def test_a_generator_step_changes_the_generator_not_the_denoiser(cfg, folder, trained):
     train = load_dataset(str(folder), "train")
     payload = ckpt.load(trained / "denoiser.safetensors")

@@ -59,7 +59,7 @@ class Generator(nn.Module):
         self.cfg = cfg
         self.samples = samples = cfg.samples
         h, w, tf = cfg.generator_encoder_width, cfg.generator_width, cfg.t_fut
-        layers = cfg.encoder_layers if cfg.generator_social else 0  # 0: own history only
+        layers = cfg.generator_encoder_layers if cfg.generator_social else 0  # 0: own history only
         self.encoder = SocialEncoder(cfg.t_hist, h, layers, cfg.heads,
                                      temporal=cfg.history_encoder == "temporal",
                                      site=cfg.scene_position)  # fmt: skip
