@@ -5,18 +5,22 @@
 The training minutes that ``benchmarks/pretrain.py`` records are those of the real runs, which
 often shared the two cores with other jobs. This script measures every dataset's two stages
 alone, one after the other in one process: ``--steps`` training steps of each stage
-(throughput in agent-windows per second, the steps' own warm-up included, so the rate errs
-low) and one validation pass, then extrapolates to the config's schedule:
+(throughput in agent-windows per second) and one validation pass, then extrapolates to the
+config's schedule:
 
     minutes = (epochs x training agent-windows / throughput + evaluations x one validation) / 60
 
-A stage whose config compiles it (``compile: true``) is always probed warm (below). ``--set
-KEY=VALUE`` changes every measured config (``--set generator.epochs=80`` estimates a
-longer schedule). ``--warm`` times a second short epoch and validation instead of the first and
-adds the first's extra time once, as ``warmup_seconds`` (what a compiled run spends compiling);
-``--warm N`` trains N epochs before the timed one (bf16 steps keep getting faster over the first
-epochs while oneDNN builds a kernel for each new batch shape; docs/pretraining.md, "oneDNN's
-kernel cache").
+The probe is warm by default (``--warm 3``): it trains three short epochs, each validated,
+before the one it times, and adds what those took beyond the timed epoch once, as
+``warmup_seconds``. bf16 steps keep getting faster over the first epochs while oneDNN builds
+a kernel for each new batch shape (docs/pretraining.md, "oneDNN's kernel cache"), so a cold
+probe (``--warm 0``, the method until 2026-11-28) errs high on the bf16 defaults; it also
+errs, less, on a stage's first steps. A compiled stage (``compile: true``) is always probed at
+least once warm: its first epoch is its compilation. Each entry records its probe (``warm``,
+``steps``) and the machine that measured it.
+
+``--set KEY=VALUE`` changes every measured config (``--set generator.epochs=80`` estimates a
+longer schedule); such an estimate is not the defaults' and needs ``--out``.
 ``--compiled`` measures each dataset a second time with both stages compiled
 (``denoiser.compile=true generator.compile=true``), side by side in the same process, always
 warm, and records both estimates and their ratio in ``meta/train_cost_compile.json``:
@@ -41,7 +45,7 @@ import tempfile
 from pathlib import Path
 
 from trajpref.config import load_config
-from trajpref.results import write_meta
+from trajpref.results import machine, write_meta
 from trajpref.train import read_metrics
 from trajpref.train.run import STAGE_NAMES, train_stage
 
@@ -146,7 +150,7 @@ def main() -> None:
         "--steps",
         type=int,
         nargs=2,
-        default=(40, 12),
+        default=(20, 60),
         metavar=("D", "G"),
         help="timed training steps of the denoiser and generator stages",
     )
@@ -162,29 +166,30 @@ def main() -> None:
         type=int,
         nargs="?",
         const=1,
-        default=0,
+        default=3,
         metavar="N",
-        help="train N short epochs (1 when no N is given) before the timed one; add their "
-        "extra time once",
+        help="train N short epochs (1 when no N is given; 0: a cold probe) before the timed "
+        "one; add their extra time once (default: 3)",
     )
     parser.add_argument("--compiled", action="store_true",
                         help="also estimate with both stages compiled, side by side (warm); "
-                        f"writes {OUT_COMPILE.relative_to(ROOT)}")  # fmt: skip
-    parser.add_argument("--out", default=None, help=f"default: {OUT.relative_to(ROOT)}")
+                        f"writes benchmarks/results/meta/{OUT_COMPILE.name}")  # fmt: skip
+    parser.add_argument("--out", default=None, help=f"default: benchmarks/results/meta/{OUT.name}")
     args = parser.parse_args()
     if args.compiled:
         compare(args)
         return
     out = Path(args.out or OUT)
-    if (args.set or args.warm) and out.resolve() == OUT.resolve():
-        raise SystemExit(f"--set/--warm estimate other settings than {OUT.name}'s: name --out")
+    if args.set and out.resolve() == OUT.resolve():
+        raise SystemExit(f"--set estimates other settings than {OUT.name}'s: name --out")
 
     entries = {}
     for dataset in args.datasets:
         cfg = load_config(ROOT / "configs" / f"{dataset}.yaml", args.set)
         entry = estimate(cfg, dataset, args.data_root, args.steps, args.warm)
-        if args.set or args.warm:
-            entry["settings"] = {"set": args.set, "warm": args.warm}
+        entry["probe"] = {"warm": args.warm, "steps": list(args.steps)}
+        if args.set:
+            entry["settings"] = {"set": args.set}
         entries[dataset] = entry
         print(f"{dataset:<9} {_line(entry)} (estimated, alone on the machine)", flush=True)
     kept = {}
@@ -192,10 +197,10 @@ def main() -> None:
         # a subset re-estimated (e.g. after its configs changed): the other datasets keep
         # their earlier entries, each stamped with the date of the run that measured it
         before = json.loads(out.read_text())
-        kept = {name: {"date": before["date"], **entry}
+        kept = {name: {"date": before["date"], "machine": before["machine"], **entry}
                 for name, entry in before["datasets"].items() if name not in entries}  # fmt: skip
-    today = datetime.date.today().isoformat()
-    entries = {name: {"date": today, **entry} for name, entry in entries.items()}
+    today, here = datetime.date.today().isoformat(), machine()
+    entries = {name: {"date": today, "machine": here, **entry} for name, entry in entries.items()}
     write_meta(out, datasets={**kept, **entries})
     print(f"wrote {out}")
 

@@ -169,7 +169,8 @@ def speed_table(meta_dir: Path) -> str:
         lines.append(
             f"_Estimated minutes: `{cost_run['command']}`, {cost_run['date']}, "
             f"{cost_run['machine']}: each stage's throughput and one validation pass, measured "
-            "alone, times the config's epochs and evaluations." + _older(estimates, cost_run) + "_"
+            f"alone {_probe(cost_run['datasets'], cost_run)}, times the config's epochs and "
+            "evaluations." + _older(estimates, cost_run) + "_"
         )
     if used_repeat:
         lines.append("")
@@ -188,13 +189,34 @@ def speed_table(meta_dir: Path) -> str:
     return "\n".join(lines)
 
 
+def _probe_label(entry: dict) -> str:
+    """How an estimate was probed: warm (after N untimed short epochs) or cold (entries
+    written before the probe was recorded were cold)."""
+    warm = entry.get("probe", {}).get("warm", 0)
+    return f"after {warm} untimed warm-up epochs" if warm else "in a cold probe"
+
+
+def _probe(estimates: dict, run: dict) -> str:
+    """The probe of the entries that ``run`` itself measured."""
+    own = [e for e in estimates.values() if e.get("date", run["date"]) == run["date"]]
+    labels = sorted({_probe_label(e) for e in own}) or ["in a cold probe"]
+    return " / ".join(labels)
+
+
 def _older(estimates: dict, run: dict) -> str:
-    """A note naming the datasets whose estimate comes from an earlier run than ``run``."""
-    by_date: dict[str, list[str]] = {}
+    """A note naming the datasets whose estimate comes from an earlier run than ``run``, with
+    the machine and probe of each where they differ from ``run``'s."""
+    by_date: dict[tuple[str, str], list[str]] = {}
     for name, entry in estimates.items():
         if entry.get("date", run["date"]) != run["date"]:
-            by_date.setdefault(entry["date"], []).append(name)
-    parts = [f"{', '.join(sorted(names))} from {day}" for day, names in sorted(by_date.items())]
+            how = [] if entry.get("machine", run["machine"]) == run["machine"] else [
+                f"on {entry['machine']}"]  # fmt: skip
+            if _probe_label(entry) != _probe(estimates, run):
+                how.append(_probe_label(entry))
+            key = (entry["date"], f" ({', '.join(how)})" if how else "")
+            by_date.setdefault(key, []).append(name)
+    parts = [f"{', '.join(sorted(names))} from {day}{how}"
+             for (day, how), names in sorted(by_date.items())]  # fmt: skip
     return f" Kept from earlier runs of the same script: {'; '.join(parts)}." if parts else ""
 
 

@@ -1,5 +1,6 @@
 """benchmarks/train_cost.py: the warm probe times a second epoch and books the first one's extra
-time once; estimates of other settings never overwrite the defaults' file."""
+time once; estimates of other settings never overwrite the defaults' file, whose entries say
+how and where each was probed."""
 
 import pytest
 from bench import load_benchmark
@@ -22,15 +23,43 @@ def test_evaluations_count_every_nth_epoch_and_the_last():
     assert cost.evaluations(42, 5) == 9  # and once more after the last epoch
 
 
-@pytest.mark.parametrize("flag", [["--set", "generator.epochs=80"], ["--warm"]])
 def test_other_settings_into_the_defaults_file_are_refused_before_anything_is_timed(
-    monkeypatch, capsys, flag
+    monkeypatch, capsys
 ):
     cost = load_benchmark("train_cost")
     monkeypatch.setattr(cost, "estimate", lambda *a: pytest.fail("timed a stage"))
-    monkeypatch.setattr("sys.argv", ["train_cost.py", "--datasets", "eth", *flag])
+    monkeypatch.setattr("sys.argv", ["train_cost.py", "--datasets", "eth", "--set",
+                                     "generator.epochs=80"])  # fmt: skip
     with pytest.raises(SystemExit, match="name --out"):
         cost.main()
+
+
+def test_the_defaults_file_records_each_entrys_probe_and_machine_and_keeps_the_others(
+    monkeypatch, capsys, tmp_path
+):
+    """The warm probe (the default) writes the defaults' file; a subset keeps the other
+    datasets' entries with the date and machine of the run that measured them."""
+    import json
+
+    cost = load_benchmark("train_cost")
+    out = tmp_path / "train_cost.json"
+    monkeypatch.setattr(cost, "OUT", out)
+    seen = []
+
+    def fake(cfg, dataset, data_root, steps, warm):
+        seen.append((dataset, tuple(steps), warm))
+        return {"denoiser": {"minutes": 1.0}, "generator": {"minutes": 2.0}, "minutes": 3.0}
+
+    monkeypatch.setattr(cost, "estimate", fake)
+    out.write_text(json.dumps({"machine": "an older host", "date": "2026-11-01", "datasets": {
+        "nba": {"minutes": 9.0}, "eth": {"minutes": 8.0}}}))  # fmt: skip
+    monkeypatch.setattr("sys.argv", ["train_cost.py", "--datasets", "eth"])
+    cost.main()
+    assert seen == [("eth", (20, 60), 3)]  # the warm probe by default
+    written = json.loads(out.read_text())["datasets"]
+    assert written["eth"]["probe"] == {"warm": 3, "steps": [20, 60]}
+    assert written["eth"]["machine"] == cost.machine() and "settings" not in written["eth"]
+    assert written["nba"] == {"date": "2026-11-01", "machine": "an older host", "minutes": 9.0}
 
 
 def test_the_printed_line_of_an_estimate_with_other_settings_names_only_the_stages():

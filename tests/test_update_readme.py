@@ -52,3 +52,17 @@ def test_the_cost_table_reads_the_defaults_record_not_a_replaced_ones(tmp_path):
     assert "| zara1/generator | 1.00 M / 0.70 M | 10.0 / 21.6 |" in table
     assert "60.9" not in table
     assert "| robo-mix/generator |" in table  # a hyphen in the name is not a suffix
+
+
+def test_the_cost_note_names_the_probe_and_the_older_entries_machine_and_probe():
+    module = _module()
+    run = {"date": "2026-11-28", "machine": "host B", "command": "python x.py"}
+    estimates = {
+        "eth": {"date": "2026-11-28", "machine": "host B", "probe": {"warm": 3}},
+        "sdd": {"date": "2026-11-24", "machine": "host A"},  # before probes were recorded
+        "nba": {"date": "2026-11-27", "machine": "host B", "probe": {"warm": 3}},
+    }
+    assert module._probe(estimates, run) == "after 3 untimed warm-up epochs"
+    note = module._older(estimates, run)
+    assert "sdd from 2026-11-24 (on host A, in a cold probe)" in note
+    assert "nba from 2026-11-27." in note  # same machine and probe: only its date
