@@ -207,11 +207,12 @@ def _older(estimates: dict, run: dict) -> str:
     """A note naming the datasets whose estimate comes from an earlier run than ``run``, with
     the machine and probe of each where they differ from ``run``'s."""
     by_date: dict[tuple[str, str], list[str]] = {}
+    probe = _probe(estimates, run)
     for name, entry in estimates.items():
         if entry.get("date", run["date"]) != run["date"]:
             how = [] if entry.get("machine", run["machine"]) == run["machine"] else [
                 f"on {entry['machine']}"]  # fmt: skip
-            if _probe_label(entry) != _probe(estimates, run):
+            if _probe_label(entry) != probe:
                 how.append(_probe_label(entry))
             key = (entry["date"], f" ({', '.join(how)})" if how else "")
             by_date.setdefault(key, []).append(name)

@@ -2,6 +2,8 @@
 time once; estimates of other settings never overwrite the defaults' file, whose entries say
 how and where each was probed."""
 
+import json
+
 import pytest
 from bench import load_benchmark
 
@@ -39,8 +41,6 @@ def test_the_defaults_file_records_each_entrys_probe_and_machine_and_keeps_the_o
 ):
     """The warm probe (the default) writes the defaults' file; a subset keeps the other
     datasets' entries with the date and machine of the run that measured them."""
-    import json
-
     cost = load_benchmark("train_cost")
     out = tmp_path / "train_cost.json"
     monkeypatch.setattr(cost, "OUT", out)
