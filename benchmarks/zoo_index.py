@@ -301,7 +301,8 @@ def _cost_estimate(dataset: str, kind: str, cfg: dict[str, Any]) -> dict[str, An
     epochs = {"denoiser": cfg["denoiser"]["epochs"], "generator": cfg["generator"]["epochs"]}
     if any(cost.get(k, {}).get("epochs") != epochs[k] for k in stages):
         return None
-    return {"date": cost.get("date") or record.get("date"), "machine": record.get("machine"),
+    return {"date": cost.get("date") or record.get("date"),
+            "machine": cost.get("machine") or record.get("machine"),
             "minutes": {k: cost[k]["minutes"] for k in stages}}  # fmt: skip
 
 
