@@ -199,7 +199,7 @@ def _probe_label(entry: dict) -> str:
 def _probe(estimates: dict, run: dict) -> str:
     """The probe of the entries that ``run`` itself measured."""
     own = [e for e in estimates.values() if e.get("date", run["date"]) == run["date"]]
-    labels = sorted({_probe_label(e) for e in own}) or ["in a cold probe"]
+    labels = sorted({_probe_label(e) for e in own}) or [_probe_label({})]
     return " / ".join(labels)
 
 
