@@ -83,6 +83,11 @@ class DataConfig:
     time_step: float = 1.0
     """Read text track files every this many frame steps, positions interpolated in time
     (1: as recorded), as ``--time-step``; both splits are read alike."""
+    extra_time_step: float = 0.0
+    """A second copy of the training split's text track files, read every this many frame
+    steps (positions interpolated in time, as ``time_step`` reads them), joins the training
+    split (0: off): training on two paces, for a test file whose steps span more time than
+    their label says (eth's: about 5/3; docs/data.md). The validation split is untouched."""
     holdout_scene: str = ""
     """Validate on a scene the model does not train on ("" : the dataset's own val split):
     the training files whose name starts with this prefix (e.g. ``biwi_hotel``, ``students``,
@@ -109,6 +114,10 @@ class DataConfig:
             raise ConfigError("DataConfig.val_cut and holdout_scene exclude each other: the "
                               "held-out scene is the validation split")  # fmt: skip
         _positive(self, "max_agents", "scale_min", "scale_max", "max_coord", "time_step")
+        if self.extra_time_step < 0 or self.extra_time_step == self.time_step:
+            raise ConfigError(f"DataConfig.extra_time_step must be 0 (off) or a positive step "
+                              f"other than time_step ({self.time_step:g}), "
+                              f"got {self.extra_time_step:g}")  # fmt: skip
         if self.history_noise < 0:
             raise ConfigError(f"DataConfig.history_noise must be >= 0 (0: off), "
                               f"got {self.history_noise}")  # fmt: skip

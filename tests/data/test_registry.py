@@ -12,6 +12,7 @@ from trajpref.data import (
     mean_speed,
     resolve_data_root,
     split_validation_in_time,
+    with_paced_copy,
 )
 from trajpref.data.registry import ETH_UCY, FEET_TO_METRES, apply_protocol, robo_episodes
 from trajpref.errors import ConfigError, DataError, TrajprefError
@@ -344,3 +345,27 @@ def test_time_step_scales_the_frame_interval_and_refuses_cut_windows(tmp_path, d
     slow = load_dataset("eth", "val", data_root, options=ReadOptions(time_step=5 / 3))
     assert 0 < slow.num_agents < plain.num_agents
     assert slow.info.frame_interval == pytest.approx(0.4 * 5 / 3)
+
+
+def test_a_paced_copy_joins_training_without_the_held_out_scene():
+    info = DatasetInfo("fold", "train", "m", 0.4, source="fold/train")
+    train = TrajectoryDataset([_from("biwi_hotel_train.txt", 0), _from("students001_train.txt", 1)],
+                              info)  # fmt: skip
+    slow = dataclasses.replace(info, frame_interval=0.4 * 5 / 3)
+    paced = TrajectoryDataset([_from("biwi_hotel_train.txt", 2), _from("students001_train.txt", 3)],
+                              slow)  # fmt: skip
+    both = with_paced_copy(train, paced)
+    assert [s.scene_id for s in both.scenes] == [s.scene_id for s in train.scenes + paced.scenes]
+    assert both.info.frame_interval == 0.4 and "1.66667x its step (2 windows)" in both.info.source
+    kept = with_paced_copy(train, paced, exclude="students")
+    assert [s.scene_id for s in kept.scenes[2:]] == ["biwi_hotel_train.txt@frame=20"]
+    with pytest.raises(ConfigError, match="no window at the extra time step"):
+        with_paced_copy(train, TrajectoryDataset([], slow))
+    with pytest.raises(ConfigError, match="cannot come from fold/val"):
+        with_paced_copy(
+            train, TrajectoryDataset(paced.scenes, dataclasses.replace(slow, split="val"))
+        )
+    with pytest.raises(ConfigError, match="extra_time_step must be 0 .off. or a positive step"):
+        DataConfig(extra_time_step=1.0)
+    with pytest.raises(ConfigError, match="extra_time_step"):
+        DataConfig(extra_time_step=-0.5)

@@ -423,6 +423,31 @@ def test_a_run_with_a_held_out_scene_trains_without_it_and_validates_on_it(
     assert "holdout_scene: walk2" in (tmp_path / "held" / "config.yaml").read_text()
 
 
+def test_a_run_at_two_paces_adds_the_paced_copy_to_training_only(tmp_path, cfg):
+    import dataclasses
+
+    from synthetic import write_dataset
+
+    from trajpref.data import ReadOptions
+
+    root = write_dataset(tmp_path / "long", frames=44)  # long enough for windows at step 2
+    cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, dataset=str(root)))
+    full = train_stage("diffusion", cfg, tmp_path / "one", device="cpu", progress=False)
+    data = dataclasses.replace(cfg.data, extra_time_step=2.0, holdout_scene="walk2")
+    two = train_stage("diffusion", dataclasses.replace(cfg, data=data), tmp_path / "two",
+                      device="cpu", progress=False)  # fmt: skip
+    train = load_dataset(cfg.data.dataset, "train")
+    paced = load_dataset(cfg.data.dataset, "train", options=ReadOptions(time_step=2.0))
+
+    def agents(ds):  # the agent-windows outside the held-out scene
+        return sum(s.num_agents for s in ds.scenes if not s.scene_id.startswith("walk2"))
+
+    assert 0 < agents(paced) < agents(train)
+    assert two["train_agents"] == agents(train) + agents(paced) < full["train_agents"] + agents(
+        paced)  # the held-out scene left the copy too  # fmt: skip
+    assert "extra_time_step: 2.0" in (tmp_path / "two" / "config.yaml").read_text()
+
+
 def test_a_run_with_a_validation_cut_trains_on_its_early_windows_and_validates_on_the_rest(
     tmp_path, cfg, monkeypatch
 ):

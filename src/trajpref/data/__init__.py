@@ -9,6 +9,7 @@ from trajpref.data.registry import (
     load_dataset,
     resolve_data_root,
     split_validation_in_time,
+    with_paced_copy,
 )
 from trajpref.data.stats import mean_speed
 from trajpref.data.text import GapWarning, ReadOptions
@@ -26,6 +27,7 @@ __all__ = [
     "mean_speed",
     "resolve_data_root",
     "split_validation_in_time",
+    "with_paced_copy",
     "write_trajnet",
     "write_trajnet_truth",
 ]

@@ -179,6 +179,26 @@ def hold_out_scene(
     return TrajectoryDataset(kept, train_info), TrajectoryDataset(held, val_info)
 
 
+def with_paced_copy(
+    train: TrajectoryDataset, paced: TrajectoryDataset, exclude: str = ""
+) -> TrajectoryDataset:
+    """``train`` plus ``paced``, the same files read at another time step
+    (``ReadOptions.time_step``): a training split at two paces (``DataConfig.extra_time_step``).
+    Windows of files whose name starts with ``exclude`` (a held-out scene) are left out of the
+    copy, as they are out of ``train``."""
+    if paced.info.name != train.info.name or paced.info.split != train.info.split:
+        raise ConfigError(f"a paced copy of {train.info.name}/{train.info.split} cannot come "
+                          f"from {paced.info.name}/{paced.info.split}")  # fmt: skip
+    extra = [s for s in paced.scenes if not (exclude and scene_file(s).startswith(exclude))]
+    if not extra:
+        raise ConfigError(f"{train.info.name}'s training files give no window at the extra "
+                          "time step: no agent is seen long enough")  # fmt: skip
+    pace = paced.info.frame_interval / train.info.frame_interval
+    note = f" plus its files read at {pace:g}x its step ({len(extra)} windows)"
+    info = dataclasses.replace(train.info, source=train.info.source + note)
+    return TrajectoryDataset(list(train.scenes) + extra, info)
+
+
 def _start_frame(scene: Scene) -> int:
     """The first frame of a text-track window (its ``scene_id`` ends ``@frame=N``)."""
     _, _, tail = scene.scene_id.partition("@frame=")

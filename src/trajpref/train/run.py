@@ -3,6 +3,7 @@ shared loop, DDP-aware."""
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import typing
 from pathlib import Path
@@ -11,7 +12,13 @@ from typing import Any, Literal
 import torch
 
 from trajpref.config import ExperimentConfig, save_config
-from trajpref.data import ReadOptions, hold_out_scene, load_dataset, split_validation_in_time
+from trajpref.data import (
+    ReadOptions,
+    hold_out_scene,
+    load_dataset,
+    split_validation_in_time,
+    with_paced_copy,
+)
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError
 from trajpref.io import check_output_dir
@@ -68,6 +75,11 @@ def _run(
         if cfg.data.val_cut:
             train, val = split_validation_in_time(train, val, cfg.data.val_cut,
                                                   cfg.data.val_cut_to_train)  # fmt: skip
+        if cfg.data.extra_time_step:  # after the hold-out: the copy leaves that scene too
+            paced = dataclasses.replace(options, time_step=cfg.data.extra_time_step)
+            train = with_paced_copy(train, load_dataset(cfg.data.dataset, "train", data_root,
+                                                        options=paced),
+                                    cfg.data.holdout_scene)  # fmt: skip
         built, optim = build(train, val, dev)
         if state is not None:
             check_resume_matches(state, built.trainable, resume)
