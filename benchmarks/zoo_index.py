@@ -53,17 +53,18 @@ LIMITS = {
     "eth": "eth's test walkers are faster than any training scene: a quarter move above 2 m/s "
     "and carry 42 % of the error, so the default model is far from the paper's LED row "
     "(0.33 / 0.60); validation (the other scenes) does not see that shift.",
-    "zara1/generator-long": "160 generator epochs from the published denoiser (the fold's "
-    "config otherwise), trained on a borrowed H100 (17-18 GPU minutes beside up to 14 other "
-    "runs); the same schedule would take 1.2-1.4 hours on two CPU cores, past the 45-minute "
-    "budget, so it is published beside the CPU default, chosen on validation "
-    "(docs/pretraining.md, '160 generator epochs on a borrowed GPU').",
+    "eth/generator-pace": "Labelled: trained on a second copy of its training files read every "
+    "5/3 frame steps (`data.extra_time_step`), the pace of eth's test file as its provenance "
+    "documents it (docs/data.md). That is knowledge of the test file the other defaults do "
+    "not use, so this is a variant beside eth's default, never the default; eth's validation "
+    "split cannot choose it (docs/pretraining.md, 'eth at two paces').",
     "robo/generator-long": "Trained on a borrowed GPU (60-epoch schedule, the best epoch 38); "
     "only slightly better than the CPU default on the test split.",
     "zara1/generator": "The CPU default (160 generator epochs without denoising steps, dropout "
     "0.2; best validation epoch 72) is 0.04 m short of LED's own minFDE20 (0.18 / 0.26); the "
-    "GPU-trained `zara1/generator-long` (160 epochs with the tau = 5 steps) is no better on the "
-    "test split (docs/pretraining.md).",
+    "GPU-trained `generator-long` (160 epochs with the tau = 5 steps; its weights left the "
+    "tree on 2026-11-28, `git show 793f59a:src/trajpref/zoo/zara1/generator-long.safetensors`) "
+    "is no better on the test split (docs/pretraining.md).",
     "robo": "Trained on our simulator only, so short of the paper's Robo numbers "
     "(0.22 / 0.35); see docs/robo_sim.md for how the simulator differs.",
     "robo-mix": "One seed. Its held-out validation (4 real recordings, 135 windows) moves by "
@@ -233,8 +234,9 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
                 den = f" --denoiser {dataset}/denoiser"
             gpu = " --device cuda" if run.get("train_machine") else ""
             sets = "".join(f" --set {s}" for s in overrides(dataset, kind, cfg))
+            seed = f" --seed {cfg['seed']}" if cfg.get("seed") else ""  # the run's own seed
             train_cmd = [f"trajpref train generator --config configs/{dataset}.yaml "
-                         f"--out {out}{den}{sets}{gpu}"]  # fmt: skip
+                         f"--out {out}{den}{seed}{sets}{gpu}"]  # fmt: skip
             if not den:  # trained with its own denoiser, in the same run folder
                 # the denoiser's own settings: a data flag adopted for the generator stage only
                 # (data.flip, data.reverse) is off in the published denoiser's file

@@ -30,7 +30,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     b.add_argument("--units", default="unknown", help="coordinate units, for a folder dataset")
     b.add_argument("--models", nargs="+", required=True, metavar="NAME=MODEL",
                    help="the methods: a name and 'cv' or a checkpoint, e.g. "
-                   "long=models/zara1/generator-long.safetensors")  # fmt: skip
+                   "gen=models/zara1/generator.safetensors")  # fmt: skip
     b.add_argument("--scorer", default=None, help="the denoiser that scores every method "
                    "(default: the first checkpoint among --models)")  # fmt: skip
     b.add_argument("--scenes", type=int, default=12, help="scenes in the study (default 12)")
