@@ -27,7 +27,7 @@ import numpy as np
 import torch
 from speed_clamp import observed_step  # the clamp rule's measure of an agent's pace
 
-from trajpref.data import hold_out_scene, load_dataset
+from trajpref.data import ReadOptions, hold_out_scene, load_dataset, with_paced_copy
 from trajpref.data.loader import SceneLoader
 from trajpref.data.transforms import scene_speeds
 from trajpref.evaluation import sampled_batches
@@ -88,6 +88,11 @@ def main() -> None:
         "--variant", default=None,
         help="a published variant (models/<D>/generator-NAME.safetensors): its methods carry "
         "the suffix -NAME, its rows go to select_<D>_NAME.json")  # fmt: skip
+    parser.add_argument(
+        "--scorer", default=None,
+        help="a denoiser checkpoint (path or DATASET/NAME) that scores the samples instead of "
+        "the generator's own; the pace gate then reads its training windows, with any paced "
+        "copy it trained on (data.extra_time_step); rows carry -scorer-<its stem>")  # fmt: skip
     parser.add_argument("--samples", type=int, default=20, help="K, the candidates")
     parser.add_argument("--keep", type=int, nargs="+", default=[1, 3, 5])
     parser.add_argument("--drop", type=float, nargs="+", default=[0.25, 0.3, 0.4, 0.5, 0.6])
@@ -179,12 +184,17 @@ def main() -> None:
         speed_ref = training_speed(trained_on, args.data_root, args.speed_norm)
         print(f"speed_ref = {speed_ref:.4f} units/step (the {args.speed_norm:g}-quantile of the "
               "training split's scene speeds)")  # fmt: skip
-    scorer = TrajectoryScorer(model.denoiser, model.schedule, model.scale, steps,
-                              speed_ref=speed_ref, precision=args.score_precision)  # fmt: skip
+    if args.scorer:
+        scorer = TrajectoryScorer.from_checkpoint(args.scorer, steps=steps, speed_ref=speed_ref,
+                                                  precision=args.score_precision)  # fmt: skip
+    else:
+        scorer = TrajectoryScorer(model.denoiser, model.schedule, model.scale, steps,
+                                  speed_ref=speed_ref, precision=args.score_precision)  # fmt: skip
     trust_speed, cuts = 0.0, []
     if args.trust_quantile is not None or args.pace_bins:
-        train_pace = observed_step(load_dataset(trained_on, "train", args.data_root),
-                                   model.scale)  # fmt: skip
+        gate_data = (scorer_training_split(args.scorer, args.data_root) if args.scorer
+                     else load_dataset(trained_on, "train", args.data_root))  # fmt: skip
+        train_pace = observed_step(gate_data, model.scale)
         cuts = [float(np.quantile(train_pace, q)) for q in sorted(args.pace_bins or [])]
     if args.trust_quantile is not None:
         trust_speed = float(np.quantile(train_pace, args.trust_quantile))
@@ -263,6 +273,8 @@ def main() -> None:
         """A row's method: the setting's name with the suffixes of this run's options."""
         method = method if args.draws == 1 else f"{method}-x{args.draws}"
         method += f"-{args.variant}" if args.variant else ""
+        if args.scorer and uses_score:
+            method += f"-scorer-{scorer_label(args.scorer)}"
         if steps_tag and uses_score:
             method += f"-{steps_tag}"
         if args.speed_norm is not None and uses_score:  # the score-free rows are as before
@@ -302,7 +314,7 @@ def main() -> None:
             "speed_ref": speed_ref, "stretch": args.stretch, "draws": args.draws,
             "trust_speed": trust_speed, "trust_quantile": args.trust_quantile,
             "score_precision": args.score_precision, "pace_bins": pace,
-            "holdout_scene": args.holdout_scene,
+            "holdout_scene": args.holdout_scene, "scorer": args.scorer,
             "command": command_line(), "machine": machine()}  # fmt: skip
     out_dir = ROOT / "benchmarks" / "results"
     variant = f"_{args.variant}" if args.variant else ""
@@ -328,6 +340,28 @@ def training_dataset(path: Path) -> str:
     the split the pace gate and the speed normalisation read (``robo``'s models train on
     ``robo-sim``; the ETH/UCY folds on their own leave-one-out training split)."""
     return read_checkpoint_header(path)["config"]["data"]["dataset"]
+
+
+def scorer_label(scorer: str) -> str:
+    """A scorer's name in row methods: its run folder for a file path (``runs/pace/eth-den/
+    denoiser.safetensors`` -> ``eth-den``), the name itself for a published ``DATASET/NAME``."""
+    path = Path(scorer)
+    if path.suffix:
+        return path.parent.name or path.stem
+    return scorer.replace("/", "-")
+
+
+def scorer_training_split(scorer: str, data_root: str | None) -> TrajectoryDataset:
+    """The windows a denoiser checkpoint trained on, as its recorded config reads them: its
+    dataset's training split, plus the copy at ``data.extra_time_step`` when it had one."""
+    data = read_checkpoint_header(ckpt.resolve_path(scorer))["config"]["data"]
+    train = load_dataset(data["dataset"], "train", data_root)
+    step = data.get("extra_time_step") or 0.0
+    if step:
+        paced = load_dataset(data["dataset"], "train", data_root,
+                             options=ReadOptions(time_step=step))  # fmt: skip
+        train = with_paced_copy(train, paced)
+    return train
 
 
 def training_speed(dataset: str, data_root: str | None, quantile: float) -> float:

@@ -112,3 +112,27 @@ def test_rows_name_their_score_steps_and_bandwidth_when_not_the_papers(
     assert methods == {"select-facility": False,
                        f"select-score-facility-d30-t2-b1-s{steps}": True}  # fmt: skip
     assert meta["score_every"] == 50
+
+
+def test_another_scorer_names_the_score_rows_and_the_same_denoiser_scores_alike(
+    tmp_path, monkeypatch, tiny_run, walks
+):
+    extra = ["--methods", "kmeans", "score-facility", "--trust-quantile", "0.5"]
+    own, _ = _test_rows(tmp_path / "own", monkeypatch, tiny_run, walks, *extra)
+    den = str(tiny_run / "denoiser.safetensors")  # the generator's own denoiser, by path
+    other, meta = _test_rows(tmp_path / "other", monkeypatch, tiny_run, walks, *extra,
+                             "--scorer", den)  # fmt: skip
+    own = {r["method"]: r["min_fde"] for r in own}
+    other = {r["method"]: r["min_fde"] for r in other}
+    label = tiny_run.name
+    assert set(other) == {"select-kmeans", f"select-score-facility-d30-t2-scorer-{label}-gate"}
+    assert other["select-kmeans"] == own["select-kmeans"]
+    assert other[f"select-score-facility-d30-t2-scorer-{label}-gate"] == pytest.approx(
+        own["select-score-facility-d30-t2-gate"])  # fmt: skip
+    assert meta["scorer"] == den
+
+
+def test_a_scorers_label_is_its_run_folder_or_its_published_name():
+    sel = load_benchmark("selection")
+    assert sel.scorer_label("runs/pace/eth-den/denoiser.safetensors") == "eth-den"
+    assert sel.scorer_label("eth/denoiser") == "eth-denoiser"
