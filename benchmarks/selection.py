@@ -27,7 +27,7 @@ import numpy as np
 import torch
 from speed_clamp import observed_step  # the clamp rule's measure of an agent's pace
 
-from trajpref.data import ReadOptions, hold_out_scene, load_dataset, with_paced_copy
+from trajpref.data import add_paced_copy, hold_out_scene, load_dataset
 from trajpref.data.loader import SceneLoader
 from trajpref.data.transforms import scene_speeds
 from trajpref.evaluation import sampled_batches
@@ -357,11 +357,7 @@ def scorer_training_split(scorer: str, data_root: str | None) -> TrajectoryDatas
     data = read_checkpoint_header(ckpt.resolve_path(scorer))["config"]["data"]
     train = load_dataset(data["dataset"], "train", data_root)
     step = data.get("extra_time_step") or 0.0
-    if step:
-        paced = load_dataset(data["dataset"], "train", data_root,
-                             options=ReadOptions(time_step=step))  # fmt: skip
-        train = with_paced_copy(train, paced)
-    return train
+    return add_paced_copy(train, step, data_root) if step else train
 
 
 def training_speed(dataset: str, data_root: str | None, quantile: float) -> float:

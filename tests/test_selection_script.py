@@ -136,3 +136,21 @@ def test_a_scorers_label_is_its_run_folder_or_its_published_name():
     sel = load_benchmark("selection")
     assert sel.scorer_label("runs/pace/eth-den/denoiser.safetensors") == "eth-den"
     assert sel.scorer_label("eth/denoiser") == "eth-denoiser"
+
+
+def test_a_scorers_gate_reads_its_training_windows_with_their_paced_copy(tmp_path, monkeypatch):
+    from synthetic import write_dataset
+
+    from trajpref.data import ReadOptions, load_dataset
+
+    sel = load_benchmark("selection")
+    root = write_dataset(tmp_path / "long", frames=44)  # long enough for windows at step 2
+    data = {"dataset": str(root), "extra_time_step": 2.0}
+    monkeypatch.setattr(sel.ckpt, "resolve_path", lambda p: p)
+    monkeypatch.setattr(sel, "read_checkpoint_header", lambda p: {"config": {"data": data}})
+    plain = load_dataset(str(root), "train")
+    paced = load_dataset(str(root), "train", options=ReadOptions(time_step=2.0))
+    both = sel.scorer_training_split("den.safetensors", None)
+    assert both.num_agents == plain.num_agents + paced.num_agents > plain.num_agents
+    data["extra_time_step"] = 0.0  # a scorer trained at one pace: its split as read
+    assert sel.scorer_training_split("den.safetensors", None).num_agents == plain.num_agents

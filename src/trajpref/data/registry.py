@@ -199,6 +199,21 @@ def with_paced_copy(
     return TrajectoryDataset(list(train.scenes) + extra, info)
 
 
+def add_paced_copy(
+    train: TrajectoryDataset,
+    step: float,
+    root: str | Path | None = None,
+    options: text.ReadOptions | None = None,
+    exclude: str = "",
+) -> TrajectoryDataset:
+    """``train`` with its own files read again every ``step`` frame steps joined to it
+    (``with_paced_copy``; the other reading options as ``options``): how a run with
+    ``DataConfig.extra_time_step`` builds its training split."""
+    paced = dataclasses.replace(options or text.ReadOptions(), time_step=step)
+    copy = load_dataset(train.info.name, train.info.split, root, options=paced)
+    return with_paced_copy(train, copy, exclude)
+
+
 def _start_frame(scene: Scene) -> int:
     """The first frame of a text-track window (its ``scene_id`` ends ``@frame=N``)."""
     _, _, tail = scene.scene_id.partition("@frame=")

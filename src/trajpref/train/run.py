@@ -3,7 +3,6 @@ shared loop, DDP-aware."""
 
 from __future__ import annotations
 
-import dataclasses
 import time
 import typing
 from pathlib import Path
@@ -14,10 +13,10 @@ import torch
 from trajpref.config import ExperimentConfig, save_config
 from trajpref.data import (
     ReadOptions,
+    add_paced_copy,
     hold_out_scene,
     load_dataset,
     split_validation_in_time,
-    with_paced_copy,
 )
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError
@@ -76,10 +75,8 @@ def _run(
             train, val = split_validation_in_time(train, val, cfg.data.val_cut,
                                                   cfg.data.val_cut_to_train)  # fmt: skip
         if cfg.data.extra_time_step:  # after the hold-out: the copy leaves that scene too
-            paced = dataclasses.replace(options, time_step=cfg.data.extra_time_step)
-            train = with_paced_copy(train, load_dataset(cfg.data.dataset, "train", data_root,
-                                                        options=paced),
-                                    cfg.data.holdout_scene)  # fmt: skip
+            train = add_paced_copy(train, cfg.data.extra_time_step, data_root, options,
+                                   cfg.data.holdout_scene)  # fmt: skip
         built, optim = build(train, val, dev)
         if state is not None:
             check_resume_matches(state, built.trainable, resume)
