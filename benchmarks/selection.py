@@ -194,7 +194,7 @@ def main() -> None:
     if args.trust_quantile is not None or args.pace_bins:
         gate_data = (scorer_training_split(args.scorer, args.data_root) if args.scorer
                      else load_dataset(trained_on, "train", args.data_root))  # fmt: skip
-        train_pace = observed_step(gate_data, scorer.scale)  # in the scorer's model units
+        train_pace = observed_step(gate_data, model.scale)
         cuts = [float(np.quantile(train_pace, q)) for q in sorted(args.pace_bins or [])]
     if args.trust_quantile is not None:
         trust_speed = float(np.quantile(train_pace, args.trust_quantile))
