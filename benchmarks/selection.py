@@ -27,7 +27,7 @@ import numpy as np
 import torch
 from speed_clamp import observed_step  # the clamp rule's measure of an agent's pace
 
-from trajpref.data import add_paced_copy, hold_out_scene, load_dataset
+from trajpref.data import hold_out_scene, load_dataset, run_splits
 from trajpref.data.loader import SceneLoader
 from trajpref.data.transforms import scene_speeds
 from trajpref.evaluation import sampled_batches
@@ -352,12 +352,11 @@ def scorer_label(scorer: str) -> str:
 
 
 def scorer_training_split(scorer: str, data_root: str | None) -> TrajectoryDataset:
-    """The windows a denoiser checkpoint trained on, as its recorded config reads them: its
-    dataset's training split, plus the copy at ``data.extra_time_step`` when it had one."""
-    data = read_checkpoint_header(ckpt.resolve_path(scorer))["config"]["data"]
-    train = load_dataset(data["dataset"], "train", data_root)
-    step = data.get("extra_time_step") or 0.0
-    return add_paced_copy(train, step, data_root) if step else train
+    """The windows a denoiser checkpoint trained on, built from its recorded data config as
+    its run built them (``data.run_splits``: reading options, held-out scene, validation cut,
+    and the copy at ``data.extra_time_step`` when it had one)."""
+    header = read_checkpoint_header(ckpt.resolve_path(scorer))
+    return run_splits(ckpt.config_of(header).data, data_root)[0]
 
 
 def training_speed(dataset: str, data_root: str | None, quantile: float) -> float:

@@ -11,6 +11,7 @@ from trajpref.data import (
     load_dataset,
     mean_speed,
     resolve_data_root,
+    run_splits,
     split_validation_in_time,
     with_paced_copy,
 )
@@ -369,3 +370,20 @@ def test_a_paced_copy_joins_training_without_the_held_out_scene():
         DataConfig(extra_time_step=1.0)
     with pytest.raises(ConfigError, match="extra_time_step"):
         DataConfig(extra_time_step=-0.5)
+
+
+def test_run_splits_hold_out_then_add_the_paced_copy_without_the_held_out_scene(tmp_path):
+    from synthetic import write_dataset
+
+    root = str(write_dataset(tmp_path / "long", frames=44))  # windows at step 2 too
+    plain_train, plain_val = run_splits(DataConfig(dataset=root))
+    assert [s.scene_id for s in plain_train.scenes] == [
+        s.scene_id for s in load_dataset(root, "train").scenes]  # fmt: skip
+    assert plain_val.num_agents == load_dataset(root, "val").num_agents
+    train, val = run_splits(DataConfig(dataset=root, holdout_scene="walk2", extra_time_step=2.0))
+    held, held_val = hold_out_scene(load_dataset(root, "train"), load_dataset(root, "val"), "walk2")
+    paced = load_dataset(root, "train", options=ReadOptions(time_step=2.0))
+    extra = [s for s in paced.scenes if not s.scene_id.startswith("walk2")]
+    assert 0 < len(extra) < len(paced.scenes)
+    assert [s.scene_id for s in train.scenes] == [s.scene_id for s in held.scenes + extra]
+    assert [s.scene_id for s in val.scenes] == [s.scene_id for s in held_val.scenes]

@@ -403,15 +403,15 @@ def test_a_run_with_a_held_out_scene_trains_without_it_and_validates_on_it(
 ):
     import dataclasses
 
-    from trajpref.train import run
+    from trajpref.data import registry  # where run_splits calls it
 
-    seen, original = {}, run.hold_out_scene
+    seen, original = {}, registry.hold_out_scene
 
     def spy(train, val, prefix):
         seen["train"], seen["val"] = original(train, val, prefix)
         return seen["train"], seen["val"]
 
-    monkeypatch.setattr(run, "hold_out_scene", spy)
+    monkeypatch.setattr(registry, "hold_out_scene", spy)
     full = train_stage("diffusion", cfg, tmp_path / "all", device="cpu", progress=False)
     assert not seen  # no held-out scene: the usual splits
     held_cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, holdout_scene="walk2"))
@@ -453,15 +453,15 @@ def test_a_run_with_a_validation_cut_trains_on_its_early_windows_and_validates_o
 ):
     import dataclasses
 
-    from trajpref.train import run
+    from trajpref.data import registry  # where run_splits calls it
 
-    seen, original = [], run.split_validation_in_time
+    seen, original = [], registry.split_validation_in_time
 
     def spy(train, val, share, to_train):
         seen.append(original(train, val, share, to_train))
         return seen[-1]
 
-    monkeypatch.setattr(run, "split_validation_in_time", spy)
+    monkeypatch.setattr(registry, "split_validation_in_time", spy)
     root = write_dataset(tmp_path / "long", frames=70)  # 51 windows per file, room for the gap
     cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, dataset=str(root)))
     full = train_stage("diffusion", cfg, tmp_path / "all", device="cpu", progress=False)

@@ -9,6 +9,7 @@ from trajpref.data.registry import (
     hold_out_scene,
     load_dataset,
     resolve_data_root,
+    run_splits,
     split_validation_in_time,
     with_paced_copy,
 )
@@ -28,6 +29,7 @@ __all__ = [
     "load_dataset",
     "mean_speed",
     "resolve_data_root",
+    "run_splits",
     "split_validation_in_time",
     "with_paced_copy",
     "write_trajnet",

@@ -11,6 +11,7 @@ import dataclasses
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,6 +19,9 @@ from trajpref.data import arrays, text, trajnet
 from trajpref.data.robo_sim import simulate
 from trajpref.errors import ConfigError, DataError, TrajprefError
 from trajpref.types import DatasetInfo, Scene, TrajectoryDataset
+
+if TYPE_CHECKING:
+    from trajpref.config import DataConfig
 
 ETH_UCY = ("eth", "hotel", "univ", "zara1", "zara2")
 """The five ETH/UCY leave-one-out folds."""
@@ -262,6 +266,26 @@ def split_validation_in_time(
         train_info = dataclasses.replace(train.info, source=train.info.source + note)
         train = TrajectoryDataset(list(train.scenes) + early, train_info)
     return train, TrajectoryDataset(late, val_info)
+
+
+def run_splits(
+    data: DataConfig, root: str | Path | None = None
+) -> tuple[TrajectoryDataset, TrajectoryDataset]:
+    """A run's training and validation splits as its data config builds them: both read with
+    its reading options, then its held-out scene, its validation cut in time, and last its
+    paced copy (``extra_time_step``; after the hold-out, so the copy leaves that scene too).
+    The training loop reads its data this way, and so does anything that must see the windows a
+    checkpoint trained on (``models.checkpoint.config_of(...).data``)."""
+    options = text.ReadOptions(data.delimiter, data.max_gap, data.max_coord, data.time_step)
+    train = load_dataset(data.dataset, "train", root, options=options)
+    val = load_dataset(data.val_dataset or data.dataset, "val", root, options=options)
+    if data.holdout_scene:
+        train, val = hold_out_scene(train, val, data.holdout_scene)
+    if data.val_cut:
+        train, val = split_validation_in_time(train, val, data.val_cut, data.val_cut_to_train)
+    if data.extra_time_step:
+        train = add_paced_copy(train, data.extra_time_step, root, options, data.holdout_scene)
+    return train, val
 
 
 def _load(

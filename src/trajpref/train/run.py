@@ -11,13 +11,7 @@ from typing import Any, Literal
 import torch
 
 from trajpref.config import ExperimentConfig, save_config
-from trajpref.data import (
-    ReadOptions,
-    add_paced_copy,
-    hold_out_scene,
-    load_dataset,
-    split_validation_in_time,
-)
+from trajpref.data import run_splits
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError
 from trajpref.io import check_output_dir
@@ -59,24 +53,12 @@ def _run(
     anything is written (a failed check leaves nothing behind)."""
     check_output_dir(out_dir)
     state = load_resume_state(resume, name) if resume is not None else None
-    options = ReadOptions(cfg.data.delimiter, cfg.data.max_gap, cfg.data.max_coord,
-                          cfg.data.time_step)  # fmt: skip
     dev = resolve_device(device)
     info, dev = init_from_env(dev)
     torch.set_num_threads(max(1, torch.get_num_threads() // max(1, info.world_size)))
     out_dir = Path(out_dir)
     try:
-        train = load_dataset(cfg.data.dataset, "train", data_root, options=options)
-        val = load_dataset(cfg.data.val_dataset or cfg.data.dataset, "val", data_root,
-                           options=options)  # fmt: skip
-        if cfg.data.holdout_scene:
-            train, val = hold_out_scene(train, val, cfg.data.holdout_scene)
-        if cfg.data.val_cut:
-            train, val = split_validation_in_time(train, val, cfg.data.val_cut,
-                                                  cfg.data.val_cut_to_train)  # fmt: skip
-        if cfg.data.extra_time_step:  # after the hold-out: the copy leaves that scene too
-            train = add_paced_copy(train, cfg.data.extra_time_step, data_root, options,
-                                   cfg.data.holdout_scene)  # fmt: skip
+        train, val = run_splits(cfg.data, data_root)
         built, optim = build(train, val, dev)
         if state is not None:
             check_resume_matches(state, built.trainable, resume)
