@@ -36,6 +36,9 @@ weighted by each job's estimated cost gives the ETA. CPU time (this process plus
 children, ``resource.getrusage``) is logged per invocation in
 ``benchmarks/results/meta/reproduce/invocations.json`` and summed.
 
+``--datasets`` limits what a run measures or trains, not what the tables list: a dataset left
+out keeps the cells that earlier runs stored for it (while their keys still match).
+
 Writes docs/reproduce.md (generated) and benchmarks/results/meta/reproduce.json; no rows are
 added to benchmarks/results/*.json by this script itself.
 """
@@ -247,7 +250,20 @@ def evaluation_job(
         return Job("evaluate", dataset, column, gen, SAMPLERS[column]) if (
             gen.is_file() or will_pretrain) else None  # fmt: skip
     published = generator_path(setup, dataset, column_method(column, opts.best))
-    return Job("evaluate", dataset, column, published, "leapfrog") if published.is_file() else None
+    if not (published.is_file() and tuned_from_today(published, gen)):
+        return None
+    return Job("evaluate", dataset, column, published, "leapfrog")
+
+
+def tuned_from_today(tuned: Path, generator: Path) -> bool:
+    """Whether a published fine-tuned generator started from the dataset's published default
+    (the start's weights hash that fine-tuning writes into ``meta.from``). One fine-tuned from
+    a default since replaced is not today's column: its cell comes from rows of runs from
+    today's start, or full mode trains them."""
+    if not generator.is_file():
+        return False
+    start = (read_checkpoint_header(tuned).get("meta") or {}).get("from")
+    return start is not None and start == read_checkpoint_header(generator).get("hash")
 
 
 def plan(opts: argparse.Namespace, setup: Setup) -> list[Job]:
@@ -491,11 +507,21 @@ def missing_cell(note: str, detail: str) -> dict:
     return {**dict.fromkeys(RESULT_KEYS), "source": "missing", "note": note, "detail": detail}
 
 
+def table_datasets(opts: argparse.Namespace, setup: Setup) -> list[str]:
+    """The datasets the tables list, in table order: the ones this run was asked for and every
+    other one that an earlier run stored an evaluation of, so that ``--datasets zara1`` adds to
+    docs/reproduce.md instead of replacing it (their cells still count only while their
+    stored keys match today's checkpoints and options)."""
+    names = (*DATASETS, *setup.sources)
+    stored = {d for d in names if any(state_file(setup, d, c).is_file() for c in COLUMNS)}
+    return [d for d in names if d in opts.datasets or d in stored]
+
+
 def build_cells(opts: argparse.Namespace, setup: Setup, failed: list[Job]) -> dict:
-    """Every cell of our side: {dataset: {column: cell}}."""
+    """Every cell of our side: {dataset: {column: cell}}, for ``table_datasets``."""
     rows = result_rows(setup)
     cells: dict[str, dict[str, dict]] = {}
-    for dataset in opts.datasets:
+    for dataset in table_datasets(opts, setup):
         out = cells[dataset] = {}
         gen = generator_path(setup, dataset)
         trainable = (setup.configs / f"{dataset}.yaml").is_file()
@@ -706,7 +732,14 @@ def parse_args(argv: list[str] | None, setup: Setup) -> argparse.Namespace:
         "--report", action="store_true", help="run nothing: rebuild the tables from what is stored"
     )
     names = (*DATASETS, *setup.sources)
-    parser.add_argument("--datasets", nargs="+", default=list(DATASETS), choices=names)
+    parser.add_argument(
+        "--datasets",
+        nargs="+",
+        default=list(DATASETS),
+        choices=names,
+        help="measure or train these only (default: all); the tables also keep the stored "
+        "cells of the others",
+    )
     parser.add_argument(
         "--best",
         default="rlhf-set",
@@ -820,6 +853,7 @@ def main(argv: list[str] | None = None, setup: Setup | None = None) -> dict:
     summary = {
         "generated_by": command_line(), "date": date.today().isoformat(), "machine": machine(),
         "mode": "report" if opts.report else entry["mode"], "datasets": opts.datasets,
+        "table_datasets": list(cells),
         "samples": opts.samples, "seed": opts.seed, "best_method": opts.best,
         "max_scenes": opts.max_scenes, "wall_seconds": round(wall, 1), "cpu_hours": cpu,
         "jobs": {"run": [j.label for j in done], "failed": [j.label for j in failed],

@@ -25,7 +25,7 @@ from trajpref.config import GENERATOR_ONLY, load_config, to_dict
 from trajpref.data.registry import SPECS
 from trajpref.models import checkpoint as ckpt
 from trajpref.models import zoo
-from trajpref.results import read_rows
+from trajpref.results import START_SUFFIXES, read_rows
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
@@ -166,6 +166,16 @@ def newest_rows(rows: list[dict[str, Any]]) -> dict[tuple, dict[str, Any]]:
     return out
 
 
+def tuned_row(rows: list[dict[str, Any]], dataset: str, stem: str) -> dict[str, Any] | None:
+    """The seed-0 test row of a published fine-tuned generator ``<dataset>/<stem>``: method
+    ``stem``, or ``stem`` with the suffix of the start it was trained from once that start was
+    retired (``benchmarks/retire_start.py``)."""
+    names = {stem, *(stem + s for s in START_SUFFIXES)}
+    found = [r for r in rows if r["dataset"] == dataset and r["method"] in names
+             and r["seed"] == 0]  # fmt: skip
+    return min(found, key=lambda r: r["method"] != stem, default=None)
+
+
 def _test_row(row: dict[str, Any]) -> dict[str, Any]:
     keys = ("split", "samples", "seed", "min_ade", "min_fde", "joint_min_ade", "joint_min_fde",
             "date", "machine", "command")  # fmt: skip
@@ -215,12 +225,21 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
         entry["sampler"] = "leapfrog"
         if "method" in meta:  # a fine-tuned generator (benchmarks/finetune.py --publish)
             entry["method"] = meta["method"]
-            row = next((r for r in rows if r["dataset"] == dataset and r["method"] == stem
-                        and r["seed"] == 0), None)  # fmt: skip
+            row, start = tuned_row(rows, dataset, stem), f"{dataset}/generator"
             run = _meta(dataset, None)
             machine = row["machine"] if row else None
-            train_cmd = [f"trajpref finetune --method {meta['method']} --from {dataset}/generator "
-                         f"--out runs/{dataset}-{stem}"]  # fmt: skip
+            today = zoo.header(path.parent / f"generator{ckpt.SUFFIX}").get("hash")
+            train_cmd = []
+            if meta.get("from") != today:  # fine-tuned from a default since replaced
+                suffix = row["method"].removeprefix(stem) if row else ""
+                kept = next((r for r in rows if r["dataset"] == dataset
+                             and r["method"] == f"pretrained{suffix}"), None)  # fmt: skip
+                where = f" ({kept['checkpoint']})" if kept and suffix else ""
+                train_cmd.append(f"# from {dataset}'s default generator of its day, weights hash "
+                                 f"{meta.get('from')}, since replaced{where}:")  # fmt: skip
+                start = "START.safetensors"
+            train_cmd.append(f"trajpref finetune --method {meta['method']} --from {start} "
+                             f"--out runs/{dataset}-{stem}")  # fmt: skip
             minutes = {"finetune": round(meta["train_seconds"] / 60, 1)}
         else:
             entry["method"] = "pretrained" + (f"-{variant}" if variant else "")

@@ -333,3 +333,41 @@ def test_full_mode_trains_with_the_equal_budget_tables_arguments(setup, tmp_path
         device = mine.index("--device")
         assert mine[2:device] + mine[device + 2 :] == theirs[2:]
     assert len(seen) == len(reproduce.TRAIN_ARGS)
+
+
+def test_a_run_on_some_datasets_keeps_the_stored_cells_of_the_others(setup, monkeypatch):
+    reproduce.main(["--quick", "--datasets", "walks", "bare", *SAMPLES], setup)
+    calls = _counting(monkeypatch)
+    out = reproduce.main(["--quick", "--datasets", "bare", *SAMPLES], setup)
+    assert calls == []  # bare's constant velocity was stored by the first run
+    assert out["datasets"] == ["bare"]
+    assert out["table_datasets"] == ["walks", "bare"]
+    assert out["cells"]["walks"]["pretrained"]["source"] == "evaluated"
+    doc = setup.doc.read_text()
+    assert sum(line.startswith("| walks |") for line in doc.splitlines()) == 2  # Tables 1, 2
+    # a stored cell of a left-out dataset still counts only while its key matches
+    out = reproduce.main(["--quick", "--datasets", "bare", "--samples", "3"], setup)
+    assert out["cells"]["walks"]["pretrained"]["note"] == "not measured"
+
+
+def test_a_published_fine_tune_fills_its_column_only_when_it_started_from_todays_generator(
+    setup, tiny_run, tmp_path
+):
+    gen = setup.models / "walks" / "generator.safetensors"
+    today = reproduce.read_checkpoint_header(gen)["hash"]
+
+    def publish_tuned(start_hash: str) -> None:
+        payload = checkpoint.load(tiny_run / "generator.safetensors")
+        payload["meta"] = {**payload.get("meta", {}), "method": "rlhf-res", "from": start_hash}
+        checkpoint.save(tmp_path / "tuned.safetensors", payload)
+        checkpoint.publish(tmp_path / "tuned.safetensors", gen.parent / "rlhf-res.safetensors")
+
+    def labels(argv: list[str]) -> set[str]:
+        return {j.label for j in reproduce.plan(reproduce.parse_args(argv, setup), setup)}
+
+    publish_tuned(today)
+    quick = ["--quick", "--datasets", "walks"]
+    assert "evaluate walks rlhf-res" in labels(quick)
+    publish_tuned("0123456789abcdef")  # fine-tuned from a default since replaced
+    assert "evaluate walks rlhf-res" not in labels(quick)
+    assert any(label.startswith("finetune walks rlhf-res") for label in labels(quick[1:]))
