@@ -231,6 +231,13 @@ class ModelConfig:
     the speed clamp are unaffected. Validation futures of zara1, hotel and eth lie within
     0.012 m ADE / 0.005 m FDE of that span at r = 5 (benchmarks/future_span.py;
     docs/pretraining.md, "Smooth outputs")."""
+    pair_distance: bool = False
+    """Whether the generator's attention across agents also reads, for each pair, their
+    distance and closing speed (the rate at which that distance changes at the last observed
+    step; negative when approaching), beside j's position and velocity relative to i. The
+    raw relative coordinates hold the same information, but a distance is a norm that a small
+    MLP of them only approximates; social models weigh neighbours by it
+    (docs/pretraining.md, "Pair distance and closing speed")."""
     scene_position: bool = False
     """Whether the generator also sees where each agent is and which way it heads in the
     scene's own coordinates (its last observed position, divided by the data scale, and the
@@ -327,6 +334,7 @@ GENERATOR_ONLY = (
     "max_speed",
     "spread_scale",
     "future_rank",
+    "pair_distance",
     "scene_position",
     "query_layers",
     "query_width",

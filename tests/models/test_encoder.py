@@ -111,3 +111,25 @@ def test_encoder_is_translation_invariant():
     shifted = [scenes[0], _shifted(scenes[1], [100.0, -40.0])]  # scene 1 has a padded slot
     out2 = enc(scene_features(collate(shifted), 1.0))
     torch.testing.assert_close(out2, out, atol=1e-4, rtol=1e-4)
+
+
+def test_pair_distance_and_closing_speed_by_hand():
+    from trajpref.models.encoder import with_distance
+
+    geom = torch.tensor([[3.0, 4.0, -0.6, -0.8], [0.0, 0.0, 1.0, 0.0]])  # approaching; itself
+    out = with_distance(geom, eps=0.0 + 1e-6)
+    torch.testing.assert_close(out[:, :4], geom)
+    torch.testing.assert_close(out[0, 4:], torch.tensor([5.0, -1.0]))  # 5 m apart, 1 m/s closer
+    assert torch.isfinite(out[1]).all() and out[1, 4] < 1e-5 and out[1, 5] == 0
+
+
+def test_an_encoder_with_pair_distances_reads_six_features_and_still_never_mixes_scenes():
+    torch.manual_seed(0)
+    enc = SocialEncoder(8, 16, 1, 2, pair_distance=True).eval()
+    assert enc.layers[0].edge[0].in_features == 6
+    f = scene_features(collate(_scenes()), 1.0)
+    other = collate([make_scene(3, seed=0), make_scene(2, seed=5)])  # scene 1 changed
+    with torch.no_grad():
+        a, b = enc(f), enc(scene_features(other, 1.0))
+    torch.testing.assert_close(a[:3], b[:3])  # scene 0's agents do not see scene 1
+    assert not torch.allclose(a[3:], b[3:])

@@ -410,3 +410,19 @@ def test_the_query_width_is_not_checked_when_there_is_no_query_decoder():
     assert cfg.query_layers == 0 and cfg.query_width % cfg.heads
     with pytest.raises(ConfigError, match="query_width"):
         dataclasses.replace(cfg, query_layers=1)
+
+
+def test_pair_distances_keep_the_heading_frame_and_the_speed_clamp_equivariant():
+    torch.manual_seed(0)
+    cfg = dataclasses.replace(TINY, agent_frame="heading", max_speed=1e-3, pair_distance=True)
+    assert cfg.denoiser_part() == dataclasses.replace(cfg, pair_distance=False).denoiser_part()
+    gen = Generator(cfg).eval()
+    features = scene_features(collate([make_scene(3), make_scene(2, seed=1)]), 1.0)
+    turned, rot = _rotated(features, 1.1)
+    fast = dataclasses.replace(features, hist=3 * features.hist, geom=3 * features.geom)
+    with torch.no_grad():
+        a, b, c = gen(features), gen(turned), gen(fast)
+    torch.testing.assert_close(b.mean, a.mean @ rot.T, atol=1e-4, rtol=0)
+    torch.testing.assert_close(c.initial_sample(), 3 * a.initial_sample(), atol=1e-4, rtol=1e-4)
+    plain = Generator(dataclasses.replace(cfg, pair_distance=False))
+    assert set(gen.state_dict()) == set(plain.state_dict())  # only the edge width differs

@@ -58,13 +58,16 @@ class SocialEncoder(nn.Module):
     (``ModelConfig.scene_position``)."""
 
     def __init__(self, t_hist: int, hidden: int, layers: int, heads: int, num_types: int = 2,
-                 temporal: bool = False, site: bool = False):  # fmt: skip
+                 temporal: bool = False, site: bool = False,
+                 pair_distance: bool = False):  # fmt: skip
         super().__init__()
+        self.pair_distance = pair_distance
         self.embed = mlp([t_hist * 4, hidden, hidden])
         self.temporal = nn.GRU(4, hidden, batch_first=True) if temporal else None
         self.site_embed = mlp([4, hidden, hidden]) if site else None
         self.type_embed = nn.Embedding(num_types, hidden)
-        self.layers = nn.ModuleList(SocialAttention(hidden, heads) for _ in range(layers))
+        edges = 6 if pair_distance else 4
+        self.layers = nn.ModuleList(SocialAttention(hidden, heads, edges) for _ in range(layers))
         self.norm = nn.LayerNorm(hidden)
 
     def forward(self, f: SceneFeatures, site: torch.Tensor | None = None) -> torch.Tensor:
@@ -81,9 +84,22 @@ class SocialEncoder(nn.Module):
         b, p = f.mask.shape
         padded = h.new_zeros(b, p, h.shape[-1])  # [B, P, H]
         padded[f.scene, f.slot] = h
+        geom = with_distance(f.geom) if self.pair_distance else f.geom  # [B, P, P, 4 or 6]
         for layer in self.layers:
-            padded = layer(padded, f.geom, f.mask)
+            padded = layer(padded, geom, f.mask)
         return self.norm(padded[f.scene, f.slot])  # [N, H]
+
+
+def with_distance(geom: torch.Tensor, eps: float = 1e-3) -> torch.Tensor:
+    """Pair features [..., 4] (j's position and velocity relative to i) with two more: the
+    pair's distance sqrt(|dp|^2 + eps^2) and its closing speed dp . dv / distance (the
+    distance's rate of change; negative when approaching) -> [..., 6]. Both are invariant
+    to rotations and scale with the scene, so the heading frame and the speed clamp keep
+    them consistent; eps keeps an agent's pair with itself finite."""
+    dp, dv = geom[..., :2], geom[..., 2:]
+    dist = (dp.square().sum(-1, keepdim=True) + eps**2).sqrt()  # [..., 1]
+    closing = (dp * dv).sum(-1, keepdim=True) / dist  # [..., 1]
+    return torch.cat([geom, dist, closing], -1)
 
 
 def heading_rotation(hist: torch.Tensor, eps: float = 1e-4) -> torch.Tensor:

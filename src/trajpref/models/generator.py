@@ -62,7 +62,8 @@ class Generator(nn.Module):
         layers = cfg.generator_encoder_layers if cfg.generator_social else 0  # 0: own history only
         self.encoder = SocialEncoder(cfg.t_hist, h, layers, cfg.heads,
                                      temporal=cfg.history_encoder == "temporal",
-                                     site=cfg.scene_position)  # fmt: skip
+                                     site=cfg.scene_position,
+                                     pair_distance=cfg.pair_distance)  # fmt: skip
         p = cfg.generator_dropout
         self.dropout = nn.Dropout(p) if p > 0 else nn.Identity()
         self.mean_head = mlp([h, w, w, tf * 2], dropout=p)
