@@ -223,6 +223,18 @@ def test_spread_scale_changes_a_generators_samples_at_prediction(capsys, tiny_ru
     assert results["--spread-scale 3"] != results[""]
 
 
+def test_the_sigma_cap_changes_a_generators_samples_only_when_it_binds(capsys, tiny_run, walks):
+    base = ["evaluate", "--dataset", walks, "--split", "test", "--samples", "4", "--json",
+            "--no-progress", "--model", tiny_run / "generator.safetensors"]  # fmt: skip
+    results = {}
+    for flag in ([], ["--max-log-sigma", "1e6"], ["--max-log-sigma", "-8"]):
+        code, out, _ = _run(capsys, *base, *flag)
+        assert code == 0
+        results[" ".join(flag)] = json.loads(out)["min_ade"]
+    assert results[""] == results["--max-log-sigma 1e6"]
+    assert results["--max-log-sigma -8"] != results[""]
+
+
 def test_the_cli_imports_without_the_survey_web_server_packages():
     # training on a machine without starlette/uvicorn (a bare GPU image) must work: the web
     # server is imported only by `survey serve`

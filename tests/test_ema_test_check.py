@@ -30,7 +30,8 @@ def test_match_settings_copies_the_published_clamp_and_keeps_the_weights(tmp_pat
     _generator(run, 2)
     weights = read_checkpoint_header(run)["hash"]
     got = mod.match_settings(run, published)
-    assert got == {"stochastic_steps": False, "max_speed": 0.32, "spread_scale": 0.9}
+    assert got == {"stochastic_steps": False, "max_speed": 0.32, "spread_scale": 0.9,
+                   "max_log_sigma": None}  # fmt: skip
     model = read_checkpoint_header(run)["config"]["model"]
     assert (model["max_speed"], model["spread_scale"]) == (0.32, 0.9)
     assert read_checkpoint_header(run)["hash"] == weights

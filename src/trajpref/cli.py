@@ -103,6 +103,10 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
                    help="generators: multiply the spread of the K initial samples about their "
                    "mean by this (1: as trained; default: the file's model.spread_scale; "
                    "docs/pretraining.md, 'The samples' spread at prediction time')")  # fmt: skip
+    p.add_argument("--max-log-sigma", type=float, default=None,
+                   help="generators: cap each sample's log sigma at this (model units; "
+                   "default: the file's model.max_log_sigma; docs/pretraining.md, 'A cap on "
+                   "the samples' sigma')")  # fmt: skip
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     p.add_argument("--max-agents", type=int, default=1024,
                    help="agents per batch of whole scenes (default 1024). Lower it to save "
@@ -425,6 +429,10 @@ def _predictor(args):
         if not args.spread_scale > 0:
             raise ConfigError("--spread-scale must be > 0 (1: the spread as trained)")
         _set_generator(model, "--spread-scale", spread_scale=args.spread_scale)
+    if getattr(args, "max_log_sigma", None) is not None:
+        if not math.isfinite(args.max_log_sigma):
+            raise ConfigError("--max-log-sigma must be a finite number")
+        _set_generator(model, "--max-log-sigma", max_log_sigma=args.max_log_sigma)
     return model, device
 
 

@@ -263,7 +263,22 @@ class ModelConfig:
     1 changes nothing; it may be set on published weights without retraining
     (docs/pretraining.md, "The samples' spread at prediction time")."""
 
+    max_log_sigma: float | None = None
+    """A sampling setting: the most log sigma (model units) any of the K samples may take, as
+    the generator's head emits it (before the speed clamp scales an agent back up and before
+    ``spread_scale``); None: no cap. Best-of-K training only trains the sample that wins, and
+    on agents unlike its training ones the sigma head extrapolates: SDD's generator of
+    2026-11-29 put 4 % of its samples more than 5 units (300 px) from their mean, where they
+    predict nothing and where a tiny change of weights moves them far, which made RL
+    fine-tuning on SDD diverge. It may be set on published weights without retraining
+    (docs/pretraining.md, "A cap on the samples' sigma")."""
+
     def __post_init__(self) -> None:
+        if self.max_log_sigma is not None and not math.isfinite(self.max_log_sigma):
+            raise ConfigError(
+                f"ModelConfig.max_log_sigma must be a finite number or null, got "
+                f"{self.max_log_sigma}"
+            )
         if self.max_speed < 0:
             raise ConfigError("ModelConfig.max_speed must be >= 0 (0 switches the clamp off)")
         if not 0 <= self.generator_dropout < 1:
@@ -333,6 +348,7 @@ GENERATOR_ONLY = (
     "generator_dropout",
     "max_speed",
     "spread_scale",
+    "max_log_sigma",
     "future_rank",
     "pair_distance",
     "scene_position",

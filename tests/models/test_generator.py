@@ -426,3 +426,29 @@ def test_pair_distances_keep_the_heading_frame_and_the_speed_clamp_equivariant()
     torch.testing.assert_close(c.initial_sample(), 3 * a.initial_sample(), atol=1e-4, rtol=1e-4)
     plain = Generator(dataclasses.replace(cfg, pair_distance=False))
     assert set(gen.state_dict()) == set(plain.state_dict())  # only the edge width differs
+
+
+def test_the_sigma_cap_bounds_every_samples_log_sigma_and_leaves_the_rest():
+    torch.manual_seed(0)
+    gen = Generator(dataclasses.replace(TINY, max_speed=1e-3)).eval()
+    features = scene_features(collate([make_scene(3), make_scene(2, seed=1)]), 1.0)
+    with torch.no_grad():
+        a = gen(features)
+        cap = float(a.log_sigma.median())  # as the head emits it: max_speed is 1e-3, so
+        gen.cfg = dataclasses.replace(gen.cfg, max_log_sigma=cap - 10.0)  # below every sample
+        low = gen(features)
+        gen.cfg = dataclasses.replace(gen.cfg, max_log_sigma=1e6)
+        high = gen(features)
+    torch.testing.assert_close(high.log_sigma, a.log_sigma)  # above every sample: no change
+    torch.testing.assert_close(low.mean, a.mean)
+    torch.testing.assert_close(low.shifts, a.shifts)
+    # every agent's K samples now share one sigma: the cap, then the clamp's log c on top
+    assert torch.allclose(low.log_sigma, low.log_sigma[:1].expand_as(low.log_sigma))
+    assert (low.log_sigma < a.log_sigma).all()
+
+
+@pytest.mark.parametrize("value", [float("inf"), float("nan")])
+def test_the_sigma_cap_is_checked_on_construction(value):
+    assert ModelConfig(max_log_sigma=1.0).denoiser_part() == ModelConfig()
+    with pytest.raises(ConfigError, match="max_log_sigma"):
+        ModelConfig(max_log_sigma=value)

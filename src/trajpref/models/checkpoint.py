@@ -405,10 +405,10 @@ def move_weights(src: str | Path, dst: str | Path) -> list[Path]:
     return moved
 
 
-POST_HOC_SETTINGS = ("stochastic_steps", "max_speed", "spread_scale")
+POST_HOC_SETTINGS = ("stochastic_steps", "max_speed", "spread_scale", "max_log_sigma")
 """``model`` fields of a generator file that may change after training without retraining:
-how its tau steps sample, its input speed clamp and its samples' spread (the weights are not
-touched)."""
+how its tau steps sample, its input speed clamp, its samples' spread and the cap on their
+sigma (the weights are not touched)."""
 
 
 def set_generator_setting(

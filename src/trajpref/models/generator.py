@@ -103,6 +103,8 @@ class Generator(nn.Module):
             mean = self.time_projection @ mean  # [N, T_f, 2]
         z = torch.cat([dropped, mean.detach().flatten(1)], -1)  # [N, H + 2T_f]
         log_sigma, raw = self._heads(z)  # [K, N], [K, N, T_f, 2]
+        if self.cfg.max_log_sigma is not None:  # a sampling setting (ModelConfig.max_log_sigma)
+            log_sigma = log_sigma.clamp(max=self.cfg.max_log_sigma)  # [K, N]
         if self.cfg.future_rank:
             raw = self.time_projection @ raw  # [K, N, T_f, 2]
         raw = raw - raw.mean(0, keepdim=True)
