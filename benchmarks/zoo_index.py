@@ -217,6 +217,8 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
                              **({"future_rank": r} if (r := cfg["model"].get("future_rank"))
                                 else {}),
                              "spread_scale": cfg["model"].get("spread_scale", 1.0),
+                             **({"max_log_sigma": m} if (m := cfg["model"].get("max_log_sigma"))
+                                is not None else {}),
                              "ema_epochs": meta.get("ema_epochs"),
                              "changes": changes}  # fmt: skip
         cfg = trained_config(cfg, changes)  # the training command reproduces the run
@@ -379,6 +381,9 @@ def _sampling_lines(sampling: dict[str, Any] | None) -> list[str]:
     if sampling.get("spread_scale", 1.0) != 1.0:
         text += (f" Its samples' spread about their mean is scaled by "
                  f"{sampling['spread_scale']:g} (`model.spread_scale`).")  # fmt: skip
+    if sampling.get("max_log_sigma") is not None:
+        text += (f" Each sample's log sigma is capped at {sampling['max_log_sigma']:g} model "
+                 "units (`model.max_log_sigma`).")  # fmt: skip
     if sampling.get("ema_epochs"):
         text += (f" Its weights are a moving average of the training iterates (time constant "
                  f"{sampling['ema_epochs']:g} epochs, `generator.ema_epochs`).")  # fmt: skip

@@ -43,15 +43,16 @@ fine-tuning runs of 2026-11-22 and 2026-11-23); they stay in the files for the t
 time and compare with their own start, ``pretrained-ancestral``."""
 
 
-RETIRED_STARTS = ("-scene", "-noclamp", "-raw", "-h128", "-tau5", "-noflip", "-norev")
+RETIRED_STARTS = ("-scene", "-noclamp", "-raw", "-h128", "-tau5", "-noflip", "-norev", "-nocap")
 """Suffixes of the published default generators that a later default replaced after fine-tuning
 runs had started from them, oldest first: the scene-frame generators (replaced 2026-11-25 by
 the heading frame), eth's unclamped heading-frame generator of 2026-11-25 (replaced 2026-11-26
 by the same weights with a speed clamp, then by the temporal encoder; its fine-tuning rows were
 paired with the later default until 2026-11-27), the raw weights (2026-11-26, the moving
 average), zara1's 128-wide encoder (2026-11-26), the tau = 5 generators (2026-11-27, no
-denoising steps), the zara generators trained without mirrored scenes (2026-11-27) and eth's
-generator trained without scenes played backwards (2026-11-27).
+denoising steps), the zara generators trained without mirrored scenes (2026-11-27), eth's
+generator trained without scenes played backwards (2026-11-27) and SDD's generator without
+the cap on its samples' sigma (2026-11-29; the same weights, ``model.max_log_sigma``).
 Their start row is ``pretrained<suffix>`` and their runs' rows carry the suffix; no run can
 begin from them now."""
 START_SUFFIXES = (ANCESTRAL_SUFFIX, *RETIRED_STARTS, "-long")
