@@ -166,14 +166,16 @@ def newest_rows(rows: list[dict[str, Any]]) -> dict[tuple, dict[str, Any]]:
     return out
 
 
-def tuned_row(rows: list[dict[str, Any]], dataset: str, stem: str) -> dict[str, Any] | None:
+def tuned_row(rows: list[dict[str, Any]], dataset: str, stem: str,
+              from_today: bool) -> dict[str, Any] | None:  # fmt: skip
     """The seed-0 test row of a published fine-tuned generator ``<dataset>/<stem>``: method
-    ``stem``, or ``stem`` with the suffix of the start it was trained from once that start was
-    retired (``benchmarks/retire_start.py``)."""
-    names = {stem, *(stem + s for s in START_SUFFIXES)}
-    found = [r for r in rows if r["dataset"] == dataset and r["method"] in names
-             and r["seed"] == 0]  # fmt: skip
-    return min(found, key=lambda r: r["method"] != stem, default=None)
+    ``stem`` when it started from today's default generator (``from_today``), else ``stem``
+    with the suffix of the start it was trained from, which ``benchmarks/retire_start.py``
+    gave its row when that start was replaced (a later run from today's default may hold the
+    plain name)."""
+    names = {stem} if from_today else {stem + s for s in START_SUFFIXES}
+    return next((r for r in rows if r["dataset"] == dataset and r["method"] in names
+                 and r["seed"] == 0), None)  # fmt: skip
 
 
 def _test_row(row: dict[str, Any]) -> dict[str, Any]:
@@ -227,12 +229,13 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
         entry["sampler"] = "leapfrog"
         if "method" in meta:  # a fine-tuned generator (benchmarks/finetune.py --publish)
             entry["method"] = meta["method"]
-            row, start = tuned_row(rows, dataset, stem), f"{dataset}/generator"
+            today = zoo.header(path.parent / f"generator{ckpt.SUFFIX}").get("hash")
+            from_today = meta.get("from") == today
+            row, start = tuned_row(rows, dataset, stem, from_today), f"{dataset}/generator"
             run = _meta(dataset, None)
             machine = row["machine"] if row else None
-            today = zoo.header(path.parent / f"generator{ckpt.SUFFIX}").get("hash")
             train_cmd = []
-            if meta.get("from") != today:  # fine-tuned from a default since replaced
+            if not from_today:  # fine-tuned from a default since replaced
                 suffix = row["method"].removeprefix(stem) if row else ""
                 kept = next((r for r in rows if r["dataset"] == dataset
                              and r["method"] == f"pretrained{suffix}"), None)  # fmt: skip

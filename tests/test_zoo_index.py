@@ -72,3 +72,13 @@ def test_a_generator_cards_denoiser_command_rebuilds_the_published_denoiser(monk
     assert gen[0].startswith("trajpref train diffusion") and gen[0] == den["train"]["commands"][0]
     assert "--set data.flip=False" in gen[0] and "--set data.reverse=False" in gen[0]
     assert "--set data" not in gen[1]  # the generator's own stage keeps the config's flags
+
+
+def test_a_published_fine_tune_from_a_replaced_start_keeps_its_own_row():
+    mod = load_benchmark("zoo_index")
+    rows = [{"dataset": "zara2", "method": "rlhf-res", "seed": 0, "min_fde": 0.21},
+            {"dataset": "zara2", "method": "rlhf-res-scene", "seed": 0, "min_fde": 0.25},
+            {"dataset": "zara2", "method": "rlhf-res-scene", "seed": 1, "min_fde": 0.26}]  # fmt: skip
+    assert mod.tuned_row(rows, "zara2", "rlhf-res", from_today=False)["min_fde"] == 0.25
+    assert mod.tuned_row(rows, "zara2", "rlhf-res", from_today=True)["min_fde"] == 0.21
+    assert mod.tuned_row(rows[1:], "zara2", "rlhf-res", from_today=True) is None
