@@ -76,9 +76,11 @@ def test_a_generator_cards_denoiser_command_rebuilds_the_published_denoiser(monk
 
 def test_a_published_fine_tune_from_a_replaced_start_keeps_its_own_row():
     mod = load_benchmark("zoo_index")
-    rows = [{"dataset": "zara2", "method": "rlhf-res", "seed": 0, "min_fde": 0.21},
-            {"dataset": "zara2", "method": "rlhf-res-scene", "seed": 0, "min_fde": 0.25},
-            {"dataset": "zara2", "method": "rlhf-res-scene", "seed": 1, "min_fde": 0.26}]  # fmt: skip
+    rows = [
+        {"dataset": "zara2", "method": "rlhf-res", "seed": 0, "min_fde": 0.21},
+        {"dataset": "zara2", "method": "rlhf-res-scene", "seed": 0, "min_fde": 0.25},
+        {"dataset": "zara2", "method": "rlhf-res-scene", "seed": 1, "min_fde": 0.26},
+    ]
     assert mod.tuned_row(rows, "zara2", "rlhf-res", from_today=False)["min_fde"] == 0.25
     assert mod.tuned_row(rows, "zara2", "rlhf-res", from_today=True)["min_fde"] == 0.21
     assert mod.tuned_row(rows[1:], "zara2", "rlhf-res", from_today=True) is None
