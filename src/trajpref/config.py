@@ -462,6 +462,11 @@ class GeneratorTrainConfig(OptimConfig):
     """How the best-of-K term averages a sample's error over the T_f steps: ``uniform`` (the
     ADE), or ``decreasing`` (step t of T_f weighted T_f + 1 - t, normalised to mean 1, as
     LED's initializer loss weights its steps: the near future counts most)."""
+    winner: Literal["joint", "separate"] = "joint"
+    """Which samples the best-of-K term trains: ``joint`` (per agent the one sample with the
+    lowest ADE_k + fde_weight FDE_k), or ``separate`` (min_k ADE_k + fde_weight min_k FDE_k:
+    the sample closest on average learns the path and the sample closest at the end learns the
+    endpoint, as minADE_K and minFDE_K choose their samples independently)."""
     mean_weight: float = 0.5
     """Weight of the ADE of the generator's mean mu (keeps mu meaningful for RL)."""
     uncertainty_weight: float = 0.1

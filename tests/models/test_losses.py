@@ -112,3 +112,24 @@ def test_wta_temperature_decays_geometrically_then_is_hard():
 def test_wta_settings_are_checked(field, value, match):
     with pytest.raises(ConfigError, match=match):
         GeneratorTrainConfig(**{field: value})
+
+
+def test_separate_winners_train_the_path_and_the_endpoint_on_different_samples():
+    out, _, target = _case()
+    # sample 0: ADE 2.25, FDE 0.5; sample 1: ADE 0.5, FDE 1
+    y = torch.tensor([[[4.0, 0.0], [0.5, 0.0]], [[0.0, 0.0], [1.0, 0.0]]])[:, None]
+    y = y.requires_grad_(True)
+    cfg = GeneratorTrainConfig(winner="separate", mean_weight=0.0, uncertainty_weight=0.0)
+    loss, _ = generator_loss(out, y, target, cfg)
+    assert loss.item() == pytest.approx(0.5 + 0.5)  # min ADE (sample 1) + min FDE (sample 0)
+    loss.backward()
+    assert y.grad[1, 0, 1].abs().sum() > 0  # the path's winner learns its path
+    assert y.grad[0, 0, 1].abs().sum() > 0  # the endpoint's winner learns its endpoint ...
+    assert y.grad[0, 0, 0].abs().sum() == 0  # ... and nothing before it
+    joint = GeneratorTrainConfig(mean_weight=0.0, uncertainty_weight=0.0)
+    assert generator_loss(out, y, target, joint)[0].item() == pytest.approx(1.5)  # 0.5 + 1
+    cfg3 = GeneratorTrainConfig(winner="separate", fde_weight=3.0, mean_weight=0.0,
+                                uncertainty_weight=0.0)  # fmt: skip
+    assert generator_loss(out, y, target, cfg3)[0].item() == pytest.approx(0.5 + 1.5)
+    with pytest.raises(ConfigError, match="winner"):
+        GeneratorTrainConfig(winner="both")

@@ -56,7 +56,9 @@ def generator_loss(
     target [N, T_f, 2]:
 
         w_best * min_k (ADE_k + w_fde FDE_k) + w_mean * ADE(mu) + w_unc * (e^{-l} ADE(mu) + l)
-        + w_reg * Eq. 4,   with l the agent's mean log sigma.
+        + w_reg * Eq. 4,   with l the agent's mean log sigma
+
+    (with ``winner: separate`` the first term is min_k ADE_k + w_fde min_k FDE_k).
 
     With a ``temperature`` > 0 the minimum is the softmin-weighted mean of ``soft_best``
     (annealed winner-takes-all; ``wta_temperature`` gives its schedule).
@@ -67,7 +69,10 @@ def generator_loss(
         t_f = err.shape[-1]
         w = torch.arange(t_f, 0, -1, dtype=err.dtype, device=err.device)  # [T_f]
         ade = (err * (w / w.mean())).mean(-1)  # [K, N]
-    best = soft_best(ade + c.fde_weight * fde, temperature).mean()  # [K, N] -> scalar
+    if c.winner == "separate":  # independent winners for the path and the endpoint
+        best = (soft_best(ade, temperature) + c.fde_weight * soft_best(fde, temperature)).mean()
+    else:
+        best = soft_best(ade + c.fde_weight * fde, temperature).mean()  # [K, N] -> scalar
     mean_err = torch.linalg.vector_norm(out.mean - target, dim=-1).mean(-1)  # [N]
     log_sigma = out.log_sigma.mean(0)  # [N]
     unc = (torch.exp(-log_sigma) * mean_err.detach() + log_sigma).mean()
