@@ -8,7 +8,7 @@ generator plus tau denoising steps) against the full sampler of its own denoiser
 ancestral steps), interleaved scene by scene (``evaluation.time_predictors``). All models are
 timed in this one process, one after the other, so their latencies compare with each other;
 the ratio full / leapfrog depends less on the machine's load than the latencies (not entirely:
-repeated runs on one idle host have moved it by up to 45 %).
+two runs of one day on the same kind of host moved it by up to 45 %).
 
 Writes benchmarks/results/meta/speed.json (machine, threads, date, command, one entry per
 model); ``python benchmarks/update_readme.py`` puts it in the README's cost table. A subset
