@@ -421,18 +421,10 @@ def _predictor(args):
         if not hasattr(model, "stochastic"):
             raise ConfigError(f"{flag} applies to diffusion checkpoints only")
         model.stochastic = bool(args.stochastic)
-    if getattr(args, "max_speed", None) is not None:
-        if args.max_speed < 0:
-            raise ConfigError("--max-speed must be >= 0 (0 switches the clamp off)")
-        _set_generator(model, "--max-speed", max_speed=args.max_speed)
-    if getattr(args, "spread_scale", None) is not None:
-        if not args.spread_scale > 0:
-            raise ConfigError("--spread-scale must be > 0 (1: the spread as trained)")
-        _set_generator(model, "--spread-scale", spread_scale=args.spread_scale)
-    if getattr(args, "max_log_sigma", None) is not None:
-        if not math.isfinite(args.max_log_sigma):
-            raise ConfigError("--max-log-sigma must be a finite number")
-        _set_generator(model, "--max-log-sigma", max_log_sigma=args.max_log_sigma)
+    for flag, name in (("--max-speed", "max_speed"), ("--spread-scale", "spread_scale"),
+                       ("--max-log-sigma", "max_log_sigma")):  # fmt: skip
+        if getattr(args, name, None) is not None:
+            _set_generator(model, flag, **{name: getattr(args, name)})
     return model, device
 
 
@@ -442,7 +434,10 @@ def _set_generator(model, flag: str, **setting) -> None:
     generator = getattr(model, "generator", None)
     if generator is None:
         raise ConfigError(f"{flag} applies to generator checkpoints only")
-    generator.cfg = dataclasses.replace(generator.cfg, **setting)
+    try:  # ModelConfig.__post_init__ checks the value; the message names the flag
+        generator.cfg = dataclasses.replace(generator.cfg, **setting)
+    except ConfigError as err:
+        raise ConfigError(f"{flag}: {err}") from None
 
 
 def _scorer(path: str, device):
