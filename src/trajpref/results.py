@@ -43,7 +43,17 @@ fine-tuning runs of 2026-11-22 and 2026-11-23); they stay in the files for the t
 time and compare with their own start, ``pretrained-ancestral``."""
 
 
-RETIRED_STARTS = ("-scene", "-noclamp", "-raw", "-h128", "-tau5", "-noflip", "-norev", "-nocap")
+RETIRED_STARTS = (
+    "-scene",
+    "-noclamp",
+    "-raw",
+    "-h128",
+    "-tau5",
+    "-noflip",
+    "-norev",
+    "-nocap",
+    "-noscale",
+)
 """Suffixes of the published default generators that a later default replaced after fine-tuning
 runs had started from them, oldest first: the scene-frame generators (replaced 2026-11-25 by
 the heading frame), eth's unclamped heading-frame generator of 2026-11-25 (replaced 2026-11-26
@@ -52,7 +62,9 @@ paired with the later default until 2026-11-27), the raw weights (2026-11-26, th
 average), zara1's 128-wide encoder (2026-11-26), the tau = 5 generators (2026-11-27, no
 denoising steps), the zara generators trained without mirrored scenes (2026-11-27), eth's
 generator trained without scenes played backwards (2026-11-27) and SDD's generator without
-the cap on its samples' sigma (2026-11-29; the same weights, ``model.max_log_sigma``).
+the cap on its samples' sigma (2026-11-29; the same weights, ``model.max_log_sigma``) and
+Robo's sim-only generator trained without scale augmentation and with dropout 0.2 (2026-11-29,
+replaced by scale augmentation 0.8-1.25 with dropout 0.3).
 Their start row is ``pretrained<suffix>`` and their runs' rows carry the suffix; no run can
 begin from them now."""
 START_SUFFIXES = (ANCESTRAL_SUFFIX, *RETIRED_STARTS, "-long")
