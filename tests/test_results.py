@@ -276,3 +276,36 @@ def test_the_reward_report_reads_only_the_validated_epochs(tmp_path, monkeypatch
     assert "| 9 |" in line  # the run's steps, from its last epoch
     assert "-0.500 -> -0.400 -> -0.200 (-0.200)" in line  # start -> first -> last (peak)
     assert "+10.0 %" in line
+
+
+def test_the_rlhf_report_keeps_lines_of_runs_not_on_this_machine_unless_retired(
+    tmp_path, monkeypatch
+):
+    """A checkout without ``runs/`` regenerated docs/rlhf_results.md without the zara1 and
+    eth diagnostics until 2026-11-29; now their lines stay, unless the runs were retired (the
+    method name now means other runs, whose test minFDE differs)."""
+    report = load_benchmark("finetune_report")
+    old = "\n".join([
+        "## Test accuracy against the pretrained start (K = 20, per agent unless joint)",
+        "| zara1 | rlhf | 3 | 0.172 | accuracy line |",
+        report.DIAGNOSTICS,
+        "| dataset | method | runs |",
+        "|---|---|---|",
+        "| zara1 | rlhf | 3 | zara1 diagnostics |",
+        "| robo | rlhf | 3 | robo diagnostics of retired runs |",
+        report.REWARD,
+        "| zara1 | rlhf | defaults | 1 | 9 | x | x | x | 1 | 0.330 (+10.0 %) | CPU |",
+        "| robo | rlhf | defaults | 1 | 9 | x | x | x | 1 | 0.469 (+4.4 %) | CPU |",
+    ])  # fmt: skip
+    assert report.previous_lines(old, report.DIAGNOSTICS)["zara1", "rlhf"].endswith(
+        "zara1 diagnostics |"
+    )  # not the accuracy table's line of the same key
+    rows = [_row("zara1", method="rlhf", fde=0.33), _row("robo", method="rlhf", fde=0.40)]
+    current = report.still_current(report.previous_lines(old, report.REWARD), rows)
+    assert set(current) == {("zara1", "rlhf")}  # robo's line had another test minFDE
+    monkeypatch.setattr(report, "ROOT", tmp_path)  # no run folders, no start records
+    diag = report.diagnostics_section(
+        ["zara1", "robo"],
+        {k: v for k, v in report.previous_lines(old, report.DIAGNOSTICS).items() if k in current},
+    )
+    assert "zara1 diagnostics" in diag and "robo" not in diag
