@@ -275,8 +275,22 @@ def _ms(xs: list[float]) -> str:
     return f"{statistics.mean(xs):.3f} ± {statistics.stdev(xs):.3f}"
 
 
+def previous_table(path: Path) -> dict[tuple[str, str], str]:
+    """The lines of an earlier table (``meta/equal_budget.md``) by their first two cells."""
+    text = path.read_text() if path.is_file() else ""
+    return {
+        (cells[1].strip(), cells[2].strip()): line
+        for line in text.splitlines()
+        if line.startswith("| ") and len(cells := line.split("|")) > 3
+    }
+
+
 def report(datasets: list[str], methods: list[str]) -> str:
-    """Mean +- std over seeds of each method's test rows, against the start and the control."""
+    """Mean +- std over seeds of each method's test rows, against the start and the control.
+    A start whose run folders are all absent here (a new checkout has no ``runs/``) keeps the
+    previous table's lines when their minFDE20 cells are still today's: the validation that
+    chose its control and counted the runs beating the start lives in those folders."""
+    before = previous_table(ROOT / "benchmarks" / "results" / "meta" / "equal_budget.md")
     rows = merge_rows(read_rows(ROOT / "benchmarks" / "results", protocol="all"))
     lines = [
         "| dataset | method | seeds | minADE20 | minFDE20 | minFDE20 vs start "
@@ -292,8 +306,23 @@ def report(datasets: list[str], methods: list[str]) -> str:
             if not any(r["method"] in names for r in pick):
                 continue
             start = next((r for r in pick if r["method"] == finetune_start(names[0])), None)
-            lines += _rows(dataset, pick, names, start)
+            group = _rows(dataset, pick, names, start)
+            lines += _kept(group, before) if _no_runs_here(dataset, pick, names) else group
     return "\n".join(lines)
+
+
+def _no_runs_here(dataset: str, pick: list[dict], names: list[str]) -> bool:
+    return all(_best_val(dataset, r["method"], r["seed"]) is None
+               for r in pick if r["method"] in names)  # fmt: skip
+
+
+def _kept(group: list[str], before: dict[tuple[str, str], str]) -> list[str]:
+    """``group``'s lines as the previous table had them, when it has every one of them with
+    the same minFDE20 cell (the rows are the same runs'); otherwise ``group`` itself."""
+    old = [before.get(tuple(c.strip() for c in line.split("|")[1:3])) for line in group]
+    same = all(o is not None and o.split("|")[5] == line.split("|")[5]
+               for o, line in zip(old, group, strict=True))  # fmt: skip
+    return old if same and group else group
 
 
 def _rows(dataset: str, pick: list[dict], names: list[str], start: dict | None) -> list[str]:

@@ -108,3 +108,23 @@ def test_each_start_is_compared_with_its_own_control_when_no_run_folder_is_left(
     assert lines["control-long"][6] == "–"  # it is the control
     assert lines["rlhf-long"][6] == "+10.0 %"  # against control-long (0.30), not control (0.50)
     assert lines["control-lr3e-5-long"][6] == "+6.7 %"
+
+
+def test_without_run_folders_the_previous_tables_lines_stay_while_their_rows_do(eb, tmp_path):
+    """A new checkout has no run folders, so it cannot choose the control on validation or
+    count the runs that beat the start; regenerating the table dropped those cells (and could
+    change which control the others are compared with) until 2026-11-29. The previous table's
+    lines now stay, unless the rows changed (another minFDE20 cell)."""
+    results = tmp_path / "benchmarks" / "results"
+    (results / "meta").mkdir(parents=True)
+    rows = [_row("pretrained", 0, 0.40), _row("control", 0, 0.44), _row("rlhf", 0, 0.42)]
+    (results / "rows.json").write_text(json.dumps(rows))
+    fresh = eb.report(["walks"], ["control", "rlhf"]).splitlines()
+    assert fresh[3].split(" | ")[-1] == "– |"  # no folder: no count of runs beating the start
+    # the same table from the machine that had the run folders: its last cells are counted
+    chosen_elsewhere = fresh[:3] + [line[: line.rindex("– |")] + "1 of 1 |" for line in fresh[3:]]
+    (results / "meta" / "equal_budget.md").write_text("\n".join(chosen_elsewhere) + "\n")
+    assert eb.report(["walks"], ["control", "rlhf"]).splitlines() == chosen_elsewhere
+    rows[2]["min_fde"] = 0.41  # rlhf's rows changed: its group is computed again
+    (results / "rows.json").write_text(json.dumps(rows))
+    assert eb.report(["walks"], ["control", "rlhf"]).splitlines()[4].endswith("| – |")
