@@ -52,8 +52,10 @@ from trajpref.results import (
     finetune_start,
     merge_rows,
     read_rows,
+    row_key,
     start_record,
     start_suffix,
+    table_lines,
     update_readme,
 )
 from trajpref.rl.presets import equal_budget_args
@@ -277,12 +279,7 @@ def _ms(xs: list[float]) -> str:
 
 def previous_table(path: Path) -> dict[tuple[str, str], str]:
     """The lines of an earlier table (``meta/equal_budget.md``) by their first two cells."""
-    text = path.read_text() if path.is_file() else ""
-    return {
-        (cells[1].strip(), cells[2].strip()): line
-        for line in text.splitlines()
-        if line.startswith("| ") and len(cells := line.split("|")) > 3
-    }
+    return table_lines(path.read_text() if path.is_file() else "")
 
 
 def report(datasets: list[str], methods: list[str]) -> str:
@@ -319,7 +316,7 @@ def _no_runs_here(dataset: str, pick: list[dict], names: list[str]) -> bool:
 def _kept(group: list[str], before: dict[tuple[str, str], str]) -> list[str]:
     """``group``'s lines as the previous table had them, when it has every one of them with
     the same minFDE20 cell (the rows are the same runs'); otherwise ``group`` itself."""
-    old = [before.get(tuple(c.strip() for c in line.split("|")[1:3])) for line in group]
+    old = [before.get(row_key(line)) for line in group]
     same = all(o is not None and o.split("|")[5] == line.split("|")[5]
                for o, line in zip(old, group, strict=True))  # fmt: skip
     return old if same and group else group

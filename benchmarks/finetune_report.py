@@ -21,6 +21,7 @@ from trajpref.results import (
     finetune_start,
     merge_rows,
     read_rows,
+    table_lines,
 )
 from trajpref.train import read_metrics
 
@@ -110,21 +111,6 @@ DIAGNOSTICS = "## Training diagnostics of the same runs (mean ± std over seeds)
 REWARD = "## Can fine-tuning raise the reward, and what does that cost? (validation)"
 
 
-def previous_lines(text: str, heading: str) -> dict[tuple[str, str], str]:
-    """The table rows under ``heading`` (up to the next ``## ``) of an earlier report, by
-    (dataset, method or run) in their first two cells: what that section falls back to for
-    runs whose folders are not on this machine (a new checkout has no ``runs/``), so that
-    regenerating the report never drops them."""
-    out, inside = {}, False
-    for line in text.splitlines():
-        if line.startswith("## "):
-            inside = line == heading
-        cells = [c.strip() for c in line.split("|")[1:3]]
-        if inside and line.startswith("| ") and len(cells) == 2 and cells[0] != "dataset":
-            out.setdefault((cells[0], cells[1]), line)
-    return out
-
-
 def still_current(
     before: dict[tuple[str, str], str], rows: list[dict]
 ) -> dict[tuple[str, str], str]:
@@ -147,7 +133,8 @@ def _run_dirs(dataset: str, method: str) -> list[Path]:
 
 def diagnostics_section(datasets: list[str], before: dict[tuple[str, str], str]) -> str:
     """One line per (dataset, method) whose run folders are here; ``before``'s line where
-    none is (``previous_lines`` of the last report)."""
+    none is (``table_lines`` of the last report: a new checkout has no
+    ``runs/``, and regenerating the report must not drop its lines)."""
     lines = [
         "| dataset | method | runs | reward, epoch 1 -> last | KL to G_0 (last) "
         "| critic explained variance (last) | val minFDE, epoch 1 -> last | best epoch |",
@@ -270,7 +257,7 @@ def main() -> None:
     rows = merge_rows(read_rows(ROOT / "benchmarks" / "results", protocol="all"))
     out = ROOT / "docs" / "rlhf_results.md"
     old = out.read_text() if out.is_file() else ""
-    current = still_current(previous_lines(old, REWARD), rows)  # runs not retired since
+    current = still_current(table_lines(old, REWARD), rows)  # runs not retired since
     acc, change = accuracy_section(rows, args.datasets)
     avg = {
         m: statistics.mean(v.values()) for m, v in change.items() if len(v) == len(args.datasets)
@@ -289,7 +276,7 @@ def main() -> None:
         DIAGNOSTICS,
         "`reward` is the mean clipped per-step score r over the epoch's rollouts; `KL to G_0` "
         "the k3 estimate per sample; explained variance of the critic against its target.",
-        diagnostics_section(args.datasets, {k: v for k, v in previous_lines(old, DIAGNOSTICS)
+        diagnostics_section(args.datasets, {k: v for k, v in table_lines(old, DIAGNOSTICS)
                                             .items() if k in current}),
         REWARD,
         "Runs that log meanATS (the average sample's ATS on the validation scenes, the "

@@ -22,6 +22,7 @@ from trajpref.results import (
     selection_table,
     start_record,
     start_suffix,
+    table_lines,
     upsert_rows,
     write_meta,
     write_rows,
@@ -297,15 +298,23 @@ def test_the_rlhf_report_keeps_lines_of_runs_not_on_this_machine_unless_retired(
         "| zara1 | rlhf | defaults | 1 | 9 | x | x | x | 1 | 0.330 (+10.0 %) | CPU |",
         "| robo | rlhf | defaults | 1 | 9 | x | x | x | 1 | 0.469 (+4.4 %) | CPU |",
     ])  # fmt: skip
-    assert report.previous_lines(old, report.DIAGNOSTICS)["zara1", "rlhf"].endswith(
+    assert table_lines(old, report.DIAGNOSTICS)["zara1", "rlhf"].endswith(
         "zara1 diagnostics |"
     )  # not the accuracy table's line of the same key
     rows = [_row("zara1", method="rlhf", fde=0.33), _row("robo", method="rlhf", fde=0.40)]
-    current = report.still_current(report.previous_lines(old, report.REWARD), rows)
+    current = report.still_current(table_lines(old, report.REWARD), rows)
     assert set(current) == {("zara1", "rlhf")}  # robo's line had another test minFDE
     monkeypatch.setattr(report, "ROOT", tmp_path)  # no run folders, no start records
     diag = report.diagnostics_section(
         ["zara1", "robo"],
-        {k: v for k, v in report.previous_lines(old, report.DIAGNOSTICS).items() if k in current},
+        {k: v for k, v in table_lines(old, report.DIAGNOSTICS).items() if k in current},
     )
     assert "zara1 diagnostics" in diag and "robo" not in diag
+
+
+def test_table_lines_keys_data_lines_by_their_first_two_cells_under_a_heading():
+    text = "\n".join(["## A", "| dataset | method |", "|---|---|", "| eth | rlhf | 1 |",
+                      "| eth | rlhf | 2 |", "## B", "| zara1 | control | 3 |"])  # fmt: skip
+    assert table_lines(text) == {("eth", "rlhf"): "| eth | rlhf | 1 |",
+                                 ("zara1", "control"): "| zara1 | control | 3 |"}  # fmt: skip
+    assert table_lines(text, "## B") == {("zara1", "control"): "| zara1 | control | 3 |"}

@@ -378,6 +378,28 @@ def update_readme(readme: str | Path, marker: str, content: str) -> None:
     path.write_text(f"{head}{start}\n{content}\n{end}{tail}")
 
 
+def row_key(line: str) -> tuple[str, str] | None:
+    """The first two cells of a markdown table's data line (``| dataset | method | ...``), or
+    None for any other line, the header line and the separator included."""
+    cells = [c.strip() for c in line.split("|")[1:3]]
+    if not line.startswith("| ") or len(cells) < 2 or cells[0] == "dataset":
+        return None
+    return cells[0], cells[1]
+
+
+def table_lines(text: str, heading: str | None = None) -> dict[tuple[str, str], str]:
+    """The data lines of the markdown tables in ``text`` (only those under ``heading``, up to
+    the next ``## ``, when given) by ``row_key``, the first of each key kept: what a generated
+    report falls back to for lines it cannot compute on this machine."""
+    out, inside = {}, heading is None
+    for line in text.splitlines():
+        if heading is not None and line.startswith("## "):
+            inside = line == heading
+        if inside and (key := row_key(line)) is not None:
+            out.setdefault(key, line)
+    return out
+
+
 PEER_COLUMNS = ("eth", "hotel", "univ", "zara1", "zara2", "avg", "sdd", "nba", "robo")
 """Columns of the peers table: the five ETH/UCY folds, their average, SDD, NBA and Robo."""
 
