@@ -247,6 +247,13 @@ class ModelConfig:
     the students files with uni_examples); it ties the model to those coordinates, and training
     requires ``data.rotate``, ``data.flip`` and ``data.reverse`` off, which would move the
     scene or its motion away from its place (docs/pretraining.md, "Where the agents are")."""
+    agent_roles: int = 0
+    """Number of fixed agent roles (0: off). When R > 0 the generator's encoder adds a learned
+    embedding of each agent's slot in its scene (its index in the scene's agent list), for
+    datasets whose every scene lists the same R roles in the same order: Robo's leader,
+    follower and approacher (docs/robo_sim.md). A scene with more than R agents is an error
+    at prediction time, and training refuses ``data.drop_agents``, which would shift the
+    slots (docs/pretraining.md, "Robo: which robot is which")."""
     query_layers: int = 0
     """How the generator proposes its K shifts: 0 (the default) maps each agent's encoding and
     mean to all K x T_f x 2 numbers with one MLP (LED's head); L > 0 makes K tokens instead
@@ -307,6 +314,9 @@ class ModelConfig:
             raise ConfigError("ModelConfig.hidden must be even (the sinusoidal step embedding)")
         if self.t_hist < 2:
             raise ConfigError("ModelConfig.t_hist must be >= 2 (velocities need two frames)")
+        if self.agent_roles < 0:
+            raise ConfigError(f"ModelConfig.agent_roles must be >= 0 (0: off), "
+                              f"got {self.agent_roles}")  # fmt: skip
         if self.query_layers < 0:
             raise ConfigError(f"ModelConfig.query_layers must be >= 0 (0: the MLP head), "
                               f"got {self.query_layers}")  # fmt: skip
@@ -352,6 +362,7 @@ GENERATOR_ONLY = (
     "future_rank",
     "pair_distance",
     "scene_position",
+    "agent_roles",
     "query_layers",
     "query_width",
 )

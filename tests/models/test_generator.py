@@ -454,3 +454,29 @@ def test_the_sigma_cap_is_checked_on_construction(value):
     assert ModelConfig(max_log_sigma=1.0).denoiser_part() == ModelConfig()
     with pytest.raises(ConfigError, match="max_log_sigma"):
         ModelConfig(max_log_sigma=value)
+
+
+@pytest.mark.parametrize("roles", [0, 3])
+def test_only_a_generator_with_agent_roles_depends_on_the_order_of_a_scenes_agents(roles):
+    torch.manual_seed(0)
+    gen = Generator(dataclasses.replace(TINY, agent_roles=roles)).eval()
+    scene = make_scene(3)
+    order = [2, 0, 1]
+    swapped = dataclasses.replace(scene, history=scene.history[order],
+                                  future=scene.future[order])  # fmt: skip
+    with torch.no_grad():
+        a = gen(scene_features(collate([scene]), 1.0))
+        b = gen(scene_features(collate([swapped]), 1.0))
+    # without roles, agent 2's prediction follows it to slot 0; with roles it changes
+    same = torch.allclose(a.mean[order], b.mean, atol=1e-5)
+    assert same == (roles == 0)
+    assert ModelConfig(agent_roles=3).denoiser_part() == ModelConfig()
+
+
+def test_a_generator_with_agent_roles_refuses_a_scene_with_more_agents_than_roles():
+    gen = Generator(dataclasses.replace(TINY, agent_roles=2)).eval()
+    gen(scene_features(collate([make_scene(2)]), 1.0))  # two agents, two roles: fine
+    with pytest.raises(ValueError, match="3 agents, but the model knows 2 agent roles"):
+        gen(scene_features(collate([make_scene(3)]), 1.0))
+    with pytest.raises(ConfigError, match="agent_roles"):
+        ModelConfig(agent_roles=-1)

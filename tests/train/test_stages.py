@@ -620,6 +620,24 @@ def test_a_generator_that_sees_scene_positions_refuses_augmentations_that_move_t
         build_generator_stage(moving, payload, train, torch.device("cpu"))
 
 
+def test_a_generator_with_agent_roles_refuses_dropped_agents_and_its_checkpoint_keeps_them(
+    cfg, folder, trained
+):
+    import dataclasses
+
+    train = load_dataset(str(folder), "train")
+    payload = ckpt.load(trained / "denoiser.safetensors")
+    model = dataclasses.replace(cfg.model, agent_roles=4)
+    stage = build_generator_stage(dataclasses.replace(cfg, model=model), payload, train,
+                                  torch.device("cpu"))  # fmt: skip
+    rebuilt, _ = ckpt.build_generator(stage.payload({"epoch": 0}))  # the checkpoint says so
+    assert rebuilt.cfg.agent_roles == 4 and rebuilt.encoder.role_embed.num_embeddings == 4
+    dropping = dataclasses.replace(cfg.data, drop_agents=0.2)
+    with pytest.raises(ConfigError, match="agent_roles"):
+        build_generator_stage(dataclasses.replace(cfg, model=model, data=dropping), payload,
+                              train, torch.device("cpu"))  # fmt: skip
+
+
 def test_a_run_with_dropped_agents_trains_on_fewer_agents_than_it_reads(tmp_path, cfg, monkeypatch):
     seen = []  # (agents read, agents kept) per training batch
     original = transforms.drop_agents_at_random

@@ -55,17 +55,19 @@ class SocialEncoder(nn.Module):
     ``temporal`` adds a GRU over the history's steps; its last state joins the MLP's
     embedding (``ModelConfig.history_encoder``). ``site`` adds an embedding of each agent's
     place and heading in the scene's coordinates, passed to ``forward`` as [N, 4]
-    (``ModelConfig.scene_position``)."""
+    (``ModelConfig.scene_position``). ``roles`` > 0 adds an embedding of each agent's slot
+    in its scene (``ModelConfig.agent_roles``)."""
 
     def __init__(self, t_hist: int, hidden: int, layers: int, heads: int, num_types: int = 2,
                  temporal: bool = False, site: bool = False,
-                 pair_distance: bool = False):  # fmt: skip
+                 pair_distance: bool = False, roles: int = 0):  # fmt: skip
         super().__init__()
         self.pair_distance = pair_distance
         self.embed = mlp([t_hist * 4, hidden, hidden])
         self.temporal = nn.GRU(4, hidden, batch_first=True) if temporal else None
         self.site_embed = mlp([4, hidden, hidden]) if site else None
         self.type_embed = nn.Embedding(num_types, hidden)
+        self.role_embed = nn.Embedding(roles, hidden) if roles else None
         edges = 6 if pair_distance else 4
         self.layers = nn.ModuleList(SocialAttention(hidden, heads, edges) for _ in range(layers))
         self.norm = nn.LayerNorm(hidden)
@@ -78,6 +80,13 @@ class SocialEncoder(nn.Module):
         h = self.embed(f.hist.flatten(1)) + self.type_embed(f.agent_type)  # [N, H]
         if self.site_embed is not None:
             h = h + self.site_embed(site)  # [N, H]
+        if self.role_embed is not None:
+            roles = self.role_embed.num_embeddings
+            if len(f.slot) and int(f.slot.max()) >= roles:
+                raise ValueError(f"SocialEncoder: a scene has {int(f.slot.max()) + 1} agents, "
+                                 f"but the model knows {roles} agent roles "
+                                 "(ModelConfig.agent_roles)")  # fmt: skip
+            h = h + self.role_embed(f.slot)  # [N, H]
         if self.temporal is not None:
             _, last = self.temporal(f.hist)  # last: [1, N, H]
             h = h + last[0].to(h.dtype)  # under autocast the GRU may run in another dtype

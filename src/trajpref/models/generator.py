@@ -63,7 +63,8 @@ class Generator(nn.Module):
         self.encoder = SocialEncoder(cfg.t_hist, h, layers, cfg.heads,
                                      temporal=cfg.history_encoder == "temporal",
                                      site=cfg.scene_position,
-                                     pair_distance=cfg.pair_distance)  # fmt: skip
+                                     pair_distance=cfg.pair_distance,
+                                     roles=cfg.agent_roles)  # fmt: skip
         p = cfg.generator_dropout
         self.dropout = nn.Dropout(p) if p > 0 else nn.Identity()
         self.mean_head = mlp([h, w, w, tf * 2], dropout=p)
