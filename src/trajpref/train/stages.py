@@ -193,8 +193,9 @@ def _check_site_augmentation(model: ModelConfig, data: DataConfig) -> None:
                           "scene's coordinates: train it with data.rotate, data.flip and "
                           "data.reverse false and no scale range")  # fmt: skip
     if model.agent_roles and data.drop_agents > 0:
-        raise ConfigError("model.agent_roles reads each agent's slot in its scene as its role: "
-                          "train it with data.drop_agents 0, which would shift the slots")  # fmt: skip
+        raise ConfigError("model.agent_roles reads each agent's slot in its scene as its "
+                          "role: train it with data.drop_agents 0 (dropping agents shifts "
+                          "the slots)")  # fmt: skip
 
 
 def build_generator_stage(
