@@ -5,7 +5,7 @@ import torch
 from synthetic import make_scene
 
 from trajpref.config import ModelConfig
-from trajpref.errors import ConfigError
+from trajpref.errors import ConfigError, DataError
 from trajpref.models.encoder import agent_site, heading_rotation, scene_features, speed_factor
 from trajpref.models.generator import Generator, time_projection
 from trajpref.types import collate
@@ -476,7 +476,7 @@ def test_only_a_generator_with_agent_roles_depends_on_the_order_of_a_scenes_agen
 def test_a_generator_with_agent_roles_refuses_a_scene_with_more_agents_than_roles():
     gen = Generator(dataclasses.replace(TINY, agent_roles=2)).eval()
     gen(scene_features(collate([make_scene(2)]), 1.0))  # two agents, two roles: fine
-    with pytest.raises(ValueError, match="3 agents, but the model knows 2 agent roles"):
+    with pytest.raises(DataError, match="3 agents, but this model knows 2 agent roles"):
         gen(scene_features(collate([make_scene(3)]), 1.0))
     with pytest.raises(ConfigError, match="agent_roles"):
         ModelConfig(agent_roles=-1)

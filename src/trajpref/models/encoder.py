@@ -9,6 +9,7 @@ import torch
 from torch import nn
 
 from trajpref.data.transforms import backward_velocity, observed_pace, to_model_frame
+from trajpref.errors import DataError
 from trajpref.models.layers import SocialAttention, mlp
 from trajpref.types import Batch
 
@@ -83,9 +84,10 @@ class SocialEncoder(nn.Module):
         if self.role_embed is not None:
             roles = self.role_embed.num_embeddings
             if len(f.slot) and int(f.slot.max()) >= roles:
-                raise ValueError(f"SocialEncoder: a scene has {int(f.slot.max()) + 1} agents, "
-                                 f"but the model knows {roles} agent roles "
-                                 "(ModelConfig.agent_roles)")  # fmt: skip
+                raise DataError(f"a scene has {int(f.slot.max()) + 1} agents, but this model "
+                                f"knows {roles} agent roles (ModelConfig.agent_roles): it "
+                                f"predicts scenes of at most {roles} agents, listed in its "
+                                "training data's order")  # fmt: skip
             h = h + self.role_embed(f.slot)  # [N, H]
         if self.temporal is not None:
             _, last = self.temporal(f.hist)  # last: [1, N, H]
