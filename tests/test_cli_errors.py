@@ -156,6 +156,13 @@ CASES: dict[str, tuple[list[str], str]] = {
         r"expected a denoiser checkpoint, got a generator"),
     "generator with no denoiser yet": ([*GEN, "--out", "{out}/run"],
                                        r"run/denoiser\.safetensors: no such checkpoint"),
+    "agent roles with dropped agents": (
+        [*GEN, "--denoiser", "{run}/denoiser.safetensors", "--out", "{out}/run", "--set",
+         "model.agent_roles=3", "--set", "data.drop_agents=0.2"],
+        r"model\.agent_roles reads each agent's slot .* data\.drop_agents 0"),
+    "negative agent roles": (
+        [*GEN, "--denoiser", "{run}/denoiser.safetensors", "--out", "{out}/run", "--set",
+         "model.agent_roles=-1"], r"agent_roles must be >= 0"),
     # --- finetune
     "finetune from a denoiser": ([*FT, "--from", "{run}/denoiser.safetensors", "--out",
                                   "{out}/ft"], r"fine-tuning starts from a generator"),
