@@ -119,8 +119,10 @@ def main() -> None:
     if not args.report:
         run_jobs(args)
     # the table always shows every method with rows, from every start: the control chosen on
-    # validation is chosen among all controls of a start, whichever methods this invocation ran
-    table = report(args.datasets, list(METHODS))
+    # validation is chosen among all controls of a start, whichever methods this invocation ran;
+    # and every dataset the previous table showed, so that a run on one dataset keeps the others
+    shown = previous_datasets(ROOT / "benchmarks" / "results" / "meta" / "equal_budget.md")
+    table = report(shown + [d for d in args.datasets if d not in shown], list(METHODS))
     if len(table.splitlines()) == 2:  # the header alone
         table = "_No equal-budget rows from the current generators yet._"
     out = ROOT / "benchmarks" / "results" / "meta" / "equal_budget.md"
@@ -280,6 +282,12 @@ def _ms(xs: list[float]) -> str:
 def previous_table(path: Path) -> dict[tuple[str, str], str]:
     """The lines of an earlier table (``meta/equal_budget.md``) by their first two cells."""
     return table_lines(path.read_text() if path.is_file() else "")
+
+
+def previous_datasets(path: Path) -> list[str]:
+    """The datasets of an earlier table (``meta/equal_budget.md``), in its order."""
+    names = [dataset for dataset, _ in previous_table(path)]
+    return list(dict.fromkeys(names))
 
 
 def report(datasets: list[str], methods: list[str]) -> str:

@@ -128,3 +128,28 @@ def test_without_run_folders_the_previous_tables_lines_stay_while_their_rows_do(
     rows[2]["min_fde"] = 0.41  # rlhf's rows changed: its group is computed again
     (results / "rows.json").write_text(json.dumps(rows))
     assert eb.report(["walks"], ["control", "rlhf"]).splitlines()[4].endswith("| – |")
+
+
+def test_a_run_on_one_dataset_keeps_the_other_datasets_of_the_table(eb, tmp_path, monkeypatch):
+    """``equal_budget.py --datasets robo`` used to write a table of robo alone, so the next
+    ``--report`` of every dataset had no previous lines to keep for the others (2026-11-29,
+    thirty-eighth session). The table now shows every dataset the previous one showed."""
+    results = tmp_path / "benchmarks" / "results"
+    (results / "meta").mkdir(parents=True)
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "rlhf.md").write_text("<!-- equal-budget:start -->\n"
+                                               "<!-- equal-budget:end -->\n")  # fmt: skip
+    rows = [_row("pretrained", 0, 0.40), _row("control", 0, 0.44)]
+    rows += [dict(r, dataset="other") for r in rows]
+    (results / "rows.json").write_text(json.dumps(rows))
+    table = results / "meta" / "equal_budget.md"
+    table.write_text(eb.report(["walks"], ["control"]).replace("| – |\n", "| 1 of 1 |\n") + "\n")
+    kept = [line for line in table.read_text().splitlines() if line.startswith("| walks")]
+    assert any(line.endswith("| 1 of 1 |") for line in kept)  # a cell only the table holds
+    assert eb.previous_datasets(table) == ["walks"]
+    monkeypatch.setattr("sys.argv", ["equal_budget.py", "--datasets", "other", "--report"])
+    eb.main()
+    written = table.read_text().splitlines()
+    assert [line for line in written if line.startswith("| walks")] == kept
+    assert any(line.startswith("| other | control") for line in written)
+    assert "| walks | control" in (tmp_path / "docs" / "rlhf.md").read_text()
