@@ -58,20 +58,21 @@ LIMITS = {
     "documents it (docs/data.md). That is knowledge of the test file the other defaults do "
     "not use, so this is a variant beside eth's default, never the default; eth's validation "
     "split cannot choose it (docs/pretraining.md, 'eth at two paces').",
-    "robo/generator-long": "Trained on a borrowed GPU (60-epoch schedule, the best epoch 38); "
-    "only slightly better than the CPU default on the test split.",
     "zara1/generator": "The CPU default (160 generator epochs without denoising steps, dropout "
     "0.2; best validation epoch 72) is 0.04 m short of LED's own minFDE20 (0.18 / 0.26); the "
     "GPU-trained `generator-long` (160 epochs with the tau = 5 steps; its weights left the "
     "tree on 2026-11-28, `git show 793f59a:src/trajpref/zoo/zara1/generator-long.safetensors`) "
     "is no better on the test split (docs/pretraining.md).",
-    "robo": "Trained on our simulator only, so short of the paper's Robo numbers "
-    "(0.22 / 0.35); see docs/robo_sim.md for how the simulator differs.",
+    "robo": "Trained on our simulator only (docs/robo_sim.md says how it differs from the real "
+    "robots). Its test minFDE20 is 0.0006 m above the paper's LED row (0.22 / 0.35), its "
+    "minADE20 0.03 m behind; it expects scenes of at most 3 robots listed as leader, follower, "
+    "approacher (`model.agent_roles`). The GPU-trained `generator-long` of 2026-11-22 left the "
+    "tree on 2026-11-29 (`git show 96c7b75:src/trajpref/zoo/robo/generator-long.safetensors`).",
     "robo-mix": "One seed. Its held-out validation (4 real recordings, 135 windows) moves by "
     "about 0.02 m between epochs, too little data to rank close candidates (docs/pretraining.md). "
-    "Its test row is better than the sim-only `robo/generator`'s and 0.009 m short of the "
+    "Its test row is better than the sim-only `robo/generator`'s and 0.009 m below the "
     "paper's LED minFDE20 (0.35); it is published beside the sim-only default, which trains on "
-    "our simulator alone.",
+    "our simulator alone. Like it, it expects at most 3 robots in their fixed order.",
     "nba": "A 6-epoch denoiser and 40 generator epochs without denoising steps over 203,511 "
     "windows, to fit the 45-minute CPU budget; twice the generator epochs did not improve "
     "validation (docs/pretraining.md). Our 8 + 12 split is not LED's 10 + 20, so LED's NBA "
