@@ -254,6 +254,10 @@ class ModelConfig:
     follower and approacher (docs/robo_sim.md). A scene with more than R agents is an error
     at prediction time, and training refuses ``data.drop_agents``, which would shift the
     slots (docs/pretraining.md, "Robo: which robot is which")."""
+    denoiser_roles: int = 0
+    """``agent_roles`` for the denoiser (0: off): its encoder adds a learned embedding of each
+    agent's slot, so that the diffusion score can judge each robot by its own role's motion.
+    A denoiser field: a generator trained from a denoiser must state the same value."""
     query_layers: int = 0
     """How the generator proposes its K shifts: 0 (the default) maps each agent's encoding and
     mean to all K x T_f x 2 numbers with one MLP (LED's head); L > 0 makes K tokens instead
@@ -314,6 +318,9 @@ class ModelConfig:
             raise ConfigError("ModelConfig.hidden must be even (the sinusoidal step embedding)")
         if self.t_hist < 2:
             raise ConfigError("ModelConfig.t_hist must be >= 2 (velocities need two frames)")
+        if self.denoiser_roles < 0:
+            raise ConfigError(f"ModelConfig.denoiser_roles must be >= 0 (0: off), "
+                              f"got {self.denoiser_roles}")  # fmt: skip
         if self.agent_roles < 0:
             raise ConfigError(f"ModelConfig.agent_roles must be >= 0 (0: off), "
                               f"got {self.agent_roles}")  # fmt: skip

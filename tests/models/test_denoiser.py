@@ -74,3 +74,22 @@ def test_gradients_reach_every_parameter():
         assert p.grad is not None, name
         assert torch.isfinite(p.grad).all(), name
         assert p.grad.abs().sum() > 0, name
+
+
+@pytest.mark.parametrize("roles", [0, 3])
+def test_only_a_denoiser_with_roles_depends_on_the_order_of_a_scenes_agents(roles):
+    import dataclasses
+
+    torch.manual_seed(0)
+    cfg = dataclasses.replace(TINY, denoiser_roles=roles)
+    model = Denoiser(cfg).eval()
+    scene = make_scene(3)
+    order = [2, 0, 1]
+    swapped = dataclasses.replace(scene, history=scene.history[order],
+                                  future=scene.future[order])  # fmt: skip
+    with torch.no_grad():
+        a = model.context(scene_features(collate([scene]), 1.0))  # [N, H]
+        b = model.context(scene_features(collate([swapped]), 1.0))
+    assert torch.allclose(a[order], b, atol=1e-5) == (roles == 0)
+    # a denoiser field: a generator's config must state the same value as its denoiser's
+    assert cfg.denoiser_part() != TINY.denoiser_part() or roles == 0

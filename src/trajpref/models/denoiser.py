@@ -22,7 +22,8 @@ class Denoiser(nn.Module):
     def __init__(self, cfg: ModelConfig):
         super().__init__()
         self.cfg = cfg
-        self.encoder = SocialEncoder(cfg.t_hist, cfg.hidden, cfg.encoder_layers, cfg.heads)
+        self.encoder = SocialEncoder(cfg.t_hist, cfg.hidden, cfg.encoder_layers, cfg.heads,
+                                     roles=cfg.denoiser_roles)  # fmt: skip
         self.t_embed = mlp([cfg.hidden, cfg.hidden, cfg.hidden])
         cond = 2 * cfg.hidden
         self.inp = nn.Linear(cfg.t_fut * 2, cfg.denoiser_width)
