@@ -64,15 +64,19 @@ LIMITS = {
     "tree on 2026-11-28, `git show 793f59a:src/trajpref/zoo/zara1/generator-long.safetensors`) "
     "is no better on the test split (docs/pretraining.md).",
     "robo": "Trained on our simulator only (docs/robo_sim.md says how it differs from the real "
-    "robots). Its test minFDE20 is 0.0006 m above the paper's LED row (0.22 / 0.35), its "
-    "minADE20 0.03 m behind; it expects scenes of at most 3 robots listed as leader, follower, "
-    "approacher (`model.agent_roles`). The GPU-trained `generator-long` of 2026-11-22 left the "
-    "tree on 2026-11-29 (`git show 96c7b75:src/trajpref/zoo/robo/generator-long.safetensors`).",
+    "robots).",
+    "robo/generator": "Its test minFDE20 is 0.0006 m above the paper's LED row (0.22 / 0.35), "
+    "its minADE20 0.03 m behind. It expects scenes of at most 3 robots listed as leader, "
+    "follower, approacher (`model.agent_roles`). The GPU-trained `generator-long` of "
+    "2026-11-22 left the tree on 2026-11-29 (`git show "
+    "96c7b75:src/trajpref/zoo/robo/generator-long.safetensors`).",
+    "robo-mix/generator": "Like `robo/generator`, it expects at most 3 robots in their fixed "
+    "order (`model.agent_roles`).",
     "robo-mix": "One seed. Its held-out validation (4 real recordings, 135 windows) moves by "
     "about 0.02 m between epochs, too little data to rank close candidates (docs/pretraining.md). "
     "Its test row is better than the sim-only `robo/generator`'s and 0.009 m below the "
     "paper's LED minFDE20 (0.35); it is published beside the sim-only default, which trains on "
-    "our simulator alone. Like it, it expects at most 3 robots in their fixed order.",
+    "our simulator alone.",
     "nba": "A 6-epoch denoiser and 40 generator epochs without denoising steps over 203,511 "
     "windows, to fit the 45-minute CPU budget; twice the generator epochs did not improve "
     "validation (docs/pretraining.md). Our 8 + 12 split is not LED's 10 + 20, so LED's NBA "
