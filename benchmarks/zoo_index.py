@@ -67,11 +67,15 @@ LIMITS = {
     "robots).",
     "robo/generator": "Its test minFDE20 is 0.0006 m above the paper's LED row (0.22 / 0.35), "
     "its minADE20 0.03 m behind. It expects scenes of at most 3 robots listed as leader, "
-    "follower, approacher (`model.agent_roles`). The GPU-trained `generator-long` of "
+    "follower, approacher (`model.agent_roles`): listed in another order it is 3-5x worse, "
+    "about constant velocity (`benchmarks/robo_order.py`); for robots whose roles are unknown "
+    "use the generator without roles, `git show "
+    "4450d00:src/trajpref/zoo/robo/generator.safetensors` (test 0.269 / 0.387). The GPU-trained `generator-long` of "
     "2026-11-22 left the tree on 2026-11-29 (`git show "
     "96c7b75:src/trajpref/zoo/robo/generator-long.safetensors`).",
     "robo-mix/generator": "Like `robo/generator`, it expects at most 3 robots in their fixed "
-    "order (`model.agent_roles`).",
+    "order (`model.agent_roles`; 3-5x worse in another order); without roles: `git show "
+    "4450d00:src/trajpref/zoo/robo-mix/generator.safetensors` (test 0.261 / 0.359).",
     "robo-mix": "One seed. Its held-out validation (4 real recordings, 135 windows) moves by "
     "about 0.02 m between epochs, too little data to rank close candidates (docs/pretraining.md). "
     "Its test row is better than the sim-only `robo/generator`'s and 0.009 m below the "
