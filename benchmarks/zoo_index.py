@@ -70,7 +70,8 @@ LIMITS = {
     "follower, approacher (`model.agent_roles`): listed in another order it is 3-5x worse, "
     "about constant velocity (`benchmarks/robo_order.py`); for robots whose roles are unknown "
     "use the generator without roles, `git show "
-    "4450d00:src/trajpref/zoo/robo/generator.safetensors` (test 0.269 / 0.387). The GPU-trained `generator-long` of "
+    "4450d00:src/trajpref/zoo/robo/generator.safetensors` (test 0.269 / 0.387). "
+    "The GPU-trained `generator-long` of "
     "2026-11-22 left the tree on 2026-11-29 (`git show "
     "96c7b75:src/trajpref/zoo/robo/generator-long.safetensors`).",
     "robo-mix/generator": "Like `robo/generator`, it expects at most 3 robots in their fixed "
