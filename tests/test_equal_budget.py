@@ -146,7 +146,7 @@ def test_a_run_on_one_dataset_keeps_the_other_datasets_of_the_table(eb, tmp_path
     table.write_text(eb.report(["walks"], ["control"]).replace("| – |\n", "| 1 of 1 |\n") + "\n")
     kept = [line for line in table.read_text().splitlines() if line.startswith("| walks")]
     assert any(line.endswith("| 1 of 1 |") for line in kept)  # a cell only the table holds
-    assert eb.previous_datasets(table) == ["walks"]
+    assert eb.previous_datasets(eb.previous_table(table)) == ["walks"]
     monkeypatch.setattr("sys.argv", ["equal_budget.py", "--datasets", "other", "--report"])
     eb.main()
     written = table.read_text().splitlines()
