@@ -184,9 +184,11 @@ def _check_matches_denoiser(cfg: ExperimentConfig, denoiser_cfg: ExperimentConfi
         )
 
 
-def _check_site_augmentation(model: ModelConfig, data: DataConfig) -> None:
-    """A generator that sees where its agents are (``scene_position``) must train on scenes
-    left in their place: no rotation, mirror, time reversal or scaling."""
+def _check_augmentations(model: ModelConfig, data: DataConfig) -> None:
+    """Augmentations that would hide what the generator reads: one that sees where its agents
+    are (``scene_position``) must train on scenes left in their place (no rotation, mirror,
+    time reversal or scaling), and one that reads each agent's slot as its role
+    (``agent_roles``) on scenes whose agents are not dropped."""
     moved = data.rotate or data.flip or data.reverse or data.scale_range is not None
     if model.scene_position and moved:
         raise ConfigError("model.scene_position learns from where the agents are in the "
@@ -203,7 +205,7 @@ def build_generator_stage(
     device: torch.device,
 ) -> Stage:  # fmt: skip
     """Stage 2. Validation: minADE_K + minFDE_K of the leapfrog sampler (lower is better)."""
-    _check_site_augmentation(cfg.model, cfg.data)
+    _check_augmentations(cfg.model, cfg.data)
     torch.manual_seed(cfg.seed)
     denoiser, dcfg = ckpt.build_denoiser(denoiser_payload)
     _check_matches_denoiser(cfg, dcfg)
@@ -248,7 +250,7 @@ def build_finetune_stage(
     torch.manual_seed(cfg.seed)
     sampler = ckpt.predictor_from_payload(start, "leapfrog").to(device)
     assert sampler.generator is not None
-    _check_site_augmentation(sampler.generator.cfg, cfg.data)
+    _check_augmentations(sampler.generator.cfg, cfg.data)
     width = cfg.model.generator_encoder_width
     critic = Critic(width, cfg.model.t_fut, cfg.model.generator_width).to(device)
     objective = RLObjective(sampler, critic, cfg.finetune, cfg.generator)
