@@ -1,0 +1,36 @@
+"""The run record: each session of a stage writes where and how it ran beside its config."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+
+from trajpref.train.run import record_session, run_record_path, train_stage
+
+
+def test_a_stage_records_its_threads_seed_and_command(tiny_cfg, tmp_path):
+    train_stage("diffusion", tiny_cfg, tmp_path, device="cpu", progress=False, max_steps=1)
+    sessions = json.loads(run_record_path(tmp_path, "denoiser").read_text())
+    assert len(sessions) == 1
+    entry = sessions[0]
+    assert entry["threads"] == torch.get_num_threads() and entry["seed"] == tiny_cfg.seed
+    assert entry["device"] == "cpu" and entry["world_size"] == 1 and not entry["resumed"]
+    assert entry["torch"] == torch.__version__ and entry["command"].startswith("python")
+
+
+def test_a_resumed_stage_appends_a_second_session(tiny_cfg, tmp_path):
+    train_stage("diffusion", tiny_cfg, tmp_path, device="cpu", progress=False, max_steps=1)
+    train_stage("diffusion", tiny_cfg, tmp_path, device="cpu", progress=False,
+                resume=str(tmp_path / "denoiser_last.pt"))  # fmt: skip
+    sessions = json.loads(run_record_path(tmp_path, "denoiser").read_text())
+    assert [s["resumed"] for s in sessions] == [False, True]
+
+
+def test_an_unreadable_record_is_started_again_with_a_warning(tmp_path):
+    run_record_path(tmp_path, "generator").write_text("{not json")
+    with pytest.warns(UserWarning, match="starting it again"):
+        record_session(tmp_path, "generator", 3, torch.device("cpu"), 1, resumed=False)
+    sessions = json.loads(run_record_path(tmp_path, "generator").read_text())
+    assert [s["seed"] for s in sessions] == [3]
