@@ -150,6 +150,16 @@ def machine_short(machine: str | None) -> str:
     return f"CPU ({cores.group(1)} cores)" if cores else machine[:24]
 
 
+def thread_prefix(machine: str | None) -> str:
+    """``OMP_NUM_THREADS=N `` for a CPU run whose machine string records its thread count: a
+    seed repeats its run exactly only at the same count (a two-thread retrain of Robo's
+    one-thread seed 1 ended 4 % away, docs/pretraining.md), so the card's command says it."""
+    if not machine or machine_short(machine).startswith("GPU"):
+        return ""
+    threads = re.search(r"(\d+) threads?\b", machine)
+    return f"OMP_NUM_THREADS={threads.group(1)} " if threads else ""
+
+
 def _zoo_file(checkpoint: str | None) -> str | None:
     """A result row's checkpoint path -> zoo name (results older than the safetensors
     conversion name the ``.pt`` file)."""
@@ -269,7 +279,8 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
             gpu = " --device cuda" if run.get("train_machine") else ""
             sets = "".join(f" --set {s}" for s in overrides(dataset, kind, cfg))
             seed = f" --seed {cfg['seed']}" if cfg.get("seed") else ""  # the run's own seed
-            train_cmd = [f"trajpref train generator --config configs/{dataset}.yaml "
+            threads = "" if gpu else thread_prefix(machine)
+            train_cmd = [f"{threads}trajpref train generator --config configs/{dataset}.yaml "
                          f"--out {out}{den}{seed}{sets}{gpu}"]  # fmt: skip
             if not den:  # trained with its own denoiser, in the same run folder
                 # the denoiser's own settings: a data flag adopted for the generator stage only

@@ -84,3 +84,23 @@ def test_a_published_fine_tune_from_a_replaced_start_keeps_its_own_row():
     assert mod.tuned_row(rows, "zara2", "rlhf-res", from_today=False)["min_fde"] == 0.25
     assert mod.tuned_row(rows, "zara2", "rlhf-res", from_today=True)["min_fde"] == 0.21
     assert mod.tuned_row(rows[1:], "zara2", "rlhf-res", from_today=True) is None
+
+
+def test_a_cards_training_command_states_the_threads_its_cpu_run_used(monkeypatch):
+    """A seed repeats its run exactly only at the same thread count, so a CPU run's recorded
+    threads go in front of the card's generator command; a GPU run's command has none."""
+    zoo = load_benchmark("zoo_index")
+    assert zoo.thread_prefix("Linux x86_64 (AMD EPYC), 2 CPU cores, torch 2.13, 1 threads") == (
+        "OMP_NUM_THREADS=1 ")
+    assert zoo.thread_prefix("Linux, 2 CPU cores, 2 threads") == "OMP_NUM_THREADS=2 "
+    assert zoo.thread_prefix("Linux, 2 CPU cores") == "" and zoo.thread_prefix(None) == ""
+    assert zoo.thread_prefix("1x H200, 16 CPU cores, 16 threads") == ""
+    path = ROOT / "models" / "zara2" / "generator.safetensors"
+    meta = {"trained_on": "trainer, 2 CPU cores, 1 threads"}
+    monkeypatch.setattr(zoo, "_meta", lambda dataset, variant: meta)
+    cmds = zoo.describe("zara2/generator", path, [])["train"]["commands"]
+    assert cmds[-1].startswith("OMP_NUM_THREADS=1 trajpref train generator")
+    assert not cmds[0].startswith("OMP")  # the denoiser's stage: its threads are not recorded
+    meta["train_machine"] = "1x H100"
+    cmds = zoo.describe("zara2/generator", path, [])["train"]["commands"]
+    assert cmds[-1].startswith("trajpref train generator") and "--device cuda" in cmds[-1]
