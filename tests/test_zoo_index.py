@@ -90,8 +90,8 @@ def test_a_cards_training_command_states_the_threads_its_cpu_run_used(monkeypatc
     """A seed repeats its run exactly only at the same thread count, so a CPU run's recorded
     threads go in front of the card's generator command; a GPU run's command has none."""
     zoo = load_benchmark("zoo_index")
-    assert zoo.thread_prefix("Linux x86_64 (AMD EPYC), 2 CPU cores, torch 2.13, 1 threads") == (
-        "OMP_NUM_THREADS=1 ")
+    one = "Linux x86_64 (AMD EPYC), 2 CPU cores, torch 2.13, 1 threads"
+    assert zoo.thread_prefix(one) == "OMP_NUM_THREADS=1 "
     assert zoo.thread_prefix("Linux, 2 CPU cores, 2 threads") == "OMP_NUM_THREADS=2 "
     assert zoo.thread_prefix("Linux, 2 CPU cores") == "" and zoo.thread_prefix(None) == ""
     assert zoo.thread_prefix("1x H200, 16 CPU cores, 16 threads") == ""
