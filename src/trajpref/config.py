@@ -282,7 +282,10 @@ class ModelConfig:
     2026-11-29 put 4 % of its samples more than 5 units (300 px) from their mean, where they
     predict nothing and where a tiny change of weights moves them far, which made RL
     fine-tuning on SDD diverge. It may be set on published weights without retraining
-    (docs/pretraining.md, "A cap on the samples' sigma")."""
+    (docs/pretraining.md, "A cap on the samples' sigma"). Set in a training config, it also
+    caps the spread while the generator trains (the clamp passes no gradient above the cap):
+    a loose cap such as 3 keeps an outlier agent's samples from overflowing the loss
+    (docs/pretraining.md, "(sh3)")."""
 
     def __post_init__(self) -> None:
         if self.max_log_sigma is not None and not math.isfinite(self.max_log_sigma):

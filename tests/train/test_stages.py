@@ -319,9 +319,25 @@ def test_nonfinite_losses_are_skipped_then_refused(tmp_path, cfg, folder):
     before = _params(stage.trainable)
     real_forward = stage.objective.forward
     stage.objective.forward = lambda batch, gen: (real_forward(batch, gen)[0] * float("nan"), {})
-    with pytest.raises(TrajprefError, match="non-finite losses"):
+    with pytest.raises(TrajprefError, match="non-finite losses; lower the learning rate$"):
         fit(stage, train, cfg.data, cfg.denoiser, tmp_path, torch.device("cpu"), progress=False)
     assert _changed(before, stage.trainable) == []  # no NaN update reached the weights
+
+
+def test_the_generator_stage_names_its_own_remedy_for_nonfinite_losses(
+    tmp_path, cfg, folder, trained
+):
+    # the generator's hint points at the spread cap, not at a reward it does not have
+    from trajpref.train.loop import fit
+
+    train = load_dataset(str(folder), "train")
+    payload = ckpt.load(trained / "denoiser.safetensors")
+    stage = build_generator_stage(cfg, payload, train, torch.device("cpu"))
+    real_forward = stage.objective.forward
+    stage.objective.forward = lambda batch, gen: (real_forward(batch, gen)[0] * float("inf"), {})
+    with pytest.raises(TrajprefError, match="model.max_log_sigma") as err:
+        fit(stage, train, cfg.data, cfg.generator, tmp_path, torch.device("cpu"), progress=False)
+    assert "reward" not in str(err.value)
 
 
 @pytest.mark.parametrize("clock", ["wall", "cpu"])

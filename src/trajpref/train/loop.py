@@ -307,8 +307,7 @@ def fit(
                     tqdm.write(f"[{stage.name}] non-finite loss at step {step + 1}; update skipped")
                     if nonfinite > max(3, steps_per_epoch // 10):
                         raise TrajprefError(
-                            f"{stage.name}: {nonfinite} non-finite losses; lower the learning "
-                            "rate or clip the reward"
+                            f"{stage.name}: {nonfinite} non-finite losses; {stage.nonfinite_hint}"
                         )
                     continue
                 optimizer.zero_grad(set_to_none=True)

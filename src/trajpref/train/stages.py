@@ -55,6 +55,8 @@ class Stage:
     """The networks whose forward passes the steps spend their time in: compiled in place
     (``nn.Module.compile``, parameters and state-dict keys unchanged) when the stage's
     ``OptimConfig.compile`` is on."""
+    nonfinite_hint: str = "lower the learning rate"
+    """What the error says to try when the loop gives up on repeated non-finite losses."""
 
 
 def data_scale(dataset: TrajectoryDataset) -> float:
@@ -224,7 +226,11 @@ def build_generator_stage(
 
     return Stage("generator", objective, generator, validate, payload,
                  on_progress=objective.set_progress,
-                 networks=(generator, sampler.denoiser))  # fmt: skip
+                 networks=(generator, sampler.denoiser),
+                 nonfinite_hint="lower the learning rate, or cap the samples' spread in "
+                 "training with model.max_log_sigma (an outlier agent, such as an annotation "
+                 "jump, can drive its log sigma to overflow; docs/pretraining.md, '(sh3)')",
+                 )  # fmt: skip
 
 
 # ----------------------------------------------------------------------------- stage 3
@@ -267,4 +273,5 @@ def build_finetune_stage(
     epochs = cfg.finetune.ppo_epochs if cfg.finetune.method != "control" else 1
     return Stage("finetune", objective, PolicyAndCritic(sampler.generator, critic), validate,
                  payload, objective.collect_frozen if epochs > 1 else None, epochs,
-                 networks=(sampler.generator, sampler.denoiser))  # fmt: skip
+                 networks=(sampler.generator, sampler.denoiser),
+                 nonfinite_hint="lower the learning rate or clip the reward")  # fmt: skip
