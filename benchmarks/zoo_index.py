@@ -417,17 +417,30 @@ def _sampling_lines(sampling: dict[str, Any] | None) -> list[str]:
                  "(`model.max_speed`).")  # fmt: skip
     clamps = [c for c in sampling["changes"] if "max_speed" in c]
     trained_clamp = clamps[0].get("previous") if clamps else None  # before any change
-    for change in sampling["changes"]:
+    for change, notes in _merged_changes(sampling["changes"]):
         if "stochastic_steps" in change:
             state = "ancestral" if change["stochastic_steps"] else "posterior-mean"
-            text += f" Set to {state} steps after training ({change_note(change)})."
+            text += f" Set to {state} steps after training ({notes})."
         if "max_speed" in change and trained_clamp:  # trained with a clamp on
             text += (f" Trained with the speed clamp at {trained_clamp:.4f}, set to "
-                     f"{change['max_speed']:.4f} ({change_note(change)}).")  # fmt: skip
+                     f"{change['max_speed']:.4f} ({notes}).")  # fmt: skip
         elif "max_speed" in change:
             text += (f" Speed clamp set to {change['max_speed']:.3f} after training, same "
-                     f"weights ({change_note(change)}).")  # fmt: skip
+                     f"weights ({notes}).")  # fmt: skip
     return [text, ""]
+
+
+def _merged_changes(changes: list[dict[str, Any]]) -> list[tuple[dict[str, Any], str]]:
+    """Consecutive changes of one setting as one (last change, joined notes) pair: a card says
+    once where a setting ended up and why, not once per rewrite of the same value."""
+    merged: list[tuple[dict[str, Any], str]] = []
+    for change in changes:
+        keys = set(change) - {"note", "date", "previous"}
+        if merged and set(merged[-1][0]) - {"note", "date", "previous"} == keys:
+            merged[-1] = (change, f"{merged[-1][1]}; {change_note(change)}")
+        else:
+            merged.append((change, change_note(change)))
+    return merged
 
 
 def card(e: dict[str, Any]) -> str:

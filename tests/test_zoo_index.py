@@ -60,6 +60,22 @@ def test_a_card_says_when_its_generator_trained_on_mirrored_scenes():
     assert "mirrored" not in " ".join(zoo._sampling_lines(base))  # files from before the field
 
 
+def test_a_card_states_consecutive_rewrites_of_one_setting_once():
+    """univ's clamp was written twice on one day (0.2996 rounded, then all its digits); the
+    card said "set to 0.300" twice. Consecutive changes of one setting make one sentence with
+    every note; a change of another setting in between keeps them apart."""
+    zoo = load_benchmark("zoo_index")
+    first = {"max_speed": 0.2996, "previous": 0.0, "date": "2026-12-01", "note": "the 90 % clamp"}
+    second = {"max_speed": 0.29963, "previous": 0.2996, "date": "2026-12-01", "note": "all digits"}
+    steps = {"stochastic_steps": False, "previous": True, "date": "2026-12-01", "note": "mean"}
+    base = {"tau": 0, "stochastic_steps": False, "changes": [first, second]}
+    text = " ".join(zoo._sampling_lines(base))
+    assert text.count("Speed clamp set to") == 1
+    assert "(2026-12-01: the 90 % clamp; 2026-12-01: all digits)" in text
+    apart = " ".join(zoo._sampling_lines({**base, "changes": [first, steps, second]}))
+    assert apart.count("Speed clamp set to") == 2
+
+
 def test_a_generator_cards_denoiser_command_rebuilds_the_published_denoiser(monkeypatch):
     """univ's config turns on data flags for its generator stage (data.flip, data.reverse)
     that its published denoiser was not trained with; the card's diffusion command must switch
