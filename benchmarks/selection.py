@@ -108,6 +108,9 @@ def main() -> None:
                         help="facility's (default: --bandwidth)")  # fmt: skip
     parser.add_argument("--final", action="store_true", help="score by the final step (FTS)")
     parser.add_argument("--score-every", type=int, default=9, help="score steps' spacing")
+    parser.add_argument("--score-from", type=int, default=0,
+                        help="the first score step (0, the lowest noise level; a later one "
+                        "keeps only the noisier steps, whose rows carry f<step>)")  # fmt: skip
     parser.add_argument("--max-scenes", type=int, default=None)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
@@ -175,9 +178,11 @@ def main() -> None:
     stem = f"generator-{args.variant}" if args.variant else "generator"
     path = Path(args.model or ROOT / "models" / args.dataset / f"{stem}.safetensors")
     model = ckpt.load_predictor(path, "leapfrog")
-    steps = score_timesteps(model.schedule.num_steps, args.score_every)
-    # rows and test records of another spacing than the paper's name their number of steps
-    steps_tag = f"s{len(steps)}" if args.score_every != PAPER_SCORE_EVERY else ""
+    steps = score_timesteps(model.schedule.num_steps, args.score_every, args.score_from)
+    # rows and test records of another spacing than the paper's name their number of steps,
+    # and their first step when it is not the chain's first
+    steps_tag = (f"s{len(steps)}" if args.score_every != PAPER_SCORE_EVERY or args.score_from
+                 else "") + (f"f{args.score_from}" if args.score_from else "")  # fmt: skip
     trained_on = training_dataset(path)  # robo's models train on robo-sim: robo has no train split
     speed_ref = None
     if args.speed_norm is not None:
@@ -250,7 +255,8 @@ def main() -> None:
     ms_score = 1000 * seconds["score"] / scenes
     header = (f"{args.dataset}/{args.split}: {scenes} scenes, K = {args.samples} x {args.draws} "
               f"draws, score every "
-              f"{args.score_every} ({'final step' if args.final else 'whole future'}); "
+              f"{args.score_every} from step {args.score_from} "
+              f"({'final step' if args.final else 'whole future'}); "
               f"predict {ms_predict:.1f} ms/scene, score {ms_score:.1f} ms/scene")  # fmt: skip
     print(header)
     print(f"{'method':<26} {'per':<6} {'K':>2} {'minADE':>7} {'minFDE':>7} {'ms/scene':>8}")
@@ -310,7 +316,8 @@ def main() -> None:
             uses_score=v["uses_score"],
         ))  # fmt: skip
     meta = {"header": header, "ms_predict_per_scene": ms_predict, "ms_score_per_scene": ms_score,
-            "score_every": args.score_every, "final": args.final, "scenes": scenes,
+            "score_every": args.score_every, "score_from": args.score_from,
+            "final": args.final, "scenes": scenes,
             "speed_ref": speed_ref, "stretch": args.stretch, "draws": args.draws,
             "trust_speed": trust_speed, "trust_quantile": args.trust_quantile,
             "score_precision": args.score_precision, "pace_bins": pace,

@@ -114,6 +114,17 @@ def test_rows_name_their_score_steps_and_bandwidth_when_not_the_papers(
     assert meta["score_every"] == 50
 
 
+def test_rows_scored_from_a_later_step_name_it(tmp_path, monkeypatch, tiny_run, walks):
+    rows, meta = _test_rows(tmp_path, monkeypatch, tiny_run, walks,
+                            "--methods", "facility", "score-facility", "--bandwidth", "1",
+                            "--score-every", "3", "--score-from", "4")  # fmt: skip
+    methods = {r["method"] for r in rows}
+    # the paper's spacing, but not its chain (the tiny run's 10 steps: 4, 7): the step count
+    # and the first step name the row
+    assert methods == {"select-facility", "select-score-facility-d30-t2-b1-s2f4"}
+    assert meta["score_from"] == 4 and "from step 4" in meta["header"]
+
+
 def test_another_scorer_names_the_score_rows_and_the_same_denoiser_scores_alike(
     tmp_path, monkeypatch, tiny_run, walks
 ):

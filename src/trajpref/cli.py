@@ -135,6 +135,9 @@ def _add_selection_args(p: argparse.ArgumentParser) -> None:
                    help="per agent, or one set of indices per scene (joint metrics)")  # fmt: skip
     p.add_argument("--score-every", type=int, default=9,
                    help="selection's score steps: every this many of the S (9)")  # fmt: skip
+    p.add_argument("--score-from", type=int, default=0,
+                   help="selection's first score step (0, the lowest noise level; a later one "
+                   "keeps only the noisier steps, docs/selection.md)")  # fmt: skip
     p.add_argument("--score-precision", default="fp32", choices=PRECISIONS,
                    help="arithmetic of selection's score passes (bf16: about 3x faster on a "
                    "CPU with bfloat16 instructions; docs/selection.md)")  # fmt: skip
@@ -457,7 +460,7 @@ def _selecting(args, model, device):
         if args.scorer is None and args.model == "cv":
             raise ConfigError(f"--select {args.select} with --model cv needs --scorer")
         every = TrajectoryScorer.from_checkpoint(args.scorer or args.model, device)
-        steps = score_timesteps(every.schedule.num_steps, args.score_every)
+        steps = score_timesteps(every.schedule.num_steps, args.score_every, args.score_from)
         scorer = TrajectoryScorer(every.denoiser, every.schedule, every.scale, steps,
                                   precision=args.score_precision)  # fmt: skip
     return SelectingPredictor(model, cfg, args.samples, scorer), args.keep

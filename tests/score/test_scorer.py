@@ -34,6 +34,14 @@ def test_score_timesteps():
     assert score_timesteps(100)[-1] == 99 and len(score_timesteps(100)) == 34
 
 
+def test_score_timesteps_from_a_later_step_keep_only_the_noisier_ones():
+    assert score_timesteps(100, 3, 66) == [66, 69, 72, 75, 78, 81, 84, 87, 90, 93, 96, 99]
+    assert score_timesteps(100, 100, 66) == [66]  # one step, at a high noise level
+    for bad in (-1, 100):
+        with pytest.raises(ConfigError, match="first step must lie in 0..99"):
+            score_timesteps(100, 3, bad)
+
+
 def test_r_is_exactly_zero_for_the_ground_truth(scorer, batch):
     res = scorer.score(batch, batch.future[None].expand(3, -1, -1, -1).clone())
     assert torch.equal(res.r, torch.zeros_like(res.r))

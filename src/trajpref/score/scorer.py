@@ -32,11 +32,15 @@ from trajpref.models.encoder import scene_features
 from trajpref.types import AGENT_BALL, AGENT_PERSON, Batch
 
 
-def score_timesteps(num_steps: int = 100, every: int = 3) -> list[int]:
-    """The paper's "every 3 steps": 0, 3, ..., up to num_steps - 1."""
+def score_timesteps(num_steps: int = 100, every: int = 3, start: int = 0) -> list[int]:
+    """The paper's "every 3 steps": start, start + 3, ..., up to num_steps - 1 (start = 0 is
+    the paper's chain from the lowest noise level; a later start keeps only the noisier steps,
+    docs/score.md, "Study: score timesteps")."""
     if every < 1:
         raise ConfigError("the score's step spacing must be >= 1")
-    return list(range(0, num_steps, every))
+    if not 0 <= start < num_steps:
+        raise ConfigError(f"the score's first step must lie in 0..{num_steps - 1}, got {start}")
+    return list(range(start, num_steps, every))
 
 
 def relative_score(d_pred: torch.Tensor, d_gt: torch.Tensor) -> torch.Tensor:
