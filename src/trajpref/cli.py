@@ -470,7 +470,9 @@ def _selection_fields(args) -> dict:
     if args.keep is None:
         return {}
     return {"candidates": args.samples, "select": args.select, "select_per": args.select_per,
-            "trust_speed": args.trust_speed, "score_precision": args.score_precision}  # fmt: skip
+            "drop": args.drop, "trust_speed": args.trust_speed,
+            "score_every": args.score_every, "score_from": args.score_from,
+            "score_precision": args.score_precision}  # fmt: skip
 
 
 SCORE_LINE = (("max_ats", "maxATS"), ("max_fts", "maxFTS"), ("mean_ats", "meanATS"))

@@ -135,6 +135,15 @@ def test_cli_keep_selects_and_reports(tiny_run, walks, capsys, tmp_path):
     res = json.loads(capsys.readouterr().out)
     assert code == 0 and res["samples"] == 2 and res["candidates"] == 4
     assert res["select"] == "score-kmeans"
+    assert (res["drop"], res["score_every"], res["score_from"]) == (0.3, 9, 0)  # the defaults
+    code = main(["evaluate", "--dataset", str(walks), "--model", gen, "--samples", "4",
+                 "--keep", "2", "--select", "score-kmeans", "--score-every", "3",
+                 "--score-from", "4", "--json", "--no-progress"])  # fmt: skip
+    assert code == 0 and json.loads(capsys.readouterr().out)["score_from"] == 4
+    code = main(["evaluate", "--dataset", str(walks), "--model", gen, "--samples", "4",
+                 "--keep", "2", "--select", "score-kmeans", "--score-from", "10",
+                 "--no-progress"])  # fmt: skip
+    assert code == 2 and "first step must lie in 0..9" in capsys.readouterr().err
     out = tmp_path / "kept.npz"
     code = main(["predict", "--dataset", str(walks), "--model", gen, "--samples", "4",
                  "--keep", "3", "--select", "kmeans", "--out", str(out),
