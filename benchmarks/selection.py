@@ -179,10 +179,11 @@ def main() -> None:
     path = Path(args.model or ROOT / "models" / args.dataset / f"{stem}.safetensors")
     model = ckpt.load_predictor(path, "leapfrog")
     steps = score_timesteps(model.schedule.num_steps, args.score_every, args.score_from)
-    # rows and test records of another spacing than the paper's name their number of steps,
-    # and their first step when it is not the chain's first
-    steps_tag = (f"s{len(steps)}" if args.score_every != PAPER_SCORE_EVERY or args.score_from
-                 else "") + (f"f{args.score_from}" if args.score_from else "")  # fmt: skip
+    # rows and test records of other steps than the paper's name their number of steps, and
+    # their first step when it is not the chain's first
+    steps_tag = ""
+    if args.score_every != PAPER_SCORE_EVERY or args.score_from:
+        steps_tag = f"s{len(steps)}" + (f"f{args.score_from}" if args.score_from else "")
     trained_on = training_dataset(path)  # robo's models train on robo-sim: robo has no train split
     speed_ref = None
     if args.speed_norm is not None:
