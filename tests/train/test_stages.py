@@ -668,3 +668,15 @@ def test_a_run_with_dropped_agents_trains_on_fewer_agents_than_it_reads(tmp_path
     train_stage("diffusion", c, tmp_path, device="cpu", progress=False)
     read, kept = sum(r for r, _ in seen), sum(k for _, k in seen)
     assert 0 < kept < read
+
+
+@pytest.mark.parametrize("fast", [True, False])
+def test_bf16_on_a_cpu_without_bfloat16_instructions_says_so(tmp_path, cfg, monkeypatch,
+                                                            capsys, fast):  # fmt: skip
+    monkeypatch.setattr("trajpref.train.loop.bf16_is_fast", lambda device: fast)
+    run_cfg = load_config(None, [*TINY_OVERRIDES, f"data.dataset={cfg.data.dataset}",
+                                 "denoiser.precision=bf16"])  # fmt: skip
+    train_stage("diffusion", run_cfg, tmp_path / "run", device="cpu", progress=False,
+                max_steps=1)  # fmt: skip
+    said = "no bfloat16 instructions" in capsys.readouterr().out
+    assert said is not fast
