@@ -9,7 +9,8 @@
 One pass predicts the 20 samples of every scene once (seed 0) and scores them once; every
 selection method then works on the same samples, so the comparison is paired. Methods (see
 ``trajpref.score.selection``): ``first``, ``random``, ``kmeans``, ``fps`` (no score), ``top``,
-``score-kmeans``, ``score-fps`` (score). Per-agent metrics come from per-agent selection, joint
+``score-kmeans``, ``score-fps`` (score), and the coverage methods ``facility`` and ``medoids``
+with their score-weighted ``score-`` forms. Per-agent metrics come from per-agent selection, joint
 metrics from per-scene selection. The time of each selection (its share of the scoring
 included) is reported in ms per scene, beside the prediction's own.
 """
@@ -55,7 +56,7 @@ def settings(args) -> list[SelectionConfig]:
     methods = args.methods or METHODS
     for method, keep, per in itertools.product(methods, args.keep, ("agent", "scene")):
         drops = args.drop if method.startswith("score-") else [0.0]
-        temps = args.temperature if method == "score-facility" else [1.0]
+        temps = args.temperature if method in ("score-facility", "score-medoids") else [1.0]
         for drop, temp in itertools.product(drops, temps):
             bandwidth = args.free_bandwidth if method == "facility" else args.bandwidth
             out.append(SelectionConfig(keep=keep, method=method, drop=drop, per=per,
@@ -72,7 +73,7 @@ FACILITY_BANDWIDTH = 0.5
 
 def name_of(cfg: SelectionConfig) -> str:
     drop = f"-d{round(cfg.drop * 100):02d}" if cfg.method.startswith("score-") else ""
-    temp = f"-t{cfg.temperature:g}" if cfg.method == "score-facility" else ""
+    temp = f"-t{cfg.temperature:g}" if cfg.method in ("score-facility", "score-medoids") else ""
     if cfg.method == "score-facility" and cfg.bandwidth != FACILITY_BANDWIDTH:
         temp += f"-b{cfg.bandwidth:g}"
     return f"select-{cfg.method}{drop}{temp}"

@@ -180,12 +180,13 @@ def test_selection_table_averages_seeds_and_computes_the_change_within_each_seed
     cells = [c.strip() for c in line.strip("|").split("|")]
     # facility's mean (0.70) beats kmeans' (0.75); the change is -10 % and 0 % within the seeds
     assert cells[:3] == ["zara1", "5", "2"]
-    assert cells[5] == "0.750" and cells[7] == "0.700" and cells[8] == "0.700"
-    assert cells[9] == "0.670 (`score-fps`)"
-    assert cells[10] == "-5.0 ± 7.1 %"
-    assert cells[11] == "1.400 / 1.340"
+    assert cells[5] == "0.750" and cells[7] == "0.700" and cells[9] == "0.700"
+    assert cells[8] == "–"  # no medoids rows
+    assert cells[10] == "0.670 (`score-fps`)"
+    assert cells[11] == "-5.0 ± 7.1 %"
+    assert cells[12] == "1.400 / 1.340"
     # the same two selections' per-agent and joint minADE
-    assert cells[13] == "0.350 / 0.335" and cells[14] == "0.700 / 0.670"
+    assert cells[14] == "0.350 / 0.335" and cells[15] == "0.700 / 0.670"
 
 
 def test_selection_table_gives_a_published_variant_its_own_line():

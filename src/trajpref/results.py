@@ -291,7 +291,7 @@ def _variant(checkpoint: str | None) -> str:
     return Path(checkpoint).stem.removeprefix("generator").lstrip("-") if checkpoint else ""
 
 
-SELECTION_FREE = ("first", "random", "kmeans", "fps", "facility")
+SELECTION_FREE = ("first", "random", "kmeans", "fps", "facility", "medoids")
 """The score-free selections, the selection table's columns."""
 
 

@@ -1,6 +1,7 @@
 """Keeping K' of K samples: hand-checked picks, the score's role, determinism, and that the
 ground truth is never read."""
 
+import itertools
 import json
 
 import numpy as np
@@ -13,8 +14,10 @@ from trajpref.errors import ConfigError
 from trajpref.models import checkpoint as ckpt
 from trajpref.score import TrajectoryScorer
 from trajpref.score.selection import (
+    MEDOID_PASSES,
     SelectingPredictor,
     SelectionConfig,
+    _medoids,
     gather,
     select_indices,
     select_samples,
@@ -55,7 +58,9 @@ def test_top_and_score_coverage_follow_the_residual():
     assert len(set(idx)) == 2 and 2 not in idx
 
 
-@pytest.mark.parametrize("method", ["kmeans", "fps", "score-kmeans", "score-fps", "random"])
+@pytest.mark.parametrize(
+    "method", ["kmeans", "fps", "medoids", "score-kmeans", "score-fps", "score-medoids", "random"]
+)
 def test_picks_are_distinct_per_agent(method):
     g = torch.Generator().manual_seed(0)
     feats = torch.randn(20, 7, 2, generator=g)  # [K, M, F]
@@ -119,6 +124,42 @@ def test_facility_location_covers_both_clusters_and_follows_the_weights():
     residual = torch.tensor([[9.0], [9.0], [9.0], [1.0], [1.2]])
     cfg = SelectionConfig(method="score-facility", keep=1, drop=0.0, temperature=0.5)
     assert select_indices(feats, 1, cfg, residual)[0, 0].item() in (3, 4)
+
+
+def test_medoids_swap_out_the_greedy_median():
+    # greedy alone starts from the 1-medoid (5.0, sample 3); the best pair is {0.1, 10.0}
+    feats = _line([0.0, 0.1, 0.2, 5.0, 9.9, 10.0, 10.1])
+    assert 3 in _medoids(feats, torch.ones(7, 1, dtype=torch.bool), torch.ones(7, 1), 2, 0)
+    idx = select_indices(feats, 2, SelectionConfig(method="medoids", keep=2))[:, 0].tolist()
+    assert sorted(idx) == [1, 5]  # cost 0.1 + 0 + 0.1 + 4.9 + 0.1 + 0 + 0.1 = 5.3
+
+
+def test_medoids_nearly_always_reach_the_brute_force_optimum():
+    g = torch.Generator().manual_seed(0)
+    x = torch.randn(8, 200, 2, generator=g)  # [K, M, F]
+    w = torch.rand(8, 200, generator=g) + 0.1  # [K, M] target weights
+    idx = _medoids(x, torch.ones(8, 200, dtype=torch.bool), w, 3, MEDOID_PASSES)  # [3, M]
+    d = (x[:, None] - x[None]).pow(2).sum(-1).sqrt()  # [K, K, M]
+    m = torch.arange(200)
+    cost = (d[idx, :, m[None]] * w.T[None]).min(0).values.sum(-1)  # [M]
+    every = [(d[list(c)] * w[None]).min(0).values.sum(0)  # [M] each 3-set's cost
+             for c in itertools.combinations(range(8), 3)]  # fmt: skip
+    best = torch.stack(every).min(0).values  # [M]
+    assert (cost >= best - 1e-5).all()
+    assert ((cost - best).abs() < 1e-5).float().mean() >= 0.9
+    assert (cost / best).mean() <= 1.01
+
+
+def test_score_medoids_follow_the_weights():
+    feats = _line([0.0, 0.1, 0.2, 10.0, 10.1])
+    # uniform weights: the median of the five (0.2); with the score, samples 0-2 are implausible
+    assert select_indices(feats, 1, SelectionConfig(method="medoids", keep=1))[0, 0] == 2
+    residual = torch.tensor([[9.0], [9.0], [9.0], [1.0], [1.2]])
+    cfg = SelectionConfig(method="score-medoids", keep=1, drop=0.0, temperature=0.5)
+    assert select_indices(feats, 1, cfg, residual)[0, 0].item() in (3, 4)
+    # dropped samples are never kept, even where they would cover best
+    cfg = SelectionConfig(method="score-medoids", keep=2, drop=0.6, temperature=100.0)
+    assert sorted(select_indices(feats, 2, cfg, residual)[:, 0].tolist()) == [3, 4]
 
 
 def test_score_first_keeps_the_generators_order_but_skips_the_worst():

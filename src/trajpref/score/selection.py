@@ -27,13 +27,15 @@ from trajpref.metrics import scene_sum
 from trajpref.score.scorer import TrajectoryScorer, scene_batch
 from trajpref.types import Batch
 
-Method = Literal["first", "random", "kmeans", "fps", "facility", "top", "score-first",
-                 "score-kmeans", "score-fps", "score-facility"]  # fmt: skip
+Method = Literal["first", "random", "kmeans", "fps", "facility", "medoids", "top",
+                 "score-first", "score-kmeans", "score-fps", "score-facility",
+                 "score-medoids"]  # fmt: skip
 METHODS: tuple[str, ...] = typing.get_args(Method)
 USES_SCORE = {m: m == "top" or m.startswith("score-") for m in METHODS}
 """Methods that read the diffusion score (the others select by the samples alone)."""
 SCORE_FREE = {"top": "first", "score-first": "first", "score-kmeans": "kmeans",
-              "score-fps": "fps", "score-facility": "facility"}  # fmt: skip
+              "score-fps": "fps", "score-facility": "facility",
+              "score-medoids": "medoids"}  # fmt: skip
 """Each score method's counterpart without the score (``trust_speed`` falls back to it)."""
 
 
@@ -47,9 +49,12 @@ class SelectionConfig:
     method: Method = "score-facility"
     """Without the score: ``first`` (the generator's first K'), ``random``, or coverage of
     the endpoints by ``kmeans``, ``fps`` (farthest-point) or ``facility`` (greedy facility
-    location). With it: ``top`` (the K' best-scored), or ``score-first`` / ``score-kmeans``
-    / ``score-fps`` / ``score-facility``: drop the ``drop`` worst-scored, then the same
-    (``score-facility`` also weights each sample's coverage by its score)."""
+    location) or ``medoids`` (weighted K'-medoids: the K' samples that minimise the mean
+    distance from every sample to its nearest kept one, the minFDE_K' the set would have if
+    the truth were one of the K). With it: ``top`` (the K' best-scored), or ``score-first`` /
+    ``score-kmeans`` / ``score-fps`` / ``score-facility`` / ``score-medoids``: drop the
+    ``drop`` worst-scored, then the same (``score-facility`` and ``score-medoids`` also
+    weight each sample as a target by its score)."""
     drop: float = 0.3
     """Fraction of the K samples the score-coverage methods drop before covering (at most
     K - K' are dropped)."""
@@ -63,8 +68,8 @@ class SelectionConfig:
     """Facility location: the similarity exp(-d^2 / (bandwidth * h^2)), h^2 the median
     squared distance between an item's samples."""
     temperature: float = 2.0
-    """score-facility: sample weights exp(-z / temperature), z the residual standardised over
-    the item's K samples."""
+    """score-facility and score-medoids: sample weights exp(-z / temperature), z the residual
+    standardised over the item's K samples."""
     seed: int = 0
     """Seed of the ``random`` method's own generator (it never draws from the sampler's, so
     every method sees the same candidates)."""
@@ -158,6 +163,50 @@ def _facility(x: torch.Tensor, valid: torch.Tensor, weight: torch.Tensor, keep: 
     return torch.stack(idx)
 
 
+def _medoids(x: torch.Tensor, valid: torch.Tensor, weight: torch.Tensor, keep: int,
+             passes: int) -> torch.Tensor:  # fmt: skip
+    """Weighted K'-medoids: valid samples S minimising sum_j weight_j min_{i in S} |x_i - x_j|
+    (Euclidean, as minFDE measures), greedily, then up to ``passes`` rounds of the best single
+    swap per item (PAM's swap step). x [K, M, F], valid and weight [K, M] -> idx [keep, M]."""
+    k, m_items, _ = x.shape
+    m = torch.arange(m_items, device=x.device)
+    d = (x[:, None] - x[None]).pow(2).sum(-1).sqrt()  # [K(i), K(j), M]
+    wd = d * weight[None]  # [K(i), K(j), M] weighted distance of target j to candidate i
+    near = torch.full((k, m_items), math.inf, dtype=x.dtype, device=x.device)  # [K(j), M]
+    free = valid.clone()  # [K, M] candidates not yet kept
+    idx = []
+    for _ in range(keep):  # greedy: add the candidate that lowers the cost most
+        cost = torch.minimum(near[None], wd).sum(1)  # [K(i), M]
+        pick = cost.masked_fill(~free, math.inf).argmin(0)  # [M]
+        free[pick, m] = False
+        near = torch.minimum(near, wd[pick, :, m].T)
+        idx.append(pick)
+    idx = torch.stack(idx)  # [keep, M]
+    for _ in range(passes):  # swap: replace one kept sample by one candidate, best gain
+        kept_wd = wd[idx, :, m[None]]  # [keep, M, K(j)]
+        others = torch.stack([  # [keep, M, K(j)] nearest kept sample but the p-th
+            torch.cat([kept_wd[:p], kept_wd[p + 1:]]).min(0).values if keep > 1
+            else torch.full_like(kept_wd[0], math.inf) for p in range(keep)])  # fmt: skip
+        cost = torch.minimum(others[:, None], wd.permute(0, 2, 1)[None]).sum(-1)  # [keep, K, M]
+        cost = cost.masked_fill(~free[None], math.inf)
+        now = torch.minimum(others, kept_wd).sum(-1)[0]  # [M] the current cost
+        best, flat = cost.flatten(0, 1).min(0)  # [M]
+        better = best < now - 1e-9 * now.abs().clamp(min=1.0)  # [M]
+        if not bool(better.any()):
+            break
+        pos, cand = (flat // k)[better], (flat % k)[better]  # the items that improve
+        items = m[better]
+        free[idx[pos, items], items] = True
+        free[cand, items] = False
+        idx[pos, items] = cand
+    return idx
+
+
+MEDOID_PASSES = 3
+"""Swap rounds of ``medoids`` after its greedy picks (K = 20, K' = 5: the swaps settle in one
+or two)."""
+
+
 def select_indices(features: torch.Tensor, keep: int, cfg: SelectionConfig,
                    residual: torch.Tensor | None = None,
                    generator: torch.Generator | None = None,
@@ -206,14 +255,25 @@ def _select(features: torch.Tensor, keep: int, cfg: SelectionConfig,
         rank = torch.arange(k, device=device)[:, None] + k * (~valid).to(torch.int64)
         return rank.argsort(0)[:keep]
     if method.endswith("facility"):
-        weight = torch.ones(k, m_items, dtype=features.dtype, device=device)
-        if method == "score-facility":
-            z = (residual - residual.mean(0)) / residual.std(0).clamp(min=1e-12)  # [K, M]
-            weight = torch.exp(-z / cfg.temperature)
+        weight = _target_weight(residual, cfg, features)  # [K, M]
         return _facility(features, valid, weight, keep, cfg.bandwidth)
+    if method.endswith("medoids"):
+        weight = _target_weight(residual, cfg, features)  # [K, M]
+        return _medoids(features, valid, weight, keep, MEDOID_PASSES)
     if method.endswith("fps"):
         return _farthest_points(features, valid, first, keep)
     return _kmeans(features, valid, first, keep, cfg.iters)
+
+
+def _target_weight(residual: torch.Tensor | None, cfg: SelectionConfig,
+                   features: torch.Tensor) -> torch.Tensor:  # fmt: skip
+    """Each sample's weight as a target of the coverage methods [K, M]: exp(-z / T) for
+    ``score-facility`` and ``score-medoids`` (z the residual standardised over the item's K
+    samples, T ``cfg.temperature``), 1 for the score-free ``facility`` and ``medoids``."""
+    if not cfg.uses_score:
+        return torch.ones(features.shape[:2], dtype=features.dtype, device=features.device)
+    z = (residual - residual.mean(0)) / residual.std(0).clamp(min=1e-12)  # [K, M]
+    return torch.exp(-z / cfg.temperature)
 
 
 def select_samples(pred: torch.Tensor, cfg: SelectionConfig, residual: torch.Tensor | None = None,
