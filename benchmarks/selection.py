@@ -39,6 +39,7 @@ from trajpref.results import command_line, machine, make_row, upsert_rows
 from trajpref.score.scorer import PRECISIONS, TrajectoryScorer, score_timesteps
 from trajpref.score.selection import (
     METHODS,
+    WEIGHTED,
     SelectionConfig,
     gather,
     observed_pace,
@@ -56,7 +57,7 @@ def settings(args) -> list[SelectionConfig]:
     methods = args.methods or METHODS
     for method, keep, per in itertools.product(methods, args.keep, ("agent", "scene")):
         drops = args.drop if method.startswith("score-") else [0.0]
-        temps = args.temperature if method in ("score-facility", "score-medoids") else [1.0]
+        temps = args.temperature if method in WEIGHTED else [1.0]
         for drop, temp in itertools.product(drops, temps):
             bandwidth = args.free_bandwidth if method == "facility" else args.bandwidth
             out.append(SelectionConfig(keep=keep, method=method, drop=drop, per=per,
@@ -73,7 +74,7 @@ FACILITY_BANDWIDTH = 0.5
 
 def name_of(cfg: SelectionConfig) -> str:
     drop = f"-d{round(cfg.drop * 100):02d}" if cfg.method.startswith("score-") else ""
-    temp = f"-t{cfg.temperature:g}" if cfg.method in ("score-facility", "score-medoids") else ""
+    temp = f"-t{cfg.temperature:g}" if cfg.method in WEIGHTED else ""
     if cfg.method == "score-facility" and cfg.bandwidth != FACILITY_BANDWIDTH:
         temp += f"-b{cfg.bandwidth:g}"
     return f"select-{cfg.method}{drop}{temp}"

@@ -37,6 +37,8 @@ SCORE_FREE = {"top": "first", "score-first": "first", "score-kmeans": "kmeans",
               "score-fps": "fps", "score-facility": "facility",
               "score-medoids": "medoids"}  # fmt: skip
 """Each score method's counterpart without the score (``trust_speed`` falls back to it)."""
+WEIGHTED = ("score-facility", "score-medoids")
+"""The score methods that weight each sample as a target by exp(-z / temperature)."""
 
 
 @dataclass
@@ -182,14 +184,17 @@ def _medoids(x: torch.Tensor, valid: torch.Tensor, weight: torch.Tensor, keep: i
         near = torch.minimum(near, wd[pick, :, m].T)
         idx.append(pick)
     idx = torch.stack(idx)  # [keep, M]
+    by_item = wd.permute(0, 2, 1)  # [K(i), M, K(j)]
+    slots = torch.arange(keep, device=x.device)[:, None, None]  # [keep, 1, 1]
     for _ in range(passes):  # swap: replace one kept sample by one candidate, best gain
-        kept_wd = wd[idx, :, m[None]]  # [keep, M, K(j)]
-        others = torch.stack([  # [keep, M, K(j)] nearest kept sample but the p-th
-            torch.cat([kept_wd[:p], kept_wd[p + 1:]]).min(0).values if keep > 1
-            else torch.full_like(kept_wd[0], math.inf) for p in range(keep)])  # fmt: skip
-        cost = torch.minimum(others[:, None], wd.permute(0, 2, 1)[None]).sum(-1)  # [keep, K, M]
+        kept_wd = by_item[idx, m[None]]  # [keep, M, K(j)]
+        now = kept_wd.min(0).values.sum(-1)  # [M] the current cost
+        others = torch.full_like(kept_wd, math.inf)  # [keep, M, K(j)] nearest kept but the p-th
+        if keep > 1:
+            two = kept_wd.topk(2, dim=0, largest=False)  # the nearest two kept, [2, M, K(j)]
+            others = torch.where(slots == two.indices[0], two.values[1], two.values[0])
+        cost = torch.minimum(others[:, None], by_item[None]).sum(-1)  # [keep, K, M]
         cost = cost.masked_fill(~free[None], math.inf)
-        now = torch.minimum(others, kept_wd).sum(-1)[0]  # [M] the current cost
         best, flat = cost.flatten(0, 1).min(0)  # [M]
         better = best < now - 1e-9 * now.abs().clamp(min=1.0)  # [M]
         if not bool(better.any()):
@@ -254,11 +259,10 @@ def _select(features: torch.Tensor, keep: int, cfg: SelectionConfig,
     if method == "score-first":  # the generator's own order, skipping the worst-scored
         rank = torch.arange(k, device=device)[:, None] + k * (~valid).to(torch.int64)
         return rank.argsort(0)[:keep]
-    if method.endswith("facility"):
+    if method.endswith(("facility", "medoids")):
         weight = _target_weight(residual, cfg, features)  # [K, M]
-        return _facility(features, valid, weight, keep, cfg.bandwidth)
-    if method.endswith("medoids"):
-        weight = _target_weight(residual, cfg, features)  # [K, M]
+        if method.endswith("facility"):
+            return _facility(features, valid, weight, keep, cfg.bandwidth)
         return _medoids(features, valid, weight, keep, MEDOID_PASSES)
     if method.endswith("fps"):
         return _farthest_points(features, valid, first, keep)
