@@ -222,6 +222,13 @@ class ModelConfig:
     the heads, and after each hidden layer of the mean, sigma and shift heads (with
     ``query_layers`` > 0: on the tokens' shared projection instead of inside the query layers;
     0: none; LED's transformer layers drop 0.1). Evaluation and sampling never drop."""
+    encoder_dropout: float = 0.0
+    """Dropout probability inside the generator's own social encoder during training: on each
+    agent's history embedding before the attention layers, and on those layers' residual
+    updates (a transformer's residual dropout, LED's 0.1 in its layers; 0: none). It adds no
+    parameters, so a file trained with it loads into a generator without it and the other
+    way round; ``generator_dropout`` acts after the encoder. Evaluation never drops
+    (docs/pretraining.md, "Dropout inside the generator's encoder")."""
     future_rank: int = 0
     """Rank of the generator's outputs in time (0: free, T_f numbers per coordinate). r > 0
     projects the mean and each of the K shifts, per coordinate, onto the polynomials
@@ -299,6 +306,10 @@ class ModelConfig:
             raise ConfigError(
                 f"ModelConfig.generator_dropout must lie in [0, 1), got {self.generator_dropout}"
             )
+        if not 0 <= self.encoder_dropout < 1:
+            raise ConfigError(
+                f"ModelConfig.encoder_dropout must lie in [0, 1), got {self.encoder_dropout}"
+            )
         if not self.spread_scale > 0:
             raise ConfigError(
                 f"ModelConfig.spread_scale must be > 0 (1: the trained spread), "
@@ -366,6 +377,7 @@ GENERATOR_ONLY = (
     "history_encoder",
     "generator_social",
     "generator_dropout",
+    "encoder_dropout",
     "max_speed",
     "spread_scale",
     "max_log_sigma",

@@ -252,10 +252,35 @@ def test_dropout_acts_in_training_only_and_keeps_the_parameter_names():
     torch.testing.assert_close(dropped(f).context, plain(f).context)
 
 
+def test_encoder_dropout_acts_inside_the_encoder_in_training_only():
+    batch = collate([make_scene(3), make_scene(2, seed=1)])
+    f = scene_features(batch, 1.0)
+    torch.manual_seed(0)
+    plain = Generator(TINY)
+    dropped = Generator(dataclasses.replace(TINY, encoder_dropout=0.5))
+    # no parameters of its own: files trained with or without it load into either
+    assert plain.state_dict().keys() == dropped.state_dict().keys()
+    dropped.load_state_dict(plain.state_dict())
+    plain.eval()
+    dropped.eval()
+    torch.testing.assert_close(dropped(f).initial_sample(), plain(f).initial_sample())
+    dropped.train()
+    plain.train()
+    torch.manual_seed(1)
+    a = dropped(f).context
+    torch.manual_seed(2)
+    b = dropped(f).context
+    assert not torch.allclose(a, b)  # the encoding itself is dropped, unlike generator_dropout
+    torch.testing.assert_close(plain(f).context, plain(f).context)  # nothing random without it
+    assert ModelConfig(encoder_dropout=0.1).denoiser_part() == ModelConfig()
+
+
 @pytest.mark.parametrize("p", [-0.1, 1.0])
 def test_dropout_is_checked_on_construction(p):
     with pytest.raises(ConfigError, match="generator_dropout"):
         dataclasses.replace(TINY, generator_dropout=p)
+    with pytest.raises(ConfigError, match="encoder_dropout"):
+        dataclasses.replace(TINY, encoder_dropout=p)
 
 
 def test_time_projection_keeps_polynomial_paths_and_removes_the_rest():

@@ -110,6 +110,24 @@ def test_factored_attention_matches_the_direct_formula_and_its_gradients():
         torch.testing.assert_close(g, g_ref, rtol=1e-4, atol=1e-5)
 
 
+def test_residual_dropout_drops_in_training_only_and_matches_the_direct_formula():
+    torch.manual_seed(0)
+    plain, dropped = SocialAttention(16, 4), SocialAttention(16, 4, dropout=0.5)
+    dropped.load_state_dict(plain.state_dict())  # no parameters of its own
+    h, geom = _attention_inputs(2, 4, hidden=16)
+    mask = torch.tensor([[1, 1, 1, 1], [1, 1, 0, 0]], dtype=torch.bool)
+    plain.eval()
+    dropped.eval()
+    torch.testing.assert_close(dropped(h, geom, mask), plain(h, geom, mask), rtol=0, atol=0)
+    dropped.train()
+    torch.manual_seed(3)
+    out = dropped(h, geom, mask)
+    torch.manual_seed(3)  # the same masks, drawn in the same order
+    ref = direct_social_attention(dropped, h, geom, mask)
+    torch.testing.assert_close(out, ref, rtol=1e-5, atol=1e-5)
+    assert not torch.allclose(out, plain(h, geom, mask))
+
+
 def test_hidden_not_divisible_by_heads_is_a_config_error():
     with pytest.raises(ConfigError, match="divisible"):
         SocialAttention(10, 3)

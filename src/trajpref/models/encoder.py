@@ -57,12 +57,16 @@ class SocialEncoder(nn.Module):
     embedding (``ModelConfig.history_encoder``). ``site`` adds an embedding of each agent's
     place and heading in the scene's coordinates, passed to ``forward`` as [N, 4]
     (``ModelConfig.scene_position``). ``roles`` > 0 adds an embedding of each agent's slot
-    in its scene (``ModelConfig.agent_roles``)."""
+    in its scene (``ModelConfig.agent_roles``). ``dropout`` > 0 drops, during training, each
+    agent's embedding before the attention layers and their residual updates
+    (``ModelConfig.encoder_dropout``)."""
 
     def __init__(self, t_hist: int, hidden: int, layers: int, heads: int, num_types: int = 2,
                  temporal: bool = False, site: bool = False,
-                 pair_distance: bool = False, roles: int = 0):  # fmt: skip
+                 pair_distance: bool = False, roles: int = 0,
+                 dropout: float = 0.0):  # fmt: skip
         super().__init__()
+        self.drop = nn.Dropout(dropout) if dropout > 0 else nn.Identity()
         self.pair_distance = pair_distance
         self.embed = mlp([t_hist * 4, hidden, hidden])
         self.temporal = nn.GRU(4, hidden, batch_first=True) if temporal else None
@@ -70,7 +74,8 @@ class SocialEncoder(nn.Module):
         self.type_embed = nn.Embedding(num_types, hidden)
         self.role_embed = nn.Embedding(roles, hidden) if roles else None
         edges = 6 if pair_distance else 4
-        self.layers = nn.ModuleList(SocialAttention(hidden, heads, edges) for _ in range(layers))
+        self.layers = nn.ModuleList(SocialAttention(hidden, heads, edges, dropout)
+                                    for _ in range(layers))  # fmt: skip
         self.norm = nn.LayerNorm(hidden)
 
     def forward(self, f: SceneFeatures, site: torch.Tensor | None = None) -> torch.Tensor:
@@ -92,6 +97,7 @@ class SocialEncoder(nn.Module):
         if self.temporal is not None:
             _, last = self.temporal(f.hist)  # last: [1, N, H]
             h = h + last[0].to(h.dtype)  # under autocast the GRU may run in another dtype
+        h = self.drop(h)  # [N, H]; h itself when not training or without dropout
         b, p = f.mask.shape
         padded = h.new_zeros(b, p, h.shape[-1])  # [B, P, H]
         padded[f.scene, f.slot] = h

@@ -64,7 +64,8 @@ class Generator(nn.Module):
                                      temporal=cfg.history_encoder == "temporal",
                                      site=cfg.scene_position,
                                      pair_distance=cfg.pair_distance,
-                                     roles=cfg.agent_roles)  # fmt: skip
+                                     roles=cfg.agent_roles,
+                                     dropout=cfg.encoder_dropout)  # fmt: skip
         p = cfg.generator_dropout
         self.dropout = nn.Dropout(p) if p > 0 else nn.Identity()
         self.mean_head = mlp([h, w, w, tf * 2], dropout=p)

@@ -55,13 +55,16 @@ class SocialAttention(nn.Module):
     Agent i attends to agent j (itself included) with logits q_i . (k_j + e_ij) and reads
     v_j + e_ij, where e_ij embeds j's position and velocity relative to i. Works on the padded
     per-scene layout [B, P, H]; ``mask`` [B, P] hides padding, so no agent sees another scene.
+    With ``dropout`` > 0, the attention's and the feed-forward's residual updates are dropped
+    during training (a transformer's residual dropout; no parameters, so the names stay).
     """
 
-    def __init__(self, hidden: int, heads: int, edge_features: int = 4):
+    def __init__(self, hidden: int, heads: int, edge_features: int = 4, dropout: float = 0.0):
         super().__init__()
         if hidden % heads:
             raise ConfigError("hidden must be divisible by heads")
         self.heads = heads
+        self.drop = nn.Dropout(dropout) if dropout > 0 else nn.Identity()
         self.qkv = nn.Linear(hidden, 3 * hidden)
         self.edge = mlp([edge_features, hidden, hidden])
         self.out = nn.Linear(hidden, hidden)
@@ -101,8 +104,8 @@ class SocialAttention(nn.Module):
             + torch.einsum("bihc,hdc->bihd", read, w2)  # W2 sum_j a_ij s_ij
             + b2  # sum_j a_ij b2 = b2
         )  # [B, P, nh, d]
-        h = h + self.out(out.reshape(b, p, hid))
-        return h + self.ff(self.norm2(h))
+        h = h + self.drop(self.out(out.reshape(b, p, hid)))
+        return h + self.drop(self.ff(self.norm2(h)))
 
 
 def direct_social_attention(layer: SocialAttention, h: torch.Tensor, geom: torch.Tensor,
@@ -121,8 +124,8 @@ def direct_social_attention(layer: SocialAttention, h: torch.Tensor, geom: torch
     logits = logits.masked_fill(~mask[:, None, :, None], float("-inf"))
     att = torch.softmax(logits, dim=2)  # over j
     out = (att[..., None] * v).sum(2).reshape(b, p, hid)  # [B, P, H]
-    h = h + layer.out(out)
-    return h + layer.ff(layer.norm2(h))
+    h = h + layer.drop(layer.out(out))
+    return h + layer.drop(layer.ff(layer.norm2(h)))
 
 
 class SetAttention(nn.Module):
