@@ -234,6 +234,8 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
                              "max_speed": cfg["model"].get("max_speed", 0.0),
                              "history_encoder": cfg["model"].get("history_encoder", "mlp"),
                              "dropout": cfg["model"].get("generator_dropout", 0.0),
+                             **({"encoder_dropout": e} if (e := cfg["model"].get("encoder_dropout"))
+                                else {}),
                              "flip": cfg["data"].get("flip", False),
                              **({"reverse": True} if cfg["data"].get("reverse") else {}),
                              **({"future_rank": r} if (r := cfg["model"].get("future_rank"))
@@ -395,6 +397,9 @@ def _sampling_lines(sampling: dict[str, Any] | None) -> list[str]:
     if sampling.get("dropout"):
         text += (f" It was trained with dropout {sampling['dropout']:g} "
                  "(`model.generator_dropout`).")  # fmt: skip
+    if sampling.get("encoder_dropout"):
+        text += (f" Its encoder dropped {sampling['encoder_dropout']:g} of its activations in "
+                 "training (`model.encoder_dropout`).")  # fmt: skip
     if sampling.get("flip"):
         text += " It was trained on scenes mirrored at random (`data.flip`)."
     if sampling.get("reverse"):
