@@ -30,6 +30,7 @@ from scipy.optimize import linear_sum_assignment
 
 from trajpref.data import load_dataset
 from trajpref.evaluation import predict_dataset
+from trajpref.metrics import min_ade_fde
 from trajpref.models import checkpoint as ckpt
 from trajpref.results import write_meta
 from trajpref.score.selection import SelectionConfig, gather, select_samples
@@ -38,10 +39,10 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def min_errors(pred: np.ndarray, future: np.ndarray) -> dict[str, float]:
-    """minADE / minFDE per agent of pred [K, N, T_f, 2] against future [N, T_f, 2]."""
-    err = np.linalg.norm(pred - future[None], axis=-1)  # [K, N, T_f]
-    return {"min_ade": float(err.mean(-1).min(0).mean()),
-            "min_fde": float(err[..., -1].min(0).mean())}  # fmt: skip
+    """minADE / minFDE per agent of pred [K, N, T_f, 2] against future [N, T_f, 2], averaged
+    over the agents (``metrics.min_ade_fde``)."""
+    ade, fde = min_ade_fde(torch.from_numpy(pred), torch.from_numpy(future))  # [N] each
+    return {"min_ade": float(ade.mean()), "min_fde": float(fde.mean())}
 
 
 def matched_mean(sets: list[np.ndarray]) -> np.ndarray:
