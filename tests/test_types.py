@@ -28,3 +28,40 @@ def test_evenly_spaced_returns_the_split_itself_when_it_is_small_enough():
 def test_evenly_spaced_rejects_a_count_below_one():
     with pytest.raises(ValueError, match="at least 1"):
         _dataset(5).evenly_spaced(0)
+
+
+def _with_context(scene, context):
+    import dataclasses
+
+    return dataclasses.replace(scene, context=context)
+
+
+def test_collate_packs_context_agents_with_their_scene_index():
+    import numpy as np
+
+    from trajpref.types import collate
+
+    a = _with_context(make_scene(2), np.ones((3, 8, 2), np.float32))
+    b = make_scene(1, seed=1)  # no context
+    c = _with_context(make_scene(2, seed=2), np.full((1, 8, 2), 2.0, np.float32))
+    batch = collate([a, b, c])
+    assert batch.num_agents == 5 and batch.num_context == 4
+    assert batch.context_scene.tolist() == [0, 0, 0, 2]
+    assert batch.context[3, 0, 0].item() == 2.0
+    assert batch.without_context().num_context == 0
+    assert collate([b]).context is None
+
+
+def test_bad_context_gives_a_clear_error():
+    import numpy as np
+    import torch
+
+    from trajpref.errors import DataError
+    from trajpref.types import collate
+
+    with pytest.raises(DataError, match=r"context must be \[C, T_h, 2\]"):
+        _with_context(make_scene(2), np.ones((3, 5, 2), np.float32))
+    batch = collate([make_scene(2)])
+    with pytest.raises(DataError, match="go together"):
+        type(batch)(batch.history, batch.future, batch.scene, batch.agent_type, 1,
+                    context=torch.zeros(1, 8, 2))  # fmt: skip

@@ -400,6 +400,7 @@ def cmd_data_stats(args) -> int:
             "mean": float(sizes.mean()),
             "max": int(sizes.max()),
         },
+        "context_agents": sum(0 if s.context is None else len(s.context) for s in ds.scenes),
         "units": ds.info.units,
         "frame_interval": ds.info.frame_interval,
         "t_hist": ds.info.t_hist,

@@ -229,6 +229,13 @@ class ModelConfig:
     parameters, so a file trained with it loads into a generator without it and the other
     way round; ``generator_dropout`` acts after the encoder. Evaluation never drops
     (docs/pretraining.md, "Dropout inside the generator's encoder")."""
+    context_agents: bool = False
+    """The generator's social encoder also attends to the context-only agents of each window
+    (``Scene.context``: observed over the whole history, gone before the window ends), as
+    further neighbours. They get no prediction and no loss, and nothing marks them apart from
+    the predicted agents (a mark would tell the encoder who stays in view). Data without them
+    (the ``.npz`` splits: SDD, Robo) runs as without the flag; the denoiser and the score never
+    read them (docs/pretraining.md, "Context-only neighbours")."""
     future_rank: int = 0
     """Rank of the generator's outputs in time (0: free, T_f numbers per coordinate). r > 0
     projects the mean and each of the K shifts, per coordinate, onto the polynomials
@@ -310,6 +317,13 @@ class ModelConfig:
             raise ConfigError(
                 f"ModelConfig.encoder_dropout must lie in [0, 1), got {self.encoder_dropout}"
             )
+        if self.context_agents and not self.generator_social:
+            raise ConfigError("ModelConfig.context_agents adds neighbours to the generator's "
+                              "social attention: it needs generator_social true")  # fmt: skip
+        if self.context_agents and self.agent_roles:
+            raise ConfigError("ModelConfig.context_agents and agent_roles do not combine: "
+                              "roles read each agent's slot, and context-only agents have "
+                              "none of their own")  # fmt: skip
         if not self.spread_scale > 0:
             raise ConfigError(
                 f"ModelConfig.spread_scale must be > 0 (1: the trained spread), "
@@ -378,6 +392,7 @@ GENERATOR_ONLY = (
     "generator_social",
     "generator_dropout",
     "encoder_dropout",
+    "context_agents",
     "max_speed",
     "spread_scale",
     "max_log_sigma",

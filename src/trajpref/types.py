@@ -6,6 +6,7 @@ K samples, T_h history steps, T_f future steps, D = 2 coordinates.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,6 +35,11 @@ class Scene:
     """[P] int64 agent-type flags (AGENT_PERSON or AGENT_BALL)."""
     scene_id: str
     """Where the window comes from, e.g. ``crowds_zara01.txt@frame=120``."""
+    context: np.ndarray | None = None
+    """[C, T_h, 2] positions of the other agents observed in all T_h history frames but not
+    in all T_h + T_f frames (they leave before the window ends), or None where the data gives
+    none (``.npz`` splits). They are neighbours only: no future, no prediction, no metric;
+    only a model built with ``ModelConfig.context_agents`` reads them."""
 
     def __post_init__(self) -> None:
         if self.history.ndim != 3 or self.history.shape[-1] != 2:
@@ -46,6 +52,11 @@ class Scene:
             raise DataError(f"{self.scene_id}: history and future disagree on the agent count")
         if self.agent_type.shape != (self.history.shape[0],):
             raise DataError(f"{self.scene_id}: agent_type must be [P]")
+        if self.context is not None and (
+            self.context.ndim != 3 or self.context.shape[1:] != self.history.shape[1:]
+        ):
+            shape = self.context.shape
+            raise DataError(f"{self.scene_id}: context must be [C, T_h, 2], got {shape}")
 
     @property
     def num_agents(self) -> int:
@@ -124,10 +135,26 @@ class Batch:
     """B, the number of scenes in the batch."""
     scene_ids: list[str] = field(default_factory=list)
     """[B] where each scene comes from."""
+    context: torch.Tensor | None = None
+    """[M, T_h, 2] absolute observed positions of context-only agents (``Scene.context``),
+    packed across the batch; None when there are none."""
+    context_scene: torch.Tensor | None = None
+    """[M] int64 scene index of each context-only agent, non-decreasing; None with ``context``."""
+
+    def __post_init__(self) -> None:
+        if (self.context is None) != (self.context_scene is None):
+            raise DataError("Batch: context and context_scene go together")
+        if self.context is not None and self.context_scene.shape != self.context.shape[:1]:
+            raise DataError("Batch: context_scene must be [M] for context [M, T_h, 2]")
 
     @property
     def num_agents(self) -> int:
         return int(self.history.shape[0])
+
+    @property
+    def num_context(self) -> int:
+        """M, the number of context-only agents (0 without any)."""
+        return 0 if self.context is None else int(self.context.shape[0])
 
     @property
     def origin(self) -> torch.Tensor:
@@ -142,7 +169,13 @@ class Batch:
             agent_type=self.agent_type.to(device),
             num_scenes=self.num_scenes,
             scene_ids=self.scene_ids,
+            context=None if self.context is None else self.context.to(device),
+            context_scene=None if self.context_scene is None else self.context_scene.to(device),
         )
+
+    def without_context(self) -> Batch:
+        """The same batch with no context-only agents."""
+        return dataclasses.replace(self, context=None, context_scene=None)
 
     def scene_sizes(self) -> torch.Tensor:
         """[B] number of agents in each scene."""
@@ -177,6 +210,12 @@ def collate(scenes: list[Scene]) -> Batch:
     fut = np.concatenate([s.future for s in scenes], 0)  # [N, T_f, 2]
     types = np.concatenate([s.agent_type for s in scenes], 0)  # [N]
     scene = np.repeat(np.arange(len(scenes)), [s.num_agents for s in scenes])  # [N]
+    context = context_scene = None
+    extra = [s.context for s in scenes if s.context is not None and len(s.context)]
+    if extra:
+        context = torch.as_tensor(np.concatenate(extra, 0), dtype=torch.float32)  # [M, T_h, 2]
+        counts = [0 if s.context is None else len(s.context) for s in scenes]  # [B]
+        context_scene = torch.as_tensor(np.repeat(np.arange(len(scenes)), counts))  # [M]
     return Batch(
         history=torch.as_tensor(hist, dtype=torch.float32),
         future=torch.as_tensor(fut, dtype=torch.float32),
@@ -184,4 +223,6 @@ def collate(scenes: list[Scene]) -> Batch:
         agent_type=torch.as_tensor(types, dtype=torch.int64),
         num_scenes=len(scenes),
         scene_ids=[s.scene_id for s in scenes],
+        context=context,
+        context_scene=context_scene,
     )

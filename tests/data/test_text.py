@@ -297,3 +297,41 @@ def test_time_step_windows_span_more_frames(tmp_path):
     for bad in (0, -1, float("nan"), 1000):
         with pytest.raises(ConfigError, match="time_step"):
             ReadOptions(time_step=bad)
+
+
+def test_context_agents_are_those_seen_over_the_history_only(tmp_path):
+    # agent 1 in frames 0..19 (the target), agent 2 in frames 0..9 (whole history, leaves in
+    # the future: context), agent 3 in frames 2..19 (misses the history's start: neither),
+    # agent 4 in frames 0..6 (leaves before the history ends: neither)
+    rows = [(f * 10, 1, f, 0) for f in range(20)]
+    rows += [(f * 10, 2, f, 1) for f in range(10)]
+    rows += [(f * 10, 3, f, 2) for f in range(2, 20)]
+    rows += [(f * 10, 4, f, 3) for f in range(7)]
+    (scene,) = window_scenes(read_tracks(write_tracks(tmp_path / "c.txt", rows)), 8, 12)
+    assert scene.num_agents == 1
+    assert scene.context.shape == (1, 8, 2)  # [C, T_h, 2]
+    np.testing.assert_allclose(scene.context[0, :, 0], np.arange(8))
+    np.testing.assert_allclose(scene.context[0, :, 1], 1.0)
+
+
+def test_context_agents_per_scene_and_stride(tmp_path):
+    # two windows (frames 0.. and 10..): agent 2 is context of the first only, agent 3 of
+    # the second only; with stride 2 the second window is not cut at all
+    rows = [(f * 10, 1, f, 0) for f in range(21)]
+    rows += [(f * 10, 2, f, 1) for f in range(8)]
+    rows += [(f * 10, 3, f, 2) for f in range(1, 12)]
+    scenes = window_scenes(read_tracks(write_tracks(tmp_path / "d.txt", rows)), 8, 12)
+    assert [s.scene_id for s in scenes] == ["d.txt@frame=0", "d.txt@frame=10"]
+    assert [len(s.context) for s in scenes] == [1, 1]
+    np.testing.assert_allclose(scenes[0].context[0, :, 1], 1.0)
+    np.testing.assert_allclose(scenes[1].context[0, :, 0], np.arange(1, 9))
+    (only,) = window_scenes(read_tracks(write_tracks(tmp_path / "d.txt", rows)), 8, 12, stride=2)
+    assert len(only.context) == 1 and only.context[0, 0, 1] == 1.0
+
+
+def test_real_eth_test_split_context_count(data_root):
+    from trajpref.data.registry import load_dataset
+
+    test = load_dataset("eth", "test", data_root)
+    assert test.num_agents == 364  # the targets are unchanged
+    assert sum(len(s.context) for s in test.scenes) == 860

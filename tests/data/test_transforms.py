@@ -191,3 +191,49 @@ def test_dropping_agents_is_seeded_and_off_at_zero():
     assert bool((dropped.history.flatten(1)[:, None] == rows[None]).all(-1).any(1).all())
     with pytest.raises(ValueError, match=r"drop_agents needs a rate in \[0, 1\)"):
         drop_agents_at_random(batch, 1.0)
+
+
+def _context_batch() -> Batch:
+    import dataclasses
+
+    import numpy as np
+
+    a = make_scene(2)
+    b = make_scene(3, seed=1)
+    rng = np.random.default_rng(5)
+    a = dataclasses.replace(a, context=rng.normal(size=(2, 8, 2)).astype(np.float32))
+    b = dataclasses.replace(b, context=rng.normal(size=(1, 8, 2)).astype(np.float32))
+    return collate([a, b])
+
+
+def test_context_agents_move_with_their_scene():
+    batch = _context_batch()
+    mats = torch.tensor([[[0.0, -1.0], [1.0, 0.0]], [[2.0, 0.0], [0.0, 2.0]]])  # [B, 2, 2]
+    moved = transform_scenes(batch, mats)
+    # as if each context agent were one more target of its scene (the centroid stays the
+    # targets')
+    from trajpref.data.transforms import scene_centroids
+
+    c = scene_centroids(batch)[batch.context_scene][:, None]  # [M, 1, 2]
+    expected = (batch.context - c) @ mats[batch.context_scene].transpose(-1, -2) + c
+    torch.testing.assert_close(moved.context, expected)
+    torch.testing.assert_close(moved.history, transform_scenes(batch.without_context(),
+                                                               mats).history)  # fmt: skip
+
+
+def test_reversed_scenes_lose_their_context_agents():
+    batch = _context_batch()
+    out = reverse_time(batch, torch.tensor([True, False]))
+    assert out.context_scene.tolist() == [1]
+    torch.testing.assert_close(out.context, batch.context[2:])
+    assert reverse_time(batch, torch.tensor([True, True])).context is None
+
+
+def test_augment_without_context_draws_as_before():
+    # the targets' draws do not depend on the context agents, which are drawn after them
+    batch = _context_batch()
+    kw = dict(flip=True, history_noise=0.05, drop_agents=0.3)
+    with_ctx = augment(batch, torch.Generator().manual_seed(3), **kw)
+    without = augment(batch.without_context(), torch.Generator().manual_seed(3), **kw)
+    torch.testing.assert_close(with_ctx.history, without.history)
+    torch.testing.assert_close(with_ctx.scene, without.scene)

@@ -505,3 +505,44 @@ def test_a_generator_with_agent_roles_refuses_a_scene_with_more_agents_than_role
         gen(scene_features(collate([make_scene(3)]), 1.0))
     with pytest.raises(ConfigError, match="agent_roles"):
         ModelConfig(agent_roles=-1)
+
+
+def _scene_with_leaver(seed: int, targets: int, leavers: int):
+    """A scene of ``targets`` agents plus ``leavers`` more, and the same scene with the
+    leavers as context-only agents."""
+    full = make_scene(targets + leavers, seed=seed)
+    ctx = dataclasses.replace(full, history=full.history[:targets], future=full.future[:targets],
+                              agent_type=full.agent_type[:targets],
+                              context=full.history[targets:])  # fmt: skip
+    return full, ctx
+
+
+@pytest.mark.parametrize("frame", ["scene", "heading"])
+def test_a_context_agent_is_a_neighbour_whose_prediction_is_dropped(frame):
+    # golden equivalence: the targets' outputs with context agents equal those of the same
+    # generator on the scene where the context agents are ordinary agents
+    cfg = dataclasses.replace(TINY, context_agents=True, agent_frame=frame, max_speed=0.3,
+                              history_encoder="temporal")  # fmt: skip
+    torch.manual_seed(0)
+    gen = Generator(cfg).eval()
+    full_a, ctx_a = _scene_with_leaver(0, 2, 2)
+    full_b, ctx_b = _scene_with_leaver(1, 3, 1)
+    plain = make_scene(2, seed=2)  # no context at all
+    out = gen(scene_features(collate([ctx_a, plain, ctx_b]), 1.0, context=True))
+    ref = gen(scene_features(collate([full_a, plain, full_b]), 1.0))
+    keep = torch.tensor([0, 1, 4, 5, 6, 7, 8])  # the targets' rows in the full batch
+    assert out.mean.shape == (7, 12, 2)
+    torch.testing.assert_close(out.mean, ref.mean[keep])
+    torch.testing.assert_close(out.log_sigma, ref.log_sigma[:, keep])
+    torch.testing.assert_close(out.shifts, ref.shifts[:, keep])
+    # and the context agents do change the targets' prediction
+    alone = gen(scene_features(collate([ctx_a, plain, ctx_b]), 1.0))
+    assert not torch.allclose(alone.mean[:2], out.mean[:2])
+    torch.testing.assert_close(alone.mean[2:4], out.mean[2:4])  # the scene without any
+
+
+def test_context_agents_need_the_social_encoder_and_no_roles():
+    with pytest.raises(ConfigError, match="needs generator_social"):
+        dataclasses.replace(TINY, context_agents=True, generator_social=False)
+    with pytest.raises(ConfigError, match="agent_roles do not combine"):
+        dataclasses.replace(TINY, context_agents=True, agent_roles=4)

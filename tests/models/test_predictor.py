@@ -166,3 +166,33 @@ def test_the_denoisers_context_is_computed_only_when_a_rollout_denoises_and_then
         with torch.no_grad():
             expected = pred.denoiser.context(cond.features)
         torch.testing.assert_close(cond.context, expected)
+
+
+def _context_batch():
+    import dataclasses
+
+    rng = np.random.default_rng(3)
+    scene = dataclasses.replace(make_scene(3), context=rng.normal(size=(2, 8, 2)).astype("f4"))
+    return collate([scene, make_scene(2, seed=1)])
+
+
+def test_only_a_context_generator_reads_context_agents_and_the_denoiser_never_does():
+    import dataclasses
+
+    from trajpref.models.encoder import scene_features
+
+    batch = _context_batch()
+    plain = _predictor()
+    with_ctx = _predictor()
+    with_ctx.generator.cfg = dataclasses.replace(TINY, context_agents=True)
+    for pred, reads in ((plain, False), (with_ctx, True)):
+        cond = pred.condition(batch)
+        bare = pred.condition(batch.without_context())
+        torch.testing.assert_close(cond.context, bare.context)  # the denoiser's
+        assert (cond.features.targets is not None) is reads
+        y = pred.rollout(batch, torch.Generator().manual_seed(1)).y
+        y0 = pred.rollout(batch.without_context(), torch.Generator().manual_seed(1)).y
+        assert y.shape == (K, 5, 12, 2)
+        assert torch.allclose(y[:, :3], y0[:, :3]) is not reads
+    with pytest.raises(ValueError, match="the generator's"):
+        plain.denoiser.context(scene_features(batch, SCALE, context=True))

@@ -680,3 +680,30 @@ def test_bf16_on_a_cpu_without_bfloat16_instructions_says_so(tmp_path, cfg, monk
                 max_steps=1)  # fmt: skip
     said = "no bfloat16 instructions" in capsys.readouterr().out
     assert said is not fast
+
+
+def test_only_a_context_generator_trains_on_batches_with_context_agents(tmp_path, monkeypatch):
+    root = write_dataset(tmp_path / "data")
+    for path in root.rglob("*.txt"):  # one more walker per file, who leaves after frame 11
+        with path.open("a") as f:
+            f.writelines(f"{t * 10}\t99\t{0.3 * t}\t1.0\n" for t in range(12))
+    cfg = load_config(None, [*TINY_OVERRIDES, f"data.dataset={root}"])
+    assert sum(len(s.context) for s in load_dataset(str(root), "train").scenes) > 0
+    seen = []  # context agents of each training batch
+    original = transforms.augment
+
+    def spy(batch, *args, **kwargs):
+        seen.append(batch.num_context)
+        return original(batch, *args, **kwargs)
+
+    monkeypatch.setattr("trajpref.train.loop.augment", spy)
+    train_stage("diffusion", cfg, tmp_path / "plain", device="cpu", progress=False)
+    train_stage("generator", cfg, tmp_path / "plain", device="cpu", progress=False)
+    assert seen and max(seen) == 0
+    seen.clear()
+    ctx = load_config(None, [*TINY_OVERRIDES, f"data.dataset={root}", "model.context_agents=true"])
+    train_stage("generator", ctx, tmp_path / "ctx", device="cpu", progress=False,
+                denoiser=tmp_path / "plain" / "denoiser.safetensors")  # fmt: skip
+    assert seen and min(seen) > 0
+    rebuilt, _ = ckpt.build_generator(ckpt.load(tmp_path / "ctx" / "generator.safetensors"))
+    assert rebuilt.cfg.context_agents

@@ -461,17 +461,44 @@ def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int |
     kind = tracks.agent_type[a_idx[start_row]]  # [W]
     cuts = np.flatnonzero(np.diff(start)) + 1  # [S-1] where a new scene begins
     bounds = np.concatenate([[0], cuts, [n_w]]) if n_w else np.zeros(1, np.int64)
+    context = _context(tracks, t_hist, t_total, start[bounds[:-1]] if n_w else start)
     name = tracks.path.name
-    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+    for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
         out.scenes.append(
             Scene(
                 history=history[a:b],
                 future=future[a:b],
                 agent_type=kind[a:b],
                 scene_id=f"{name}@frame={frames[start[a]]:g}",
+                context=context[i],
             )
         )
     return out
+
+
+def _context(tracks: Tracks, t_hist: int, t_total: int, starts: np.ndarray) -> list[np.ndarray]:
+    """For each scene starting at unique-frame index ``starts`` [S], the histories [C, T_h, 2]
+    of the agents present in all its T_h history frames but not in all T_total frames
+    (``Scene.context``), in agent order. Whether an agent counts is decided by the frames of
+    the window's history alone, plus its absence from the targets; its later positions are not
+    read."""
+    f_idx, a_idx, n_r = tracks.frame_index, tracks.agent_index, tracks.num_rows
+    empty = np.zeros((0, t_hist, 2), np.float32)
+    if n_r < t_hist or len(starts) == 0:
+        return [empty] * len(starts)
+    head = np.arange(n_r - t_hist + 1)  # [R-T_h+1] candidate first rows
+    seen = (a_idx[head + t_hist - 1] == a_idx[head]) & (
+        f_idx[head + t_hist - 1] - f_idx[head] == t_hist - 1
+    )  # [R-T_h+1] the agent is in all T_h frames from this row's
+    end = np.minimum(head + t_total - 1, n_r - 1)  # [R-T_h+1]
+    whole = (a_idx[end] == a_idx[head]) & (f_idx[end] - f_idx[head] == t_total - 1)
+    rows = head[seen & ~whole & np.isin(f_idx[head], starts)]  # [C_all] context first rows
+    order = np.argsort(f_idx[rows], kind="stable")  # by scene, agents stay sorted by id
+    rows = rows[order]
+    hist = np.take(tracks.xy, rows[:, None] + np.arange(t_hist), axis=0)  # [C_all, T_h, 2]
+    pos = np.searchsorted(f_idx[rows], starts)  # [S]
+    ends = np.searchsorted(f_idx[rows], starts, side="right")  # [S]
+    return [hist[a:b] for a, b in zip(pos, ends, strict=True)]
 
 
 def resample_tracks(tracks: Tracks, factor: float) -> Tracks:

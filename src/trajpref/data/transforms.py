@@ -83,7 +83,9 @@ def augment(
     (``reverse_time``); its coin is drawn after the others, so they do not depend on it.
     With ``history_noise`` > 0, Gaussian noise of that std is added to every observed position
     but the last, after the scene's transform. With ``drop_agents`` > 0, agents are then left
-    out at that rate (``drop_agents``, drawn last of all).
+    out at that rate (``drop_agents``). Context-only agents (``Batch.context``) move with their
+    scene and are left out of reversed scenes; their jitter and drop are drawn last of all, so
+    the draws for the batch's agents do not depend on them.
     """
     device = batch.history.device
     b = batch.num_scenes
@@ -111,6 +113,15 @@ def augment(
         batch = replace(batch, history=torch.cat([jittered, batch.history[:, -1:]], 1))
     if drop_agents > 0:
         batch = drop_agents_at_random(batch, drop_agents, generator)
+    if batch.context is not None:  # drawn after everything else, so the draws above stay
+        m, t_h = batch.num_context, batch.context.shape[1]
+        if history_noise > 0:
+            noise = torch.randn(m, t_h - 1, 2, generator=generator) * history_noise
+            jittered = batch.context[:, :-1] + noise.to(batch.context)  # [M, T_h - 1, 2]
+            batch = replace(batch, context=torch.cat([jittered, batch.context[:, -1:]], 1))
+        if drop_agents > 0:  # context-only agents left out at the same rate
+            keep = (torch.rand(m, generator=generator) >= drop_agents).nonzero()[:, 0]  # [M']
+            batch = _context_subset(batch, keep.to(batch.scene.device))
     return batch
 
 
@@ -120,7 +131,8 @@ def drop_agents_at_random(
     """The batch without a random subset of its agents: each agent is left out with
     probability ``p`` (one uniform draw per agent, on the CPU), as a target and as everyone's
     neighbour. A scene whose agents were all drawn keeps its first one, so every scene keeps
-    at least one agent and the scene indices stay valid."""
+    at least one agent and the scene indices stay valid. Context-only agents are kept
+    (``augment`` drops them at the same rate after its other draws)."""
     if not 0.0 <= p < 1.0:
         raise ValueError(f"drop_agents needs a rate in [0, 1), got {p}")
     n = batch.num_agents
@@ -135,12 +147,21 @@ def drop_agents_at_random(
                    scene=batch.scene[idx], agent_type=batch.agent_type[idx])  # fmt: skip
 
 
+def _context_subset(batch: Batch, idx: torch.Tensor) -> Batch:
+    """The batch with only the context-only agents ``idx`` [M'] (increasing) kept."""
+    if len(idx) == 0:
+        return batch.without_context()
+    return replace(batch, context=batch.context[idx], context_scene=batch.context_scene[idx])
+
+
 def reverse_time(batch: Batch, scenes: torch.Tensor) -> Batch:
     """The batch with the scenes flagged in ``scenes`` [B] bool played backwards in time.
 
     An agent's window of T_h + T_f positions is reversed and cut again at T_h: its new history
     is its last T_h positions in reverse order, its new future the first T_f in reverse order.
-    Agents of unflagged scenes are unchanged. Applying it twice gives the batch back.
+    Agents of unflagged scenes are unchanged. Applying it twice gives the batch back (up to
+    context-only agents: a flagged scene loses them, since their positions after the history
+    are not known).
     """
     if scenes.shape != (batch.num_scenes,):
         raise ValueError(f"reverse_time needs one flag per scene ({batch.num_scenes}), "
@@ -149,13 +170,22 @@ def reverse_time(batch: Batch, scenes: torch.Tensor) -> Batch:
     window = torch.cat([batch.history, batch.future], dim=1)  # [N, T_h + T_f, 2]
     flagged = scenes[batch.scene][:, None, None]  # [N, 1, 1]
     window = torch.where(flagged, window.flip(1), window)  # [N, T_h + T_f, 2]
-    return replace(batch, history=window[:, :t_h], future=window[:, t_h:])
+    batch = replace(batch, history=window[:, :t_h], future=window[:, t_h:])
+    if batch.context is not None:
+        batch = _context_subset(batch, (~scenes[batch.context_scene]).nonzero()[:, 0])
+    return batch
 
 
 def transform_scenes(batch: Batch, mats: torch.Tensor) -> Batch:
-    """Apply one linear map per scene, mats [B, 2, 2], about the scene's centroid."""
-    return replace(batch, history=transform_positions(batch.history, batch, mats),
-                   future=transform_positions(batch.future, batch, mats))  # fmt: skip
+    """Apply one linear map per scene, mats [B, 2, 2], about the scene's centroid (the
+    targets' mean last observed position; context-only agents move with their scene)."""
+    out = replace(batch, history=transform_positions(batch.history, batch, mats),
+                  future=transform_positions(batch.future, batch, mats))  # fmt: skip
+    if batch.context is not None:
+        c = scene_centroids(batch)[batch.context_scene][:, None, :]  # [M, 1, 2]
+        r = mats[batch.context_scene]  # [M, 2, 2]
+        out = replace(out, context=(batch.context - c) @ r.transpose(-1, -2) + c)
+    return out
 
 
 def transform_positions(positions: torch.Tensor, batch: Batch, mats: torch.Tensor) -> torch.Tensor:

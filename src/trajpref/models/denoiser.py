@@ -34,7 +34,11 @@ class Denoiser(nn.Module):
                                  nn.Linear(cfg.denoiser_width, cfg.t_fut * 2))  # fmt: skip
 
     def context(self, features: SceneFeatures) -> torch.Tensor:
-        """[N, H]: computed once per batch, reused across steps and samples."""
+        """[N, H]: computed once per batch, reused across steps and samples. The denoiser
+        never reads context-only agents (``ModelConfig.context_agents`` is the generator's)."""
+        if features.targets is not None:
+            raise ValueError("Denoiser.context: features with context-only agents are the "
+                             "generator's; build the denoiser's without them")  # fmt: skip
         return self.encoder(features)
 
     def forward(self, y: torch.Tensor, s: torch.Tensor | int, context: torch.Tensor):

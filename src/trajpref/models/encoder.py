@@ -11,7 +11,7 @@ from torch import nn
 from trajpref.data.transforms import backward_velocity, observed_pace, to_model_frame
 from trajpref.errors import DataError
 from trajpref.models.layers import SocialAttention, mlp
-from trajpref.types import Batch
+from trajpref.types import AGENT_PERSON, Batch
 
 
 @dataclass
@@ -33,21 +33,59 @@ class SceneFeatures:
     position: torch.Tensor
     """[N, 2] each agent's last observed position in the scene's own coordinates (not
     relative to anything), divided by the scale: only ``ModelConfig.scene_position`` reads it."""
+    targets: int | None = None
+    """With context-only agents (``scene_features(..., context=True)``): the first
+    ``targets`` rows are the batch's agents, the rows after them its context-only agents, and
+    every per-agent field above has N + M rows. None: every row is one of the batch's agents."""
 
 
-def scene_features(batch: Batch, scale: float) -> SceneFeatures:
-    """Features in units of ``scale`` (the data scale stored with each model)."""
+def scene_features(batch: Batch, scale: float, context: bool = False) -> SceneFeatures:
+    """Features in units of ``scale`` (the data scale stored with each model). With
+    ``context`` the batch's context-only agents (``Batch.context``) join their scenes after
+    the batch's agents (``SceneFeatures.targets``); a batch without any gives the same
+    features as without ``context``."""
+    if context and batch.num_context:
+        return _features_with_context(batch, scale)
     rel = to_model_frame(batch.history, batch, scale)  # [N, T_h, 2]
     vel = backward_velocity(batch.history) / scale  # [N, T_h, 2]
     slot, mask = batch.padded_index()
-    b, p = mask.shape
     position = batch.origin / scale  # [N, 2]
-    state = torch.cat([position, vel[:, -1]], -1)  # [N, 4] last position, velocity
-    padded = state.new_zeros(b, p, 4)
-    padded[batch.scene, slot] = state
-    geom = padded[:, None, :, :] - padded[:, :, None, :]  # [B, P(i), P(j), 4]: j relative to i
+    geom = _pair_geometry(position, vel[:, -1], batch.scene, slot, mask)  # [B, P, P, 4]
     return SceneFeatures(torch.cat([rel, vel], -1), geom, mask, batch.scene, slot,
                          batch.agent_type, position)  # fmt: skip
+
+
+def _pair_geometry(position, velocity, scene, slot, mask) -> torch.Tensor:
+    """[B, P(i), P(j), 4] j's last position and velocity [R, 2] relative to i's, padded."""
+    b, p = mask.shape
+    state = torch.cat([position, velocity], -1)  # [R, 4] last position, velocity
+    padded = state.new_zeros(b, p, 4)
+    padded[scene, slot] = state
+    return padded[:, None, :, :] - padded[:, :, None, :]  # [B, P(i), P(j), 4]: j relative to i
+
+
+def _features_with_context(batch: Batch, scale: float) -> SceneFeatures:
+    """``scene_features`` over the batch's N agents followed by its M context-only agents."""
+    n, m, b = batch.num_agents, batch.num_context, batch.num_scenes
+    hist = torch.cat([batch.history, batch.context], 0)  # [N + M, T_h, 2]
+    rel = (hist - hist[:, -1:]) / scale  # [N + M, T_h, 2]
+    vel = backward_velocity(hist) / scale  # [N + M, T_h, 2]
+    sizes = batch.scene_sizes()  # [B]
+    extra = torch.bincount(batch.context_scene, minlength=b)  # [B]
+    slot_t, _ = batch.padded_index()  # [N]
+    ctx_start = torch.cumsum(extra, 0) - extra  # [B]
+    arange = torch.arange(m, device=hist.device)
+    slot_c = arange - ctx_start[batch.context_scene] + sizes[batch.context_scene]  # [M]
+    slot = torch.cat([slot_t, slot_c])  # [N + M]
+    scene = torch.cat([batch.scene, batch.context_scene])  # [N + M]
+    total = sizes + extra  # [B]
+    p_max = int(total.max().item())
+    mask = torch.arange(p_max, device=hist.device)[None, :] < total[:, None]  # [B, P]
+    types = torch.cat([batch.agent_type, batch.agent_type.new_full((m,), AGENT_PERSON)])  # [N+M]
+    position = hist[:, -1] / scale  # [N + M, 2]
+    geom = _pair_geometry(position, vel[:, -1], scene, slot, mask)  # [B, P, P, 4]
+    return SceneFeatures(torch.cat([rel, vel], -1), geom, mask, scene, slot, types,
+                         position, targets=n)  # fmt: skip
 
 
 class SocialEncoder(nn.Module):

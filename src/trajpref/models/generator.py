@@ -97,7 +97,12 @@ class Generator(nn.Module):
         if self.cfg.max_speed > 0:
             c = speed_factor(features.hist, self.cfg.max_speed)  # [N]
             features = scale_features(features, c)
-        ctx = self.encoder(features, site)  # [N, H]
+        ctx = self.encoder(features, site)  # [N, H], or [N + M, H] with context-only agents
+        if features.targets is not None:  # only the batch's own agents are predicted
+            n = features.targets
+            ctx = ctx[:n]  # [N, H]
+            rot = None if rot is None else rot[:n]  # [N, 2, 2]
+            c = None if c is None else c[:n]  # [N]
         n, tf = ctx.shape[0], self.cfg.t_fut
         dropped = self.dropout(ctx)  # [N, H]; ctx itself when not training
         mean = self.mean_head(dropped).view(n, tf, 2)  # [N, T_f, 2]

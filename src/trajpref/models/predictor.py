@@ -34,9 +34,12 @@ class Condition:
     The denoiser's context is computed on first use: a leapfrog rollout with tau = 0 never
     runs the denoiser, so it never pays for its encoder."""
 
-    def __init__(self, features: SceneFeatures, denoiser: Denoiser):
+    def __init__(self, features: SceneFeatures, denoiser: Denoiser,
+                 denoiser_features: SceneFeatures | None = None):  # fmt: skip
         self.features = features
-        """The normalised history features."""
+        """The normalised history features the generator reads."""
+        self.denoiser_features = features if denoiser_features is None else denoiser_features
+        """The denoiser's: the same, less any context-only agents."""
         self._denoiser = denoiser
         self._context: torch.Tensor | None = None
 
@@ -46,7 +49,7 @@ class Condition:
         wherever a rollout is trained through)."""
         if self._context is None:
             with torch.no_grad():
-                self._context = self._denoiser.context(self.features)  # [N, H]
+                self._context = self._denoiser.context(self.denoiser_features)  # [N, H]
         return self._context
 
 
@@ -105,8 +108,12 @@ class DiffusionPredictor(nn.Module):
 
     def condition(self, batch: Batch) -> Condition:
         """Features and (on first use) the denoiser's context of a batch (no gradient into
-        the denoiser)."""
-        return Condition(scene_features(batch, self.scale), self.denoiser)
+        the denoiser). A generator built with ``ModelConfig.context_agents`` also sees the
+        batch's context-only agents; the denoiser never does."""
+        plain = scene_features(batch, self.scale)
+        if self.generator is None or not self.generator.cfg.context_agents or not batch.num_context:
+            return Condition(plain, self.denoiser)
+        return Condition(scene_features(batch, self.scale, context=True), self.denoiser, plain)
 
     def denoise(
         self, cond: Condition, y_tau: torch.Tensor, generator: torch.Generator | None = None

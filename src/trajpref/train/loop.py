@@ -303,6 +303,8 @@ def fit(
                    desc=f"{stage.name} epoch {epoch + 1}/{optim_cfg.epochs}", unit="batch",
                    disable=not (progress and main), leave=False)  # fmt: skip
         for batch in bar:
+            if not stage.context:
+                batch = batch.without_context()
             batch = augment(batch, aug_gen, rotate=data_cfg.rotate, flip=data_cfg.flip,
                             scale_range=data_cfg.scale_range,
                             reverse=data_cfg.reverse,

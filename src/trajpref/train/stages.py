@@ -57,6 +57,10 @@ class Stage:
     ``OptimConfig.compile`` is on."""
     nonfinite_hint: str = "lower the learning rate"
     """What the error says to try when the loop gives up on repeated non-finite losses."""
+    context: bool = False
+    """Whether training batches keep their context-only agents (``Batch.context``): only for
+    a generator built with ``ModelConfig.context_agents``; the others train on batches without
+    them, so that their augmentation draws are what they were before context existed."""
 
 
 def data_scale(dataset: TrajectoryDataset) -> float:
@@ -230,7 +234,7 @@ def build_generator_stage(
                  nonfinite_hint="lower the learning rate, or cap the samples' spread in "
                  "training with model.max_log_sigma (an outlier agent, such as an annotation "
                  "jump, can drive its log sigma to overflow; docs/pretraining.md, '(sh3)')",
-                 )  # fmt: skip
+                 context=cfg.model.context_agents)  # fmt: skip
 
 
 # ----------------------------------------------------------------------------- stage 3
@@ -274,4 +278,5 @@ def build_finetune_stage(
     return Stage("finetune", objective, PolicyAndCritic(sampler.generator, critic), validate,
                  payload, objective.collect_frozen if epochs > 1 else None, epochs,
                  networks=(sampler.generator, sampler.denoiser),
-                 nonfinite_hint="lower the learning rate or clip the reward")  # fmt: skip
+                 nonfinite_hint="lower the learning rate or clip the reward",
+                 context=sampler.generator.cfg.context_agents)  # fmt: skip
