@@ -236,6 +236,8 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
                              "dropout": cfg["model"].get("generator_dropout", 0.0),
                              **({"encoder_dropout": e} if (e := cfg["model"].get("encoder_dropout"))
                                 else {}),
+                             **({"context_agents": True}
+                                if cfg["model"].get("context_agents") else {}),
                              "flip": cfg["data"].get("flip", False),
                              **({"reverse": True} if cfg["data"].get("reverse") else {}),
                              **({"future_rank": r} if (r := cfg["model"].get("future_rank"))
@@ -400,6 +402,9 @@ def _sampling_lines(sampling: dict[str, Any] | None) -> list[str]:
     if sampling.get("encoder_dropout"):
         text += (f" Its encoder dropped {sampling['encoder_dropout']:g} of its activations in "
                  "training (`model.encoder_dropout`).")  # fmt: skip
+    if sampling.get("context_agents"):
+        text += (" Its encoder also reads the agents that leave the view before a window "
+                 "ends, as neighbours only (`model.context_agents`).")  # fmt: skip
     if sampling.get("flip"):
         text += " It was trained on scenes mirrored at random (`data.flip`)."
     if sampling.get("reverse"):

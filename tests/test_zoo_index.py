@@ -58,6 +58,8 @@ def test_a_card_says_when_its_generator_trained_on_mirrored_scenes():
     assert "mirrored" in " ".join(zoo._sampling_lines({**base, "flip": True}))
     assert "mirrored" not in " ".join(zoo._sampling_lines({**base, "flip": False}))
     assert "mirrored" not in " ".join(zoo._sampling_lines(base))  # files from before the field
+    assert "leave the view" in " ".join(zoo._sampling_lines({**base, "context_agents": True}))
+    assert "leave the view" not in " ".join(zoo._sampling_lines(base))
 
 
 def test_a_card_states_consecutive_rewrites_of_one_setting_once():
