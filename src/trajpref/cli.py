@@ -400,7 +400,12 @@ def cmd_data_stats(args) -> int:
             "mean": float(sizes.mean()),
             "max": int(sizes.max()),
         },
+        # context-only agents: seen at the last observed frame, and over the whole history
         "context_agents": sum(0 if s.context is None else len(s.context) for s in ds.scenes),
+        "context_agents_whole_history": sum(
+            0 if s.context is None else int(np.isfinite(s.context).all(axis=(1, 2)).sum())
+            for s in ds.scenes
+        ),
         "units": ds.info.units,
         "frame_interval": ds.info.frame_interval,
         "t_hist": ds.info.t_hist,

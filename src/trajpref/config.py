@@ -236,6 +236,11 @@ class ModelConfig:
     the predicted agents (a mark would tell the encoder who stays in view). Data without them
     (the ``.npz`` splits: SDD, Robo) runs as without the flag; the denoiser and the score never
     read them (docs/pretraining.md, "Context-only neighbours")."""
+    context_frames: int = 0
+    """With ``context_agents``: how many of the last history frames a context-only agent must
+    have been seen in without a break to be read (2..T_h; its earlier frames hold its first
+    position of that run, ``data.transforms.observed_context``). 0: all T_h frames, the
+    setting of the first context-reading models."""
     future_rank: int = 0
     """Rank of the generator's outputs in time (0: free, T_f numbers per coordinate). r > 0
     projects the mean and each of the K shifts, per coordinate, onto the polynomials
@@ -320,6 +325,10 @@ class ModelConfig:
         if self.context_agents and not self.generator_social:
             raise ConfigError("ModelConfig.context_agents adds neighbours to the generator's "
                               "social attention: it needs generator_social true")  # fmt: skip
+        if self.context_frames and not 2 <= self.context_frames <= self.t_hist:
+            raise ConfigError(f"ModelConfig.context_frames must be 0 (the whole history) or "
+                              f"lie in 2..t_hist ({self.t_hist}), got "
+                              f"{self.context_frames}")  # fmt: skip
         if self.context_agents and self.agent_roles:
             raise ConfigError("ModelConfig.context_agents and agent_roles do not combine: "
                               "roles read each agent's slot, and context-only agents have "
@@ -393,6 +402,7 @@ GENERATOR_ONLY = (
     "generator_dropout",
     "encoder_dropout",
     "context_agents",
+    "context_frames",
     "max_speed",
     "spread_scale",
     "max_log_sigma",

@@ -36,10 +36,12 @@ class Scene:
     scene_id: str
     """Where the window comes from, e.g. ``crowds_zara01.txt@frame=120``."""
     context: np.ndarray | None = None
-    """[C, T_h, 2] positions of the other agents observed in all T_h history frames but not
-    in all T_h + T_f frames (they leave before the window ends), or None where the data gives
-    none (``.npz`` splits). They are neighbours only: no future, no prediction, no metric;
-    only a model built with ``ModelConfig.context_agents`` reads them."""
+    """[C, T_h, 2] positions of the other agents seen at the last observed frame but not in
+    all T_h + T_f frames (they entered during the history or leave before the window ends),
+    NaN at the history frames where they were not seen; None where the data gives none
+    (``.npz`` splits). They are neighbours only: no future, no prediction, no metric; only a
+    model built with ``ModelConfig.context_agents`` reads them
+    (``data.transforms.observed_context`` keeps those seen long enough)."""
 
     def __post_init__(self) -> None:
         if self.history.ndim != 3 or self.history.shape[-1] != 2:
@@ -136,8 +138,8 @@ class Batch:
     scene_ids: list[str] = field(default_factory=list)
     """[B] where each scene comes from."""
     context: torch.Tensor | None = None
-    """[M, T_h, 2] absolute observed positions of context-only agents (``Scene.context``),
-    packed across the batch; None when there are none."""
+    """[M, T_h, 2] absolute observed positions of context-only agents (``Scene.context``, NaN
+    where not seen), packed across the batch; None when there are none."""
     context_scene: torch.Tensor | None = None
     """[M] int64 scene index of each context-only agent, non-decreasing; None with ``context``."""
 

@@ -299,34 +299,38 @@ def test_time_step_windows_span_more_frames(tmp_path):
             ReadOptions(time_step=bad)
 
 
-def test_context_agents_are_those_seen_over_the_history_only(tmp_path):
+def test_context_agents_are_the_others_seen_at_the_last_observed_frame(tmp_path):
     # agent 1 in frames 0..19 (the target), agent 2 in frames 0..9 (whole history, leaves in
-    # the future: context), agent 3 in frames 2..19 (misses the history's start: neither),
-    # agent 4 in frames 0..6 (leaves before the history ends: neither)
+    # the future), agent 3 in frames 2..19 (enters during the history: NaN before), agent 4 in
+    # frames 0..6 (gone before the history ends: not context)
     rows = [(f * 10, 1, f, 0) for f in range(20)]
     rows += [(f * 10, 2, f, 1) for f in range(10)]
     rows += [(f * 10, 3, f, 2) for f in range(2, 20)]
     rows += [(f * 10, 4, f, 3) for f in range(7)]
     (scene,) = window_scenes(read_tracks(write_tracks(tmp_path / "c.txt", rows)), 8, 12)
     assert scene.num_agents == 1
-    assert scene.context.shape == (1, 8, 2)  # [C, T_h, 2]
+    assert scene.context.shape == (2, 8, 2)  # [C, T_h, 2], agents 2 and 3
     np.testing.assert_allclose(scene.context[0, :, 0], np.arange(8))
     np.testing.assert_allclose(scene.context[0, :, 1], 1.0)
+    assert np.isnan(scene.context[1, :2]).all()  # agent 3 not yet seen
+    np.testing.assert_allclose(scene.context[1, 2:, 0], np.arange(2, 8))
 
 
 def test_context_agents_per_scene_and_stride(tmp_path):
-    # two windows (frames 0.. and 10..): agent 2 is context of the first only, agent 3 of
-    # the second only; with stride 2 the second window is not cut at all
+    # two windows (frames 0.. and 10..): agent 2 (frames 0..7) is context of the first only;
+    # agent 3 (frames 1..11) of both, seen from its second frame in the first; with stride 2
+    # the second window is not cut at all
     rows = [(f * 10, 1, f, 0) for f in range(21)]
     rows += [(f * 10, 2, f, 1) for f in range(8)]
     rows += [(f * 10, 3, f, 2) for f in range(1, 12)]
     scenes = window_scenes(read_tracks(write_tracks(tmp_path / "d.txt", rows)), 8, 12)
     assert [s.scene_id for s in scenes] == ["d.txt@frame=0", "d.txt@frame=10"]
-    assert [len(s.context) for s in scenes] == [1, 1]
+    assert [len(s.context) for s in scenes] == [2, 1]
     np.testing.assert_allclose(scenes[0].context[0, :, 1], 1.0)
+    assert np.isnan(scenes[0].context[1, 0]).all()
     np.testing.assert_allclose(scenes[1].context[0, :, 0], np.arange(1, 9))
     (only,) = window_scenes(read_tracks(write_tracks(tmp_path / "d.txt", rows)), 8, 12, stride=2)
-    assert len(only.context) == 1 and only.context[0, 0, 1] == 1.0
+    assert len(only.context) == 2 and only.context[0, 0, 1] == 1.0
 
 
 def test_real_eth_test_split_context_count(data_root):
@@ -334,4 +338,6 @@ def test_real_eth_test_split_context_count(data_root):
 
     test = load_dataset("eth", "test", data_root)
     assert test.num_agents == 364  # the targets are unchanged
-    assert sum(len(s.context) for s in test.scenes) == 860
+    assert sum(len(s.context) for s in test.scenes) == 1630  # seen at the last observed frame
+    whole = sum(int(np.isfinite(s.context).all(axis=(1, 2)).sum()) for s in test.scenes)
+    assert whole == 860  # seen over the whole history

@@ -237,3 +237,28 @@ def test_augment_without_context_draws_as_before():
     without = augment(batch.without_context(), torch.Generator().manual_seed(3), **kw)
     torch.testing.assert_close(with_ctx.history, without.history)
     torch.testing.assert_close(with_ctx.scene, without.scene)
+
+
+def test_observed_context_keeps_agents_seen_long_enough_and_holds_them_still_before():
+    import dataclasses
+
+    import numpy as np
+
+    from trajpref.data.transforms import observed_context
+
+    track = np.stack([np.arange(8.0), np.zeros(8)], -1).astype(np.float32)  # [T_h, 2]
+    ctx = np.stack([track] * 4)  # [4, T_h, 2]
+    ctx[1, :2] = np.nan  # seen from frame 2: a run of 6
+    ctx[2, 3] = np.nan  # a break at frame 3: a run of 4 (frames 4..7)
+    ctx[3, :7] = np.nan  # seen at the last frame only
+    batch = collate([dataclasses.replace(make_scene(1), context=ctx)])
+    assert observed_context(batch, 8).context_scene.tolist() == [0]
+    torch.testing.assert_close(observed_context(batch, 8).context, batch.context[:1])
+    six = observed_context(batch, 6).context  # rows 0 and 1
+    assert six.shape == (2, 8, 2)
+    torch.testing.assert_close(six[1, :, 0], torch.tensor([2.0, 2, 2, 3, 4, 5, 6, 7]))
+    four = observed_context(batch, 4).context  # rows 0, 1 and 2; row 2 holds frame 4 before
+    torch.testing.assert_close(four[2, :, 0], torch.tensor([4.0, 4, 4, 4, 4, 5, 6, 7]))
+    assert observed_context(batch, 1).num_context == 4
+    with pytest.raises(ValueError, match="min_frames"):
+        observed_context(batch, 9)

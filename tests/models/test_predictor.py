@@ -196,3 +196,23 @@ def test_only_a_context_generator_reads_context_agents_and_the_denoiser_never_do
         assert torch.allclose(y[:, :3], y0[:, :3]) is not reads
     with pytest.raises(ValueError, match="the generator's"):
         plain.denoiser.context(scene_features(batch, SCALE, context=True))
+
+
+def test_context_frames_admits_the_agents_seen_over_the_last_frames():
+    import dataclasses
+
+    ctx = np.random.default_rng(4).normal(size=(3, 8, 2)).astype("f4")
+    ctx[1, :3] = np.nan  # entered at frame 3
+    ctx[2, :6] = np.nan  # seen over the last two frames only
+    batch = collate([dataclasses.replace(make_scene(2), context=ctx)])
+    pred = _predictor()
+    counts = []
+    for frames in (0, 5, 2):
+        pred.generator.cfg = dataclasses.replace(TINY, context_agents=True,
+                                                 context_frames=frames)  # fmt: skip
+        features = pred.condition(batch).features
+        counts.append(features.hist.shape[0] - features.targets)
+        assert torch.isfinite(features.hist).all() and torch.isfinite(features.geom).all()
+    assert counts == [1, 2, 3]
+    with pytest.raises(ConfigError, match="context_frames"):
+        dataclasses.replace(TINY, context_frames=1)

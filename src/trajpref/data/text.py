@@ -478,27 +478,36 @@ def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int |
 
 def _context(tracks: Tracks, t_hist: int, t_total: int, starts: np.ndarray) -> list[np.ndarray]:
     """For each scene starting at unique-frame index ``starts`` [S], the histories [C, T_h, 2]
-    of the agents present in all its T_h history frames but not in all T_total frames
-    (``Scene.context``), in agent order. Whether an agent counts is decided by the frames of
-    the window's history alone, plus its absence from the targets; its later positions are not
-    read."""
-    f_idx, a_idx, n_r = tracks.frame_index, tracks.agent_index, tracks.num_rows
+    of the other agents seen at its last observed frame (``Scene.context``): those not in all
+    T_total frames, NaN at the history frames where they were not seen, in agent order.
+    Which agents count is decided by the window's history frames and the targets alone; none
+    of their later positions is read."""
+    n_f = len(tracks.frames)
+    key = tracks.agent_index.astype(np.int64) * n_f + tracks.frame_index  # [R] sorted
     empty = np.zeros((0, t_hist, 2), np.float32)
-    if n_r < t_hist or len(starts) == 0:
-        return [empty] * len(starts)
-    head = np.arange(n_r - t_hist + 1)  # [R-T_h+1] candidate first rows
-    seen = (a_idx[head + t_hist - 1] == a_idx[head]) & (
-        f_idx[head + t_hist - 1] - f_idx[head] == t_hist - 1
-    )  # [R-T_h+1] the agent is in all T_h frames from this row's
-    end = np.minimum(head + t_total - 1, n_r - 1)  # [R-T_h+1]
-    whole = (a_idx[end] == a_idx[head]) & (f_idx[end] - f_idx[head] == t_total - 1)
-    rows = head[seen & ~whole & np.isin(f_idx[head], starts)]  # [C_all] context first rows
-    order = np.argsort(f_idx[rows], kind="stable")  # by scene, agents stay sorted by id
-    rows = rows[order]
-    hist = np.take(tracks.xy, rows[:, None] + np.arange(t_hist), axis=0)  # [C_all, T_h, 2]
-    pos = np.searchsorted(f_idx[rows], starts)  # [S]
-    ends = np.searchsorted(f_idx[rows], starts, side="right")  # [S]
-    return [hist[a:b] for a, b in zip(pos, ends, strict=True)]
+    if len(starts) == 0:
+        return []
+    last = starts + t_hist - 1  # [S] each scene's last observed unique frame
+
+    def find(k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Row of each (agent, frame) key [...], and whether it exists."""
+        idx = np.minimum(np.searchsorted(key, k), len(key) - 1)
+        return idx, key[idx] == k
+
+    rows = np.flatnonzero(np.isin(tracks.frame_index, last))  # [C0] rows at a last frame
+    first = key[rows] - (t_hist - 1)  # [C0] the same agent at its scene's first frame
+    row0, seen0 = find(first)
+    row_end, seen_end = find(first + t_total - 1)
+    target = seen0 & seen_end & (row_end - row0 == t_total - 1)  # all frames: a target
+    rows, first = rows[~target], first[~target]
+    order = np.argsort(tracks.frame_index[rows], kind="stable")  # by scene, agents by id
+    rows, first = rows[order], first[order]
+    idx, seen = find(first[:, None] + np.arange(t_hist))  # [C, T_h]
+    hist = np.where(seen[..., None], tracks.xy[idx], np.nan).astype(np.float32)  # [C, T_h, 2]
+    frame = tracks.frame_index[rows]  # [C] last observed frame of each
+    a = np.searchsorted(frame, last)  # [S]
+    b = np.searchsorted(frame, last, side="right")  # [S]
+    return [hist[i:j] if j > i else empty for i, j in zip(a, b, strict=True)]
 
 
 def resample_tracks(tracks: Tracks, factor: float) -> Tracks:

@@ -147,6 +147,32 @@ def drop_agents_at_random(
                    scene=batch.scene[idx], agent_type=batch.agent_type[idx])  # fmt: skip
 
 
+def observed_context(batch: Batch, min_frames: int) -> Batch:
+    """The batch with only the context-only agents seen in at least the last ``min_frames``
+    history frames without a break, their earlier frames (not seen, or seen before the break)
+    set to the first position of that run: an agent that entered the view holds still until
+    it did. With ``min_frames`` = T_h only agents seen over the whole history are kept, as
+    they are."""
+    if batch.context is None:
+        return batch
+    t_h = batch.context.shape[1]
+    if not 1 <= min_frames <= t_h:
+        raise ValueError(f"min_frames must lie in 1..{t_h}, got {min_frames}")
+    seen = torch.isfinite(batch.context).all(-1)  # [M, T_h]
+    # length of the run of seen frames that ends at the last one
+    run = seen.flip(1).to(torch.int64).cumprod(1).sum(1)  # [M]
+    keep = (run >= min_frames).nonzero()[:, 0]  # [M']
+    batch = _context_subset(batch, keep)
+    if batch.context is None or min_frames == t_h:
+        return batch
+    run = run[keep]  # [M']
+    first = t_h - run  # [M'] index of the run's first frame
+    steps = torch.arange(t_h, device=run.device)  # [T_h]
+    src = torch.maximum(steps[None, :], first[:, None])  # [M', T_h] frame each one copies
+    filled = batch.context.gather(1, src[..., None].expand(-1, -1, 2))  # [M', T_h, 2]
+    return replace(batch, context=filled)
+
+
 def _context_subset(batch: Batch, idx: torch.Tensor) -> Batch:
     """The batch with only the context-only agents ``idx`` [M'] (increasing) kept."""
     if len(idx) == 0:

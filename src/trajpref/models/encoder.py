@@ -8,7 +8,12 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from trajpref.data.transforms import backward_velocity, observed_pace, to_model_frame
+from trajpref.data.transforms import (
+    backward_velocity,
+    observed_context,
+    observed_pace,
+    to_model_frame,
+)
 from trajpref.errors import DataError
 from trajpref.models.layers import SocialAttention, mlp
 from trajpref.types import AGENT_PERSON, Batch
@@ -39,11 +44,16 @@ class SceneFeatures:
     every per-agent field above has N + M rows. None: every row is one of the batch's agents."""
 
 
-def scene_features(batch: Batch, scale: float, context: bool = False) -> SceneFeatures:
+def scene_features(batch: Batch, scale: float, context: bool = False,
+                   context_frames: int | None = None) -> SceneFeatures:  # fmt: skip
     """Features in units of ``scale`` (the data scale stored with each model). With
-    ``context`` the batch's context-only agents (``Batch.context``) join their scenes after
-    the batch's agents (``SceneFeatures.targets``); a batch without any gives the same
-    features as without ``context``."""
+    ``context`` the batch's context-only agents (``Batch.context``) seen in at least the last
+    ``context_frames`` history frames (None: all of them; ``transforms.observed_context``)
+    join their scenes after the batch's agents (``SceneFeatures.targets``); a batch without
+    any gives the same features as without ``context``."""
+    if context and batch.num_context:
+        frames = batch.history.shape[1] if context_frames is None else context_frames
+        batch = observed_context(batch, frames)
     if context and batch.num_context:
         return _features_with_context(batch, scale)
     rel = to_model_frame(batch.history, batch, scale)  # [N, T_h, 2]

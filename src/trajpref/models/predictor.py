@@ -113,7 +113,9 @@ class DiffusionPredictor(nn.Module):
         plain = scene_features(batch, self.scale)
         if self.generator is None or not self.generator.cfg.context_agents or not batch.num_context:
             return Condition(plain, self.denoiser)
-        return Condition(scene_features(batch, self.scale, context=True), self.denoiser, plain)
+        frames = self.generator.cfg.context_frames or None  # 0: the whole history
+        features = scene_features(batch, self.scale, context=True, context_frames=frames)
+        return Condition(features, self.denoiser, plain)
 
     def denoise(
         self, cond: Condition, y_tau: torch.Tensor, generator: torch.Generator | None = None
