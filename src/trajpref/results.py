@@ -69,8 +69,9 @@ the cap on its samples' sigma (2026-11-29; the same weights, ``model.max_log_sig
 Robo's sim-only generator trained without scale augmentation and with dropout 0.2 (2026-11-29,
 replaced by scale augmentation 0.8-1.25 with dropout 0.3), then that generator, which did not
 know which robot is which (2026-11-29, replaced by ``model.agent_roles``), then the roles
-generator with dropout 0.3 (2026-12-01, replaced by dropout 0.2), then eth's generator that
-did not read the agents leaving the view (2026-12-02, replaced by ``model.context_agents``).
+generator with dropout 0.3 (2026-12-01, replaced by dropout 0.2), then eth's and zara1's
+generators that did not read the agents leaving the view (2026-12-02, replaced by
+``model.context_agents``).
 Their start row is ``pretrained<suffix>`` and their runs' rows carry the suffix; no run can
 begin from them now."""
 START_SUFFIXES = (ANCESTRAL_SUFFIX, *RETIRED_STARTS, "-long")
