@@ -171,3 +171,13 @@ def test_a_drop_rate_outside_zero_to_one_is_a_config_error(rate):
 def test_the_scale_range_is_none_when_the_scale_augmentation_is_off():
     assert load_config(None).data.scale_range is None
     assert load_config(None, ["data.scale_min=0.8"]).data.scale_range == (0.8, 1.0)
+
+
+def test_reverse_context_needs_reversed_scenes_and_a_context_reading_generator():
+    with pytest.raises(ConfigError, match="reverse_context needs data.reverse"):
+        load_config(None, ["data.reverse_context=true"])
+    with pytest.raises(ConfigError, match="needs model.context_agents"):
+        load_config(None, ["data.reverse=true", "data.reverse_context=true"])
+    cfg = load_config(None, ["data.reverse=true", "data.reverse_context=true",
+                             "model.context_agents=true"])  # fmt: skip
+    assert cfg.data.reverse_context

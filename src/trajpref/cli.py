@@ -406,6 +406,10 @@ def cmd_data_stats(args) -> int:
             0 if s.context is None else int(np.isfinite(s.context).all(axis=(1, 2)).sum())
             for s in ds.scenes
         ),
+        # the same for the windows played backwards (data.reverse_context)
+        "context_agents_reversed": sum(
+            0 if s.context_reverse is None else len(s.context_reverse) for s in ds.scenes
+        ),
         "units": ds.info.units,
         "frame_interval": ds.info.frame_interval,
         "t_hist": ds.info.t_hist,

@@ -58,6 +58,12 @@ class DataConfig:
     """Randomly play training scenes backwards in time (probability 1/2 per scene, all its
     agents together: the window's last T_h positions, reversed, become the history and the
     rest, reversed, the future; docs/pretraining.md, "Scenes played backwards")."""
+    reverse_context: bool = False
+    """A scene played backwards keeps context-only neighbours: those of the reversed window
+    (``Scene.context_reverse``: the other agents seen at the first of the window's last T_h
+    frames, their positions there reversed) instead of none (False: the published eth, univ
+    and zara2 generators' training). Only with ``reverse`` and a generator built with
+    ``model.context_agents``; docs/pretraining.md, "Reversed scenes keep their neighbours"."""
     history_noise: float = 0.0
     """Std of Gaussian noise added to each training window's observed positions except the
     last, in the dataset's units (0: off): the inputs jitter, the targets (futures relative to
@@ -103,6 +109,9 @@ class DataConfig:
     that a control validates on the same windows without training on more)."""
 
     def __post_init__(self) -> None:
+        if self.reverse_context and not self.reverse:
+            raise ConfigError("DataConfig.reverse_context needs data.reverse: it says which "
+                              "neighbours a scene played backwards keeps")  # fmt: skip
         if self.holdout_scene and self.val_dataset:
             raise ConfigError("DataConfig.holdout_scene and val_dataset exclude each other: "
                               "the held-out scene is the validation split")  # fmt: skip
@@ -708,6 +717,9 @@ class ExperimentConfig:
     def __post_init__(self) -> None:
         if self.model.tau > self.diffusion.num_steps:
             raise ConfigError("model.tau cannot exceed diffusion.num_steps")
+        if self.data.reverse_context and not self.model.context_agents:
+            raise ConfigError("data.reverse_context keeps context-only neighbours in reversed "
+                              "scenes: it needs model.context_agents")  # fmt: skip
 
 
 def to_dict(cfg: Any) -> dict[str, Any]:

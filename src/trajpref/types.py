@@ -42,6 +42,12 @@ class Scene:
     (``.npz`` splits). They are neighbours only: no future, no prediction, no metric; only a
     model built with ``ModelConfig.context_agents`` reads them
     (``data.transforms.observed_context`` keeps those seen long enough)."""
+    context_reverse: np.ndarray | None = None
+    """[C', T_h, 2] the context-only agents of the window played backwards
+    (``data.transforms.reverse_time``): the other agents seen at the first of the window's last
+    T_h frames but not in all of its frames, their positions over those T_h frames in reverse
+    order (NaN where not seen); None where the data gives none. Training only: a reversed
+    scene's history is the window's end, so these are its neighbours."""
 
     def __post_init__(self) -> None:
         if self.history.ndim != 3 or self.history.shape[-1] != 2:
@@ -59,6 +65,12 @@ class Scene:
         ):
             shape = self.context.shape
             raise DataError(f"{self.scene_id}: context must be [C, T_h, 2], got {shape}")
+        if self.context_reverse is not None and (
+            self.context_reverse.ndim != 3
+            or self.context_reverse.shape[1:] != self.history.shape[1:]
+        ):
+            shape = self.context_reverse.shape
+            raise DataError(f"{self.scene_id}: context_reverse must be [C', T_h, 2], got {shape}")
 
     @property
     def num_agents(self) -> int:
@@ -142,12 +154,20 @@ class Batch:
     where not seen), packed across the batch; None when there are none."""
     context_scene: torch.Tensor | None = None
     """[M] int64 scene index of each context-only agent, non-decreasing; None with ``context``."""
+    context_reverse: torch.Tensor | None = None
+    """[M', T_h, 2] the context-only agents of each scene played backwards
+    (``Scene.context_reverse``), packed across the batch; read by ``reverse_time`` only, which
+    hands back a batch without them. None when there are none."""
+    context_reverse_scene: torch.Tensor | None = None
+    """[M'] int64 scene index of each of them, non-decreasing; None with ``context_reverse``."""
 
     def __post_init__(self) -> None:
-        if (self.context is None) != (self.context_scene is None):
-            raise DataError("Batch: context and context_scene go together")
-        if self.context is not None and self.context_scene.shape != self.context.shape[:1]:
-            raise DataError("Batch: context_scene must be [M] for context [M, T_h, 2]")
+        for name in ("context", "context_reverse"):
+            value, scene = getattr(self, name), getattr(self, f"{name}_scene")
+            if (value is None) != (scene is None):
+                raise DataError(f"Batch: {name} and {name}_scene go together")
+            if value is not None and scene.shape != value.shape[:1]:
+                raise DataError(f"Batch: {name}_scene must be [M] for {name} [M, T_h, 2]")
 
     @property
     def num_agents(self) -> int:
@@ -173,11 +193,14 @@ class Batch:
             scene_ids=self.scene_ids,
             context=None if self.context is None else self.context.to(device),
             context_scene=None if self.context_scene is None else self.context_scene.to(device),
+            context_reverse=_to(self.context_reverse, device),
+            context_reverse_scene=_to(self.context_reverse_scene, device),
         )
 
     def without_context(self) -> Batch:
-        """The same batch with no context-only agents."""
-        return dataclasses.replace(self, context=None, context_scene=None)
+        """The same batch with no context-only agents (of either time direction)."""
+        return dataclasses.replace(self, context=None, context_scene=None,
+                                   context_reverse=None, context_reverse_scene=None)  # fmt: skip
 
     def scene_sizes(self) -> torch.Tensor:
         """[B] number of agents in each scene."""
@@ -212,12 +235,8 @@ def collate(scenes: list[Scene]) -> Batch:
     fut = np.concatenate([s.future for s in scenes], 0)  # [N, T_f, 2]
     types = np.concatenate([s.agent_type for s in scenes], 0)  # [N]
     scene = np.repeat(np.arange(len(scenes)), [s.num_agents for s in scenes])  # [N]
-    context = context_scene = None
-    extra = [s.context for s in scenes if s.context is not None and len(s.context)]
-    if extra:
-        context = torch.as_tensor(np.concatenate(extra, 0), dtype=torch.float32)  # [M, T_h, 2]
-        counts = [0 if s.context is None else len(s.context) for s in scenes]  # [B]
-        context_scene = torch.as_tensor(np.repeat(np.arange(len(scenes)), counts))  # [M]
+    context, context_scene = _pack([s.context for s in scenes])  # [M, T_h, 2], [M]
+    context_reverse, context_reverse_scene = _pack([s.context_reverse for s in scenes])
     return Batch(
         history=torch.as_tensor(hist, dtype=torch.float32),
         future=torch.as_tensor(fut, dtype=torch.float32),
@@ -227,4 +246,21 @@ def collate(scenes: list[Scene]) -> Batch:
         scene_ids=[s.scene_id for s in scenes],
         context=context,
         context_scene=context_scene,
+        context_reverse=context_reverse,
+        context_reverse_scene=context_reverse_scene,
     )
+
+
+def _pack(parts: list[np.ndarray | None]) -> tuple[torch.Tensor | None, torch.Tensor | None]:
+    """Per-scene agent arrays [C_b, T_h, 2] (or None) packed into one [M, T_h, 2] float32
+    tensor and its [M] scene index; (None, None) when no scene has any."""
+    extra = [c for c in parts if c is not None and len(c)]
+    if not extra:
+        return None, None
+    counts = [0 if c is None else len(c) for c in parts]  # [B]
+    packed = torch.as_tensor(np.concatenate(extra, 0), dtype=torch.float32)  # [M, T_h, 2]
+    return packed, torch.as_tensor(np.repeat(np.arange(len(parts)), counts))  # [M]
+
+
+def _to(x: torch.Tensor | None, device: torch.device | str) -> torch.Tensor | None:
+    return None if x is None else x.to(device)

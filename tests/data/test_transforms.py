@@ -1,3 +1,6 @@
+import dataclasses
+
+import numpy as np
 import pytest
 import torch
 from synthetic import make_scene
@@ -194,10 +197,6 @@ def test_dropping_agents_is_seeded_and_off_at_zero():
 
 
 def _context_batch() -> Batch:
-    import dataclasses
-
-    import numpy as np
-
     a = make_scene(2)
     b = make_scene(3, seed=1)
     rng = np.random.default_rng(5)
@@ -262,3 +261,46 @@ def test_observed_context_keeps_agents_seen_long_enough_and_holds_them_still_bef
     assert observed_context(batch, 1).num_context == 4
     with pytest.raises(ValueError, match="min_frames"):
         observed_context(batch, 9)
+
+
+def _two_way_context_batch():
+    a, b = make_scene(2), make_scene(3, seed=1)
+    rng = np.random.default_rng(6)
+    a = dataclasses.replace(
+        a,
+        context=rng.normal(size=(2, 8, 2)).astype(np.float32),
+        context_reverse=rng.normal(size=(3, 8, 2)).astype(np.float32),
+    )
+    b = dataclasses.replace(
+        b,
+        context=rng.normal(size=(1, 8, 2)).astype(np.float32),
+        context_reverse=rng.normal(size=(2, 8, 2)).astype(np.float32),
+    )
+    return collate([a, b])  # fmt: skip
+
+
+def test_reversed_scenes_can_keep_the_reversed_windows_context():
+    batch = _two_way_context_batch()
+    assert batch.context_reverse_scene.tolist() == [0, 0, 0, 1, 1]
+    out = reverse_time(batch, torch.tensor([False, True]), keep_context=True)
+    # scene 0 keeps its own context; scene 1 takes its reversed window's
+    assert out.context_scene.tolist() == [0, 0, 1, 1]
+    torch.testing.assert_close(out.context[:2], batch.context[:2])
+    torch.testing.assert_close(out.context[2:], batch.context_reverse[3:])
+    assert out.context_reverse is None and out.context_reverse_scene is None
+    both = reverse_time(batch, torch.tensor([True, True]), keep_context=True)
+    torch.testing.assert_close(both.context, batch.context_reverse)
+    # without keep_context a reversed scene has none, as before
+    lost = reverse_time(batch, torch.tensor([False, True]))
+    assert lost.context_scene.tolist() == [0, 0] and lost.context_reverse is None
+
+
+def test_augment_hands_back_no_reversed_context_and_draws_as_before():
+    batch = _two_way_context_batch()
+    kw = dict(flip=True, history_noise=0.05, drop_agents=0.3, reverse=True)
+    kept = augment(batch, torch.Generator().manual_seed(4), reverse_context=True, **kw)
+    plain = augment(batch.without_context(), torch.Generator().manual_seed(4), **kw)
+    torch.testing.assert_close(kept.history, plain.history)  # the targets' draws unchanged
+    torch.testing.assert_close(kept.future, plain.future)
+    assert kept.context_reverse is None
+    assert augment(batch, torch.Generator().manual_seed(4)).context_reverse is None

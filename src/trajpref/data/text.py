@@ -461,7 +461,9 @@ def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int |
     kind = tracks.agent_type[a_idx[start_row]]  # [W]
     cuts = np.flatnonzero(np.diff(start)) + 1  # [S-1] where a new scene begins
     bounds = np.concatenate([[0], cuts, [n_w]]) if n_w else np.zeros(1, np.int64)
-    context = _context(tracks, t_hist, t_total, start[bounds[:-1]] if n_w else start)
+    firsts = start[bounds[:-1]] if n_w else start  # [S] each scene's first frame
+    context = _context(tracks, t_hist, t_total, firsts)
+    context_reverse = _context(tracks, t_hist, t_total, firsts, backwards=True)
     name = tracks.path.name
     for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
         out.scenes.append(
@@ -471,23 +473,30 @@ def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int |
                 agent_type=kind[a:b],
                 scene_id=f"{name}@frame={frames[start[a]]:g}",
                 context=context[i],
+                context_reverse=context_reverse[i],
             )
         )
     return out
 
 
-def _context(tracks: Tracks, t_hist: int, t_total: int, starts: np.ndarray) -> list[np.ndarray]:
+def _context(
+    tracks: Tracks, t_hist: int, t_total: int, starts: np.ndarray, backwards: bool = False
+) -> list[np.ndarray]:
     """For each scene starting at unique-frame index ``starts`` [S], the histories [C, T_h, 2]
     of the other agents seen at its last observed frame (``Scene.context``): those not in all
     T_total frames, NaN at the history frames where they were not seen, in agent order.
     Which agents count is decided by the window's history frames and the targets alone; none
-    of their later positions is read."""
+    of their later positions is read. With ``backwards``, the same for the window played
+    backwards (``Scene.context_reverse``): its history is the window's last T_h frames in
+    reverse order, so its last observed frame is the first of them."""
     n_f = len(tracks.frames)
     key = tracks.agent_index.astype(np.int64) * n_f + tracks.frame_index  # [R] sorted
     empty = np.zeros((0, t_hist, 2), np.float32)
     if len(starts) == 0:
         return []
-    last = starts + t_hist - 1  # [S] each scene's last observed unique frame
+    span = t_total - t_hist if backwards else 0  # offset of the history frames in the window
+    anchor = span if backwards else t_hist - 1  # offset of the last observed frame
+    last = starts + anchor  # [S] each scene's last observed unique frame
 
     def find(k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Row of each (agent, frame) key [...], and whether it exists."""
@@ -495,15 +504,17 @@ def _context(tracks: Tracks, t_hist: int, t_total: int, starts: np.ndarray) -> l
         return idx, key[idx] == k
 
     rows = np.flatnonzero(np.isin(tracks.frame_index, last))  # [C0] rows at a last frame
-    first = key[rows] - (t_hist - 1)  # [C0] the same agent at its scene's first frame
+    first = key[rows] - anchor  # [C0] the same agent at its scene's first frame
     row0, seen0 = find(first)
     row_end, seen_end = find(first + t_total - 1)
     target = seen0 & seen_end & (row_end - row0 == t_total - 1)  # all frames: a target
     rows, first = rows[~target], first[~target]
     order = np.argsort(tracks.frame_index[rows], kind="stable")  # by scene, agents by id
     rows, first = rows[order], first[order]
-    idx, seen = find(first[:, None] + np.arange(t_hist))  # [C, T_h]
+    idx, seen = find(first[:, None] + span + np.arange(t_hist))  # [C, T_h]
     hist = np.where(seen[..., None], tracks.xy[idx], np.nan).astype(np.float32)  # [C, T_h, 2]
+    if backwards:
+        hist = np.ascontiguousarray(hist[:, ::-1])  # [C, T_h, 2] in the reversed window's order
     frame = tracks.frame_index[rows]  # [C] last observed frame of each
     a = np.searchsorted(frame, last)  # [S]
     b = np.searchsorted(frame, last, side="right")  # [S]

@@ -73,6 +73,7 @@ def augment(
     reverse: bool = False,
     history_noise: float = 0.0,
     drop_agents: float = 0.0,
+    reverse_context: bool = False,
 ) -> Batch:
     """Random rigid transform per scene (all agents of a scene move together).
 
@@ -84,8 +85,10 @@ def augment(
     With ``history_noise`` > 0, Gaussian noise of that std is added to every observed position
     but the last, after the scene's transform. With ``drop_agents`` > 0, agents are then left
     out at that rate (``drop_agents``). Context-only agents (``Batch.context``) move with their
-    scene and are left out of reversed scenes; their jitter and drop are drawn last of all, so
-    the draws for the batch's agents do not depend on them.
+    scene; a reversed scene has none, or with ``reverse_context`` those of the reversed window
+    (``Batch.context_reverse``); their jitter and drop are drawn last of all, so the draws for
+    the batch's agents do not depend on them. The batch handed back has no
+    ``context_reverse``.
     """
     device = batch.history.device
     b = batch.num_scenes
@@ -104,7 +107,9 @@ def augment(
         rot = rot * factor[:, None, None]
     if reverse:
         backwards = torch.rand(b, generator=generator) < 0.5  # [B]
-        batch = reverse_time(batch, backwards.to(device))
+        batch = reverse_time(batch, backwards.to(device), keep_context=reverse_context)
+    else:
+        batch = replace(batch, context_reverse=None, context_reverse_scene=None)
     batch = transform_scenes(batch, rot)
     if history_noise > 0:
         n, t_h, _ = batch.history.shape
@@ -180,14 +185,15 @@ def _context_subset(batch: Batch, idx: torch.Tensor) -> Batch:
     return replace(batch, context=batch.context[idx], context_scene=batch.context_scene[idx])
 
 
-def reverse_time(batch: Batch, scenes: torch.Tensor) -> Batch:
+def reverse_time(batch: Batch, scenes: torch.Tensor, keep_context: bool = False) -> Batch:
     """The batch with the scenes flagged in ``scenes`` [B] bool played backwards in time.
 
     An agent's window of T_h + T_f positions is reversed and cut again at T_h: its new history
     is its last T_h positions in reverse order, its new future the first T_f in reverse order.
-    Agents of unflagged scenes are unchanged. Applying it twice gives the batch back (up to
-    context-only agents: a flagged scene loses them, since their positions after the history
-    are not known).
+    Agents of unflagged scenes are unchanged. A flagged scene loses its context-only agents,
+    or with ``keep_context`` takes those of the reversed window (``Batch.context_reverse``)
+    in their place. The batch handed back has no ``context_reverse``, so applying it twice
+    gives the batch back up to context-only agents.
     """
     if scenes.shape != (batch.num_scenes,):
         raise ValueError(f"reverse_time needs one flag per scene ({batch.num_scenes}), "
@@ -196,9 +202,21 @@ def reverse_time(batch: Batch, scenes: torch.Tensor) -> Batch:
     window = torch.cat([batch.history, batch.future], dim=1)  # [N, T_h + T_f, 2]
     flagged = scenes[batch.scene][:, None, None]  # [N, 1, 1]
     window = torch.where(flagged, window.flip(1), window)  # [N, T_h + T_f, 2]
-    batch = replace(batch, history=window[:, :t_h], future=window[:, t_h:])
+    rev, rev_scene = batch.context_reverse, batch.context_reverse_scene
+    batch = replace(batch, history=window[:, :t_h], future=window[:, t_h:],
+                    context_reverse=None, context_reverse_scene=None)  # fmt: skip
     if batch.context is not None:
         batch = _context_subset(batch, (~scenes[batch.context_scene]).nonzero()[:, 0])
+    if keep_context and rev is not None:
+        take = scenes[rev_scene].nonzero()[:, 0]  # [M'] those of flagged scenes
+        parts = [(rev[take], rev_scene[take])]
+        if batch.context is not None:
+            parts.append((batch.context, batch.context_scene))
+        ctx = torch.cat([c for c, _ in parts])  # [M, T_h, 2]
+        ctx_scene = torch.cat([i for _, i in parts])  # [M]
+        order = torch.sort(ctx_scene, stable=True).indices  # [M] scene order kept
+        if len(order):
+            batch = replace(batch, context=ctx[order], context_scene=ctx_scene[order])
     return batch
 
 

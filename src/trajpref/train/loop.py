@@ -309,7 +309,8 @@ def fit(
                             scale_range=data_cfg.scale_range,
                             reverse=data_cfg.reverse,
                             history_noise=data_cfg.history_noise,
-                            drop_agents=data_cfg.drop_agents).to(device)  # fmt: skip
+                            drop_agents=data_cfg.drop_agents,
+                            reverse_context=data_cfg.reverse_context).to(device)  # fmt: skip
             collected = () if stage.collect is None else (stage.collect(batch, noise_gen),)
             for _ in range(stage.updates):
                 if stage.on_progress is not None:
