@@ -3,8 +3,10 @@ measured side by side (interleaved, one scene per call) on a split's largest sce
 
     python benchmarks/selection_cost.py --dataset univ --scenes 20 --precision fp32 bf16 \
         --data-root ../shared/data
+    python benchmarks/selection_cost.py --dataset univ --scorer own univ/denoiser-small
 
-For each score-step spacing and score precision (``--precision fp32 bf16``), prints ms per
+For each scorer (``own``: the generator's denoiser; or a denoiser checkpoint, path or
+DATASET/NAME), score-step spacing and score precision (``--precision fp32 bf16``), prints ms per
 scene of: the prediction (K = 20 leapfrog samples, fp32), the score of its samples, the
 selection itself, and the ratio (score + selection) / prediction. Writes
 benchmarks/results/meta/selection_cost_<dataset>.json.
@@ -40,15 +42,26 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--precision", nargs="+", default=["fp32"], choices=PRECISIONS,
                         help="score precisions, timed side by side")  # fmt: skip
+    parser.add_argument("--scorer", nargs="+", default=["own"],
+                        help="scorers timed side by side: own (the generator's denoiser) or "
+                        "denoiser checkpoints (path or DATASET/NAME)")  # fmt: skip
     args = parser.parse_args()
 
     path = ROOT / "models" / args.dataset / "generator.safetensors"
     model = ckpt.load_predictor(path, "leapfrog")
     test = load_dataset(args.dataset, "test", args.data_root)
     largest = sorted(test.scenes, key=lambda s: -s.num_agents)[: args.scenes]
-    scorers = {(p, e): TrajectoryScorer(model.denoiser, model.schedule, model.scale,
-                                        score_timesteps(model.schedule.num_steps, e), precision=p)
-               for p in args.precision for e in args.every}  # fmt: skip
+    scorers = {}
+    for name in args.scorer:
+        for p in args.precision:
+            for e in args.every:
+                steps = score_timesteps(model.schedule.num_steps, e)
+                scorers[name, p, e] = (
+                    TrajectoryScorer(model.denoiser, model.schedule, model.scale, steps,
+                                     precision=p) if name == "own"
+                    else TrajectoryScorer.from_checkpoint(ckpt.resolve_path(name), steps=steps,
+                                                          precision=p)
+                )  # fmt: skip
     cfg = SelectionConfig(keep=5, method="score-fps", drop=0.4)
     ms = {"predict": 0.0, "select": 0.0} | {key: 0.0 for key in scorers}
     for _ in range(args.repeats):
@@ -73,13 +86,15 @@ def main() -> None:
         f"repeats: predict {ms['predict']:.1f} ms/scene, select {ms['select']:.2f} ms/scene"
     )
     rows = []
-    for p, e in scorers:
-        steps = len(score_timesteps(model.schedule.num_steps, e))
-        ratio = (ms[p, e] + ms["select"]) / ms["predict"]
-        rows.append({"precision": p, "every": e, "steps": steps, "ms_score": ms[p, e],
-                     "ratio": ratio})  # fmt: skip
-        print(f"  {p} score every {e:>2} ({steps:>2} steps): {ms[p, e]:7.1f} ms/scene, "
-              f"(score + select) / predict = {ratio:.2f}x")  # fmt: skip
+    for key, scorer in scorers.items():
+        name, p, e = key
+        params = sum(t.numel() for t in scorer.denoiser.parameters())
+        steps = len(scorer.steps)
+        ratio = (ms[key] + ms["select"]) / ms["predict"]
+        rows.append({"scorer": name, "parameters": params, "precision": p, "every": e,
+                     "steps": steps, "ms_score": ms[key], "ratio": ratio})  # fmt: skip
+        print(f"  {name} ({params / 1e6:.2f} M) {p} score every {e:>3} ({steps:>2} steps): "
+              f"{ms[key]:7.1f} ms/scene, (score + select) / predict = {ratio:.2f}x")  # fmt: skip
     out = {"dataset": args.dataset, "scene_sizes": sizes, "ms_predict": ms["predict"],
            "ms_select": ms["select"], "settings": rows, "command": command_line(),
            "machine": machine()}  # fmt: skip
