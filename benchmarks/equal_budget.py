@@ -204,15 +204,17 @@ def _beats_start(dataset: str, method: str, seed: int) -> bool | None:
 
 def _chosen_control(dataset: str, rows: list[dict], methods: list[str]) -> str:
     """Of the control variants in the table, the one with the best mean validation score
-    over its seeds; the start's plain supervised control (``control``, ``control-long``) when
-    the run folders are missing (a fresh checkout)."""
+    over the seeds whose run folders every control still has (a seed's folders can be lost
+    with a checkout while later seeds are run in another); the start's plain supervised
+    control (``control``, ``control-long``) when no seed has them all (a fresh checkout)."""
     controls = [m for m in methods if m.startswith("control")]
-    scores = {}
-    for method in controls:
-        vals = [_best_val(dataset, method, r["seed"]) for r in rows if r["method"] == method]
-        if vals and None not in vals:
-            scores[method] = statistics.mean(vals)
-    if scores:
+    vals = {m: {r["seed"]: _best_val(dataset, m, r["seed"]) for r in rows if r["method"] == m}
+            for m in controls}  # fmt: skip
+    vals = {m: v for m, v in vals.items() if v}  # controls with rows
+    common = set.intersection(*(set(s for s, b in v.items() if b is not None)
+                                for v in vals.values())) if vals else set()  # fmt: skip
+    if common:
+        scores = {m: statistics.mean(v[s] for s in common) for m, v in vals.items()}
         return min(scores, key=scores.get)
     return min(controls, key=len) if controls else "control"  # no -lr3e-5: the plain one
 

@@ -110,6 +110,31 @@ def test_each_start_is_compared_with_its_own_control_when_no_run_folder_is_left(
     assert lines["control-lr3e-5-long"][6] == "+6.7 %"
 
 
+def test_the_control_is_chosen_on_the_seeds_whose_run_folders_are_left(eb, tmp_path):
+    """eth's seed 0 was run in a checkout whose run folders were lost, its seeds 1 and 2 in
+    the next (2026-12-03): the control is then chosen on seeds 1 and 2, where the lower
+    learning rate validates better, instead of falling back to the plain control."""
+    results = tmp_path / "benchmarks" / "results"
+    results.mkdir(parents=True)
+    rows = [_row("pretrained", 0, 0.40)] + [
+        _row(m, s, f) for s in (0, 1, 2)
+        for m, f in (("control", 0.44), ("control-lr3e-5", 0.46), ("rlhf", 0.42))
+    ]  # fmt: skip
+    (results / "rows.json").write_text(json.dumps(rows))
+    for seed in (1, 2):
+        for folder, val in ((f"walks-control-s{seed}", 0.50), (f"walks-control-s{seed}-lr3e-5",
+                                                               0.45)):  # fmt: skip
+            run = tmp_path / "runs" / folder
+            run.mkdir(parents=True)
+            (run / "finetune_metrics.jsonl").write_text(json.dumps({"val_score": val}) + "\n")
+    lines = {line.split(" | ")[1]: line.split(" | ")
+             for line in eb.report(["walks"], ["control", "control-lr3e-5", "rlhf"])
+             .splitlines()[2:]}  # fmt: skip
+    assert lines["control-lr3e-5"][6] == "–"  # chosen: 0.45 < 0.50 on seeds 1 and 2
+    assert lines["rlhf"][6] == "-8.7 %"  # 0.42 against the chosen control's 0.46
+    assert lines["control"][6] == "-4.3 %"
+
+
 def test_without_run_folders_the_previous_tables_lines_stay_while_their_rows_do(eb, tmp_path):
     """A new checkout has no run folders, so it cannot choose the control on validation or
     count the runs that beat the start; regenerating the table dropped those cells (and could
