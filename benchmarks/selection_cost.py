@@ -3,7 +3,8 @@ measured side by side (interleaved, one scene per call) on a split's largest sce
 
     python benchmarks/selection_cost.py --dataset univ --scenes 20 --precision fp32 bf16 \
         --data-root ../shared/data
-    python benchmarks/selection_cost.py --dataset univ --scorer own univ/denoiser-small
+    python benchmarks/selection_cost.py --dataset univ --scorer own \
+        runs/sm49/univ/denoiser.safetensors   # a denoiser of another shape beside the own
 
 For each scorer (``own``: the generator's denoiser; or a denoiser checkpoint, path or
 DATASET/NAME), score-step spacing and score precision (``--precision fp32 bf16``), prints ms per
@@ -51,17 +52,13 @@ def main() -> None:
     model = ckpt.load_predictor(path, "leapfrog")
     test = load_dataset(args.dataset, "test", args.data_root)
     largest = sorted(test.scenes, key=lambda s: -s.num_agents)[: args.scenes]
-    scorers = {}
-    for name in args.scorer:
-        for p in args.precision:
-            for e in args.every:
-                steps = score_timesteps(model.schedule.num_steps, e)
-                scorers[name, p, e] = (
-                    TrajectoryScorer(model.denoiser, model.schedule, model.scale, steps,
-                                     precision=p) if name == "own"
-                    else TrajectoryScorer.from_checkpoint(ckpt.resolve_path(name), steps=steps,
-                                                          precision=p)
-                )  # fmt: skip
+    bases = {name: model if name == "own" else TrajectoryScorer.from_checkpoint(
+                 ckpt.resolve_path(name)) for name in args.scorer}  # fmt: skip
+    scorers = {(name, p, e): TrajectoryScorer(base.denoiser, base.schedule, base.scale,
+                                              score_timesteps(base.schedule.num_steps, e),
+                                              precision=p)
+               for name, base in bases.items() for p in args.precision
+               for e in args.every}  # fmt: skip
     cfg = SelectionConfig(keep=5, method="score-fps", drop=0.4)
     ms = {"predict": 0.0, "select": 0.0} | {key: 0.0 for key in scorers}
     for _ in range(args.repeats):
