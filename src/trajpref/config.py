@@ -94,6 +94,14 @@ class DataConfig:
     steps (positions interpolated in time, as ``time_step`` reads them), joins the training
     split (0: off): training on two paces, for a test file whose steps span more time than
     their label says (eth's: about 5/3; docs/data.md). The validation split is untouched."""
+    partial_future: int = 0
+    """Training split only: also train on the agents seen in every history frame and in at
+    least this many first future frames but not in all of them (agents that leave the view
+    before a window ends), as targets whose loss reads only the frames they were seen in (0:
+    off; the validation and test splits keep the benchmarks' complete windows). Text track
+    files only (ETH/UCY or a folder of them); not with ``reverse`` (a future with missing
+    frames cannot be played backwards), and for the generator stage only (docs/pretraining.md,
+    "Agents that leave the view")."""
     holdout_scene: str = ""
     """Validate on a scene the model does not train on ("" : the dataset's own val split):
     the training files whose name starts with this prefix (e.g. ``biwi_hotel``, ``students``,
@@ -127,6 +135,12 @@ class DataConfig:
             raise ConfigError(f"DataConfig.extra_time_step must be 0 (off) or a positive step "
                               f"other than time_step ({self.time_step:g}), "
                               f"got {self.extra_time_step:g}")  # fmt: skip
+        if isinstance(self.partial_future, bool) or self.partial_future < 0:
+            raise ConfigError(f"DataConfig.partial_future must be an integer >= 0 (0: off), "
+                              f"got {self.partial_future!r}")  # fmt: skip
+        if self.partial_future and self.reverse:
+            raise ConfigError("DataConfig.partial_future and reverse exclude each other: a "
+                              "future with missing frames cannot be played backwards")  # fmt: skip
         if self.history_noise < 0:
             raise ConfigError(f"DataConfig.history_noise must be >= 0 (0: off), "
                               f"got {self.history_noise}")  # fmt: skip

@@ -387,3 +387,27 @@ def test_run_splits_hold_out_then_add_the_paced_copy_without_the_held_out_scene(
     assert 0 < len(extra) < len(paced.scenes)
     assert [s.scene_id for s in train.scenes] == [s.scene_id for s in held.scenes + extra]
     assert [s.scene_id for s in val.scenes] == [s.scene_id for s in held_val.scenes]
+
+
+def test_partial_future_applies_to_the_training_split_alone(tmp_path, data_root):
+    from synthetic import write_dataset
+
+    root = str(write_dataset(tmp_path / "pf", frames=44))
+    plain_train, plain_val = run_splits(DataConfig(dataset=root))
+    train, val = run_splits(DataConfig(dataset=root, partial_future=4))
+    assert [s.scene_id for s in val.scenes] == [s.scene_id for s in plain_val.scenes]
+    assert train.num_agents >= plain_train.num_agents
+    # zara1's training files: agents that leave the view after at least 4 future frames
+    # join the targets (counted 2026-12-04), its validation split is untouched
+    z_plain, z_val_plain = run_splits(DataConfig(dataset="zara1"), data_root)
+    z_train, z_val = run_splits(DataConfig(dataset="zara1", partial_future=4), data_root)
+    assert (z_plain.num_agents, z_train.num_agents) == (28577, 38146)
+    assert z_val.num_agents == z_val_plain.num_agents == 5184
+    for name in ("sdd", "robo-sim"):
+        with pytest.raises(ConfigError, match="partial_future cuts windows from text track"):
+            load_dataset(name, "train", data_root, options=ReadOptions(partial_future=4))
+    with pytest.raises(ConfigError, match="partial_future and reverse exclude each other"):
+        DataConfig(partial_future=4, reverse=True)
+    for bad in (-1, True):
+        with pytest.raises(ConfigError, match="partial_future must be an integer"):
+            DataConfig(partial_future=bad)

@@ -363,3 +363,49 @@ def test_reversed_window_context_is_the_reversed_files_context(tmp_path):
     np.testing.assert_array_equal(rev.context_reverse, scene.context)
     window = np.concatenate([scene.history, scene.future], 1)  # [1, T, 2]
     np.testing.assert_array_equal(rev.history, window[:, ::-1][:, :8])
+
+
+def test_partial_future_makes_agents_that_leave_the_view_targets(tmp_path):
+    # agent 1 in frames 0..19 (a complete window); agent 2 in frames 0..12 (the whole history
+    # and 5 future frames, then leaves); agent 3 in frames 0..9 (2 future frames)
+    rows = [(f * 10, 1, f, 0) for f in range(20)]
+    rows += [(f * 10, 2, f, 1) for f in range(13)]
+    rows += [(f * 10, 3, f, 2) for f in range(10)]
+    write_tracks(tmp_path / "p.txt", rows)
+    (plain,) = read_folder(tmp_path, 8, 12)
+    assert plain.num_agents == 1 and len(plain.context) == 2  # both leave: context only
+    (scene,) = read_folder(tmp_path, 8, 12, options=ReadOptions(partial_future=4))
+    assert scene.num_agents == 2  # agent 2 is seen in 5 >= 4 future frames: a target
+    np.testing.assert_allclose(scene.history[1, :, 0], np.arange(8))
+    np.testing.assert_allclose(scene.future[1, :5, 0], np.arange(8, 13))
+    assert np.isnan(scene.future[1, 5:]).all()  # NaN from the first frame it is missing on
+    np.testing.assert_array_equal(scene.future[0], plain.future[0])
+    assert len(scene.context) == 1  # agent 3 (2 future frames) stays context-only
+    np.testing.assert_allclose(scene.context[0, :, 1], 2.0)
+    (strict,) = read_folder(tmp_path, 8, 12, options=ReadOptions(partial_future=6))
+    assert strict.num_agents == 1 and len(strict.context) == 2
+
+
+def test_partial_future_windows_need_the_files_frames_and_a_valid_setting(tmp_path):
+    # one agent in frames 0..14 of a 15-frame file: no window needs fewer than 20 frames
+    write_tracks(tmp_path / "q.txt", [(f * 10, 1, f, 0) for f in range(15)])
+    with pytest.raises(DataError, match="too few frames"):
+        read_folder(tmp_path, 8, 12, options=ReadOptions(partial_future=4))
+    for bad in (-1, True):
+        with pytest.raises(ConfigError, match="partial_future"):
+            ReadOptions(partial_future=bad)
+    write_tracks(tmp_path / "q.txt", [(f * 10, 1, f, 0) for f in range(25)])
+    with pytest.raises(ConfigError, match="below the 12 future frames"):
+        read_folder(tmp_path, 8, 12, options=ReadOptions(partial_future=12))
+
+
+def test_partial_future_windows_stop_at_the_files_last_frame(tmp_path):
+    # 22 frames: windows start at frame indices 0, 1, 2 (agent 1's complete ones). Agent 2 in
+    # frames 10..21 has its history and 4 future frames there, but its window would reach
+    # frame index 29, past the file's end, so it is not cut
+    rows = [(f * 10, 1, f, 0) for f in range(22)]
+    rows += [(f * 10, 2, f, 1) for f in range(10, 22)]
+    write_tracks(tmp_path / "e.txt", rows)
+    scenes = read_folder(tmp_path, 8, 12, options=ReadOptions(partial_future=4))
+    assert [s.scene_id for s in scenes] == ["e.txt@frame=0", "e.txt@frame=10", "e.txt@frame=20"]
+    assert [s.num_agents for s in scenes] == [1, 1, 1]

@@ -133,3 +133,62 @@ def test_separate_winners_train_the_path_and_the_endpoint_on_different_samples()
     assert generator_loss(out, y, target, cfg3)[0].item() == pytest.approx(0.5 + 1.5)
     with pytest.raises(ConfigError, match="winner"):
         GeneratorTrainConfig(winner="both")
+
+
+def _partial_case():
+    """Two agents, T_f = 3, K = 2. Agent 0 is seen at all 3 steps; agent 1 left the view
+    after 2 steps (NaN at step 3). The targets stay at the origin."""
+    target = torch.zeros(2, 3, 2)  # [N, T_f, 2]
+    target[1, 2] = float("nan")
+    y = torch.zeros(2, 2, 3, 2)  # [K, N, T_f, 2]
+    y[0, :, :, 0] = 1.0  # sample 0: 1 m off at every step, both agents
+    y[1, :, 1, 1] = 2.0  # sample 1: exact at step 1, 2 m off at step 2 ...
+    y[1, :, 2, 1] = 9.0  # ... and 9 m off at step 3 (agent 1 was not seen there)
+    out = GeneratorOutput(mean=torch.zeros(2, 3, 2), log_sigma=torch.zeros(2, 2),
+                          shifts=torch.zeros(2, 2, 3, 2), context=torch.zeros(2, 4))  # fmt: skip
+    return out, y, target
+
+
+def test_a_target_that_left_the_view_is_scored_on_its_seen_steps():
+    out, y, target = _partial_case()
+    cfg = GeneratorTrainConfig(mean_weight=0.0, uncertainty_weight=0.0)
+    y = y.requires_grad_(True)
+    loss, logs = generator_loss(out, y, target, cfg)
+    # agent 0: sample 0 ADE 1 + FDE 1 = 2 against (0 + 2 + 9) / 3 + 9; agent 1 over its two
+    # seen steps: sample 0 gives 1 + 1 (endpoint: step 2) = 2, sample 1 (0 + 2) / 2 + 2 = 3
+    assert loss.item() == pytest.approx(2.0)
+    assert logs["best_of_k"] == pytest.approx(2.0)
+    loss.backward()
+    assert torch.isfinite(y.grad).all()
+    assert y.grad[:, 1, 2].abs().sum() == 0  # the unseen step teaches nothing
+    # the same as the loss of agent 1 alone, cut to its two seen steps
+    alone, _ = generator_loss(GeneratorOutput(out.mean[1:, :2], out.log_sigma[:, 1:],
+                                              out.shifts[:, 1:, :2], out.context[1:]),
+                              y.detach()[:, 1:, :2], target[1:, :2], cfg)  # fmt: skip
+    assert alone.item() == pytest.approx(2.0)
+
+
+def test_the_mean_and_eq4_terms_average_over_seen_steps_only():
+    out, y, target = _partial_case()
+    cfg = GeneratorTrainConfig(best_of_k_weight=0.0, mean_weight=0.0, uncertainty_weight=0.0,
+                               reg_weight=1.0)  # fmt: skip
+    _, logs = generator_loss(out, y, target, cfg)
+    # squared errors per seen (sample, agent, step): sample 0 1 at each of 5 seen steps;
+    # sample 1 0, 4, 81 (agent 0) and 0, 4 (agent 1): (5 + 89) / 10
+    assert logs["eq4"] == pytest.approx(9.4)
+    assert logs["mean_ade"] == pytest.approx(0.0)
+    full = target.clone()
+    full[1, 2] = 0.0
+    _, logs_full = generator_loss(out, y, full, cfg)
+    assert logs_full["eq4"] == pytest.approx((6 + 85 + 85) / 12)  # step 3 counted when seen
+
+
+def test_unseen_steps_must_come_after_the_seen_ones():
+    out, y, target = _partial_case()
+    target[1] = 0.0
+    target[1, 1] = float("nan")  # seen, unseen, seen: not an agent that left the view
+    with pytest.raises(ValueError, match="seen steps must be its first ones"):
+        generator_loss(out, y, target, GeneratorTrainConfig())
+    target[1] = float("nan")  # never seen
+    with pytest.raises(ValueError, match="at least one"):
+        generator_loss(out, y, target, GeneratorTrainConfig())

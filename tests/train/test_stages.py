@@ -707,3 +707,34 @@ def test_only_a_context_generator_trains_on_batches_with_context_agents(tmp_path
     assert seen and min(seen) > 0
     rebuilt, _ = ckpt.build_generator(ckpt.load(tmp_path / "ctx" / "generator.safetensors"))
     assert rebuilt.cfg.context_agents
+
+
+def test_a_generator_trains_on_agents_that_leave_the_view_and_the_denoiser_refuses(
+    tmp_path, cfg, trained
+):
+    import dataclasses
+
+    import numpy as np
+    from synthetic import write_tracks
+
+    rng = np.random.default_rng(0)
+    for split in ("train", "val", "test"):
+        rows = []
+        for a in range(5):  # agents 4 and 5 leave the view after 6 future frames
+            frames = 24 if a < 3 else 14
+            pos, vel = rng.uniform(-3, 3, 2), rng.uniform(-0.5, 0.5, 2)
+            rows += [(t * 10, a + 1, *(pos + t * vel)) for t in range(frames)]
+        write_tracks(tmp_path / "data" / split / "w.txt", rows)
+    data = dataclasses.replace(cfg.data, dataset=str(tmp_path / "data"), partial_future=4)
+    run = dataclasses.replace(cfg, data=data)
+    with pytest.raises(ConfigError, match="partial_future trains the generator stage only"):
+        train_stage("diffusion", run, tmp_path / "d", device="cpu", progress=False)
+    res = train_stage("generator", run, tmp_path / "g", device="cpu", progress=False,
+                      denoiser=str(trained / "denoiser.safetensors"))  # fmt: skip
+    plain = load_dataset(str(tmp_path / "data"), "train")
+    # windows start at frames 0..4; agents 4 and 5 are seen in 6 - s >= 4 future frames of
+    # the windows starting at s = 0, 1, 2: 3 partial targets each
+    assert (plain.num_agents, res["train_agents"]) == (15, 15 + 6)
+    records = read_metrics(tmp_path / "g", "generator")
+    assert all(np.isfinite(r["train_loss"]) for r in records)
+    assert "partial_future: 4" in (tmp_path / "g" / "config.yaml").read_text()

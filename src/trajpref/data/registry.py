@@ -274,11 +274,14 @@ def run_splits(
     """A run's training and validation splits as its data config builds them: both read with
     its reading options, then its held-out scene, its validation cut in time, and last its
     paced copy (``extra_time_step``; after the hold-out, so the copy leaves that scene too).
+    ``partial_future`` applies to the training split (and its paced copy) alone.
     The training loop reads its data this way, and so does anything that must see the windows a
     checkpoint trained on (``models.checkpoint.config_of(...).data``)."""
     options = text.ReadOptions(data.delimiter, data.max_gap, data.max_coord, data.time_step)
-    train = load_dataset(data.dataset, "train", root, options=options)
     val = load_dataset(data.val_dataset or data.dataset, "val", root, options=options)
+    # agents that leave the view count as targets in training only (``partial_future``)
+    options = dataclasses.replace(options, partial_future=data.partial_future)
+    train = load_dataset(data.dataset, "train", root, options=options)
     if data.holdout_scene:
         train, val = hold_out_scene(train, val, data.holdout_scene)
     if data.val_cut:
@@ -297,6 +300,9 @@ def _load(
     options: text.ReadOptions | None,
 ) -> TrajectoryDataset:
     options = options or text.ReadOptions()
+    if options.partial_future and name in NAMES and name not in ETH_UCY:
+        raise ConfigError(f"partial_future cuts windows from text track files (ETH/UCY or "
+                          f"a folder of them); {name} comes as windows already cut")  # fmt: skip
     if options.time_step != 1.0 and name in ("sdd", "robo", "robo-sim", "robo-mix"):
         raise ConfigError(f"time_step resamples text track files; {name} comes as windows "
                           "already cut (or simulated)")  # fmt: skip
@@ -371,6 +377,9 @@ def _trajnet(
     """TrajNet++ scene files: metres by the format's convention, the interval from their fps."""
     if options.time_step != 1.0:
         raise ConfigError("time_step resamples text track files, not TrajNet++ scenes")
+    if options.partial_future:
+        raise ConfigError("partial_future cuts windows from text track files, not TrajNet++ "
+                          "scenes")  # fmt: skip
     units = "m" if units == "unknown" else units
     scenes: list[Scene] = []
     fps: set[float] = set()

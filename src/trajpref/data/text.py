@@ -69,6 +69,12 @@ class ReadOptions:
     every n-th frame exactly). For data recorded faster than a model's step (10 Hz data and a
     0.4 s model: 4), and for simulating a file whose steps span more time than their label
     says, as eth's test file does (docs/data.md)."""
+    partial_future: int = 0
+    """Also cut windows of the agents seen in every history frame and in at least this many
+    first future frames, but not in all of them (an agent that leaves the view): their future
+    is NaN from the first frame they are missing on (0: complete windows only, the
+    benchmarks' rule). For training splits only (``DataConfig.partial_future``); such agents
+    are then targets, not context-only agents."""
 
     def __post_init__(self) -> None:
         if self.delimiter is not None:
@@ -80,6 +86,9 @@ class ReadOptions:
             raise ConfigError(f"max_gap must be None or an integer >= 0, got {self.max_gap!r}")
         if not (np.isfinite(self.max_coord) and self.max_coord > 0):
             raise ConfigError(f"max_coord must be a positive finite number, got {self.max_coord}")
+        if isinstance(self.partial_future, bool) or self.partial_future < 0:
+            raise ConfigError(f"partial_future must be an integer >= 0 (0: off), "
+                              f"got {self.partial_future!r}")  # fmt: skip
         if not (np.isfinite(self.time_step) and 0.1 <= self.time_step <= 100):
             raise ConfigError(f"time_step must be a number of frame steps in [0.1, 100], "
                               f"got {self.time_step}")  # fmt: skip
@@ -417,8 +426,13 @@ def _missing_frames(frames: np.ndarray) -> tuple[np.ndarray, float]:
     return missing, step
 
 
-def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int | None):
+def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int | None,
+            partial: int = 0):  # fmt: skip
     t_total = t_hist + t_fut
+    if partial >= t_fut:
+        raise ConfigError(f"partial_future must be below the {t_fut} future frames (0: off), "
+                          f"got {partial}")  # fmt: skip
+    need = t_hist + partial if partial else t_total  # frames a target must be seen in
     frames = tracks.frames
     n_f = len(frames)
     if n_f < t_total:
@@ -426,11 +440,14 @@ def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int |
             f"too few frames: {n_f} unique frames, a window needs {t_total}", tracks.path
         )
     f_idx, a_idx, n_r = tracks.frame_index, tracks.agent_index, tracks.num_rows
-    # a row starts a complete window when the row T-1 further holds the same agent
-    # T-1 frames later (rows are sorted by agent, then frame, without duplicates)
-    head = slice(0, max(n_r - t_total + 1, 0))
-    tail = slice(t_total - 1, n_r)
-    full = (a_idx[tail] == a_idx[head]) & (f_idx[tail] - f_idx[head] == t_total - 1)  # [R-T+1]
+    # a row starts a window when the row need-1 further holds the same agent need-1 frames
+    # later (rows are sorted by agent, then frame, without duplicates); need = T unless
+    # ``partial``, whose windows may end before the file does
+    head = slice(0, max(n_r - need + 1, 0))
+    tail = slice(need - 1, n_r)
+    full = (a_idx[tail] == a_idx[head]) & (f_idx[tail] - f_idx[head] == need - 1)  # [R-need+1]
+    if partial:  # a window still needs all T frames of the file
+        full &= f_idx[head] + t_total <= n_f
     full &= f_idx[head] % stride == 0
     start_row = np.flatnonzero(full)  # [W] first row of each agent-window
     start = f_idx[start_row]  # [W] index of its first frame
@@ -456,13 +473,19 @@ def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int |
     offsets = np.arange(t_total)  # [T]
     for c in range(0, n_w, _CHUNK):
         rows = start_row[c : c + _CHUNK, None] + offsets  # [C, T]
+        if partial:
+            rows = np.minimum(rows, n_r - 1)  # [C, T]
         np.take(tracks.xy, rows[:, :t_hist], axis=0, out=history[c : c + _CHUNK])
         np.take(tracks.xy, rows[:, t_hist:], axis=0, out=future[c : c + _CHUNK])
+        if partial:  # NaN from the first future frame the agent is not seen on
+            first = start_row[c : c + _CHUNK, None]  # [C, 1]
+            seen = (a_idx[rows] == a_idx[first]) & (f_idx[rows] - f_idx[first] == offsets)
+            future[c : c + _CHUNK][~seen[:, t_hist:]] = np.nan  # seen: [C, T]
     kind = tracks.agent_type[a_idx[start_row]]  # [W]
     cuts = np.flatnonzero(np.diff(start)) + 1  # [S-1] where a new scene begins
     bounds = np.concatenate([[0], cuts, [n_w]]) if n_w else np.zeros(1, np.int64)
     firsts = start[bounds[:-1]] if n_w else start  # [S] each scene's first frame
-    context = _context(tracks, t_hist, t_total, firsts)
+    context = _context(tracks, t_hist, t_total, firsts, need=need)
     context_reverse = _context(tracks, t_hist, t_total, firsts, backwards=True)
     name = tracks.path.name
     for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
@@ -480,7 +503,8 @@ def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int |
 
 
 def _context(
-    tracks: Tracks, t_hist: int, t_total: int, starts: np.ndarray, backwards: bool = False
+    tracks: Tracks, t_hist: int, t_total: int, starts: np.ndarray, backwards: bool = False,
+    need: int | None = None,
 ) -> list[np.ndarray]:
     """For each scene starting at unique-frame index ``starts`` [S], the histories [C, T_h, 2]
     of the other agents seen at its last observed frame (``Scene.context``): those not in all
@@ -488,7 +512,8 @@ def _context(
     Which agents count is decided by the window's history frames and the targets alone; none
     of their later positions is read. With ``backwards``, the same for the window played
     backwards (``Scene.context_reverse``): its history is the window's last T_h frames in
-    reverse order, so its last observed frame is the first of them."""
+    reverse order, so its last observed frame is the first of them. ``need`` (forwards only;
+    None: T_total): the first frames an agent seen in all of is a target (``partial_future``)."""
     n_f = len(tracks.frames)
     key = tracks.agent_index.astype(np.int64) * n_f + tracks.frame_index  # [R] sorted
     empty = np.zeros((0, t_hist, 2), np.float32)
@@ -506,8 +531,9 @@ def _context(
     rows = np.flatnonzero(np.isin(tracks.frame_index, last))  # [C0] rows at a last frame
     first = key[rows] - anchor  # [C0] the same agent at its scene's first frame
     row0, seen0 = find(first)
-    row_end, seen_end = find(first + t_total - 1)
-    target = seen0 & seen_end & (row_end - row0 == t_total - 1)  # all frames: a target
+    need = t_total if need is None or backwards else need
+    row_end, seen_end = find(first + need - 1)
+    target = seen0 & seen_end & (row_end - row0 == need - 1)  # its first need frames: a target
     rows, first = rows[~target], first[~target]
     order = np.argsort(tracks.frame_index[rows], kind="stable")  # by scene, agents by id
     rows, first = rows[order], first[order]
@@ -635,7 +661,7 @@ def read_files(
     for path in files:
         tracks = read_tracks(path, with_type, options, scale, units)
         tracks = resample_tracks(tracks, options.time_step)
-        out = _window(tracks, t_hist, t_fut, stride, options.max_gap)
+        out = _window(tracks, t_hist, t_fut, stride, options.max_gap, options.partial_future)
         scenes.extend(out.scenes)
         gap = [gap[0] + out.gap_scenes, gap[1] + out.gap_agents, max(gap[2], out.max_missing)]
     if gap[0]:

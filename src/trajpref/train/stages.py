@@ -123,6 +123,9 @@ def build_denoiser_stage(
 ) -> tuple[Stage, float]:  # fmt: skip
     """Stage 1. Validation: Eq. 2 on the validation split with fixed noise (lower is better).
     Returns the stage and the data scale measured on ``train``."""
+    if cfg.data.partial_future:
+        raise ConfigError("data.partial_future trains the generator stage only: the "
+                          "denoiser and its data scale learn from complete futures")  # fmt: skip
     torch.manual_seed(cfg.seed)
     scale = data_scale(train)
     denoiser = Denoiser(cfg.model).to(device)
