@@ -25,10 +25,9 @@ from pathlib import Path
 
 import torch
 import torch.nn.functional as F
+from selection_cost import add_scene_arguments, largest_scenes
 
-from trajpref.data import load_dataset
 from trajpref.data.transforms import to_model_frame
-from trajpref.models import checkpoint as ckpt
 from trajpref.models.denoiser import Denoiser
 from trajpref.models.encoder import scene_features
 from trajpref.models.layers import timestep_embedding
@@ -79,20 +78,13 @@ def gemm_rate(rows: int, width: int, inner: int, repeats: int = 50) -> float:
 @torch.no_grad()
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--dataset", default="univ")
-    parser.add_argument("--data-root", default=None)
-    parser.add_argument("--scenes", type=int, default=20, help="the largest this many")
-    parser.add_argument("--samples", type=int, default=20)
-    parser.add_argument("--repeats", type=int, default=5)
+    add_scene_arguments(parser, repeats=5)
     parser.add_argument("--chunk", type=int, default=5, help="samples per chunk")
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
 
-    model = ckpt.load_predictor(ROOT / "models" / args.dataset / "generator.safetensors",
-                                "leapfrog")  # fmt: skip
+    model, largest = largest_scenes(args)
     den = model.denoiser.eval()
-    test = load_dataset(args.dataset, "test", args.data_root)
-    largest = sorted(test.scenes, key=lambda s: -s.num_agents)[: args.scenes]
     batches = [collate([s]) for s in largest]
     ms = dict.fromkeys(("predict", "context", "step", "fused", "chunks"), 0.0)
     fused_diff, chunks_equal = 0.0, True

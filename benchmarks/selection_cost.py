@@ -32,15 +32,30 @@ from trajpref.types import collate
 ROOT = Path(__file__).resolve().parent.parent
 
 
-@torch.no_grad()
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def add_scene_arguments(parser: argparse.ArgumentParser, repeats: int) -> None:
+    """The options of a timing run on a test split's largest scenes (this script's and
+    ``score_step_profile.py``'s): dataset, data root, how many scenes, K, repeats."""
     parser.add_argument("--dataset", default="univ")
     parser.add_argument("--data-root", default=None)
     parser.add_argument("--scenes", type=int, default=20, help="the largest this many")
     parser.add_argument("--samples", type=int, default=20)
+    parser.add_argument("--repeats", type=int, default=repeats)
+
+
+def largest_scenes(args: argparse.Namespace):
+    """The dataset's published generator (leapfrog) and its test split's ``args.scenes``
+    largest scenes, largest first."""
+    path = ROOT / "models" / args.dataset / "generator.safetensors"
+    model = ckpt.load_predictor(path, "leapfrog")
+    test = load_dataset(args.dataset, "test", args.data_root)
+    return model, sorted(test.scenes, key=lambda s: -s.num_agents)[: args.scenes]
+
+
+@torch.no_grad()
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_scene_arguments(parser, repeats=3)
     parser.add_argument("--every", type=int, nargs="+", default=[3, 9, 13, 20, 33])
-    parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--precision", nargs="+", default=["fp32"], choices=PRECISIONS,
                         help="score precisions, timed side by side")  # fmt: skip
     parser.add_argument("--scorer", nargs="+", default=["own"],
@@ -48,10 +63,7 @@ def main() -> None:
                         "denoiser checkpoints (path or DATASET/NAME)")  # fmt: skip
     args = parser.parse_args()
 
-    path = ROOT / "models" / args.dataset / "generator.safetensors"
-    model = ckpt.load_predictor(path, "leapfrog")
-    test = load_dataset(args.dataset, "test", args.data_root)
-    largest = sorted(test.scenes, key=lambda s: -s.num_agents)[: args.scenes]
+    model, largest = largest_scenes(args)
     bases = {name: model if name == "own" else TrajectoryScorer.from_checkpoint(
                  ckpt.resolve_path(name)) for name in args.scorer}  # fmt: skip
     scorers = {(name, p, e): TrajectoryScorer(base.denoiser, base.schedule, base.scale,

@@ -512,8 +512,9 @@ def _context(
     Which agents count is decided by the window's history frames and the targets alone; none
     of their later positions is read. With ``backwards``, the same for the window played
     backwards (``Scene.context_reverse``): its history is the window's last T_h frames in
-    reverse order, so its last observed frame is the first of them. ``need`` (forwards only;
-    None: T_total): the first frames an agent seen in all of is a target (``partial_future``)."""
+    reverse order, so its last observed frame is the first of them. ``need`` (None:
+    T_total): an agent seen in all of a window's first ``need`` frames is a target, not context
+    (``partial_future``; ``_window`` passes it for the forward windows only)."""
     n_f = len(tracks.frames)
     key = tracks.agent_index.astype(np.int64) * n_f + tracks.frame_index  # [R] sorted
     empty = np.zeros((0, t_hist, 2), np.float32)
@@ -531,7 +532,7 @@ def _context(
     rows = np.flatnonzero(np.isin(tracks.frame_index, last))  # [C0] rows at a last frame
     first = key[rows] - anchor  # [C0] the same agent at its scene's first frame
     row0, seen0 = find(first)
-    need = t_total if need is None or backwards else need
+    need = t_total if need is None else need
     row_end, seen_end = find(first + need - 1)
     target = seen0 & seen_end & (row_end - row0 == need - 1)  # its first need frames: a target
     rows, first = rows[~target], first[~target]

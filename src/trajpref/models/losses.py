@@ -76,13 +76,9 @@ def generator_loss(
         t_f = err.shape[-1]
         w = torch.arange(t_f, 0, -1, dtype=err.dtype, device=err.device)  # [T_f]
         ade = (err * (w / w.mean())).mean(-1)  # [K, N]
-    if c.winner == "separate":  # independent winners for the path and the endpoint
-        best = (soft_best(ade, temperature) + c.fde_weight * soft_best(fde, temperature)).mean()
-    else:
-        best = soft_best(ade + c.fde_weight * fde, temperature).mean()  # [K, N] -> scalar
     mean_err = torch.linalg.vector_norm(out.mean - target, dim=-1).mean(-1)  # [N]
     reg = (y - target).pow(2).sum(-1).mean()  # Eq. 4
-    return _combine(out, c, best, mean_err, reg)
+    return _combine(out, c, ade, fde, temperature, mean_err, reg)
 
 
 def _partial_generator_loss(
@@ -91,32 +87,34 @@ def _partial_generator_loss(
 ) -> tuple[torch.Tensor, dict[str, float]]:  # fmt: skip
     """``generator_loss`` over the seen steps ``seen`` [N, T_f] of each target."""
     steps = torch.arange(seen.shape[-1], device=seen.device)  # [T_f]
-    if not bool(seen[:, 0].all()) or bool((seen != (steps < seen.sum(-1, keepdim=True))).any()):
+    n_seen = seen.sum(-1)  # [N]
+    if not bool(seen[:, 0].all()) or bool((seen != (steps < n_seen[:, None])).any()):
         raise ValueError("generator_loss: a target's seen steps must be its first ones, at "
                          "least one (NaN from the first step it was not seen on)")  # fmt: skip
     w = seen.to(y.dtype)  # [N, T_f] 1 where seen
-    if c.time_weights == "decreasing":  # LED's step weights over all T_f steps, masked
-        t_f = seen.shape[-1]
-        w = w * torch.arange(t_f, 0, -1, dtype=y.dtype, device=y.device)  # [N, T_f]
+    if c.time_weights == "decreasing":  # LED's step weights T_f, ..., 1, masked
+        w = w * (seen.shape[-1] - steps).to(y.dtype)  # [N, T_f]
     w = w / w.sum(-1, keepdim=True)  # [N, T_f], each agent's weights sum to 1
     clean = torch.where(seen[..., None], target, torch.zeros_like(target))  # [N, T_f, 2]
     err = torch.linalg.vector_norm(y - clean, dim=-1)  # [K, N, T_f]
     ade = (err * w).sum(-1)  # [K, N]
-    last = seen.sum(-1) - 1  # [N] the last seen step (seen steps come first)
+    last = n_seen - 1  # [N] the last seen step (seen steps come first)
     fde = err.gather(-1, last.expand(err.shape[0], -1)[..., None])[..., 0]  # [K, N]
-    if c.winner == "separate":
+    mean_err = (torch.linalg.vector_norm(out.mean - clean, dim=-1) * seen).sum(-1) / n_seen
+    reg = ((y - clean).pow(2).sum(-1) * seen).sum() / (y.shape[0] * n_seen.sum())  # Eq. 4
+    return _combine(out, c, ade, fde, temperature, mean_err, reg)
+
+
+def _combine(
+    out: GeneratorOutput, c: GeneratorTrainConfig, ade: torch.Tensor, fde: torch.Tensor,
+    temperature: float, mean_err: torch.Tensor, reg: torch.Tensor,
+) -> tuple[torch.Tensor, dict[str, float]]:  # fmt: skip
+    """``generator_loss`` from each sample's ADE and FDE [K, N], the mean's error [N] and Eq.
+    4: the best-of-K term, then the weighted sum of the terms, and its logs."""
+    if c.winner == "separate":  # independent winners for the path and the endpoint
         best = (soft_best(ade, temperature) + c.fde_weight * soft_best(fde, temperature)).mean()
     else:
         best = soft_best(ade + c.fde_weight * fde, temperature).mean()  # [K, N] -> scalar
-    n_seen = seen.sum(-1).to(y.dtype)  # [N]
-    mean_err = (torch.linalg.vector_norm(out.mean - clean, dim=-1) * seen).sum(-1) / n_seen
-    reg = ((y - clean).pow(2).sum(-1) * seen).sum() / (y.shape[0] * seen.sum())  # Eq. 4
-    return _combine(out, c, best, mean_err, reg)
-
-
-def _combine(out: GeneratorOutput, c: GeneratorTrainConfig, best: torch.Tensor,
-             mean_err: torch.Tensor, reg: torch.Tensor) -> tuple[torch.Tensor, dict[str, float]]:
-    """The weighted sum of ``generator_loss``'s terms, and its logs."""
     log_sigma = out.log_sigma.mean(0)  # [N]
     unc = (torch.exp(-log_sigma) * mean_err.detach() + log_sigma).mean()
     loss = (c.best_of_k_weight * best + c.mean_weight * mean_err.mean()
