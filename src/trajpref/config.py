@@ -264,6 +264,14 @@ class ModelConfig:
     have been seen in without a break to be read (2..T_h; its earlier frames hold its first
     position of that run, ``data.transforms.observed_context``). 0: all T_h frames, the
     setting of the first context-reading models."""
+    mean_prior: Literal["none", "velocity"] = "none"
+    """What the generator's mean head predicts: ``none``, the mean path itself (LED's head);
+    ``velocity``, the path's departure from a constant-velocity extrapolation of the agent's
+    last observed step (v t for the future steps t = 1..T_f, with v the backward difference of
+    the last two observed positions, in the frame and at the speed the encoder sees the agent,
+    so the heading frame and the speed clamp stay equivariant). It adds no parameters; with the
+    head's output at zero the mean is the constant-velocity baseline's path
+    (docs/pretraining.md, "A constant-velocity prior under the generator's mean")."""
     future_rank: int = 0
     """Rank of the generator's outputs in time (0: free, T_f numbers per coordinate). r > 0
     projects the mean and each of the K shifts, per coordinate, onto the polynomials
@@ -430,6 +438,7 @@ GENERATOR_ONLY = (
     "spread_scale",
     "max_log_sigma",
     "future_rank",
+    "mean_prior",
     "pair_distance",
     "scene_position",
     "agent_roles",

@@ -6,6 +6,7 @@ from synthetic import make_scene
 
 from trajpref.config import ModelConfig
 from trajpref.errors import ConfigError, DataError
+from trajpref.models.baseline import ConstantVelocity
 from trajpref.models.encoder import agent_site, heading_rotation, scene_features, speed_factor
 from trajpref.models.generator import Generator, time_projection
 from trajpref.types import collate
@@ -546,3 +547,81 @@ def test_context_agents_need_the_social_encoder_and_no_roles():
         dataclasses.replace(TINY, context_agents=True, generator_social=False)
     with pytest.raises(ConfigError, match="agent_roles do not combine"):
         dataclasses.replace(TINY, context_agents=True, agent_roles=4)
+
+
+def _zero_mean_head(gen: Generator) -> None:
+    """The mean head's last layer at zero: its output, the departure from the prior, is 0."""
+    last = gen.mean_head[-1]
+    torch.nn.init.zeros_(last.weight)
+    torch.nn.init.zeros_(last.bias)
+
+
+PRIOR_CASES = [("scene", 0.0, 0), ("heading", 0.0, 0), ("heading", 1e-3, 0), ("heading", 0.0, 3)]
+
+
+@pytest.mark.parametrize("frame,max_speed,rank", PRIOR_CASES)
+def test_a_velocity_prior_with_a_silent_head_gives_the_constant_velocity_path(
+    frame, max_speed, rank
+):
+    torch.manual_seed(0)
+    cfg = dataclasses.replace(TINY, mean_prior="velocity", agent_frame=frame,
+                              max_speed=max_speed, future_rank=rank)  # fmt: skip
+    gen = Generator(cfg).eval()
+    _zero_mean_head(gen)
+    batch = collate([make_scene(3), make_scene(2, seed=1)])
+    scale = 2.0
+    with torch.no_grad():
+        mean = gen(scene_features(batch, scale)).mean  # [N, T_f, 2]
+    cv = ConstantVelocity().predict(batch, 1)[0]  # [N, T_f, 2] absolute positions
+    expected = (cv - batch.origin[:, None]) / scale  # relative, in model units
+    torch.testing.assert_close(mean, expected, atol=1e-5, rtol=0)
+    # without the prior the same silent head predicts standing still
+    plain = Generator(dataclasses.replace(cfg, mean_prior="none")).eval()
+    plain.load_state_dict(gen.state_dict())  # the prior adds no parameters
+    with torch.no_grad():
+        still = plain(scene_features(batch, scale)).mean
+    torch.testing.assert_close(still, torch.zeros_like(still))
+
+
+def test_the_velocity_prior_keeps_the_heading_frame_and_the_clamp_equivariant():
+    torch.manual_seed(0)
+    cfg = dataclasses.replace(TINY, mean_prior="velocity", agent_frame="heading", max_speed=1e-3)
+    gen = Generator(cfg).eval()
+    features = scene_features(collate([make_scene(3), make_scene(2, seed=1)]), 1.0)
+    turned, rot = _rotated(features, 0.9)
+    fast = dataclasses.replace(features, hist=3 * features.hist, geom=3 * features.geom)
+    with torch.no_grad():
+        a, b, c = gen(features), gen(turned), gen(fast)
+    torch.testing.assert_close(b.mean, a.mean @ rot.T, atol=1e-4, rtol=0)
+    torch.testing.assert_close(c.initial_sample(), 3 * a.initial_sample(), atol=1e-4, rtol=1e-4)
+
+
+def test_the_velocity_prior_moves_the_mean_by_the_last_step_and_trains():
+    torch.manual_seed(0)
+    gen = Generator(dataclasses.replace(TINY, mean_prior="velocity"))
+    features = scene_features(collate([make_scene(3)]), 1.0)
+    pushed = features.hist.clone()
+    pushed[:, -1, 2:] += torch.tensor([0.5, -0.25])  # only the last velocity feature changes
+    gen.eval()
+    with torch.no_grad():
+        a = gen(features).mean
+        head_b = gen(dataclasses.replace(features, hist=pushed)).mean
+    # the head's own output moves too (it reads the features); the prior adds exactly v t
+    plain = Generator(dataclasses.replace(TINY, mean_prior="none")).eval()
+    plain.load_state_dict(gen.state_dict())
+    with torch.no_grad():
+        pa = plain(features).mean
+        pb = plain(dataclasses.replace(features, hist=pushed)).mean
+    t = torch.arange(1, 13, dtype=torch.float32)[:, None]  # [T_f, 1]
+    step = (t * torch.tensor([0.5, -0.25])).expand(3, 12, 2)  # [N, T_f, 2]
+    torch.testing.assert_close((head_b - pb) - (a - pa), step, atol=1e-5, rtol=0)
+    gen.train()
+    loss = gen(features).mean.pow(2).mean()
+    loss.backward()
+    assert gen.mean_head[-1].weight.grad.abs().sum() > 0
+
+
+def test_the_mean_prior_is_a_generator_setting_checked_on_construction():
+    assert ModelConfig(mean_prior="velocity").denoiser_part() == ModelConfig()
+    with pytest.raises(ConfigError, match="mean_prior"):
+        ModelConfig(mean_prior="acceleration")

@@ -503,7 +503,11 @@ def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int |
 
 
 def _context(
-    tracks: Tracks, t_hist: int, t_total: int, starts: np.ndarray, backwards: bool = False,
+    tracks: Tracks,
+    t_hist: int,
+    t_total: int,
+    starts: np.ndarray,
+    backwards: bool = False,
     need: int | None = None,
 ) -> list[np.ndarray]:
     """For each scene starting at unique-frame index ``starts`` [S], the histories [C, T_h, 2]

@@ -51,6 +51,15 @@ def time_projection(t_fut: int, rank: int) -> torch.Tensor:
     return (basis @ basis.T).float()  # [T_f, T_f]
 
 
+def velocity_path(hist: torch.Tensor, t_fut: int) -> torch.Tensor:
+    """The constant-velocity path v t, t = 1..T_f, of each agent from its last observed
+    velocity v (the backward difference ``hist[:, -1, 2:]``), relative to its last position:
+    hist [N, T_h, 4] (the model's history features: positions, then velocities) ->
+    [N, T_f, 2]. Linear in ``hist``, so it turns and scales with the agent's frame."""
+    steps = torch.arange(1, t_fut + 1, dtype=hist.dtype, device=hist.device)  # [T_f]
+    return hist[:, -1, None, 2:] * steps[None, :, None]  # [N, T_f, 2]
+
+
 class Generator(nn.Module):
     """Social encoder + heads for the mean, the K scales and the K shifts (LED's initializer)."""
 
@@ -108,6 +117,8 @@ class Generator(nn.Module):
         mean = self.mean_head(dropped).view(n, tf, 2)  # [N, T_f, 2]
         if self.cfg.future_rank:
             mean = self.time_projection @ mean  # [N, T_f, 2]
+        if self.cfg.mean_prior == "velocity":  # the head predicts the departure from v t
+            mean = mean + velocity_path(features.hist[:n], tf)  # [N, T_f, 2]
         z = torch.cat([dropped, mean.detach().flatten(1)], -1)  # [N, H + 2T_f]
         log_sigma, raw = self._heads(z)  # [K, N], [K, N, T_f, 2]
         if self.cfg.max_log_sigma is not None:  # a sampling setting (ModelConfig.max_log_sigma)
