@@ -68,6 +68,19 @@ def _rotated(features, angle: float):
     return dataclasses.replace(features, hist=hist, geom=geom), rot
 
 
+def _assert_turns_and_scales_with_the_scene(gen: Generator, angle: float) -> None:
+    """A heading-frame generator with a speed clamp below every agent's speed: the scene
+    turned by ``angle`` gets the turned mean, and the scene three times faster gets three
+    times the samples."""
+    features = scene_features(collate([make_scene(3), make_scene(2, seed=1)]), 1.0)
+    turned, rot = _rotated(features, angle)
+    fast = dataclasses.replace(features, hist=3 * features.hist, geom=3 * features.geom)
+    with torch.no_grad():
+        a, b, c = gen(features), gen(turned), gen(fast)
+    torch.testing.assert_close(b.mean, a.mean @ rot.T, atol=1e-4, rtol=0)
+    torch.testing.assert_close(c.initial_sample(), 3 * a.initial_sample(), atol=1e-4, rtol=1e-4)
+
+
 def test_heading_rotation_turns_the_observed_displacement_onto_x():
     hist = torch.zeros(3, 8, 4)
     hist[0, 0, :2] = torch.tensor([-3.0, -4.0])  # came from (-3, -4): moved along (3, 4)
@@ -443,13 +456,7 @@ def test_pair_distances_keep_the_heading_frame_and_the_speed_clamp_equivariant()
     cfg = dataclasses.replace(TINY, agent_frame="heading", max_speed=1e-3, pair_distance=True)
     assert cfg.denoiser_part() == dataclasses.replace(cfg, pair_distance=False).denoiser_part()
     gen = Generator(cfg).eval()
-    features = scene_features(collate([make_scene(3), make_scene(2, seed=1)]), 1.0)
-    turned, rot = _rotated(features, 1.1)
-    fast = dataclasses.replace(features, hist=3 * features.hist, geom=3 * features.geom)
-    with torch.no_grad():
-        a, b, c = gen(features), gen(turned), gen(fast)
-    torch.testing.assert_close(b.mean, a.mean @ rot.T, atol=1e-4, rtol=0)
-    torch.testing.assert_close(c.initial_sample(), 3 * a.initial_sample(), atol=1e-4, rtol=1e-4)
+    _assert_turns_and_scales_with_the_scene(gen, 1.1)
     plain = Generator(dataclasses.replace(cfg, pair_distance=False))
     assert set(gen.state_dict()) == set(plain.state_dict())  # only the edge width differs
 
@@ -586,14 +593,7 @@ def test_a_velocity_prior_with_a_silent_head_gives_the_constant_velocity_path(
 def test_the_velocity_prior_keeps_the_heading_frame_and_the_clamp_equivariant():
     torch.manual_seed(0)
     cfg = dataclasses.replace(TINY, mean_prior="velocity", agent_frame="heading", max_speed=1e-3)
-    gen = Generator(cfg).eval()
-    features = scene_features(collate([make_scene(3), make_scene(2, seed=1)]), 1.0)
-    turned, rot = _rotated(features, 0.9)
-    fast = dataclasses.replace(features, hist=3 * features.hist, geom=3 * features.geom)
-    with torch.no_grad():
-        a, b, c = gen(features), gen(turned), gen(fast)
-    torch.testing.assert_close(b.mean, a.mean @ rot.T, atol=1e-4, rtol=0)
-    torch.testing.assert_close(c.initial_sample(), 3 * a.initial_sample(), atol=1e-4, rtol=1e-4)
+    _assert_turns_and_scales_with_the_scene(Generator(cfg).eval(), 0.9)
 
 
 def test_the_velocity_prior_moves_the_mean_by_the_last_step_and_trains():
