@@ -107,6 +107,15 @@ def probe(cfg, stage: str, data_root, steps: int, denoiser: Path | None,
     }
 
 
+def stage_config(cfg, stage: str):
+    """The config a stage trains with: the denoiser stage learns from complete futures only
+    (it refuses ``data.partial_future``), so a generator-only data setting is left out of its
+    probe, as a real run would train its denoiser without it."""
+    if stage == "diffusion" and cfg.data.partial_future:
+        return dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, partial_future=0))
+    return cfg
+
+
 def estimate(cfg, dataset: str, data_root, steps: tuple[int, int], warm: int) -> dict:
     """Both stages' estimated minutes for ``cfg`` (see the module docstring)."""
     denoiser = ROOT / "models" / dataset / "denoiser.safetensors"
@@ -119,8 +128,8 @@ def estimate(cfg, dataset: str, data_root, steps: tuple[int, int], warm: int) ->
             continue
         # a compiled stage's first epoch is its compilation
         warm_here = warm or (1 if optim.compile else 0)
-        p = probe(cfg, stage, data_root, n, denoiser if stage == "generator" else None,
-                  warm_here)  # fmt: skip
+        p = probe(stage_config(cfg, stage), stage, data_root, n,
+                  denoiser if stage == "generator" else None, warm_here)  # fmt: skip
         n_eval = evaluations(optim.epochs, optim.eval_every)
         seconds = optim.epochs * p["train_agents"] / p["rate"] + n_eval * p["val_seconds"]
         seconds += p.get("warmup_seconds", 0.0)

@@ -83,3 +83,16 @@ def test_a_warmer_probe_times_the_last_epoch_and_books_every_earlier_ones_extra(
     p = cost.probe(tiny_cfg, "diffusion", None, steps=2, denoiser=None, warm=2)
     assert p["val_seconds"] == 1.0
     assert p["warmup_seconds"] == (5 - 2) + (1.5 - 1) + (3 - 2)  # 4.5 s, booked once
+
+
+def test_a_generator_only_data_setting_is_left_out_of_the_denoiser_probe_only(tiny_cfg):
+    """``data.partial_future`` trains the generator stage alone (the denoiser stage refuses
+    it), so the denoiser's probe runs without it and the generator's with it."""
+    import dataclasses
+
+    cost = load_benchmark("train_cost")
+    cfg = dataclasses.replace(tiny_cfg, data=dataclasses.replace(tiny_cfg.data, partial_future=4))
+    assert cost.stage_config(cfg, "diffusion").data.partial_future == 0
+    assert cost.stage_config(cfg, "generator").data.partial_future == 4
+    assert cost.stage_config(cfg, "diffusion").denoiser == cfg.denoiser
+    assert cost.stage_config(tiny_cfg, "diffusion") is tiny_cfg  # nothing to leave out
