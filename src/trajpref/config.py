@@ -460,6 +460,9 @@ class OptimConfig:
     """AdamW weight decay."""
     warmup_steps: int = 200
     """Linear warm-up steps."""
+    final_lr: float = 0.1
+    """Where the cosine decay ends, as a fraction of ``lr``: the rate falls from ``lr`` to
+    ``final_lr * lr`` over the schedule (0.1 in every published config; 0 anneals to zero)."""
     grad_clip: float = 1.0
     """Gradient-norm clip."""
     eval_every: int = 5
@@ -522,6 +525,9 @@ class OptimConfig:
             )
         if self.weight_decay < 0 or self.warmup_steps < 0:
             raise ConfigError("OptimConfig.weight_decay and warmup_steps must be >= 0")
+        if not 0.0 <= self.final_lr <= 1.0:
+            raise ConfigError(f"OptimConfig.final_lr is a fraction of lr in [0, 1], "
+                              f"got {self.final_lr}")  # fmt: skip
         check_choices(self)
 
 

@@ -90,7 +90,8 @@ def _lr_lambda(cfg: OptimConfig, total: int) -> Callable[[int], float]:
         if step < cfg.warmup_steps:
             return (step + 1) / cfg.warmup_steps
         progress = (step - cfg.warmup_steps) / max(1, total - cfg.warmup_steps)
-        return 0.1 + 0.9 * 0.5 * (1 + math.cos(math.pi * min(1.0, progress)))
+        cosine = 0.5 * (1 + math.cos(math.pi * min(1.0, progress)))  # 1 -> 0
+        return cfg.final_lr + (1 - cfg.final_lr) * cosine
 
     return f
 

@@ -1,0 +1,37 @@
+"""train/loop.py's learning-rate schedule: a linear warm-up, then a cosine decay from lr to
+``final_lr * lr``."""
+
+import math
+
+import pytest
+
+from trajpref.config import OptimConfig
+from trajpref.errors import ConfigError
+from trajpref.train.loop import _lr_lambda
+
+
+def test_the_default_schedule_is_the_published_one_warm_up_then_cosine_to_a_tenth():
+    f = _lr_lambda(OptimConfig(warmup_steps=4), total=104)
+    assert [f(s) for s in range(4)] == pytest.approx([0.25, 0.5, 0.75, 1.0])
+    assert f(4) == pytest.approx(1.0)  # the decay starts at the peak
+    assert f(54) == pytest.approx(0.55)  # half-way: 0.1 + 0.9 * 0.5
+    assert f(104) == pytest.approx(0.1)
+    assert f(500) == pytest.approx(0.1)  # past the end it stays at the floor
+    # a golden value a quarter of the way: 0.1 + 0.45 * (1 + cos(pi / 4))
+    assert f(29) == pytest.approx(0.1 + 0.45 * (1 + math.cos(math.pi / 4)))
+
+
+@pytest.mark.parametrize("final", [0.0, 0.01, 0.5, 1.0])
+def test_final_lr_sets_where_the_cosine_ends_and_nothing_before_its_decay(final):
+    f = _lr_lambda(OptimConfig(warmup_steps=0, final_lr=final), total=100)
+    assert f(0) == pytest.approx(1.0)
+    assert f(50) == pytest.approx((1 + final) / 2)
+    assert f(100) == pytest.approx(final)
+    values = [f(s) for s in range(101)]
+    assert all(a >= b - 1e-12 for a, b in zip(values[:-1], values[1:], strict=True))  # never rises
+
+
+@pytest.mark.parametrize("bad", [-0.1, 1.5, float("nan")])
+def test_a_final_lr_outside_zero_to_one_is_a_clear_error(bad):
+    with pytest.raises(ConfigError, match="final_lr"):
+        OptimConfig(final_lr=bad)
