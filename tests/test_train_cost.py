@@ -2,6 +2,7 @@
 time once; estimates of other settings never overwrite the defaults' file, whose entries say
 how and where each was probed."""
 
+import dataclasses
 import json
 
 import pytest
@@ -88,8 +89,6 @@ def test_a_warmer_probe_times_the_last_epoch_and_books_every_earlier_ones_extra(
 def test_a_generator_only_data_setting_is_left_out_of_the_denoiser_probe_only(tiny_cfg):
     """``data.partial_future`` trains the generator stage alone (the denoiser stage refuses
     it), so the denoiser's probe runs without it and the generator's with it."""
-    import dataclasses
-
     cost = load_benchmark("train_cost")
     cfg = dataclasses.replace(tiny_cfg, data=dataclasses.replace(tiny_cfg.data, partial_future=4))
     assert cost.stage_config(cfg, "diffusion").data.partial_future == 0
