@@ -485,6 +485,13 @@ class OptimConfig:
     budget_clock: Literal["wall", "cpu"] = "wall"
     """What ``max_minutes`` counts: ``wall`` (elapsed time) or ``cpu`` (this process's CPU
     time, all its threads). ``cpu`` keeps a budget fair when other jobs share the machine."""
+    budget_schedule: bool = False
+    """With ``max_minutes``: the learning rate's cosine decay (and an annealed best-of-K
+    temperature) advances by the larger of the share of the steps done and the share of the
+    budget spent, so a stage that meets its budget before its last epoch ends annealed at
+    ``final_lr`` instead of being cut mid-decay. Where every epoch fits in the budget the
+    steps' share is always the larger, and the run is the same as without it (same weights).
+    Off: ``max_minutes`` only stops the stage (equal-budget comparisons)."""
     precision: Literal["fp32", "bf16"] = "fp32"
     """Arithmetic of the training steps' forward passes: ``fp32``, or ``bf16`` (autocast to
     bfloat16 on the stage's device; weights, optimiser state and validation stay float32).
@@ -517,6 +524,9 @@ class OptimConfig:
             raise ConfigError("steps_per_epoch must be >= 1 or null")
         if self.max_minutes is not None and self.max_minutes <= 0:
             raise ConfigError("max_minutes must be > 0 or null")
+        if self.budget_schedule and self.max_minutes is None:
+            raise ConfigError("budget_schedule anneals the schedule by the time budget: it "
+                              "needs max_minutes (e.g. --set generator.max_minutes=30)")  # fmt: skip
         if self.eval_every_minutes is not None and not (
             self.eval_every_minutes > 0 and math.isfinite(self.eval_every_minutes)
         ):

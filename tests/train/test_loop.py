@@ -35,3 +35,34 @@ def test_final_lr_sets_where_the_cosine_ends_and_nothing_before_its_decay(final)
 def test_a_final_lr_outside_zero_to_one_is_a_clear_error(bad):
     with pytest.raises(ConfigError, match="final_lr"):
         OptimConfig(final_lr=bad)
+
+
+def test_a_budget_schedule_decays_by_the_larger_of_the_steps_and_the_budgets_share():
+    share = {"value": 0.0}
+    cfg = OptimConfig(warmup_steps=0, max_minutes=10.0, budget_schedule=True)
+    f = _lr_lambda(cfg, total=100, budget_share=lambda: share["value"])
+    assert f(50) == pytest.approx(0.55)  # no time spent: the steps' own schedule
+    share["value"] = 0.75  # three quarters of the budget, a quarter of the steps
+    assert f(25) == pytest.approx(0.1 + 0.45 * (1 + math.cos(0.75 * math.pi)))
+    assert f(90) == pytest.approx(0.1 + 0.45 * (1 + math.cos(0.9 * math.pi)))  # steps lead
+    share["value"] = 1.3  # past the budget: the floor, not a rise
+    assert f(10) == pytest.approx(0.1)
+
+
+def test_without_a_budget_schedule_the_time_spent_does_not_touch_the_rate():
+    f = _lr_lambda(OptimConfig(warmup_steps=0, max_minutes=10.0), total=100,
+                   budget_share=lambda: 0.9)  # fmt: skip
+    assert f(50) == pytest.approx(0.55)
+
+
+def test_the_warm_up_is_by_steps_even_with_a_budget_schedule():
+    cfg = OptimConfig(warmup_steps=4, max_minutes=1.0, budget_schedule=True)
+    f = _lr_lambda(cfg, total=104, budget_share=lambda: 0.5)
+    assert [f(s) for s in range(4)] == pytest.approx([0.25, 0.5, 0.75, 1.0])
+    # then the step the budget's half stands for: 52 of 104, 48 of the 100 decay steps
+    assert f(4) == pytest.approx(0.1 + 0.45 * (1 + math.cos(0.48 * math.pi)))
+
+
+def test_a_budget_schedule_without_a_budget_is_a_clear_error():
+    with pytest.raises(ConfigError, match="budget_schedule .* needs max_minutes"):
+        OptimConfig(budget_schedule=True)

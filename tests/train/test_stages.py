@@ -354,6 +354,37 @@ def test_a_time_budget_stops_the_stage_and_still_validates(tmp_path, cfg, clock)
     assert records[0][f"budget_{clock}_seconds"] > 0
 
 
+def test_a_stage_that_meets_its_budget_with_budget_schedule_ends_annealed(tmp_path, cfg):
+    optim = dict(epochs=50, warmup_steps=0, max_minutes=1e-6, final_lr=0.1)
+    lrs = {}
+    for on in (False, True):
+        denoiser = dataclasses.replace(cfg.denoiser, **optim, budget_schedule=on)
+        out = tmp_path / str(on)
+        train_stage("diffusion", dataclasses.replace(cfg, denoiser=denoiser), out,
+                    device="cpu", progress=False)  # fmt: skip
+        (record,) = read_metrics(out, "denoiser")  # one step, past the budget, then validation
+        lrs[on] = record["lr"] / cfg.denoiser.lr
+    assert lrs[True] == pytest.approx(0.1)  # at the floor where the budget ran out
+    assert lrs[False] > 0.99  # cut one step into a 50-epoch cosine: still near the peak
+
+
+def test_a_budget_that_is_not_met_leaves_the_run_as_it_was(tmp_path, cfg, trained):
+    weights = []
+    # two minutes: the steps' share stays ahead of the time's (the last step ends a tiny run
+    # in well under a second), so the schedule is the steps' own
+    for extra in ({}, {"max_minutes": 2.0, "budget_schedule": True}):
+        generator = dataclasses.replace(cfg.generator, **extra)
+        out = tmp_path / str(len(weights))
+        train_stage("generator", dataclasses.replace(cfg, generator=generator), out,
+                    device="cpu", progress=False,
+                    denoiser=str(trained / "denoiser.safetensors"))  # fmt: skip
+        weights.append(ckpt.load(out / "generator.safetensors")["state_dict"])
+    assert weights[0].keys() == weights[1].keys()
+    assert all(torch.equal(weights[0][k], weights[1][k]) for k in weights[0])
+    shares = [r["budget_share"] for r in read_metrics(tmp_path / "1", "generator")]
+    assert 0 < shares[0] <= shares[-1] < 0.5  # logged, rising, far from the budget
+
+
 def test_an_unknown_budget_clock_is_a_config_error():
     from trajpref.config import DenoiserTrainConfig
 

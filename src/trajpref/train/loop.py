@@ -85,15 +85,39 @@ def read_metrics(run_dir: str | Path, stage: str) -> list[dict[str, Any]]:
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
-def _lr_lambda(cfg: OptimConfig, total: int) -> Callable[[int], float]:
+def _lr_lambda(cfg: OptimConfig, total: int,
+               budget_share: Callable[[], float] | None = None) -> Callable[[int], float]:  # fmt: skip
+    """The learning rate's factor at each step of ``total``: a linear warm-up, then a cosine
+    decay to ``final_lr``. With ``cfg.budget_schedule`` the schedule stands at the larger of
+    the step and ``budget_share() * total`` (the step the share of the time budget spent
+    would be at): a run whose time keeps pace with its steps is not touched."""
+
     def f(step: int) -> float:
         if step < cfg.warmup_steps:
             return (step + 1) / cfg.warmup_steps
-        progress = (step - cfg.warmup_steps) / max(1, total - cfg.warmup_steps)
+        at = float(step)
+        if cfg.budget_schedule and budget_share is not None:
+            at = max(at, budget_share() * total)
+        progress = (at - cfg.warmup_steps) / max(1, total - cfg.warmup_steps)
         cosine = 0.5 * (1 + math.cos(math.pi * min(1.0, progress)))  # 1 -> 0
         return cfg.final_lr + (1 - cfg.final_lr) * cosine
 
     return f
+
+
+def _budget_share(seconds: float, cfg: OptimConfig, dist_info: DistInfo,
+                  device: torch.device) -> float:  # fmt: skip
+    """The share of ``cfg.max_minutes`` that ``seconds`` of the budget clock are (the largest
+    over the ranks, so that every rank steps with the same learning rate); 0 without
+    ``budget_schedule``."""
+    if not cfg.budget_schedule or cfg.max_minutes is None:
+        return 0.0
+    share = seconds / (60 * cfg.max_minutes)
+    if dist_info.enabled:
+        t = torch.tensor(share, dtype=torch.float64, device=device)
+        torch.distributed.all_reduce(t, op=torch.distributed.ReduceOp.MAX)
+        share = float(t)
+    return share
 
 
 def save_resume_state(path: Path, state: dict[str, Any]) -> None:
@@ -238,7 +262,10 @@ def fit(
     total = steps_per_epoch * optim_cfg.epochs * stage.updates
     params = [p for p in stage.trainable.parameters() if p.requires_grad]
     optimizer = torch.optim.AdamW(params, lr=optim_cfg.lr, weight_decay=optim_cfg.weight_decay)
-    sched = torch.optim.lr_scheduler.LambdaLR(optimizer, _lr_lambda(optim_cfg, total))
+    budget = {"share": 0.0}  # share of max_minutes spent, for OptimConfig.budget_schedule
+    sched = torch.optim.lr_scheduler.LambdaLR(
+        optimizer, _lr_lambda(optim_cfg, total, lambda: budget["share"])
+    )
     noise_gen = torch.Generator().manual_seed(seed * 1000 + dist_info.rank)
     aug_gen = torch.Generator().manual_seed(seed * 1000 + 500 + dist_info.rank)
     average = None  # the weights' moving average (every rank keeps it: weights agree under DDP)
@@ -275,6 +302,7 @@ def fit(
                                   "config.yaml")  # fmt: skip
             average.load_state_dict(state["ema"])
 
+    budget["share"] = _budget_share(spent, optim_cfg, dist_info, device)  # a resumed run's
     if optim_cfg.compile and can_compile(device):
         for network in stage.networks:
             network.compile(dynamic=True)  # in place: same parameters, same state-dict keys
@@ -315,7 +343,7 @@ def fit(
             collected = () if stage.collect is None else (stage.collect(batch, noise_gen),)
             for _ in range(stage.updates):
                 if stage.on_progress is not None:
-                    stage.on_progress(step / total)
+                    stage.on_progress(max(step / total, min(1.0, budget["share"])))
                 with precision_autocast(device, optim_cfg.precision):  # validation stays fp32
                     loss, logs = objective(batch, noise_gen, *collected)
                 loss = loss.float()  # autocast may hand back a bfloat16 scalar
@@ -335,6 +363,8 @@ def fit(
                 loss.backward()
                 grad_norm = torch.nn.utils.clip_grad_norm_(params, optim_cfg.grad_clip)
                 optimizer.step()
+                budget["share"] = _budget_share(spent + clock() - c0, optim_cfg, dist_info,
+                                                device)  # fmt: skip
                 sched.step()
                 if average is not None:
                     average.update()
@@ -360,6 +390,8 @@ def fit(
             f"budget_{optim_cfg.budget_clock}_seconds": round(spent, 4),
             "samples_per_second": round(rate, 1),
         }  # fmt: skip
+        if optim_cfg.budget_schedule:  # how much of the time budget the schedule has used
+            record["budget_share"] = round(budget["share"], 6)
         record.update({f"train_{k}": v / max(1, agents) for k, v in sums.items()})
         last = epoch + 1 == optim_cfg.epochs or stop
         if optim_cfg.eval_every_minutes is not None:
