@@ -52,6 +52,19 @@ def _train(args, run_dir: Path) -> None:
         train_stage(stage, cfg, run_dir, args.data_root, args.device, resume)
 
 
+def stage_records(logs: dict[str, list[dict]]) -> tuple[dict, dict, dict, dict]:
+    """From each stage's metric records: its training seconds, its mean agent-windows per
+    second, the epochs it trained, and the share of its time budget it used at the end (None
+    without ``budget_schedule``; a config's ``max_minutes`` with it ends a stage early,
+    annealed, on a host too slow for the schedule). A stage without records gets None."""
+    seconds = {s: (log[-1]["train_seconds"] if log else None) for s, log in logs.items()}
+    rates = {s: (sum(r["samples_per_second"] for r in log) / len(log) if log else None)
+             for s, log in logs.items()}  # fmt: skip
+    epochs = {s: (log[-1]["epoch"] if log else None) for s, log in logs.items()}
+    share = {s: (log[-1].get("budget_share") if log else None) for s, log in logs.items()}
+    return seconds, rates, epochs, share
+
+
 def _git(root: Path, *args: str) -> subprocess.CompletedProcess:
     return subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True)
 
@@ -186,18 +199,19 @@ def main() -> None:
     logs = {s: read_metrics(run_dir, s) for s in ("denoiser", "generator")}
     if args.published:
         logs = {s: [] for s in logs}  # the training records are the previous meta file's
-    stage_seconds = {s: (log[-1]["train_seconds"] if log else None) for s, log in logs.items()}
-    rates = {s: (sum(r["samples_per_second"] for r in log) / len(log) if log else None)
-             for s, log in logs.items()}  # fmt: skip
+    stage_seconds, rates, epochs_done, budget_share = stage_records(logs)
     denoiser_note = None
     if args.published:
         stage_seconds, rates = previous["stage_seconds"], previous["samples_per_second"]
+        epochs_done = previous.get("epochs_done", epochs_done)
+        budget_share = previous.get("budget_share", budget_share)
         denoiser_note = previous.get("denoiser_note")
     elif not logs["denoiser"] and previous is not None:
         # a generator-only run from the published denoiser: that denoiser's training cost is
         # the one its own run recorded, kept from the previous meta file
         stage_seconds["denoiser"] = previous["stage_seconds"]["denoiser"]
         rates["denoiser"] = previous["samples_per_second"]["denoiser"]
+        epochs_done["denoiser"] = previous.get("epochs_done", {}).get("denoiser")
         denoiser_note = "reused the published denoiser; its cost is from its own training run"
 
     test = load_dataset(args.dataset, "test", args.data_root)
@@ -251,6 +265,8 @@ def main() -> None:
         "best_epoch": {"denoiser": den_ckpt["meta"]["epoch"],
                        "generator": gen_ckpt["meta"]["epoch"]},
         "samples_per_second": rates,
+        "epochs_done": epochs_done,
+        "budget_share": budget_share,
         "val": gen_ckpt["meta"]["val"],
         "ms_per_scene": speed,
         "speedup_full_over_leapfrog": speed["full"] / speed["leapfrog"],

@@ -27,6 +27,11 @@ warm, and records both estimates and their ratio in ``meta/train_cost_compile.js
 
     python benchmarks/train_cost.py --datasets eth zara1 --compiled
 
+A stage with a time budget (``max_minutes``; the defaults anneal to it, ``budget_schedule``)
+is estimated at the budget where its schedule would take longer, with the share of its
+schedule it trains (``schedule_share``) and what the whole schedule would take
+(``unguarded_minutes``) beside it.
+
 The generator stage is timed from the dataset's published denoiser. Writes
 benchmarks/results/meta/train_cost.json (with ``--datasets`` naming a subset, the other
 datasets keep their earlier entries; each entry carries the date it was measured);
@@ -107,13 +112,15 @@ def probe(cfg, stage: str, data_root, steps: int, denoiser: Path | None,
     }
 
 
-def stage_config(cfg, stage: str):
-    """The config a stage trains with: the denoiser stage learns from complete futures only
-    (it refuses ``data.partial_future``), so a generator-only data setting is left out of its
-    probe, as a real run would train its denoiser without it."""
-    if stage == "diffusion" and cfg.data.partial_future:
-        return dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, partial_future=0))
-    return cfg
+def guarded(steps_seconds: float, val_seconds: float,
+            max_minutes: float | None) -> tuple[float, float]:  # fmt: skip
+    """A stage's estimated seconds under its time budget, and the share of its schedule it
+    trains: the training steps stop at ``max_minutes`` (``OptimConfig.max_minutes``, counted
+    here as wall time) and the validations, spread over the schedule, with them."""
+    if max_minutes is None or steps_seconds <= 60 * max_minutes:
+        return steps_seconds + val_seconds, 1.0
+    share = 60 * max_minutes / steps_seconds
+    return 60 * max_minutes + share * val_seconds, share
 
 
 def estimate(cfg, dataset: str, data_root, steps: tuple[int, int], warm: int) -> dict:
@@ -128,11 +135,11 @@ def estimate(cfg, dataset: str, data_root, steps: tuple[int, int], warm: int) ->
             continue
         # a compiled stage's first epoch is its compilation
         warm_here = warm or (1 if optim.compile else 0)
-        p = probe(stage_config(cfg, stage), stage, data_root, n,
+        p = probe(cfg, stage, data_root, n,
                   denoiser if stage == "generator" else None, warm_here)  # fmt: skip
         n_eval = evaluations(optim.epochs, optim.eval_every)
-        seconds = optim.epochs * p["train_agents"] / p["rate"] + n_eval * p["val_seconds"]
-        seconds += p.get("warmup_seconds", 0.0)
+        steps_s = optim.epochs * p["train_agents"] / p["rate"] + p.get("warmup_seconds", 0.0)
+        seconds, share = guarded(steps_s, n_eval * p["val_seconds"], optim.max_minutes)
         entry[key] = {
             "epochs": optim.epochs, "train_agents": p["train_agents"],
             "agents_per_second": round(p["rate"], 1), "evaluations": n_eval,
@@ -140,6 +147,12 @@ def estimate(cfg, dataset: str, data_root, steps: tuple[int, int], warm: int) ->
         }  # fmt: skip
         if warm_here:
             entry[key]["warmup_seconds"] = round(p["warmup_seconds"], 1)
+        if optim.max_minutes is not None:
+            entry[key]["budget_minutes"] = optim.max_minutes
+            entry[key]["schedule_share"] = round(share, 3)
+            if share < 1:  # what the whole schedule would take without its budget
+                unguarded = steps_s + n_eval * p["val_seconds"]
+                entry[key]["unguarded_minutes"] = round(unguarded / 60, 1)
     entry["minutes"] = round(sum(v["minutes"] for v in entry.values() if v is not None), 1)
     return entry
 

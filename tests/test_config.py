@@ -181,3 +181,14 @@ def test_reverse_context_needs_reversed_scenes_and_a_context_reading_generator()
     cfg = load_config(None, ["data.reverse=true", "data.reverse_context=true",
                              "model.context_agents=true"])  # fmt: skip
     assert cfg.data.reverse_context
+
+
+def test_the_denoiser_part_of_a_data_config_leaves_out_the_generator_only_settings():
+    from trajpref.config import DataConfig
+
+    data = DataConfig(partial_future=4, flip=True, max_agents=64)
+    part = data.denoiser_part()
+    assert part.partial_future == 0
+    assert dataclasses.replace(part, partial_future=4) == data  # nothing else changed
+    plain = DataConfig(flip=True)
+    assert plain.denoiser_part() is plain  # nothing to leave out

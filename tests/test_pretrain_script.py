@@ -66,3 +66,19 @@ def test_keep_replaced_refuses_uncommitted_weights_and_a_taken_name(tmp_path):
         mod.keep_replaced(root, "zara1", "tau5")
     with pytest.raises(SystemExit, match="no 'pretrained' row"):
         mod.keep_replaced(root, "eth", "tau5")
+
+
+def test_stage_records_say_how_long_each_stage_trained_and_how_much_of_its_budget_it_used():
+    mod = load_benchmark("pretrain")
+    logs = {
+        "denoiser": [{"epoch": 1, "train_seconds": 10.0, "samples_per_second": 100.0},
+                     {"epoch": 2, "train_seconds": 21.0, "samples_per_second": 300.0}],
+        "generator": [{"epoch": 7, "train_seconds": 60.0, "samples_per_second": 50.0,
+                       "budget_share": 1.0002}],
+        "none": [],
+    }  # fmt: skip
+    seconds, rates, epochs, share = mod.stage_records(logs)
+    assert seconds == {"denoiser": 21.0, "generator": 60.0, "none": None}
+    assert rates == {"denoiser": 200.0, "generator": 50.0, "none": None}
+    assert epochs == {"denoiser": 2, "generator": 7, "none": None}
+    assert share == {"denoiser": None, "generator": 1.0002, "none": None}

@@ -2,7 +2,6 @@
 time once; estimates of other settings never overwrite the defaults' file, whose entries say
 how and where each was probed."""
 
-import dataclasses
 import json
 
 import pytest
@@ -18,6 +17,14 @@ def test_a_warm_probe_times_the_second_epoch_and_books_the_first_ones_extra_time
     assert warmer["warmup_seconds"] >= 0.0
     for p in (cold, warm, warmer):
         assert p["rate"] > 0 and p["val_seconds"] > 0 and p["train_agents"] > 0
+
+
+def test_a_budget_caps_the_estimate_and_its_validations_share_the_cut():
+    cost = load_benchmark("train_cost")
+    assert cost.guarded(1200.0, 60.0, None) == (1260.0, 1.0)  # no budget
+    assert cost.guarded(1200.0, 60.0, 30.0) == (1260.0, 1.0)  # 20 of 30 minutes: not reached
+    # 40 minutes of steps against 30: three quarters of the schedule, and of its validations
+    assert cost.guarded(2400.0, 60.0, 30.0) == pytest.approx((1800.0 + 45.0, 0.75))
 
 
 def test_evaluations_count_every_nth_epoch_and_the_last():
@@ -84,14 +91,3 @@ def test_a_warmer_probe_times_the_last_epoch_and_books_every_earlier_ones_extra(
     p = cost.probe(tiny_cfg, "diffusion", None, steps=2, denoiser=None, warm=2)
     assert p["val_seconds"] == 1.0
     assert p["warmup_seconds"] == (5 - 2) + (1.5 - 1) + (3 - 2)  # 4.5 s, booked once
-
-
-def test_a_generator_only_data_setting_is_left_out_of_the_denoiser_probe_only(tiny_cfg):
-    """``data.partial_future`` trains the generator stage alone (the denoiser stage refuses
-    it), so the denoiser's probe runs without it and the generator's with it."""
-    cost = load_benchmark("train_cost")
-    cfg = dataclasses.replace(tiny_cfg, data=dataclasses.replace(tiny_cfg.data, partial_future=4))
-    assert cost.stage_config(cfg, "diffusion").data.partial_future == 0
-    assert cost.stage_config(cfg, "generator").data.partial_future == 4
-    assert cost.stage_config(cfg, "diffusion").denoiser == cfg.denoiser
-    assert cost.stage_config(tiny_cfg, "diffusion") is tiny_cfg  # nothing to leave out

@@ -40,6 +40,11 @@ def check_choices(obj: Any) -> None:
             raise ConfigError(f"{type(obj).__name__}.{f.name} must be {options}, got {value!r}")
 
 
+DATA_GENERATOR_ONLY = ("partial_future",)
+"""``DataConfig`` fields that only the generator stage reads: the denoiser stage trains with
+them at their defaults (``DataConfig.denoiser_part``)."""
+
+
 @dataclass
 class DataConfig:
     """Which data to train on and how to batch and augment it."""
@@ -100,8 +105,9 @@ class DataConfig:
     before a window ends), as targets whose loss reads only the frames they were seen in (0:
     off; the validation and test splits keep the benchmarks' complete windows). Text track
     files only (ETH/UCY or a folder of them); not with ``reverse`` (a future with missing
-    frames cannot be played backwards), and for the generator stage only (docs/pretraining.md,
-    "Agents that leave the view")."""
+    frames cannot be played backwards). The generator stage only: the denoiser stage trains on
+    complete futures whatever this says (``denoiser_part``; docs/pretraining.md, "Agents that
+    leave the view")."""
     holdout_scene: str = ""
     """Validate on a scene the model does not train on ("" : the dataset's own val split):
     the training files whose name starts with this prefix (e.g. ``biwi_hotel``, ``students``,
@@ -151,6 +157,13 @@ class DataConfig:
             raise ConfigError("DataConfig.scale_min must be <= scale_max")
         if self.max_gap is not None and self.max_gap < 0:
             raise ConfigError("DataConfig.max_gap must be >= 0 or null")
+
+    def denoiser_part(self) -> DataConfig:
+        """This data config as the denoiser stage trains on it: the generator-only settings
+        (``DATA_GENERATOR_ONLY``) at their defaults; itself when none is set."""
+        defaults = {f.name: f.default for f in fields(self) if f.name in DATA_GENERATOR_ONLY}
+        changes = {k: v for k, v in defaults.items() if getattr(self, k) != v}
+        return dataclasses.replace(self, **changes) if changes else self
 
     @property
     def scale_range(self) -> tuple[float, float] | None:
@@ -525,8 +538,8 @@ class OptimConfig:
         if self.max_minutes is not None and self.max_minutes <= 0:
             raise ConfigError("max_minutes must be > 0 or null")
         if self.budget_schedule and self.max_minutes is None:
-            raise ConfigError("budget_schedule anneals the schedule by the time budget: it "
-                              "needs max_minutes (e.g. --set generator.max_minutes=30)")  # fmt: skip
+            raise ConfigError("budget_schedule anneals the schedule by the time budget: "
+                              "it needs max_minutes (e.g. generator.max_minutes=30)")  # fmt: skip
         if self.eval_every_minutes is not None and not (
             self.eval_every_minutes > 0 and math.isfinite(self.eval_every_minutes)
         ):

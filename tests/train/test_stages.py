@@ -354,16 +354,21 @@ def test_a_time_budget_stops_the_stage_and_still_validates(tmp_path, cfg, clock)
     assert records[0][f"budget_{clock}_seconds"] > 0
 
 
-def test_a_stage_that_meets_its_budget_with_budget_schedule_ends_annealed(tmp_path, cfg):
+def test_a_stage_that_meets_its_budget_with_budget_schedule_ends_annealed(tmp_path, cfg, capsys):
     optim = dict(epochs=50, warmup_steps=0, max_minutes=1e-6, final_lr=0.1)
     lrs = {}
     for on in (False, True):
         denoiser = dataclasses.replace(cfg.denoiser, **optim, budget_schedule=on)
         out = tmp_path / str(on)
-        train_stage("diffusion", dataclasses.replace(cfg, denoiser=denoiser), out,
-                    device="cpu", progress=False)  # fmt: skip
+        summary = train_stage("diffusion", dataclasses.replace(cfg, denoiser=denoiser), out,
+                              device="cpu", progress=False)  # fmt: skip
+        assert summary["budget_reached"] and summary["steps"] == 1
         (record,) = read_metrics(out, "denoiser")  # one step, past the budget, then validation
         lrs[on] = record["lr"] / cfg.denoiser.lr
+        said = capsys.readouterr().out
+        assert "the time budget of 1e-06 min (wall clock) ended the stage after 1 of" in said
+        assert ("annealed to it" if on else "cut mid-schedule") in said
+        assert "--set denoiser.max_minutes=null --set denoiser.budget_schedule=false" in said
     assert lrs[True] == pytest.approx(0.1)  # at the floor where the budget ran out
     assert lrs[False] > 0.99  # cut one step into a 50-epoch cosine: still near the peak
 
@@ -375,10 +380,11 @@ def test_a_budget_that_is_not_met_leaves_the_run_as_it_was(tmp_path, cfg, traine
     for extra in ({}, {"max_minutes": 2.0, "budget_schedule": True}):
         generator = dataclasses.replace(cfg.generator, **extra)
         out = tmp_path / str(len(weights))
-        train_stage("generator", dataclasses.replace(cfg, generator=generator), out,
-                    device="cpu", progress=False,
-                    denoiser=str(trained / "denoiser.safetensors"))  # fmt: skip
+        summary = train_stage("generator", dataclasses.replace(cfg, generator=generator), out,
+                              device="cpu", progress=False,
+                              denoiser=str(trained / "denoiser.safetensors"))  # fmt: skip
         weights.append(ckpt.load(out / "generator.safetensors")["state_dict"])
+        assert not summary["budget_reached"]
     assert weights[0].keys() == weights[1].keys()
     assert all(torch.equal(weights[0][k], weights[1][k]) for k in weights[0])
     shares = [r["budget_share"] for r in read_metrics(tmp_path / "1", "generator")]
@@ -740,7 +746,7 @@ def test_only_a_context_generator_trains_on_batches_with_context_agents(tmp_path
     assert rebuilt.cfg.context_agents
 
 
-def test_a_generator_trains_on_agents_that_leave_the_view_and_the_denoiser_refuses(
+def test_a_generator_trains_on_agents_that_leave_the_view_and_the_denoiser_does_not(
     tmp_path, cfg, trained
 ):
     import dataclasses
@@ -759,7 +765,11 @@ def test_a_generator_trains_on_agents_that_leave_the_view_and_the_denoiser_refus
     data = dataclasses.replace(cfg.data, dataset=str(tmp_path / "data"), partial_future=4)
     run = dataclasses.replace(cfg, data=data)
     with pytest.raises(ConfigError, match="partial_future trains the generator stage only"):
-        train_stage("diffusion", run, tmp_path / "d", device="cpu", progress=False)
+        build_denoiser_stage(run, None, None, torch.device("cpu"))  # the stage itself refuses
+    # the denoiser stage trains on the complete futures alone, and its run says so
+    den = train_stage("diffusion", run, tmp_path / "d", device="cpu", progress=False)
+    assert den["train_agents"] == 15
+    assert "partial_future: 0" in (tmp_path / "d" / "config.yaml").read_text()
     res = train_stage("generator", run, tmp_path / "g", device="cpu", progress=False,
                       denoiser=str(trained / "denoiser.safetensors"))  # fmt: skip
     plain = load_dataset(str(tmp_path / "data"), "train")

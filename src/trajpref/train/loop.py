@@ -85,8 +85,9 @@ def read_metrics(run_dir: str | Path, stage: str) -> list[dict[str, Any]]:
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
-def _lr_lambda(cfg: OptimConfig, total: int,
-               budget_share: Callable[[], float] | None = None) -> Callable[[int], float]:  # fmt: skip
+def _lr_lambda(
+    cfg: OptimConfig, total: int, budget_share: Callable[[], float] | None = None
+) -> Callable[[int], float]:
     """The learning rate's factor at each step of ``total``: a linear warm-up, then a cosine
     decay to ``final_lr``. With ``cfg.budget_schedule`` the schedule stands at the larger of
     the step and ``budget_share() * total`` (the step the share of the time budget spent
@@ -444,5 +445,15 @@ def fit(
             tqdm.write(f"[{stage.name}] " + " ".join(f"{k}={v}" for k, v in summary.items()))
         if stop:
             break
+    budget_reached = (optim_cfg.max_minutes is not None and step < total
+                      and spent >= 60 * optim_cfg.max_minutes)  # fmt: skip
+    if budget_reached and main:
+        how = ("annealed to it (budget_schedule)" if optim_cfg.budget_schedule
+               else "cut mid-schedule (budget_schedule is off)")  # fmt: skip
+        unset = f"--set {stage.name}.max_minutes=null --set {stage.name}.budget_schedule=false"
+        tqdm.write(f"[{stage.name}] the time budget of {optim_cfg.max_minutes:g} min "
+                   f"({optim_cfg.budget_clock} clock) ended the stage after {step} of its "
+                   f"{total} steps, {how}; to train every step: {unset}")  # fmt: skip
     return {"best": best, "train_seconds": elapsed, "budget_seconds": spent, "steps": step,
+            "budget_reached": budget_reached,
             "samples_per_second": rate}  # fmt: skip

@@ -3,6 +3,7 @@ shared loop, DDP-aware."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 import typing
@@ -138,10 +139,13 @@ def train_stage(
     max_steps: int | None = None,
 ) -> dict[str, Any]:
     """Train one pretraining stage; returns the loop's summary (best validation metrics,
-    seconds)."""
+    seconds). The denoiser stage trains on ``cfg.data.denoiser_part()``: complete futures
+    only, whatever the generator's ``data.partial_future`` (its run folder's config says so)."""
     if stage not in STAGES:
         raise ConfigError(f"unknown stage {stage!r}; choose {' or '.join(STAGES)}")
     payload = None
+    if stage == "diffusion":  # generator-only data settings (partial futures) left out
+        cfg = dataclasses.replace(cfg, data=cfg.data.denoiser_part())
     if stage == "generator":  # read before any compute: a wrong file fails at once
         path = Path(denoiser) if denoiser else Path(out_dir) / f"denoiser{ckpt.SUFFIX}"
         payload = ckpt.load(path)

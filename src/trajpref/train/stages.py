@@ -125,7 +125,8 @@ def build_denoiser_stage(
     Returns the stage and the data scale measured on ``train``."""
     if cfg.data.partial_future:
         raise ConfigError("data.partial_future trains the generator stage only: the "
-                          "denoiser and its data scale learn from complete futures")  # fmt: skip
+                          "denoiser and its data scale learn from complete futures "
+                          "(train_stage passes cfg.data.denoiser_part())")  # fmt: skip
     torch.manual_seed(cfg.seed)
     scale = data_scale(train)
     denoiser = Denoiser(cfg.model).to(device)
