@@ -116,7 +116,14 @@ def overrides(dataset: str, kind: str, config: dict[str, Any]) -> list[str]:
     skip = {f"model.{k}" for k in GENERATOR_ONLY} if kind == "denoiser" else set()
     keys = [k for k in got if k.split(".")[0] in STAGE_SECTIONS[kind] and base.get(k) != got[k]
             and k not in skip]  # fmt: skip
-    return [f"{k}={json.dumps(got[k]) if isinstance(got[k], str) else got[k]}" for k in keys]
+    return [f"{k}={_scalar(got[k])}" for k in keys]
+
+
+def _scalar(value: Any) -> str:
+    """A config value as ``--set`` reads it back: YAML's null, true and false, quoted strings."""
+    if value is None or isinstance(value, bool):
+        return json.dumps(value)  # null, true, false
+    return json.dumps(value) if isinstance(value, str) else str(value)
 
 
 def trained_config(config: dict[str, Any], changes: list[dict[str, Any]]) -> dict[str, Any]:

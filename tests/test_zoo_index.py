@@ -88,7 +88,7 @@ def test_a_generator_cards_denoiser_command_rebuilds_the_published_denoiser(monk
     gen = zoo.describe("univ/generator", path, [])["train"]["commands"]
     den = zoo.describe("univ/denoiser", path.with_name("denoiser.safetensors"), [])
     assert gen[0].startswith("trajpref train diffusion") and gen[0] == den["train"]["commands"][0]
-    assert "--set data.flip=False" in gen[0] and "--set data.reverse=False" in gen[0]
+    assert "--set data.flip=false" in gen[0] and "--set data.reverse=false" in gen[0]
     assert "--set data" not in gen[1]  # the generator's own stage keeps the config's flags
 
 
@@ -122,3 +122,23 @@ def test_a_cards_training_command_states_the_threads_its_cpu_run_used(monkeypatc
     meta["train_machine"] = "1x H100"
     cmds = zoo.describe("zara2/generator", path, [])["train"]["commands"]
     assert cmds[-1].startswith("trajpref train generator") and "--device cuda" in cmds[-1]
+
+
+def test_a_cards_overrides_read_back_as_the_values_they_set():
+    """A card's ``--set`` values are YAML that the config reads back: null, true, false and
+    quoted strings, not Python's None and False (``--set x=None`` is not a number)."""
+    from trajpref.config import load_config
+
+    zoo = load_benchmark("zoo_index")
+    assert [zoo._scalar(v) for v in (None, False, True, 0.5, 3, "a b")] == [
+        "null",
+        "false",
+        "true",
+        "0.5",
+        "3",
+        '"a b"',
+    ]
+    sets = [f"generator.max_minutes={zoo._scalar(None)}",
+            f"generator.budget_schedule={zoo._scalar(False)}"]  # fmt: skip
+    cfg = load_config(zoo.ROOT / "configs" / "hotel.yaml", sets)
+    assert cfg.generator.max_minutes is None and cfg.generator.budget_schedule is False

@@ -1,6 +1,7 @@
 """Run by ``torchrun`` from test_ddp.py: a few DDP steps of both stages, then each rank saves
 its parameters so the test can compare them."""
 
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -29,7 +30,10 @@ def main(folder: str, out: str) -> None:
     torch.save(stage.trainable.state_dict(), out_dir / f"denoiser_rank{info.rank}.pt")
     barrier(info)
     gen = build_generator_stage(cfg, ckpt.load(out_dir / "denoiser.safetensors"), val, device)
-    fit(gen, train, cfg.data, cfg.generator, out_dir, device, cfg.seed, dist_info=info,
+    # a budget the steps cannot keep pace with: each rank's clock reads a different share, and
+    # the ranks must still step with one learning rate (the largest share, all-reduced)
+    budget = dataclasses.replace(cfg.generator, max_minutes=0.01, budget_schedule=True)
+    fit(gen, train, cfg.data, budget, out_dir, device, cfg.seed, dist_info=info,
         progress=False, max_steps=3)  # fmt: skip
     torch.save(gen.trainable.state_dict(), out_dir / f"generator_rank{info.rank}.pt")
     barrier(info)  # both ranks done before gloo is torn down (distributed.cleanup)

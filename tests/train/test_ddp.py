@@ -1,5 +1,6 @@
 """Two CPU processes under torchrun (gloo): after a few DDP steps both ranks hold identical
-parameters, and rank 0 alone writes the run files."""
+parameters (the generator's with a time budget that sets its learning rate), and rank 0 alone
+writes the run files."""
 
 import socket
 import subprocess
