@@ -212,6 +212,7 @@ def main() -> None:
         stage_seconds["denoiser"] = previous["stage_seconds"]["denoiser"]
         rates["denoiser"] = previous["samples_per_second"]["denoiser"]
         epochs_done["denoiser"] = previous.get("epochs_done", {}).get("denoiser")
+        budget_share["denoiser"] = previous.get("budget_share", {}).get("denoiser")
         denoiser_note = "reused the published denoiser; its cost is from its own training run"
 
     test = load_dataset(args.dataset, "test", args.data_root)

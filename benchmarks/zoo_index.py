@@ -121,9 +121,7 @@ def overrides(dataset: str, kind: str, config: dict[str, Any]) -> list[str]:
 
 def _scalar(value: Any) -> str:
     """A config value as ``--set`` reads it back: YAML's null, true and false, quoted strings."""
-    if value is None or isinstance(value, bool):
-        return json.dumps(value)  # null, true, false
-    return json.dumps(value) if isinstance(value, str) else str(value)
+    return json.dumps(value) if value is None or isinstance(value, bool | str) else str(value)
 
 
 def trained_config(config: dict[str, Any], changes: list[dict[str, Any]]) -> dict[str, Any]:

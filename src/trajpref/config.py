@@ -161,7 +161,7 @@ class DataConfig:
     def denoiser_part(self) -> DataConfig:
         """This data config as the denoiser stage trains on it: the generator-only settings
         (``DATA_GENERATOR_ONLY``) at their defaults; itself when none is set."""
-        defaults = {f.name: f.default for f in fields(self) if f.name in DATA_GENERATOR_ONLY}
+        defaults = {k: getattr(DataConfig, k) for k in DATA_GENERATOR_ONLY}  # as ModelConfig's
         changes = {k: v for k, v in defaults.items() if getattr(self, k) != v}
         return dataclasses.replace(self, **changes) if changes else self
 
