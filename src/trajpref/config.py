@@ -516,6 +516,10 @@ class OptimConfig:
     eagerly, with a warning. Weights, checkpoints and resume states are the same as without it
     (``Stage.networks``). On the 2-core CPU its speed-up was not separable from the machine's
     drift (docs/pretraining.md, "Compiled training steps"), so every config leaves it off."""
+    fused: bool = False
+    """AdamW's fused implementation (one kernel per step instead of PyTorch's default
+    ``foreach`` one): the same arithmetic, the weights equal up to float rounding, a cheaper
+    optimiser step (docs/pretraining.md, "Fused AdamW steps")."""
     ema_epochs: float = 0.0
     """Time constant, in epochs, of an exponential moving average of the trained weights
     (0: off). When on, validation and the best checkpoint use the average, the raw weights

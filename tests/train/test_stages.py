@@ -618,6 +618,30 @@ def test_a_compiled_generator_stage_trains_the_same_weights(tmp_path, cfg, train
         torch.testing.assert_close(compiled[key], value, rtol=1e-3, atol=1e-4)
 
 
+def test_a_fused_adamw_stage_trains_the_same_weights_up_to_rounding(tmp_path, cfg, trained):
+    # generator.fused swaps AdamW's implementation, not its arithmetic: the same seeded run
+    # ends at the same weights up to float rounding, and both moved from the start
+    denoiser = str(trained / "denoiser.safetensors")
+    options = {"device": "cpu", "progress": False, "denoiser": denoiser, "max_steps": 3}
+    weights = {}
+    for run, fused in (("default", "false"), ("fused", "true")):
+        run_cfg = load_config(None, [*TINY_OVERRIDES, f"data.dataset={cfg.data.dataset}",
+                                     f"generator.fused={fused}"])  # fmt: skip
+        train_stage("generator", run_cfg, tmp_path / run, **options)
+        weights[run] = torch.load(tmp_path / run / "generator_last.pt", weights_only=True)
+    default, fused = weights["default"]["trainable"], weights["fused"]["trainable"]
+    start = build_generator_stage(cfg, ckpt.load(denoiser), load_dataset(cfg.data.dataset, "val"),
+                                  torch.device("cpu")).trainable.state_dict()  # fmt: skip
+    assert any(not torch.equal(start[k], v) for k, v in fused.items())  # it trained
+    for key, value in default.items():
+        torch.testing.assert_close(fused[key], value, rtol=0, atol=1e-6)
+
+
+def test_fused_must_be_a_boolean():
+    with pytest.raises(ConfigError, match="fused"):
+        load_config(None, ["generator.fused=maybe"])
+
+
 def test_compile_must_be_a_boolean():
     with pytest.raises(ConfigError, match="compile"):
         load_config(None, ["generator.compile=sometimes"])

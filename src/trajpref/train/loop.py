@@ -85,6 +85,14 @@ def read_metrics(run_dir: str | Path, stage: str) -> list[dict[str, Any]]:
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
+def make_optimizer(params: list[nn.Parameter], cfg: OptimConfig) -> torch.optim.AdamW:
+    """The stage's AdamW at ``cfg.lr`` and ``cfg.weight_decay``: PyTorch's default
+    implementation, or its fused one with ``cfg.fused`` (the same arithmetic, equal up to
+    float rounding; docs/pretraining.md, "Fused AdamW steps")."""
+    extra = {"fused": True} if cfg.fused else {}
+    return torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay, **extra)
+
+
 def _lr_lambda(
     cfg: OptimConfig, total: int, budget_share: Callable[[], float] | None = None
 ) -> Callable[[int], float]:
@@ -262,7 +270,7 @@ def fit(
         steps_per_epoch = min(steps_per_epoch, optim_cfg.steps_per_epoch)
     total = steps_per_epoch * optim_cfg.epochs * stage.updates
     params = [p for p in stage.trainable.parameters() if p.requires_grad]
-    optimizer = torch.optim.AdamW(params, lr=optim_cfg.lr, weight_decay=optim_cfg.weight_decay)
+    optimizer = make_optimizer(params, optim_cfg)
     budget = {"share": 0.0}  # share of max_minutes spent, for OptimConfig.budget_schedule
     sched = torch.optim.lr_scheduler.LambdaLR(
         optimizer, _lr_lambda(optim_cfg, total, lambda: budget["share"])

@@ -1,0 +1,128 @@
+"""How much faster a training step runs with AdamW's fused implementation, side by side.
+
+    python benchmarks/optimizer_speed.py --datasets eth hotel univ zara1 zara2 sdd nba robo \
+        --data-root ../shared/data
+
+For each dataset's default config and each pretraining stage (the denoiser by Eq. 2, the
+generator through the published denoiser, in the config's precision), two copies of the stage
+start from the same weights: one steps PyTorch's default AdamW (``foreach``), the other the
+fused one (``OptimConfig.fused``, ``train.loop.make_optimizer``). They take the same training
+batches in turn, batch by batch, with the same noise and dropout draws, round after round, so
+both see the same machine load (which of the two goes first alternates); the first round is
+warm-up and not timed. A step is what the loop times: forward, backward, the gradient clip and
+the optimiser step (loading and augmentation, the same for both, are left out, so the ratio of
+a whole epoch is a little closer to 1). Prints agent-windows per second of each, their ratio,
+and the largest difference between the two copies' weights at the end (float rounding in fp32;
+in bf16 the rounding of the activations lets it grow); writes
+benchmarks/results/meta/optimizer_speed.json. The rule that reads it: docs/pretraining.md,
+"Fused AdamW steps".
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import dataclasses
+import itertools
+import time
+from pathlib import Path
+
+import torch
+
+from trajpref.config import load_config
+from trajpref.data import load_dataset
+from trajpref.data.loader import SceneLoader
+from trajpref.models import checkpoint as ckpt
+from trajpref.results import write_meta
+from trajpref.train.loop import make_optimizer, precision_autocast
+from trajpref.train.stages import build_denoiser_stage, build_generator_stage
+
+ROOT = Path(__file__).resolve().parent.parent
+OUT = ROOT / "benchmarks" / "results" / "meta" / "optimizer_speed.json"
+ARMS = ("default", "fused")
+
+
+def time_arms(stages: dict, optim_cfg, batches, rounds: int, device: torch.device) -> dict:
+    """Seconds per arm over ``rounds`` timed rounds (one warm-up round first), each arm's
+    stage stepping its own optimiser as the loop does; and the largest weight difference
+    between the arms at the end."""
+    opts, params = {}, {}
+    for arm, stage in stages.items():
+        params[arm] = [p for p in stage.trainable.parameters() if p.requires_grad]
+        opts[arm] = make_optimizer(
+            params[arm], dataclasses.replace(optim_cfg, fused=arm == "fused")
+        )
+        stage.objective.train()
+    seconds = dict.fromkeys(stages, 0.0)
+    for r in range(rounds + 1):
+        for i, batch in enumerate(batches):
+            order = list(stages.items())
+            for arm, stage in order if (r + i) % 2 == 0 else order[::-1]:  # neither always first
+                torch.manual_seed(1000 * r + i)  # the same dropout masks in both arms
+                gen = torch.Generator().manual_seed(1000 * r + i)  # the same noise draws
+                t0 = time.perf_counter()
+                with precision_autocast(device, optim_cfg.precision):
+                    loss, _ = stage.objective(batch, gen)
+                opts[arm].zero_grad(set_to_none=True)
+                loss.float().backward()
+                torch.nn.utils.clip_grad_norm_(params[arm], optim_cfg.grad_clip)
+                opts[arm].step()
+                if r > 0:
+                    seconds[arm] += time.perf_counter() - t0
+    a, b = (params[arm] for arm in ARMS)
+    diff = max(float((x - y).detach().abs().max()) for x, y in zip(a, b, strict=True))
+    return {"seconds": seconds, "max_weight_difference": diff}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--datasets", nargs="+", default=["hotel"])
+    parser.add_argument("--data-root", default=None, help="default: $TRAJPREF_DATA")
+    parser.add_argument("--batches", type=int, default=4, help="training batches per round")
+    parser.add_argument("--rounds", type=int, default=3, help="timed rounds (after one warm-up)")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
+    parser.add_argument("--out", default=str(OUT))
+    args = parser.parse_args()
+    if args.batches < 1 or args.rounds < 1 or args.threads < 1:
+        parser.error("--batches, --rounds and --threads must be >= 1")
+    torch.set_num_threads(args.threads)
+    device = torch.device("cpu")
+
+    entries = {}
+    for dataset in args.datasets:
+        cfg = load_config(ROOT / "configs" / f"{dataset}.yaml")
+        train = load_dataset(cfg.data.dataset, "train", args.data_root)
+        loader = SceneLoader(train, max_agents=cfg.data.max_agents, shuffle=True, seed=0)
+        raw = [b.to(device) for b in itertools.islice(loader, args.batches)]
+        agents = sum(b.num_agents for b in raw) * args.rounds
+        torch.manual_seed(0)
+        stages = {"denoiser": (build_denoiser_stage(cfg, train, train, device)[0], cfg.denoiser)}
+        published = ROOT / "models" / dataset / f"denoiser{ckpt.SUFFIX}"
+        if published.is_file():
+            generator = build_generator_stage(cfg, ckpt.load(published), train, device)
+            stages["generator"] = (generator, cfg.generator)
+        entry = {}
+        for name, (stage, optim_cfg) in stages.items():
+            batches = raw if stage.context else [b.without_context() for b in raw]
+            arms = {arm: copy.deepcopy(stage) for arm in ARMS}  # the same start
+            out = time_arms(arms, optim_cfg, batches, args.rounds, device)
+            sec = out["seconds"]
+            entry[name] = {
+                "precision": optim_cfg.precision,
+                "agent_windows": agents,
+                "default_per_second": round(agents / sec["default"], 1),
+                "fused_per_second": round(agents / sec["fused"], 1),
+                "speedup": round(sec["default"] / sec["fused"], 3),
+                "max_weight_difference": out["max_weight_difference"],
+            }
+            print(f"{dataset:<9} {name:<9} ({optim_cfg.precision}) default "
+                  f"{agents / sec['default']:7.1f}  fused {agents / sec['fused']:7.1f} "
+                  f"agent-windows/s  fused is {sec['default'] / sec['fused']:.3f}x  largest "
+                  f"weight difference {out['max_weight_difference']:.1e}", flush=True)  # fmt: skip
+        entries[dataset] = entry
+    write_meta(args.out, datasets=entries, batches=args.batches, rounds=args.rounds)
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
