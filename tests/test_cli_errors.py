@@ -44,6 +44,8 @@ CASES: dict[str, tuple[list[str], str]] = {
     "missing required --out": (PRED, r"required: --out"),
     # --- data: missing or malformed input
     "missing folder": ([*STATS, "--dataset", "{in}/nope"], r"no such folder"),
+    "a file, not a folder": ([*STATS, "--dataset", "{in}/nan/good.txt"],
+                             r"good\.txt: a file, where a folder of track files is needed"),
     "unknown dataset name": ([*STATS, "--dataset", "zara9"], r"unknown dataset 'zara9'"),
     "too few columns": ([*STATS, "--dataset", "{in}/cols"], r"bad\.txt:1: .*4 columns"),
     "NaN coordinate": ([*STATS, "--dataset", "{in}/nan"], r"bad\.txt:1: .*(NaN|finite)"),
@@ -155,7 +157,9 @@ CASES: dict[str, tuple[list[str], str]] = {
         [*GEN, "--denoiser", "{run}/generator.safetensors", "--out", "{out}/run"],
         r"expected a denoiser checkpoint, got a generator"),
     "generator with no denoiser yet": ([*GEN, "--out", "{out}/run"],
-                                       r"run/denoiser\.safetensors: no such checkpoint"),
+                                       r"run/denoiser\.safetensors: the generator trains "
+                                       r"through a denoiser and there is none in .*train it "
+                                       r"there first.*or pass --denoiser FILE"),
     "agent roles with dropped agents": (
         [*GEN, "--denoiser", "{run}/denoiser.safetensors", "--out", "{out}/run", "--set",
          "model.agent_roles=3", "--set", "data.drop_agents=0.2"],

@@ -131,6 +131,12 @@ def _add_selection_args(p: argparse.ArgumentParser) -> None:
                    "score-* and top use --scorer or the model's own denoiser")  # fmt: skip
     p.add_argument("--drop", type=float, default=0.3,
                    help="score-* selections: the fraction dropped first (0.3)")  # fmt: skip
+    p.add_argument("--bandwidth", type=float, default=0.5,
+                   help="facility selections: the similarity's bandwidth, as a multiple of "
+                   "each item's median squared sample distance (0.5)")  # fmt: skip
+    p.add_argument("--select-temperature", type=float, default=2.0,
+                   help="score-facility and score-medoids: sample weights "
+                   "exp(-z / T), z the standardised residual (2)")  # fmt: skip
     p.add_argument("--select-per", default="agent", choices=["agent", "scene"],
                    help="per agent, or one set of indices per scene (joint metrics)")  # fmt: skip
     p.add_argument("--score-every", type=int, default=9,
@@ -326,9 +332,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="a group of runs (e.g. the seeds of one setting) or one run folder; "
                     "changes are against the first group")  # fmt: skip
     co.add_argument("--stage", choices=compare.STAGES, default="generator")
-    co.add_argument("--metrics", nargs="+", default=["val_min_ade", "val_min_fde"],
-                    help="validated metrics to show (keys of <stage>_metrics.jsonl); the "
-                    "kept epoch is always the lowest val_score, as the training loop keeps "
+    co.add_argument("--metrics", nargs="+", default=None,
+                    help="validated metrics to show (keys of <stage>_metrics.jsonl; default "
+                    "val_min_ade val_min_fde, for the denoiser val_denoise_loss); the kept "
+                    "epoch is always the lowest val_score, as the training loop keeps "
                     "it")  # fmt: skip
     co.add_argument("--shares", nargs="+", type=float, default=[0.25, 0.5, 0.75, 1.0],
                     help="shares of each run's schedule at which to show its curve")  # fmt: skip
@@ -463,7 +470,8 @@ def _selecting(args, model, device):
     if args.keep is None:
         return model, args.samples
     cfg = SelectionConfig(keep=args.keep, method=args.select, drop=args.drop,
-                          per=args.select_per, seed=args.seed,
+                          per=args.select_per, seed=args.seed, bandwidth=args.bandwidth,
+                          temperature=args.select_temperature,
                           trust_speed=args.trust_speed)  # fmt: skip
     scorer = None
     if cfg.uses_score:
@@ -480,7 +488,8 @@ def _selection_fields(args) -> dict:
     if args.keep is None:
         return {}
     return {"candidates": args.samples, "select": args.select, "select_per": args.select_per,
-            "drop": args.drop, "trust_speed": args.trust_speed,
+            "drop": args.drop, "bandwidth": args.bandwidth,
+            "select_temperature": args.select_temperature, "trust_speed": args.trust_speed,
             "score_every": args.score_every, "score_from": args.score_from,
             "score_precision": args.score_precision}  # fmt: skip
 
@@ -806,7 +815,7 @@ def cmd_compare(args) -> int:
     """Runs' validation side by side (``train/compare.py``): what each kept, each group's mean
     and spread over its runs and its change against the first group, and the curves."""
     groups: dict[str, list] = {}
-    metrics = tuple(args.metrics)
+    metrics = tuple(args.metrics) if args.metrics else compare.default_metrics(args.stage)
     for text in args.groups:
         name, runs = compare.parse_group(text)
         if name in groups:

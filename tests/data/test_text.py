@@ -140,6 +140,9 @@ def test_explicit_delimiter_and_hints_on_a_wrong_column_count(tmp_path):
     ):
         read_tracks(path, options=ReadOptions(delimiter=","))
     assert read_tracks(path, options=ReadOptions(delimiter="tab")).num_rows == 1
+    path.write_text("0\t1\t2.0\t3.0\n10\t1\t2.5\n")  # tabs read as whitespace, a column short
+    with pytest.raises(DataError, match=r"mixed\.txt:2: expected 4 columns .* found 3$"):
+        read_tracks(path)
     path.write_text("0 1 2.0 3.0 7\n")
     with pytest.raises(DataError, match="found 5; only frame agent x y are read"):
         read_tracks(path)
@@ -219,6 +222,32 @@ def test_coordinates_beyond_float32_or_the_bound_are_errors_with_units(tmp_path)
     path.write_text("0 1 10 0\n")
     with pytest.raises(DataError, match="beyond the sane bound of 3 m"):
         read_tracks(path, options=ReadOptions(max_coord=3), scale=0.3048 * 1.0, units="m")
+
+
+def test_map_coordinates_that_float32_would_round_away_are_refused_with_the_fix(tmp_path):
+    # one walker at 0.37 / 0.23 m per frame, as UTM eastings and northings and near the origin
+    rows = [(10 * i, 1, 0.37 * i, 0.23 * i) for i in range(20)]
+    near = tmp_path / "near.txt"
+    near.write_text("".join(f"{f} {a} {x:.2f} {y:.2f}\n" for f, a, x, y in rows))
+    assert read_tracks(near).num_rows == 20
+    utm = tmp_path / "utm.txt"
+    utm.write_text("".join(f"{f} {a} {500000 + x:.2f} {4500000 + y:.2f}\n" for f, a, x, y in rows))
+    big = ReadOptions(max_coord=1e7)
+    with pytest.raises(
+        DataError, match=r"4\.5e\+06 lose up to 0\.\d+ to float32 rounding.*subtract an"
+    ):
+        read_tracks(utm, options=big)
+    # an offset float32 carries to well within a step reads as before
+    shifted = tmp_path / "shifted.txt"
+    shifted.write_text("".join(f"{f} {a} {1000 + x:.2f} {2000 + y:.2f}\n" for f, a, x, y in rows))
+    assert read_tracks(shifted).num_rows == 20
+
+
+def test_the_bound_message_leaves_out_unknown_units(tmp_path):
+    path = tmp_path / "big.txt"
+    path.write_text("0 1 2 3\n10 1 5e6 3\n")
+    with pytest.raises(DataError, match=r"coordinate 5e\+06 is beyond the sane bound of 1e\+06 \("):
+        read_tracks(path)
 
 
 def test_text_that_is_not_utf8_names_the_line(tmp_path):

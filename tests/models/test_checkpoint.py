@@ -203,6 +203,20 @@ def test_a_tampered_denoiser_is_refused(tmp_path, cfg):
         ckpt.load(pub / "g.safetensors")
 
 
+def test_a_published_generator_copied_without_its_denoiser_says_what_to_copy(tmp_path, cfg):
+    import shutil
+
+    pub = tmp_path / "pub"
+    ckpt.publish(_publish_generator(tmp_path, cfg, 1), pub / "g.safetensors")
+    alone = tmp_path / "alone"
+    alone.mkdir()
+    shutil.copy(pub / "g.safetensors", alone / "g.safetensors")
+    with pytest.raises(TrajprefError, match=rf"needs {ckpt.DENOISER_NAME} \(hash .*\) beside it"):
+        ckpt.load(alone / "g.safetensors")
+    shutil.copy(pub / ckpt.DENOISER_NAME, alone / ckpt.DENOISER_NAME)
+    assert ckpt.load(alone / "g.safetensors")["denoiser"]["kind"] == "denoiser"
+
+
 # ----------------------------------------------------------------------------- legacy
 
 

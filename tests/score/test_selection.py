@@ -195,6 +195,35 @@ def test_cli_keep_selects_and_reports(tiny_run, walks, capsys, tmp_path):
     assert code == 2 and "needs --scorer" in capsys.readouterr().err
 
 
+def test_cli_bandwidth_and_temperature_reach_the_selection(tiny_run, walks, capsys, monkeypatch):
+    # --bandwidth and --select-temperature are the table rows' b and t (README): they are
+    # recorded with the result and passed to the selection's config
+    import trajpref.score.selection as selection
+
+    seen = []
+    original = selection.select_samples
+
+    def spy(pred, cfg, *args, **kwargs):
+        seen.append((cfg.bandwidth, cfg.temperature))
+        return original(pred, cfg, *args, **kwargs)
+
+    monkeypatch.setattr(selection, "select_samples", spy)
+    gen = str(tiny_run / "generator.safetensors")
+    base = ["evaluate", "--dataset", str(walks), "--model", gen, "--samples", "4", "--keep",
+            "2", "--select", "score-facility", "--json", "--no-progress"]  # fmt: skip
+    assert main(base) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert (res["bandwidth"], res["select_temperature"]) == (0.5, 2.0)  # the defaults
+    assert set(seen) == {(0.5, 2.0)}
+    seen.clear()
+    assert main([*base, "--bandwidth", "1", "--select-temperature", "0.5"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert (res["bandwidth"], res["select_temperature"]) == (1.0, 0.5)
+    assert set(seen) == {(1.0, 0.5)}
+    assert main([*base, "--bandwidth", "0"]) == 2
+    assert "bandwidth and temperature must be > 0" in capsys.readouterr().err
+
+
 def test_untrusted_agents_fall_back_to_the_score_free_counterpart():
     g = torch.Generator().manual_seed(0)
     feats = torch.randn(20, 6, 2, generator=g)  # [K, M, F]

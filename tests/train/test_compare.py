@@ -118,3 +118,24 @@ def test_the_command_refuses_a_group_named_twice(tmp_path, capsys):
     a = _run(tmp_path / "a", 2, {2: (0.2, 0.3)})
     assert main(["compare", f"x={a}", f"x={a}"]) == 2
     assert "group 'x' is given twice" in capsys.readouterr().err
+
+
+def test_each_stage_reads_its_own_config_not_the_last_stages(tmp_path, capsys):
+    # a denoiser trained for 3 epochs, then a generator into the same folder: the generator's
+    # config.yaml holds the default denoiser schedule, denoiser_config.yaml the one it ran
+    run = tmp_path / "run"
+    run.mkdir()
+    rows = [{"epoch": e, "val_denoise_loss": 1.0 / e, "val_score": 1.0 / e} for e in (1, 2, 3)]
+    (run / "denoiser_metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    trained = ExperimentConfig()
+    trained.denoiser.epochs = 3
+    save_config(trained, run / "denoiser_config.yaml")
+    save_config(ExperimentConfig(), run / "config.yaml")  # the later stage's: 60 epochs
+    assert compare.stage_config_path(run, "denoiser") == run / "denoiser_config.yaml"
+    assert compare.stage_config_path(run, "generator") == run / "config.yaml"  # older folders
+    curve = compare.read_curve(run, "denoiser", compare.default_metrics("denoiser"))
+    assert (curve.epochs, curve.kept) == (3, 3)
+    # and the command shows the denoiser's own metric without --metrics
+    assert main(["compare", f"a={run}", "--stage", "denoiser"]) == 0
+    assert f"| a | {run} | 3 of 3 |" in capsys.readouterr().out
+    assert compare.default_metrics("generator") == ("val_min_ade", "val_min_fde")

@@ -34,3 +34,25 @@ def test_an_unreadable_record_is_started_again_with_a_warning(tmp_path):
         record_session(tmp_path, "generator", 3, torch.device("cpu"), 1, resumed=False)
     sessions = json.loads(run_record_path(tmp_path, "generator").read_text())
     assert [s["seed"] for s in sessions] == [3]
+
+
+def test_a_dataset_folder_given_relative_is_stored_absolute(tiny_cfg, tmp_path, monkeypatch):
+    # a run started in the data's parent folder must be usable from anywhere: its config
+    # and its checkpoint name the folder by its absolute path
+    import dataclasses
+    from pathlib import Path
+
+    from trajpref.config import load_config
+    from trajpref.models import checkpoint as ckpt
+
+    walks = Path(tiny_cfg.data.dataset)
+    monkeypatch.chdir(walks.parent)
+    relative = dataclasses.replace(
+        tiny_cfg, data=dataclasses.replace(tiny_cfg.data, dataset=walks.name)
+    )
+    out = tmp_path / "run"
+    train_stage("diffusion", relative, out, device="cpu", progress=False, max_steps=1)
+    assert load_config(out / "denoiser_config.yaml").data.dataset == str(walks.resolve())
+    payload = ckpt.load(out / "denoiser.safetensors")
+    assert payload["config"]["data"]["dataset"] == str(walks.resolve())
+    assert relative.data.dataset == walks.name  # the caller's config is not changed

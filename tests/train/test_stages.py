@@ -132,6 +132,8 @@ def test_a_generator_step_changes_the_generator_not_the_denoiser(cfg, folder, tr
 
 def test_run_folder_holds_config_metrics_and_self_sufficient_checkpoints(trained):
     assert (trained / "config.yaml").is_file()
+    for stage in ("denoiser", "generator"):  # each stage's own resolved config, kept
+        assert load_config(trained / f"{stage}_config.yaml") == load_config(trained / "config.yaml")
     records = [json.loads(line) for line in (trained / "generator_metrics.jsonl").open()]
     assert len(records) == 2 and "val_min_ade" in records[-1]
     assert read_metrics(trained, "generator") == records  # the reader the benchmarks use

@@ -346,6 +346,10 @@ def _user_folder(
     if not path.is_dir():
         if path.is_symlink():
             text.track_files(path)  # says "symlink loop" or "broken symlink"
+        if path.is_file():
+            raise DataError(f"a file, where a folder of track files is needed (with its own "
+                            f"train/val/test sub-folders or not): pass {path.parent} or a "
+                            "folder holding just this file", path)  # fmt: skip
         raise DataError("no such folder", path)
     has_splits = any((path / s).is_dir() for s in SPLITS)
     folder = path / split if has_splits else path

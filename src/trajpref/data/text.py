@@ -266,7 +266,10 @@ def _parse_slow(path: Path, layout: _Layout, with_type: bool):
 
 
 def _column_hint(content: str, delimiter: str | None, found: int, n_cols: int) -> str:
-    others = [c for c in (",", ";", "\t", "|") if c in content and c != delimiter]
+    # a separator worth naming splits the line into more fields than were found (a tab in a
+    # whitespace-separated line is already a separator: the line is short of a column)
+    others = [c for c in (",", ";", "\t", "|") if c in content and c != delimiter
+              and len(_split(content.rstrip("\r\n"), c)) > found]  # fmt: skip
     if found < n_cols and others:
         sep = others[0]
         held = "a tab" if sep == "\t" else repr(sep)
@@ -360,6 +363,7 @@ def _checked_xy(values, scale, max_coord, units, path, line_of) -> np.ndarray:
     inside = (np.abs(xy) <= max_coord).all(1)  # [R]
     bad = ~(finite & fits & inside)  # [R]
     if not bad.any():
+        _check_precision(values, scale, xy, path)
         return xy
     r = int(np.argmax(bad))
     (line,) = line_of([r])
@@ -369,11 +373,41 @@ def _checked_xy(values, scale, max_coord, units, path, line_of) -> np.ndarray:
     big = float(v[np.argmax(np.abs(v))])
     if not fits[r]:
         raise DataError(f"coordinate {big:g} does not fit float32 (|value| > 3.4e38)", path, line)
+    unit = f" {units}" if units and units != "unknown" else ""
     raise DataError(
-        f"coordinate {big:g} {units} is beyond the sane bound of {max_coord:g} {units} "
+        f"coordinate {big:g}{unit} is beyond the sane bound of {max_coord:g}{unit} "
         "(raise it with --max-coord if the data really spans that far)",
         path,
         line,
+    )
+
+
+PRECISION_SHARE = 0.01
+"""The largest float32 rounding of a position, as a share of the file's median step, that a
+file may carry (``_check_precision``)."""
+
+
+def _check_precision(values: np.ndarray, scale: float, xy: np.ndarray, path: Path) -> None:
+    """Refuse a file whose coordinates are so large that float32, in which every model
+    computes, rounds them by more than ``PRECISION_SHARE`` of its median step between an
+    agent's consecutive rows (map coordinates such as UTM eastings and northings)."""
+    exact = values[:, 2:4] * scale  # [R, 2] float64
+    rounding = float(np.abs(exact - xy).max()) if len(xy) else 0.0
+    if rounding == 0.0:
+        return
+    order = np.lexsort((values[:, 0], values[:, 1]))  # by agent, then frame
+    same = values[order[1:], 1] == values[order[:-1], 1]  # consecutive rows of one agent
+    steps = np.linalg.norm(np.diff(exact[order], axis=0), axis=1)[same]  # [S]
+    steps = steps[steps > 0]
+    if not len(steps) or rounding <= PRECISION_SHARE * float(np.median(steps)):
+        return  # no movement to compare with, or rounding well within a step
+    largest, median = float(np.abs(exact).max()), float(np.median(steps))
+    raise DataError(
+        f"coordinates as large as {largest:.6g} lose up to {rounding:.3g} to float32 rounding, "
+        f"{rounding / median:.0%} of a median step ({median:.3g}): "
+        "every model computes in float32, so subtract an origin from x and y (e.g. the "
+        "first row's) before reading, and add it back to the predictions",
+        path,
     )
 
 

@@ -3,7 +3,7 @@
 A candidate is judged against a control by the validation its runs kept (the epoch with the
 lowest ``val_score``, the checkpoint the loop saved), over seeds, and by where its curve runs
 at the same share of the schedule (docs/pretraining.md compares candidates this way). This
-module reads each run's ``<stage>_metrics.jsonl`` and ``config.yaml`` and computes exactly
+module reads each run's ``<stage>_metrics.jsonl`` and ``<stage>_config.yaml`` and computes exactly
 that; ``trajpref compare`` prints it.
 """
 
@@ -24,6 +24,23 @@ STAGES = tuple(STAGE_NAMES.values())
 """Stages whose runs can be compared, by the name their files carry (each is also the config
 section with its ``epochs``)."""
 
+DEFAULT_METRICS = {"denoiser": ("val_denoise_loss",)}
+"""The metrics a stage shows unless told (``default_metrics``); the others validate the
+generator's samples and show ``val_min_ade`` and ``val_min_fde``."""
+
+
+def default_metrics(stage: str) -> tuple[str, ...]:
+    """What ``trajpref compare --stage STAGE`` shows without ``--metrics``."""
+    return DEFAULT_METRICS.get(stage, ("val_min_ade", "val_min_fde"))
+
+
+def stage_config_path(run_dir: str | Path, stage: str) -> Path:
+    """The resolved config a stage of ``run_dir`` trained with: ``<stage>_config.yaml``, which
+    each stage writes, or for folders written before it the run's ``config.yaml`` (the last
+    stage's, which may not hold an earlier stage's settings)."""
+    own = Path(run_dir) / f"{stage}_config.yaml"
+    return own if own.is_file() else Path(run_dir) / "config.yaml"
+
 
 @dataclass(frozen=True)
 class RunCurve:
@@ -32,8 +49,8 @@ class RunCurve:
     run: str
     """The run folder, as given."""
     epochs: int
-    """The stage's scheduled epochs (the run's ``config.yaml``; without one, its last logged
-    epoch)."""
+    """The stage's scheduled epochs (its ``<stage>_config.yaml``, ``stage_config_path``;
+    without one, its last logged epoch)."""
     points: dict[int, dict[str, float]]
     """{epoch: {metric: value}} at each validated epoch, in order."""
     kept: int
@@ -67,7 +84,7 @@ def read_curve(run_dir: str | Path, stage: str, metrics: tuple[str, ...]) -> Run
             raise TrajprefError(f"{run_dir}: no metric {name!r}; validated: {', '.join(known)}")
     points = {int(r["epoch"]): {m: float(r[m]) for m in metrics} for r in validated}
     kept = int(min(validated, key=lambda r: r["val_score"])["epoch"])
-    config = Path(run_dir) / "config.yaml"
+    config = stage_config_path(run_dir, stage)
     if config.is_file():
         epochs = int(getattr(load_config(config), stage).epochs)
     else:

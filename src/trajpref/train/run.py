@@ -16,6 +16,7 @@ import torch
 
 from trajpref.config import ExperimentConfig, save_config
 from trajpref.data import run_splits
+from trajpref.data.registry import NAMES
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError
 from trajpref.io import check_output_dir, write_json
@@ -33,6 +34,22 @@ Pretraining = Literal["diffusion", "generator"]
 STAGES: tuple[str, ...] = typing.get_args(Pretraining)
 STAGE_NAMES = {"diffusion": "denoiser", "generator": "generator", "finetune": "finetune"}
 """CLI stage -> the name its files carry (``<name>.safetensors``, ``<name>_last.pt``)."""
+
+
+def with_absolute_folders(cfg: ExperimentConfig) -> ExperimentConfig:
+    """``cfg`` with a dataset (or validation dataset) given as a relative folder path made
+    absolute, so that the run's config and checkpoints find it from any working directory;
+    built-in names and absolute paths stay as they are."""
+    changes = {}
+    for key in ("dataset", "val_dataset"):
+        value = getattr(cfg.data, key)
+        if value and value not in NAMES and not Path(value).expanduser().is_absolute():
+            folder = Path(value).expanduser()
+            if folder.exists():
+                changes[key] = str(folder.resolve())
+    if not changes:
+        return cfg
+    return dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, **changes))
 
 
 def last_state_path(out_dir: str | Path, stage: str) -> Path:
@@ -112,7 +129,8 @@ def _run(
             check_resume_matches(state, built.trainable, resume)
         if info.is_main:
             out_dir.mkdir(parents=True, exist_ok=True)
-            save_config(cfg, out_dir / "config.yaml")
+            save_config(cfg, out_dir / "config.yaml")  # the run's last stage
+            save_config(cfg, out_dir / f"{name}_config.yaml")  # this stage's, kept
             record_session(out_dir, name, cfg.seed, dev, info.world_size, state is not None)
         barrier(info)
         start = time.perf_counter()
@@ -143,11 +161,19 @@ def train_stage(
     only, whatever the generator's ``data.partial_future`` (its run folder's config says so)."""
     if stage not in STAGES:
         raise ConfigError(f"unknown stage {stage!r}; choose {' or '.join(STAGES)}")
+    cfg = with_absolute_folders(cfg)
     payload = None
     if stage == "diffusion":  # generator-only data settings (partial futures) left out
         cfg = dataclasses.replace(cfg, data=cfg.data.denoiser_part())
     if stage == "generator":  # read before any compute: a wrong file fails at once
         path = Path(denoiser) if denoiser else Path(out_dir) / f"denoiser{ckpt.SUFFIX}"
+        if not denoiser and not path.is_file():
+            raise ConfigError(
+                f"{path}: the generator trains through a denoiser and there is none in "
+                f"{out_dir}: train it there first (trajpref train diffusion ... --out "
+                f"{out_dir}) or pass --denoiser FILE (e.g. a published one: "
+                "models/zara1/denoiser.safetensors)"
+            )
         payload = ckpt.load(path)
         if payload["kind"] != "denoiser":
             raise ConfigError(f"{path}: expected a denoiser checkpoint, got a {payload['kind']}")
@@ -173,6 +199,7 @@ def finetune(
 ) -> dict[str, Any]:
     """RLHF / RLHF-ReS fine-tuning from the generator checkpoint ``start`` (DDP-aware);
     ``cfg`` comes from ``rl.presets.finetune_config``."""
+    cfg = with_absolute_folders(cfg)
     payload = ckpt.load(start)
     if payload["kind"] != "generator":
         raise ConfigError(f"{start}: fine-tuning starts from a generator checkpoint")
