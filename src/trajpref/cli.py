@@ -23,12 +23,21 @@ from trajpref import __version__
 from trajpref.adapt import ADAPT_OBJECTIVES, ADAPT_PARAMS, AdaptConfig, evaluate_in_context
 from trajpref.config import ExperimentConfig, config_entries, field_docs, load_config
 from trajpref.data import PROTOCOLS, ReadOptions, hold_out_scene, load_dataset, mean_speed
+from trajpref.data.registry import SPECS
 from trajpref.data.trajnet import write_trajnet, write_trajnet_truth
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, TrajprefError
 from trajpref.evaluation import evaluate, predict_dataset, resolve_collision_radius
-from trajpref.io import atomic_path, check_output_dir, check_output_file, dumps_json, write_json
+from trajpref.io import (
+    atomic_path,
+    check_output_dir,
+    check_output_file,
+    dumps_json,
+    read_checkpoint_header,
+    write_json,
+)
 from trajpref.metrics import SCENE_SIZE_EDGES, check_bin_edges
+from trajpref.models import checkpoint as ckpt
 from trajpref.models import zoo
 from trajpref.models.registry import load_predictor
 from trajpref.rl.presets import finetune_config
@@ -421,14 +430,21 @@ def cmd_data_stats(args) -> int:
         "frame_interval": ds.info.frame_interval,
         "t_hist": ds.info.t_hist,
         "t_fut": ds.info.t_fut,
-        "mean_speed": speed,
+        "mean_speed": speed,  # the dataset's units per second
         "source": ds.info.source,
     }
     if args.json:
         print(dumps_json(out))
     else:
+        width = max(len(k) for k in out)
         for key, value in out.items():
-            print(f"{key:>16}: {value}")
+            if isinstance(value, dict):
+                value = ", ".join(f"{k} {v:.3g}" for k, v in value.items())
+            elif key == "mean_speed":
+                value = f"{value:.4g} {ds.info.units}/s"
+            elif key == "frame_interval":
+                value = f"{value:g} s"
+            print(f"{key:>{width}}: {value}")
     return 0
 
 
@@ -446,6 +462,33 @@ def _predictor(args):
         if getattr(args, name, None) is not None:
             _set_generator(model, flag, **{name: getattr(args, name)})
     return model, device
+
+
+def _warn_if_trained_otherwise(spec: str, ds) -> None:
+    """One warning when the model was trained on a built-in dataset whose units or time step
+    differ from this data's (known ones only): its predictions would be in the wrong units or
+    at the wrong pace."""
+    if spec == "cv":
+        return
+    try:
+        header = read_checkpoint_header(ckpt.resolve_path(spec))
+        trained_on = header["config"]["data"]["dataset"]
+    except (TrajprefError, KeyError, TypeError):
+        return  # not a checkpoint this check can read: loading it has said what it needed
+    source = SPECS.get(trained_on)
+    if source is None:  # a user folder: its units and step were not recorded
+        return
+    problems = []
+    if ds.info.units not in ("", "unknown") and ds.info.units != source.units:
+        problems.append(f"this data is in {ds.info.units}, the model's in {source.units}")
+    step = ds.info.frame_interval
+    if step > 0 and not math.isclose(step, source.frame_interval, rel_tol=0.01):
+        problems.append(f"this data steps {step:g} s, the model's {source.frame_interval:g} s "
+                        f"(--time-step {source.frame_interval / step:.4g} reads it at the "
+                        "model's step)")  # fmt: skip
+    if problems:
+        warnings.warn(f"{spec} was trained on {trained_on}: {'; '.join(problems)}",
+                      stacklevel=2)  # fmt: skip
 
 
 def _set_generator(model, flag: str, **setting) -> None:
@@ -554,6 +597,7 @@ def cmd_evaluate(args) -> int:
     scorer = _scorer(args.scorer, device) if args.scorer else None
     model, samples = _selecting(args, model, device)
     ds = _load(args)
+    _warn_if_trained_otherwise(args.model, ds)
     start = time.perf_counter()
     result = evaluate(
         model, ds, samples, args.seed, device, args.max_agents,
@@ -617,6 +661,7 @@ def _evaluate_in_context(args) -> int:
         check_output_file(args.out)
     model, device = _predictor(args)
     ds = _load(args)
+    _warn_if_trained_otherwise(args.model, ds)
     result = evaluate_in_context(model, ds, cfg, args.samples, args.seed, device=device)
     out = {"dataset": ds.info.name, "split": ds.info.split, "protocol": ds.info.protocol,
            "model": args.model, "samples": args.samples, "seed": args.seed,
@@ -668,6 +713,7 @@ def cmd_predict(args) -> int:
         scorer = _scorer(args.scorer or args.model, device)
     model, samples = _selecting(args, model, device)
     ds = _load(args)
+    _warn_if_trained_otherwise(args.model, ds)
     arrays = predict_dataset(
         model, ds, samples, args.seed, device, args.max_agents,
         progress=not args.no_progress, scorer=scorer,
@@ -704,6 +750,7 @@ def cmd_plot(args) -> int:
         raise ConfigError(f"--scene {args.scene}: scene indices start at 0")
     model, device = _predictor(args)
     ds = _load(args)
+    _warn_if_trained_otherwise(args.model, ds)
     if not 0 <= args.scene < len(ds):
         raise TrajprefError(f"--scene {args.scene}: the split has scenes 0..{len(ds) - 1}")
     scene = ds[args.scene]

@@ -805,3 +805,16 @@ def test_a_generator_trains_on_agents_that_leave_the_view_and_the_denoiser_does_
     records = read_metrics(tmp_path / "g", "generator")
     assert all(np.isfinite(r["train_loss"]) for r in records)
     assert "partial_future: 4" in (tmp_path / "g" / "config.yaml").read_text()
+
+
+def test_the_epoch_line_keeps_a_small_learning_rate_readable(tmp_path, cfg, capsys):
+    # the line printed after each validated epoch rounds to 4 significant digits, not 4
+    # decimals: a rate of 1e-5 must not read 0.0
+    run_cfg = load_config(None, [*TINY_OVERRIDES, f"data.dataset={cfg.data.dataset}",
+                                 "denoiser.lr=1e-5", "denoiser.warmup_steps=0",
+                                 "denoiser.final_lr=1", "denoiser.epochs=1"])  # fmt: skip
+    train_stage("diffusion", run_cfg, tmp_path, device="cpu", progress=True, max_steps=1)
+    printed = capsys.readouterr()
+    lines = (printed.out + printed.err).splitlines()
+    line = next(x for x in lines if x.startswith("[denoiser] epoch"))
+    assert " lr=1e-05 " in line

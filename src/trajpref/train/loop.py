@@ -449,7 +449,9 @@ def fit(
                 **({"ema": average.state_dict(), "best_raw": best_raw}
                    if average is not None else {}),
             })  # fmt: skip
-            summary = {k: (round(v, 4) if isinstance(v, float) else v) for k, v in record.items()}
+            # 4 significant digits: a small learning rate (1e-5) must not print as 0.0
+            summary = {k: (float(f"{v:.4g}") if isinstance(v, float) else v)
+                       for k, v in record.items()}  # fmt: skip
             tqdm.write(f"[{stage.name}] " + " ".join(f"{k}={v}" for k, v in summary.items()))
         if stop:
             break
