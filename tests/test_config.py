@@ -192,3 +192,24 @@ def test_the_denoiser_part_of_a_data_config_leaves_out_the_generator_only_settin
     assert dataclasses.replace(part, partial_future=4) == data  # nothing else changed
     plain = DataConfig(flip=True)
     assert plain.denoiser_part() is plain  # nothing to leave out
+
+
+def test_a_shipped_config_is_found_by_its_name_from_anywhere(tmp_path, monkeypatch):
+    from trajpref.config import BUILTIN_CONFIGS, builtin_configs, resolve_config
+
+    monkeypatch.chdir(tmp_path)  # outside the repository: configs/ is not here
+    assert "zara1" in builtin_configs() and "robo-mix" in builtin_configs()
+    assert resolve_config("zara1") == BUILTIN_CONFIGS / "zara1.yaml"
+    assert resolve_config("hotel.yaml") == BUILTIN_CONFIGS / "hotel.yaml"
+    assert (
+        load_config("hotel").generator.epochs
+        == load_config(BUILTIN_CONFIGS / "hotel.yaml").generator.epochs
+    )
+    (tmp_path / "zara1.yaml").write_text("generator:\n  epochs: 3\n")
+    assert load_config("zara1.yaml").generator.epochs == 3  # a file here wins over the name
+    with pytest.raises(
+        ConfigError, match=r"nope: no such config file \(the shipped configs: eth, "
+    ):
+        load_config("nope")
+    with pytest.raises(ConfigError, match="no such config file"):
+        load_config("some/dir/zara1.yaml")  # a path is a path, not a name

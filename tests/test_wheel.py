@@ -60,6 +60,10 @@ def test_the_wheel_holds_the_zoo_and_stays_small(wheel):
         assert f"trajpref/zoo/{name}.safetensors" in names, name
         assert f"trajpref/zoo/{name}.md" in names, name
     assert "trajpref/zoo/index.json" in names
+    from trajpref.config import builtin_configs
+
+    for name in builtin_configs():  # --config NAME works from an installed wheel
+        assert f"trajpref/configs/{name}.yaml" in names, name
 
 
 @pytest.mark.wheel

@@ -909,6 +909,31 @@ def experiment_from_dict(data: dict[str, Any] | None) -> ExperimentConfig:
     return from_dict(ExperimentConfig, upgrade_config_dict(data or {}))
 
 
+BUILTIN_CONFIGS = Path(__file__).resolve().parent / "configs"
+"""The default configs of the published models, shipped with the package (the repository's
+``configs/`` links here)."""
+
+
+def builtin_configs() -> list[str]:
+    """Names of the shipped default configs (``zara1``, ``sdd``, ...), sorted."""
+    return sorted(p.stem for p in BUILTIN_CONFIGS.glob("*.yaml"))
+
+
+def resolve_config(path: str | Path) -> Path:
+    """A config file: ``path`` when it is one, else the shipped default config of that name
+    (``zara1`` or ``zara1.yaml``), so that ``--config zara1`` works outside the repository.
+    A clear error names the shipped configs otherwise."""
+    given = Path(path)
+    if given.is_file():
+        return given
+    if given.parent == Path(".") and given.suffix in ("", ".yaml"):
+        shipped = BUILTIN_CONFIGS / f"{given.stem}.yaml"
+        if shipped.is_file():
+            return shipped
+    raise ConfigError(f"{path}: no such config file (the shipped configs: "
+                      f"{', '.join(builtin_configs())}, e.g. --config zara1)")  # fmt: skip
+
+
 def load_config(
     path: str | Path | None,
     overrides: list[str] | None = None,
@@ -923,9 +948,7 @@ def load_config(
     """
     data: dict[str, Any] = copy.deepcopy(base) if base is not None else {}
     if path is not None:
-        path = Path(path)
-        if not path.is_file():
-            raise ConfigError(f"{path}: no such config file")
+        path = resolve_config(path)
         try:
             loaded = yaml.safe_load(path.read_text()) or {}
         except yaml.YAMLError as exc:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import torch
 
 from trajpref.errors import TrajprefError
@@ -27,6 +29,12 @@ def load_predictor(spec: str, device: torch.device | str = "cpu", sampler: Sampl
     try:
         path = checkpoint.resolve_path(spec)
     except TrajprefError:
+        folder = Path(spec)
+        if folder.is_dir():  # a run folder: name the checkpoint it holds
+            found = [folder / f"{n}{checkpoint.SUFFIX}" for n in ("finetune", "generator")]
+            found = [str(p) for p in found if p.is_file()]
+            hint = f": pass {' or '.join(found)}" if found else ""
+            raise TrajprefError(f"{spec}: a folder, not a checkpoint file{hint}") from None
         raise TrajprefError(
             f"{spec}: no such model (use 'cv', a published name such as zara1/generator "
             "(`trajpref models` lists them) or a checkpoint file)"
