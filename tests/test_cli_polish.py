@@ -79,6 +79,29 @@ def test_a_model_trained_in_other_units_or_at_another_step_is_named_in_one_warni
         assert (code, err) == (0, ""), model
 
 
+def test_options_that_change_nothing_say_so(capsys, walks):
+    base = ["evaluate", "--dataset", walks, "--model", "cv", "--samples", "4", "--keep", "2",
+            "--no-progress", "--device", "cpu"]  # fmt: skip
+    code, _, err = _run(capsys, *base, "--select", "kmeans", "--drop", "0.2")
+    assert code == 0
+    assert (
+        err.strip()
+        == "trajpref: warning: --select kmeans reads no score, so --drop changes nothing"
+    )
+    code, _, err = _run(capsys, *base, "--select", "kmeans")
+    assert (code, err) == (0, "")
+
+
+def test_a_built_in_dataset_ignores_folder_descriptions_and_says_so(capsys, data_root):
+    code, out, err = _run(capsys, "data", "stats", "--dataset", "zara1", "--units", "px",
+                          "--data-root", data_root)  # fmt: skip
+    assert code == 0 and "units: m" in out
+    assert (
+        "--frame-interval and --units describe a folder dataset; zara1 knows its own (m, "
+        "0.4 s), so they are ignored" in err
+    )
+
+
 def test_config_show_prints_every_key_with_its_docstring(capsys):
     code, out, _ = _run(capsys, "config", "show", "--set", "data.max_agents=64")
     assert code == 0

@@ -58,7 +58,8 @@ def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> N
         help="eth hotel univ zara1 zara2 sdd nba robo robo-sim robo-mix, or a folder of "
         "'frame agent x y' text files (with train/val/test sub-folders when present)",
     )
-    p.add_argument("--split", default=split_default, choices=["train", "val", "test"])
+    p.add_argument("--split", default=split_default, choices=["train", "val", "test"],
+                   help=f"which split to read (default {split_default})")  # fmt: skip
     p.add_argument("--data-root", default=None, help="data folder (default: $TRAJPREF_DATA)")
     p.add_argument("--frame-interval", type=float, default=0.4,
                    help="seconds between frames, for a folder dataset (default 0.4)")  # fmt: skip
@@ -357,6 +358,11 @@ def _check_data_args(args) -> None:
     if not (math.isfinite(args.frame_interval) and args.frame_interval > 0):
         raise ConfigError(f"--frame-interval must be a number of seconds > 0, "
                           f"got {args.frame_interval}")  # fmt: skip
+    if args.dataset in SPECS and (args.frame_interval != 0.4 or args.units != "unknown"):
+        spec = SPECS[args.dataset]
+        warnings.warn(f"--frame-interval and --units describe a folder dataset; {args.dataset} "
+                      f"knows its own ({spec.units}, {spec.frame_interval:g} s), so they are "
+                      "ignored", stacklevel=2)  # fmt: skip
     _read_options(args)  # --delimiter, --max-gap, --max-coord, --time-step
     if args.holdout_scene is not None:
         if not args.holdout_scene:
@@ -516,6 +522,12 @@ def _selecting(args, model, device):
                           per=args.select_per, seed=args.seed, bandwidth=args.bandwidth,
                           temperature=args.select_temperature,
                           trust_speed=args.trust_speed)  # fmt: skip
+    ignored = [flag for flag, value, default in (("--drop", args.drop, 0.3),
+               ("--select-temperature", args.select_temperature, 2.0),
+               ("--trust-speed", args.trust_speed, 0.0)) if value != default]  # fmt: skip
+    if ignored and not cfg.uses_score:
+        warnings.warn(f"--select {args.select} reads no score, so {', '.join(ignored)} "
+                      "changes nothing", stacklevel=2)  # fmt: skip
     scorer = None
     if cfg.uses_score:
         if args.scorer is None and args.model == "cv":
@@ -623,7 +635,9 @@ def cmd_evaluate(args) -> int:
         out["bins"] = result["bins"]
     bad = [k for k, v in out.items() if isinstance(v, float) and not math.isfinite(v)]
     if bad:
-        warnings.warn(f"{', '.join(bad)} not finite: the JSON output holds null", stacklevel=1)
+        where = "the JSON output holds null" if args.json or args.out else "printed as nan"
+        why = " (no agent has a neighbour)" if set(bad) <= {"col_i_pct", "col_ii_pct"} else ""
+        warnings.warn(f"{', '.join(bad)} not finite{why}: {where}", stacklevel=1)
     if args.out:
         write_json(args.out, out)
     if args.json:
