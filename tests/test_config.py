@@ -213,3 +213,12 @@ def test_a_shipped_config_is_found_by_its_name_from_anywhere(tmp_path, monkeypat
         load_config("nope")
     with pytest.raises(ConfigError, match="no such config file"):
         load_config("some/dir/zara1.yaml")  # a path is a path, not a name
+
+
+def test_a_checks_message_names_the_key_as_the_user_wrote_it():
+    with pytest.raises(ConfigError, match=r"^denoiser\.epochs must be > 0, got 0$"):
+        load_config(None, ["denoiser.epochs=0"])
+    with pytest.raises(ConfigError, match=r"^generator\.final_lr is a fraction of lr"):
+        load_config(None, ["generator.final_lr=2"])  # a field of the parent OptimConfig
+    with pytest.raises(ConfigError, match=r"^generator: budget_schedule anneals"):
+        load_config(None, ["generator.budget_schedule=true"])  # a message naming no field

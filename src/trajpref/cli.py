@@ -21,7 +21,14 @@ import torch
 
 from trajpref import __version__
 from trajpref.adapt import ADAPT_OBJECTIVES, ADAPT_PARAMS, AdaptConfig, evaluate_in_context
-from trajpref.config import ExperimentConfig, config_entries, field_docs, load_config
+from trajpref.config import (
+    ExperimentConfig,
+    ModelConfig,
+    config_entries,
+    field_docs,
+    in_section,
+    load_config,
+)
 from trajpref.data import PROTOCOLS, ReadOptions, hold_out_scene, load_dataset, mean_speed
 from trajpref.data.registry import SPECS
 from trajpref.data.trajnet import write_trajnet, write_trajnet_truth
@@ -506,7 +513,7 @@ def _set_generator(model, flag: str, **setting) -> None:
     try:  # ModelConfig.__post_init__ checks the value; the message names the flag
         generator.cfg = dataclasses.replace(generator.cfg, **setting)
     except ConfigError as err:
-        raise ConfigError(f"{flag}: {err}") from None
+        raise ConfigError(f"{flag}: {in_section(str(err), ModelConfig, 'model.')}") from None
 
 
 def _scorer(path: str, device):

@@ -804,6 +804,21 @@ def from_dict(cls: type, data: dict[str, Any] | None, where: str = "") -> Any:
         return cls(**kwargs)
     except TypeError as exc:
         raise ConfigError(f"{where or cls.__name__}: {exc}") from None
+    except ConfigError as exc:
+        if not where:
+            raise
+        raise ConfigError(in_section(str(exc), cls, where)) from None
+
+
+def in_section(message: str, cls: type, where: str) -> str:
+    """A dataclass's check message in the user's words: ``DenoiserTrainConfig.epochs must
+    be > 0`` becomes ``denoiser.epochs must be > 0`` (``where`` is the section's dotted
+    prefix); a message that names no field gets the section in front."""
+    named = [k.__name__ for k in cls.__mro__ if dataclasses.is_dataclass(k)]
+    out = message
+    for name in named:
+        out = out.replace(f"{name}.", where)
+    return out if out != message else f"{where.rstrip('.')}: {message}"
 
 
 def unknown_key_message(unknown: list[str], known: list[str], where: str = "") -> str:
