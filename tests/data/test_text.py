@@ -237,6 +237,14 @@ def test_map_coordinates_that_float32_would_round_away_are_refused_with_the_fix(
         DataError, match=r"4\.5e\+06 lose up to 0\.\d+ to float32 rounding.*subtract an"
     ):
         read_tracks(utm, options=big)
+    # 100 Hz tracks 10 km out: float32 rounds away 4 % of each recorded step, but read every
+    # 40 frame steps (a 0.4 s model's) the rounding is 0.1 % of a step
+    fast = tmp_path / "fast.txt"
+    rows100 = [(i, 1, 10000 + 0.013 * i, 0.0) for i in range(400)]
+    fast.write_text("".join(f"{f} {a} {x:.4f} {y:.4f}\n" for f, a, x, y in rows100))
+    with pytest.raises(DataError, match="float32 rounding"):
+        read_tracks(fast)
+    assert read_tracks(fast, options=ReadOptions(time_step=40)).num_rows > 0
     # an offset float32 carries to well within a step reads as before
     shifted = tmp_path / "shifted.txt"
     shifted.write_text("".join(f"{f} {a} {1000 + x:.2f} {2000 + y:.2f}\n" for f, a, x, y in rows))

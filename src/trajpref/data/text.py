@@ -338,7 +338,7 @@ def read_tracks(
             known = _parse_slow(path, layout, with_type)[2]  # the two parsers disagree on rows
         return [int(known[r]) for r in rows]
 
-    xy = _checked_xy(values, scale, options.max_coord, units, path, line_of)  # [R, 2]
+    xy = _checked_xy(values, scale, options, units, path, line_of)  # [R, 2]
     frames, f_idx = np.unique(values[:, 0], return_inverse=True)  # [F], [R]
     agents, a_idx = np.unique(values[:, 1], return_inverse=True)  # [A], [R]
     del values
@@ -354,16 +354,17 @@ def read_tracks(
     return Tracks(path, frames, agents, f_idx, a_idx, xy[order], agent_type)
 
 
-def _checked_xy(values, scale, max_coord, units, path, line_of) -> np.ndarray:
+def _checked_xy(values, scale, options, units, path, line_of) -> np.ndarray:
     """[R, 2] float32 positions after ``scale``; the first bad row (file order) raises."""
     finite = np.isfinite(values).all(1)  # [R]
     with np.errstate(over="ignore", invalid="ignore"):
         xy = (values[:, 2:4] * scale).astype(np.float32)  # [R, 2]
     fits = np.isfinite(xy).all(1)  # [R]
+    max_coord = options.max_coord
     inside = (np.abs(xy) <= max_coord).all(1)  # [R]
     bad = ~(finite & fits & inside)  # [R]
     if not bad.any():
-        _check_precision(values, scale, xy, path)
+        _check_precision(values, scale, xy, path, options.time_step)
         return xy
     r = int(np.argmax(bad))
     (line,) = line_of([r])
@@ -387,10 +388,13 @@ PRECISION_SHARE = 0.01
 file may carry (``_check_precision``)."""
 
 
-def _check_precision(values: np.ndarray, scale: float, xy: np.ndarray, path: Path) -> None:
+def _check_precision(
+    values: np.ndarray, scale: float, xy: np.ndarray, path: Path, time_step: float = 1.0
+) -> None:
     """Refuse a file whose coordinates are so large that float32, in which every model
-    computes, rounds them by more than ``PRECISION_SHARE`` of its median step between an
-    agent's consecutive rows (map coordinates such as UTM eastings and northings)."""
+    computes, rounds them by more than ``PRECISION_SHARE`` of its median step (between an
+    agent's consecutive rows, times ``time_step``: the step it is read at) — map coordinates
+    such as UTM eastings and northings."""
     exact = values[:, 2:4] * scale  # [R, 2] float64
     rounding = float(np.abs(exact - xy).max()) if len(xy) else 0.0
     if rounding == 0.0:
@@ -398,7 +402,7 @@ def _check_precision(values: np.ndarray, scale: float, xy: np.ndarray, path: Pat
     order = np.lexsort((values[:, 0], values[:, 1]))  # by agent, then frame
     same = values[order[1:], 1] == values[order[:-1], 1]  # consecutive rows of one agent
     steps = np.linalg.norm(np.diff(exact[order], axis=0), axis=1)[same]  # [S]
-    steps = steps[steps > 0]
+    steps = steps[steps > 0] * time_step
     if not len(steps) or rounding <= PRECISION_SHARE * float(np.median(steps)):
         return  # no movement to compare with, or rounding well within a step
     largest, median = float(np.abs(exact).max()), float(np.median(steps))
