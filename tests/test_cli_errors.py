@@ -59,6 +59,8 @@ CASES: dict[str, tuple[list[str], str]] = {
     "max agents 0": ([*EVAL, "--max-agents", "0"], r"--max-agents must be >= 1"),
     "unknown device": ([*EVAL, "--device", "tpu"], r"unknown device 'tpu'"),
     "missing model file": ([*EVAL, "--model", "{in}/nope.safetensors"], r"no such model"),
+    "a sampler for cv": ([*EVAL, "--model", "cv", "--sampler", "full"],
+                         r"--sampler applies to diffusion checkpoints; --model cv has none"),
     "a run folder as the model": ([*EVAL, "--model", "{run}"],
                                   r"a folder, not a checkpoint file: pass .*generator\.safet"),
     "random bytes as model": ([*EVAL, "--model", "{in}/rand.safetensors"],

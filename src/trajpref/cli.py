@@ -411,6 +411,8 @@ def _check_model_args(args) -> None:
     keep = getattr(args, "keep", None)
     if keep is not None and not 1 <= keep <= args.samples:
         raise ConfigError(f"--keep must lie in 1..--samples ({args.samples}), got {keep}")
+    if getattr(args, "sampler", None) is not None and args.model == "cv":
+        raise ConfigError("--sampler applies to diffusion checkpoints; --model cv has none")
 
 
 def cmd_data_stats(args) -> int:
