@@ -5,8 +5,9 @@
 
 For each dataset's default config and each pretraining stage (the denoiser by Eq. 2, the
 generator through the published denoiser, in the config's precision), two copies of the stage
-start from the same weights: one steps PyTorch's default AdamW (``foreach``), the other the
-fused one (``OptimConfig.fused``, ``train.loop.make_optimizer``). They take the same training
+start from the same weights: one steps PyTorch's default AdamW (on the CPU a loop over the
+parameters), the other the fused one (``OptimConfig.fused``, ``train.loop.make_optimizer``).
+They take the same training
 batches in turn, batch by batch, with the same noise and dropout draws, round after round, so
 both see the same machine load (which of the two goes first alternates); the first round is
 warm-up and not timed. A step is what the loop times: forward, backward, the gradient clip and

@@ -8,6 +8,7 @@ import math
 import os
 import re
 import shlex
+import warnings
 from pathlib import Path
 
 import pytest
@@ -77,6 +78,33 @@ def test_a_model_trained_in_other_units_or_at_another_step_is_named_in_one_warni
     for model in ("zara1/generator", tiny_run / "generator.safetensors", "cv"):
         code, _, err = _run(capsys, *base, "--model", model, "--units", "m")
         assert (code, err) == (0, ""), model
+
+
+def test_the_models_own_read_step_counts_in_the_step_check(capsys, walks, monkeypatch):
+    # a model trained on zara1 read every 2 frame steps (data.time_step) predicts 0.8 s steps
+    header = {"config": {"data": {"dataset": "zara1", "time_step": 2.0}}}
+    monkeypatch.setattr(cli, "read_checkpoint_header", lambda path: header)
+    monkeypatch.setattr(cli.ckpt, "resolve_path", lambda spec: spec)
+    from trajpref.data import load_dataset
+
+    data = load_dataset(str(walks), "test", frame_interval=0.8)
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        cli._warn_if_trained_otherwise("m.safetensors", data)
+    assert seen == []  # 0.8 s data for a 0.8 s model
+    data = load_dataset(str(walks), "test", frame_interval=0.4)
+    with pytest.warns(UserWarning, match=r"the model's 0\.8 s \(--time-step 2 reads it"):
+        cli._warn_if_trained_otherwise("m.safetensors", data)
+
+
+def test_lone_walkers_collision_rates_say_why_they_are_nan(capsys, tmp_path):
+    from synthetic import straight_rows, write_tracks
+
+    write_tracks(tmp_path / "alone" / "a.txt", straight_rows(24, agents=1))
+    code, out, err = _run(capsys, "evaluate", "--dataset", tmp_path / "alone", "--model", "cv",
+                          "--units", "m", "--no-progress")  # fmt: skip
+    assert code == 0
+    assert "not finite (no agent has a neighbour): printed as nan" in err
 
 
 def test_options_that_change_nothing_say_so(capsys, walks):

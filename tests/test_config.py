@@ -213,6 +213,8 @@ def test_a_shipped_config_is_found_by_its_name_from_anywhere(tmp_path, monkeypat
         load_config("nope")
     with pytest.raises(ConfigError, match="no such config file"):
         load_config("some/dir/zara1.yaml")  # a path is a path, not a name
+    with pytest.raises(ConfigError, match="no such config file"):
+        load_config("./hotel.yaml")  # so is one in this folder that is not there
 
 
 def test_a_checks_message_names_the_key_as_the_user_wrote_it():
@@ -222,3 +224,7 @@ def test_a_checks_message_names_the_key_as_the_user_wrote_it():
         load_config(None, ["generator.final_lr=2"])  # a field of the parent OptimConfig
     with pytest.raises(ConfigError, match=r"^generator: budget_schedule anneals"):
         load_config(None, ["generator.budget_schedule=true"])  # a message naming no field
+    with pytest.raises(ConfigError, match=r"^finetune\.gamma and gae_lambda must lie in"):
+        load_config(None, ["finetune.gamma=2"])  # already in the user's words: unchanged
+    with pytest.raises(ConfigError, match=r"^diffusion needs beta_start <= beta_end < 1"):
+        load_config(None, ["diffusion.beta_start=0.5"])  # "DiffusionConfig needs ..."

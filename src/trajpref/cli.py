@@ -454,7 +454,8 @@ def cmd_data_stats(args) -> int:
         width = max(len(k) for k in out)
         for key, value in out.items():
             if isinstance(value, dict):
-                value = ", ".join(f"{k} {v:.3g}" for k, v in value.items())
+                value = ", ".join(f"{k} {v}" if isinstance(v, int) else f"{k} {v:.3g}"
+                                  for k, v in value.items())  # fmt: skip
             elif key == "mean_speed":
                 value = f"{value:.4g} {ds.info.units}/s"
             elif key == "frame_interval":
@@ -488,7 +489,8 @@ def _warn_if_trained_otherwise(spec: str, ds) -> None:
     try:
         header = read_checkpoint_header(ckpt.resolve_path(spec))
         trained_on = header["config"]["data"]["dataset"]
-    except (TrajprefError, KeyError, TypeError):
+        read_every = float(header["config"]["data"].get("time_step", 1.0))  # data.time_step
+    except (TrajprefError, KeyError, TypeError, ValueError):
         return  # not a checkpoint this check can read: loading it has said what it needed
     source = SPECS.get(trained_on)
     if source is None:  # a user folder: its units and step were not recorded
@@ -496,10 +498,10 @@ def _warn_if_trained_otherwise(spec: str, ds) -> None:
     problems = []
     if ds.info.units not in ("", "unknown") and ds.info.units != source.units:
         problems.append(f"this data is in {ds.info.units}, the model's in {source.units}")
-    step = ds.info.frame_interval
-    if step > 0 and not math.isclose(step, source.frame_interval, rel_tol=0.01):
-        problems.append(f"this data steps {step:g} s, the model's {source.frame_interval:g} s "
-                        f"(--time-step {source.frame_interval / step:.4g} reads it at the "
+    step, model_step = ds.info.frame_interval, source.frame_interval * read_every
+    if step > 0 and not math.isclose(step, model_step, rel_tol=0.01):
+        problems.append(f"this data steps {step:g} s, the model's {model_step:g} s "
+                        f"(--time-step {model_step / step:.4g} reads it at the "
                         "model's step)")  # fmt: skip
     if problems:
         warnings.warn(f"{spec} was trained on {trained_on}: {'; '.join(problems)}",
@@ -645,7 +647,8 @@ def cmd_evaluate(args) -> int:
     bad = [k for k, v in out.items() if isinstance(v, float) and not math.isfinite(v)]
     if bad:
         where = "the JSON output holds null" if args.json or args.out else "printed as nan"
-        why = " (no agent has a neighbour)" if set(bad) <= {"col_i_pct", "col_ii_pct"} else ""
+        collisions = {"col_i_pct", "col_ii_pct", "col_gt_pct"}
+        why = " (no agent has a neighbour)" if set(bad) <= collisions else ""
         warnings.warn(f"{', '.join(bad)} not finite{why}: {where}", stacklevel=1)
     if args.out:
         write_json(args.out, out)

@@ -9,6 +9,7 @@ import dataclasses
 import difflib
 import inspect
 import math
+import os
 import textwrap
 import typing
 import warnings
@@ -517,9 +518,10 @@ class OptimConfig:
     (``Stage.networks``). On the 2-core CPU its speed-up was not separable from the machine's
     drift (docs/pretraining.md, "Compiled training steps"), so every config leaves it off."""
     fused: bool = False
-    """AdamW's fused implementation (one kernel per step instead of PyTorch's default
-    ``foreach`` one): the same arithmetic, the weights equal up to float rounding, a cheaper
-    optimiser step (docs/pretraining.md, "Fused AdamW steps")."""
+    """AdamW's fused implementation (one kernel per step instead of PyTorch's default, a loop
+    over the parameters on the CPU and ``foreach`` on a GPU): the same arithmetic, the weights
+    equal up to float rounding, a cheaper optimiser step (docs/pretraining.md, "Fused AdamW
+    steps"). A resumed run follows this setting, whatever its saved state used."""
     ema_epochs: float = 0.0
     """Time constant, in epochs, of an exponential moving average of the trained weights
     (0: off). When on, validation and the best checkpoint use the average, the raw weights
@@ -543,7 +545,7 @@ class OptimConfig:
             raise ConfigError("max_minutes must be > 0 or null")
         if self.budget_schedule and self.max_minutes is None:
             raise ConfigError("budget_schedule anneals the schedule by the time budget: "
-                              "it needs max_minutes (e.g. generator.max_minutes=30)")  # fmt: skip
+                              "it needs the same stage's max_minutes (e.g. 30)")  # fmt: skip
         if self.eval_every_minutes is not None and not (
             self.eval_every_minutes > 0 and math.isfinite(self.eval_every_minutes)
         ):
@@ -814,10 +816,12 @@ def in_section(message: str, cls: type, where: str) -> str:
     """A dataclass's check message in the user's words: ``DenoiserTrainConfig.epochs must
     be > 0`` becomes ``denoiser.epochs must be > 0`` (``where`` is the section's dotted
     prefix); a message that names no field gets the section in front."""
+    if message.startswith(where):  # it names its key as the user wrote it already
+        return message
     named = [k.__name__ for k in cls.__mro__ if dataclasses.is_dataclass(k)]
     out = message
     for name in named:
-        out = out.replace(f"{name}.", where)
+        out = out.replace(f"{name}.", where).replace(f"{name} ", f"{where.rstrip('.')} ")
     return out if out != message else f"{where.rstrip('.')}: {message}"
 
 
@@ -941,7 +945,8 @@ def resolve_config(path: str | Path) -> Path:
     given = Path(path)
     if given.is_file():
         return given
-    if given.parent == Path(".") and given.suffix in ("", ".yaml"):
+    bare = "/" not in str(path) and os.sep not in str(path)  # a name, not a path
+    if bare and given.suffix in ("", ".yaml"):
         shipped = BUILTIN_CONFIGS / f"{given.stem}.yaml"
         if shipped.is_file():
             return shipped

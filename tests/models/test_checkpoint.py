@@ -217,6 +217,18 @@ def test_a_published_generator_copied_without_its_denoiser_says_what_to_copy(tmp
     assert ckpt.load(alone / "g.safetensors")["denoiser"]["kind"] == "denoiser"
 
 
+def test_a_denoiser_named_by_its_old_pt_name_is_found_as_safetensors(tmp_path, cfg):
+    # generators published before the .safetensors switch name "denoiser.pt"; beside the
+    # converted denoiser they still load, with the rename's warning
+    pub = tmp_path / "pub"
+    ckpt.publish(_publish_generator(tmp_path, cfg, 1), pub / "g.safetensors")
+    payload = ckpt._read_file(pub / "g.safetensors")
+    payload["denoiser_ref"] = {**payload["denoiser_ref"], "path": "denoiser.pt"}
+    ckpt.save(pub / "old.safetensors", payload, half=True)
+    with pytest.warns(FutureWarning, match="is now"):
+        assert ckpt.load(pub / "old.safetensors")["denoiser"]["kind"] == "denoiser"
+
+
 # ----------------------------------------------------------------------------- legacy
 
 

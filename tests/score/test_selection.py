@@ -220,8 +220,10 @@ def test_cli_bandwidth_and_temperature_reach_the_selection(tiny_run, walks, caps
     res = json.loads(capsys.readouterr().out)
     assert (res["bandwidth"], res["select_temperature"]) == (1.0, 0.5)
     assert set(seen) == {(1.0, 0.5)}
-    assert main([*base, "--bandwidth", "0"]) == 2
-    assert "bandwidth and temperature must be > 0" in capsys.readouterr().err
+    for flag, bad in (("--bandwidth", "0"), ("--bandwidth", "nan"),
+                      ("--select-temperature", "inf")):  # fmt: skip
+        assert main([*base, flag, bad]) == 2
+        assert "bandwidth and temperature must be finite and > 0" in capsys.readouterr().err
 
 
 def test_untrusted_agents_fall_back_to_the_score_free_counterpart():

@@ -65,13 +65,14 @@ def test_the_warm_up_is_by_steps_even_with_a_budget_schedule():
 
 
 def test_a_budget_schedule_without_a_budget_is_a_clear_error():
-    with pytest.raises(ConfigError, match="budget_schedule .* needs max_minutes"):
+    with pytest.raises(ConfigError, match="budget_schedule .* needs the same stage.s max_minutes"):
         OptimConfig(budget_schedule=True)
 
 
 def test_the_fused_optimiser_steps_like_the_default_up_to_float_rounding():
     # docs/pretraining.md, "Fused AdamW steps": 20 steps of the same gradients on a small
-    # network; the default is PyTorch's foreach AdamW, fused does the same sums in one kernel
+    # network; PyTorch's default loops over the parameters on the CPU, fused does the same sums
+    # in one kernel
     torch.manual_seed(0)
     shapes = [(64, 32), (64,), (8, 64), (8,)]
     start = [torch.randn(s) for s in shapes]

@@ -216,6 +216,22 @@ def test_resume_continues_to_the_same_result(tmp_path, cfg):
         torch.testing.assert_close(last_stop["trainable"][key], value)
 
 
+def test_a_resumed_run_follows_its_configs_fused_setting_not_its_states(tmp_path, cfg):
+    # AdamW's state dict carries its "fused" flag; resuming with another setting must not
+    # silently keep the old implementation while the run's config says otherwise
+    stop = tmp_path / "stop"
+    plain = [*TINY_OVERRIDES, f"data.dataset={cfg.data.dataset}", "denoiser.fused=false"]
+    train_stage("diffusion", load_config(None, plain), stop, device="cpu", progress=False,
+                max_steps=_steps(cfg))  # fmt: skip
+    saved = torch.load(stop / "denoiser_last.pt", weights_only=True)["optimizer"]
+    assert saved["param_groups"][0]["fused"] is None
+    fused = load_config(None, [*plain[:-1], "denoiser.fused=true"])
+    train_stage("diffusion", fused, stop, device="cpu", progress=False,
+                resume=str(stop / "denoiser_last.pt"))  # fmt: skip
+    saved = torch.load(stop / "denoiser_last.pt", weights_only=True)["optimizer"]
+    assert saved["param_groups"][0]["fused"] is True
+
+
 def test_a_fresh_run_in_a_used_folder_moves_the_earlier_log_aside(tmp_path, cfg):
     """A resumed run appends to its own log; a run started anew in the same folder keeps
     its log to its own epochs and moves the earlier one aside (it was appended to before)."""

@@ -267,14 +267,15 @@ def load(path: str | Path) -> dict[str, Any]:
     _attach_weights(payload, path)
     ref = payload.get("denoiser_ref")
     if payload["kind"] == "generator" and "denoiser" not in payload and ref is not None:
-        den_path = path.parent / ref["path"]
-        if not den_path.is_file():
+        try:  # an older file may name denoiser.pt, now converted to .safetensors
+            den_path = resolve_path(path.parent / ref["path"])
+        except TrajprefError:
             raise TrajprefError(
                 f"{path}: this generator names its denoiser instead of embedding it (a "
                 f"published file): it needs {ref['path']} (hash {ref['hash']}) beside it, in "
                 f"{path.parent}; copy the denoiser it was published with there (`trajpref "
                 "models` lists them) or load it by its published name"
-            )
+            ) from None
         den = _load_file(den_path)
         found = state_hash(den["state_dict"]) if den.get("kind") == "denoiser" else None
         if found != ref["hash"]:

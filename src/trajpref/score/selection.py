@@ -89,8 +89,9 @@ class SelectionConfig:
             raise ConfigError("selection drop must lie in [0, 1)")
         if self.iters < 0:
             raise ConfigError("selection iters must be >= 0")
-        if self.bandwidth <= 0 or self.temperature <= 0:
-            raise ConfigError("selection bandwidth and temperature must be > 0")
+        if not all(math.isfinite(v) and v > 0 for v in (self.bandwidth, self.temperature)):
+            raise ConfigError(f"selection bandwidth and temperature must be finite and > 0, "
+                              f"got {self.bandwidth} and {self.temperature}")  # fmt: skip
         if not self.trust_speed >= 0:
             raise ConfigError(f"selection trust_speed must be >= 0, got {self.trust_speed}")
 

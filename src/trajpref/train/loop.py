@@ -85,12 +85,19 @@ def read_metrics(run_dir: str | Path, stage: str) -> list[dict[str, Any]]:
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
+def fused_flag(cfg: OptimConfig) -> bool | None:
+    """AdamW's ``fused`` argument for ``cfg``: True, or None (PyTorch's default: a loop over
+    the parameters on the CPU, ``foreach`` on a GPU)."""
+    return True if cfg.fused else None
+
+
 def make_optimizer(params: list[nn.Parameter], cfg: OptimConfig) -> torch.optim.AdamW:
     """The stage's AdamW at ``cfg.lr`` and ``cfg.weight_decay``: PyTorch's default
     implementation, or its fused one with ``cfg.fused`` (the same arithmetic, equal up to
-    float rounding; docs/pretraining.md, "Fused AdamW steps")."""
-    extra = {"fused": True} if cfg.fused else {}
-    return torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay, **extra)
+    float rounding; docs/pretraining.md, "Fused AdamW steps"). A resumed run takes the
+    config's choice, not the one its saved state was made with (``fit``)."""
+    return torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay,
+                             fused=fused_flag(cfg))  # fmt: skip
 
 
 def _lr_lambda(
@@ -296,6 +303,8 @@ def fit(
         )
         stage.trainable.load_state_dict(state["trainable"])
         optimizer.load_state_dict(state["optimizer"])
+        for group in optimizer.param_groups:  # the state brings its own; the config decides
+            group["fused"] = fused_flag(optim_cfg)
         sched.load_state_dict(state["scheduler"])
         noise_gen.set_state(state["noise_gen"])
         aug_gen.set_state(state["aug_gen"])
