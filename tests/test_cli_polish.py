@@ -113,11 +113,15 @@ def test_options_that_change_nothing_say_so(capsys, walks):
     code, _, err = _run(capsys, *base, "--select", "kmeans", "--drop", "0.2")
     assert code == 0
     assert (
-        err.strip()
-        == "trajpref: warning: --select kmeans reads no score, so --drop changes nothing"
+        err.strip() == "trajpref: warning: --select kmeans does not read --drop: it changes nothing"
     )
     code, _, err = _run(capsys, *base, "--select", "kmeans")
     assert (code, err) == (0, "")
+    code, _, err = _run(capsys, *base, "--select", "facility", "--bandwidth", "1",
+                        "--select-temperature", "1")  # fmt: skip
+    assert code == 0  # facility reads its bandwidth, not a temperature (it reads no score)
+    assert err.strip() == ("trajpref: warning: --select facility does not read "
+                           "--select-temperature: it changes nothing")  # fmt: skip
 
 
 def test_a_built_in_dataset_ignores_folder_descriptions_and_says_so(capsys, data_root):
