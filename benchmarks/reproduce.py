@@ -697,10 +697,12 @@ def render(cells: dict, paper: dict, opts, cpu: dict) -> str:
         *[f"- {n}" for n in paper["notes"]],
         f"- SDD: {paper['text_only']['sdd']}",
         "- Sampling: the published generators' tau denoising steps are posterior means since "
-        '2026-11-24 (docs/pretraining.md, "The switch"), so the evaluated `pretrained` cells '
-        "use them; the RLHF, RLHF-ReS and best cells that come from result rows (†) are the "
-        "equal-budget runs of 2026-11-25 from the current generators (docs/rlhf.md); the "
-        "older runs from the ancestral-step generators are rows with the suffix `-ancestral`.",
+        '2026-11-24 (docs/pretraining.md, "The switch"), and the default generators have had '
+        "none (`model.tau: 0`) since 2026-11-27 to 2026-12-01, so the evaluated `pretrained` "
+        "cells are their samples as drawn; the RLHF, RLHF-ReS and best cells that come from "
+        "result rows (†) are equal-budget runs from the current generators, each trained on "
+        "the date its source line below gives (docs/rlhf.md); the older runs from the "
+        "ancestral-step generators are rows with the suffix `-ancestral`.",
         "",
         "## Where each cell comes from",
         "",

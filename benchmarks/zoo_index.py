@@ -59,7 +59,8 @@ LIMITS = {
     "not use, so this is a variant beside eth's default, never the default; eth's validation "
     "split cannot choose it (docs/pretraining.md, 'eth at two paces').",
     "zara1/generator": "The CPU default (160 generator epochs without denoising steps, dropout "
-    "0.2; best validation epoch 72) is 0.04 m short of LED's own minFDE20 (0.18 / 0.26); the "
+    "0.2; its best validation epoch is under Training above) is 0.04 m short of LED's own "
+    "minFDE20 (0.18 / 0.26); the "
     "GPU-trained `generator-long` (160 epochs with the tau = 5 steps; its weights left the "
     "tree on 2026-11-28, `git show 793f59a:src/trajpref/zoo/zara1/generator-long.safetensors`) "
     "is no better on the test split (docs/pretraining.md).",
