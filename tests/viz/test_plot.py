@@ -84,3 +84,29 @@ def test_plot_curves_lays_panels_in_a_grid_and_refuses_none(tmp_path):
     assert w4 > 2 * w1 and h4 > 1.5 * h1  # three columns, two rows
     with pytest.raises(ValueError, match="at least one panel"):
         plot_curves({}, tmp_path / "none.png", "x", "y")
+
+
+def test_a_tall_or_flat_scene_is_shown_in_a_readable_box(tmp_path, monkeypatch):
+    # one walker going straight down 10 m within 0.2 m of x: the panels would be a sliver;
+    # the shown box is widened to an aspect of at most 1.3 (at least 0.35 the other way),
+    # and every plotted point stays inside it
+    import trajpref.viz.plot as plot
+
+    seen = {}
+    original = plot._save
+
+    def keep(fig, out):
+        seen["axes"] = [(ax.get_xlim(), ax.get_ylim()) for ax in fig.axes]
+        return original(fig, out)
+
+    monkeypatch.setattr(plot, "_save", keep)
+    t = np.arange(20, dtype=float)
+    path = np.stack([0.01 * np.sin(t), -0.5 * t], -1)  # [20, 2]
+    for walk in (path, path[:, ::-1]):  # tall, then flat
+        hist, fut = walk[None, :8], walk[None, 8:]
+        pred = fut[None] + np.zeros((3, 1, 12, 2))
+        plot_scene_scored(hist, fut, pred, np.zeros((3, 1)), tmp_path / "t.png")
+        (x0, x1), (y0, y1) = seen["axes"][0]
+        assert 0.35 - 1e-6 <= (y1 - y0) / (x1 - x0) <= 1.3 + 1e-6
+        assert x0 <= walk[:, 0].min() and walk[:, 0].max() <= x1
+        assert y0 <= walk[:, 1].min() and walk[:, 1].max() <= y1

@@ -80,11 +80,18 @@ def plot_scene_scored(
     """
     p = history.shape[0]
     colours = plt.get_cmap("tab10" if p <= 10 else "tab20")
-    pts = np.concatenate([history.reshape(-1, 2), future.reshape(-1, 2)])  # [M, 2]
-    span = np.ptp(pts, axis=0) + 1e-6  # [2]
-    aspect = float(np.clip(span[1] / span[0], 0.35, 1.3))
+    shown = [pred[np.argsort(-scores[:, i])[:top], i] for i in range(p)]  # P x [top, T_f, 2]
+    pts = np.concatenate([history.reshape(-1, 2), future.reshape(-1, 2),
+                          *(s.reshape(-1, 2) for s in shown)])  # fmt: skip  # [M, 2]
+    lo, hi = pts.min(0), pts.max(0)  # [2]
+    centre, half = (lo + hi) / 2, (hi - lo) / 2 * 1.05 + 1e-6  # [2], [2] with a margin
+    # the shown box is widened (or heightened) to an aspect in [0.35, 1.3], so that a scene
+    # much taller or wider than the other way keeps readable panels and titles
+    aspect = float(np.clip(half[1] / half[0], 0.35, 1.3))
+    half = np.maximum(half, [half[1] / aspect, half[0] * aspect])  # [2]
+    # "compressed": the two equal-aspect panels keep no empty band around them
     fig, axes = plt.subplots(1, 2, figsize=(11, 1.2 + 5 * aspect), dpi=120, sharex=True,
-                             sharey=True)  # fmt: skip
+                             sharey=True, layout="compressed")  # fmt: skip
     for i in range(p):
         c = colours(i % colours.N)
         for ax in axes:
@@ -101,9 +108,13 @@ def plot_scene_scored(
             axes[1].plot(path[:, 0], path[:, 1], color=c, lw=2.0 - 0.6 * rank,
                          alpha=0.3 + 0.7 * weight)  # fmt: skip
     axes[0].set_title("ground truth", fontsize=9)
-    axes[1].set_title(f"top-{top} samples per agent by diffusion score (darker = higher)",
+    # a tall scene makes narrow panels: the long title then takes two lines, not its neighbour's
+    sep = "\n" if aspect > 0.8 else " "
+    axes[1].set_title(f"top-{top} samples per agent{sep}by diffusion score (darker = higher)",
                       fontsize=9)  # fmt: skip
     for ax in axes:
+        ax.set_xlim(centre[0] - half[0], centre[0] + half[0])
+        ax.set_ylim(centre[1] - half[1], centre[1] + half[1])
         ax.set_aspect("equal", adjustable="box")
         ax.set_xlabel(f"x [{units}]")
         ax.grid(alpha=0.3)
@@ -231,7 +242,8 @@ def _save(fig, out: str | Path) -> Path:
     """Lay out, write as PNG through a temporary file, close. The saved canvas grows to hold
     every title and label (``bbox_inches="tight"``), so nothing is clipped however long the
     title or however tall the axes' aspect."""
-    fig.tight_layout()
+    if fig.get_layout_engine() is None:  # a figure with its own layout engine keeps it
+        fig.tight_layout()
     out = Path(out)
     try:
         with atomic_path(out) as tmp:
