@@ -21,18 +21,14 @@ benchmarks/results/meta/optimizer_speed.json. The rule that reads it: docs/pretr
 
 from __future__ import annotations
 
-import argparse
 import copy
 import dataclasses
-import itertools
 import time
 from pathlib import Path
 
 import torch
+from precision_speed import step_timing_args, timing_batches
 
-from trajpref.config import load_config
-from trajpref.data import load_dataset
-from trajpref.data.loader import SceneLoader
 from trajpref.models import checkpoint as ckpt
 from trajpref.results import write_meta
 from trajpref.train.loop import make_optimizer, precision_autocast
@@ -76,26 +72,12 @@ def time_arms(stages: dict, optim_cfg, batches, rounds: int, device: torch.devic
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--datasets", nargs="+", default=["hotel"])
-    parser.add_argument("--data-root", default=None, help="default: $TRAJPREF_DATA")
-    parser.add_argument("--batches", type=int, default=4, help="training batches per round")
-    parser.add_argument("--rounds", type=int, default=3, help="timed rounds (after one warm-up)")
-    parser.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
-    parser.add_argument("--out", default=str(OUT))
-    args = parser.parse_args()
-    if args.batches < 1 or args.rounds < 1 or args.threads < 1:
-        parser.error("--batches, --rounds and --threads must be >= 1")
-    torch.set_num_threads(args.threads)
+    args = step_timing_args(__doc__.splitlines()[0], "hotel", OUT)
     device = torch.device("cpu")
 
     entries = {}
     for dataset in args.datasets:
-        cfg = load_config(ROOT / "configs" / f"{dataset}.yaml")
-        train = load_dataset(cfg.data.dataset, "train", args.data_root)
-        loader = SceneLoader(train, max_agents=cfg.data.max_agents, shuffle=True, seed=0)
-        raw = [b.to(device) for b in itertools.islice(loader, args.batches)]
-        agents = sum(b.num_agents for b in raw) * args.rounds
+        cfg, train, raw, agents = timing_batches(dataset, args, device)
         torch.manual_seed(0)
         stages = {"denoiser": (build_denoiser_stage(cfg, train, train, device)[0], cfg.denoiser)}
         published = ROOT / "models" / dataset / f"denoiser{ckpt.SUFFIX}"

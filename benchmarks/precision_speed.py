@@ -65,27 +65,40 @@ def time_stage(stage, batches, rounds: int, device: torch.device) -> dict[str, f
     return seconds
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--datasets", nargs="+", default=["zara1"])
+def step_timing_args(description: str, dataset: str, out: Path) -> argparse.Namespace:
+    """The options of the benchmarks that time training steps side by side (this one and
+    ``optimizer_speed.py``), parsed and checked; torch then runs on ``--threads`` threads."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--datasets", nargs="+", default=[dataset])
     parser.add_argument("--data-root", default=None, help="default: $TRAJPREF_DATA")
     parser.add_argument("--batches", type=int, default=4, help="training batches per round")
     parser.add_argument("--rounds", type=int, default=3, help="timed rounds (after one warm-up)")
     parser.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
-    parser.add_argument("--out", default=str(OUT))
+    parser.add_argument("--out", default=str(out))
     args = parser.parse_args()
     if args.batches < 1 or args.rounds < 1 or args.threads < 1:
         parser.error("--batches, --rounds and --threads must be >= 1")
     torch.set_num_threads(args.threads)
+    return args
+
+
+def timing_batches(dataset: str, args: argparse.Namespace, device: torch.device):
+    """A default config, its training split and the first ``--batches`` batches of it (the
+    same for every arm), and the agent-windows the timed rounds step over."""
+    cfg = load_config(ROOT / "configs" / f"{dataset}.yaml")
+    train = load_dataset(cfg.data.dataset, "train", args.data_root)
+    loader = SceneLoader(train, max_agents=cfg.data.max_agents, shuffle=True, seed=0)
+    batches = [b.to(device) for b in itertools.islice(loader, args.batches)]
+    return cfg, train, batches, sum(b.num_agents for b in batches) * args.rounds
+
+
+def main() -> None:
+    args = step_timing_args(__doc__.splitlines()[0], "zara1", OUT)
     device = torch.device("cpu")
 
     entries = {}
     for dataset in args.datasets:
-        cfg = load_config(ROOT / "configs" / f"{dataset}.yaml")
-        train = load_dataset(cfg.data.dataset, "train", args.data_root)
-        loader = SceneLoader(train, max_agents=cfg.data.max_agents, shuffle=True, seed=0)
-        batches = [b.to(device) for b in itertools.islice(loader, args.batches)]
-        agents = sum(b.num_agents for b in batches) * args.rounds
+        cfg, train, batches, agents = timing_batches(dataset, args, device)
         denoiser_stage, _ = build_denoiser_stage(cfg, train, train, device)
         stages = {"denoiser": denoiser_stage}
         published = ROOT / "models" / dataset / f"denoiser{ckpt.SUFFIX}"
