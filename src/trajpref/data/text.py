@@ -338,10 +338,9 @@ def read_tracks(
             known = _parse_slow(path, layout, with_type)[2]  # the two parsers disagree on rows
         return [int(known[r]) for r in rows]
 
-    xy = _checked_xy(values, scale, options, units, path, line_of)  # [R, 2]
+    xy, rounding = _checked_xy(values, scale, options.max_coord, units, path, line_of)  # [R, 2]
     frames, f_idx = np.unique(values[:, 0], return_inverse=True)  # [F], [R]
     agents, a_idx = np.unique(values[:, 1], return_inverse=True)  # [A], [R]
-    del values
     agent_type = np.zeros(len(agents), np.int64)  # [A]
     if kinds is not None:
         agent_type[a_idx] = _kind_flags(kinds, path, line_of)  # last row of an agent wins
@@ -351,21 +350,24 @@ def read_tracks(
     same = (f_idx[1:] == f_idx[:-1]) & (a_idx[1:] == a_idx[:-1])  # [R-1]
     if same.any():
         _raise_duplicate(np.flatnonzero(same), order, f_idx, a_idx, frames, agents, path, line_of)
+    if rounding:  # float32 rounded the positions: by how much of a step, in (agent, frame) order
+        _check_precision(values[order, 2:4] * scale, a_idx, rounding, path, options.time_step)
+    del values
     return Tracks(path, frames, agents, f_idx, a_idx, xy[order], agent_type)
 
 
-def _checked_xy(values, scale, options, units, path, line_of) -> np.ndarray:
-    """[R, 2] float32 positions after ``scale``; the first bad row (file order) raises."""
+def _checked_xy(values, scale, max_coord, units, path, line_of) -> tuple[np.ndarray, float]:
+    """[R, 2] float32 positions after ``scale``, and the largest rounding float32 made in them;
+    the first bad row (file order) raises."""
     finite = np.isfinite(values).all(1)  # [R]
     with np.errstate(over="ignore", invalid="ignore"):
-        xy = (values[:, 2:4] * scale).astype(np.float32)  # [R, 2]
+        exact = values[:, 2:4] * scale  # [R, 2] float64
+        xy = exact.astype(np.float32)  # [R, 2]
     fits = np.isfinite(xy).all(1)  # [R]
-    max_coord = options.max_coord
     inside = (np.abs(xy) <= max_coord).all(1)  # [R]
     bad = ~(finite & fits & inside)  # [R]
     if not bad.any():
-        _check_precision(values, scale, xy, path, options.time_step)
-        return xy
+        return xy, float(np.abs(exact - xy).max()) if len(xy) else 0.0
     r = int(np.argmax(bad))
     (line,) = line_of([r])
     if not finite[r]:
@@ -389,19 +391,15 @@ file may carry (``_check_precision``)."""
 
 
 def _check_precision(
-    values: np.ndarray, scale: float, xy: np.ndarray, path: Path, time_step: float = 1.0
+    exact: np.ndarray, agent: np.ndarray, rounding: float, path: Path, time_step: float = 1.0
 ) -> None:
     """Refuse a file whose coordinates are so large that float32, in which every model
-    computes, rounds them by more than ``PRECISION_SHARE`` of its median step (between an
-    agent's consecutive rows, times ``time_step``: the step it is read at) — map coordinates
-    such as UTM eastings and northings."""
-    exact = values[:, 2:4] * scale  # [R, 2] float64
-    rounding = float(np.abs(exact - xy).max()) if len(xy) else 0.0
-    if rounding == 0.0:
-        return
-    order = np.lexsort((values[:, 0], values[:, 1]))  # by agent, then frame
-    same = values[order[1:], 1] == values[order[:-1], 1]  # consecutive rows of one agent
-    steps = np.linalg.norm(np.diff(exact[order], axis=0), axis=1)[same]  # [S]
+    computes, rounds them (by up to ``rounding``) by more than ``PRECISION_SHARE`` of its
+    median step (between an agent's consecutive rows, times ``time_step``: the step it is read
+    at) — map coordinates such as UTM eastings and northings. ``exact`` [R, 2] are the float64
+    positions and ``agent`` [R] their agents, rows in (agent, frame) order."""
+    same = agent[1:] == agent[:-1]  # [R-1] consecutive rows of one agent
+    steps = np.linalg.norm(np.diff(exact, axis=0), axis=1)[same]  # [S]
     steps = steps[steps > 0] * time_step
     if not len(steps) or rounding <= PRECISION_SHARE * float(np.median(steps)):
         return  # no movement to compare with, or rounding well within a step
