@@ -50,7 +50,7 @@ from trajpref.models.registry import load_predictor
 from trajpref.rl.presets import finetune_config
 from trajpref.score import TrajectoryScorer, score_timesteps
 from trajpref.score.scorer import PRECISIONS
-from trajpref.score.selection import METHODS, WEIGHTED, SelectingPredictor, SelectionConfig
+from trajpref.score.selection import METHODS, SelectingPredictor, SelectionConfig
 from trajpref.survey.cli import add_parser as add_survey_parser
 from trajpref.train import compare
 from trajpref.train.run import finetune, last_state_path, train_stage
@@ -533,13 +533,9 @@ def _selecting(args, model, device):
                           per=args.select_per, seed=args.seed, bandwidth=args.bandwidth,
                           temperature=args.select_temperature,
                           trust_speed=args.trust_speed)  # fmt: skip
-    reads = {"--drop": cfg.uses_score, "--trust-speed": cfg.uses_score,
-             "--select-temperature": args.select in WEIGHTED,
-             "--bandwidth": args.select in ("facility", "score-facility")}  # fmt: skip
-    given = {"--drop": args.drop != 0.3, "--trust-speed": args.trust_speed != 0.0,
-             "--select-temperature": args.select_temperature != 2.0,
-             "--bandwidth": args.bandwidth != 0.5}  # fmt: skip
-    ignored = [flag for flag in reads if given[flag] and not reads[flag]]
+    flags = {"drop": "--drop", "trust_speed": "--trust-speed", "bandwidth": "--bandwidth",
+             "temperature": "--select-temperature"}  # fmt: skip
+    ignored = [flags[name] for name in cfg.unread()]
     if ignored:
         warnings.warn(f"--select {args.select} does not read {', '.join(ignored)}: "
                       "it changes nothing", stacklevel=2)  # fmt: skip

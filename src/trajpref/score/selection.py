@@ -99,6 +99,16 @@ class SelectionConfig:
     def uses_score(self) -> bool:
         return USES_SCORE.get(self.method, False)
 
+    def unread(self) -> list[str]:
+        """The settings given away from their defaults that this method does not read (the
+        score's drop and pace gate without the score, a temperature outside the weighted
+        methods, a bandwidth outside facility location)."""
+        reads = {"drop": self.uses_score, "trust_speed": self.uses_score,
+                 "temperature": self.method in WEIGHTED,
+                 "bandwidth": self.method.endswith("facility")}  # fmt: skip
+        return [k for k, read in reads.items() if not read and getattr(self, k) != getattr(
+            SelectionConfig, k)]  # fmt: skip
+
 
 def _pairwise(x: torch.Tensor, centers: torch.Tensor) -> torch.Tensor:
     """Squared distances x [K, M, F] to centers [C, M, F] -> [K, C, M]."""
