@@ -605,6 +605,22 @@ def test_eval_every_minutes_must_be_positive():
             GeneratorTrainConfig(eval_every_minutes=bad)
 
 
+def _generator_off_and_on(tmp_path, cfg, trained, switch: str, steps: int):
+    """The tiny generator trained for ``steps`` steps with ``generator.<switch>`` false and
+    true (runs ``off`` and ``on``), and the weights it started from: three state dicts."""
+    denoiser = str(trained / "denoiser.safetensors")
+    options = {"device": "cpu", "progress": False, "denoiser": denoiser, "max_steps": steps}
+    weights = {}
+    for run, value in (("off", "false"), ("on", "true")):
+        run_cfg = load_config(None, [*TINY_OVERRIDES, f"data.dataset={cfg.data.dataset}",
+                                     f"generator.{switch}={value}"])  # fmt: skip
+        train_stage("generator", run_cfg, tmp_path / run, **options)
+        weights[run] = torch.load(tmp_path / run / "generator_last.pt", weights_only=True)
+    start = build_generator_stage(cfg, ckpt.load(denoiser), load_dataset(cfg.data.dataset, "val"),
+                                  torch.device("cpu")).trainable.state_dict()  # fmt: skip
+    return weights["off"]["trainable"], weights["on"]["trainable"], start
+
+
 def test_a_compiled_generator_stage_trains_the_same_weights(tmp_path, cfg, trained, monkeypatch):
     # generator.compile compiles the generator and the frozen denoiser in place: the run's
     # checkpoint has the same keys and, up to the compiler's rounding, the same weights. The
@@ -618,19 +634,9 @@ def test_a_compiled_generator_stage_trains_the_same_weights(tmp_path, cfg, train
         original(module, backend="eager", **kwargs)
 
     monkeypatch.setattr(torch.nn.Module, "compile", capture)
-    denoiser = str(trained / "denoiser.safetensors")
-    options = {"device": "cpu", "progress": False, "denoiser": denoiser, "max_steps": 2}
-    weights = {}
-    for run, compiled in (("eager", "false"), ("compiled", "true")):
-        run_cfg = load_config(None, [*TINY_OVERRIDES, f"data.dataset={cfg.data.dataset}",
-                                     f"generator.compile={compiled}"])  # fmt: skip
-        train_stage("generator", run_cfg, tmp_path / run, **options)
-        weights[run] = torch.load(tmp_path / run / "generator_last.pt", weights_only=True)
+    eager, compiled, start = _generator_off_and_on(tmp_path, cfg, trained, "compile", 2)
     assert compiled_modules == ["Generator", "Denoiser"]
-    eager, compiled = weights["eager"]["trainable"], weights["compiled"]["trainable"]
     assert eager.keys() == compiled.keys()  # no "_orig_mod." prefixes
-    start = build_generator_stage(cfg, ckpt.load(denoiser), load_dataset(cfg.data.dataset, "val"),
-                                  torch.device("cpu")).trainable.state_dict()  # fmt: skip
     assert any(not torch.equal(start[k], v) for k, v in compiled.items())  # it trained
     for key, value in eager.items():
         torch.testing.assert_close(compiled[key], value, rtol=1e-3, atol=1e-4)
@@ -639,17 +645,7 @@ def test_a_compiled_generator_stage_trains_the_same_weights(tmp_path, cfg, train
 def test_a_fused_adamw_stage_trains_the_same_weights_up_to_rounding(tmp_path, cfg, trained):
     # generator.fused swaps AdamW's implementation, not its arithmetic: the same seeded run
     # ends at the same weights up to float rounding, and both moved from the start
-    denoiser = str(trained / "denoiser.safetensors")
-    options = {"device": "cpu", "progress": False, "denoiser": denoiser, "max_steps": 3}
-    weights = {}
-    for run, fused in (("default", "false"), ("fused", "true")):
-        run_cfg = load_config(None, [*TINY_OVERRIDES, f"data.dataset={cfg.data.dataset}",
-                                     f"generator.fused={fused}"])  # fmt: skip
-        train_stage("generator", run_cfg, tmp_path / run, **options)
-        weights[run] = torch.load(tmp_path / run / "generator_last.pt", weights_only=True)
-    default, fused = weights["default"]["trainable"], weights["fused"]["trainable"]
-    start = build_generator_stage(cfg, ckpt.load(denoiser), load_dataset(cfg.data.dataset, "val"),
-                                  torch.device("cpu")).trainable.state_dict()  # fmt: skip
+    default, fused, start = _generator_off_and_on(tmp_path, cfg, trained, "fused", 3)
     assert any(not torch.equal(start[k], v) for k, v in fused.items())  # it trained
     for key, value in default.items():
         torch.testing.assert_close(fused[key], value, rtol=0, atol=1e-6)
