@@ -27,12 +27,10 @@ import time
 from pathlib import Path
 
 import torch
-from precision_speed import step_timing_args, timing_batches
+from precision_speed import step_timing_args, timing_batches, timing_stages
 
-from trajpref.models import checkpoint as ckpt
 from trajpref.results import write_meta
 from trajpref.train.loop import make_optimizer, precision_autocast
-from trajpref.train.stages import build_denoiser_stage, build_generator_stage
 
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "benchmarks" / "results" / "meta" / "optimizer_speed.json"
@@ -79,13 +77,10 @@ def main() -> None:
     for dataset in args.datasets:
         cfg, train, raw, agents = timing_batches(dataset, args, device)
         torch.manual_seed(0)
-        stages = {"denoiser": (build_denoiser_stage(cfg, train, train, device)[0], cfg.denoiser)}
-        published = ROOT / "models" / dataset / f"denoiser{ckpt.SUFFIX}"
-        if published.is_file():
-            generator = build_generator_stage(cfg, ckpt.load(published), train, device)
-            stages["generator"] = (generator, cfg.generator)
         entry = {}
-        for name, (stage, optim_cfg) in stages.items():
+        torch.manual_seed(0)  # the denoiser stage's fresh weights, the same each run
+        for name, stage in timing_stages(cfg, train, dataset, device).items():
+            optim_cfg = getattr(cfg, name)  # the stage's own optimisation section
             batches = raw if stage.context else [b.without_context() for b in raw]
             arms = {arm: copy.deepcopy(stage) for arm in ARMS}  # the same start
             out = time_arms(arms, optim_cfg, batches, args.rounds, device)

@@ -92,6 +92,16 @@ def timing_batches(dataset: str, args: argparse.Namespace, device: torch.device)
     return cfg, train, batches, sum(b.num_agents for b in batches) * args.rounds
 
 
+def timing_stages(cfg, train, dataset: str, device: torch.device) -> dict:
+    """The stages to time: the denoiser by Eq. 2 and, when the dataset has a published
+    denoiser, the generator through it."""
+    stages = {"denoiser": build_denoiser_stage(cfg, train, train, device)[0]}
+    published = ROOT / "models" / dataset / f"denoiser{ckpt.SUFFIX}"
+    if published.is_file():
+        stages["generator"] = build_generator_stage(cfg, ckpt.load(published), train, device)
+    return stages
+
+
 def main() -> None:
     args = step_timing_args(__doc__.splitlines()[0], "zara1", OUT)
     device = torch.device("cpu")
@@ -99,11 +109,7 @@ def main() -> None:
     entries = {}
     for dataset in args.datasets:
         cfg, train, batches, agents = timing_batches(dataset, args, device)
-        denoiser_stage, _ = build_denoiser_stage(cfg, train, train, device)
-        stages = {"denoiser": denoiser_stage}
-        published = ROOT / "models" / dataset / f"denoiser{ckpt.SUFFIX}"
-        if published.is_file():
-            stages["generator"] = build_generator_stage(cfg, ckpt.load(published), train, device)
+        stages = timing_stages(cfg, train, dataset, device)
         entry = {}
         for name, stage in stages.items():
             sec = time_stage(stage, batches, args.rounds, device)
