@@ -77,7 +77,7 @@ def main() -> None:
     for dataset, path in published_generators(ROOT / "models"):
         if dataset not in data:
             data[dataset] = load_dataset(dataset, "val", args.data_root)
-        predictor = ckpt.load_predictor(path, "leapfrog", args.device)
+        predictor = ckpt.load_predictor(path, sampler="leapfrog", device=args.device)
         trained = ckpt.config_of(ckpt.load(path)).model.stochastic_steps
         row = {"dataset": dataset, "checkpoint": str(path.relative_to(ROOT)),
                "trained_stochastic": trained}  # fmt: skip

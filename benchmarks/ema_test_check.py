@@ -86,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
         test = load_dataset(dataset, "test", args.data_root)
         measured = {}
         for weights, path in files.items():
-            model = ckpt.load_predictor(path, "leapfrog", args.device)
+            model = ckpt.load_predictor(path, sampler="leapfrog", device=args.device)
             res = evaluate(model, test, 20, 0, args.device, progress=False)
             measured[weights] = {k: res[k] for k in METRICS}
         for s, pair in ((0, published_pair(dataset)), (seed, measured)):

@@ -107,7 +107,7 @@ def main() -> None:
         summary = finetune(cfg, start, run, args.data_root, args.device,
                            str(last) if last.is_file() else None, progress=True)  # fmt: skip
         best = run / f"finetune{ckpt.SUFFIX}"
-        model = ckpt.load_predictor(best, "leapfrog", args.device)
+        model = ckpt.load_predictor(best, sampler="leapfrog", device=args.device)
         res = evaluate(model, test, args.samples, 0, args.device, scorer=scorer,
                        progress=False)  # fmt: skip
         if args.publish and seed == 0 and not args.tag:

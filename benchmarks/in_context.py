@@ -92,7 +92,7 @@ def main() -> None:
         print(report(args.split))
         return
     spec = args.model.format(dataset=args.dataset)
-    model = load_predictor(spec, "cpu")
+    model = load_predictor(spec, device="cpu")
     ds = load_dataset(args.dataset, args.split, args.data_root)
     out = Path(
         args.out or HERE / "results" / "meta" / f"in_context_{args.dataset}_{args.split}.json"

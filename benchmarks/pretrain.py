@@ -216,8 +216,8 @@ def main() -> None:
         denoiser_note = "reused the published denoiser; its cost is from its own training run"
 
     test = load_dataset(args.dataset, "test", args.data_root)
-    leap = ckpt.load_predictor(published, "leapfrog", args.device)
-    full = ckpt.load_predictor(published, "full", args.device)
+    leap = ckpt.load_predictor(published, sampler="leapfrog", device=args.device)
+    full = ckpt.load_predictor(published, sampler="full", device=args.device)
     speed = time_predictors({"leapfrog": leap, "full": full}, test, args.samples,
                             args.timing_scenes)  # fmt: skip
     params = {"denoiser": sum(p.numel() for p in leap.denoiser.parameters()),

@@ -59,7 +59,7 @@ def main() -> None:
         models = {"cv": ConstantVelocity()}
         checkpoints = published_generators(fold)
         for method, path in checkpoints.items():
-            models[method] = ckpt.load_predictor(path, "leapfrog", args.device)
+            models[method] = ckpt.load_predictor(path, sampler="leapfrog", device=args.device)
         for method, model in models.items():
             start = time.perf_counter()
             res = evaluate(model, ds, args.samples, args.seed, args.device, progress=False,

@@ -384,8 +384,8 @@ def run_evaluation(job: Job, opts: argparse.Namespace, setup: Setup, splits: Spl
         raise FileNotFoundError(f"{job.model} does not exist")
     test = splits.of(job)
     whole = splits.test(job.dataset)
-    model = (ConstantVelocity() if job.model is None
-             else ckpt.load_predictor(job.model, job.sampler, opts.device))  # fmt: skip
+    model = (ConstantVelocity() if job.model is None else
+             ckpt.load_predictor(job.model, sampler=job.sampler, device=opts.device))  # fmt: skip
     wall, cpu = time.perf_counter(), cpu_seconds()[0]
     res = evaluate(model, test, opts.samples, opts.seed, opts.device, progress=False,
                    scorer=splits.scorer(job.dataset))  # fmt: skip

@@ -107,7 +107,7 @@ def main() -> None:
         if args.model
         else ROOT / "models" / args.dataset / f"generator{ckpt.SUFFIX}"
     )
-    model = ckpt.load_predictor(path, "leapfrog")
+    model = ckpt.load_predictor(path, sampler="leapfrog")
     cfg = ckpt.load(path)["config"]
     val = load_dataset(cfg["data"].get("val_dataset") or cfg["data"]["dataset"], "val",
                        args.data_root).evenly_spaced(args.max_scenes)  # fmt: skip

@@ -106,8 +106,8 @@ def main() -> None:
     scorer = TrajectoryScorer.from_checkpoint(gen_path)
     methods = {
         "cv": ConstantVelocity(),
-        "full-sampler": ckpt.load_predictor(gen_path, "full"),
-        "pretrained": ckpt.load_predictor(gen_path, "leapfrog"),
+        "full-sampler": ckpt.load_predictor(gen_path, sampler="full"),
+        "pretrained": ckpt.load_predictor(gen_path, sampler="leapfrog"),
     }
     if args.study_only:
         args.study = True

@@ -179,7 +179,7 @@ def main() -> None:
 
     stem = f"generator-{args.variant}" if args.variant else "generator"
     path = Path(args.model or ROOT / "models" / args.dataset / f"{stem}.safetensors")
-    model = ckpt.load_predictor(path, "leapfrog")
+    model = ckpt.load_predictor(path, sampler="leapfrog")
     steps = score_timesteps(model.schedule.num_steps, args.score_every, args.score_from)
     # rows and test records of other steps than the paper's name their number of steps, and
     # their first step when it is not the chain's first

@@ -46,7 +46,7 @@ def largest_scenes(args: argparse.Namespace):
     """The dataset's published generator (leapfrog) and its test split's ``args.scenes``
     largest scenes, largest first."""
     path = ROOT / "models" / args.dataset / "generator.safetensors"
-    model = ckpt.load_predictor(path, "leapfrog")
+    model = ckpt.load_predictor(path, sampler="leapfrog")
     test = load_dataset(args.dataset, "test", args.data_root)
     return model, sorted(test.scenes, key=lambda s: -s.num_agents)[: args.scenes]
 

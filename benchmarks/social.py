@@ -142,7 +142,7 @@ def main() -> None:
         }  # fmt: skip
         for label, spec in models.items():
             spec = spec.format(dataset=name)
-            model = load_predictor(spec, args.device)
+            model = load_predictor(spec, device=args.device)
             start = time.perf_counter()
             res = evaluate(model, ds, args.samples, args.seed, args.device, progress=False,
                            scorer=scorer, bins=SCENE_SIZE_EDGES)  # fmt: skip

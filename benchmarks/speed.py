@@ -58,8 +58,8 @@ def main() -> None:
             splits[dataset] = load_dataset(dataset, "test", args.data_root)
         test = splits[dataset]
         predictors = {
-            "leapfrog": ckpt.load_predictor(path, "leapfrog", args.device),
-            "full": ckpt.load_predictor(path, "full", args.device),
+            "leapfrog": ckpt.load_predictor(path, sampler="leapfrog", device=args.device),
+            "full": ckpt.load_predictor(path, sampler="full", device=args.device),
         }
         ms = time_predictors(predictors, test, args.samples, args.scenes)
         picks = ms["scenes"]

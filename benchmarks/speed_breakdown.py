@@ -82,7 +82,7 @@ def main() -> None:
     test = load_dataset(args.dataset, "test", args.data_root)
     train = load_dataset(args.dataset, "train", args.data_root)
     dt = test.info.frame_interval
-    predictor = ckpt.load_predictor(model_path, "leapfrog", "cpu")
+    predictor = ckpt.load_predictor(model_path, sampler="leapfrog", device="cpu")
 
     def min_errors(model) -> tuple[torch.Tensor, torch.Tensor]:
         """Per-agent minADE_K / minFDE_K over the test split (agents in dataset order)."""

@@ -41,7 +41,7 @@ def long_walks(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def model(tiny_run):
-    return load_predictor(str(tiny_run / "generator.safetensors"), "cpu")
+    return load_predictor(str(tiny_run / "generator.safetensors"), device="cpu")
 
 
 def _poisoned(ds: TrajectoryDataset, last: float) -> TrajectoryDataset:

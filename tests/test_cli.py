@@ -267,3 +267,14 @@ def test_holdout_scene_evaluates_the_held_out_files_of_both_splits(capsys, walks
 def test_holdout_scene_bad_input_is_one_clear_error(capsys, walks, extra, message):
     code, _, err = _run(capsys, "evaluate", "--dataset", walks, "--no-progress", *extra)
     assert code == 2 and message in err
+
+
+def test_data_stats_counts_reversed_context_only_when_asked(capsys, tmp_path):
+    rows = [(f * 10, 1, f, 0) for f in range(20)] + [(f * 10, 3, f, 2) for f in range(2, 20)]
+    write_tracks(tmp_path / "d" / "a.txt", rows)
+    code, out, _ = _run(capsys, "data", "stats", "--dataset", tmp_path / "d", "--json")
+    assert code == 0 and "context_agents_reversed" not in json.loads(out)
+    code, out, _ = _run(capsys, "data", "stats", "--dataset", tmp_path / "d", "--json",
+                        "--reverse-context")  # fmt: skip
+    stats = json.loads(out)
+    assert code == 0 and stats["context_agents"] == 1 and stats["context_agents_reversed"] == 1

@@ -113,7 +113,10 @@ def test_the_comparison_puts_the_papers_numbers_beside_ours_and_averages_the_fol
 def test_quick_mode_builds_both_tables_with_our_columns_beside_the_papers(setup, walks):
     # the published generator evaluated directly (seed 0, scored by its denoiser)
     gen = setup.models / "walks" / "generator.safetensors"
-    model, test = checkpoint.load_predictor(gen, "leapfrog"), load_dataset(str(walks), "test")
+    model, test = (
+        checkpoint.load_predictor(gen, sampler="leapfrog"),
+        load_dataset(str(walks), "test"),
+    )
     direct = evaluate(model, test, 4, 0, progress=False,
                       scorer=TrajectoryScorer.from_checkpoint(gen))  # fmt: skip
     write_rows(setup.results / "finetune_walks.json",

@@ -105,7 +105,7 @@ def test_rows_name_their_score_steps_and_bandwidth_when_not_the_papers(
     from trajpref.models import checkpoint as ckpt
     from trajpref.score.scorer import score_timesteps
 
-    model = ckpt.load_predictor(tiny_run / "generator.safetensors", "leapfrog")
+    model = ckpt.load_predictor(tiny_run / "generator.safetensors", sampler="leapfrog")
     steps = len(score_timesteps(model.schedule.num_steps, 50))
     methods = {r["method"]: r["uses_score"] for r in rows}
     # the number of score steps and the bandwidth name the row; the score-free rows as before

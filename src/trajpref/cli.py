@@ -209,6 +209,10 @@ def build_parser() -> argparse.ArgumentParser:
     stats = data_sub.add_parser("stats", help="counts and basic statistics of one split")
     _add_data_args(stats)
     stats.add_argument("--json", action="store_true", help="print JSON")
+    stats.add_argument("--reverse-context", action="store_true",
+                       help="also count the context-only agents of each window played backwards "
+                       "(what data.reverse_context trains with; as much memory again as the "
+                       "forward ones): 'context_agents_reversed'")  # fmt: skip
     stats.set_defaults(func=cmd_data_stats)
 
     ev = sub.add_parser("evaluate", help="minADE/minFDE (per agent and joint) of a model")
@@ -381,7 +385,8 @@ def _check_data_args(args) -> None:
 
 def _read_options(args) -> ReadOptions:
     return ReadOptions(delimiter=args.delimiter, max_gap=args.max_gap, max_coord=args.max_coord,
-                       time_step=args.time_step)  # fmt: skip
+                       time_step=args.time_step,
+                       reverse_context=getattr(args, "reverse_context", False))  # fmt: skip
 
 
 def _load(args):
@@ -437,10 +442,6 @@ def cmd_data_stats(args) -> int:
             0 if s.context is None else int(np.isfinite(s.context).all(axis=(1, 2)).sum())
             for s in ds.scenes
         ),
-        # the same for the windows played backwards (data.reverse_context)
-        "context_agents_reversed": sum(
-            0 if s.context_reverse is None else len(s.context_reverse) for s in ds.scenes
-        ),
         "units": ds.info.units,
         "frame_interval": ds.info.frame_interval,
         "t_hist": ds.info.t_hist,
@@ -448,6 +449,10 @@ def cmd_data_stats(args) -> int:
         "mean_speed": speed,  # the dataset's units per second
         "source": ds.info.source,
     }
+    if args.reverse_context:  # the same for the windows played backwards (data.reverse_context)
+        out["context_agents_reversed"] = sum(
+            0 if s.context_reverse is None else len(s.context_reverse) for s in ds.scenes
+        )
     if args.json:
         print(dumps_json(out))
     else:
@@ -467,7 +472,7 @@ def cmd_data_stats(args) -> int:
 def _predictor(args):
     _check_model_args(args)
     device = resolve_device(args.device)
-    model = load_predictor(args.model, device, args.sampler)
+    model = load_predictor(args.model, device=device, sampler=args.sampler)
     if args.deterministic or args.stochastic:
         flag = "--deterministic" if args.deterministic else "--stochastic"
         if not hasattr(model, "stochastic"):

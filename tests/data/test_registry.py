@@ -411,3 +411,18 @@ def test_partial_future_applies_to_the_training_split_alone(tmp_path, data_root)
     for bad in (-1, True):
         with pytest.raises(ConfigError, match="partial_future must be an integer"):
             DataConfig(partial_future=bad)
+
+
+def test_reversed_context_is_read_for_the_training_split_of_a_run_that_trains_with_it(tmp_path):
+    from synthetic import write_tracks
+
+    # agent 1 the target over frames 0..19; agent 3 (2..19) and 5 (12..15) only context
+    rows = [(f * 10, 1, f, 0) for f in range(20)]
+    rows += [(f * 10, 3, f, 2) for f in range(2, 20)] + [(f * 10, 5, f, 5) for f in range(12, 16)]
+    for split in ("train", "val"):
+        write_tracks(tmp_path / "d" / split / "a.txt", rows)
+    root = str(tmp_path / "d")
+    train, val = run_splits(DataConfig(dataset=root, reverse=True))
+    assert train.scenes[0].context_reverse is None  # off: no memory spent on them
+    train, val = run_splits(DataConfig(dataset=root, reverse=True, reverse_context=True))
+    assert len(train.scenes[0].context_reverse) == 2 and val.scenes[0].context_reverse is None

@@ -378,6 +378,9 @@ def test_real_eth_test_split_context_count(data_root):
     assert sum(len(s.context) for s in test.scenes) == 1630  # seen at the last observed frame
     whole = sum(int(np.isfinite(s.context).all(axis=(1, 2)).sum()) for s in test.scenes)
     assert whole == 860  # seen over the whole history
+    assert all(s.context_reverse is None for s in test.scenes)  # not kept unless asked for
+    options = ReadOptions(reverse_context=True)
+    test = load_dataset("eth", "test", data_root, options=options)
     assert sum(len(s.context_reverse) for s in test.scenes) == 1746  # the windows backwards
 
 
@@ -388,14 +391,17 @@ def test_reversed_window_context_is_the_reversed_files_context(tmp_path):
     rows += [(f * 10, 2, f, 1) for f in range(10)]
     rows += [(f * 10, 3, f, 2) for f in range(2, 20)]
     rows += [(f * 10, 5, f, 5) for f in range(12, 16)]
-    (scene,) = window_scenes(read_tracks(write_tracks(tmp_path / "f.txt", rows)), 8, 12)
+    tracks = read_tracks(write_tracks(tmp_path / "f.txt", rows))
+    assert window_scenes(tracks, 8, 12)[0].context_reverse is None  # kept only when asked for
+    (scene,) = window_scenes(tracks, 8, 12, reverse_context=True)
     assert scene.context_reverse.shape == (2, 8, 2)  # [C', T_h, 2], agents 3 and 5
     np.testing.assert_allclose(scene.context_reverse[0, :, 0], np.arange(19, 11, -1))
     assert np.isnan(scene.context_reverse[1, :4]).all()  # frames 19..16: not there
     np.testing.assert_allclose(scene.context_reverse[1, 4:, 0], [15, 14, 13, 12])
     # the same file played backwards (frame f -> 190 - f) reads them as its own context
     back = [(190 - f, a, x, y) for f, a, x, y in rows]
-    (rev,) = window_scenes(read_tracks(write_tracks(tmp_path / "b.txt", back)), 8, 12)
+    (rev,) = window_scenes(read_tracks(write_tracks(tmp_path / "b.txt", back)), 8, 12,
+                           reverse_context=True)  # fmt: skip
     np.testing.assert_array_equal(rev.context, scene.context_reverse)
     np.testing.assert_array_equal(rev.context_reverse, scene.context)
     window = np.concatenate([scene.history, scene.future], 1)  # [1, T, 2]

@@ -261,3 +261,18 @@ def test_a_change_shows_its_stamped_date_once_on_the_card():
     dated_by_hand = {**stamped, "note": "2026-11-27: 90 % clamp"}  # not repeated
     assert zoo_index.change_note(dated_by_hand) == "2026-11-27: 90 % clamp"
     assert zoo_index.change_note({"max_speed": 0.3, "note": "old file"}) == "old file"
+
+
+def test_both_load_predictor_functions_take_sampler_and_device_by_keyword(fake_zoo):
+    """``registry.load_predictor`` and ``checkpoint.load_predictor`` once took sampler and
+    device in opposite orders; both now refuse them positionally, and agree by keyword."""
+    from trajpref.models import registry
+
+    path = fake_zoo / "walks" / "generator.safetensors"
+    with pytest.raises(TypeError):
+        checkpoint.load_predictor(path, "leapfrog", "cpu")
+    with pytest.raises(TypeError):
+        registry.load_predictor(str(path), "cpu", "leapfrog")
+    a = registry.load_predictor("walks/generator", device="cpu", sampler="full")
+    b = checkpoint.load_predictor(path, sampler="full", device="cpu")
+    assert a.sampler == b.sampler == "full"

@@ -274,13 +274,15 @@ def run_splits(
     """A run's training and validation splits as its data config builds them: both read with
     its reading options, then its held-out scene, its validation cut in time, and last its
     paced copy (``extra_time_step``; after the hold-out, so the copy leaves that scene too).
-    ``partial_future`` applies to the training split (and its paced copy) alone.
+    ``partial_future`` and ``reverse_context`` apply to the training split (and its paced
+    copy) alone.
     The training loop reads its data this way, and so does anything that must see the windows a
     checkpoint trained on (``models.checkpoint.config_of(...).data``)."""
     options = text.ReadOptions(data.delimiter, data.max_gap, data.max_coord, data.time_step)
     val = load_dataset(data.val_dataset or data.dataset, "val", root, options=options)
     # agents that leave the view count as targets in training only (``partial_future``)
-    options = dataclasses.replace(options, partial_future=data.partial_future)
+    options = dataclasses.replace(options, partial_future=data.partial_future,
+                                  reverse_context=data.reverse_context)  # fmt: skip
     train = load_dataset(data.dataset, "train", root, options=options)
     if data.holdout_scene:
         train, val = hold_out_scene(train, val, data.holdout_scene)

@@ -75,6 +75,10 @@ class ReadOptions:
     is NaN from the first frame they are missing on (0: complete windows only, the
     benchmarks' rule). For training splits only (``DataConfig.partial_future``); such agents
     are then targets, not context-only agents."""
+    reverse_context: bool = False
+    """Also keep each window's context-only agents as seen played backwards
+    (``Scene.context_reverse``), read by training with ``DataConfig.reverse_context`` alone;
+    off (None), since they add as much memory again as the forward ones (``Scene.context``)."""
 
     def __post_init__(self) -> None:
         if self.delimiter is not None:
@@ -463,7 +467,7 @@ def _missing_frames(frames: np.ndarray) -> tuple[np.ndarray, float]:
 
 
 def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int | None,
-            partial: int = 0):  # fmt: skip
+            partial: int = 0, reverse_context: bool = False):  # fmt: skip
     t_total = t_hist + t_fut
     if partial >= t_fut:
         raise ConfigError(f"partial_future must be below the {t_fut} future frames (0: off), "
@@ -504,6 +508,14 @@ def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int |
     by_start = np.argsort(start, kind="stable")  # [W] scene order; agents stay sorted by id
     start_row, start = start_row[by_start], start[by_start]
     n_w = len(start_row)
+    cuts = np.flatnonzero(np.diff(start)) + 1  # [S-1] where a new scene begins
+    bounds = np.concatenate([[0], cuts, [n_w]]) if n_w else np.zeros(1, np.int64)
+    firsts = start[bounds[:-1]] if n_w else start  # [S] each scene's first frame
+    # context-only agents before the windows are gathered: their temporaries and the windows
+    # are not held at once (the reader's peak memory on big files)
+    context = _context(tracks, t_hist, t_total, firsts, need=need)
+    context_reverse = (_context(tracks, t_hist, t_total, firsts, backwards=True)
+                       if reverse_context else [None] * len(context))  # fmt: skip
     history = np.empty((n_w, t_hist, 2), np.float32)  # [W, T_h, 2]
     future = np.empty((n_w, t_fut, 2), np.float32)  # [W, T_f, 2]
     offsets = np.arange(t_total)  # [T]
@@ -518,11 +530,6 @@ def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int |
             seen = (a_idx[rows] == a_idx[first]) & (f_idx[rows] - f_idx[first] == offsets)
             future[c : c + _CHUNK][~seen[:, t_hist:]] = np.nan  # seen: [C, T]
     kind = tracks.agent_type[a_idx[start_row]]  # [W]
-    cuts = np.flatnonzero(np.diff(start)) + 1  # [S-1] where a new scene begins
-    bounds = np.concatenate([[0], cuts, [n_w]]) if n_w else np.zeros(1, np.int64)
-    firsts = start[bounds[:-1]] if n_w else start  # [S] each scene's first frame
-    context = _context(tracks, t_hist, t_total, firsts, need=need)
-    context_reverse = _context(tracks, t_hist, t_total, firsts, backwards=True)
     name = tracks.path.name
     for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
         out.scenes.append(
@@ -570,18 +577,26 @@ def _context(
         return idx, key[idx] == k
 
     rows = np.flatnonzero(np.isin(tracks.frame_index, last))  # [C0] rows at a last frame
-    first = key[rows] - anchor  # [C0] the same agent at its scene's first frame
-    row0, seen0 = find(first)
     need = t_total if need is None else need
-    row_end, seen_end = find(first + need - 1)
-    target = seen0 & seen_end & (row_end - row0 == need - 1)  # its first need frames: a target
-    rows, first = rows[~target], first[~target]
-    order = np.argsort(tracks.frame_index[rows], kind="stable")  # by scene, agents by id
-    rows, first = rows[order], first[order]
-    idx, seen = find(first[:, None] + span + np.arange(t_hist))  # [C, T_h]
-    hist = np.where(seen[..., None], tracks.xy[idx], np.nan).astype(np.float32)  # [C, T_h, 2]
+    target = np.empty(len(rows), bool)  # [C0] seen in its window's first need frames
+    for c in range(0, len(rows), _CHUNK):  # in chunks: a few [C0] int64 arrays at once are big
+        first = key[rows[c : c + _CHUNK]] - anchor  # [c] the same agent at its scene's first frame
+        row0, seen0 = find(first)
+        row_end, seen_end = find(first + need - 1)
+        target[c : c + _CHUNK] = seen0 & seen_end & (row_end - row0 == need - 1)
+    rows = rows[~target]  # [C]
+    rows = rows[np.argsort(tracks.frame_index[rows], kind="stable")]  # by scene, agents by id
+    first = key[rows] - anchor  # [C]
+    # gathered in chunks straight into float32: the whole [C, T_h] gather at once, with its
+    # int64 rows and a float64 NaN fill, tripled the reader's peak memory on big files
+    offsets = span + np.arange(t_hist)  # [T_h]
     if backwards:
-        hist = np.ascontiguousarray(hist[:, ::-1])  # [C, T_h, 2] in the reversed window's order
+        offsets = offsets[::-1]  # the reversed window's order: its first frame is the last seen
+    hist = np.empty((len(rows), t_hist, 2), np.float32)  # [C, T_h, 2]
+    for c in range(0, len(rows), _CHUNK):
+        idx, seen = find(first[c : c + _CHUNK, None] + offsets)  # [c, T_h]
+        np.take(tracks.xy, idx, axis=0, out=hist[c : c + _CHUNK])
+        hist[c : c + _CHUNK][~seen] = np.nan
     frame = tracks.frame_index[rows]  # [C] last observed frame of each
     a = np.searchsorted(frame, last)  # [S]
     b = np.searchsorted(frame, last, side="right")  # [S]
@@ -648,14 +663,15 @@ def window_scenes(
     t_fut: int,
     stride: int = 1,
     max_gap: int | None = None,
+    reverse_context: bool = False,
 ) -> list[Scene]:
     """Cut one file's tracks into scenes by the windowing rule in the module docstring.
 
-    ``max_gap`` as in ``ReadOptions``; with ``None`` a ``GapWarning`` reports windows that span
-    missing frames. Raises ``DataError`` when the file has fewer unique frames than one window
-    needs.
+    ``max_gap`` and ``reverse_context`` as in ``ReadOptions``; with ``max_gap`` None a
+    ``GapWarning`` reports windows that span missing frames. Raises ``DataError`` when the file
+    has fewer unique frames than one window needs.
     """
-    out = _window(tracks, t_hist, t_fut, stride, max_gap)
+    out = _window(tracks, t_hist, t_fut, stride, max_gap, reverse_context=reverse_context)
     if out.gap_scenes:
         message = _gap_message(tracks.path, out.gap_scenes, out.gap_agents, out.max_missing)
         warnings.warn(message, GapWarning, stacklevel=2)
@@ -702,7 +718,8 @@ def read_files(
     for path in files:
         tracks = read_tracks(path, with_type, options, scale, units)
         tracks = resample_tracks(tracks, options.time_step)
-        out = _window(tracks, t_hist, t_fut, stride, options.max_gap, options.partial_future)
+        out = _window(tracks, t_hist, t_fut, stride, options.max_gap, options.partial_future,
+                      options.reverse_context)  # fmt: skip
         scenes.extend(out.scenes)
         gap = [gap[0] + out.gap_scenes, gap[1] + out.gap_agents, max(gap[2], out.max_missing)]
     if gap[0]:

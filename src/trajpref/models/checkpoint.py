@@ -517,6 +517,10 @@ def predictor_from_payload(payload: dict[str, Any], sampler: Sampler | None = No
     return predictor.eval()
 
 
-def load_predictor(path: str | Path, sampler: Sampler | None = None, device: Any = "cpu"):
-    """A ``DiffusionPredictor`` from a checkpoint file, on ``device``, in eval mode."""
+def load_predictor(path: str | Path, *, sampler: Sampler | None = None, device: Any = "cpu"):
+    """A ``DiffusionPredictor`` from a checkpoint file, on ``device``, in eval mode.
+
+    ``sampler`` and ``device`` are keyword-only, as in ``registry.load_predictor``, so that the
+    two functions cannot be called with their arguments in different orders.
+    """
     return predictor_from_payload(load(path), sampler).to(device).eval()

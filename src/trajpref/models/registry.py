@@ -15,7 +15,9 @@ BUILTIN = {"cv": ConstantVelocity}
 """Models that need no checkpoint."""
 
 
-def load_predictor(spec: str, device: torch.device | str = "cpu", sampler: Sampler | None = None):
+def load_predictor(
+    spec: str, *, device: torch.device | str = "cpu", sampler: Sampler | None = None
+):
     """``cv`` gives the constant-velocity baseline; a published name (``zara1/generator``)
     or a path loads a checkpoint.
 
@@ -25,7 +27,9 @@ def load_predictor(spec: str, device: torch.device | str = "cpu", sampler: Sampl
     if spec in BUILTIN:
         return BUILTIN[spec]()
     if zoo.is_name(spec):  # DATASET/NAME: a published model, or an error listing them
-        return checkpoint.load_predictor(checkpoint.resolve_path(spec), sampler, device)
+        return checkpoint.load_predictor(
+            checkpoint.resolve_path(spec), sampler=sampler, device=device
+        )
     try:
         path = checkpoint.resolve_path(spec)
     except TrajprefError:
@@ -39,4 +43,4 @@ def load_predictor(spec: str, device: torch.device | str = "cpu", sampler: Sampl
             f"{spec}: no such model (use 'cv', a published name such as zara1/generator "
             "(`trajpref models` lists them) or a checkpoint file)"
         ) from None
-    return checkpoint.load_predictor(path, sampler, device)
+    return checkpoint.load_predictor(path, sampler=sampler, device=device)

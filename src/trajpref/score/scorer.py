@@ -323,13 +323,17 @@ def scene_batch(scorer: TrajectoryScorer, history: ArrayLike, samples: ArrayLike
     hist = _float_tensor("history", history, device)  # [P, T_h, 2]
     futs = _float_tensor("samples", samples, device)  # [K, P, T_f, 2]
     t_h, t_f = scorer.t_hist, scorer.t_fut
-    if hist.ndim != 3 or tuple(hist.shape[1:]) != (t_h, 2) or hist.shape[0] < 1:
+    if hist.ndim == 3 and hist.shape[0] == 0:
+        raise DataError("history: the scene has no agents (P = 0): nothing to rank")
+    if futs.ndim == 4 and futs.shape[0] == 0:
+        raise DataError("samples: no samples (K = 0): nothing to rank")
+    if hist.ndim != 3 or tuple(hist.shape[1:]) != (t_h, 2):
         raise DataError(
             f"history: expected [P, {t_h}, 2] (agents, observed steps, x/y; this scorer's "
             f"T_h = {t_h}), got {list(hist.shape)}"
         )
     p = hist.shape[0]
-    if futs.ndim != 4 or tuple(futs.shape[1:]) != (p, t_f, 2) or futs.shape[0] < 1:
+    if futs.ndim != 4 or tuple(futs.shape[1:]) != (p, t_f, 2):
         hint = " (one sample? add a leading axis: samples[None])" if futs.ndim == 3 else ""
         raise DataError(
             f"samples: expected [K, {p}, {t_f}, 2] (samples, the history's {p} agents, "

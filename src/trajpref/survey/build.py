@@ -167,7 +167,7 @@ def build_study(cfg: BuildConfig, out: str | Path, progress: bool = True) -> Stu
         raise ConfigError(f"{out}: already exists; a study folder is never overwritten "
                           "(its answers would no longer match): choose a new --out")  # fmt: skip
     device = resolve_device(cfg.device)
-    predictors = {name: load_predictor(spec, device) for name, spec in cfg.models.items()}
+    predictors = {name: load_predictor(spec, device=device) for name, spec in cfg.models.items()}
     scorer = TrajectoryScorer.from_checkpoint(_scorer_path(cfg), device)
     ds = load_dataset(cfg.dataset, cfg.split, cfg.data_root, cfg.frame_interval, cfg.units)
     sizes = np.array([s.num_agents for s in ds.scenes])  # [B]
