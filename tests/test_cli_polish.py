@@ -132,6 +132,12 @@ def test_a_built_in_dataset_ignores_folder_descriptions_and_says_so(capsys, data
         "--frame-interval and --units describe a folder dataset; zara1 knows its own (m, "
         "0.4 s), so they are ignored" in err
     )
+    # the default's own value, given explicitly, is given all the same
+    code, _, err = _run(capsys, "data", "stats", "--dataset", "zara1", "--frame-interval", "0.4",
+                        "--data-root", data_root)  # fmt: skip
+    assert code == 0 and "so they are ignored" in err
+    code, _, err = _run(capsys, "data", "stats", "--dataset", "zara1", "--data-root", data_root)
+    assert code == 0 and "ignored" not in err
 
 
 def test_config_show_prints_every_key_with_its_docstring(capsys):

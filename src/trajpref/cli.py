@@ -68,9 +68,10 @@ def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> N
     p.add_argument("--split", default=split_default, choices=["train", "val", "test"],
                    help=f"which split to read (default {split_default})")  # fmt: skip
     p.add_argument("--data-root", default=None, help="data folder (default: $TRAJPREF_DATA)")
-    p.add_argument("--frame-interval", type=float, default=0.4,
+    p.add_argument("--frame-interval", type=float, default=None,
                    help="seconds between frames, for a folder dataset (default 0.4)")  # fmt: skip
-    p.add_argument("--units", default="unknown", help="coordinate units, for a folder dataset")
+    p.add_argument("--units", default=None,
+                   help="coordinate units, for a folder dataset (default unknown)")  # fmt: skip
     p.add_argument("--delimiter", default=None, help="text columns separated by: comma, "
                    "semicolon, tab, '|' or whitespace (default: sniffed)")  # fmt: skip
     p.add_argument("--max-gap", type=int, default=None, help="missing frames a window may "
@@ -366,10 +367,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _check_data_args(args) -> None:
+    """Checks the data options, and fills in the defaults of --frame-interval and --units
+    (None until here, so that a built-in dataset can tell when either was given at all)."""
+    given = args.frame_interval is not None or args.units is not None
+    args.frame_interval = 0.4 if args.frame_interval is None else args.frame_interval
+    args.units = "unknown" if args.units is None else args.units
     if not (math.isfinite(args.frame_interval) and args.frame_interval > 0):
         raise ConfigError(f"--frame-interval must be a number of seconds > 0, "
                           f"got {args.frame_interval}")  # fmt: skip
-    if args.dataset in SPECS and (args.frame_interval != 0.4 or args.units != "unknown"):
+    if args.dataset in SPECS and given:
         spec = SPECS[args.dataset]
         warnings.warn(f"--frame-interval and --units describe a folder dataset; {args.dataset} "
                       f"knows its own ({spec.units}, {spec.frame_interval:g} s), so they are "
