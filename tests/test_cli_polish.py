@@ -138,6 +138,10 @@ def test_a_built_in_dataset_ignores_folder_descriptions_and_says_so(capsys, data
     assert code == 0 and "so they are ignored" in err
     code, _, err = _run(capsys, "data", "stats", "--dataset", "zara1", "--data-root", data_root)
     assert code == 0 and "ignored" not in err
+    # evaluate checks its data options twice (the command, then the model's loading)
+    code, _, err = _run(capsys, "evaluate", "--dataset", "zara1", "--model", "cv", "--samples",
+                        "1", "--data-root", data_root, "--no-progress")  # fmt: skip
+    assert code == 0 and "ignored" not in err
 
 
 def test_config_show_prints_every_key_with_its_docstring(capsys):

@@ -369,12 +369,15 @@ def build_parser() -> argparse.ArgumentParser:
 def _check_data_args(args) -> None:
     """Checks the data options, and fills in the defaults of --frame-interval and --units
     (None until here, so that a built-in dataset can tell when either was given at all)."""
+    if getattr(args, "_data_checked", False):  # a command may check twice; warn once
+        return
     given = args.frame_interval is not None or args.units is not None
     args.frame_interval = 0.4 if args.frame_interval is None else args.frame_interval
     args.units = "unknown" if args.units is None else args.units
     if not (math.isfinite(args.frame_interval) and args.frame_interval > 0):
         raise ConfigError(f"--frame-interval must be a number of seconds > 0, "
                           f"got {args.frame_interval}")  # fmt: skip
+    args._data_checked = True
     if args.dataset in SPECS and given:
         spec = SPECS[args.dataset]
         warnings.warn(f"--frame-interval and --units describe a folder dataset; {args.dataset} "
