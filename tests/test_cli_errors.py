@@ -139,9 +139,17 @@ CASES: dict[str, tuple[list[str], str]] = {
         [*TRAIN, "--out", "{out}/run", "--resume", "{in}/tensor.pt"],
         r"not a resume state \(no keys\)"),
     "resume into another model size": (
-        [*TRAIN, "--set", "model.hidden=32", "--out", "{out}/run", "--resume",
+        [*TRAIN, "--set", "model.hidden=32", "--out", "{run}", "--resume",
          "{run}/denoiser_last.pt"],
-        r"its weights do not fit this run's model .*config\.yaml"),
+        r"differs from the one that wrote the state \(model\.hidden: \d+ -> 32\); resume "
+        r"with its config as it was \(--config .*denoiser_config\.yaml\)"),
+    "resume into another folder": (
+        [*TRAIN, "--out", "{out}/run", "--resume", "{run}/denoiser_last.pt"],
+        r"a run resumes in its own folder \(--out .*\), not in .*run"),
+    "resume with no epochs left": (
+        [*TRAIN, "--set", "denoiser.epochs=1", "--out", "{run}", "--resume",
+         "{run}/denoiser_last.pt"],
+        r"the state has finished \d+ epochs and this run has 1: nothing left to train"),
     "unknown --set key": ([*TRAIN, "--set", "data.max_agent=8", "--out", "{out}/run"],
                           r"unknown config key data\.max_agent \(did you mean data\.max_agents\?"
                           r"\); valid keys of section data: dataset, val_dataset, max_agents"),
@@ -185,6 +193,15 @@ CASES: dict[str, tuple[list[str], str]] = {
     "control with a preset": (["finetune", "--method", "control", "--preset", "paper", "--from",
                                "{run}/generator.safetensors", "--out", "{out}/ft"],
                               r"the control takes no preset"),
+    "finetune with another network size": (
+        [*FT, "--from", "{run}/generator.safetensors", "--out", "{out}/ft", "--set",
+         "model.samples=5"],
+        r"model\.samples: fine-tuning keeps the network of the checkpoint it starts from "
+        r"\(model\.samples = \d+ there, 5 asked\)"),
+    "finetune --set method against --method": (
+        ["finetune", "--method", "control", "--from", "{run}/generator.safetensors", "--out",
+         "{out}/ft", "--device", "cpu", "--set", "finetune.method=rlhf"],
+        r"finetune\.method=rlhf contradicts --method control"),
     "finetune unknown key": ([*FT, "--from", "{run}/generator.safetensors", "--out", "{out}/ft",
                               "--set", "finetune.methd=rlhf"],
                              r"did you mean finetune\.method\?"),

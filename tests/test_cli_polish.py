@@ -188,6 +188,12 @@ def test_ctrl_c_prints_the_exact_resume_command(capsys, monkeypatch, tmp_path):
     code, _, err = _run(capsys, *TRAIN_ARGS, "--out", run, "--resume", tmp_path / "old_last.pt")
     command = shlex.split(err.strip().splitlines()[1])
     assert command.count("--resume") == 1 and command[-1] == str(run / "denoiser_last.pt")
+    # under torchrun: the same launcher and number of processes
+    monkeypatch.setenv("WORLD_SIZE", "2")
+    os.utime(run / "denoiser_last.pt", (0, 0))
+    code, _, err = _run(capsys, *TRAIN_ARGS, "--out", run)
+    command = shlex.split(err.strip().splitlines()[1])
+    assert command[:4] == ["torchrun", "--nproc_per_node=2", "-m", "trajpref.cli"]
 
 
 def test_ctrl_c_before_an_epoch_ends(capsys, monkeypatch, tmp_path):

@@ -326,7 +326,8 @@ def build_parser() -> argparse.ArgumentParser:
         "RLHF-ReS's weights 0.3 / 1.5 for both methods)",
     )
     ft.add_argument("--config", default=None, help="YAML whose 'finetune' section applies "
-                    "(data and model come from the checkpoint)")  # fmt: skip
+                    "(its other sections are not read: data and model come from the "
+                    "checkpoint; --set data.dataset=FOLDER fine-tunes on other data)")  # fmt: skip
     _add_run_args(ft, "finetune.lr=5e-5", "a finetune_last.pt")
     ft.set_defaults(func=cmd_finetune)
 
@@ -952,7 +953,11 @@ def _resume_hint(args, argv: list[str], before: tuple[int, int] | None) -> str:
             skip = True
         elif not arg.startswith("--resume="):
             rest.append(arg)
-    command = shlex.join(["trajpref", *rest, "--resume", resume])
+    # under torchrun, the same number of processes (another count changes the batches)
+    world = int(os.environ.get("WORLD_SIZE", "1") or 1)
+    launcher = (["torchrun", f"--nproc_per_node={world}", "-m", "trajpref.cli"] if world > 1
+                else ["trajpref"])  # fmt: skip
+    command = shlex.join([*launcher, *rest, "--resume", resume])
     return f"; to continue from the last finished epoch:\n  {command}"
 
 

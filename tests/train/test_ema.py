@@ -151,9 +151,20 @@ def test_resuming_an_averaging_run_from_a_state_without_average_is_refused(tmp_p
                                                                         epochs=3))  # fmt: skip
     train_stage("generator", plain, tmp_path, device="cpu", progress=False, denoiser=denoiser,
                 max_steps=1)  # fmt: skip
+    last = tmp_path / "generator_last.pt"
+    config = (tmp_path / "generator_config.yaml").read_text()
+    with pytest.raises(ConfigError, match=r"differs .*generator\.ema_epochs: 0\.0 -> 1\.0"):
+        train_stage("generator", _with_ema(tiny_cfg), tmp_path, device="cpu", progress=False,
+                    denoiser=denoiser, resume=str(last))  # fmt: skip
+    # a state written before states recorded their run: the missing average is still caught,
+    # before the run's config files are rewritten
+    state = torch.load(last, weights_only=True)
+    state.pop("identity")
+    torch.save(state, last)
     with pytest.raises(ConfigError, match="no average"):
         train_stage("generator", _with_ema(tiny_cfg), tmp_path, device="cpu", progress=False,
-                    denoiser=denoiser, resume=str(tmp_path / "generator_last.pt"))  # fmt: skip
+                    denoiser=denoiser, resume=str(last))  # fmt: skip
+    assert (tmp_path / "generator_config.yaml").read_text() == config
 
 
 def test_only_trained_parameters_are_averaged():

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import pytest
 import torch
 
+from trajpref.errors import ConfigError
 from trajpref.train.run import record_session, run_record_path, train_stage
 
 
@@ -56,3 +58,28 @@ def test_a_dataset_folder_given_relative_is_stored_absolute(tiny_cfg, tmp_path, 
     payload = ckpt.load(out / "denoiser.safetensors")
     assert payload["config"]["data"]["dataset"] == str(walks.resolve())
     assert relative.data.dataset == walks.name  # the caller's config is not changed
+
+
+def test_a_resume_is_checked_against_the_run_that_wrote_the_state(tiny_cfg, tmp_path):
+    from trajpref.train.run import check_resume, run_identity
+
+    state = {"epoch": 2, "identity": run_identity(tiny_cfg, "finetune", "abc")}
+    last = tmp_path / "finetune_last.pt"
+    # what may change: the schedule's length, the budget, the arithmetic
+    longer = dataclasses.replace(tiny_cfg, finetune=dataclasses.replace(
+        tiny_cfg.finetune, epochs=9, max_minutes=5.0, precision="bf16"))  # fmt: skip
+    check_resume(state, run_identity(longer, "finetune", "abc"), 9, tmp_path, last, "finetune")
+    with pytest.raises(ConfigError, match=r"\(start: 'abc' -> 'xyz'\); resume with the "
+                       r"checkpoint it starts from as it was"):  # fmt: skip
+        check_resume(state, run_identity(tiny_cfg, "finetune", "xyz"), 9, tmp_path, last,
+                     "finetune")  # fmt: skip
+    other = dataclasses.replace(tiny_cfg, finetune=dataclasses.replace(
+        tiny_cfg.finetune, method="rlhf", lr=0.05))  # fmt: skip
+    with pytest.raises(ConfigError, match=r"finetune\.lr: .* -> 0\.05; finetune\.method: "):
+        check_resume(state, run_identity(other, "finetune", "abc"), 9, tmp_path, last,
+                     "finetune")  # fmt: skip
+    with pytest.raises(ConfigError, match="finished 3 epochs and this run has 3: nothing left"):
+        check_resume(state, state["identity"], 3, tmp_path, last, "finetune")
+    # a state from before states recorded their run is not compared
+    check_resume({"epoch": 2}, run_identity(other, "finetune", "xyz"), 9, tmp_path, last,
+                 "finetune")  # fmt: skip

@@ -76,4 +76,20 @@ def finetune_config(
     # the start's resolved config (a file older than a changed default keeps its own value)
     resolved = to_dict(checkpoint.config_of(payload))
     base = {k: v for k, v in resolved.items() if k != "finetune"}
-    return load_config(config, [*extra, *(overrides or [])], base=base, sections=("finetune",))
+    cfg = load_config(config, [*extra, *(overrides or [])], base=base, sections=("finetune",))
+    if cfg.finetune.method != method:
+        raise ConfigError(f"finetune.method={cfg.finetune.method} contradicts --method {method}; "
+                          "choose the method with --method alone")  # fmt: skip
+    now = to_dict(cfg)
+    for section in ("model", "diffusion"):  # the network and its schedule come from the start
+        changed = [k for k, v in now[section].items() if v != resolved[section].get(k)]
+        if changed:
+            k = changed[0]
+            raise ConfigError(
+                f"{section}.{k}: fine-tuning keeps the network of the checkpoint it starts from "
+                f"({section}.{k} = {resolved[section].get(k)!r} there, {now[section][k]!r} "
+                f"asked); a sampling setting of the result can be changed afterwards "
+                f"(`trajpref evaluate --spread-scale/--max-speed`, or "
+                f"models.checkpoint.set_generator_setting)"
+            )
+    return cfg

@@ -183,9 +183,14 @@ def load_resume_state(path: str | Path, stage: str | None = None) -> dict[str, A
     return state
 
 
-def check_resume_matches(state: dict[str, Any], module: nn.Module, path: str | Path) -> None:
-    """The resume state's weights fit ``module`` (same names and shapes), or a one-line
-    ``ConfigError`` before anything is written."""
+def check_resume_matches(state: dict[str, Any], module: nn.Module, path: str | Path,
+                         averaged: bool = False) -> None:  # fmt: skip
+    """The resume state's weights fit ``module`` (same names and shapes), and it holds a
+    moving average of them when the run keeps one (``averaged``: ``ema_epochs > 0``), or a
+    one-line ``ConfigError`` before anything is written."""
+    if averaged and "ema" not in state:
+        raise ConfigError(f"--resume {path}: this run averages its weights (ema_epochs > 0) but "
+                          "the state has no average; resume with the run's own config")  # fmt: skip
     own = module.state_dict()
     saved = state["trainable"]
     for key in sorted(set(own) | set(saved)):
@@ -255,6 +260,7 @@ def fit(
     dist_info: DistInfo | None = None,
     progress: bool = True,
     max_steps: int | None = None,
+    identity: str | None = None,
 ) -> dict[str, Any]:
     """Train ``stage`` and keep the checkpoint with the best validation ``score``.
 
@@ -263,7 +269,9 @@ def fit(
     weights (``ema_epochs > 0``) the best checkpoint holds the average, and
     ``<stage>_raw.safetensors`` keeps the best raw weights by the same validation: the run's
     own control, same seed and batches. ``max_steps`` stops early
-    (for tests). Returns a summary with the best validation metrics and the wall time.
+    (for tests). ``identity`` (what the run is: its config and start, as text) is kept in the
+    resume state, so that a resume can be checked against it (``train.run``). Returns a
+    summary with the best validation metrics and the wall time.
     """
     dist_info = dist_info or DistInfo()
     out_dir = Path(out_dir)
@@ -298,9 +306,8 @@ def fit(
     trained_on = machine()  # recorded with every checkpoint (the zoo cards name it)
     if resume is not None:
         state = resume if isinstance(resume, dict) else load_resume_state(resume, stage.name)
-        check_resume_matches(
-            state, stage.trainable, "(state)" if isinstance(resume, dict) else resume
-        )
+        where = "(state)" if isinstance(resume, dict) else resume
+        check_resume_matches(state, stage.trainable, where, optim_cfg.ema_epochs > 0)
         stage.trainable.load_state_dict(state["trainable"])
         optimizer.load_state_dict(state["optimizer"])
         for group in optimizer.param_groups:  # the state brings its own; the config decides
@@ -314,10 +321,6 @@ def fit(
         spent = state.get("spent", elapsed)  # states written before budget_clock: wall time
         validated_at = state.get("validated_at", spent)
         if average is not None:
-            if "ema" not in state:
-                raise ConfigError("this run averages its weights (ema_epochs > 0) but the "
-                                  "resume state has no average; resume with the run's own "
-                                  "config.yaml")  # fmt: skip
             average.load_state_dict(state["ema"])
 
     budget["share"] = _budget_share(spent, optim_cfg, dist_info, device)  # a resumed run's
@@ -455,6 +458,7 @@ def fit(
                 "noise_gen": noise_gen.get_state(), "aug_gen": aug_gen.get_state(),
                 "epoch": epoch, "step": step, "best": best, "elapsed": elapsed, "spent": spent,
                 "validated_at": validated_at,
+                **({"identity": identity} if identity is not None else {}),
                 **({"ema": average.state_dict(), "best_raw": best_raw}
                    if average is not None else {}),
             })  # fmt: skip

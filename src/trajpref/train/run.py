@@ -14,7 +14,7 @@ from typing import Any, Literal
 
 import torch
 
-from trajpref.config import ExperimentConfig, save_config
+from trajpref.config import ExperimentConfig, save_config, to_dict
 from trajpref.data import run_splits
 from trajpref.data.registry import NAMES
 from trajpref.device import resolve_device
@@ -50,6 +50,60 @@ def with_absolute_folders(cfg: ExperimentConfig) -> ExperimentConfig:
     if not changes:
         return cfg
     return dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, **changes))
+
+
+RESUME_FREE = ("epochs", "eval_every", "eval_every_minutes", "max_minutes", "budget_clock",
+               "precision", "compile", "fused", "keep_checkpoints")  # fmt: skip
+"""Fields of the resumed stage's own section that a resume may change: its length, budget,
+validation interval, arithmetic and checkpoints kept. Everything else that shapes the stage
+(data, model, noise schedule, seed, the rest of its section, its start) must be as it was."""
+
+
+def run_identity(cfg: ExperimentConfig, name: str, start: str | None = None) -> str:
+    """What a stage's resume state records of its run (JSON text): the config sections that
+    shape stage ``name`` (data, model, diffusion, seed, its own section less ``RESUME_FREE``)
+    and ``start``, the hash of the checkpoint it starts from (fine-tuning)."""
+    full = to_dict(cfg)
+    own = {k: v for k, v in full[name].items() if k not in RESUME_FREE}
+    keep = {k: full[k] for k in ("data", "model", "diffusion", "seed")}
+    return json.dumps({**keep, name: own, "start": start}, sort_keys=True, default=str)
+
+
+def _differences(saved: Any, now: Any, prefix: str = "") -> list[str]:
+    """``key: saved -> now`` for each leaf that differs between two nested dicts."""
+    if isinstance(saved, dict) and isinstance(now, dict):
+        return [line for k in sorted(set(saved) | set(now), key=str)
+                for line in _differences(saved.get(k), now.get(k), f"{prefix}{k}.")]  # fmt: skip
+    return [] if saved == now else [f"{prefix.rstrip('.')}: {saved!r} -> {now!r}"]
+
+
+def check_resume(state: dict[str, Any], identity: str, epochs: int, out_dir: Path,
+                 resume: str | Path, name: str) -> None:  # fmt: skip
+    """A resume state belongs to this run folder, was written by a run of the same config and
+    start (``run_identity``; states older than the record are not checked) and has epochs left
+    to train; else a one-line ``ConfigError`` before anything is written."""
+    resume = Path(resume)
+    if resume.resolve().parent != out_dir.resolve():
+        raise ConfigError(f"--resume {resume}: a run resumes in its own folder (--out "
+                          f"{resume.parent}), not in {out_dir}")  # fmt: skip
+    saved = state.get("identity")
+    if saved is not None:
+        changed = _differences(json.loads(saved), json.loads(identity))
+        if changed:
+            shown = "; ".join(changed[:3]) + (f" (and {len(changed) - 3} more)"
+                                              if len(changed) > 3 else "")  # fmt: skip
+            which = (
+                "the checkpoint it starts from" if changed[0].startswith("start") else "its config"
+            )
+            raise ConfigError(f"--resume {resume}: this run differs from the one that wrote the "
+                              f"state ({shown}); resume with {which} as it was (--config "
+                              f"{out_dir / f'{name}_config.yaml'}); only {name}."
+                              f"{{{','.join(RESUME_FREE)}}} may change")  # fmt: skip
+    done = int(state["epoch"]) + 1
+    if done >= epochs:
+        raise ConfigError(f"--resume {resume}: the state has finished {done} epochs and this run "
+                          f"has {epochs}: nothing left to train (raise {name}.epochs to train "
+                          "longer)")  # fmt: skip
 
 
 def last_state_path(out_dir: str | Path, stage: str) -> Path:
@@ -110,23 +164,29 @@ def _run(
     max_steps: int | None,
     build,
     name: str,
+    start: str | None = None,
 ) -> dict[str, Any]:
     """What every stage shares: devices and DDP, the datasets, the run folder's config, the
-    loop. ``build(train, val, device) -> (Stage, OptimConfig)`` supplies the stage ``name``.
+    loop. ``build(train, val, device) -> (Stage, OptimConfig)`` supplies the stage ``name``;
+    ``start`` is the hash of the checkpoint it starts from, when it has one (fine-tuning).
 
     The run folder and the resume state are checked before any data is read and before
     anything is written (a failed check leaves nothing behind)."""
     check_output_dir(out_dir)
-    state = load_resume_state(resume, name) if resume is not None else None
+    out_dir = Path(out_dir)
+    identity = run_identity(cfg, name, start)
+    state = None
+    if resume is not None:
+        state = load_resume_state(resume, name)
+        check_resume(state, identity, getattr(cfg, name).epochs, out_dir, resume, name)
     dev = resolve_device(device)
     info, dev = init_from_env(dev)
     torch.set_num_threads(max(1, torch.get_num_threads() // max(1, info.world_size)))
-    out_dir = Path(out_dir)
     try:
         train, val = run_splits(cfg.data, data_root)
         built, optim = build(train, val, dev)
         if state is not None:
-            check_resume_matches(state, built.trainable, resume)
+            check_resume_matches(state, built.trainable, resume, optim.ema_epochs > 0)
         if info.is_main:
             out_dir.mkdir(parents=True, exist_ok=True)
             save_config(cfg, out_dir / "config.yaml")  # the run's last stage
@@ -135,7 +195,7 @@ def _run(
         barrier(info)
         start = time.perf_counter()
         summary = fit(built, train, cfg.data, optim, out_dir, dev, cfg.seed, state, info,
-                      progress, max_steps)  # fmt: skip
+                      progress, max_steps, identity)  # fmt: skip
         summary["wall_seconds"] = time.perf_counter() - start
         barrier(info)  # every rank done (rank 0 may still have been writing) before teardown
         summary["train_agents"] = train.num_agents
@@ -183,8 +243,9 @@ def train_stage(
             return build_denoiser_stage(cfg, train, val, dev)[0], cfg.denoiser
         return build_generator_stage(cfg, payload, val, dev), cfg.generator
 
+    start = payload.get("hash") if payload is not None else None  # the generator's denoiser
     return _run(cfg, out_dir, data_root, device, resume, progress, max_steps, build,
-                STAGE_NAMES[stage])  # fmt: skip
+                STAGE_NAMES[stage], start)  # fmt: skip
 
 
 def finetune(
@@ -208,4 +269,4 @@ def finetune(
         return build_finetune_stage(cfg, payload, val, dev), cfg.finetune
 
     return _run(cfg, out_dir, data_root, device, resume, progress, max_steps, build,
-                STAGE_NAMES["finetune"])  # fmt: skip
+                STAGE_NAMES["finetune"], payload.get("hash"))  # fmt: skip
