@@ -29,7 +29,8 @@ from trajpref.models import checkpoint as ckpt
 from trajpref.results import RUNNABLE_STARTS, make_row, start_record, start_suffix, write_rows
 from trajpref.rl.presets import finetune_config
 from trajpref.score.scorer import TrajectoryScorer
-from trajpref.train.run import finetune
+from trajpref.train.loop import load_resume_state
+from trajpref.train.run import epochs_done, finetune
 from trajpref.train.stages import build_finetune_stage
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -104,8 +105,12 @@ def main() -> None:
         cfg = finetune_config(str(start), method, args.preset, None, args.overrides, seed)
         last = run / "finetune_last.pt"
         check_start(run, start)
-        summary = finetune(cfg, start, run, args.data_root, args.device,
-                           str(last) if last.is_file() else None, progress=True)  # fmt: skip
+        if epochs_done(last) >= cfg.finetune.epochs:  # trained: a resume would be refused
+            state = load_resume_state(last)
+            summary = {"train_seconds": state["elapsed"], "steps": state["step"]}
+        else:
+            summary = finetune(cfg, start, run, args.data_root, args.device,
+                               str(last) if last.is_file() else None, progress=True)  # fmt: skip
         best = run / f"finetune{ckpt.SUFFIX}"
         model = ckpt.load_predictor(best, sampler="leapfrog", device=args.device)
         res = evaluate(model, test, args.samples, 0, args.device, scorer=scorer,

@@ -82,3 +82,17 @@ def test_stage_records_say_how_long_each_stage_trained_and_how_much_of_its_budge
     assert rates == {"denoiser": 200.0, "generator": 50.0, "none": None}
     assert epochs == {"denoiser": 2, "generator": 7, "none": None}
     assert share == {"denoiser": None, "generator": 1.0002, "none": None}
+
+
+def test_training_again_skips_the_stages_that_have_finished(tiny_cfg, tmp_path, monkeypatch,
+                                                             capsys):  # fmt: skip
+    import argparse
+
+    pretrain = load_benchmark("pretrain")
+    monkeypatch.setattr(pretrain, "load_config", lambda path: tiny_cfg)
+    args = argparse.Namespace(dataset="walks", data_root=None, device="cpu")
+    pretrain._train(args, tmp_path)
+    before = (tmp_path / "generator.safetensors").read_bytes()
+    pretrain._train(args, tmp_path)  # a resume of a finished stage would be refused
+    assert "the generator stage has finished" in capsys.readouterr().out
+    assert (tmp_path / "generator.safetensors").read_bytes() == before

@@ -83,3 +83,11 @@ def test_a_resume_is_checked_against_the_run_that_wrote_the_state(tiny_cfg, tmp_
     # a state from before states recorded their run is not compared
     check_resume({"epoch": 2}, run_identity(other, "finetune", "xyz"), 9, tmp_path, last,
                  "finetune")  # fmt: skip
+
+
+def test_epochs_done_reads_a_resume_state(tiny_cfg, tmp_path):
+    from trajpref.train.run import epochs_done
+
+    assert epochs_done(tmp_path / "denoiser_last.pt") == 0  # no state yet
+    train_stage("diffusion", tiny_cfg, tmp_path, device="cpu", progress=False, max_steps=1)
+    assert epochs_done(tmp_path / "denoiser_last.pt") == 1

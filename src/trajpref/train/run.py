@@ -106,6 +106,14 @@ def check_resume(state: dict[str, Any], identity: str, epochs: int, out_dir: Pat
                           "longer)")  # fmt: skip
 
 
+def epochs_done(path: str | Path) -> int:
+    """The epochs a resume state has finished (0 when there is no such file): a script that
+    trains or resumes skips a stage whose state has done its config's epochs, which a resume
+    refuses."""
+    path = Path(path)
+    return int(load_resume_state(path)["epoch"]) + 1 if path.is_file() else 0
+
+
 def last_state_path(out_dir: str | Path, stage: str) -> Path:
     """The resume state a stage (``diffusion``, ``generator``, ``finetune``) writes."""
     return Path(out_dir) / f"{STAGE_NAMES[stage]}_last.pt"
