@@ -184,6 +184,18 @@ CASES: dict[str, tuple[list[str], str]] = {
                                   "{out}/ft"], r"fine-tuning starts from a generator"),
     "finetune from nothing": ([*FT, "--from", "{in}/nope.safetensors", "--out", "{out}/ft"],
                               r"no such checkpoint"),
+    "finetune from a run folder": ([*FT, "--from", "{run}", "--out", "{out}/ft"],
+                                   r"--from .*: a folder, not a checkpoint file: pass "
+                                   r".*generator\.safetensors"),
+    "finetune from a resume state": ([*FT, "--from", "{run}/generator_last.pt", "--out",
+                                      "{out}/ft"],
+                                     r"a resume state \(pass it to --resume\), not a model; "
+                                     r"the model is generator\.safetensors beside it"),
+    "generator with another model than its denoiser": (
+        [*GEN, "--set", "model.hidden=32", "--denoiser", "{run}/denoiser.safetensors", "--out",
+         "{out}/g"],
+        r"the generator's config differs from its denoiser checkpoint's \(model\.hidden: "
+        r"\d+ there, 32 here\): train it with the denoiser's config"),
     "finetune resume the wrong stage": (
         [*FT, "--from", "{run}/generator.safetensors", "--out", "{out}/ft", "--resume",
          "{run}/generator_last.pt"],

@@ -846,6 +846,10 @@ def cmd_train(args) -> int:
 
 def cmd_finetune(args) -> int:
     check_output_dir(args.out)
+    if Path(args.start).is_dir():  # a run folder: name the generator in it
+        found = [p for p in (Path(args.start) / f"generator{ckpt.SUFFIX}",) if p.is_file()]
+        hint = f": pass {found[0]}" if found else " with no generator checkpoint in it"
+        raise ConfigError(f"--from {args.start}: a folder, not a checkpoint file{hint}")
     cfg = finetune_config(args.start, args.method, args.preset, args.config, args.overrides,
                           args.seed)  # fmt: skip
     summary = finetune(cfg, args.start, args.out, args.data_root, args.device, args.resume,

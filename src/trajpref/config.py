@@ -389,7 +389,8 @@ class ModelConfig:
             raise ConfigError(f"ModelConfig.tau must be >= 0 (0: no denoising steps), "
                               f"got {self.tau}")  # fmt: skip
         if self.hidden % self.heads:
-            raise ConfigError("ModelConfig.hidden must be divisible by heads")
+            raise ConfigError(f"ModelConfig.hidden must be divisible by heads, got hidden "
+                              f"{self.hidden} and heads {self.heads}")  # fmt: skip
         if self.generator_hidden < 0 or self.generator_hidden % self.heads:
             raise ConfigError("ModelConfig.generator_hidden must be 0 (the denoiser's width) or "
                               "a positive multiple of heads")  # fmt: skip

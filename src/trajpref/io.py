@@ -143,6 +143,14 @@ def write_json(path: str | Path, obj: Any) -> None:
         tmp.write_text(text)
 
 
+def resume_state_message(path: str | Path) -> str:
+    """What to say when a ``<stage>_last.pt`` resume state is given where a model goes: what
+    training writes beside the model, and a common slip."""
+    name = Path(path).name
+    return (f"{path}: a resume state (pass it to --resume), not a model; the model is "
+            f"{name[: -len('_last.pt')]}.safetensors beside it")  # fmt: skip
+
+
 def read_checkpoint_header(path: str | Path) -> dict[str, Any]:
     """The ``trajpref`` JSON metadata of a safetensors checkpoint, without its weights."""
     try:
@@ -153,6 +161,8 @@ def read_checkpoint_header(path: str | Path) -> dict[str, Any]:
             meta = json.loads(fh.read(length)).get("__metadata__") or {}
         out = json.loads(meta["trajpref"])
     except (OSError, ValueError, KeyError, AttributeError) as exc:
+        if Path(path).name.endswith("_last.pt"):
+            raise TrajprefError(resume_state_message(path)) from None
         raise TrajprefError(
             f"{path}: not a trajpref checkpoint ({exc.__class__.__name__})"
         ) from None

@@ -81,8 +81,14 @@ def test_a_run_without_its_config_takes_its_last_logged_epoch_as_the_schedule(tm
 
 
 def test_missing_logs_metrics_and_bad_groups_are_clear_errors(tmp_path):
-    with pytest.raises(TrajprefError, match="no generator_metrics.jsonl"):
+    with pytest.raises(TrajprefError, match=r"no generator_metrics.jsonl \(is it a run folder"):
         compare.read_curve(tmp_path, "generator", ("val_min_fde",))
+    with pytest.raises(TrajprefError, match="nope: no such run folder"):
+        compare.read_curve(tmp_path / "nope", "generator", ("val_min_fde",))
+    (tmp_path / "ft").mkdir()
+    (tmp_path / "ft" / "finetune_metrics.jsonl").write_text('{"epoch": 1}\n')
+    with pytest.raises(TrajprefError, match="it holds finetune logs: --stage finetune"):
+        compare.read_curve(tmp_path / "ft", "generator", ("val_min_fde",))
     run = _run(tmp_path / "a", 2, {})
     with pytest.raises(TrajprefError, match="has not validated yet"):
         compare.read_curve(run, "generator", ("val_min_fde",))

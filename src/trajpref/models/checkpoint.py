@@ -31,7 +31,7 @@ from safetensors.torch import load_file, save_file
 from trajpref.config import ExperimentConfig, experiment_from_dict, to_dict
 from trajpref.diffusion.schedule import DDPMSchedule
 from trajpref.errors import TrajprefError
-from trajpref.io import atomic_path, load_tensors, read_checkpoint_header
+from trajpref.io import atomic_path, load_tensors, read_checkpoint_header, resume_state_message
 from trajpref.models import zoo
 from trajpref.models.denoiser import Denoiser
 from trajpref.models.generator import Generator
@@ -224,6 +224,8 @@ def _read_legacy(path: Path) -> dict[str, Any]:
             f"{path}: not a loadable checkpoint ({exc.__class__.__name__})"
         ) from None
     if not isinstance(payload, dict) or payload.get("format") != LEGACY_FORMAT:
+        if path.name.endswith("_last.pt"):
+            raise TrajprefError(resume_state_message(path))
         raise TrajprefError(f"{path}: not a trajpref checkpoint")
     missing = {"kind", "config", "scale", "state_dict", "hash"} - set(payload)
     if missing:

@@ -72,9 +72,14 @@ def read_curve(run_dir: str | Path, stage: str, metrics: tuple[str, ...]) -> Run
     no validation, or lacks a metric."""
     if stage not in STAGES:
         raise TrajprefError(f"stage must be one of {', '.join(STAGES)}, got {stage!r}")
+    if not Path(run_dir).is_dir():
+        raise TrajprefError(f"{run_dir}: no such run folder")
     rows = read_metrics(run_dir, stage)
     if not rows:
-        raise TrajprefError(f"{run_dir}: no {stage}_metrics.jsonl (is it a {stage} run folder?)")
+        others = [s for s in STAGES if s != stage and read_metrics(run_dir, s)]
+        hint = (f"; it holds {', '.join(others)} logs: --stage {others[-1]}" if others
+                else " (is it a run folder?)")  # fmt: skip
+        raise TrajprefError(f"{run_dir}: no {stage}_metrics.jsonl{hint}")
     validated = [r for r in rows if "val_score" in r]
     if not validated:
         raise TrajprefError(f"{run_dir}: the {stage} stage has not validated yet")

@@ -4,6 +4,7 @@ for the one training loop (``train.loop.fit``); validation runs the one evaluati
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -186,11 +187,19 @@ class GeneratorObjective(nn.Module):
 
 
 def _check_matches_denoiser(cfg: ExperimentConfig, denoiser_cfg: ExperimentConfig) -> None:
-    if (cfg.model.denoiser_part() != denoiser_cfg.model.denoiser_part()
-            or cfg.diffusion != denoiser_cfg.diffusion):  # fmt: skip
+    pairs = [("model", cfg.model.denoiser_part(), denoiser_cfg.model.denoiser_part()),
+             ("diffusion", cfg.diffusion, denoiser_cfg.diffusion)]  # fmt: skip
+    changed = [f"{section}.{f.name}: {getattr(theirs, f.name)!r} there, "
+               f"{getattr(ours, f.name)!r} here"
+               for section, ours, theirs in pairs for f in dataclasses.fields(ours)
+               if getattr(ours, f.name) != getattr(theirs, f.name)]  # fmt: skip
+    if changed:
+        shown = "; ".join(changed[:3]) + ("; ..." if len(changed) > 3 else "")
         raise ConfigError(
-            "the generator config's model/diffusion sections differ from the denoiser "
-            "checkpoint's (only the generator's fields, config.GENERATOR_ONLY, may differ)"
+            f"the generator's config differs from its denoiser checkpoint's ({shown}): train it "
+            "with the denoiser's config (its run folder's denoiser_config.yaml, or the "
+            "dataset's --config); only the generator's own fields (config.GENERATOR_ONLY) may "
+            "differ"
         )
 
 
