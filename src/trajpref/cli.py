@@ -340,7 +340,8 @@ def build_parser() -> argparse.ArgumentParser:
                       metavar="KEY=VALUE", help="override a value, as train and finetune "
                       "take it (repeatable)")  # fmt: skip
     show.set_defaults(func=cmd_config_show)
-    add_survey_parser(sub)
+    add_survey_parser(sub, add_data_args=_add_data_args, check_data_args=_check_data_args,
+                      warn_if_trained_otherwise=_warn_if_trained_otherwise)  # fmt: skip
 
     mo = sub.add_parser("models", help="the published models (the zoo): list them or show a card")
     mo.add_argument("name", nargs="?", default=None,

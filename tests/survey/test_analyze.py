@@ -180,3 +180,84 @@ def test_run_analysis_writes_nothing_for_a_corrupt_manifest_or_no_answers(synthe
     with pytest.raises(DataError, match="corrupt manifest"):
         run_analysis(synthetic_study, out=out)
     assert not out.exists()
+
+
+def _insert(path, *rows) -> None:
+    """Answers added by hand (foreign keys off, as the sqlite3 tool adds them)."""
+    import sqlite3
+
+    now = "2026-12-05T00:00:00"
+    with sqlite3.connect(path) as db:
+        for rater, scene, panel in rows:
+            db.execute("INSERT INTO answers VALUES (?, ?, ?, 3, 3, 1, ?, ?)",
+                       (rater, scene, panel, now, now))  # fmt: skip
+    db.close()
+
+
+def test_answers_the_analysis_cannot_use_are_counted_in_a_warning_and_the_report(
+    synthetic_study, store
+):
+    from trajpref.survey.simulate import SimulateConfig, simulate
+
+    simulate(store.study, store, SimulateConfig(raters=3))
+    _insert(store.path, ("synthetic-01", "S01", "A"), ("synthetic-02", "s01", "Z"),
+            ("ghost", "s01", "A"))  # fmt: skip
+    text = ("ignored: 3 answers (2 to scenes or panels this study does not have, 1 from "
+            "raters not in the raters table)")  # fmt: skip
+    with pytest.warns(UserWarning) as seen:
+        result, paths = run_analysis(synthetic_study)
+    assert [str(w.message) for w in seen] == [f"{store.path}: {text}"]
+    assert result.raters == 3 and result.rows[0].answers == 9  # 3 raters x 3 scenes
+    assert f"\nI{text[1:]}: they are not in the tables below.\n" in paths["markdown"].read_text()
+    data = json.loads(paths["json"].read_text())
+    assert data["ignored"] == {"answers": 3, "unknown_panels": 2, "unknown_raters": 1}
+
+
+def test_when_every_answer_is_ignored_the_error_says_why(synthetic_study, store):
+    _insert(store.path, ("ghost", "s01", "A"), ("ghost", "S02", "B"))
+    with pytest.raises(ConfigError) as err:
+        run_analysis(synthetic_study)
+    assert str(err.value) == (
+        "no answers to this study's panels yet; ignored: 2 answers (1 to scenes or panels "
+        "this study does not have, 1 from raters not in the raters table)"
+    )
+    assert not (synthetic_study / "analysis.md").exists()
+
+
+def test_the_output_paths_are_checked_before_anything_is_written(synthetic_study, store):
+    from trajpref.survey.simulate import SimulateConfig, simulate
+
+    simulate(store.study, store, SimulateConfig(raters=2))
+    for taken in ("analysis.md", "analysis.json", "analysis.png"):
+        out = synthetic_study.parent / f"out-{taken}"
+        (out / taken).mkdir(parents=True)
+        with pytest.raises(ConfigError) as err:
+            run_analysis(synthetic_study, out=out)
+        assert str(err.value) == f"cannot write {out / taken}: is an existing folder, not a file"
+        assert [p.name for p in out.iterdir()] == [taken]  # nothing else written
+    manifest = synthetic_study / "manifest.json"
+    with pytest.raises(ConfigError) as err:
+        run_analysis(synthetic_study, out=manifest)
+    assert str(err.value) == f"--out {manifest}: exists and is not a folder"
+
+
+def test_analysis_never_writes_into_the_database(synthetic_study, tmp_path):
+    from trajpref.survey.manifest import DATABASE, load_study
+    from trajpref.survey.simulate import SimulateConfig, simulate
+    from trajpref.survey.store import AnswerStore
+
+    store = AnswerStore(synthetic_study / DATABASE, load_study(synthetic_study))
+    simulate(store.study, store, SimulateConfig(raters=2))
+    store.close()
+    before = store.path.read_bytes()
+    run_analysis(synthetic_study, out=tmp_path / "report")
+    assert store.path.read_bytes() == before
+    empty = tmp_path / "empty.sqlite"
+    empty.touch()
+    with pytest.raises(ConfigError) as err:
+        run_analysis(synthetic_study, db=empty, out=tmp_path / "r2")
+    assert str(err.value) == (
+        f"{empty}: not an answers database (no answers and raters tables; it holds no table)"
+    )
+    assert empty.read_bytes() == b"" and not (tmp_path / "r2").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["empty.sqlite", "report", "study"]

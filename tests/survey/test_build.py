@@ -122,6 +122,13 @@ def _png_text(data: bytes) -> bytes:
     return out
 
 
+def test_the_images_one_text_chunk_is_matplotlibs_software_version(tiny_study):
+    # docs/survey.md, "Blinding", says so
+    for image in (tiny_study / "images").iterdir():
+        text = _png_text(image.read_bytes())
+        assert text.startswith(b"Software\x00Matplotlib version") and text.count(b"\x00") == 1
+
+
 def test_the_served_page_never_names_a_method(tiny_study, tmp_path):
     study = load_study(tiny_study)
     store = AnswerStore(tmp_path / "a.sqlite", study)

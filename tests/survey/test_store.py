@@ -7,7 +7,7 @@ import pytest
 
 from trajpref.errors import ConfigError
 from trajpref.survey.manifest import DATABASE, load_study
-from trajpref.survey.store import AnswerError, AnswerStore
+from trajpref.survey.store import SCHEMA, AnswerError, AnswerStore
 
 OK = {"social": 4, "kinetics": 2}
 
@@ -143,7 +143,213 @@ def test_answers_of_another_study_are_refused(store, tmp_path):
     with pytest.raises(ConfigError, match="another study"):
         AnswerStore(store.path, other)
     with pytest.raises(ConfigError, match="no answers yet"):
-        AnswerStore(tmp_path / "none.sqlite", other, create=False)
+        AnswerStore(tmp_path / "none.sqlite", other, readonly=True)
     (tmp_path / "junk.sqlite").write_bytes(b"this is not a database" * 100)
     with pytest.raises(ConfigError, match="not a usable answers database"):
         AnswerStore(tmp_path / "junk.sqlite", other)
+
+
+def _raw(path, *statements) -> None:
+    """Statements on a plain connection, as an import with the sqlite3 tool makes them:
+    foreign keys off, no CHECK beyond the file's own tables."""
+    with sqlite3.connect(path) as db:
+        for statement in statements:
+            db.execute(statement)
+    db.close()
+
+
+def _study_id(path) -> str:
+    db = sqlite3.connect(path)
+    try:
+        return db.execute("SELECT value FROM meta WHERE key = 'study_id'").fetchone()[0]
+    finally:
+        db.close()
+
+
+def _edit_manifest(folder, edit) -> None:
+    import json
+
+    manifest = folder / "manifest.json"
+    data = json.loads(manifest.read_text())
+    edit(data)
+    manifest.write_text(json.dumps(data))
+
+
+@pytest.mark.parametrize(
+    "edit",
+    [
+        lambda m: m["key"]["s01"]["panels"]["A"].update(ats=0.123456),  # another model's scores
+        lambda m: m["key"]["s02"].update(source="other#7"),  # another scene of the data
+        lambda m: m["dataset"].update(name="eth"),  # another dataset
+    ],
+    ids=["scores", "source", "dataset"],
+)
+def test_a_study_of_the_same_structure_from_other_data_or_models_is_refused(
+    store, synthetic_study, tmp_path, edit
+):
+    import shutil
+
+    other = shutil.copytree(
+        synthetic_study, tmp_path / "other", ignore=lambda d, n: ["answers.sqlite"]
+    )
+    _edit_manifest(other, edit)
+    study = load_study(other)
+    assert study.legacy_study_id == store.study.legacy_study_id  # the same structure
+    with pytest.raises(ConfigError) as err:
+        AnswerStore(store.path, study, readonly=True)
+    assert str(err.value) == (
+        f"{store.path}: these answers belong to another study ({store.study.study_id}, "
+        f"this one is {study.study_id})"
+    )
+
+
+def test_a_database_with_the_legacy_structure_only_id_still_opens_for_its_study(store, tmp_path):
+    from trajpref.survey.study import make_synthetic_study
+
+    store.save("r1", "s01", "A", OK)
+    legacy = store.study.legacy_study_id
+    _raw(store.path, f"UPDATE meta SET value = '{legacy}' WHERE key = 'study_id'")
+    message = (
+        f"{store.path}: an older answers database: its study id ({legacy}) covers only the "
+        "scene, panel and method structure, which this study shares; it cannot tell this "
+        "study from another of that structure built from other data or models"
+    )
+    for readonly in (True, False):
+        with pytest.warns(UserWarning) as seen:
+            again = AnswerStore(store.path, store.study, readonly=readonly)
+        assert [str(w.message) for w in seen] == [message]
+        assert [r[:4] for r in again.rows()] == [("r1", "human", "s01", "A")]
+        again.close()
+    assert _study_id(store.path) == legacy  # not rewritten
+    other = make_synthetic_study(tmp_path / "other", scenes=2, methods=("x", "y"), seed=5)
+    with pytest.raises(ConfigError, match="belong to another study"):
+        AnswerStore(store.path, other, readonly=True)  # another structure: still refused
+
+
+def test_answers_that_match_no_panel_or_no_rater_are_counted(store):
+    store.save("r1", "s01", "A", OK)
+    now = "2026-12-05T00:00:00"
+    _raw(
+        store.path,
+        *[
+            f"INSERT INTO answers VALUES ('{r}', '{s}', '{p}', 3, 3, 1, '{now}', '{now}')"
+            for r, s, p in [("r1", "S01", "A"), ("r1", "s01", "Z"), ("ghost", "s01", "B"),
+                            ("ghost", "s02", "A"), ("ghost", "s09", "A")]
+        ],
+    )  # fmt: skip
+    assert [r[:4] for r in store.rows()] == [("r1", "human", "s01", "A")]
+    assert store.ignored() == {"answers": 5, "unknown_panels": 3, "unknown_raters": 2}
+
+
+@pytest.mark.parametrize(
+    "statements, message",
+    [
+        (
+            ["ALTER TABLE answers RENAME COLUMN kinetics TO kinetic"],
+            "table answers has no column kinetics (it has rater, scene, panel, social, "
+            "kinetic, revision, created_at, updated_at; the schema is in docs/survey.md)",
+        ),
+        (
+            # what `sqlite3 answers.sqlite ".import --csv answers.csv answers"` makes: TEXT
+            ["DROP TABLE answers",
+             "CREATE TABLE answers (rater, scene, panel, social TEXT, kinetics TEXT, revision, "
+             "created_at, updated_at)",
+             "INSERT INTO answers VALUES ('r1', 's01', 'A', '4', '2', 1, 'x', 'x')"],
+            "1 answer with ratings that are not integers from 1 to 5, the first: rater 'r1', "
+            "scene 's01', panel 'A', social '4', kinetics '2' (text from a CSV import? import "
+            "into tables made from the schema in docs/survey.md: their INTEGER columns "
+            "convert it)",
+        ),
+        (
+            ["DROP TABLE answers",
+             "CREATE TABLE answers (rater, scene, panel, social, kinetics, revision, "
+             "created_at, updated_at)",
+             "INSERT INTO answers VALUES ('r1', 's01', 'A', 4, 7, 1, 'x', 'x')",
+             "INSERT INTO answers VALUES ('r1', 's01', 'B', 3.5, 2, 1, 'x', 'x')"],
+            "2 answers with ratings that are not integers from 1 to 5, the first: rater 'r1', "
+            "scene 's01', panel 'A', social 4, kinetics 7",
+        ),
+        (
+            ["DROP TABLE raters",
+             "CREATE TABLE raters (rater, kind, created_at, submitted_at)",
+             "INSERT INTO raters VALUES ('r1', 'Human', 'x', NULL)"],
+            "1 rater of a kind other than 'human' or 'synthetic', the first: 'r1' ('Human')",
+        ),
+        (
+            ["DROP TABLE answers",
+             "CREATE TABLE answers (rater, scene, panel, social, kinetics, revision, "
+             "created_at, updated_at)",
+             "INSERT INTO answers VALUES ('r1', 's01', 'A', 4, 2, 1, 'x', 'x')",
+             "INSERT INTO answers VALUES ('r1', 's01', 'A', 5, 2, 1, 'x', 'x')"],
+            "1 panel answered more than once by the same rater, the first: rater 'r1', "
+            "scene 's01', panel 'A'",
+        ),
+        (["DROP TABLE raters"],
+         "not an answers database (no raters table; it holds answers, meta)"),
+    ],
+    ids=["column-typo", "csv-import-text", "out-of-range", "unknown-kind", "answered-twice",
+         "no-raters-table"],
+)  # fmt: skip
+def test_a_database_with_other_columns_or_values_is_one_clear_error(
+    synthetic_study, statements, message
+):
+    study = load_study(synthetic_study)
+    path = synthetic_study / DATABASE
+    AnswerStore(path, study).close()
+    _raw(path, *statements)
+    before = path.read_bytes()
+    for readonly in (True, False):
+        with pytest.raises(ConfigError) as err:
+            AnswerStore(path, study, readonly=readonly)
+        assert str(err.value).startswith(f"{path}: {message}")
+        assert "\n" not in str(err.value)
+    assert path.read_bytes() == before
+
+
+def test_a_database_in_a_missing_folder_or_a_folder_as_database(synthetic_study, tmp_path):
+    study = load_study(synthetic_study)
+    folder = tmp_path / "dbs"
+    folder.mkdir()
+    path = folder / "nodir" / "answers.sqlite"
+    with pytest.raises(ConfigError) as err:
+        AnswerStore(path, study)
+    assert str(err.value) == (
+        f"{path}: cannot create the answers database: there is no folder {path.parent}"
+    )
+    for readonly in (True, False):
+        with pytest.raises(ConfigError) as err:
+            AnswerStore(folder, study, readonly=readonly)
+        assert str(err.value) == f"{folder}: is a folder, not an answers database file"
+    assert list(folder.iterdir()) == []
+
+
+def test_read_only_opening_writes_nothing_and_claims_nothing(synthetic_study, tmp_path):
+    study = load_study(synthetic_study)
+    folder = tmp_path / "dbs"
+    folder.mkdir()
+    empty = folder / "empty.sqlite"
+    empty.touch()
+    with pytest.raises(ConfigError) as err:
+        AnswerStore(empty, study, readonly=True)
+    assert str(err.value) == (
+        f"{empty}: not an answers database (no answers and raters tables; it holds no table)"
+    )
+    other = folder / "other.sqlite"
+    _raw(other, "CREATE TABLE notes (text)")
+    for readonly in (True, False):  # a file of other tables: nothing is added to it
+        with pytest.raises(ConfigError, match="no answers and raters tables; it holds notes"):
+            AnswerStore(other, study, readonly=readonly)
+    bare = folder / "bare.sqlite"  # the documented tables, made by hand, no study id yet
+    with sqlite3.connect(bare) as db:
+        db.executescript(SCHEMA)
+    db.close()
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    store = AnswerStore(bare, study, readonly=True)
+    assert store.rows() == [] and store.ignored()["answers"] == 0
+    with pytest.raises(sqlite3.OperationalError, match="readonly"):
+        store.save("r1", "s01", "A", OK)
+    store.close()
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+    writer = AnswerStore(bare, study)  # serve / simulate claim it
+    writer.close()
+    assert _study_id(bare) == study.study_id

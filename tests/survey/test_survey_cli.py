@@ -95,6 +95,10 @@ def test_analyze_before_any_answer(capsys, synthetic_study):
         (["--models", "cv", "--scenes", "0"], "--scenes"),
         (["--models", "x=missing.safetensors"], "no such model"),
         (["--models", "cv"], "--scorer"),
+        (["--models", "cv", "--time-step", "0"], "time_step must be a number of frame steps"),
+        (["--models", "cv", "--max-gap", "-1"], "max_gap must be None or an integer >= 0"),
+        (["--models", "cv", "--delimiter", "colon"], "delimiter 'colon': choose one of"),
+        (["--models", "cv", "--holdout-scene", "walk0"], "--holdout-scene selects a validation"),
     ],
 )
 def test_build_errors(capsys, walks, tmp_path, args, text):
@@ -132,3 +136,108 @@ def test_serve_refuses_a_tiny_body_limit_before_writing(capsys, synthetic_study)
     code, _, err = _run(capsys, "survey", "serve", synthetic_study, "--max-body", "10")
     _one_line_error(code, err, "--max-body")
     assert not (synthetic_study / "answers.sqlite").exists()
+
+
+def test_build_reads_data_with_evaluates_options(capsys, walks, tiny_run, tmp_path):
+    out = tmp_path / "study"
+    code, _, err = _run(capsys, "survey", "build", "--dataset", walks, "--units", "m",
+                        "--delimiter", "tab", "--max-gap", "0", "--max-coord", "1000",
+                        "--time-step", "0.5", "--models", "a=cv",
+                        f"b={tiny_run / 'generator.safetensors'}", "--scenes", "1",
+                        "--samples", "2", "--min-gap", "0", "--device", "cpu", "--no-progress",
+                        "--out", out)  # fmt: skip
+    assert (code, err) == (0, "")
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["dataset"]["frame_interval"] == pytest.approx(0.2)  # 0.4 s read every 0.5
+    assert {k: manifest["build"][k] for k in ("delimiter", "max_gap", "max_coord", "time_step",
+                                               "protocol", "holdout_scene")} == {
+        "delimiter": "tab", "max_gap": 0, "max_coord": 1000.0, "time_step": 0.5,
+        "protocol": "all", "holdout_scene": None}  # fmt: skip
+
+
+def test_build_warns_as_evaluate_when_a_model_was_trained_in_other_units_or_steps(
+    capsys, walks, tmp_path
+):
+    code, _, err = _run(capsys, "survey", "build", "--dataset", walks, "--units", "ft",
+                        "--frame-interval", "0.1", "--models", "cv", "gen=zara1/generator",
+                        "--scorer", "zara1/denoiser", "--scenes", "1", "--samples", "2",
+                        "--min-gap", "0", "--device", "cpu", "--no-progress", "--out",
+                        tmp_path / "study")  # fmt: skip
+    assert code == 0
+    problems = ("this data is in ft, the model's in m; this data steps 0.1 s, the model's 0.4 s "
+                "(--time-step 4 reads it at the model's step)")  # fmt: skip
+    assert err.splitlines() == [
+        f"trajpref: warning: zara1/generator was trained on zara1: {problems}",
+        f"trajpref: warning: zara1/denoiser was trained on zara1: {problems}",
+    ]
+
+
+def test_a_database_in_a_missing_folder(capsys, synthetic_study, tmp_path):
+    db = tmp_path / "nodir" / "answers.sqlite"
+    for cmd in (["serve", "--port", "0"], ["simulate"]):
+        code, _, err = _run(capsys, "survey", cmd[0], synthetic_study, *cmd[1:], "--db", db)
+        _one_line_error(code, err, f"{db}: cannot create the answers database: there is no "
+                        f"folder {db.parent}")  # fmt: skip
+    assert not db.parent.exists()
+
+
+def test_analyze_refuses_a_database_it_cannot_read_in_one_line(capsys, synthetic_study, tmp_path):
+    import sqlite3
+
+    db = tmp_path / "imported.sqlite"  # what `.import --csv answers.csv answers` makes
+    with sqlite3.connect(db) as con:
+        con.execute(
+            "CREATE TABLE answers (rater TEXT, scene TEXT, panel TEXT, social TEXT, "
+            "kinetics TEXT, revision TEXT, created_at TEXT, updated_at TEXT)"
+        )
+        con.execute(
+            "CREATE TABLE raters (rater TEXT, kind TEXT, created_at TEXT, submitted_at TEXT)"
+        )
+        con.execute("INSERT INTO answers VALUES ('p1', 's01', 'A', '4', '3', '1', 'x', 'x')")
+    con.close()
+    before = db.read_bytes()
+    code, _, err = _run(capsys, "survey", "analyze", synthetic_study, "--db", db)
+    _one_line_error(code, err, f"{db}: 1 answer with ratings that are not integers from 1 to 5")
+    assert db.read_bytes() == before and not (synthetic_study / "analysis.md").exists()
+    code, _, err = _run(capsys, "survey", "analyze", synthetic_study, "--db", db, "--out",
+                        synthetic_study / "manifest.json")  # fmt: skip
+    _one_line_error(code, err, f"--out {synthetic_study / 'manifest.json'}: exists and is not a "
+                    "folder")  # fmt: skip
+
+
+def _survey_commands(text: str) -> list[str]:
+    """The ``trajpref survey`` lines of a Markdown text's bash blocks, continuations joined,
+    comments dropped."""
+    import re
+
+    lines = []
+    for block in re.findall(r"```bash\n(.*?)```", text, flags=re.S):
+        for line in block.replace("\\\n", " ").splitlines():
+            line = line.split("#", 1)[0].strip()
+            if line.startswith("trajpref survey"):
+                lines.append(line)
+    return lines
+
+
+def test_the_documented_survey_commands_parse_and_name_published_models():
+    import shlex
+    from pathlib import Path
+
+    from trajpref.cli import build_parser
+
+    root = Path(__file__).resolve().parents[2]
+    readme = (root / "README.md").read_text().split("## Human study", 1)[1].split("\n## ", 1)[0]
+    docs = (root / "docs" / "survey.md").read_text()
+    commands = _survey_commands(readme) + _survey_commands(docs)
+    assert len(commands) >= 8
+    for command in commands:
+        build_parser().parse_args(shlex.split(command)[1:])  # SystemExit(2) on a typo
+        assert " models/" not in command and "=models/" not in command, command
+    # every option of `survey build` is in the options table of docs/survey.md
+    table = docs.split("| option | default | what it does |", 1)[1].split("\n\n", 1)[0]
+    sub = next(a for a in build_parser()._subparsers._actions if a.dest == "command")
+    survey = next(
+        a for a in sub.choices["survey"]._subparsers._actions if a.dest == "survey_command"
+    )
+    options = [o for a in survey.choices["build"]._actions for o in a.option_strings]
+    assert [o for o in options if f"`{o}" not in table] == ["-h", "--help"]

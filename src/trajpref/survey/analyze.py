@@ -31,7 +31,7 @@ import numpy as np
 from scipy import stats
 
 from trajpref.errors import ConfigError
-from trajpref.io import atomic_path, write_json
+from trajpref.io import atomic_path, check_output_dir, check_output_file, dumps_json
 from trajpref.survey.manifest import DATABASE, GROUND_TRUTH, Study, load_study
 from trajpref.survey.store import AnswerStore
 from trajpref.viz.plot import plot_survey_summary
@@ -43,6 +43,8 @@ EXACT_MAX_N = 50
 """The Wilcoxon test uses the exact null distribution up to this many pairs (without ties)."""
 EXACT_SPEARMAN_MAX_N = 8
 """Spearman's p-value is exact (by enumeration) up to this many pairs."""
+NOTHING_IGNORED = {"answers": 0, "unknown_panels": 0, "unknown_raters": 0}
+"""``Analysis.ignored`` when every answer was used."""
 
 
 def stars(p: float) -> str:
@@ -210,6 +212,9 @@ class Analysis:
     """Paired tests of the best method against the others."""
     agreement: dict[str, dict[str, dict[str, float]]]
     """level (methods, panels, within_scene) -> score (ats, fts) -> correlations."""
+    ignored: dict[str, int] = field(default_factory=lambda: dict(NOTHING_IGNORED))
+    """Answers in the database that match no panel of the study or no rater
+    (``AnswerStore.ignored``): ``answers``, ``unknown_panels``, ``unknown_raters``."""
 
     def to_dict(self) -> dict[str, Any]:
         return _finite(asdict(self))
@@ -252,7 +257,11 @@ class Analysis:
         where = f"{ds.get('name', '?')}/{ds.get('split', '?')}" if ds else "?"
         out += [f"Data: {where}; {self.scenes} scenes, {self.panels} panels; raters: "
                 f"{self.raters} {self.rater_kind} ({self.complete_raters} answered every "
-                "panel).", "", self.table(), "", self.legend(), "",
+                "panel)."]  # fmt: skip
+        if self.ignored["answers"]:
+            text = ignored_text(self.ignored)
+            out += ["", f"{text[0].upper()}{text[1:]}: they are not in the tables below."]
+        out += ["", self.table(), "", self.legend(), "",
                 "## Per criterion", "",
                 "| Method | Social appropriateness | Kinetics | answers | maxATS_K | maxFTS_K |",
                 "|---|---|---|---|---|---|"]  # fmt: skip
@@ -280,6 +289,14 @@ class Analysis:
                            f"{_num(c['spearman'])} | {_p(c['spearman_p'])} | "
                            f"{_num(c['kendall'])} | {_p(c['kendall_p'])} |")  # fmt: skip
         return "\n".join(out) + "\n"
+
+
+def ignored_text(ignored: dict[str, int]) -> str:
+    """``ignored: N answers (M to ..., K from ...)``: what the warning and the report say."""
+    n = ignored["answers"]
+    return (f"ignored: {n} answer{'' if n == 1 else 's'} ({ignored['unknown_panels']} to "
+            f"scenes or panels this study does not have, {ignored['unknown_raters']} from "
+            "raters not in the raters table)")  # fmt: skip
 
 
 def _finite(obj: Any) -> Any:
@@ -318,10 +335,15 @@ def _mean_sd(values: list[float] | np.ndarray) -> tuple[float, float]:
     return float(v.mean()), float(v.std(ddof=1)) if v.size > 1 else 0.0
 
 
-def analyze(study: Study, rows: list[tuple], rater_kind: RaterKind = "auto") -> Analysis:
+def analyze(study: Study, rows: list[tuple], rater_kind: RaterKind = "auto",
+            ignored: dict[str, int] | None = None) -> Analysis:  # fmt: skip
     """The analysis of ``rows`` (``AnswerStore.rows()``: rater, kind, scene, panel, social,
     kinetics, submitted). ``rater_kind``: ``auto`` uses the human raters when there are any,
-    else the synthetic ones."""
+    else the synthetic ones. ``ignored`` (``AnswerStore.ignored()``) is reported as given."""
+    ignored = dict(ignored or NOTHING_IGNORED)
+    if not rows:
+        note = f"; {ignored_text(ignored)}" if ignored["answers"] else ""
+        raise ConfigError(f"no answers to this study's panels yet{note}")
     if rater_kind == "auto":
         rater_kind = "human" if any(r[1] == "human" for r in rows) else "synthetic"
     if rater_kind != "all":
@@ -413,23 +435,35 @@ def analyze(study: Study, rows: list[tuple], rater_kind: RaterKind = "auto") -> 
         title=study.title, dataset=study.dataset, rater_kind=rater_kind, synthetic=synthetic,
         raters=len(raters), complete_raters=len(complete), scenes=len(study.scenes),
         panels=study.num_panels, best=best, rows=[table[m] for m in ordered], tests=tests,
-        agreement=agreement,
+        agreement=agreement, ignored=ignored,
     )  # fmt: skip
 
 
 def run_analysis(folder: str | Path, db: str | Path | None = None, out: str | Path | None = None,
                  rater_kind: RaterKind = "auto") -> tuple[Analysis, dict[str, Path]]:  # fmt: skip
     """Read a study and its answers, analyse, write ``analysis.md``, ``analysis.json`` and
-    ``analysis.png`` into ``out`` (default: the study folder). Nothing is written on error."""
+    ``analysis.png`` into ``out`` (default: the study folder).
+
+    The database is opened read-only (nothing is ever written into it). The output paths are
+    checked before the answers are read, and the three files are renamed into place together
+    at the end: nothing is written on error. Answers that match no panel of the study or no
+    rater are left out, counted in a warning and in the report (``Analysis.ignored``)."""
     study = load_study(folder)
-    store = AnswerStore(db or study.folder / DATABASE, study, create=False)
-    try:
-        result = analyze(study, store.rows(), rater_kind)
-    finally:
-        store.close()
-    out = Path(out) if out is not None else study.folder
+    given = out is not None
+    out = Path(out) if given else study.folder
+    check_output_dir(out, "--out" if given else "the study folder")
     paths = {"markdown": out / "analysis.md", "json": out / "analysis.json",
              "figure": out / "analysis.png"}  # fmt: skip
+    for path in paths.values():
+        check_output_file(path, what="cannot write")
+    store = AnswerStore(db or study.folder / DATABASE, study, readonly=True)
+    try:
+        rows, ignored = store.rows(), store.ignored()
+    finally:
+        store.close()
+    result = analyze(study, rows, rater_kind, ignored)
+    if ignored["answers"]:
+        warnings.warn(f"{store.path}: {ignored_text(ignored)}", stacklevel=2)
     names = [r.method for r in result.rows]
     marks = {label: [r.marks.get(col, "") for r in result.rows]
              for label, col in (("human score (1-5)", "human"), ("ATS", "ats"),
@@ -444,11 +478,13 @@ def run_analysis(folder: str | Path, db: str | Path | None = None, out: str | Pa
                 np.array([r.fts_sd for r in result.rows])),
     }  # fmt: skip
     label = "SYNTHETIC raters - not human data. " if result.synthetic else ""
-    plot_survey_summary(names, columns, marks, paths["figure"],
-                        f"{label}{result.title} ({result.raters} raters, "
-                        f"{result.scenes} scenes)",
-                        xlims={"human score (1-5)": (0.0, 5.4)})  # fmt: skip
-    with atomic_path(paths["markdown"]) as tmp:
-        tmp.write_text(result.markdown(), encoding="utf-8")
-    write_json(paths["json"], result.to_dict())
+    # all three written to temporary files first, renamed only when every one is complete
+    with (atomic_path(paths["markdown"]) as markdown, atomic_path(paths["json"]) as js,
+          atomic_path(paths["figure"]) as figure):  # fmt: skip
+        plot_survey_summary(names, columns, marks, figure,
+                            f"{label}{result.title} ({result.raters} raters, "
+                            f"{result.scenes} scenes)",
+                            xlims={"human score (1-5)": (0.0, 5.4)})  # fmt: skip
+        markdown.write_text(result.markdown(), encoding="utf-8")
+        js.write_text(dumps_json(result.to_dict(), indent=2) + "\n")
     return result, paths

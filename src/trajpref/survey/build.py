@@ -4,6 +4,7 @@ method, score the samples with one denoiser, and write a blinded study folder.""
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -11,7 +12,9 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from trajpref.data import load_dataset
+from trajpref.data import ReadOptions, hold_out_scene, load_dataset
+from trajpref.data.registry import check_protocol
+from trajpref.data.text import DEFAULT_MAX_COORD
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError
 from trajpref.models.registry import BUILTIN, load_predictor
@@ -24,7 +27,7 @@ from trajpref.survey.study import (
     shown_predictions,
     write_study,
 )
-from trajpref.types import collate
+from trajpref.types import TrajectoryDataset, collate
 
 
 @dataclass
@@ -43,6 +46,20 @@ class BuildConfig:
     """Seconds between frames, for a folder dataset."""
     units: str = "unknown"
     """Coordinate units, for a folder dataset."""
+    delimiter: str | None = None
+    """Column separator of the text files (``ReadOptions.delimiter``; None: sniffed)."""
+    max_gap: int | None = None
+    """Missing frames a window may span (``ReadOptions.max_gap``; None: any, with a warning)."""
+    max_coord: float = DEFAULT_MAX_COORD
+    """Largest accepted |x| or |y| (``ReadOptions.max_coord``)."""
+    time_step: float = 1.0
+    """Read the text files every this many frame steps (``ReadOptions.time_step``: 4 shows
+    10 Hz data at a 0.4 s model's step)."""
+    protocol: str = "all"
+    """Which windows count (``load_dataset``'s ``protocol``)."""
+    holdout_scene: str | None = None
+    """With ``split="val"``: the windows of the training scene whose file names start with
+    this prefix (``hold_out_scene``)."""
     scorer: str | None = None
     """The denoiser (or generator) checkpoint whose diffusion score rates every method's
     samples; default: the first checkpoint among ``models``. One scorer for all methods, so
@@ -93,6 +110,28 @@ class BuildConfig:
             raise ConfigError("--min-gap must be >= 0")
         if self.ground_truth not in ("rated", "reference"):
             raise ConfigError("--ground-truth must be 'rated' or 'reference'")
+        self.read_options()  # ConfigError for a bad delimiter, gap, bound or step
+        check_protocol(self.protocol)
+        if self.holdout_scene is not None and self.split != "val":
+            raise ConfigError(f"--holdout-scene selects a validation split: use it with "
+                              f"--split val, not --split {self.split}")  # fmt: skip
+
+    def read_options(self) -> ReadOptions:
+        """How the dataset's text files are read."""
+        return ReadOptions(delimiter=self.delimiter, max_gap=self.max_gap,
+                           max_coord=self.max_coord, time_step=self.time_step)  # fmt: skip
+
+
+def read_data(cfg: BuildConfig) -> TrajectoryDataset:
+    """The split the scenes are drawn from, read as ``trajpref evaluate`` reads it."""
+
+    def split(name: str) -> TrajectoryDataset:
+        return load_dataset(cfg.dataset, name, cfg.data_root, cfg.frame_interval, cfg.units,
+                            options=cfg.read_options(), protocol=cfg.protocol)  # fmt: skip
+
+    if cfg.holdout_scene:  # the held-out scene's windows of both splits
+        return hold_out_scene(split("train"), split("val"), cfg.holdout_scene)[1]
+    return split(cfg.split)
 
 
 def select_scenes(
@@ -160,8 +199,11 @@ def _scorer_path(cfg: BuildConfig) -> str:
 
 
 @torch.no_grad()
-def build_study(cfg: BuildConfig, out: str | Path, progress: bool = True) -> Study:
-    """Draw the scenes, sample and score every method, render and write the study folder."""
+def build_study(cfg: BuildConfig, out: str | Path, progress: bool = True,
+                on_data: Callable[[TrajectoryDataset], None] | None = None) -> Study:  # fmt: skip
+    """Draw the scenes, sample and score every method, render and write the study folder.
+    ``on_data`` is called with the dataset once it is read, before any sampling (the CLI
+    warns there when a model was trained on data in other units or at another step)."""
     out = Path(out)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise ConfigError(f"{out}: already exists; a study folder is never overwritten "
@@ -169,7 +211,9 @@ def build_study(cfg: BuildConfig, out: str | Path, progress: bool = True) -> Stu
     device = resolve_device(cfg.device)
     predictors = {name: load_predictor(spec, device=device) for name, spec in cfg.models.items()}
     scorer = TrajectoryScorer.from_checkpoint(_scorer_path(cfg), device)
-    ds = load_dataset(cfg.dataset, cfg.split, cfg.data_root, cfg.frame_interval, cfg.units)
+    ds = read_data(cfg)
+    if on_data is not None:
+        on_data(ds)
     sizes = np.array([s.num_agents for s in ds.scenes])  # [B]
     picks = select_scenes(sizes, cfg.scenes, cfg.seed, cfg.strata, cfg.min_agents,
                           cfg.max_agents, cfg.min_gap)  # fmt: skip
@@ -202,6 +246,6 @@ def build_study(cfg: BuildConfig, out: str | Path, progress: bool = True) -> Stu
         out, scenes, methods, seed=cfg.seed, title=cfg.title, ground_truth=cfg.ground_truth,
         units=ds.info.units,
         dataset={"name": ds.info.name, "split": ds.info.split, "units": ds.info.units,
-                 "scenes_in_split": len(ds)},
+                 "frame_interval": ds.info.frame_interval, "scenes_in_split": len(ds)},
         build=record,
     )  # fmt: skip

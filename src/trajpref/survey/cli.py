@@ -4,7 +4,10 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import json
+from collections.abc import Callable
+from typing import Any
 
 from trajpref.errors import ConfigError
 from trajpref.survey.analyze import run_analysis
@@ -14,25 +17,31 @@ from trajpref.survey.simulate import SimulateConfig, simulate
 from trajpref.survey.store import AnswerStore
 
 
-def add_parser(subparsers) -> argparse.ArgumentParser:
-    """Add ``survey`` and its four commands to the main parser's sub-commands."""
+def add_parser(
+    subparsers,
+    *,
+    add_data_args: Callable[[argparse.ArgumentParser], None],
+    check_data_args: Callable[[argparse.Namespace], None],
+    warn_if_trained_otherwise: Callable[[str, Any], None],
+) -> argparse.ArgumentParser:
+    """Add ``survey`` and its four commands to the main parser's sub-commands.
+
+    ``survey build`` reads data as ``trajpref evaluate`` does, with the main CLI's own data
+    options, their checks and its warning for a model trained on data in other units or at
+    another step: ``trajpref.cli`` passes them in (``survey`` sits below ``cli`` in the layers
+    of docs/architecture.md, so it may not import them)."""
     sv = subparsers.add_parser("survey", help="a human-evaluation study (the paper's Table 3): "
                                "build, serve, simulate, analyze")  # fmt: skip
     sub = sv.add_subparsers(dest="survey_command", required=True)
 
     b = sub.add_parser("build", help="pick scenes, render each method's top futures, blind them")
-    b.add_argument("--dataset", required=True, help="dataset name or a folder of 'frame agent "
-                   "x y' files")  # fmt: skip
-    b.add_argument("--split", default="test", choices=["train", "val", "test"])
-    b.add_argument("--data-root", default=None, help="data folder (default: $TRAJPREF_DATA)")
-    b.add_argument("--frame-interval", type=float, default=0.4,
-                   help="seconds between frames, for a folder dataset (default 0.4)")  # fmt: skip
-    b.add_argument("--units", default="unknown", help="coordinate units, for a folder dataset")
+    add_data_args(b)  # --dataset, --split, --data-root, ... as `trajpref evaluate` has them
     b.add_argument("--models", nargs="+", required=True, metavar="NAME=MODEL",
-                   help="the methods: a name and 'cv' or a checkpoint, e.g. "
-                   "gen=models/zara1/generator.safetensors")  # fmt: skip
-    b.add_argument("--scorer", default=None, help="the denoiser that scores every method "
-                   "(default: the first checkpoint among --models)")  # fmt: skip
+                   help="the methods: a name and 'cv', a published model (DATASET/NAME, see "
+                   "`trajpref models`) or a checkpoint path, e.g. gen=zara1/generator")  # fmt: skip
+    b.add_argument("--scorer", default=None, help="the denoiser that scores every method: a "
+                   "published model or a checkpoint path, e.g. zara1/denoiser (default: the "
+                   "first checkpoint among --models)")  # fmt: skip
     b.add_argument("--scenes", type=int, default=12, help="scenes in the study (default 12)")
     b.add_argument("--samples", type=int, default=20, help="K, samples per agent (default 20)")
     b.add_argument("--top", type=int, default=2, help="futures shown per agent (default 2)")
@@ -49,7 +58,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     b.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     b.add_argument("--out", required=True, help="the new study folder")
     b.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    b.set_defaults(func=cmd_build)
+    b.set_defaults(
+        func=functools.partial(
+            cmd_build,
+            check_data_args=check_data_args,
+            warn_if_trained_otherwise=warn_if_trained_otherwise,
+        )
+    )
 
     s = sub.add_parser("serve", help="the rating page; answers go to STUDY/answers.sqlite")
     s.add_argument("study", help="a study folder made by `survey build`")
@@ -105,16 +120,25 @@ def parse_models(items: list[str]) -> dict[str, str]:
     return out
 
 
-def cmd_build(args) -> int:
+def cmd_build(args, check_data_args: Callable[[argparse.Namespace], None],
+              warn_if_trained_otherwise: Callable[[str, Any], None]) -> int:  # fmt: skip
+    check_data_args(args)  # fills in --frame-interval and --units, checks the read options
     cfg = BuildConfig(
         dataset=args.dataset, models=parse_models(args.models), split=args.split,
         data_root=args.data_root, frame_interval=args.frame_interval, units=args.units,
+        delimiter=args.delimiter, max_gap=args.max_gap, max_coord=args.max_coord,
+        time_step=args.time_step, protocol=args.protocol, holdout_scene=args.holdout_scene,
         scorer=args.scorer, scenes=args.scenes, samples=args.samples, top=args.top,
         seed=args.seed, min_agents=args.min_agents, max_agents=args.max_agents,
         min_gap=args.min_gap, strata=args.strata, ground_truth=args.ground_truth,
         title=args.title, device=args.device,
     )  # fmt: skip
-    study = build_study(cfg, args.out, progress=not args.no_progress)
+
+    def warn(ds) -> None:  # as `evaluate` warns, for every checkpoint: methods and scorer
+        for spec in dict.fromkeys([*cfg.models.values(), *([cfg.scorer] if cfg.scorer else [])]):
+            warn_if_trained_otherwise(spec, ds)
+
+    study = build_study(cfg, args.out, progress=not args.no_progress, on_data=warn)
     print(f"wrote {study.folder}: {len(study.scenes)} scenes x {len(study.methods)} panels "
           f"({', '.join(study.methods)}), blinded; serve it with "
           f"`trajpref survey serve {study.folder}`")  # fmt: skip

@@ -126,7 +126,8 @@ class Study:
     scenes: tuple[StudyScene, ...]
     """The scenes, in the order raters see them."""
     dataset: dict[str, Any] = field(default_factory=dict)
-    """``name``, ``split``, ``units`` of the data."""
+    """``name``, ``split``, ``units``, ``frame_interval`` (seconds per step, as read) and
+    ``scenes_in_split`` of the data."""
     build: dict[str, Any] = field(default_factory=dict)
     """The build options (for the record)."""
     synthetic: bool = False
@@ -140,8 +141,31 @@ class Study:
 
     @property
     def study_id(self) -> str:
-        """A hash of the scene / panel / method structure: the answers database records it,
-        so that answers are never analysed against another study's key."""
+        """A hash of what the raters were shown and what the key says about it: the scene /
+        panel / method structure, each scene's source, each panel's ATS, FTS, ADE and FDE
+        (rounded to 6 decimals), and the dataset record. The answers database records it, so
+        that answers are never analysed against another study's key, even one of the same
+        structure built from other data or models (their scores differ). A rebuild with the
+        same data, models and seed shows the same pictures and gets the same id, so ``created``
+        and the build record (device, data folder, how the models were named) are left out."""
+        items = {
+            "version": 2,
+            "dataset": self.dataset,
+            "scenes": [
+                [s.id, s.source, s.index, [[p.id, p.key.method, *map(_rounded, (
+                    p.key.ats, p.key.fts, p.key.ade, p.key.fde))] for p in s.panels]]
+                for s in self.scenes
+            ],
+        }  # fmt: skip
+        text = json.dumps(items, sort_keys=True, default=str)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    @property
+    def legacy_study_id(self) -> str:
+        """The id that databases written before 2026-12-05 record: a hash of the scene /
+        panel / method structure only. Such a database still opens for the study it
+        belongs to (its structure matches); it cannot tell that study apart from another of
+        the same structure."""
         items = [(s.id, p.id, p.key.method) for s in self.scenes for p in s.panels]
         return hashlib.sha256(json.dumps(items).encode()).hexdigest()[:16]
 
@@ -175,6 +199,12 @@ class Study:
                 for s in self.scenes
             ],
         }
+
+
+def _rounded(x: float) -> float:
+    """``x`` to 6 decimals, -0.0 as 0.0: a key value as the study id hashes it, the same
+    whatever the digits a JSON writer keeps beyond that."""
+    return round(float(x), 6) + 0.0
 
 
 def manifest_dict(study: Study) -> dict[str, Any]:

@@ -13,6 +13,11 @@ Every write is validated here (rater id, known scene and panel, ratings integers
 runs in one transaction, and is committed (``synchronous=FULL``: on disk, not only handed to
 the operating system) before the call returns; a second answer for the same panel updates the
 row, never adds one.
+
+A file made elsewhere (answers collected on paper and imported) is checked when it is opened:
+the tables have the columns of ``SCHEMA``, every rating is an integer in 1..5, every kind is
+``human`` or ``synthetic``, no answer or rater appears twice, and the file belongs to this
+study. ``analyze`` opens the file read-only (``readonly=True``): it never writes into it.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ import contextlib
 import re
 import sqlite3
 import threading
+import warnings
 from collections.abc import Iterator
 from datetime import datetime, timezone
 from pathlib import Path
@@ -58,6 +64,13 @@ CREATE TABLE IF NOT EXISTS answers (
 );
 """
 """The tables (``CREATE ... IF NOT EXISTS``: opening an existing file keeps it)."""
+TABLES = {
+    "meta": ("key", "value"),
+    "raters": ("rater", "kind", "created_at", "submitted_at"),
+    "answers": ("rater", "scene", "panel", "social", "kinetics", "revision", "created_at",
+                "updated_at"),
+}  # fmt: skip
+"""The columns of each table of ``SCHEMA``, checked whenever a file is opened."""
 
 
 class AnswerError(TrajprefError, ValueError):
@@ -71,6 +84,11 @@ class AnswerError(TrajprefError, ValueError):
 
 def _now() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
+
+
+def _count(n: int, what: str) -> str:
+    """``1 answer``, ``3 answers``."""
+    return f"{n} {what}{'' if n == 1 else 's'}"
 
 
 def check_rater(rater: Any) -> str:
@@ -103,43 +121,149 @@ def check_ratings(ratings: Any) -> tuple[int, int]:
 
 class AnswerStore:
     """The answers of one study. Thread-safe (one connection behind a lock: SQLite writes
-    one transaction at a time anyway); several processes may share the file."""
+    one transaction at a time anyway); several processes may share the file.
 
-    def __init__(self, path: str | Path, study: Study, create: bool = True):
+    ``readonly=False`` (``serve``, ``simulate``) creates the file when needed, in WAL mode, and
+    claims it for ``study``; ``readonly=True`` (``analyze``) needs an existing file and opens
+    it read-only: no schema, no claim, nothing written. Either way a file that is not an
+    answers database of this study is a ``ConfigError`` naming the file and the problem."""
+
+    def __init__(self, path: str | Path, study: Study, readonly: bool = False):
         self.path = Path(path)
         self.study = study
+        self.readonly = readonly
         self.panels = study.panel_ids()  # scene -> panel letters
         self.total = sum(len(p) for p in self.panels.values())
-        if not create and not self.path.is_file():
+        if self.path.is_dir():
+            raise ConfigError(f"{self.path}: is a folder, not an answers database file")
+        if readonly and not self.path.is_file():
             raise ConfigError(f"{self.path}: no answers yet (run `trajpref survey serve` or "
                               "`trajpref survey simulate` first)")  # fmt: skip
+        if not readonly and not self.path.parent.is_dir():
+            raise ConfigError(f"{self.path}: cannot create the answers database: there is no "
+                              f"folder {self.path.parent}")  # fmt: skip
         self._lock = threading.Lock()
-        self.db = sqlite3.connect(self.path, timeout=30, isolation_level=None,
-                                  check_same_thread=False)  # fmt: skip
         try:
-            mode = self.db.execute("PRAGMA journal_mode=WAL").fetchone()[0]
-            if mode.lower() != "wal":
-                raise ConfigError(f"{self.path}: SQLite could not use WAL mode here ({mode})")
-            self.db.execute("PRAGMA synchronous=FULL")
-            self.db.execute("PRAGMA foreign_keys=ON")
+            if readonly:  # a URI, so that SQLite itself refuses any write
+                self.db = sqlite3.connect(f"{self.path.resolve().as_uri()}?mode=ro", uri=True,
+                                          timeout=30, isolation_level=None,
+                                          check_same_thread=False)  # fmt: skip
+            else:
+                self.db = sqlite3.connect(self.path, timeout=30, isolation_level=None,
+                                          check_same_thread=False)  # fmt: skip
+        except sqlite3.Error as exc:
+            raise ConfigError(f"{self.path}: cannot open the answers database ({exc})") from None
+        try:
             self.db.execute("PRAGMA busy_timeout=30000")
-            self.db.executescript(SCHEMA)
-            self._claim_study()
-        except sqlite3.DatabaseError as exc:
+            self._check_tables(new_file_ok=not readonly)  # before anything is written into it
+            if not readonly:
+                mode = self.db.execute("PRAGMA journal_mode=WAL").fetchone()[0]
+                if mode.lower() != "wal":
+                    raise ConfigError(f"{self.path}: SQLite could not use WAL mode here ({mode})")
+                self.db.execute("PRAGMA synchronous=FULL")
+                self.db.execute("PRAGMA foreign_keys=ON")
+                self.db.executescript(SCHEMA)
+                self._check_tables(new_file_ok=False)
+            self._check_values()
+            self._check_study()
+        except sqlite3.Error as exc:
             self.db.close()
             raise ConfigError(f"{self.path}: not a usable answers database ({exc})") from None
         except BaseException:
             self.db.close()
             raise
 
-    def _claim_study(self) -> None:
-        with self._tx():
-            row = self.db.execute("SELECT value FROM meta WHERE key = 'study_id'").fetchone()
-            if row is None:
-                self.db.execute("INSERT INTO meta VALUES ('study_id', ?)", (self.study.study_id,))
-            elif row[0] != self.study.study_id:
-                raise ConfigError(f"{self.path}: these answers belong to another study "
-                                  f"({row[0]}, this one is {self.study.study_id})")  # fmt: skip
+    def _check_tables(self, new_file_ok: bool) -> None:
+        """The tables ``answers`` and ``raters`` (and ``meta`` when present) exist with the
+        columns of ``SCHEMA``. ``new_file_ok``: a file without any table passes (the schema is
+        written next); a file of other tables never does, so that nothing is added to it."""
+        names = {r[0] for r in self.db.execute("SELECT name FROM sqlite_master "
+                                               "WHERE type = 'table'")}  # fmt: skip
+        if not names and new_file_ok:
+            return
+        missing = [t for t in ("answers", "raters") if t not in names]
+        if missing:
+            held = f"; it holds {', '.join(sorted(names))}" if names else "; it holds no table"
+            raise ConfigError(f"{self.path}: not an answers database (no {' and '.join(missing)} "
+                              f"table{'s' if len(missing) > 1 else ''}{held})")  # fmt: skip
+        for table, columns in TABLES.items():
+            if table not in names:
+                continue
+            have = [r[1] for r in self.db.execute(f"PRAGMA table_info({table})")]
+            lacking = [c for c in columns if c not in have]
+            if lacking:
+                raise ConfigError(
+                    f"{self.path}: table {table} has no column{'s' if len(lacking) > 1 else ''} "
+                    f"{', '.join(lacking)} (it has {', '.join(have)}; the schema is in "
+                    "docs/survey.md)"
+                )
+
+    def _check_values(self) -> None:
+        """Ratings are integers in 1..5, kinds ``human`` or ``synthetic``, and no answer or
+        rater appears twice (a file made elsewhere may lack the schema's constraints)."""
+        names = [c for c, _, _ in CRITERIA]
+        valid = " AND ".join(f"typeof({c}) = 'integer' AND {c} BETWEEN {RATING_MIN} AND "
+                             f"{RATING_MAX}" for c in names)  # fmt: skip
+        n, r = self._first(f"SELECT rater, scene, panel, {', '.join(names)} FROM answers "
+                           f"WHERE NOT ({valid})")  # fmt: skip
+        if n:
+            ratings = ", ".join(f"{c} {v!r:.20}" for c, v in zip(names, r[3:], strict=True))
+            raise ConfigError(
+                f"{self.path}: {_count(n, 'answer')} with ratings that are not integers from "
+                f"{RATING_MIN} to {RATING_MAX}, the first: rater {r[0]!r:.40}, scene "
+                f"{r[1]!r:.40}, panel {r[2]!r:.40}, {ratings} (text from a CSV import? import "
+                "into tables made from the schema in docs/survey.md: their INTEGER columns "
+                "convert it)"
+            )
+        kinds = [f"'{k}'" for k in KINDS]
+        n, r = self._first(f"SELECT rater, kind FROM raters WHERE kind IS NULL OR kind NOT IN "
+                           f"({', '.join(kinds)})")  # fmt: skip
+        if n:
+            raise ConfigError(f"{self.path}: {_count(n, 'rater')} of a kind other than "
+                              f"{' or '.join(kinds)}, the first: {r[0]!r:.40} "
+                              f"({r[1]!r:.20})")  # fmt: skip
+        n, r = self._first("SELECT rater, scene, panel FROM answers "
+                           "GROUP BY rater, scene, panel HAVING count(*) > 1")  # fmt: skip
+        if n:
+            raise ConfigError(f"{self.path}: {_count(n, 'panel')} answered more than once by "
+                              f"the same rater, the first: rater {r[0]!r:.40}, scene "
+                              f"{r[1]!r:.40}, panel {r[2]!r:.40}")  # fmt: skip
+        n, r = self._first("SELECT rater FROM raters GROUP BY rater HAVING count(*) > 1")
+        if n:
+            raise ConfigError(f"{self.path}: {_count(n, 'rater id')} in more than one row of "
+                              f"raters, the first: {r[0]!r:.40}")  # fmt: skip
+
+    def _first(self, query: str) -> tuple[int, tuple | None]:
+        """How many rows ``query`` returns, and the first."""
+        rows = self.db.execute(query).fetchall()
+        return len(rows), (rows[0] if rows else None)
+
+    def _check_study(self) -> None:
+        """The file's ``meta.study_id`` is this study's; a file without one is claimed for
+        this study, unless read-only. A file written before the id covered the data and the
+        scores holds the structure-only ``Study.legacy_study_id``: it is accepted when that
+        matches, with a warning that it cannot tell this study from one of the same
+        structure (it is not rewritten: it may be another such study's)."""
+        query = "SELECT value FROM meta WHERE key = 'study_id'"
+        if self.readonly:
+            has_meta = self.db.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND "
+                                       "name = 'meta'").fetchone()  # fmt: skip
+            row = self.db.execute(query).fetchone() if has_meta else None
+        else:
+            with self._tx():
+                row = self.db.execute(query).fetchone()
+                if row is None:
+                    self.db.execute("INSERT INTO meta VALUES ('study_id', ?)",
+                                    (self.study.study_id,))  # fmt: skip
+        if row is None or row[0] == self.study.study_id:
+            return
+        if row[0] != self.study.legacy_study_id:
+            raise ConfigError(f"{self.path}: these answers belong to another study ({row[0]}, "
+                              f"this one is {self.study.study_id})")  # fmt: skip
+        warnings.warn(f"{self.path}: an older answers database: its study id ({row[0]}) covers "
+                      "only the scene, panel and method structure, which this study shares; it "
+                      "cannot tell this study from another of that structure built from other "
+                      "data or models", stacklevel=3)  # fmt: skip
 
     @contextlib.contextmanager
     def _tx(self) -> Iterator[None]:
@@ -257,19 +381,35 @@ class AnswerStore:
             "submitted": bool(row and row[1]),
         }
 
+    def _read(self, query: str) -> list[tuple]:
+        """``query``'s rows; an SQLite error (a file locked for too long) is a ConfigError."""
+        try:
+            with self._lock:
+                return self.db.execute(query).fetchall()
+        except sqlite3.Error as exc:
+            raise ConfigError(f"{self.path}: cannot read the answers ({exc})") from None
+
     def rows(self) -> list[tuple[str, str, str, str, int, int, bool]]:
         """Every answer of this study: ``(rater, kind, scene, panel, social, kinetics,
-        submitted)``."""
-        with self._lock:
-            rows = self.db.execute(
-                """SELECT a.rater, r.kind, a.scene, a.panel, a.social, a.kinetics,
-                          r.submitted_at IS NOT NULL
-                   FROM answers a JOIN raters r USING (rater)
-                   ORDER BY a.rater, a.scene, a.panel"""
-            ).fetchall()
+        submitted)``. What it leaves out, :meth:`ignored` counts."""
+        rows = self._read(
+            """SELECT a.rater, r.kind, a.scene, a.panel, a.social, a.kinetics,
+                      r.submitted_at IS NOT NULL
+               FROM answers a JOIN raters r USING (rater)
+               ORDER BY a.rater, a.scene, a.panel"""
+        )
         return [(*r[:6], bool(r[6])) for r in rows if r[3] in self.panels.get(r[2], ())]
+
+    def ignored(self) -> dict[str, int]:
+        """The answers in the file that :meth:`rows` leaves out: ``unknown_panels`` (to a
+        scene or panel this study does not have), ``unknown_raters`` (to one of its panels,
+        from a rater id without a row in ``raters``) and their sum ``answers``."""
+        rows = self._read("SELECT a.scene, a.panel, r.rater IS NULL FROM answers a "
+                          "LEFT JOIN raters r USING (rater)")  # fmt: skip
+        panels = sum(1 for s, p, _ in rows if p not in self.panels.get(s, ()))
+        raters = sum(1 for s, p, no_rater in rows if no_rater and p in self.panels.get(s, ()))
+        return {"answers": panels + raters, "unknown_panels": panels, "unknown_raters": raters}
 
     def raters(self) -> dict[str, str]:
         """rater -> kind."""
-        with self._lock:
-            return dict(self.db.execute("SELECT rater, kind FROM raters").fetchall())
+        return dict(self._read("SELECT rater, kind FROM raters"))
