@@ -139,14 +139,15 @@ def test_serve_refuses_a_tiny_body_limit_before_writing(capsys, synthetic_study)
 
 
 def test_build_reads_data_with_evaluates_options(capsys, walks, tiny_run, tmp_path):
-    out = tmp_path / "study"
-    code, _, err = _run(capsys, "survey", "build", "--dataset", walks, "--units", "m",
+    out = tmp_path / "my study"  # a space: the printed serve command must paste back
+    code, printed, err = _run(capsys, "survey", "build", "--dataset", walks, "--units", "m",
                         "--delimiter", "tab", "--max-gap", "0", "--max-coord", "1000",
                         "--time-step", "0.5", "--models", "a=cv",
                         f"b={tiny_run / 'generator.safetensors'}", "--scenes", "1",
                         "--samples", "2", "--min-gap", "0", "--device", "cpu", "--no-progress",
                         "--out", out)  # fmt: skip
     assert (code, err) == (0, "")
+    assert f"`trajpref survey serve '{out}'`" in printed
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["dataset"]["frame_interval"] == pytest.approx(0.2)  # 0.4 s read every 0.5
     assert {k: manifest["build"][k] for k in ("delimiter", "max_gap", "max_coord", "time_step",

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import functools
 import json
+import shlex
 from collections.abc import Callable
 from typing import Any
 
@@ -141,7 +142,7 @@ def cmd_build(args, check_data_args: Callable[[argparse.Namespace], None],
     study = build_study(cfg, args.out, progress=not args.no_progress, on_data=warn)
     print(f"wrote {study.folder}: {len(study.scenes)} scenes x {len(study.methods)} panels "
           f"({', '.join(study.methods)}), blinded; serve it with "
-          f"`trajpref survey serve {study.folder}`")  # fmt: skip
+          f"`trajpref survey serve {shlex.quote(str(study.folder))}`")  # fmt: skip
     return 0
 
 

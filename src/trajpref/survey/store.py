@@ -93,8 +93,8 @@ def _count(n: int, what: str) -> str:
 
 def check_rater(rater: Any) -> str:
     if not isinstance(rater, str) or not RATER_RE.match(rater):
-        raise AnswerError("rater id: 1-64 letters, digits or '_.@-', starting with a letter "
-                          "or digit", 422)  # fmt: skip
+        raise AnswerError("rater id: 1-64 ASCII letters (A-Z, a-z), digits or '_.@-', starting "
+                          "with a letter or digit", 422)  # fmt: skip
     return rater
 
 

@@ -291,7 +291,7 @@ async function main() {
     event.preventDefault();
     const rater = $("rater").value.trim();
     if (!$("rater").checkValidity() || !rater) {
-      setLoginError("Use 1-64 letters, digits or _ . @ - (starting with a letter or digit).");
+      setLoginError("Use 1-64 ASCII letters (A-Z, a-z), digits or _ . @ - (starting with a letter or digit).");
       return;
     }
     startRater(rater);
