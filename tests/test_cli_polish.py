@@ -223,7 +223,15 @@ def test_only_rank_0_reports(capsys, monkeypatch, tmp_path):
     monkeypatch.setattr(cli, "train_stage", lambda *a, **k: {**summary, "rank": 0})
     monkeypatch.setenv("RANK", "0")
     code, out, _ = _run(capsys, *TRAIN_ARGS, "--out", tmp_path / "r")
-    assert out.startswith("trained diffusion in 1 s; best validation:")
+    assert out.startswith("trained diffusion in 1 s (training time over all sessions); best "
+                          "validation: score=inf")  # fmt: skip
+    summary["best"] = {"score": 0.123456, "val_denoise_loss": 0.123456, "epoch": 7}
+    (tmp_path / "r" / "denoiser.safetensors").write_bytes(b"")
+    code, out, _ = _run(capsys, *TRAIN_ARGS, "--out", tmp_path / "r")
+    assert out.strip() == (
+        "trained diffusion in 1 s (training time over all sessions); best validation at epoch "
+        f"7: score=0.1235 val_denoise_loss=0.1235; kept {tmp_path / 'r' / 'denoiser.safetensors'}"
+    )
 
 
 def test_a_run_reports_its_rank(tiny_cfg, tmp_path):

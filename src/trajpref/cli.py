@@ -53,7 +53,7 @@ from trajpref.score.scorer import PRECISIONS
 from trajpref.score.selection import METHODS, SelectingPredictor, SelectionConfig
 from trajpref.survey.cli import add_parser as add_survey_parser
 from trajpref.train import compare
-from trajpref.train.run import finetune, last_state_path, train_stage
+from trajpref.train.run import STAGE_NAMES, finetune, last_state_path, train_stage
 from trajpref.types import collate
 from trajpref.viz.plot import plot_scene, plot_scene_scored
 
@@ -840,9 +840,25 @@ def cmd_train(args) -> int:
         progress=not args.no_progress,
     )
     if summary.get("rank", 0) == 0:
-        best = {k: round(v, 4) if isinstance(v, float) else v for k, v in summary["best"].items()}
-        print(f"trained {args.stage} in {summary['train_seconds']:.0f} s; best validation: {best}")
+        name = STAGE_NAMES[args.stage]
+        print(_summary_line(f"trained {args.stage}", summary, Path(args.out) / f"{name}"))
     return 0
+
+
+def _summary_line(what: str, summary: dict, stem: Path) -> str:
+    """The line a finished training command prints: its training time over every session,
+    the kept epoch's validation numbers, and the checkpoint it wrote."""
+    best = dict(summary["best"])
+    epoch = best.pop("epoch", None)
+    numbers = " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+                       for k, v in best.items())  # fmt: skip
+    at = f" at epoch {epoch}" if epoch is not None else ""
+    path = stem.with_name(stem.name + ckpt.SUFFIX)
+    wrote = f"; kept {path}" if path.is_file() else ""
+    return (
+        f"{what} in {summary['train_seconds']:.0f} s (training time over all sessions); "
+        f"best validation{at}: {numbers}{wrote}"
+    )
 
 
 def cmd_finetune(args) -> int:
@@ -856,9 +872,8 @@ def cmd_finetune(args) -> int:
     summary = finetune(cfg, args.start, args.out, args.data_root, args.device, args.resume,
                        progress=not args.no_progress)  # fmt: skip
     if summary.get("rank", 0) == 0:
-        best = {k: round(v, 4) if isinstance(v, float) else v for k, v in summary["best"].items()}
-        print(f"fine-tuned ({args.method}) in {summary['train_seconds']:.0f} s; best validation: "
-              f"{best}")  # fmt: skip
+        print(_summary_line(f"fine-tuned ({cfg.finetune.method})", summary,
+                            Path(args.out) / "finetune"))  # fmt: skip
     return 0
 
 
