@@ -80,16 +80,22 @@ def test_shapes_and_scene_masks_in_a_mixed_batch(scorer):
     assert res.d_pred.shape == (4, 9, 12) and res.d_gt.shape == (9, 12)
     assert res.ats.shape == (4, 3) and res.fts.shape == (4, 3)
     assert res.ats_mean_of_ratios.shape == (4, 3)
-    # the first scene scored alone gives the same residuals: no agent sees another scene
+    # each scene scored alone gives the same residuals, wherever it sits in the batch: no agent
+    # sees another scene, and an agent's noise follows its place in its own scene
     alone = scorer.residual(collate(scenes[:1]), pred[:, :3])
     torch.testing.assert_close(alone, res.d_pred[:, :3], atol=1e-5, rtol=1e-4)
+    last = scorer.residual(collate(scenes[2:]), pred[:, 4:])
+    torch.testing.assert_close(last, res.d_pred[:, 4:], atol=1e-5, rtol=1e-4)
+    order, _ = rank_samples(scorer, batch.history[4:], pred[:, 4:])  # the planning call
+    assert order.tolist() == res.d_pred[:, 4:].sum((1, 2)).argsort().tolist()
     # Eq. 5 written out with one step per row (the denoiser's per-element path) agrees with
     # the scorer's step-by-step evaluation
     context = scorer.denoiser.context(scene_features(batch, scorer.scale))  # [N, H]
     y = to_model_frame(pred, batch, scorer.scale)  # [K, N, T_f, 2]
     n, s_count = batch.num_agents, len(scorer.steps)
-    z = torch.randn((n, s_count, 1, 12, 2), generator=torch.Generator().manual_seed(scorer.seed))
-    z = z.permute(1, 2, 0, 3, 4)  # [S', 1, N, T_f, 2]
+    slots = torch.tensor([0, 1, 2, 0, 0, 1, 2, 3, 4])  # each agent's index in its scene
+    z = torch.randn((5, s_count, 1, 12, 2), generator=torch.Generator().manual_seed(scorer.seed))
+    z = z[slots].permute(1, 2, 0, 3, 4)  # [S', 1, N, T_f, 2]
     steps = torch.tensor(scorer.steps)[:, None, None].expand(-1, 4, n)  # [S', K, N]
     y_s = scorer.schedule.add_noise(y[None].expand(s_count, -1, -1, -1, -1), z, steps)
     eps = scorer.denoiser(y_s, steps, context)  # [S', K, N, T_f, 2]

@@ -158,7 +158,9 @@ class TrajectoryScorer:
         """d for absolute futures [M, N, T_f, 2] of the batch's agents -> [M, N, T_f].
 
         Uses only the histories of ``batch`` (its ``future`` is never read). The noise is
-        drawn from a generator seeded with ``seed``: the same call gives the same numbers.
+        drawn from a generator seeded with ``seed``: the same call gives the same numbers,
+        and an agent's noise depends on its place in its own scene only, so a scene scores the
+        same alone (``rank_samples``) as among other scenes (``evaluate``, ``--keep``).
         """
         self.check_shapes(batch, futures)
         if self.speed_ref is not None:
@@ -169,22 +171,30 @@ class TrajectoryScorer:
         with low:
             context = self.denoiser.context(scene_features(batch, self.scale))  # [N, H]
             y = to_model_frame(futures, batch, self.scale)  # [M, N, T_f, 2]
-            return self.residual_normalised(context, y).float()
+            return self.residual_normalised(context, y, scene_slots(batch.scene)).float()
 
     @torch.no_grad()
-    def residual_normalised(self, context: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    def residual_normalised(self, context: torch.Tensor, y: torch.Tensor,
+                            slots: torch.Tensor | None = None) -> torch.Tensor:  # fmt: skip
         """d for futures already in the denoiser's frame (relative, divided by the data
-        scale): y [M, N, T_f, 2], context [N, H] from this scorer's denoiser -> [M, N, T_f]."""
-        return self.residual_differentiable(context, y)
+        scale): y [M, N, T_f, 2], context [N, H] from this scorer's denoiser -> [M, N, T_f].
+        ``slots`` [N]: each agent's index within its scene (``scene_slots``), which picks its
+        noise; None: its index in the batch (the same for a batch of one scene)."""
+        return self.residual_differentiable(context, y, slots)
 
-    def residual_differentiable(self, context: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    def residual_differentiable(self, context: torch.Tensor, y: torch.Tensor,
+                                slots: torch.Tensor | None = None) -> torch.Tensor:  # fmt: skip
         """``residual_normalised`` with autograd on: gradients flow from d into y (and into
         whatever made y), never into the frozen denoiser's weights unless they require it."""
         m, n, t_f, _ = y.shape
         gen = torch.Generator().manual_seed(self.seed)
-        # agent-major draw: an agent's noise depends on its index only, not on the batch size
-        shape = (n, len(self.steps), 1 if self.shared_noise else m, t_f, 2)
-        z = torch.randn(shape, generator=gen).permute(1, 2, 0, 3, 4).to(y)  # [S',1|M,N,T,2]
+        # slot-major draw: an agent's noise depends on its slot only (its index in its scene,
+        # or in the batch without slots), not on the batch's size or other scenes
+        slots = torch.arange(n) if slots is None else slots.cpu()  # [N]
+        rows = int(slots.max()) + 1 if n else 0
+        shape = (rows, len(self.steps), 1 if self.shared_noise else m, t_f, 2)
+        z = torch.randn(shape, generator=gen)[slots]  # [N, S', 1|M, T_f, 2]
+        z = z.permute(1, 2, 0, 3, 4).to(y)  # [S', 1|M, N, T_f, 2]
         d = y.new_zeros(m, n, t_f)
         # one step at a time: the denoiser's conditioning on (step, agent) is then computed
         # once per agent and shared by the M samples (about half the cost of a pass)
@@ -281,6 +291,14 @@ def _agent_types(value, p: int, device: torch.device) -> torch.Tensor:
         raise DataError(f"agent_type: flags must be {AGENT_PERSON} (person) or "
                         f"{AGENT_BALL} (ball), got {sorted(set(types.tolist()))}")  # fmt: skip
     return types.to(device=device, dtype=torch.int64)
+
+
+def scene_slots(scene: torch.Tensor) -> torch.Tensor:
+    """Each agent's index within its scene, [N] int64, from the batch's non-decreasing scene
+    index [N] (``Batch.scene``): 0, 1, ... for the first scene's agents, 0, 1, ... again for
+    the next."""
+    first = torch.searchsorted(scene, scene)  # [N] where each agent's scene begins
+    return torch.arange(len(scene), device=scene.device) - first  # [N]
 
 
 def rank_samples(
