@@ -216,3 +216,43 @@ def test_context_frames_admits_the_agents_seen_over_the_last_frames():
     assert counts == [1, 2, 3]
     with pytest.raises(ConfigError, match="context_frames"):
         dataclasses.replace(TINY, context_frames=1)
+
+
+def test_predict_checks_what_a_python_caller_hands_it(batch):
+    from dataclasses import replace
+
+    from trajpref.errors import DataError
+
+    pred = _predictor()
+    for k in (0, -1, 2.0, True):
+        with pytest.raises(ConfigError, match="num_samples must be an integer >= 1"):
+            pred.predict(batch, k)
+    with pytest.raises(DataError, match=r"expected \[N, 8, 2\] .*T_h = 8\), got \[5, 7, 2\]"):
+        pred.predict(replace(batch, history=batch.history[:, 1:]), K)
+    holed = batch.history.clone()
+    holed[3, 2, 0] = float("nan")
+    with pytest.raises(DataError, match="1 agent.* non-finite positions, the first at index 3"):
+        pred.predict(replace(batch, history=holed), K)
+    far = batch.history + 5e6  # UTM-like: float32 keeps about 0.25 of a unit there
+    with pytest.raises(DataError, match="subtract an origin"):
+        pred.predict(replace(batch, history=far, future=batch.future + 5e6), K)
+    pred.predict(replace(batch, history=batch.history + 1e3), K)  # a plaza's size is fine
+
+
+def test_loading_resolves_the_device_as_the_command_line_does(tiny_run, monkeypatch):
+    from trajpref.models.registry import load_predictor
+    from trajpref.score import TrajectoryScorer
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    path = str(tiny_run / "generator.safetensors")
+    assert load_predictor(path, device="auto").device.type == "cpu"
+    with pytest.raises(ConfigError, match="no CUDA GPU is available"):
+        load_predictor(path, device="cuda")
+    with pytest.raises(ConfigError, match="no CUDA GPU is available"):
+        load_predictor("cv", device="cuda")
+    with pytest.raises(ConfigError, match="no CUDA GPU is available"):
+        TrajectoryScorer.from_checkpoint(tiny_run / "denoiser.safetensors", device="cuda")
+    assert (
+        TrajectoryScorer.from_checkpoint(tiny_run / "denoiser.safetensors", "auto").device.type
+        == "cpu"
+    )

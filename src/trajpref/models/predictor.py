@@ -18,7 +18,7 @@ from torch import nn
 from trajpref.data.transforms import from_model_frame
 from trajpref.diffusion.samplers import denoise, sample_full
 from trajpref.diffusion.schedule import DDPMSchedule
-from trajpref.errors import ConfigError
+from trajpref.errors import ConfigError, DataError
 from trajpref.models.denoiser import Denoiser
 from trajpref.models.encoder import SceneFeatures, scene_features
 from trajpref.models.generator import Generator, GeneratorOutput
@@ -67,6 +67,42 @@ class Rollout:
     """[K, N, T_f, 2] the denoised samples after tau steps."""
     explore: torch.Tensor | None
     """[K, N, T_f, 2] the exploration noise added to Y^tau, or None."""
+
+
+PRECISION_SHARE = 0.01
+"""The largest float32 rounding of a coordinate, as a share of the median observed step, that a
+prediction accepts (the text reader's rule, ``data.text``)."""
+
+
+def check_histories(history: torch.Tensor, t_hist: int) -> None:
+    """``DataError`` unless ``history`` is [N, T_h, 2] with this ``t_hist``, finite, and in
+    coordinates whose float32 rounding stays within ``PRECISION_SHARE`` of a median step (map
+    coordinates such as UTM eastings are not: subtract an origin first)."""
+    if history.ndim != 3 or tuple(history.shape[1:]) != (t_hist, 2):
+        raise DataError(f"history: expected [N, {t_hist}, 2] (agents, observed steps, x/y; this "
+                        f"model's T_h = {t_hist}), got {list(history.shape)}")  # fmt: skip
+    bad = ~torch.isfinite(history).all(dim=(1, 2))  # [N]
+    if bad.any():
+        first = int(bad.nonzero()[0, 0])
+        raise DataError(
+            f"history: {int(bad.sum())} agent(s) with non-finite positions, the first at index "
+            f"{first}; every target needs all {t_hist} observed positions (an agent seen for "
+            "only part of the history can be a neighbour: Scene.context)"
+        )
+    if history.numel() == 0:
+        return
+    steps = (history[:, 1:] - history[:, :-1]).norm(dim=-1).flatten()  # [N * (T_h - 1)]
+    steps = steps[steps > 0]
+    largest = float(history.abs().max())
+    rounding = float(torch.finfo(torch.float32).eps) * largest / 2  # half a float32 spacing
+    if len(steps) and rounding > PRECISION_SHARE * float(steps.median()):
+        median = float(steps.median())
+        raise DataError(
+            f"history: coordinates as large as {largest:.6g} lose up to {rounding:.3g} to "
+            f"float32 rounding, {rounding / median:.0%} of a median step ({median:.3g}): "
+            "subtract an origin from x and y before predicting, and add it back to the "
+            "predictions"
+        )
 
 
 class DiffusionPredictor(nn.Module):
@@ -183,6 +219,11 @@ class DiffusionPredictor(nn.Module):
     def predict(
         self, batch: Batch, num_samples: int = 20, generator: torch.Generator | None = None
     ) -> torch.Tensor:
-        """Absolute future positions [K, N, T_f, 2]."""
+        """Absolute future positions [K, N, T_f, 2]. The batch's histories must be [N, T_h, 2]
+        with this model's T_h, finite, and in coordinates float32 can hold to within a small
+        share of a step (``check_histories``); ``num_samples`` >= 1."""
+        if isinstance(num_samples, bool) or not isinstance(num_samples, int) or num_samples < 1:
+            raise ConfigError(f"num_samples must be an integer >= 1, got {num_samples!r}")
+        check_histories(batch.history, self.denoiser.cfg.t_hist)
         y = self.sample_normalised(batch, num_samples, generator)  # [K, N, T_f, 2]
         return from_model_frame(y, batch, self.scale)

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import torch
 
+from trajpref.device import resolve_device
 from trajpref.errors import TrajprefError
 from trajpref.models import checkpoint, zoo
 from trajpref.models.baseline import ConstantVelocity
@@ -22,8 +23,11 @@ def load_predictor(
     or a path loads a checkpoint.
 
     ``sampler`` (``leapfrog`` or ``full``) applies to diffusion checkpoints; None picks the
-    checkpoint's natural one (leapfrog for a generator, full for a bare denoiser).
+    checkpoint's natural one (leapfrog for a generator, full for a bare denoiser). ``device``:
+    ``auto`` (a GPU when there is one), ``cpu`` or ``cuda[:i]``; the baseline computes on its
+    inputs' device.
     """
+    device = resolve_device(device)  # "auto" as the CLI reads it; a missing GPU in one line
     if spec in BUILTIN:
         return BUILTIN[spec]()
     if zoo.is_name(spec):  # DATASET/NAME: a published model, or an error listing them

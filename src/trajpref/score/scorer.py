@@ -23,6 +23,7 @@ from trajpref.data.transforms import (
     transform_positions,
     transform_scenes,
 )
+from trajpref.device import resolve_device
 from trajpref.diffusion.schedule import DDPMSchedule
 from trajpref.errors import ConfigError, DataError
 from trajpref.metrics import ade_fde, scene_sum
@@ -118,6 +119,7 @@ class TrajectoryScorer:
     @classmethod
     def from_checkpoint(cls, path, device="cpu", **kwargs) -> TrajectoryScorer:
         """From a denoiser checkpoint, or the denoiser embedded in a generator checkpoint."""
+        device = resolve_device(device)  # "auto" as the CLI reads it; a missing GPU in one line
         payload = checkpoint.denoiser_of(checkpoint.load(path))
         denoiser, cfg = checkpoint.build_denoiser(payload)
         schedule = DDPMSchedule.from_config(cfg.diffusion)
