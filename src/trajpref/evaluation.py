@@ -135,26 +135,33 @@ def predict_dataset(
     Returns ``history`` [N, T_h, 2], ``future`` [N, T_f, 2], ``pred`` [K, N, T_f, 2],
     ``scene`` [N] (scene index per agent, in dataset order), ``agent_type`` [N]. With a
     ``scorer``, each scene's samples are reordered best first by the ground-truth-free
-    ranking, and ``order`` [K, B] (original indices) and ``residual`` [K, B] are added.
+    ranking, and ``order`` [K, B] (original indices) and ``residual`` [K, B] are added. A
+    selecting model (``SelectingPredictor``) adds ``kept`` [K, N]: each kept sample's index
+    among the samples it drew, in ``pred``'s order (after the ranking, when there is one).
     """
     parts: dict[str, list[np.ndarray]] = {k: [] for k in ("history", "future", "pred", "scene")}
     parts["agent_type"] = []
     offset = 0
     for batch, pred in sampled_batches(model, dataset, num_samples, seed, device, max_agents,
                                        progress, f"predict {dataset.info.name}"):  # fmt: skip
+        kept = getattr(model, "last_kept", None)  # [K, N] a selection's indices, if any
         if scorer is not None:
             total = scorer.scene_residual(batch, pred)  # [K, B]
             order = total.argsort(0)  # [K, B] best first
             pred = gather(pred, order[:, batch.scene])  # each scene's samples, best first
+            if kept is not None:
+                kept = kept.gather(0, order[:, batch.scene])  # [K, N] in the ranked order
             parts.setdefault("order", []).append(order.T.cpu().numpy())  # [B, K]
             parts.setdefault("residual", []).append(total.gather(0, order).T.cpu().numpy())
+        if kept is not None:
+            parts.setdefault("kept", []).append(kept.cpu().numpy())  # [K, N]
         parts["history"].append(batch.history.cpu().numpy())
         parts["future"].append(batch.future.cpu().numpy())
         parts["pred"].append(pred.cpu().numpy())
         parts["scene"].append(batch.scene.cpu().numpy() + offset)
         parts["agent_type"].append(batch.agent_type.cpu().numpy())
         offset += batch.num_scenes
-    out = {k: np.concatenate(v, axis=1 if k == "pred" else 0) for k, v in parts.items()}
+    out = {k: np.concatenate(v, axis=1 if k in ("pred", "kept") else 0) for k, v in parts.items()}
     for key in ("order", "residual"):
         if key in out:
             out[key] = out[key].T  # [K, B]

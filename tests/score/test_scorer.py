@@ -202,3 +202,18 @@ def test_bf16_scoring_stays_close_to_fp32_and_returns_fp32(tiny_run, batch):
     assert corr.mean() > 0.9
     with pytest.raises(ConfigError, match="precision"):
         TrajectoryScorer.from_checkpoint(tiny_run / "denoiser.safetensors", precision="fp16")
+
+
+def test_predict_with_keep_saves_which_samples_it_kept(tiny_run, walks, tmp_path, capsys):
+    import numpy as np
+
+    gen = str(tiny_run / "generator.safetensors")
+    common = ["predict", "--dataset", str(walks), "--model", gen, "--samples", "4",
+              "--no-progress", "--seed", "3"]  # fmt: skip
+    assert main([*common, "--out", str(tmp_path / "all.npz")]) == 0
+    assert main([*common, "--keep", "2", "--select", "score-facility", "--rank", "--out",
+                 str(tmp_path / "kept.npz")]) == 0  # fmt: skip
+    with np.load(tmp_path / "all.npz") as a, np.load(tmp_path / "kept.npz") as b:
+        drawn, pred, kept = a["pred"], b["pred"], b["kept"]
+        assert kept.shape == (2, drawn.shape[1]) and b["order"].shape[0] == 2
+        np.testing.assert_array_equal(pred, np.take_along_axis(drawn, kept[..., None, None], 0))

@@ -46,8 +46,10 @@ class SelectionConfig:
     """How to keep K' of K samples."""
 
     keep: int = 5
-    """K', the samples kept per agent (or per scene). The defaults below were chosen on the
-    validation splits of zara1 and eth (docs/selection.md)."""
+    """K', the samples kept per agent (or per scene). The defaults below are an early choice
+    on zara1's and eth's validation splits; the settings chosen since for each published
+    generator are in ``benchmarks/selection_chosen.json`` and the README's selection table
+    (zara1's: ``drop=0.2, bandwidth=1.0, trust_speed=0.445`` with 34 score steps)."""
     method: Method = "score-facility"
     """Without the score: ``first`` (the generator's first K'), ``random``, or coverage of
     the endpoints by ``kmeans``, ``fps`` (farthest-point) or ``facility`` (greedy facility
@@ -388,6 +390,9 @@ class SelectingPredictor:
         self.scorer = scorer
         self.name = f"{getattr(base, 'name', 'model')}+{cfg.method}{cfg.keep}"
         self.generator = torch.Generator().manual_seed(cfg.seed)
+        self.last_kept: torch.Tensor | None = None
+        """[K', N] the indices, among the K samples drawn, of those the last ``predict`` kept
+        (``trajpref predict --keep`` saves them as ``kept``)."""
 
     @torch.no_grad()
     def select(self, batch: Batch, pred: torch.Tensor) -> torch.Tensor:
@@ -400,5 +405,9 @@ class SelectingPredictor:
         if num_samples is not None and num_samples != self.cfg.keep:
             raise ConfigError(f"this selector keeps {self.cfg.keep} samples, asked for "
                               f"{num_samples}")  # fmt: skip
+        """[K', N, T_f, 2]: K (``candidates``) samples drawn from the base predictor, and the
+        K' (``cfg.keep``) of them the selection keeps, in its order; their indices among the
+        K are left in ``last_kept``."""
         pred = self.base.predict(batch, self.candidates, generator)  # [K, N, T_f, 2]
-        return gather(pred, self.select(batch, pred))
+        self.last_kept = self.select(batch, pred)  # [K', N]
+        return gather(pred, self.last_kept)
