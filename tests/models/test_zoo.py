@@ -276,3 +276,10 @@ def test_both_load_predictor_functions_take_sampler_and_device_by_keyword(fake_z
     a = registry.load_predictor("walks/generator", device="cpu", sampler="full")
     b = checkpoint.load_predictor(path, sampler="full", device="cpu")
     assert a.sampler == b.sampler == "full"
+
+
+def test_a_published_name_given_with_its_suffix_is_named_without_it(fake_zoo):
+    from trajpref.models import registry
+
+    with pytest.raises(TrajprefError, match="the published model is named walks/generator"):
+        registry.load_predictor("walks/generator.safetensors")

@@ -320,3 +320,9 @@ def test_select_for_scene_keeps_k_of_numpy_samples_without_the_future(tiny_run, 
     assert isinstance(out, torch.Tensor)
     kept = samples[idx, np.arange(idx.shape[1])]  # [K', P, T_f, 2]
     assert kept.shape == (3, *scene.future.shape)
+
+
+@pytest.mark.parametrize("keep", [0, 5.0, "5", True])
+def test_keep_must_be_a_positive_integer(keep):
+    with pytest.raises(ConfigError, match="keep must be an integer >= 1"):
+        SelectionConfig(keep=keep)

@@ -189,7 +189,8 @@ class DiffusionPredictor(nn.Module):
         if k > self.generator.samples:
             raise ConfigError(
                 f"this generator emits K = {self.generator.samples} samples; "
-                f"asked for {k} (use --sampler full for more)"
+                f"asked for {k} (for more, the full sampler: --sampler full, or "
+                "sampler='full' when loading in Python)"
             )
         cond = cond if cond is not None else self.condition(batch)
         out = self.generator(cond.features)

@@ -85,8 +85,8 @@ class SelectionConfig:
 
     def __post_init__(self) -> None:
         check_choices(self)
-        if self.keep < 1:
-            raise ConfigError("selection keep must be >= 1")
+        if isinstance(self.keep, bool) or not isinstance(self.keep, int) or self.keep < 1:
+            raise ConfigError(f"selection keep must be an integer >= 1, got {self.keep!r}")
         if not 0 <= self.drop < 1:
             raise ConfigError("selection drop must lie in [0, 1)")
         if self.iters < 0:
