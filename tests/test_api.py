@@ -55,6 +55,7 @@ def test_readme_example_runs_as_written(data_root, tmp_path, monkeypatch):
     samples = namespace["samples"]
     assert idx.shape == (5, samples.shape[1]) and kept.shape == (5, *samples.shape[1:])
     assert all(len(set(col)) == 5 for col in idx.T.tolist())  # five distinct futures per agent
+    assert namespace["futures"].shape == (20, *samples.shape[1:])  # predict_scene
     # the same numbers from tensors (the scorer's noise is seeded)
     pred = np.load("pred.npz")
     agents = pred["scene"] == 0

@@ -217,3 +217,30 @@ def test_predict_with_keep_saves_which_samples_it_kept(tiny_run, walks, tmp_path
         drawn, pred, kept = a["pred"], b["pred"], b["kept"]
         assert kept.shape == (2, drawn.shape[1]) and b["order"].shape[0] == 2
         np.testing.assert_array_equal(pred, np.take_along_axis(drawn, kept[..., None, None], 0))
+
+
+def test_predict_scene_samples_one_scene_from_arrays_as_the_batched_path_does(tiny_run, walks):
+    import numpy as np
+
+    from trajpref.errors import DataError
+    from trajpref.models.registry import load_predictor
+    from trajpref.score import predict_scene
+
+    model = load_predictor(str(tiny_run / "generator.safetensors"), device="cpu")
+    scenes = load_dataset(str(walks), "test").scenes[:2]
+    batched = model.predict(collate(scenes), 4, torch.Generator().manual_seed(3))  # [4, N, 12, 2]
+    p = scenes[1].num_agents
+    mine = predict_scene(model, scenes[1].history.astype(np.float64), 4, seed=3)
+    assert isinstance(mine, np.ndarray) and mine.shape == (4, p, 12, 2)
+    np.testing.assert_allclose(mine, batched[:, -p:].numpy(), atol=1e-5)
+    as_tensor = predict_scene(model, torch.from_numpy(scenes[1].history), 4, seed=3)
+    assert isinstance(as_tensor, torch.Tensor) and as_tensor.shape == (4, p, 12, 2)
+    with pytest.raises(DataError, match=r"expected \[P, 8, 2\] .*T_h = 8\), got \[.*, 7, 2\]"):
+        predict_scene(model, scenes[1].history[:, 1:])
+    with pytest.raises(DataError, match="not finite"):
+        predict_scene(model, np.where(np.arange(16).reshape(8, 2) == 3, np.nan,
+                                      scenes[1].history))  # fmt: skip
+    with pytest.raises(DataError, match="subtract an origin"):
+        predict_scene(model, scenes[1].history + 5e6)
+    cv = predict_scene(load_predictor("cv"), scenes[1].history, 1)  # any T_h, T_f 12
+    assert cv.shape == (1, p, 12, 2)

@@ -140,7 +140,18 @@ class DiffusionPredictor(nn.Module):
 
     @property
     def device(self) -> torch.device:
+        """Where the weights are (and where prediction runs)."""
         return next(self.denoiser.parameters()).device
+
+    @property
+    def t_hist(self) -> int:
+        """T_h, the observed steps per agent the model reads."""
+        return self.denoiser.cfg.t_hist
+
+    @property
+    def t_fut(self) -> int:
+        """T_f, the future steps per sample it predicts."""
+        return self.denoiser.cfg.t_fut
 
     def condition(self, batch: Batch) -> Condition:
         """Features and (on first use) the denoiser's context of a batch (no gradient into

@@ -333,6 +333,43 @@ def rank_samples(
     return order.cpu().numpy(), total.cpu().numpy()
 
 
+def predict_scene(model, history: ArrayLike, num_samples: int = 20,
+                  agent_type: ArrayLike | None = None, seed: int = 0) -> ArrayLike:  # fmt: skip
+    """Sample the futures of ONE scene from its agents' histories (the planning use, beside
+    ``rank_samples``): history [P, T_h, 2] absolute positions in the model's units (metres
+    for the published ETH/UCY and Robo models) -> [K, P, T_f, 2] absolute future positions.
+
+    ``model`` is what ``models.registry.load_predictor`` returns (a published name, a
+    checkpoint or ``cv``). ``agent_type`` [P]: 0 person (the default), 1 ball. ``seed`` seeds
+    the sampling (the published generators draw no noise: every seed gives the same). A numpy
+    array (or anything ``np.asarray`` reads) gives a numpy array back, a tensor a tensor on
+    the model's device. Wrong shapes, non-numbers, non-finite values and coordinates too
+    large for float32 raise ``DataError``."""
+    device = getattr(model, "device", torch.device("cpu"))
+    hist = _float_tensor("history", history, device)  # [P, T_h, 2]
+    t_h = getattr(model, "t_hist", None)  # None: any length (the constant-velocity baseline)
+    t_f = getattr(model, "t_fut", 12)
+    if hist.ndim == 3 and hist.shape[0] == 0:
+        raise DataError("history: the scene has no agents (P = 0)")
+    if hist.ndim != 3 or hist.shape[2] != 2 or hist.shape[1] != (t_h or hist.shape[1]):
+        want = (
+            f"[P, {t_h}, 2] (agents, observed steps, x/y; this model's T_h = {t_h})"
+            if t_h
+            else "[P, T_h, 2] (agents, observed steps, x/y)"
+        )
+        raise DataError(f"history: expected {want}, got {list(hist.shape)}")
+    p = hist.shape[0]
+    batch = Batch(
+        history=hist,
+        future=hist.new_full((p, t_f, 2), float("nan")),  # unknown; its length is T_f
+        scene=torch.zeros(p, dtype=torch.int64, device=device),
+        agent_type=_agent_types(agent_type, p, device),
+        num_scenes=1,
+    )
+    pred = model.predict(batch, num_samples, torch.Generator().manual_seed(seed))
+    return pred if isinstance(history, torch.Tensor) else pred.cpu().numpy()
+
+
 def scene_batch(scorer: TrajectoryScorer, history: ArrayLike, samples: ArrayLike,
                 agent_type: ArrayLike | None = None) -> tuple[Batch, torch.Tensor]:  # fmt: skip
     """One scene's history [P, T_h, 2] and samples [K, P, T_f, 2] (arrays or tensors, the
