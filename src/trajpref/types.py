@@ -74,6 +74,7 @@ class Scene:
 
     @property
     def num_agents(self) -> int:
+        """P, the scene's agents (targets; context-only agents not counted)."""
         return int(self.history.shape[0])
 
 
@@ -115,6 +116,7 @@ class TrajectoryDataset:
 
     @property
     def num_agents(self) -> int:
+        """The agent-windows of every scene of the split."""
         return sum(s.num_agents for s in self.scenes)
 
     def evenly_spaced(self, max_scenes: int | None) -> TrajectoryDataset:
@@ -171,6 +173,7 @@ class Batch:
 
     @property
     def num_agents(self) -> int:
+        """N, the agents of every scene packed in the batch (context-only agents not counted)."""
         return int(self.history.shape[0])
 
     @property
@@ -184,6 +187,7 @@ class Batch:
         return self.history[:, -1]
 
     def to(self, device: torch.device | str) -> Batch:
+        """The same batch with every tensor on ``device``."""
         return Batch(
             history=self.history.to(device),
             future=self.future.to(device),

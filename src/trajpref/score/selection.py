@@ -99,6 +99,7 @@ class SelectionConfig:
 
     @property
     def uses_score(self) -> bool:
+        """Whether the method reads the diffusion score (and so needs a scorer)."""
         return USES_SCORE.get(self.method, False)
 
     def unread(self) -> list[str]:
