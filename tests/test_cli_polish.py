@@ -238,3 +238,17 @@ def test_a_run_reports_its_rank(tiny_cfg, tmp_path):
     summary = train_stage("diffusion", tiny_cfg, tmp_path / "r", device="cpu", progress=False,
                           max_steps=1)  # fmt: skip
     assert summary["rank"] == 0 and math.isfinite(summary["best"]["score"])
+
+
+def test_unit_names_that_mean_metres_are_not_a_mismatch(capsys, tmp_path):
+    from synthetic import straight_rows, write_tracks
+
+    write_tracks(tmp_path / "d" / "a.txt", straight_rows(20))
+    code, _, err = _run(capsys, "evaluate", "--dataset", tmp_path / "d", "--units", "Meters",
+                        "--model", "zara1/generator", "--samples", "2",
+                        "--no-progress")  # fmt: skip
+    assert code == 0 and "this data is in" not in err
+    code, _, err = _run(capsys, "evaluate", "--dataset", tmp_path / "d", "--units", "ft",
+                        "--model", "zara1/generator", "--samples", "2",
+                        "--no-progress")  # fmt: skip
+    assert code == 0 and "this data is in ft, the model's in m" in err

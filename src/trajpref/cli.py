@@ -43,7 +43,7 @@ from trajpref.io import (
     read_checkpoint_header,
     write_json,
 )
-from trajpref.metrics import SCENE_SIZE_EDGES, check_bin_edges
+from trajpref.metrics import METRE_UNITS, SCENE_SIZE_EDGES, check_bin_edges
 from trajpref.models import checkpoint as ckpt
 from trajpref.models import zoo
 from trajpref.models.registry import load_predictor
@@ -496,6 +496,12 @@ def _predictor(args):
     return model, device
 
 
+def same_units(a: str, b: str) -> bool:
+    """Whether two unit names mean the same (``m``, ``metres``, ``Meters``; else literally)."""
+    a, b = a.strip().lower(), b.strip().lower()
+    return a == b or (a in METRE_UNITS and b in METRE_UNITS)
+
+
 def _warn_if_trained_otherwise(spec: str, ds) -> None:
     """One warning when the model was trained on a built-in dataset whose units or time step
     differ from this data's (known ones only): its predictions would be in the wrong units or
@@ -512,7 +518,7 @@ def _warn_if_trained_otherwise(spec: str, ds) -> None:
     if source is None:  # a user folder: its units and step were not recorded
         return
     problems = []
-    if ds.info.units not in ("", "unknown") and ds.info.units != source.units:
+    if ds.info.units not in ("", "unknown") and not same_units(ds.info.units, source.units):
         problems.append(f"this data is in {ds.info.units}, the model's in {source.units}")
     step, model_step = ds.info.frame_interval, source.frame_interval * read_every
     if step > 0 and not math.isclose(step, model_step, rel_tol=0.01):

@@ -452,3 +452,13 @@ def test_partial_future_windows_stop_at_the_files_last_frame(tmp_path):
     scenes = read_folder(tmp_path, 8, 12, options=ReadOptions(partial_future=4))
     assert [s.scene_id for s in scenes] == ["e.txt@frame=0", "e.txt@frame=10", "e.txt@frame=20"]
     assert [s.num_agents for s in scenes] == [1, 1, 1]
+
+
+def test_scene_ids_keep_large_frame_numbers_exact(tmp_path):
+    # frames from 12,000,000 and Unix-like times: six significant digits made ids collide
+    for first, step in ((12_000_000, 10), (1_700_000_000.1, 0.4)):
+        rows = [(first + f * step, a, f, a) for f in range(24) for a in (1, 2)]
+        scenes = window_scenes(read_tracks(write_tracks(tmp_path / "d.txt", rows)), 8, 12)
+        ids = [s.scene_id for s in scenes]
+        assert len(set(ids)) == len(ids) == 5
+        assert ids[0] == f"d.txt@frame={first}"

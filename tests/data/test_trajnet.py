@@ -200,3 +200,14 @@ def test_cli_predict_format_trajnet_scores_like_evaluate(walks, tmp_path, capsys
     assert main(["predict", *common, "--format", "trajnet", "--out", str(tmp_path / "p.npz")]) == 2
     assert main(["predict", *common, "--out", str(tmp_path / "p.npz"), "--truth", str(truth)]) == 2
     assert not (tmp_path / "p.npz").exists()
+
+
+def test_a_file_saved_with_a_byte_order_mark_reads_as_without(tmp_path):
+    path = _three_agents(tmp_path / "a.ndjson")
+    good = [l for l in path.read_text().splitlines() if '"id": 8' not in l]
+    path.write_text("\n".join(good) + "\n")
+    plain = read_trajnet(path)
+    path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())
+    marked = read_trajnet(path)
+    assert [s.scene_id for s in marked.scenes] == [s.scene_id for s in plain.scenes]
+    np.testing.assert_array_equal(marked.scenes[0].history, plain.scenes[0].history)

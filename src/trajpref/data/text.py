@@ -383,7 +383,9 @@ def _checked_xy(values, scale, max_coord, units, path, line_of) -> tuple[np.ndar
     unit = f" {units}" if units and units != "unknown" else ""
     raise DataError(
         f"coordinate {big:g}{unit} is beyond the sane bound of {max_coord:g}{unit} "
-        "(raise it with --max-coord if the data really spans that far)",
+        "(map coordinates such as UTM: subtract an origin from x and y, since every model "
+        "computes in float32; raise it with --max-coord only if the data really spans that "
+        "far)",
         path,
         line,
     )
@@ -537,12 +539,18 @@ def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int |
                 history=history[a:b],
                 future=future[a:b],
                 agent_type=kind[a:b],
-                scene_id=f"{name}@frame={frames[start[a]]:g}",
+                scene_id=f"{name}@frame={_frame_label(frames[start[a]])}",
                 context=context[i],
                 context_reverse=context_reverse[i],
             )
         )
     return out
+
+
+def _frame_label(frame: float) -> str:
+    """A frame number as text, exact and without an exponent: ``780``, ``1700000000.1``
+    (``:g`` kept six digits, so large frame numbers gave colliding scene ids)."""
+    return np.format_float_positional(float(frame), trim="-")
 
 
 def _context(

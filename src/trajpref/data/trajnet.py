@@ -82,7 +82,7 @@ def read_trajnet(
     with open_data_file(path) as fh:
         for line, raw in enumerate(fh, start=1):
             try:
-                text = raw.decode("utf-8")
+                text = raw.decode("utf-8-sig" if line == 1 else "utf-8")  # a BOM, as in text files
             except UnicodeDecodeError:
                 raise DataError("not UTF-8 text", path, line) from None
             if not text.strip():
