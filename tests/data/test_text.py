@@ -462,3 +462,25 @@ def test_scene_ids_keep_large_frame_numbers_exact(tmp_path):
         ids = [s.scene_id for s in scenes]
         assert len(set(ids)) == len(ids) == 5
         assert ids[0] == f"d.txt@frame={first}"
+
+
+@pytest.mark.parametrize(
+    "header", ["agent,frame,x,y", "frame,x,y,agent", "frame,agent,y,x", "ped_id;time;pos_x;pos_y"]
+)
+def test_a_header_naming_the_columns_in_another_order_is_refused(tmp_path, header):
+    sep = ";" if ";" in header else ","
+    path = tmp_path / "h.csv"
+    path.write_text(f"{header}\n" + "".join(f"{f}{sep}1{sep}{f}{sep}0\n" for f in range(3)))
+    with pytest.raises(DataError, match="columns are read by position as frame agent x y: "
+                       "reorder") as info:  # fmt: skip
+        read_tracks(path)
+    assert info.value.line == 1
+
+
+@pytest.mark.parametrize(
+    "header", ["frame_id,ped_id,x,y", "t,id,x,y", "a,b,c,d", "Frame,Track,X,Y"]
+)
+def test_a_header_in_the_read_order_or_of_unknown_names_is_read(tmp_path, header):
+    path = tmp_path / "h.csv"
+    path.write_text(f"{header}\n" + "".join(f"{f},1,{f},0\n" for f in range(3)))
+    assert read_tracks(path).num_rows == 3

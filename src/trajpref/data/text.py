@@ -173,6 +173,34 @@ def check_file(path: Path) -> None:
     raise DataError("no such file", path)
 
 
+_HEADER_ROLES = {
+    "frame": {"frame", "frames", "frame_id", "frameid", "f", "t", "time", "timestamp", "step"},
+    "agent": {"agent", "agent_id", "agentid", "id", "ped", "ped_id", "pedid", "pedestrian",
+              "person", "person_id", "track", "track_id", "trackid", "obj", "object_id", "p"},
+    "x": {"x", "pos_x", "x_m", "px"},
+    "y": {"y", "pos_y", "y_m", "py"},
+}  # fmt: skip
+"""Column names a header may use for each of the four columns read (lower case)."""
+
+
+def _check_header(tokens: list[str], path: Path, line: int) -> None:
+    """Refuse a header whose names say the columns are not in the order they are read
+    (``frame agent x y``, by position): read anyway, such a file gives wrong tracks silently."""
+    roles = []
+    for token in tokens[:4]:
+        name = token.strip("\"'").lower()
+        roles.append(next((r for r, names in _HEADER_ROLES.items() if name in names), None))
+    known = [r for r in roles if r is not None]
+    if len(known) >= 3 and any(r is not None and r != want for r, want in
+                               zip(roles, _HEADER_ROLES, strict=False)):  # fmt: skip
+        raise DataError(
+            f"the header names the first columns {' '.join(tokens[:4])}, but columns are read "
+            "by position as frame agent x y: reorder the file's columns to that order",
+            path,
+            line,
+        )
+
+
 def _layout(path: Path, options: ReadOptions) -> _Layout:
     """Sniff the delimiter and a header from the first line that holds data."""
     try:
@@ -192,6 +220,8 @@ def _layout(path: Path, options: ReadOptions) -> _Layout:
                     delimiter = None
                 tokens = [t for t in re.split(r"[\s,;|]+", content) if t]
                 is_header = not any(_is_float(t) for t in tokens)
+                if is_header:
+                    _check_header(tokens, path, lineno)
                 return _Layout(delimiter, lineno if is_header else None)
     except OSError as exc:
         raise DataError(f"cannot read file ({exc.strerror or exc})", path) from None
