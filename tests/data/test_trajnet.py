@@ -2,6 +2,7 @@
 trajnetplusplustools (the real package from PyPI) reads and scores like we do."""
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -211,3 +212,20 @@ def test_a_file_saved_with_a_byte_order_mark_reads_as_without(tmp_path):
     marked = read_trajnet(path)
     assert [s.scene_id for s in marked.scenes] == [s.scene_id for s in plain.scenes]
     np.testing.assert_array_equal(marked.scenes[0].history, plain.scenes[0].history)
+
+
+def test_a_window_across_a_frame_its_primary_agent_misses_is_reported(tmp_path):
+    from trajpref.data.text import GapWarning
+
+    path = _three_agents(tmp_path / "a.ndjson")
+    good = [l for l in path.read_text().splitlines() if '"id": 8' not in l]
+    path.write_text("\n".join(good) + "\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_trajnet(path)  # complete: no warning
+    holed = [l for l in good if not ('"f": 100,' in l and '"p": 1,' in l)]
+    assert len(holed) == len(good) - 1
+    path.write_text("\n".join(holed) + "\n")
+    with pytest.warns(GapWarning, match=r"1 scene\(s\) \(the first: 7\) have windows whose "
+                      "primary agent misses a frame"):  # fmt: skip
+        read_trajnet(path)

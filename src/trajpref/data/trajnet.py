@@ -15,13 +15,14 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from trajpref.data.text import DEFAULT_MAX_COORD, check_file, open_data_file
+from trajpref.data.text import DEFAULT_MAX_COORD, GapWarning, check_file, open_data_file
 from trajpref.errors import ConfigError, DataError
 from trajpref.io import atomic_path
 from trajpref.types import Scene
@@ -144,6 +145,10 @@ def read_trajnet(
     for f in sorted(rows):
         for p in rows[f]:
             frames_of[p].append(f)
+    unique = np.array(sorted(rows), np.int64)  # [F] every frame of the file
+    jumps, counts = np.unique(np.diff(unique), return_counts=True)
+    step = int(jumps[np.argmax(counts)]) if len(jumps) else 1  # the file's frame step
+    gaps: list[int] = []  # scene ids whose window spans a frame its primary agent misses
     scenes = []
     for line, sid, p, s, e in scene_rows:
         own = [f for f in frames_of.get(p, ()) if s <= f <= e]
@@ -155,6 +160,8 @@ def read_trajnet(
                 line,
             )
         window = own[-t_total:]
+        if any(b - a != step for a, b in zip(window, window[1:], strict=False)):
+            gaps.append(sid)
         others = set(rows[window[0]])
         for f in window[1:]:
             others &= rows[f].keys()
@@ -167,6 +174,14 @@ def read_trajnet(
                 np.zeros(len(agents), np.int64),
                 f"{path.name}#{sid}",
             )  # fmt: skip
+        )
+    if gaps:
+        warnings.warn(
+            f"{path}: {len(gaps)} scene(s) (the first: {gaps[0]}) have windows whose primary "
+            f"agent misses a frame (the file steps {step} frames): their steps span more time "
+            "than the others'",
+            GapWarning,
+            stacklevel=2,
         )
     return TrajnetScenes(scenes, fps)
 
