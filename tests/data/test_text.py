@@ -484,3 +484,21 @@ def test_a_header_in_the_read_order_or_of_unknown_names_is_read(tmp_path, header
     path = tmp_path / "h.csv"
     path.write_text(f"{header}\n" + "".join(f"{f},1,{f},0\n" for f in range(3)))
     assert read_tracks(path).num_rows == 3
+
+
+def test_reading_at_another_pace_is_the_same_with_millisecond_timestamps(tmp_path, data_root):
+    from trajpref.data.text import resample_tracks
+
+    # zara1's test file at 10 Hz, its frames written as Unix milliseconds: read every 4th
+    # step, it must give the windows the same rows with small frame numbers give
+    (src,) = (data_root / "eth_ucy" / "zara1" / "test").glob("*.txt")
+    fast = resample_tracks(read_tracks(src), 0.25)  # rows every 2.5 frames
+    f = fast.frames[fast.frame_index].tolist()  # [R] frame number of each row
+    a = fast.agents[fast.agent_index].tolist()  # [R]
+    xy = fast.xy.tolist()  # [R, 2]
+    windows = []
+    for name, first, scale in (("ms.txt", 1_700_000_000_000, 40), ("small.txt", 0, 4)):
+        body = [(first + round(v * scale), i, x, y) for v, i, (x, y) in zip(f, a, xy, strict=True)]
+        tracks = resample_tracks(read_tracks(write_tracks(tmp_path / name, body)), 4)
+        windows.append(sum(s.num_agents for s in window_scenes(tracks, 8, 12)))
+    assert windows[0] == windows[1] > 2000

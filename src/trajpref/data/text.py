@@ -652,7 +652,15 @@ def resample_tracks(tracks: Tracks, factor: float) -> Tracks:
     _, step = _missing_frames(tracks.frames)
     if step <= 0:
         return tracks
-    tol = step * 1e-6
+    # the step as the whole file's span over its number of steps: the most common jump alone is
+    # off by float64's rounding on large frame numbers (Unix times: 0.0999999 for 0.1), and
+    # a grid built from it drifts off the rows over thousands of steps
+    span = float(tracks.frames[-1] - tracks.frames[0])
+    step = span / max(float(np.rint(span / step)), 1.0)
+    # a frame "on" a grid point: within a millionth of a step, or within float64's rounding at
+    # the frames' magnitude (Unix-time frame numbers: 1.7e9 s is rounded to 2.4e-7 already)
+    largest = float(np.abs(tracks.frames).max())
+    tol = max(step * 1e-6, 64 * float(np.spacing(largest)))
     grid = np.arange(tracks.frames[0], tracks.frames[-1] + tol, step * factor)  # [G]
     time = tracks.frames[tracks.frame_index]  # [R] frame number of each row
     cuts = np.flatnonzero(np.diff(tracks.agent_index)) + 1  # [A'-1] where a new agent begins
