@@ -252,3 +252,17 @@ def test_unit_names_that_mean_metres_are_not_a_mismatch(capsys, tmp_path):
                         "--model", "zara1/generator", "--samples", "2",
                         "--no-progress")  # fmt: skip
     assert code == 0 and "this data is in ft, the model's in m" in err
+
+
+def test_the_step_hint_keeps_the_time_step_given_and_names_an_assumed_interval(capsys, tmp_path):
+    from synthetic import write_dataset
+
+    long = write_dataset(tmp_path / "long", frames=44)
+    # read every 2 frames at the assumed 0.4 s: following the old hint alone went back and forth
+    code, _, err = _run(capsys, "evaluate", "--dataset", long, "--samples", "2", "--no-progress",
+                        "--model", "zara1/generator", "--units", "m", "--time-step",
+                        "2")  # fmt: skip
+    assert code == 0 and err.strip().endswith(
+        "this data steps 0.8 s, the model's 0.4 s (--time-step 1 reads it at the model's step; "
+        "0.4 s between frames is the default: give the file's own with --frame-interval)"
+    )

@@ -374,6 +374,7 @@ def _check_data_args(args) -> None:
     if getattr(args, "_data_checked", False):  # a command may check twice; warn once
         return
     given = args.frame_interval is not None or args.units is not None
+    args._interval_given = args.frame_interval is not None
     args.frame_interval = 0.4 if args.frame_interval is None else args.frame_interval
     args.units = "unknown" if args.units is None else args.units
     if not (math.isfinite(args.frame_interval) and args.frame_interval > 0):
@@ -502,10 +503,12 @@ def same_units(a: str, b: str) -> bool:
     return a == b or (a in METRE_UNITS and b in METRE_UNITS)
 
 
-def _warn_if_trained_otherwise(spec: str, ds) -> None:
+def _warn_if_trained_otherwise(spec: str, ds, time_step: float = 1.0,
+                               interval_assumed: bool = False) -> None:  # fmt: skip
     """One warning when the model was trained on a built-in dataset whose units or time step
     differ from this data's (known ones only): its predictions would be in the wrong units or
-    at the wrong pace."""
+    at the wrong pace. ``time_step``: the ``--time-step`` the data was read with (the hint
+    replaces it); ``interval_assumed``: the frame interval is the 0.4 s default, not given."""
     if spec == "cv":
         return
     try:
@@ -522,12 +525,22 @@ def _warn_if_trained_otherwise(spec: str, ds) -> None:
         problems.append(f"this data is in {ds.info.units}, the model's in {source.units}")
     step, model_step = ds.info.frame_interval, source.frame_interval * read_every
     if step > 0 and not math.isclose(step, model_step, rel_tol=0.01):
-        problems.append(f"this data steps {step:g} s, the model's {model_step:g} s "
-                        f"(--time-step {model_step / step:.4g} reads it at the "
-                        "model's step)")  # fmt: skip
+        frame = step / time_step  # seconds between the file's frames, as read
+        hint = (f"--time-step {time_step * model_step / step:.4g} reads it at the model's "
+                "step")  # fmt: skip
+        if interval_assumed:
+            hint += (f"; {frame:g} s between frames is the default: give the file's own with "
+                     "--frame-interval")  # fmt: skip
+        problems.append(f"this data steps {step:g} s, the model's {model_step:g} s ({hint})")
     if problems:
         warnings.warn(f"{spec} was trained on {trained_on}: {'; '.join(problems)}",
                       stacklevel=2)  # fmt: skip
+
+
+def _warn_trained(args, ds) -> None:
+    """``_warn_if_trained_otherwise`` with the command's reading options."""
+    _warn_if_trained_otherwise(args.model, ds, args.time_step,
+                               not getattr(args, "_interval_given", True))  # fmt: skip
 
 
 def _set_generator(model, flag: str, **setting) -> None:
@@ -642,7 +655,7 @@ def cmd_evaluate(args) -> int:
     scorer = _scorer(args.scorer, device) if args.scorer else None
     model, samples = _selecting(args, model, device)
     ds = _load(args)
-    _warn_if_trained_otherwise(args.model, ds)
+    _warn_trained(args, ds)
     start = time.perf_counter()
     result = evaluate(
         model, ds, samples, args.seed, device, args.max_agents,
@@ -709,7 +722,7 @@ def _evaluate_in_context(args) -> int:
         check_output_file(args.out)
     model, device = _predictor(args)
     ds = _load(args)
-    _warn_if_trained_otherwise(args.model, ds)
+    _warn_trained(args, ds)
     result = evaluate_in_context(model, ds, cfg, args.samples, args.seed, device=device)
     out = {"dataset": ds.info.name, "split": ds.info.split, "protocol": ds.info.protocol,
            "model": args.model, "samples": args.samples, "seed": args.seed,
@@ -761,7 +774,7 @@ def cmd_predict(args) -> int:
         scorer = _scorer(args.scorer or args.model, device)
     model, samples = _selecting(args, model, device)
     ds = _load(args)
-    _warn_if_trained_otherwise(args.model, ds)
+    _warn_trained(args, ds)
     arrays = predict_dataset(
         model, ds, samples, args.seed, device, args.max_agents,
         progress=not args.no_progress, scorer=scorer,
@@ -798,7 +811,7 @@ def cmd_plot(args) -> int:
         raise ConfigError(f"--scene {args.scene}: scene indices start at 0")
     model, device = _predictor(args)
     ds = _load(args)
-    _warn_if_trained_otherwise(args.model, ds)
+    _warn_trained(args, ds)
     if not 0 <= args.scene < len(ds):
         raise TrajprefError(f"--scene {args.scene}: the split has scenes 0..{len(ds) - 1}")
     scene = ds[args.scene]
