@@ -502,3 +502,14 @@ def test_reading_at_another_pace_is_the_same_with_millisecond_timestamps(tmp_pat
         tracks = resample_tracks(read_tracks(write_tracks(tmp_path / name, body)), 4)
         windows.append(sum(s.num_agents for s in window_scenes(tracks, 8, 12)))
     assert windows[0] == windows[1] > 2000
+
+
+def test_error_lines_count_right_after_a_byte_order_mark_and_a_comment(tmp_path):
+    rows = "".join(f"{f},1,{f},0\n" for f in range(5)) + "2,1,2,0\n"  # row 3 again, line 9
+    path = tmp_path / "z.csv"
+    for prefix in (b"", b"\xef\xbb\xbf"):
+        path.write_bytes(prefix + b"# exported\nframe,agent,x,y\n" + rows.encode())
+        with pytest.raises(DataError, match=r"duplicate row for frame 2, agent 1 \(also on "
+                           r"line 5\)") as info:  # fmt: skip
+            read_tracks(path)
+        assert info.value.line == 8

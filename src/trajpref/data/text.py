@@ -325,7 +325,8 @@ def _data_lines(path: Path, layout: _Layout, rows: Iterable[int]) -> dict[int, i
         for lineno, raw in enumerate(fh, start=1):
             if lineno == layout.header_line:
                 continue
-            if not raw.decode("utf-8", "replace").split("#", 1)[0].strip():
+            text = raw.decode("utf-8-sig" if lineno == 1 else "utf-8", "replace")  # a BOM
+            if not text.split("#", 1)[0].strip():
                 continue
             row += 1
             if row == wanted[len(found)]:
