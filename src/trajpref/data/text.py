@@ -436,18 +436,27 @@ def _check_precision(
     at) — map coordinates such as UTM eastings and northings. ``exact`` [R, 2] are the float64
     positions and ``agent`` [R] their agents, rows in (agent, frame) order."""
     same = agent[1:] == agent[:-1]  # [R-1] consecutive rows of one agent
-    steps = np.linalg.norm(np.diff(exact, axis=0), axis=1)[same]  # [S]
-    steps = steps[steps > 0] * time_step
+    steps = np.linalg.norm(np.diff(exact, axis=0), axis=1)[same] * time_step  # [S]
+    problem = float32_precision_loss(float(np.abs(exact).max()), rounding, steps)
+    if problem is not None:
+        raise DataError(
+            f"{problem}: every model computes in float32, so subtract an origin from x and y "
+            "(e.g. the first row's) before reading, and add it back to the predictions",
+            path,
+        )
+
+
+def float32_precision_loss(largest: float, rounding: float, steps: np.ndarray) -> str | None:
+    """What is wrong when coordinates as large as ``largest``, rounded by up to ``rounding``
+    in float32, lose more than ``PRECISION_SHARE`` of the median of ``steps`` (the moving
+    ones); None when nothing moves or the rounding stays within it. The text reader's rule,
+    which ``models.predictor.check_histories`` applies to histories handed in from Python."""
+    steps = steps[steps > 0]
     if not len(steps) or rounding <= PRECISION_SHARE * float(np.median(steps)):
-        return  # no movement to compare with, or rounding well within a step
-    largest, median = float(np.abs(exact).max()), float(np.median(steps))
-    raise DataError(
-        f"coordinates as large as {largest:.6g} lose up to {rounding:.3g} to float32 rounding, "
-        f"{rounding / median:.0%} of a median step ({median:.3g}): "
-        "every model computes in float32, so subtract an origin from x and y (e.g. the "
-        "first row's) before reading, and add it back to the predictions",
-        path,
-    )
+        return None
+    median = float(np.median(steps))
+    return (f"coordinates as large as {largest:.6g} lose up to {rounding:.3g} to float32 "
+            f"rounding, {rounding / median:.0%} of a median step ({median:.3g})")  # fmt: skip
 
 
 def _kind_flags(kinds: np.ndarray, path: Path, line_of) -> np.ndarray:

@@ -141,12 +141,12 @@ def read_trajnet(
             scene_rows.append((line, sid, p, s, e))
     if not scene_rows:
         raise DataError('no {"scene": ...} rows', path)
+    frames = sorted(rows)  # [F] every frame of the file
     frames_of: dict[int, list[int]] = defaultdict(list)  # agent -> its frames, sorted
-    for f in sorted(rows):
+    for f in frames:
         for p in rows[f]:
             frames_of[p].append(f)
-    unique = np.array(sorted(rows), np.int64)  # [F] every frame of the file
-    jumps, counts = np.unique(np.diff(unique), return_counts=True)
+    jumps, counts = np.unique(np.diff(np.array(frames, np.int64)), return_counts=True)
     step = int(jumps[np.argmax(counts)]) if len(jumps) else 1  # the file's frame step
     gaps: list[int] = []  # scene ids whose window spans a frame its primary agent misses
     scenes = []

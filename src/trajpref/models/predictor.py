@@ -15,6 +15,7 @@ from typing import Literal
 import torch
 from torch import nn
 
+from trajpref.data.text import float32_precision_loss
 from trajpref.data.transforms import from_model_frame
 from trajpref.diffusion.samplers import denoise, sample_full
 from trajpref.diffusion.schedule import DDPMSchedule
@@ -69,15 +70,11 @@ class Rollout:
     """[K, N, T_f, 2] the exploration noise added to Y^tau, or None."""
 
 
-PRECISION_SHARE = 0.01
-"""The largest float32 rounding of a coordinate, as a share of the median observed step, that a
-prediction accepts (the text reader's rule, ``data.text``)."""
-
-
 def check_histories(history: torch.Tensor, t_hist: int) -> None:
     """``DataError`` unless ``history`` is [N, T_h, 2] with this ``t_hist``, finite, and in
-    coordinates whose float32 rounding stays within ``PRECISION_SHARE`` of a median step (map
-    coordinates such as UTM eastings are not: subtract an origin first)."""
+    coordinates whose float32 rounding stays within a small share of a median step (the text
+    reader's rule, ``data.text.float32_precision_loss``; map coordinates such as UTM eastings
+    are not within it: subtract an origin first)."""
     if history.ndim != 3 or tuple(history.shape[1:]) != (t_hist, 2):
         raise DataError(f"history: expected [N, {t_hist}, 2] (agents, observed steps, x/y; this "
                         f"model's T_h = {t_hist}), got {list(history.shape)}")  # fmt: skip
@@ -92,17 +89,12 @@ def check_histories(history: torch.Tensor, t_hist: int) -> None:
     if history.numel() == 0:
         return
     steps = (history[:, 1:] - history[:, :-1]).norm(dim=-1).flatten()  # [N * (T_h - 1)]
-    steps = steps[steps > 0]
     largest = float(history.abs().max())
     rounding = float(torch.finfo(torch.float32).eps) * largest / 2  # half a float32 spacing
-    if len(steps) and rounding > PRECISION_SHARE * float(steps.median()):
-        median = float(steps.median())
-        raise DataError(
-            f"history: coordinates as large as {largest:.6g} lose up to {rounding:.3g} to "
-            f"float32 rounding, {rounding / median:.0%} of a median step ({median:.3g}): "
-            "subtract an origin from x and y before predicting, and add it back to the "
-            "predictions"
-        )
+    problem = float32_precision_loss(largest, rounding, steps.cpu().numpy())
+    if problem is not None:
+        raise DataError(f"history: {problem}: subtract an origin from x and y before "
+                        "predicting, and add it back to the predictions")  # fmt: skip
 
 
 class DiffusionPredictor(nn.Module):

@@ -358,14 +358,7 @@ def predict_scene(model, history: ArrayLike, num_samples: int = 20,
             else "[P, T_h, 2] (agents, observed steps, x/y)"
         )
         raise DataError(f"history: expected {want}, got {list(hist.shape)}")
-    p = hist.shape[0]
-    batch = Batch(
-        history=hist,
-        future=hist.new_full((p, t_f, 2), float("nan")),  # unknown; its length is T_f
-        scene=torch.zeros(p, dtype=torch.int64, device=device),
-        agent_type=_agent_types(agent_type, p, device),
-        num_scenes=1,
-    )
+    batch = _one_scene(hist, t_f, agent_type)
     pred = model.predict(batch, num_samples, torch.Generator().manual_seed(seed))
     return pred if isinstance(history, torch.Tensor) else pred.cpu().numpy()
 
@@ -396,14 +389,20 @@ def scene_batch(scorer: TrajectoryScorer, history: ArrayLike, samples: ArrayLike
             f"samples: expected [K, {p}, {t_f}, 2] (samples, the history's {p} agents, "
             f"future steps, x/y; this scorer's T_f = {t_f}), got {list(futs.shape)}{hint}"
         )
-    batch = Batch(
+    return _one_scene(hist, t_f, agent_type), futs
+
+
+def _one_scene(hist: torch.Tensor, t_f: int, agent_type: ArrayLike | None) -> Batch:
+    """One scene's checked history [P, T_h, 2] as a one-scene Batch on its device, with an
+    unknown (NaN) future of T_f steps, never read."""
+    p, device = hist.shape[0], hist.device
+    return Batch(
         history=hist,
-        future=torch.full_like(futs[0], float("nan")),  # unknown; never read
+        future=hist.new_full((p, t_f, 2), float("nan")),  # [P, T_f, 2]
         scene=torch.zeros(p, dtype=torch.int64, device=device),
         agent_type=_agent_types(agent_type, p, device),
         num_scenes=1,
     )
-    return batch, futs
 
 
 def recall_hits(
