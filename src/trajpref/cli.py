@@ -859,21 +859,20 @@ def cmd_train(args) -> int:
         progress=not args.no_progress,
     )
     if summary.get("rank", 0) == 0:
-        name = STAGE_NAMES[args.stage]
-        print(_summary_line(f"trained {args.stage}", summary, Path(args.out) / f"{name}"))
+        kept = Path(args.out) / f"{STAGE_NAMES[args.stage]}{ckpt.SUFFIX}"
+        print(_summary_line(f"trained {args.stage}", summary, kept))
     return 0
 
 
-def _summary_line(what: str, summary: dict, stem: Path) -> str:
+def _summary_line(what: str, summary: dict, kept: Path) -> str:
     """The line a finished training command prints: its training time over every session,
-    the kept epoch's validation numbers, and the checkpoint it wrote."""
+    the kept epoch's validation numbers, and ``kept``, the best checkpoint, when it exists."""
     best = dict(summary["best"])
     epoch = best.pop("epoch", None)
     numbers = " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
                        for k, v in best.items())  # fmt: skip
     at = f" at epoch {epoch}" if epoch is not None else ""
-    path = stem.with_name(stem.name + ckpt.SUFFIX)
-    wrote = f"; kept {path}" if path.is_file() else ""
+    wrote = f"; kept {kept}" if kept.is_file() else ""
     return (
         f"{what} in {summary['train_seconds']:.0f} s (training time over all sessions); "
         f"best validation{at}: {numbers}{wrote}"
@@ -883,8 +882,10 @@ def _summary_line(what: str, summary: dict, stem: Path) -> str:
 def cmd_finetune(args) -> int:
     check_output_dir(args.out)
     if Path(args.start).is_dir():  # a run folder: name the generator in it
-        found = [p for p in (Path(args.start) / f"generator{ckpt.SUFFIX}",) if p.is_file()]
-        hint = f": pass {found[0]}" if found else " with no generator checkpoint in it"
+        generator = Path(args.start) / f"generator{ckpt.SUFFIX}"
+        hint = (
+            f": pass {generator}" if generator.is_file() else " with no generator checkpoint in it"
+        )
         raise ConfigError(f"--from {args.start}: a folder, not a checkpoint file{hint}")
     cfg = finetune_config(args.start, args.method, args.preset, args.config, args.overrides,
                           args.seed)  # fmt: skip
@@ -892,7 +893,7 @@ def cmd_finetune(args) -> int:
                        progress=not args.no_progress)  # fmt: skip
     if summary.get("rank", 0) == 0:
         print(_summary_line(f"fine-tuned ({cfg.finetune.method})", summary,
-                            Path(args.out) / "finetune"))  # fmt: skip
+                            Path(args.out) / f"finetune{ckpt.SUFFIX}"))  # fmt: skip
     return 0
 
 

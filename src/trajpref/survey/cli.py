@@ -8,7 +8,6 @@ import functools
 import json
 import shlex
 from collections.abc import Callable
-from typing import Any
 
 from trajpref.errors import ConfigError
 from trajpref.survey.analyze import run_analysis
@@ -23,7 +22,7 @@ def add_parser(
     *,
     add_data_args: Callable[[argparse.ArgumentParser], None],
     check_data_args: Callable[[argparse.Namespace], None],
-    warn_if_trained_otherwise: Callable[[str, Any], None],
+    warn_if_trained_otherwise: Callable[..., None],
 ) -> argparse.ArgumentParser:
     """Add ``survey`` and its four commands to the main parser's sub-commands.
 
@@ -122,7 +121,7 @@ def parse_models(items: list[str]) -> dict[str, str]:
 
 
 def cmd_build(args, check_data_args: Callable[[argparse.Namespace], None],
-              warn_if_trained_otherwise: Callable[[str, Any], None]) -> int:  # fmt: skip
+              warn_if_trained_otherwise: Callable[..., None]) -> int:  # fmt: skip
     check_data_args(args)  # fills in --frame-interval and --units, checks the read options
     cfg = BuildConfig(
         dataset=args.dataset, models=parse_models(args.models), split=args.split,
@@ -137,7 +136,8 @@ def cmd_build(args, check_data_args: Callable[[argparse.Namespace], None],
 
     def warn(ds) -> None:  # as `evaluate` warns, for every checkpoint: methods and scorer
         for spec in dict.fromkeys([*cfg.models.values(), *([cfg.scorer] if cfg.scorer else [])]):
-            warn_if_trained_otherwise(spec, ds)
+            warn_if_trained_otherwise(spec, ds, args.time_step,
+                                      not getattr(args, "_interval_given", True))  # fmt: skip
 
     study = build_study(cfg, args.out, progress=not args.no_progress, on_data=warn)
     print(f"wrote {study.folder}: {len(study.scenes)} scenes x {len(study.methods)} panels "

@@ -62,7 +62,8 @@ validation interval, arithmetic and checkpoints kept. Everything else that shape
 def run_identity(cfg: ExperimentConfig, name: str, start: str | None = None) -> str:
     """What a stage's resume state records of its run (JSON text): the config sections that
     shape stage ``name`` (data, model, diffusion, seed, its own section less ``RESUME_FREE``)
-    and ``start``, the hash of the checkpoint it starts from (fine-tuning)."""
+    and ``start``, the hash of the checkpoint it starts from (the generator stage's denoiser,
+    fine-tuning's generator)."""
     full = to_dict(cfg)
     own = {k: v for k, v in full[name].items() if k not in RESUME_FREE}
     keep = {k: full[k] for k in ("data", "model", "diffusion", "seed")}
@@ -176,7 +177,8 @@ def _run(
 ) -> dict[str, Any]:
     """What every stage shares: devices and DDP, the datasets, the run folder's config, the
     loop. ``build(train, val, device) -> (Stage, OptimConfig)`` supplies the stage ``name``;
-    ``start`` is the hash of the checkpoint it starts from, when it has one (fine-tuning).
+    ``start`` is the hash of the checkpoint it starts from, when it has one (the generator's
+    denoiser, fine-tuning's generator).
 
     The run folder and the resume state are checked before any data is read and before
     anything is written (a failed check leaves nothing behind)."""
