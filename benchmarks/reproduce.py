@@ -69,7 +69,7 @@ from trajpref.models import checkpoint as ckpt
 from trajpref.models.baseline import ConstantVelocity
 from trajpref.results import command_line, machine
 from trajpref.rl.presets import equal_budget_args
-from trajpref.score.scorer import TrajectoryScorer
+from trajpref.score.scorer import NOISE_LAYOUT, TrajectoryScorer
 from trajpref.types import TrajectoryDataset
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -299,6 +299,7 @@ def eval_key(job: Job, opts: argparse.Namespace, setup: Setup) -> dict[str, Any]
         "checkpoint": rel(job.model), "checkpoint_sha256": sha256(weights) if weights else None,
         "scorer": rel(den) if den.is_file() else None,
         "scorer_sha256": sha256(den) if den.is_file() else None,
+        "score_noise": NOISE_LAYOUT if den.is_file() else None,
         "sampler": job.sampler, "samples": opts.samples, "seed": opts.seed,
         "max_scenes": opts.max_scenes,
         **({"full_sampler_agents": opts.full_sampler_agents} if job.sampler == "full" else {}),

@@ -100,6 +100,10 @@ def test_predict_writes_the_documented_arrays(capsys, folder, tmp_path):
         assert z["future"].shape == (6, 12, 2)
         assert z["pred"].shape == (5, 6, 12, 2)
         assert z["scene"].tolist() == [0, 0, 1, 1, 2, 2]
+        # each scene names its file and first frame; strings load without pickle
+        assert z["scene_id"].shape == (3,)
+        assert all("@frame=" in s for s in z["scene_id"].tolist())
+        assert len(set(z["scene_id"].tolist())) == 3
         # absolute coordinates: the first sample (plain CV) continues the straight line
         np.testing.assert_allclose(z["pred"][0], z["future"], atol=1e-4)
 

@@ -250,6 +250,18 @@ def test_a_sampling_change_re_evaluates_the_generator_but_not_the_full_sampler(s
     assert out["jobs"]["skipped"] == 2
 
 
+def test_another_layout_of_the_scores_noise_re_evaluates_every_scored_cell(setup, monkeypatch):
+    args = ["--quick", "--datasets", "walks", *SAMPLES]
+    reproduce.main(args, setup)
+    monkeypatch.setattr(reproduce, "NOISE_LAYOUT", "batch-index")
+    calls = _counting(monkeypatch)
+    reproduce.main(args, setup)
+    assert len(calls) == 3  # constant velocity too: its Table 2 cell is scored
+    calls = _counting(monkeypatch)
+    reproduce.main(args, setup)
+    assert calls == []
+
+
 # ----------------------------------------------------------------------------- full mode
 
 

@@ -133,7 +133,9 @@ def predict_dataset(
     """Samples for a whole split, as the arrays ``trajpref predict`` saves.
 
     Returns ``history`` [N, T_h, 2], ``future`` [N, T_f, 2], ``pred`` [K, N, T_f, 2],
-    ``scene`` [N] (scene index per agent, in dataset order), ``agent_type`` [N]. With a
+    ``scene`` [N] (scene index per agent, in dataset order), ``agent_type`` [N] and
+    ``scene_id`` [B] (each scene's source and first frame, e.g. ``crowds_zara01.txt@frame=120``,
+    as unicode strings, so a prediction maps back to the file it came from). With a
     ``scorer``, each scene's samples are reordered best first by the ground-truth-free
     ranking, and ``order`` [K, B] (original indices) and ``residual`` [K, B] are added. A
     selecting model (``SelectingPredictor``) adds ``kept`` [K, N]: each kept sample's index
@@ -165,6 +167,7 @@ def predict_dataset(
     for key in ("order", "residual"):
         if key in out:
             out[key] = out[key].T  # [K, B]
+    out["scene_id"] = np.array([s.scene_id for s in dataset.scenes], dtype=str)  # [B]
     return out
 
 

@@ -32,6 +32,11 @@ from trajpref.models.denoiser import Denoiser
 from trajpref.models.encoder import scene_features
 from trajpref.types import AGENT_BALL, AGENT_PERSON, Batch
 
+NOISE_LAYOUT = "scene-slot"
+"""How the residual's noise is assigned to agents: ``scene-slot`` (since 2026-12-05), by each
+agent's index within its own scene (``scene_slots``); before that, by its index in the batch.
+Stored evaluations key on it (benchmarks/reproduce.py), so a change of layout re-measures them."""
+
 
 def score_timesteps(num_steps: int = 100, every: int = 3, start: int = 0) -> list[int]:
     """The paper's "every 3 steps": start, start + 3, ..., up to num_steps - 1 (start = 0 is
