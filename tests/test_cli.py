@@ -62,6 +62,20 @@ def test_time_step_option_reaches_stats(capsys, tmp_path):
     assert code == 2 and "time_step must be a number of frame steps" in err
 
 
+def test_frame_interval_of_trajnet_files_is_theirs_unless_given(capsys, tmp_path):
+    # the CLI passed its 0.4 s default as if given; a value given was overridden silently
+    (tmp_path / "d").mkdir()
+    lines = [json.dumps({"scene": {"id": 1, "p": 1, "s": 0, "e": 20, "fps": 5}})]
+    lines += [json.dumps({"track": {"f": f, "p": 1, "x": f / 10, "y": 0}}) for f in range(21)]
+    (tmp_path / "d" / "a.ndjson").write_text("\n".join(lines) + "\n")
+    code, out, err = _run(capsys, "data", "stats", "--dataset", tmp_path / "d", "--json")
+    assert code == 0 and json.loads(out)["frame_interval"] == 0.2 and err == ""
+    code, out, err = _run(capsys, "data", "stats", "--dataset", tmp_path / "d", "--json",
+                          "--frame-interval", "0.5")  # fmt: skip
+    assert code == 0 and json.loads(out)["frame_interval"] == 0.2
+    assert "the frame interval given (0.5 s, --frame-interval) is ignored" in err
+
+
 def test_evaluate_json_and_out_file(capsys, folder, tmp_path):
     out_file = tmp_path / "res" / "eval.json"
     code, out, _ = _run(

@@ -69,7 +69,8 @@ def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> N
                    help=f"which split to read (default {split_default})")  # fmt: skip
     p.add_argument("--data-root", default=None, help="data folder (default: $TRAJPREF_DATA)")
     p.add_argument("--frame-interval", type=float, default=None,
-                   help="seconds between frames, for a folder dataset (default 0.4)")  # fmt: skip
+                   help="seconds between frames, for a folder dataset (default 0.4; "
+                   "TrajNet++ files: the fps their scenes declare)")  # fmt: skip
     p.add_argument("--units", default=None,
                    help="coordinate units, for a folder dataset (default unknown)")  # fmt: skip
     p.add_argument("--delimiter", default=None, help="text columns separated by: comma, "
@@ -401,13 +402,19 @@ def _read_options(args) -> ReadOptions:
                        reverse_context=getattr(args, "reverse_context", False))  # fmt: skip
 
 
+def _interval_given(args) -> bool:
+    """Whether --frame-interval was given (``_check_data_args`` fills in its default)."""
+    return getattr(args, "_interval_given", True)
+
+
 def _load(args):
     def split(name: str):
         return load_dataset(
             args.dataset,
             name,
             args.data_root,
-            frame_interval=args.frame_interval,
+            # not given: None, so that TrajNet++ files use the fps they declare, silently
+            frame_interval=args.frame_interval if _interval_given(args) else None,
             units=args.units,
             options=_read_options(args),
             protocol=args.protocol,
@@ -540,7 +547,7 @@ def _warn_if_trained_otherwise(spec: str, ds, time_step: float = 1.0,
 def _warn_trained(args, ds) -> None:
     """``_warn_if_trained_otherwise`` with the command's reading options."""
     _warn_if_trained_otherwise(args.model, ds, args.time_step,
-                               not getattr(args, "_interval_given", True))  # fmt: skip
+                               not _interval_given(args))  # fmt: skip
 
 
 def _set_generator(model, flag: str, **setting) -> None:

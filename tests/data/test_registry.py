@@ -1,4 +1,6 @@
 import dataclasses
+import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -236,6 +238,55 @@ def test_user_folders_read_csv_files_too(tmp_path):
     ds = load_dataset(str(tmp_path), "test")
     assert [s.scene_id for s in ds.scenes] == ["a.csv@frame=0", "b.txt@frame=0"]
     np.testing.assert_array_equal(ds[0].future, ds[1].future)
+
+
+def test_upper_case_suffixes_and_split_folders_are_read(tmp_path):
+    # a.TXT, b.CSV and Train/ Val/ Test/ were passed over: "no *.txt or *.csv files"
+    for split, n in (("Train", 25), ("Val", 21), ("Test", 22)):
+        write_tracks(tmp_path / "d" / split / "a.TXT", straight_rows(n))
+        write_tracks(tmp_path / "d" / split / "b.CSV", straight_rows(n))
+    for split, windows in (("train", 12), ("val", 4), ("test", 6)):
+        ds = load_dataset(str(tmp_path / "d"), split)
+        assert len(ds) == windows and ds.info.source.endswith(split.capitalize())
+        assert {s.scene_id.split("@")[0] for s in ds.scenes} == {"a.TXT", "b.CSV"}
+    write_tracks(tmp_path / "two" / "train" / "a.txt", straight_rows(20))
+    write_tracks(tmp_path / "two" / "Train" / "a.txt", straight_rows(20))
+    with pytest.raises(DataError, match=r"both Train/ and train/ are there, and split folders "
+                       "are matched ignoring case: keep one"):  # fmt: skip
+        load_dataset(str(tmp_path / "two"), "train")
+
+
+def test_a_folder_that_cannot_be_read_says_so(tmp_path, monkeypatch):
+    from trajpref.data.text import folder_error
+
+    # an unreadable folder was "no *.txt or *.csv files in folder": Path.glob hides the error
+    message = str(folder_error(tmp_path, PermissionError(13, "Permission denied")))
+    assert message == f"{tmp_path}: cannot read folder (Permission denied): check its permissions"
+    write_tracks(tmp_path / "d" / "test" / "a.txt", straight_rows(20))
+    locked = tmp_path / "d" / "test"
+    listing = Path.iterdir
+
+    def denied(self):
+        if self == locked:
+            raise PermissionError(13, "Permission denied", str(self))
+        return listing(self)
+
+    monkeypatch.setattr(Path, "iterdir", denied)  # as root, chmod does not deny reading
+    with pytest.raises(DataError, match=r"test: cannot read folder \(Permission denied\)"):
+        load_dataset(str(tmp_path / "d"), "test")
+
+
+def test_a_folder_without_read_permission_says_so(tmp_path):
+    write_tracks(tmp_path / "d" / "test" / "a.txt", straight_rows(20))
+    locked = tmp_path / "d" / "test"
+    locked.chmod(0)
+    try:
+        if os.access(locked, os.R_OK):  # root (os.geteuid() == 0) with its usual rights
+            pytest.skip("this user reads a folder whatever its mode")
+        with pytest.raises(DataError, match=r"test: cannot read folder \(Permission denied\)"):
+            load_dataset(str(tmp_path / "d"), "test")
+    finally:
+        locked.chmod(0o755)
 
 
 def test_a_looping_dataset_path_says_so(tmp_path):

@@ -1,3 +1,5 @@
+import warnings
+
 import numpy as np
 import pytest
 from synthetic import straight_rows, write_tracks
@@ -513,3 +515,88 @@ def test_error_lines_count_right_after_a_byte_order_mark_and_a_comment(tmp_path)
                            r"line 5\)") as info:  # fmt: skip
             read_tracks(path)
         assert info.value.line == 8
+
+
+def _walkers(frame) -> list[tuple]:
+    """12 agents, each on 45 consecutive frame steps k (agent 4 misses two of them), starting
+    15 steps apart; ``frame(k)`` is the frame column of step k."""
+    rows = []
+    for a in range(12):
+        for k in range(15 * a, 15 * a + 45):
+            if a != 3 or k not in (15 * a + 20, 15 * a + 21):
+                rows.append((frame(k), a + 1, round(0.3 * k, 3), float(a)))
+    return rows
+
+
+@pytest.mark.parametrize("time_step", [1.0, 0.4, 1.5])
+def test_unix_second_timestamps_read_the_windows_of_frame_numbers(tmp_path, time_step):
+    from trajpref.data.text import resample_tracks
+
+    # the same rows with frames 0, 1, 2, ... and as Unix seconds 0.4 apart: read at a
+    # non-integer step, numpy's arange laid the grid with the step rounded at 1.5e9
+    # (0.16000009 for 0.16) and the grid drifted off the rows (1067 windows for 1072)
+    counts = []
+    for name, frame in (("small.txt", lambda k: k), ("unix.txt", lambda k: 1.5e9 + 0.4 * k)):
+        tracks = resample_tracks(read_tracks(write_tracks(tmp_path / name, _walkers(frame))),
+                                 time_step)  # fmt: skip
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", GapWarning)  # agent 4's own gap
+            counts.append(sum(s.num_agents for s in window_scenes(tracks, 8, 12)))
+    assert counts[0] == counts[1] == {1.0: 291, 0.4: 1072, 1.5: 121}[time_step]
+
+
+def test_a_step_that_float_rounding_splits_is_still_the_most_common(tmp_path):
+    # one agent at Unix seconds 0.4 apart for 40 steps, then 0.8 apart for 34: the 0.4 jumps
+    # come as 0.39999986 (16) and 0.4000001 (24), the 0.8 ones as 0.79999995 (27) and
+    # 0.80000019 (7); counted apart, 0.8 won and no frame was missing
+    ks = [*range(41), *range(42, 110, 2)]
+    path = write_tracks(tmp_path / "u.txt", [(1.5e9 + 0.4 * k, 1, 0.3 * k, 0) for k in ks])
+    tracks = read_tracks(path)
+    with pytest.warns(GapWarning, match=r"34 windows \(34 agent-windows\) span missing frames "
+                      r"\(up to 1 in a row\)"):  # fmt: skip
+        assert len(window_scenes(tracks, 8, 12)) == 75 - 19
+    assert len(window_scenes(tracks, 8, 12, max_gap=0)) == 41 - 19
+
+
+def test_agent_ids_beyond_float64_integers_stay_distinct_and_exact(tmp_path):
+    big = 2**53 + 1  # 9007199254740993: float64 reads it as 2**53, the id of another agent
+    # two agents one after the other: one track of 40 frames, 21 windows, if the ids merge
+    rows = [(f * 10, big, 0.3 * f, 0) for f in range(20)]
+    rows += [(f * 10, big - 1, 100 + 0.3 * f, 5) for f in range(20, 40)]
+    tracks = read_tracks(write_tracks(tmp_path / "a.txt", rows))
+    assert tracks.agents.tolist() == [big - 1, big]
+    assert [s.num_agents for s in window_scenes(tracks, 8, 12)] == [1, 1]
+    # the brief's pair at the same frames: two agents of one scene, in id order
+    rows = [(f * 10, a, 0.3 * f, y) for f in range(20) for a, y in ((big + 2, 1), (big, 0))]
+    (scene,) = window_scenes(read_tracks(write_tracks(tmp_path / "b.txt", rows)), 8, 12)
+    np.testing.assert_array_equal(scene.history[:, 0, 1], [0, 1])  # big first, then big + 2
+    path = write_tracks(tmp_path / "c.txt", [*rows, (0, big, 9.0, 9.0)])
+    with pytest.raises(DataError, match=f"duplicate row for frame 0, agent {big} "):
+        read_tracks(path)
+
+
+def write_text(path, text: str):
+    """``text`` written as it is (no newline translation)."""
+    path.write_bytes(text.encode())
+    return path
+
+
+def test_old_mac_line_ends_read_like_unix_ones(tmp_path):
+    # CR-only line ends: the line parser and the header sniffing saw one line, so a file with
+    # a header was refused as "found 136 columns" and every error said line 1
+    text = "# exported\nframe,agent,x,y\n" + "".join(
+        f"{f * 10},{a},{0.3 * f},{a}\n" for f in range(22) for a in (1, 2)
+    )
+    unix = read_tracks(write_text(tmp_path / "n.csv", text))
+    mac = read_tracks(write_text(tmp_path / "r.csv", text.replace("\n", "\r")))
+    np.testing.assert_array_equal(mac.xy, unix.xy)
+    assert len(window_scenes(mac, 8, 12)) == 3
+    bad = text.replace("50,1,", "50,1,abc,", 1)  # row 11: line 13
+    with pytest.raises(DataError, match="expected 4 columns") as info:
+        read_tracks(write_text(tmp_path / "b.csv", bad.replace("\n", "\r")))
+    assert info.value.line == 13
+    dup = text + "0,1,5,5\n"  # the first row again, line 47
+    with pytest.raises(DataError, match=r"duplicate row for frame 0, agent 1 \(also on line 3\)"
+                       ) as info:  # fmt: skip
+        read_tracks(write_text(tmp_path / "d.csv", dup.replace("\n", "\r")))
+    assert info.value.line == 47

@@ -229,3 +229,55 @@ def test_a_window_across_a_frame_its_primary_agent_misses_is_reported(tmp_path):
     with pytest.warns(GapWarning, match=r"1 scene\(s\) \(the first: 7\) have windows whose "
                       "primary agent misses a frame"):  # fmt: skip
         read_trajnet(path)
+
+
+def _rated(path, rates):
+    """One scene per rate in ``rates`` (fps), each with its own primary agent on 21 frames."""
+    tracks, scenes = [], []
+    for i, fps in enumerate(rates):
+        tracks += [(100 * i + f, i, f / 10, 0.0) for f in range(21)]
+        scenes.append({"id": i, "p": i, "s": 100 * i, "e": 100 * i + 20, "fps": fps})
+    return _scene_file(path, tracks, scenes)
+
+
+def test_frame_rates_that_disagree_are_refused_or_named(tmp_path):
+    from trajpref.data import FrameRateWarning
+
+    # scenes at 2.5 and 5 fps were read at the 0.4 s default without a word
+    mixed = tmp_path / "mixed"
+    mixed.mkdir()
+    _rated(mixed / "m.ndjson", [2.5, 5])
+    with pytest.raises(DataError, match=r"declare different frame rates \(2.5 fps in m.ndjson, "
+                       r"5 fps in m.ndjson\).*pass --frame-interval"):  # fmt: skip
+        load_dataset(str(mixed), "test")
+    with pytest.warns(FrameRateWarning, match=r"different frame rates .*all are read at the "
+                      r"frame interval given, 0.4 s"):  # fmt: skip
+        assert load_dataset(str(mixed), "test", frame_interval=0.4).info.frame_interval == 0.4
+    # one rate: the files' own, silently unless a different interval was given
+    five = tmp_path / "five"
+    five.mkdir()
+    _rated(five / "f.ndjson", [5, 5])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert load_dataset(str(five), "test").info.frame_interval == 0.2
+        assert load_dataset(str(five), "test", frame_interval=0.2).info.frame_interval == 0.2
+    with pytest.warns(FrameRateWarning, match=r"declare 5 fps in f.ndjson \(0.2 s between "
+                      r"frames\), which is used: the frame interval given \(0.5 s, "
+                      r"--frame-interval\) is ignored"):  # fmt: skip
+        assert load_dataset(str(five), "test", frame_interval=0.5).info.frame_interval == 0.2
+
+
+def test_old_mac_line_ends_and_an_upper_case_suffix(tmp_path):
+    path = _rated(tmp_path / "a.ndjson", [2.5, 2.5])
+    plain = read_trajnet(path)
+    mac = tmp_path / "B.NDJSON"  # CR-only line ends: one line, "not a JSON object" on line 1
+    mac.write_bytes(path.read_bytes().replace(b"\n", b"\r"))
+    read = read_trajnet(mac)
+    np.testing.assert_array_equal(read.scenes[1].future, plain.scenes[1].future)
+    assert load_dataset(str(mac), "test").num_agents == 2  # .NDJSON: a TrajNet++ file
+    path.unlink()
+    assert len(load_dataset(str(tmp_path), "test")) == 2  # a folder of one B.NDJSON
+    mac.write_bytes(mac.read_bytes().replace(b'"x": 0.5', b'"x": "0.5"'))  # row 6, line 8
+    with pytest.raises(DataError, match="'x' must be a number") as info:
+        read_trajnet(mac)
+    assert info.value.line == 8

@@ -15,10 +15,11 @@ from trajpref.data.registry import (
 )
 from trajpref.data.stats import mean_speed
 from trajpref.data.text import GapWarning, ReadOptions
-from trajpref.data.trajnet import write_trajnet, write_trajnet_truth
+from trajpref.data.trajnet import FrameRateWarning, write_trajnet, write_trajnet_truth
 
 __all__ = [
     "ETH_UCY",
+    "FrameRateWarning",
     "NAMES",
     "PROTOCOLS",
     "GapWarning",

@@ -8,7 +8,9 @@ sub-folders when present), or to one ``.ndjson`` file. Formats: ``docs/data_form
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -29,7 +31,11 @@ NAMES = (*ETH_UCY, "sdd", "nba", "robo", "robo-sim", "robo-mix")
 """Built-in dataset names."""
 SPLITS = ("train", "val", "test")
 USER_TEXT = ("*.txt", "*.csv")
-"""Track files of a user folder (Social-GAN text format; docs/data_format.md)."""
+"""Track files of a user folder (Social-GAN text format; docs/data_format.md), matched
+ignoring case (``a.TXT``, ``b.Csv``)."""
+DEFAULT_FRAME_INTERVAL = 0.4
+"""Seconds between frames of a user folder when none is given (and, for TrajNet++ files,
+none is declared)."""
 
 FEET_TO_METRES = 0.3048
 
@@ -103,7 +109,7 @@ def load_dataset(
     name: str,
     split: str = "test",
     root: str | Path | None = None,
-    frame_interval: float = 0.4,
+    frame_interval: float | None = None,
     units: str = "unknown",
     options: text.ReadOptions | None = None,
     protocol: str = "all",
@@ -111,9 +117,11 @@ def load_dataset(
     """Load one split of a dataset as a list of scenes in absolute coordinates.
 
     ``frame_interval`` and ``units`` describe user folders (a path ``name``) only; built-in
-    datasets know their own. ``options`` (delimiter, ``max_gap``, ``max_coord``) apply to every
-    reader that they make sense for (the bound to all of them). ``protocol`` is one of
-    ``PROTOCOLS`` (``apply_protocol``).
+    datasets know their own. ``frame_interval`` None: ``DEFAULT_FRAME_INTERVAL`` (0.4 s) for
+    text files, the declared ``fps`` of TrajNet++ files (``trajnet_interval``; a value given
+    that differs from it is ignored with a ``FrameRateWarning``). ``options`` (delimiter,
+    ``max_gap``, ``max_coord``) apply to every reader that they make sense for (the bound to
+    all of them). ``protocol`` is one of ``PROTOCOLS`` (``apply_protocol``).
     """
     _check_split(split)
     check_protocol(protocol)
@@ -297,7 +305,7 @@ def _load(
     name: str,
     split: str,
     root: str | Path | None,
-    frame_interval: float,
+    frame_interval: float | None,
     units: str,
     options: text.ReadOptions | None,
 ) -> TrajectoryDataset:
@@ -340,9 +348,9 @@ def _load(
 
 
 def _user_folder(
-    path: Path, split: str, frame_interval: float, units: str, options: text.ReadOptions
+    path: Path, split: str, frame_interval: float | None, units: str, options: text.ReadOptions
 ) -> TrajectoryDataset:
-    if path.suffix == ".ndjson" and not path.is_dir():
+    if path.suffix.lower() == ".ndjson" and not path.is_dir():
         text.check_file(path)  # a clear error for a missing file or a symlink loop
         return _trajnet([path], str(path), split, frame_interval, units, options, path)
     if not path.is_dir():
@@ -353,13 +361,13 @@ def _user_folder(
                             f"train/val/test sub-folders or not): pass {path.parent} or a "
                             "folder holding just this file", path)  # fmt: skip
         raise DataError("no such folder", path)
-    has_splits = any((path / s).is_dir() for s in SPLITS)
-    folder = path / split if has_splits else path
-    if has_splits and not folder.is_dir():
-        present = [s for s in SPLITS if (path / s).is_dir()]
+    splits = split_folders(path)
+    folder = splits.get(split, path)
+    if splits and split not in splits:
+        present = [f.name for f in splits.values()]
         raise DataError(f"no {split}/ sub-folder (found {', '.join(present)})", path)
-    has_text = any(folder.glob("*.txt")) or any(folder.glob("*.csv"))
-    if any(folder.glob("*.ndjson")):
+    has_text = bool(text.matching_files(folder, USER_TEXT))
+    if text.matching_files(folder, ("*.ndjson",)):
         if has_text:
             raise DataError("holds both text (*.txt, *.csv) and *.ndjson files: keep one "
                             "format per folder",
@@ -367,20 +375,42 @@ def _user_folder(
         files = text.track_files(folder, "*.ndjson")
         return _trajnet(files, str(path), split, frame_interval, units, options, folder)
     scenes = text.read_folder(folder, 8, 12, pattern=USER_TEXT, options=options, units=units)
-    info = DatasetInfo(str(path), split, units, frame_interval, 8, 12, str(folder))
+    interval = DEFAULT_FRAME_INTERVAL if frame_interval is None else frame_interval
+    info = DatasetInfo(str(path), split, units, interval, 8, 12, str(folder))
     return TrajectoryDataset(scenes, info)
+
+
+def split_folders(path: Path) -> dict[str, Path]:
+    """The ``train/ val/ test/`` sub-folders of a user folder, by split name, matched
+    ignoring case (``Train/`` is ``train/``); empty when it has none. Two folders for one
+    split (``train/`` and ``Train/``) are a ``DataError``: which one was meant is unknown."""
+    found: dict[str, Path] = {}
+    try:
+        for entry in text.folder_entries(path):
+            name = entry.name.lower()
+            if name not in SPLITS or not entry.is_dir():
+                continue
+            if name in found:
+                raise DataError(f"both {found[name].name}/ and {entry.name}/ are there, and "
+                                "split folders are matched ignoring case: keep one",
+                                path)  # fmt: skip
+            found[name] = entry
+    except OSError as exc:  # a sub-folder that cannot be looked at
+        raise text.folder_error(path, exc) from None
+    return found
 
 
 def _trajnet(
     files: list[Path],
     name: str,
     split: str,
-    frame_interval: float,
+    frame_interval: float | None,
     units: str,
     options: text.ReadOptions,
     source: Path,
 ) -> TrajectoryDataset:
-    """TrajNet++ scene files: metres by the format's convention, the interval from their fps."""
+    """TrajNet++ scene files: metres by the format's convention, the interval from their fps
+    (``trajnet_interval``)."""
     if options.time_step != 1.0:
         raise ConfigError("time_step resamples text track files, not TrajNet++ scenes")
     if options.partial_future:
@@ -388,17 +418,47 @@ def _trajnet(
                           "scenes")  # fmt: skip
     units = "m" if units == "unknown" else units
     scenes: list[Scene] = []
-    fps: set[float] = set()
+    rates: dict[float, str] = {}  # each declared fps -> the first file declaring it
     for path in files:
         read = trajnet.read_trajnet(path, 8, 12, options.max_coord, units)
         scenes.extend(read.scenes)
-        fps |= read.fps
+        for rate in sorted(read.fps):
+            rates.setdefault(rate, path.name)
     if not scenes:
         raise DataError("no TrajNet++ scene has 20 frames of its primary agent", source)
-    if len(fps) == 1:
-        frame_interval = 1.0 / fps.pop()
-    info = DatasetInfo(name, split, units, frame_interval, 8, 12, str(source))
+    interval = trajnet_interval(rates, frame_interval, source)
+    info = DatasetInfo(name, split, units, interval, 8, 12, str(source))
     return TrajectoryDataset(scenes, info)
+
+
+def trajnet_interval(rates: dict[float, str], given: float | None, source: Path) -> float:
+    """Seconds between frames of TrajNet++ files whose scenes declare the frame rates
+    ``rates`` (fps -> a file declaring it), with ``given`` the interval the user passed
+    (None: none). One rate: ``1 / fps``, and a ``FrameRateWarning`` when ``given`` differs
+    (the files' own rate is used). Several rates: ``given`` with a ``FrameRateWarning``, or a
+    ``DataError`` without one, since one dataset's windows would step different times. No
+    rate: ``given``, else ``DEFAULT_FRAME_INTERVAL``."""
+    where = ", ".join(f"{rate:g} fps in {file}" for rate, file in sorted(rates.items()))
+    if len(rates) > 1:
+        if given is None:
+            raise DataError(f"the TrajNet++ scenes declare different frame rates ({where}): "
+                            "one dataset's windows would step different times; keep one rate "
+                            "per folder, or pass --frame-interval to read all of them at that "
+                            "interval", source)  # fmt: skip
+        warnings.warn(f"{source}: the TrajNet++ scenes declare different frame rates "
+                      f"({where}); all are read at the frame interval given, {given:g} s",
+                      trajnet.FrameRateWarning, stacklevel=3)  # fmt: skip
+        return given
+    if not rates:
+        return DEFAULT_FRAME_INTERVAL if given is None else given
+    (rate,) = rates
+    own = 1.0 / rate
+    if given is not None and not math.isclose(given, own, rel_tol=1e-6):
+        warnings.warn(f"{source}: the TrajNet++ scenes declare {where} ({own:g} s between "
+                      f"frames), which is used: the frame interval given ({given:g} s, "
+                      "--frame-interval) is ignored", trajnet.FrameRateWarning,
+                      stacklevel=3)  # fmt: skip
+    return own
 
 
 def _carve_val(n: int, fraction: float = VAL_FRACTION) -> np.ndarray:

@@ -17,12 +17,14 @@ numbers and never a frames x agents array. A file's scenes are views into two ar
 from __future__ import annotations
 
 import errno
+import fnmatch
 import os
 import re
 import warnings
 from array import array
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
+from decimal import Decimal, InvalidOperation
 from pathlib import Path
 from typing import BinaryIO
 
@@ -106,7 +108,8 @@ class Tracks:
     frames: np.ndarray
     """[F] float64 sorted unique frame numbers."""
     agents: np.ndarray
-    """[A] float64 sorted unique agent ids."""
+    """[A] float64 sorted unique agent ids; an object array of exact ints (or Decimals) when
+    an id reaches ``EXACT_ID_LIMIT`` (2**53), which float64 cannot hold exactly."""
     frame_index: np.ndarray
     """[R] int32 index into ``frames`` of each row."""
     agent_index: np.ndarray
@@ -205,7 +208,7 @@ def _layout(path: Path, options: ReadOptions) -> _Layout:
     """Sniff the delimiter and a header from the first line that holds data."""
     try:
         with open(path, "rb") as fh:
-            for lineno, raw in enumerate(fh, start=1):
+            for lineno, raw in enumerate(file_lines(fh), start=1):
                 try:
                     line = raw.decode("utf-8-sig" if lineno == 1 else "utf-8")
                 except UnicodeDecodeError:
@@ -259,6 +262,19 @@ def open_data_file(path: Path) -> BinaryIO:
         raise DataError(f"cannot read file ({exc.strerror or exc})", path) from None
 
 
+def file_lines(fh: BinaryIO) -> Iterator[bytes]:
+    """The lines of a file opened in binary, ending at ``\\n``, ``\\r\\n`` or a lone ``\\r``
+    (old Mac line ends), as numpy's parser and Python's text mode count them: iterating the
+    file itself splits at ``\\n`` alone, so a CR-only file was one line, and its errors all
+    said line 1. (No UTF-8 character holds the byte ``\\r``: splitting bytes is safe.)"""
+    for raw in fh:
+        cr = raw.count(b"\r")
+        if cr == 0 or (cr == 1 and raw.endswith(b"\r\n")):
+            yield raw
+        else:
+            yield from raw.splitlines(keepends=True)
+
+
 def _parse_slow(path: Path, layout: _Layout, with_type: bool):
     """Line-by-line parser: the reference for what is accepted, and the source of the
     line-numbered error messages. Returns ``(values [R, 4], kinds [R] | None, lines [R])``."""
@@ -269,7 +285,7 @@ def _parse_slow(path: Path, layout: _Layout, with_type: bool):
     kinds: list[str] = []
     lines = array("q")
     with open_data_file(path) as fh:
-        for lineno, raw in enumerate(fh, start=1):
+        for lineno, raw in enumerate(file_lines(fh), start=1):
             if lineno == layout.header_line:
                 continue
             try:
@@ -322,7 +338,7 @@ def _data_lines(path: Path, layout: _Layout, rows: Iterable[int]) -> dict[int, i
     found: dict[int, int] = {}
     row = -1
     with open(path, "rb") as fh:
-        for lineno, raw in enumerate(fh, start=1):
+        for lineno, raw in enumerate(file_lines(fh), start=1):
             if lineno == layout.header_line:
                 continue
             text = raw.decode("utf-8-sig" if lineno == 1 else "utf-8", "replace")  # a BOM
@@ -375,7 +391,8 @@ def read_tracks(
 
     xy, rounding = _checked_xy(values, scale, options.max_coord, units, path, line_of)  # [R, 2]
     frames, f_idx = np.unique(values[:, 0], return_inverse=True)  # [F], [R]
-    agents, a_idx = np.unique(values[:, 1], return_inverse=True)  # [A], [R]
+    ids = _agent_ids(values[:, 1], path, layout)  # [R] float64, or exact beyond 2**53
+    agents, a_idx = np.unique(ids, return_inverse=True)  # [A], [R]
     agent_type = np.zeros(len(agents), np.int64)  # [A]
     if kinds is not None:
         agent_type[a_idx] = _kind_flags(kinds, path, line_of)  # last row of an agent wins
@@ -389,6 +406,55 @@ def read_tracks(
         _check_precision(values[order, 2:4] * scale, a_idx, rounding, path, options.time_step)
     del values
     return Tracks(path, frames, agents, f_idx, a_idx, xy[order], agent_type)
+
+
+EXACT_ID_LIMIT = 2**53
+"""Agent ids at least this large (in absolute value) are beyond float64's exact integers:
+``_agent_ids`` re-reads them from the text."""
+
+
+def _agent_ids(parsed: np.ndarray, path: Path, layout: _Layout) -> np.ndarray:
+    """[R] the agent ids of a file's rows: ``parsed`` (the float64 column) when every id is
+    below ``EXACT_ID_LIMIT``, else the ids read again from the text as exact numbers (an
+    object array of ints, or Decimals for non-integers), since float64 rounds 64-bit tracker
+    ids (9007199254740993 reads as 9007199254740992) and two agents would become one."""
+    if not len(parsed) or float(np.abs(parsed).max()) < EXACT_ID_LIMIT:
+        return parsed
+    tokens = _agent_tokens(path, layout)
+    if len(tokens) != len(parsed):  # the parsers disagree on rows: the slow one's are the rows
+        raise DataError(f"agent ids of 2**53 ({EXACT_ID_LIMIT}) or more (column 2) could not "
+                        "be read exactly: renumber the agents below 2**53", path)  # fmt: skip
+    try:
+        return np.array([_exact_number(t) for t in tokens], dtype=object)
+    except InvalidOperation:
+        raise DataError("an agent id (column 2) is not a number", path) from None
+
+
+def _exact_number(token: str) -> int | Decimal:
+    """A number's text as an exact int (integral values) or Decimal."""
+    value = Decimal(token.strip())
+    return int(value) if value == value.to_integral_value() else value
+
+
+def _agent_tokens(path: Path, layout: _Layout) -> list[str]:
+    """The agent column's text of every data row, in file order (rows as ``_parse_slow``
+    finds them)."""
+    tokens = []
+    with open_data_file(path) as fh:
+        for lineno, raw in enumerate(file_lines(fh), start=1):
+            if lineno == layout.header_line:
+                continue
+            content = raw.decode("utf-8-sig" if lineno == 1 else "utf-8").split("#", 1)[0]
+            if content.strip():
+                tokens.append(_split(content.rstrip("\r\n"), layout.delimiter)[1])
+    return tokens
+
+
+def _id_label(value) -> str:
+    """An agent id as text, exact: ``1``, ``-1``, ``2.5``, ``9007199254740993``."""
+    if isinstance(value, (float, np.floating)):
+        return _frame_label(float(value))
+    return str(value)
 
 
 def _checked_xy(values, scale, max_coord, units, path, line_of) -> tuple[np.ndarray, float]:
@@ -478,7 +544,7 @@ def _raise_duplicate(pos, order, f_idx, a_idx, frames, agents, path, line_of):
     line_first, line_second = line_of([int(order[first]), int(order[first + 1])])
     f, a = frames[f_idx[first]], agents[a_idx[first]]
     raise DataError(
-        f"duplicate row for frame {f:g}, agent {a:g} (also on line {line_first})",
+        f"duplicate row for frame {f:g}, agent {_id_label(a)} (also on line {line_first})",
         path,
         line_second,
     )
@@ -502,10 +568,21 @@ def _missing_frames(frames: np.ndarray) -> tuple[np.ndarray, float]:
     jumps = np.diff(frames)  # [F-1]
     if len(jumps) == 0:
         return np.zeros(0, np.int64), 0.0
-    values, counts = np.unique(jumps, return_counts=True)
-    step = float(values[np.argmax(counts)])  # the most common jump (the smallest on ties)
+    step = _common_jump(jumps, float(np.abs(frames).max()))
     missing = np.maximum(np.rint(jumps / step).astype(np.int64) - 1, 0)  # [F-1]
     return missing, step
+
+
+def _common_jump(jumps: np.ndarray, largest: float) -> float:
+    """The most common of ``jumps`` [J] (> 0; the smallest on ties), counting as one the jumps
+    that differ by no more than float64's rounding of frame numbers as large as ``largest``:
+    non-integer frame numbers (0.4 * k, Unix seconds) give one step as several float values
+    (0.39999986, 0.40000009, ...), and counted apart, a less common jump of two steps could
+    win and hide every missing frame. Returns the median of the winning group's jumps."""
+    quantum = 64 * float(np.spacing(largest))
+    keys = np.rint(jumps / quantum).astype(np.int64)  # [J] jump / quantum <= 2**47: no overflow
+    values, counts = np.unique(keys, return_counts=True)
+    return float(np.median(jumps[keys == values[np.argmax(counts)]]))
 
 
 def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int | None,
@@ -671,8 +748,9 @@ def resample_tracks(tracks: Tracks, factor: float) -> Tracks:
     # the frames' magnitude (Unix-time frame numbers: 1.7e9 s is rounded to 2.4e-7 already)
     largest = float(np.abs(tracks.frames).max())
     tol = max(step * 1e-6, 64 * float(np.spacing(largest)))
-    grid = np.arange(tracks.frames[0], tracks.frames[-1] + tol, step * factor)  # [G]
-    time = tracks.frames[tracks.frame_index]  # [R] frame number of each row
+    origin = float(tracks.frames[0])
+    grid = _grid(span, step * factor, tol)  # [G] grid frames, counted from ``origin``
+    time = (tracks.frames - origin)[tracks.frame_index]  # [R] each row's frame, from ``origin``
     cuts = np.flatnonzero(np.diff(tracks.agent_index)) + 1  # [A'-1] where a new agent begins
     bounds = np.concatenate([[0], cuts, [tracks.num_rows]])
     g_parts, a_parts, xy_parts = [], [], []
@@ -683,7 +761,8 @@ def resample_tracks(tracks: Tracks, factor: float) -> Tracks:
         g = np.arange(lo, hi)  # [g] grid frames inside its span
         if len(g) == 0:
             continue
-        i = np.clip(np.searchsorted(t, grid[g], side="right") - 1, 0, len(t) - 1)  # [g] row before
+        # the row at or before each grid frame; a row within ``tol`` after it counts as at it
+        i = np.clip(np.searchsorted(t, grid[g] + tol, side="right") - 1, 0, len(t) - 1)  # [g]
         j = np.minimum(i + 1, len(t) - 1)  # [g] row after
         span = t[j] - t[i]  # [g]
         exact = np.abs(grid[g] - t[i]) <= tol  # [g] on an annotated frame
@@ -700,9 +779,19 @@ def resample_tracks(tracks: Tracks, factor: float) -> Tracks:
     a_idx = np.concatenate(a_parts)  # [R'] agent index per new row (non-decreasing)
     used = np.unique(f_idx)  # [F'] grid frames that hold a row
     frame_index = np.searchsorted(used, f_idx).astype(tracks.frame_index.dtype)
-    return Tracks(tracks.path, grid[used], tracks.agents, frame_index,
+    return Tracks(tracks.path, origin + grid[used], tracks.agents, frame_index,
                   a_idx.astype(tracks.agent_index.dtype), np.concatenate(xy_parts),
                   tracks.agent_type)  # fmt: skip
+
+
+def _grid(span: float, every: float, tol: float) -> np.ndarray:
+    """[G] the frames ``0, every, 2 * every, ...`` up to ``span`` (plus ``tol``), each one
+    product ``j * every``. Counted from the file's first frame rather than laid from it with
+    ``np.arange(first, ...)``: numpy takes arange's increment as ``(first + every) - first``,
+    which at Unix-time magnitudes is rounded (0.16 became 0.16000009 at 1.5e9 s), and that
+    error grew with every step until the grid missed the rows (issue: Unix-second
+    timestamps read with ``--time-step 0.4`` lost windows)."""
+    return np.arange(int(np.floor((span + tol) / every)) + 1) * every
 
 
 def _gap_message(where: Path, gap_scenes: int, gap_agents: int, max_missing: int) -> str:
@@ -734,22 +823,55 @@ def window_scenes(
     return out.scenes
 
 
+def folder_error(folder: Path, exc: OSError) -> DataError:
+    """The error for a folder that exists but cannot be listed (permission denied, ...):
+    saying it has no track files would send the user looking for files that are there."""
+    return DataError(f"cannot read folder ({exc.strerror or exc}): check its permissions",
+                     folder)  # fmt: skip
+
+
+def folder_entries(folder: Path) -> list[Path]:
+    """What ``folder`` holds, sorted by name; ``folder_error`` when it cannot be listed
+    (``Path.glob`` answered an unreadable folder with nothing at all)."""
+    try:
+        return sorted(folder.iterdir())
+    except OSError as exc:
+        raise folder_error(folder, exc) from None
+
+
+def name_matches(path: Path, patterns: tuple[str, ...]) -> bool:
+    """Whether ``path``'s name matches one of the glob ``patterns``, ignoring case
+    (``a.TXT`` matches ``*.txt``)."""
+    name = path.name.lower()
+    return any(fnmatch.fnmatchcase(name, pat.lower()) for pat in patterns)
+
+
+def matching_files(folder: Path, patterns: tuple[str, ...]) -> list[Path]:
+    """The entries of ``folder`` whose names match ``patterns`` (ignoring case), sorted by
+    name; files, broken links and anything else alike."""
+    return [p for p in folder_entries(folder) if name_matches(p, patterns)]
+
+
 def track_files(folder: str | Path, pattern: str | tuple[str, ...] = "*.txt") -> list[Path]:
-    """The files matching ``pattern`` (one glob pattern or several) in ``folder``, sorted by
-    name. Raises ``DataError`` for a missing folder, a symlink loop or a broken symlink, and a
-    folder without such files."""
+    """The files matching ``pattern`` (one glob pattern or several, matched ignoring case:
+    ``*.txt`` takes ``a.TXT`` too) in ``folder``, sorted by name. Raises ``DataError`` for a
+    missing folder, one that cannot be read, a symlink loop or a broken symlink, and a folder
+    without such files."""
     folder = Path(folder)
-    if not folder.is_dir():
-        if folder.is_symlink():
-            raise _link_error(folder)
-        raise DataError("no such folder", folder)
-    patterns = (pattern,) if isinstance(pattern, str) else pattern
-    files = []
-    for path in sorted({p for pat in patterns for p in folder.glob(pat)}):
-        if path.is_file():
-            files.append(path)
-        elif path.is_symlink() and not path.exists():
-            raise _link_error(path)
+    patterns = (pattern,) if isinstance(pattern, str) else tuple(pattern)
+    try:
+        if not folder.is_dir():
+            if folder.is_symlink():
+                raise _link_error(folder)
+            raise DataError("no such folder", folder)
+        files = []
+        for path in matching_files(folder, patterns):
+            if path.is_file():
+                files.append(path)
+            elif path.is_symlink() and not path.exists():
+                raise _link_error(path)
+    except OSError as exc:  # a folder on the way that cannot be searched
+        raise folder_error(folder, exc) from None
     if not files:
         raise DataError(f"no {' or '.join(patterns)} files in folder", folder)
     return files

@@ -22,10 +22,21 @@ from pathlib import Path
 
 import numpy as np
 
-from trajpref.data.text import DEFAULT_MAX_COORD, GapWarning, check_file, open_data_file
+from trajpref.data.text import (
+    DEFAULT_MAX_COORD,
+    GapWarning,
+    check_file,
+    file_lines,
+    open_data_file,
+)
 from trajpref.errors import ConfigError, DataError
 from trajpref.io import atomic_path
 from trajpref.types import Scene
+
+
+class FrameRateWarning(UserWarning):
+    """TrajNet++ scenes declare frame rates that disagree with each other or with the frame
+    interval the user gave (``registry.trajnet_interval`` says which one is used)."""
 
 
 @dataclass
@@ -81,7 +92,7 @@ def read_trajnet(
     seen_ids: set[int] = set()
     fps: set[float] = set()
     with open_data_file(path) as fh:
-        for line, raw in enumerate(fh, start=1):
+        for line, raw in enumerate(file_lines(fh), start=1):
             try:
                 text = raw.decode("utf-8-sig" if line == 1 else "utf-8")  # a BOM, as in text files
             except UnicodeDecodeError:

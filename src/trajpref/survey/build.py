@@ -4,6 +4,7 @@ method, score the samples with one denoiser, and write a blinded study folder.""
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,8 +43,9 @@ class BuildConfig:
     """Which split to draw scenes from."""
     data_root: str | None = None
     """Data folder (default ``$TRAJPREF_DATA``)."""
-    frame_interval: float = 0.4
-    """Seconds between frames, for a folder dataset."""
+    frame_interval: float | None = None
+    """Seconds between frames, for a folder dataset (None: 0.4 for text files, the declared
+    fps of TrajNet++ files; ``load_dataset``)."""
     units: str = "unknown"
     """Coordinate units, for a folder dataset."""
     delimiter: str | None = None
@@ -108,6 +110,11 @@ class BuildConfig:
             raise ConfigError("--max-agents must be >= --min-agents")
         if self.min_gap < 0:
             raise ConfigError("--min-gap must be >= 0")
+        if self.frame_interval is not None and not (
+            math.isfinite(self.frame_interval) and self.frame_interval > 0
+        ):
+            raise ConfigError(f"--frame-interval must be a number of seconds > 0, "
+                              f"got {self.frame_interval}")  # fmt: skip
         if self.ground_truth not in ("rated", "reference"):
             raise ConfigError("--ground-truth must be 'rated' or 'reference'")
         self.read_options()  # ConfigError for a bad delimiter, gap, bound or step

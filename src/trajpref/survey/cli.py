@@ -125,7 +125,8 @@ def cmd_build(args, check_data_args: Callable[[argparse.Namespace], None],
     check_data_args(args)  # fills in --frame-interval and --units, checks the read options
     cfg = BuildConfig(
         dataset=args.dataset, models=parse_models(args.models), split=args.split,
-        data_root=args.data_root, frame_interval=args.frame_interval, units=args.units,
+        data_root=args.data_root, units=args.units,
+        frame_interval=args.frame_interval if args._interval_given else None,
         delimiter=args.delimiter, max_gap=args.max_gap, max_coord=args.max_coord,
         time_step=args.time_step, protocol=args.protocol, holdout_scene=args.holdout_scene,
         scorer=args.scorer, scenes=args.scenes, samples=args.samples, top=args.top,
