@@ -58,3 +58,25 @@ class Denoiser(nn.Module):
         for block in self.blocks:
             x = block(x, c)
         return self.out(x).view(y.shape)  # [..., N, T_f, 2]
+
+
+class DenoiserShapes:
+    """The window shape and device of an object that holds a ``denoiser`` (the predictor and
+    the scorer): T_h and T_f are the denoiser's config's, the device its weights'."""
+
+    denoiser: Denoiser
+
+    @property
+    def t_hist(self) -> int:
+        """T_h, the observed steps per agent the denoiser was trained on."""
+        return self.denoiser.cfg.t_hist
+
+    @property
+    def t_fut(self) -> int:
+        """T_f, the future steps per sample the denoiser predicts and scores."""
+        return self.denoiser.cfg.t_fut
+
+    @property
+    def device(self) -> torch.device:
+        """Where the denoiser's weights are (and where prediction and scoring run)."""
+        return next(self.denoiser.parameters()).device

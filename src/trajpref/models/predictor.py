@@ -20,7 +20,7 @@ from trajpref.data.transforms import from_model_frame
 from trajpref.diffusion.samplers import denoise, sample_full
 from trajpref.diffusion.schedule import DDPMSchedule
 from trajpref.errors import ConfigError, DataError
-from trajpref.models.denoiser import Denoiser
+from trajpref.models.denoiser import Denoiser, DenoiserShapes
 from trajpref.models.encoder import SceneFeatures, scene_features
 from trajpref.models.generator import Generator, GeneratorOutput
 from trajpref.types import Batch
@@ -97,7 +97,7 @@ def check_histories(history: torch.Tensor, t_hist: int) -> None:
                         "predicting, and add it back to the predictions")  # fmt: skip
 
 
-class DiffusionPredictor(nn.Module):
+class DiffusionPredictor(DenoiserShapes, nn.Module):
     """Samples futures with the leapfrog sampler (generator + tau denoising steps) or the full
     S-step sampler from noise, both with the same denoiser.
 
@@ -129,21 +129,6 @@ class DiffusionPredictor(nn.Module):
         self.sampler = sampler
         self.stochastic = stochastic
         self.name = f"diffusion-{sampler}"
-
-    @property
-    def device(self) -> torch.device:
-        """Where the weights are (and where prediction runs)."""
-        return next(self.denoiser.parameters()).device
-
-    @property
-    def t_hist(self) -> int:
-        """T_h, the observed steps per agent the model reads."""
-        return self.denoiser.cfg.t_hist
-
-    @property
-    def t_fut(self) -> int:
-        """T_f, the future steps per sample it predicts."""
-        return self.denoiser.cfg.t_fut
 
     def condition(self, batch: Batch) -> Condition:
         """Features and (on first use) the denoiser's context of a batch (no gradient into

@@ -28,7 +28,7 @@ from trajpref.diffusion.schedule import DDPMSchedule
 from trajpref.errors import ConfigError, DataError
 from trajpref.metrics import ade_fde, scene_sum
 from trajpref.models import checkpoint
-from trajpref.models.denoiser import Denoiser
+from trajpref.models.denoiser import Denoiser, DenoiserShapes
 from trajpref.models.encoder import scene_features
 from trajpref.types import AGENT_BALL, AGENT_PERSON, Batch
 
@@ -85,7 +85,7 @@ PRECISIONS = ("fp32", "bf16")
 """Arithmetic of the scorer's denoiser passes (``TrajectoryScorer.precision``)."""
 
 
-class TrajectoryScorer:
+class TrajectoryScorer(DenoiserShapes):
     """Scores futures with a frozen denoiser: lower residual = more human-like."""
 
     def __init__(
@@ -129,21 +129,6 @@ class TrajectoryScorer:
         denoiser, cfg = checkpoint.build_denoiser(payload)
         schedule = DDPMSchedule.from_config(cfg.diffusion)
         return cls(denoiser.to(device), schedule.to(device), payload["scale"], **kwargs)
-
-    @property
-    def t_hist(self) -> int:
-        """T_h, the observed steps per agent the denoiser was trained on (its config's)."""
-        return self.denoiser.cfg.t_hist
-
-    @property
-    def t_fut(self) -> int:
-        """T_f, the future steps per sample the denoiser scores (its config's)."""
-        return self.denoiser.cfg.t_fut
-
-    @property
-    def device(self) -> torch.device:
-        """Where the denoiser's weights are (and where the scoring runs)."""
-        return next(self.denoiser.parameters()).device
 
     def check_shapes(self, batch: Batch, futures: torch.Tensor) -> None:
         """DataError unless the batch's histories are [N, T_h, 2] and futures [M, N, T_f, 2]
