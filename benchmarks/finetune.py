@@ -30,7 +30,7 @@ from trajpref.results import RUNNABLE_STARTS, make_row, start_record, start_suff
 from trajpref.rl.presets import finetune_config
 from trajpref.score.scorer import TrajectoryScorer
 from trajpref.train.loop import load_resume_state
-from trajpref.train.run import epochs_done, finetune
+from trajpref.train.run import finetune, finished
 from trajpref.train.stages import build_finetune_stage
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -105,7 +105,7 @@ def main() -> None:
         cfg = finetune_config(str(start), method, args.preset, None, args.overrides, seed)
         last = run / "finetune_last.pt"
         check_start(run, start)
-        if epochs_done(last) >= cfg.finetune.epochs:  # trained: a resume would be refused
+        if finished(last, cfg.finetune):  # epochs or budget spent: a resume would be refused
             state = load_resume_state(last)
             summary = {"train_seconds": state["elapsed"], "steps": state["step"]}
         else:

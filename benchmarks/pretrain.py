@@ -39,7 +39,7 @@ from trajpref.evaluation import evaluate, time_predictors
 from trajpref.models import checkpoint as ckpt
 from trajpref.results import make_row, sampler_of, upsert_rows, write_rows
 from trajpref.train import read_metrics, train_stage
-from trajpref.train.run import epochs_done
+from trajpref.train.run import finished
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -49,9 +49,10 @@ def _train(args, run_dir: Path) -> None:
     for stage in ("diffusion", "generator"):
         name = "denoiser" if stage == "diffusion" else "generator"
         last = run_dir / f"{name}_last.pt"
-        epochs = (cfg.denoiser if stage == "diffusion" else cfg.generator).epochs
-        if epochs_done(last) >= epochs:  # trained already: a resume would be refused
-            print(f"{run_dir}: the {name} stage has finished its {epochs} epochs")
+        optim = cfg.denoiser if stage == "diffusion" else cfg.generator
+        if finished(last, optim):  # trained already: a resume would be refused
+            print(f"{run_dir}: the {name} stage has finished (its {optim.epochs} epochs, or "
+                  "its time budget)")  # fmt: skip
             continue
         resume = str(last) if last.is_file() else None
         train_stage(stage, cfg, run_dir, args.data_root, args.device, resume)

@@ -691,7 +691,8 @@ def render(cells: dict, paper: dict, opts, cpu: dict) -> str:
         'paper and us; orderings within a row are, up to the score\'s noise. "no scorer": the '
         "dataset has no published denoiser. Every cell here was measured before 2026-12-05, "
         "when the score's noise was keyed to each agent's place in its own scene "
-        '(docs/score.md, "Common random numbers"): run again, a cell moves by a few hundredths '
+        '(docs/score.md, "The trajectory diffusion score", bullet "Common random numbers"): '
+        "run again, a cell moves by a few hundredths "
         "(eth's cv 0.689 / 0.574 -> 0.709 / 0.592, a helper's rerun), enough to swap close "
         "neighbours; a rerun of this script skips stored cells, so it shows the old numbers "
         "until their rows are deleted.",

@@ -296,3 +296,105 @@ def test_data_stats_counts_reversed_context_only_when_asked(capsys, tmp_path):
                         "--reverse-context")  # fmt: skip
     stats = json.loads(out)
     assert code == 0 and stats["context_agents"] == 1 and stats["context_agents_reversed"] == 1
+
+
+FINETUNE_TINY = ["--set", "finetune.epochs=1", "--set", "finetune.steps_per_epoch=1", "--set",
+                 "finetune.eval_max_scenes=2", "--device", "cpu", "--no-progress"]  # fmt: skip
+
+
+def test_finetune_names_its_reward_and_evaluate_records_the_checkpoint(
+    capsys, tiny_run, walks, tmp_path
+):
+    from trajpref.io import read_checkpoint_header
+    from trajpref.models import checkpoint as ckpt
+
+    start = tiny_run / "generator.safetensors"
+    argv = ["finetune", "--method", "rlhf", "--from", start, "--out", tmp_path / "ft", "--set",
+            "finetune.reward=set", *FINETUNE_TINY]  # fmt: skip
+    code, out, _ = _run(capsys, *argv)
+    last = out.strip().splitlines()[-1]  # after the loop's epoch lines
+    assert code == 0 and last.startswith("fine-tuned (rlhf, set-aware reward) in ")
+    tuned = tmp_path / "ft" / "finetune.safetensors"
+    assert read_checkpoint_header(tuned)["meta"]["method"] == "rlhf"  # the stored value stays
+    base = ["evaluate", "--dataset", walks, "--samples", "2", "--json", "--no-progress",
+            "--device", "cpu"]  # fmt: skip
+    code, out, _ = _run(capsys, *base, "--model", tuned, "--out", tmp_path / "e.json")
+    res = json.loads(out)
+    assert code == 0 and json.loads((tmp_path / "e.json").read_text()) == res
+    assert res["model"] == str(tuned) and res["model_hash"] == ckpt.model_hash(tuned)
+    assert res["weights_hash"] == read_checkpoint_header(tuned)["hash"]
+    assert (res["finetune_method"], res["finetune_reward"]) == ("rlhf", "set")
+    assert res["start_hash"] == read_checkpoint_header(start)["hash"]
+    # a pretrained generator: its hashes, no fine-tuning fields; a sampling option changes
+    # what predicts, so the model hash follows it
+    code, out, _ = _run(capsys, *base, "--model", start)
+    plain = json.loads(out)
+    assert plain["model_hash"] == ckpt.model_hash(start) and "finetune_method" not in plain
+    code, out, _ = _run(capsys, *base, "--model", start, "--max-speed", "1e-3")
+    clamped = json.loads(out)
+    assert clamped["model_hash"] != plain["model_hash"]
+    assert clamped["weights_hash"] == plain["weights_hash"]
+    code, out, _ = _run(capsys, *base, "--model", "cv")
+    assert (json.loads(out)["model_hash"], json.loads(out)["weights_hash"]) == (None, None)
+
+
+def test_a_folder_without_split_folders_warns_that_validation_reads_training(
+    capsys, monkeypatch, tiny_run, walks, tmp_path
+):
+    import trajpref.cli as cli
+
+    flat = tmp_path / "flat"
+    flat.mkdir()
+    for f in (walks / "train").iterdir():
+        (flat / f.name).write_text(f.read_text())
+    summary = {"best": {"score": 0.5}, "train_seconds": 1.0}
+    monkeypatch.setattr(cli, "train_stage", lambda *a, **k: summary)
+    monkeypatch.setattr(cli, "finetune", lambda *a, **k: summary)
+    start = tiny_run / "generator.safetensors"
+    runs = {
+        "train": ["train", "diffusion", "--out", tmp_path / "t", "--device", "cpu"],
+        "finetune": ["finetune", "--method", "rlhf", "--from", start, "--out", tmp_path / "f"],
+    }
+    for argv in runs.values():
+        code, _, err = _run(capsys, *argv, "--set", f"data.dataset={flat}")
+        assert code == 0 and len(err.strip().splitlines()) == 1
+        assert err.startswith(f"trajpref: warning: {flat} has no train/ and val/ sub-folders, "
+                              "so validation (and the choice of the kept checkpoint) reads "
+                              "the training windows")  # fmt: skip
+        assert "data.val_dataset=FOLDER" in err and "data.holdout_scene=PREFIX" in err
+        # kept apart: split folders, another validation dataset, a held-out scene
+        for extra in ([f"data.dataset={walks}"],
+                      [f"data.dataset={flat}", f"data.val_dataset={walks}"],
+                      [f"data.dataset={flat}", "data.holdout_scene=walk0"]):  # fmt: skip
+            code, _, err = _run(capsys, *argv, *(a for e in extra for a in ("--set", e)))
+            assert code == 0 and err == ""
+
+
+def test_finetune_equal_budget_and_seed_reach_the_run_config(capsys, monkeypatch, tiny_run):
+    import trajpref.cli as cli
+
+    seen = []
+    monkeypatch.setattr(cli, "finetune", lambda cfg, *a, **k: seen.append(cfg) or
+                        {"best": {"score": 0.5}, "train_seconds": 1.0})  # fmt: skip
+    argv = ["finetune", "--method", "control", "--from", tiny_run / "generator.safetensors",
+            "--out", "unused", "--equal-budget", "2"]  # fmt: skip
+    code, out, _ = _run(capsys, *argv)
+    ft = seen[-1].finetune
+    assert code == 0 and out.startswith("fine-tuned (control) in 1 s")
+    assert (ft.max_minutes, ft.budget_clock, ft.eval_every_minutes, ft.warmup_steps,
+            ft.epochs) == (2.0, "cpu", 0.5, 4, 100000)  # fmt: skip
+    assert seen[-1].seed == 0  # not the start's: --seed's documented default
+    _run(capsys, *argv, "--seed", "3")
+    assert seen[-1].seed == 3
+
+
+def test_finetune_help_explains_each_method_the_rewards_and_the_seed(capsys):
+    code = main(["finetune", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert code == 0
+    for part in ("rlhf: the policy and value losses on all K samples",
+                 "rlhf-res: on each scene's best-scored sample k* only",
+                 "control: the supervised generator loss alone", "set-aware reward",
+                 "finetune.reward=set", "--equal-budget MINUTES", "the run's seed (default 0, "
+                 "whatever seed the start was trained with)"):  # fmt: skip
+        assert part in text, part

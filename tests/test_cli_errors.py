@@ -217,6 +217,21 @@ CASES: dict[str, tuple[list[str], str]] = {
     "finetune unknown key": ([*FT, "--from", "{run}/generator.safetensors", "--out", "{out}/ft",
                               "--set", "finetune.methd=rlhf"],
                              r"did you mean finetune\.method\?"),
+    "control with RL settings": (
+        ["finetune", "--method", "control", "--from", "{run}/generator.safetensors", "--out",
+         "{out}/ft", "--set", "finetune.reward=set", "--set", "finetune.policy_weight=5"],
+        r"finetune\.policy_weight, finetune\.reward: the control reads no RL setting .* "
+        r"no effect; leave them out"),
+    "rlhf-res with the set-aware reward": (
+        [*FT, "--from", "{run}/generator.safetensors", "--out", "{out}/ft", "--set",
+         "finetune.reward=set"], r"RLHF-ReS trains only .* use it with --method rlhf"),
+    "equal budget and one of its keys": (
+        [*FT, "--from", "{run}/generator.safetensors", "--out", "{out}/ft", "--equal-budget",
+         "4", "--set", "finetune.max_minutes=6"],
+        r"--equal-budget sets finetune\.max_minutes: leave it out of --set"),
+    "equal budget of no minutes": (
+        [*FT, "--from", "{run}/generator.safetensors", "--out", "{out}/ft", "--equal-budget",
+         "-1"], r"must be a number of CPU minutes > 0"),
     # --- config show
     "config show unknown key": (["config", "show", "--set", "model.hiden=8"],
                                 r"did you mean model\.hidden\?"),
@@ -312,3 +327,26 @@ def test_an_os_error_is_one_line_too(capsys, monkeypatch, walks):
     code = main(["data", "stats", "--dataset", str(walks)])
     err = capsys.readouterr().err
     assert code == 2 and err == "trajpref: error: /data/eth/test/a.txt: Permission denied\n"
+
+
+def test_a_published_models_repository_path_names_it_outside_the_repository(
+    capsys, monkeypatch, tmp_path
+):
+    """`--from models/zara1/generator.safetensors` (the README's path) where there is no such
+    file: the error names the published name, which works in any folder."""
+    from trajpref.models import zoo
+
+    if not zoo.published():
+        pytest.skip("the package was built without its models")
+    name = next(n for n in zoo.published() if n.endswith("/generator"))
+    monkeypatch.chdir(tmp_path)
+    path = f"models/{name}.safetensors"
+    for argv in (["finetune", "--method", "rlhf", "--from", path, "--out", "ft"],
+                 ["evaluate", "--dataset", "eth", "--model", path],
+                 ["evaluate", "--dataset", "eth", "--model", "cv", "--scorer", path]):  # fmt: skip
+        flag = argv[argv.index(path) - 1]
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert err == (f"trajpref: error: {flag} {path}: no such checkpoint here; the published "
+                       f"model is named {name} ({flag} {name} works in any folder)\n")  # fmt: skip
+    assert list(tmp_path.iterdir()) == []

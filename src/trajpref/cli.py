@@ -30,7 +30,7 @@ from trajpref.config import (
     load_config,
 )
 from trajpref.data import PROTOCOLS, ReadOptions, hold_out_scene, load_dataset, mean_speed
-from trajpref.data.registry import SPECS
+from trajpref.data.registry import NAMES, SPECS, split_folders
 from trajpref.data.trajnet import write_trajnet, write_trajnet_truth
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, TrajprefError
@@ -47,7 +47,7 @@ from trajpref.metrics import METRE_UNITS, SCENE_SIZE_EDGES, check_bin_edges
 from trajpref.models import checkpoint as ckpt
 from trajpref.models import zoo
 from trajpref.models.registry import load_predictor
-from trajpref.rl.presets import finetune_config
+from trajpref.rl.presets import EQUAL_BUDGET_VALIDATIONS, EQUAL_BUDGET_WARMUP, finetune_config
 from trajpref.score import TrajectoryScorer, score_timesteps
 from trajpref.score.scorer import PRECISIONS
 from trajpref.score.selection import METHODS, SelectingPredictor, SelectionConfig
@@ -172,8 +172,8 @@ def _add_selection_args(p: argparse.ArgumentParser) -> None:
                    "which never saw their pace (0: off; docs/selection.md)")  # fmt: skip
 
 
-def _add_run_args(p: argparse.ArgumentParser, example: str, last: str) -> None:
-    """Options every training stage shares (train and finetune)."""
+def _add_run_args(p: argparse.ArgumentParser, example: str, last: str, seed: str) -> None:
+    """Options every training stage shares (train and finetune); ``seed``: what --seed does."""
     p.add_argument("--out", required=True, help="run folder: checkpoints, config, metrics")
     p.add_argument(
         "--set",
@@ -185,7 +185,7 @@ def _add_run_args(p: argparse.ArgumentParser, example: str, last: str) -> None:
     )
     p.add_argument("--resume", default=None, help=f"{last} to continue from")
     p.add_argument("--data-root", default=None, help="data folder (default: $TRAJPREF_DATA)")
-    p.add_argument("--seed", type=int, default=None, help="override the config's seed")
+    p.add_argument("--seed", type=int, default=None, help=seed)
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
 
@@ -311,25 +311,65 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--dataset", default=None, help="shortcut for --set data.dataset=NAME")
     tr.add_argument("--denoiser", default=None, help="generator stage: the denoiser "
                     "checkpoint (default OUT/denoiser.safetensors)")  # fmt: skip
-    _add_run_args(tr, "denoiser.epochs=5", "a <stage>_last.pt")
+    _add_run_args(
+        tr,
+        "denoiser.epochs=5",
+        "a <stage>_last.pt",
+        "override the config's seed (default: the config's, 0 unless it sets one)",
+    )
     tr.set_defaults(func=cmd_train)
 
-    ft = sub.add_parser("finetune", help="RLHF / RLHF-ReS fine-tuning of a pretrained generator")
+    ft = sub.add_parser(
+        "finetune",
+        help="RLHF / RLHF-ReS fine-tuning of a pretrained generator",
+        description="Fine-tune a pretrained generator with RLHF or RLHF-ReS (the paper's Sec. "
+        "5-6), or train the supervised control that an RL gain is measured against. The "
+        "reward is the diffusion score by default; --set finetune.reward=set gives the "
+        "set-aware reward (each sample rewarded by its marginal gain in a score-weighted DPP "
+        "over its agent's K endpoints: plausible samples that cover what the others do not; "
+        "with --method rlhf), --set finetune.reward=sda the paper's hand-crafted social "
+        "baseline (Sec. 8.1). docs/rlhf.md describes every setting (trajpref config show "
+        "lists them).",
+    )
     ft.add_argument("--method", required=True, choices=["rlhf", "rlhf-res", "control"],
-                    help="control: the supervised loss alone (equal-budget control)")  # fmt: skip
-    ft.add_argument("--from", dest="start", required=True, help="a generator checkpoint")
+                    help="rlhf: the policy and value losses on all K samples of each agent "
+                    "(Eq. 15-17); rlhf-res: on each scene's best-scored sample k* only "
+                    "(Eq. 18-20); control: the supervised generator loss alone on clean "
+                    "rollouts, with no reward (it refuses the RL settings, which it does not "
+                    "read): the equal-budget control")  # fmt: skip
+    ft.add_argument("--from", dest="start", required=True,
+                    help="a generator checkpoint: a file or a published name (e.g. "
+                    "zara1/generator; `trajpref models` lists them)")  # fmt: skip
     ft.add_argument(
         "--preset",
         default=None,
         choices=["paper"],
         help="'paper': Eq. 13-20 as written, with the paper's loss weights for the method "
-        "(default: FinetuneConfig's values, which follow the same readings but keep "
-        "RLHF-ReS's weights 0.3 / 1.5 for both methods)",
+        "(default: FinetuneConfig's values, which depart from the equations as printed where "
+        "validation said so: kl_form, ratio_against, likelihood, score_every, value_target, "
+        "adv_norm, reward_clip (docs/rlhf.md), and use RLHF-ReS's weights 0.3 / 1.5 for "
+        "both methods)",
+    )
+    ft.add_argument(
+        "--equal-budget",
+        type=float,
+        default=None,
+        metavar="MINUTES",
+        help="the equal-budget protocol (docs/rlhf.md), the same for every method: train for "
+        "MINUTES of this process's CPU time (finetune.budget_clock=cpu; validation is not "
+        f"counted, so the run takes longer), validate after every MINUTES/"
+        f"{EQUAL_BUDGET_VALIDATIONS} of it, warm up {EQUAL_BUDGET_WARMUP} steps, no epoch "
+        "limit. Run each method on one thread (OMP_NUM_THREADS=1), as the table's runs",
     )
     ft.add_argument("--config", default=None, help="YAML whose 'finetune' section applies "
                     "(its other sections are not read: data and model come from the "
                     "checkpoint; --set data.dataset=FOLDER fine-tunes on other data)")  # fmt: skip
-    _add_run_args(ft, "finetune.lr=5e-5", "a finetune_last.pt")
+    _add_run_args(
+        ft,
+        "finetune.lr=5e-5",
+        "a finetune_last.pt",
+        "the run's seed (default 0, whatever seed the start was trained with)",
+    )
     ft.set_defaults(func=cmd_finetune)
 
     cf = sub.add_parser("config", help="the training config's keys, values and meanings")
@@ -437,6 +477,10 @@ def _check_model_args(args) -> None:
         raise ConfigError(f"--keep must lie in 1..--samples ({args.samples}), got {keep}")
     if getattr(args, "sampler", None) is not None and args.model == "cv":
         raise ConfigError("--sampler applies to diffusion checkpoints; --model cv has none")
+    if args.model != "cv":
+        _check_checkpoint("--model", args.model)
+    if getattr(args, "scorer", None):
+        _check_checkpoint("--scorer", args.scorer)
 
 
 def cmd_data_stats(args) -> int:
@@ -592,6 +636,46 @@ def _selecting(args, model, device):
     return SelectingPredictor(model, cfg, args.samples, scorer), args.keep
 
 
+MODEL_SETTINGS = ("max_speed", "spread_scale", "max_log_sigma")
+"""The ``model`` settings that ``_predictor``'s options of the same names replace."""
+
+
+def _model_fields(args) -> dict:
+    """Who made a result, beside the model's path: ``model_hash`` (what predicted, as a results
+    row records it: weights, denoiser, data scale and model settings, with this command's
+    --max-speed, --spread-scale, --max-log-sigma, --deterministic or --stochastic applied;
+    ``models.checkpoint.header_model_hash``), ``weights_hash`` (the weights' own content hash,
+    which a fine-tuned model's ``start_hash`` names), and for a fine-tuned model
+    ``finetune_method``, ``finetune_reward`` and ``start_hash`` (the header's ``meta.method``,
+    ``config.finetune.reward`` and ``meta.from``). None for cv."""
+    if args.model == "cv":
+        return {"model_hash": None, "weights_hash": None}
+    path = ckpt.resolve_path(args.model)
+    if path.suffix == ckpt.LEGACY_SUFFIX:
+        with warnings.catch_warnings():  # loading the model has warned of the legacy format
+            warnings.simplefilter("ignore", FutureWarning)
+            header = {k: v for k, v in ckpt.load(path).items() if k != "state_dict"}
+    else:
+        header = read_checkpoint_header(path)
+    header = {**header, "config": {**header["config"], "model": dict(header["config"]["model"])}}
+    model = header["config"]["model"]
+    for name in MODEL_SETTINGS:
+        if getattr(args, name, None) is not None:
+            model[name] = getattr(args, name)
+    if args.deterministic or args.stochastic:
+        model["stochastic_steps"] = bool(args.stochastic)
+    sampler = args.sampler or ("full" if header["kind"] == "denoiser" else "leapfrog")
+    out = {"model_hash": ckpt.header_model_hash(header, sampler),
+           "weights_hash": header.get("hash")}  # fmt: skip
+    meta = header.get("meta") or {}
+    if meta.get("method") is not None:
+        reward = (header["config"].get("finetune") or {}).get("reward")
+        out.update(finetune_method=meta["method"],
+                   finetune_reward=None if meta["method"] == "control" else reward,
+                   start_hash=meta.get("from"))  # fmt: skip
+    return out
+
+
 def _selection_fields(args) -> dict:
     if args.keep is None:
         return {}
@@ -677,6 +761,7 @@ def cmd_evaluate(args) -> int:
         "protocol": ds.info.protocol,
         **({"holdout_scene": args.holdout_scene} if args.holdout_scene else {}),
         "model": args.model,
+        **_model_fields(args),
         "samples": samples,
         "seed": args.seed,
         **_selection_fields(args),
@@ -732,7 +817,8 @@ def _evaluate_in_context(args) -> int:
     _warn_trained(args, ds)
     result = evaluate_in_context(model, ds, cfg, args.samples, args.seed, device=device)
     out = {"dataset": ds.info.name, "split": ds.info.split, "protocol": ds.info.protocol,
-           "model": args.model, "samples": args.samples, "seed": args.seed,
+           "model": args.model, **_model_fields(args), "samples": args.samples,
+           "seed": args.seed,
            "in_context": args.in_context, "adapt_steps": cfg.steps, "adapt_lr": cfg.lr,
            "adapt_params": cfg.params, "adapt_trust": cfg.trust,
            "adapt_objective": cfg.objective, **result,
@@ -855,6 +941,7 @@ def cmd_train(args) -> int:
     cfg = load_config(args.config, overrides)
     if args.seed is not None:
         cfg = dataclasses.replace(cfg, seed=args.seed)
+    _warn_if_validation_reads_training(cfg.data)
     summary = train_stage(
         args.stage,
         cfg,
@@ -886,6 +973,52 @@ def _summary_line(what: str, summary: dict, kept: Path) -> str:
     )
 
 
+REWARD_LABELS = {"set": "set-aware reward", "sda": "SDA reward"}
+"""How the summary line names a ``finetune.reward`` other than the diffusion score."""
+
+
+def _method_label(finetune_cfg) -> str:
+    """A fine-tuning run's method as its summary line names it: ``rlhf``, or with a reward
+    other than the score, ``rlhf, set-aware reward`` (the checkpoint's ``meta.method`` keeps
+    the plain method; ``config.finetune.reward`` says the reward)."""
+    reward = REWARD_LABELS.get(finetune_cfg.reward) if finetune_cfg.method != "control" else None
+    return finetune_cfg.method + (f", {reward}" if reward else "")
+
+
+def _check_checkpoint(flag: str, spec: str) -> None:
+    """A checkpoint option's value that is no file but the repository path of a published
+    model (``models/zara1/generator.safetensors`` outside the repository): a ConfigError that
+    names the published name, which works in any folder."""
+    path = Path(spec)
+    if path.exists() or zoo.is_name(spec) or path.with_suffix(ckpt.SUFFIX).is_file():
+        return
+    name = f"{path.parent.name}/{path.stem}"
+    if path.suffix in (ckpt.SUFFIX, ckpt.LEGACY_SUFFIX) and name in zoo.published():
+        raise ConfigError(f"{flag} {spec}: no such checkpoint here; the published model is "
+                          f"named {name} ({flag} {name} works in any folder)")  # fmt: skip
+
+
+def _warn_if_validation_reads_training(data) -> None:
+    """One warning when a run's validation split is its training split: a folder dataset (or
+    one TrajNet++ file) without train/ and val/ sub-folders, with neither another validation
+    dataset nor a held-out scene."""
+    if data.holdout_scene or (data.val_dataset and data.val_dataset != data.dataset):
+        return
+    if data.dataset in NAMES or not _is_main_process():
+        return
+    path = Path(data.dataset).expanduser()
+    try:
+        flat = path.is_file() or (path.is_dir() and not split_folders(path))
+    except TrajprefError:  # reading the data says what is wrong with the folder
+        return
+    if flat:
+        warnings.warn(f"{data.dataset} has no train/ and val/ sub-folders, so validation (and "
+                      "the choice of the kept checkpoint) reads the training windows: give it "
+                      "train/ and val/ sub-folders, or --set data.val_dataset=FOLDER, or --set "
+                      "data.holdout_scene=PREFIX (its files whose names start with PREFIX "
+                      "leave training for validation)", stacklevel=2)  # fmt: skip
+
+
 def cmd_finetune(args) -> int:
     check_output_dir(args.out)
     if Path(args.start).is_dir():  # a run folder: name the generator in it
@@ -894,12 +1027,14 @@ def cmd_finetune(args) -> int:
             f": pass {generator}" if generator.is_file() else " with no generator checkpoint in it"
         )
         raise ConfigError(f"--from {args.start}: a folder, not a checkpoint file{hint}")
+    _check_checkpoint("--from", args.start)
     cfg = finetune_config(args.start, args.method, args.preset, args.config, args.overrides,
-                          args.seed)  # fmt: skip
+                          args.seed, args.equal_budget)  # fmt: skip
+    _warn_if_validation_reads_training(cfg.data)
     summary = finetune(cfg, args.start, args.out, args.data_root, args.device, args.resume,
                        progress=not args.no_progress)  # fmt: skip
     if summary.get("rank", 0) == 0:
-        print(_summary_line(f"fine-tuned ({cfg.finetune.method})", summary,
+        print(_summary_line(f"fine-tuned ({_method_label(cfg.finetune)})", summary,
                             Path(args.out) / f"finetune{ckpt.SUFFIX}"))  # fmt: skip
     return 0
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import statistics
 from pathlib import Path
@@ -145,3 +146,69 @@ def test_each_stage_reads_its_own_config_not_the_last_stages(tmp_path, capsys):
     assert main(["compare", f"a={run}", "--stage", "denoiser"]) == 0
     assert f"| a | {run} | 3 of 3 |" in capsys.readouterr().out
     assert compare.default_metrics("generator") == ("val_min_ade", "val_min_fde")
+
+
+def _budget_run(path: Path, seconds: list[float], fde: list[float], minutes: float | None,
+                start_fde: float | None = None) -> Path:  # fmt: skip
+    """A fine-tuning run folder validated at each epoch, logged at ``seconds`` of the cpu
+    budget clock, with ``epochs=100000`` and ``max_minutes=minutes`` (a budget that ended it
+    when the last seconds reach it); with ``start_fde``, the start's validation first."""
+    path.mkdir(parents=True)
+    rows = []
+    if start_fde is not None:  # the loop's epoch 0: the start, validated before training
+        rows.append({"epoch": 0, "step": 0, "start": True, "val_min_ade": 0.1,
+                     "val_min_fde": start_fde, "val_score": 0.1 + start_fde})  # fmt: skip
+    for epoch, (s, f) in enumerate(zip(seconds, fde, strict=True), 1):
+        rows.append({"epoch": epoch, "budget_cpu_seconds": s, "val_min_ade": 0.2,
+                     "val_min_fde": f, "val_score": 0.2 + f})  # fmt: skip
+    (path / "finetune_metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    cfg = ExperimentConfig()
+    cfg.finetune.epochs, cfg.finetune.max_minutes = 100000, minutes
+    cfg.finetune.budget_clock = "cpu"
+    save_config(cfg, path / "finetune_config.yaml")
+    return path
+
+
+def test_a_run_its_budget_ended_is_compared_at_shares_of_the_budget(tmp_path, capsys):
+    metrics = ("val_min_ade", "val_min_fde")
+    # cheap epochs (validated at 6, 12, 18, 24 s of a 24 s budget) and dear ones (7, 13, 24 s):
+    # at equal shares of the budget, not of their 100000 epochs (where all are the last)
+    cheap = _budget_run(tmp_path / "c", [6, 12, 18, 24.01], [0.4, 0.3, 0.35, 0.32], 0.4)
+    dear = _budget_run(tmp_path / "d", [7, 13, 24.2], [0.5, 0.45, 0.44], 0.4)
+    curves = [compare.read_curve(r, "finetune", metrics) for r in (cheap, dear)]
+    assert [c.budget for c in curves] == [0.4, 0.4] and curves[0].kept == 2
+    rows = compare.curve_rows({"c": curves[:1], "d": curves[1:]}, metrics, (0.25, 0.5, 1.0))
+    assert [[r["epoch"] for r in row["runs"]] for row in rows] == [[1, 1], [2, 2], [4, 3]]
+    assert curves[0].schedule(2) == "2 (0.2 of 0.4 min, cpu budget)"
+    assert main(["compare", "--stage", "finetune", f"c={cheap}", f"d={dear}"]) == 0
+    text = capsys.readouterr().out
+    assert f"| c | {cheap} | 2 (0.2 of 0.4 min, cpu budget) | 0.2000 / 0.3000 |" in text
+    assert (
+        "| share of the schedule (epochs; of the time budget where it ended the run) | "
+        f"c: {cheap} (of its 0.4 min budget) | d: {dear} (of its 0.4 min budget) |" in text
+    )
+    assert "| 0.50 | 0.2000 / 0.3000 (2) | 0.2000 / 0.4500 (2) |" in text
+    # a budget that has not ended the run (stopped early, or not reached): its epochs
+    short = compare.read_curve(_budget_run(tmp_path / "s", [6, 12], [0.4, 0.3], 0.4),
+                               "finetune", metrics)  # fmt: skip
+    unbudgeted = compare.read_curve(_budget_run(tmp_path / "u", [6, 12], [0.4, 0.3], None),
+                                    "finetune", metrics)  # fmt: skip
+    assert short.budget is None and unbudgeted.budget is None
+    assert short.schedule(2) == "2 of 100000"
+
+
+def test_the_start_row_of_fine_tuning_is_no_epoch_and_never_kept(tmp_path, capsys):
+    # a start better than every epoch: the kept checkpoint is still an epoch's, as the loop
+    # saved it, and the log's epochs are those of a run without the start row
+    metrics = ("val_min_ade", "val_min_fde")
+    run = _budget_run(tmp_path / "a", [6, 12], [0.4, 0.3], None, start_fde=0.1)
+    without = _budget_run(tmp_path / "b", [6, 12], [0.4, 0.3], None)
+    curve = compare.read_curve(run, "finetune", metrics)
+    assert list(curve.points) == [1, 2] and curve.kept == 2
+    assert curve == dataclasses.replace(compare.read_curve(without, "finetune", metrics),
+                                        run=str(run))  # fmt: skip
+    assert compare.curve_rows({"a": [curve]}, metrics, (1e-5,))[0]["runs"][0]["epoch"] == 1
+    # a run stopped in its first epoch has validated its start only
+    alone = _budget_run(tmp_path / "c", [], [], None, start_fde=0.1)
+    with pytest.raises(TrajprefError, match="has not validated an epoch yet .*start's validation"):
+        compare.read_curve(alone, "finetune", metrics)

@@ -4,11 +4,15 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
+import shlex
+import sys
 
 import pytest
 import torch
 
 from trajpref.errors import ConfigError
+from trajpref.train import read_metrics
 from trajpref.train.run import record_session, run_record_path, train_stage
 
 
@@ -91,3 +95,244 @@ def test_epochs_done_reads_a_resume_state(tiny_cfg, tmp_path):
     assert epochs_done(tmp_path / "denoiser_last.pt") == 0  # no state yet
     train_stage("diffusion", tiny_cfg, tmp_path, device="cpu", progress=False, max_steps=1)
     assert epochs_done(tmp_path / "denoiser_last.pt") == 1
+
+
+# --- resumes: the command to follow, the data, the time budget; a replaced run's record
+
+
+def _record(out, name, command):
+    out.mkdir(parents=True, exist_ok=True)
+    run_record_path(out, name).write_text(json.dumps([{"command": command}]))
+
+
+def test_a_refused_resume_gives_the_command_that_started_the_run(tiny_cfg, tmp_path):
+    # finetune --config reads only the finetune section, so a finetune_config.yaml cannot
+    # restore a data.* override or the seed: the refusal names the recorded command instead
+    from trajpref.train.run import check_resume, run_identity
+
+    out, last = tmp_path / "ft", tmp_path / "ft" / "finetune_last.pt"
+    state = {"epoch": 0, "identity": run_identity(tiny_cfg, "finetune", "abc")}
+    other = dataclasses.replace(tiny_cfg, seed=9)
+    with pytest.raises(ConfigError, match=r"resume with its config as it was \(the options it "
+                       r"was started with; .*finetune_config\.yaml holds"):  # fmt: skip
+        check_resume(state, run_identity(other, "finetune", "abc"), 9, out, last, "finetune")
+    _record(out, "finetune", "python /venv/bin/trajpref finetune --method rlhf --from 'a b' "
+            f"--out {out} --set data.max_agents=6 --resume {out}/old.pt")  # fmt: skip
+    want = (f"as the command that started it did: trajpref finetune --method rlhf --from 'a b' "
+            f"--out {out} --set data.max_agents=6 --resume {last}; only finetune.")  # fmt: skip
+    with pytest.raises(ConfigError, match=re.escape(want)):
+        check_resume(state, run_identity(other, "finetune", "abc"), 9, out, last, "finetune")
+    # a script that resumes by itself is named as it ran
+    _record(out, "finetune", "python benchmarks/finetune.py --dataset zara1")
+    with pytest.raises(ConfigError, match="did: python benchmarks/finetune.py --dataset zara1;"):
+        check_resume(state, run_identity(other, "finetune", "abc"), 9, out, last, "finetune")
+    # a pretraining stage's --config reads its whole file: named first, the command beside it
+    state = {"epoch": 0, "identity": run_identity(tiny_cfg, "denoiser")}
+    _record(out, "denoiser", "python /venv/bin/trajpref train diffusion --out x --seed 3")
+    want = (f"resume with its config as it was (--config {out / 'denoiser_config.yaml'}) or as "
+            f"the command that started it did: trajpref train diffusion --out x --seed 3 --resume "
+            f"{out / 'denoiser_last.pt'}; only denoiser.")  # fmt: skip
+    with pytest.raises(ConfigError, match=re.escape(want)):
+        check_resume(state, run_identity(other, "denoiser"), 9, out, out / "denoiser_last.pt",
+                     "denoiser")  # fmt: skip
+
+
+def test_following_the_refusals_advice_resumes_the_fine_tuning_run(
+    tiny_run, tmp_path, monkeypatch, capsys
+):
+    from trajpref.cli import main
+
+    out = tmp_path / "ft"
+    argv = ["finetune", "--method", "control", "--from", str(tiny_run / "generator.safetensors"),
+            "--out", str(out), "--seed", "4", "--set", "data.max_agents=6", "--set",
+            "finetune.epochs=1", "--set", "finetune.steps_per_epoch=1", "--set",
+            "finetune.eval_max_scenes=2", "--device", "cpu", "--no-progress"]  # fmt: skip
+    monkeypatch.setattr(sys, "argv", ["/venv/bin/trajpref", *argv])  # what the record keeps
+    assert main(argv) == 0
+    # the advice of before: the run's own finetune_config.yaml, which finetune --config reads
+    # only the finetune section of (the seed and data.max_agents are lost)
+    old = ["finetune", "--method", "control", "--from", str(tiny_run / "generator.safetensors"),
+           "--out", str(out), "--config", str(out / "finetune_config.yaml"), "--set",
+           "finetune.epochs=2", "--resume", str(out / "finetune_last.pt"), "--device", "cpu",
+           "--no-progress"]  # fmt: skip
+    assert main(old) == 2
+    err = capsys.readouterr().err
+    assert "(data.max_agents: 6 -> 8; seed: 4 -> " in err
+    command = err.split("as the command that started it did: ", 1)[1].split("; only ")[0]
+    args = shlex.split(command)
+    assert args[0] == "trajpref" and args[-2:] == ["--resume", str(out / "finetune_last.pt")]
+    assert main([*args[1:], "--set", "finetune.epochs=2"]) == 0  # a longer schedule may change
+    assert [s["resumed"] for s in json.loads((out / "finetune_run.json").read_text())] == [
+        False, True]  # fmt: skip
+
+
+def _walks_copy(tmp_path):
+    from synthetic import write_dataset
+
+    return write_dataset(tmp_path / "data")
+
+
+def test_a_resume_on_changed_data_is_refused_and_names_the_file(tiny_cfg, tmp_path):
+    import os
+
+    from trajpref.train.run import data_fingerprint
+
+    data = _walks_copy(tmp_path)
+    cfg = dataclasses.replace(tiny_cfg, data=dataclasses.replace(tiny_cfg.data, dataset=str(data)))
+    out = tmp_path / "run"
+    train_stage("diffusion", cfg, out, device="cpu", progress=False, max_steps=1)
+    last = str(out / "denoiser_last.pt")
+    # copied or touched files are the same data: the resume goes on
+    walk = data / "train" / "walk1.txt"
+    os.utime(walk, ns=(1, 1))
+    # the same lines, fewer of them: other windows
+    walk.write_text("".join(walk.read_text().splitlines(keepends=True)[:-6]))
+    with pytest.raises(ConfigError, match=r"the data differ from those the state was trained on "
+                       r"\(train walk1\.txt: \d+ windows, [0-9a-f]{16} -> \d+ windows, "
+                       r"[0-9a-f]{16}\); a run resumes on its own data"):  # fmt: skip
+        train_stage("diffusion", cfg, out, device="cpu", progress=False, resume=last)
+    assert [s["resumed"] for s in json.loads(run_record_path(out, "denoiser").read_text())] == [
+        False]  # nothing written  # fmt: skip
+    # a state written before states recorded their data resumes as it did
+    state = torch.load(last, weights_only=True)
+    identity = json.loads(state["identity"])
+    assert set(identity["data_files"]) == {"train", "val"}
+    del identity["data_files"]
+    state["identity"] = json.dumps(identity, sort_keys=True)
+    torch.save(state, last)
+    train_stage("diffusion", cfg, out, device="cpu", progress=False, resume=last)
+    # and the checkpoint records which data it was trained on
+    from trajpref.data import run_splits
+    from trajpref.models import checkpoint as ckpt
+    from trajpref.train.run import data_digest
+
+    meta = ckpt.load(out / "denoiser.safetensors")["meta"]
+    assert meta["data_hash"] == data_digest(data_fingerprint(*run_splits(cfg.data)))
+
+
+def test_a_fingerprint_ignores_file_times_and_tells_splits_and_files_apart(tiny_cfg, tmp_path):
+    import os
+    import shutil
+
+    from trajpref.data import run_splits
+    from trajpref.train.run import data_fingerprint
+
+    data = _walks_copy(tmp_path)
+    cfg = dataclasses.replace(tiny_cfg.data, dataset=str(data))
+    before = data_fingerprint(*run_splits(cfg))
+    assert list(before) == ["train", "val"]
+    assert list(before["train"]) == ["walk0.txt", "walk1.txt", "walk2.txt"]
+    copy = shutil.copytree(data, tmp_path / "copy")  # new times, same content
+    for path in copy.rglob("*.txt"):
+        os.utime(path, ns=(7, 7))
+    assert data_fingerprint(*run_splits(dataclasses.replace(cfg, dataset=str(copy)))) == before
+    (data / "val" / "walk0.txt").write_text((data / "train" / "walk0.txt").read_text())
+    after = data_fingerprint(*run_splits(cfg))
+    assert after["train"] == before["train"] and after["val"] != before["val"]
+
+
+def test_finetune_refuses_a_config_resolved_from_another_start(tiny_run, tmp_path):
+    from trajpref.rl.presets import finetune_config
+    from trajpref.train.run import finetune
+
+    start = tiny_run / "generator.safetensors"
+    cfg = finetune_config(str(start), "control", overrides=["finetune.epochs=1"])
+    for section, change in (("model", {"max_speed": 0.123}), ("diffusion", {"num_steps": 11})):
+        other = dataclasses.replace(cfg, **{section: dataclasses.replace(
+            getattr(cfg, section), **change)})  # fmt: skip
+        key = f"{section}.{next(iter(change))}"
+        with pytest.raises(ConfigError, match=rf"the config was not resolved from this start "
+                           rf"\({re.escape(key)} = .* in the start, .*config\)"):  # fmt: skip
+            finetune(other, start, tmp_path / section, device="cpu", progress=False)
+        assert not (tmp_path / section).exists()  # checked before anything is written
+
+
+def test_fine_tuning_validates_its_start_once_as_epoch_0_never_kept(tiny_run, tmp_path, capsys):
+    from trajpref.models import checkpoint as ckpt
+    from trajpref.rl.presets import finetune_config
+    from trajpref.train import read_metrics
+    from trajpref.train.run import finetune
+
+    start = tiny_run / "generator.safetensors"
+    small = ["finetune.steps_per_epoch=1", "finetune.eval_max_scenes=2"]
+    cfg = finetune_config(str(start), "control", overrides=["finetune.epochs=1", *small])
+    out = tmp_path / "ft"
+    summary = finetune(cfg, start, out, device="cpu", progress=False)
+    rows = read_metrics(out, "finetune", start=True)
+    assert [(r["epoch"], r.get("start", False)) for r in rows] == [(0, True), (1, False)]
+    first = rows[0]
+    assert first["step"] == 0 and "best" not in first and "lr" not in first
+    assert summary["start"] == {k[4:]: v for k, v in first.items()
+                                if k.startswith("val_") and k != "val_seconds"}  # fmt: skip
+    assert [r["epoch"] for r in read_metrics(out, "finetune")] == [1]  # no epoch by default
+    assert ckpt.load(out / "finetune.safetensors")["meta"]["epoch"] == 1
+    said = capsys.readouterr().out
+    assert "[finetune] start (epoch 0, not trained): val_min_ade=" in said
+    assert "[finetune] kept epoch 1 against its start (epoch 0, the same validation scenes): " \
+           f"min_ade {first['val_min_ade']:.4f} -> " in said  # fmt: skip
+    # the same validation as the stage's own, on the untouched start
+    from trajpref.data import load_dataset
+    from trajpref.train.stages import build_finetune_stage
+
+    val = load_dataset(cfg.data.dataset, "val")
+    own = build_finetune_stage(cfg, ckpt.load(start), val, torch.device("cpu")).validate()
+    assert own == summary["start"]
+    # a resume does not validate the start again, and still sets the kept epoch against it
+    longer = dataclasses.replace(cfg, finetune=dataclasses.replace(cfg.finetune, epochs=2))
+    resumed = finetune(longer, start, out, device="cpu", progress=False,
+                       resume=str(out / "finetune_last.pt"))  # fmt: skip
+    rows = read_metrics(out, "finetune", start=True)
+    assert [r["epoch"] for r in rows] == [0, 1, 2] and sum("start" in r for r in rows) == 1
+    assert resumed["start"] == summary["start"]
+    assert "kept epoch" in capsys.readouterr().out
+
+
+def test_a_resume_whose_time_budget_is_spent_is_refused(tiny_cfg, tmp_path):
+    from trajpref.train.run import finished
+
+    denoiser = dataclasses.replace(tiny_cfg.denoiser, epochs=50, max_minutes=1e-6)
+    cfg = dataclasses.replace(tiny_cfg, denoiser=denoiser)
+    summary = train_stage("diffusion", cfg, tmp_path, device="cpu", progress=False)
+    assert summary["budget_reached"] and summary["steps"] == 1
+    last = tmp_path / "denoiser_last.pt"
+    assert finished(last, cfg.denoiser)  # a script that trains or resumes skips it
+    with pytest.raises(
+        ConfigError,
+        match=r"the budget of 1e-06 min is spent \(the state has "
+        r"trained .* min\): nothing left to train \(raise denoiser\.max_minutes",
+    ):
+        train_stage("diffusion", cfg, tmp_path, device="cpu", progress=False, resume=str(last))
+    assert len(read_metrics(tmp_path, "denoiser")) == 1  # no step, no validation added
+    # a larger budget, or none, trains on
+    more = dataclasses.replace(cfg, denoiser=dataclasses.replace(denoiser, max_minutes=10.0))
+    assert not finished(last, more.denoiser)
+    train_stage("diffusion", more, tmp_path, device="cpu", progress=False, resume=str(last),
+                max_steps=2)  # fmt: skip
+    assert len(read_metrics(tmp_path, "denoiser")) == 2
+
+
+def test_a_new_run_in_a_used_folder_moves_the_earlier_runs_record_aside(tiny_cfg, tmp_path, capsys):
+    out = tmp_path / "run"
+    train_stage("diffusion", tiny_cfg, out, device="cpu", progress=False, max_steps=1)
+    train_stage("diffusion", tiny_cfg, out, device="cpu", progress=False,
+                resume=str(out / "denoiser_last.pt"))  # fmt: skip
+    first = json.loads(run_record_path(out, "denoiser").read_text())
+    assert [s["resumed"] for s in first] == [False, True]  # one run's sessions
+    train_stage("diffusion", tiny_cfg, out, device="cpu", progress=False, max_steps=1)
+    assert [s["resumed"] for s in json.loads(run_record_path(out, "denoiser").read_text())] == [
+        False]  # fmt: skip
+    # the earlier run's record and log, aside with the same number
+    assert json.loads((out / "denoiser_run.replaced-1.json").read_text()) == first
+    assert (out / "denoiser_metrics.replaced-1.jsonl").is_file()
+    assert "moved aside to denoiser_metrics.replaced-1.jsonl and denoiser_run.replaced-1.json" \
+        in capsys.readouterr().err  # fmt: skip
+    # a record left without a log (a run stopped before its first epoch) keeps them paired
+    (out / "denoiser_metrics.jsonl").unlink()
+    train_stage("diffusion", tiny_cfg, out, device="cpu", progress=False, max_steps=1)
+    assert (out / "denoiser_run.replaced-2.json").is_file()
+    assert not (out / "denoiser_metrics.replaced-2.jsonl").exists()
+    train_stage("diffusion", tiny_cfg, out, device="cpu", progress=False, max_steps=1)
+    assert {p.name for p in out.glob("*replaced-3*")} == {
+        "denoiser_run.replaced-3.json",
+        "denoiser_metrics.replaced-3.jsonl",
+    }

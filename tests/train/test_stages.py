@@ -830,3 +830,27 @@ def test_the_epoch_line_keeps_a_small_learning_rate_readable(tmp_path, cfg, caps
     lines = (printed.out + printed.err).splitlines()
     line = next(x for x in lines if x.startswith("[denoiser] epoch"))
     assert " lr=1e-05 " in line
+
+
+def test_validation_shows_a_bar_and_a_budgeted_stage_the_share_of_its_budget(
+    tmp_path, cfg, trained, capsys
+):
+    # a time budget ends the stage, not its epochs: the bar says the budget and its share
+    denoiser = dataclasses.replace(cfg.denoiser, epochs=50, max_minutes=1e-6)
+    train_stage("diffusion", dataclasses.replace(cfg, denoiser=denoiser), tmp_path / "a",
+                device="cpu", progress=True)  # fmt: skip
+    err = capsys.readouterr().err
+    assert "denoiser epoch 1 (1e-06 min budget)" in err and "1/50" not in err
+    assert "budget=100%" in err
+    assert "denoiser validation" in err  # the validation pass has its own bar
+    train_stage("diffusion", cfg, tmp_path / "b", device="cpu", progress=True)
+    err = capsys.readouterr().err
+    assert f"denoiser epoch 1/{cfg.denoiser.epochs}" in err and "budget=" not in err
+    # a generator's (and fine-tuning's) validation: the evaluation's bar; none without progress
+    generator = dataclasses.replace(cfg.generator, epochs=1)
+    for progress in (True, False):
+        train_stage("generator", dataclasses.replace(cfg, generator=generator),
+                    tmp_path / f"g{progress}", device="cpu", progress=progress,
+                    denoiser=str(trained / "denoiser.safetensors"))  # fmt: skip
+        err = capsys.readouterr().err
+        assert ("evaluate " in err) is progress and ("generator epoch 1/1" in err) is progress

@@ -2,16 +2,19 @@
 
 A candidate is judged against a control by the validation its runs kept (the epoch with the
 lowest ``val_score``, the checkpoint the loop saved), over seeds, and by where its curve runs
-at the same share of the schedule (docs/pretraining.md compares candidates this way). This
-module reads each run's ``<stage>_metrics.jsonl`` and ``<stage>_config.yaml`` and computes exactly
-that; ``trajpref compare`` prints it.
+at the same share of the schedule (docs/pretraining.md compares candidates this way). The
+schedule is a run's epochs, or for a run that its time budget ended (``max_minutes``), the
+budget: its validations stand at the budget clock's seconds they were logged at. This module
+reads each run's ``<stage>_metrics.jsonl`` and ``<stage>_config.yaml`` and computes exactly
+that; ``trajpref compare`` prints it. Fine-tuning's validation of its start (epoch 0) is no
+epoch and is not read (``read_metrics``).
 """
 
 from __future__ import annotations
 
 import math
 import statistics
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -55,15 +58,34 @@ class RunCurve:
     """{epoch: {metric: value}} at each validated epoch, in order."""
     kept: int
     """The validated epoch with the lowest ``val_score``: the checkpoint the loop kept."""
+    budget: float | None = None
+    """The time budget in minutes (``max_minutes``) when it ended the run: the schedule is
+    then the budget, not ``epochs``; None for a run that its epochs ended (or not yet)."""
+    clock: str = "wall"
+    """What the budget counted (``budget_clock``)."""
+    seconds: dict[int, float] = field(default_factory=dict)
+    """{epoch: seconds of the budget's clock} at each validated epoch (a budget-ended run)."""
 
     def at(self, epoch: int) -> dict[str, float]:
         """The metrics validated at ``epoch``."""
         return self.points[epoch]
 
     def nearest(self, share: float) -> int:
-        """The validated epoch closest to ``share`` of the schedule (the earlier on a tie)."""
+        """The validated epoch closest to ``share`` of the schedule (the earlier on a tie):
+        of its epochs, or of its time budget for a run the budget ended."""
+        if self.budget is not None:
+            target = share * 60 * self.budget
+            return min(self.points, key=lambda e: (abs(self.seconds[e] - target), e))
         target = share * self.epochs
         return min(self.points, key=lambda e: (abs(e - target), e))
+
+    def schedule(self, epoch: int) -> str:
+        """Where ``epoch`` stands in the schedule: ``4 of 8``, or for a budget-ended run
+        ``22 (0.28 of 0.3 min, cpu budget)``."""
+        if self.budget is None:
+            return f"{epoch} of {self.epochs}"
+        minutes = self.seconds[epoch] / 60
+        return f"{epoch} ({minutes:.2g} of {self.budget:g} min, {self.clock} budget)"
 
 
 def read_curve(run_dir: str | Path, stage: str, metrics: tuple[str, ...]) -> RunCurve:
@@ -75,6 +97,9 @@ def read_curve(run_dir: str | Path, stage: str, metrics: tuple[str, ...]) -> Run
     if not Path(run_dir).is_dir():
         raise TrajprefError(f"{run_dir}: no such run folder")
     rows = read_metrics(run_dir, stage)
+    if not rows and read_metrics(run_dir, stage, start=True):  # the start's validation alone
+        raise TrajprefError(f"{run_dir}: the {stage} stage has not validated an epoch yet "
+                            "(its log holds the start's validation only)")  # fmt: skip
     if not rows:
         others = [s for s in STAGES if s != stage and read_metrics(run_dir, s)]
         hint = (f"; it holds {', '.join(others)} logs: --stage {others[-1]}" if others
@@ -90,11 +115,18 @@ def read_curve(run_dir: str | Path, stage: str, metrics: tuple[str, ...]) -> Run
     points = {int(r["epoch"]): {m: float(r[m]) for m in metrics} for r in validated}
     kept = int(min(validated, key=lambda r: r["val_score"])["epoch"])
     config = stage_config_path(run_dir, stage)
-    if config.is_file():
-        epochs = int(getattr(load_config(config), stage).epochs)
-    else:
-        epochs = int(rows[-1]["epoch"])
-    return RunCurve(str(run_dir), epochs, points, kept)
+    if not config.is_file():
+        return RunCurve(str(run_dir), int(rows[-1]["epoch"]), points, kept)
+    section = getattr(load_config(config), stage)
+    key = f"budget_{section.budget_clock}_seconds"  # the clock max_minutes counted
+    ended = (section.max_minutes is not None and rows[-1]["epoch"] < section.epochs
+             and all(key in r for r in validated)
+             and rows[-1].get(key, 0.0) >= 60 * section.max_minutes)  # fmt: skip
+    if not ended:
+        return RunCurve(str(run_dir), int(section.epochs), points, kept)
+    seconds = {int(r["epoch"]): float(r[key]) for r in validated}
+    return RunCurve(str(run_dir), int(section.epochs), points, kept, section.max_minutes,
+                    section.budget_clock, seconds)  # fmt: skip
 
 
 def parse_group(text: str) -> tuple[str, list[str]]:
@@ -124,9 +156,16 @@ def summarise(groups: dict[str, list[RunCurve]], metrics: tuple[str, ...]) -> di
         change = {m: (mean[m] / first[m] - 1) if first[m] else math.nan for m in metrics}
         out[name] = {
             "runs": [
-                {"run": c.run, "kept_epoch": c.kept, "epochs": c.epochs, **c.at(c.kept)}
+                {
+                    "run": c.run,
+                    "kept_epoch": c.kept,
+                    "epochs": c.epochs,
+                    "budget_minutes": c.budget,
+                    "schedule": c.schedule(c.kept),
+                    **c.at(c.kept),
+                }
                 for c in curves
-            ],
+            ],  # fmt: skip
             "mean": mean,
             "sd": sd,
             "change": change,
@@ -137,7 +176,8 @@ def summarise(groups: dict[str, list[RunCurve]], metrics: tuple[str, ...]) -> di
 def curve_rows(
     groups: dict[str, list[RunCurve]], metrics: tuple[str, ...], shares: tuple[float, ...]
 ) -> list[dict[str, Any]]:
-    """For each share of the schedule, every run's metrics at its nearest validated epoch."""
+    """For each share of the schedule (of a budget-ended run's time budget), every run's
+    metrics at its nearest validated epoch."""
     for s in shares:
         if not 0 < s <= 1:
             raise TrajprefError(f"shares lie in (0, 1], got {s}")
@@ -165,8 +205,7 @@ def format_report(
     lines = [f"| group | run | kept epoch | {head} |", "|---|---|---|---|"]
     for name, g in summary.items():
         for r in g["runs"]:
-            epoch = f"{r['kept_epoch']} of {r['epochs']}"
-            lines.append(f"| {name} | {r['run']} | {epoch} | {_values(r, metrics)} |")
+            lines.append(f"| {name} | {r['run']} | {r['schedule']} | {_values(r, metrics)} |")
     lines += ["", f"| group | runs | mean {head} | sd | change against the first |"]
     lines.append("|---|---|---|---|---|")
     for name, g in summary.items():
@@ -175,8 +214,15 @@ def format_report(
         n = len(g["runs"])
         lines.append(f"| {name} | {n} | {_values(g['mean'], metrics)} | {sd} | {change} |")
     rows = curve_rows(groups, metrics, shares)
-    names = [f"{r['group']}: {r['run']}" for r in rows[0]["runs"]]
-    lines += ["", "| share of the schedule | " + " | ".join(names) + " |"]
+    budgets = {c.run: c.budget for cs in groups.values() for c in cs}
+    names = [f"{r['group']}: {r['run']}" + (f" (of its {budgets[r['run']]:g} min budget)"
+             if budgets[r["run"]] is not None else "") for r in rows[0]["runs"]]  # fmt: skip
+    head = "share of the schedule" + (
+        " (epochs; of the time budget where it ended the run)"
+        if any(v is not None for v in budgets.values())
+        else ""
+    )
+    lines += ["", f"| {head} | " + " | ".join(names) + " |"]
     lines.append("|---" * (len(names) + 1) + "|")
     for row in rows:
         cells = [f"{_values(r, metrics)} ({r['epoch']})" for r in row["runs"]]

@@ -37,25 +37,51 @@ from trajpref.train.ema import WeightAverage, ema_decay
 from trajpref.train.stages import Stage
 from trajpref.types import TrajectoryDataset
 
+RUN_FILES = ("metrics.jsonl", "run.json")
+"""A stage's files that accumulate over a run's sessions: its metrics log and its record of
+sessions (``<stage>_run.json``, ``train.run.record_session``). A run started anew in the same
+folder moves them aside (``set_aside``) rather than appending to another run's."""
+
+
+def set_aside(out_dir: str | Path, stage: str, names: tuple[str, ...] = RUN_FILES) -> list[str]:
+    """Move an earlier run's ``<stage>_<name>`` files (of ``names``, those that exist) to
+    ``<stage>_metrics.replaced-<k>.jsonl``, ``<stage>_run.replaced-<k>.json``: one ``k`` for
+    all, free for every file of ``RUN_FILES``, so that a log and its record stay paired. Says
+    so on stderr; returns the new names."""
+    out_dir = Path(out_dir)
+    present = [n for n in names if (out_dir / f"{stage}_{n}").exists()]
+    if not present:
+        return []
+
+    def aside(name: str, k: int) -> Path:  # metrics.jsonl -> metrics.replaced-<k>.jsonl
+        stem, _, ext = name.partition(".")
+        return out_dir / f"{stage}_{stem}.replaced-{k}.{ext}"
+
+    k = 1
+    while any(aside(n, k).exists() for n in RUN_FILES):
+        k += 1
+    moved = []
+    for name in present:
+        (out_dir / f"{stage}_{name}").rename(aside(name, k))
+        moved.append(aside(name, k).name)
+    print(f"[{stage}] {out_dir} held an earlier run: moved aside to {' and '.join(moved)}; "
+          "its other files are replaced as this run writes", file=sys.stderr)  # fmt: skip
+    return moved
+
 
 class MetricLog:
     """Per-epoch metrics to ``metrics.jsonl`` (and TensorBoard when it is installed)."""
 
     def __init__(self, out_dir: Path, stage: str, enabled: bool, fresh: bool = True):
         """``fresh``: a run that starts from its first epoch moves an earlier run's log in
-        the same folder aside (``<stage>_metrics.replaced-<k>.jsonl``), so that the log holds
-        this run's epochs only; a resumed run appends to its own."""
+        the same folder aside (``<stage>_metrics.replaced-<k>.jsonl``, ``set_aside``), so
+        that the log holds this run's epochs only; a resumed run appends to its own."""
         self.enabled = enabled
         self.path = out_dir / f"{stage}_metrics.jsonl"
         self.stage = stage
         self.tb = None
-        if enabled and fresh and self.path.exists():
-            k = 1
-            while (aside := out_dir / f"{stage}_metrics.replaced-{k}.jsonl").exists():
-                k += 1
-            self.path.rename(aside)
-            print(f"[{stage}] {out_dir} held an earlier run's log: moved to {aside.name}; "
-                  "its other files are replaced as this run writes", file=sys.stderr)  # fmt: skip
+        if enabled and fresh:
+            set_aside(out_dir, stage, ("metrics.jsonl",))
         if enabled:
             try:
                 from torch.utils.tensorboard import SummaryWriter
@@ -71,18 +97,22 @@ class MetricLog:
             fh.write(dumps_json(record) + "\n")
         if self.tb is not None:
             for key, value in record.items():
-                if isinstance(value, (int, float)) and key != "epoch":
+                number = isinstance(value, (int, float)) and not isinstance(value, bool)
+                if number and key != "epoch":  # the start row's ``start: true`` is no number
                     self.tb.add_scalar(f"{self.stage}/{key}", value, record["epoch"])
             self.tb.flush()
 
 
-def read_metrics(run_dir: str | Path, stage: str) -> list[dict[str, Any]]:
+def read_metrics(run_dir: str | Path, stage: str, start: bool = False) -> list[dict[str, Any]]:
     """A run's ``<stage>_metrics.jsonl`` as written by :class:`MetricLog`: one dict per
-    epoch, in order; ``[]`` when the run has not logged that stage (blank lines skipped)."""
+    epoch, in order; ``[]`` when the run has not logged that stage (blank lines skipped).
+    The validation of the start that fine-tuning logs first (``"epoch": 0, "start": true``)
+    is no epoch and is left out, unless ``start``."""
     path = Path(run_dir) / f"{stage}_metrics.jsonl"
     if not path.is_file():
         return []
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    return rows if start else [r for r in rows if not r.get("start")]
 
 
 def fused_flag(cfg: OptimConfig) -> bool | None:
@@ -261,6 +291,7 @@ def fit(
     progress: bool = True,
     max_steps: int | None = None,
     identity: str | None = None,
+    run_meta: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Train ``stage`` and keep the checkpoint with the best validation ``score``.
 
@@ -270,8 +301,16 @@ def fit(
     ``<stage>_raw.safetensors`` keeps the best raw weights by the same validation: the run's
     own control, same seed and batches. ``max_steps`` stops early
     (for tests). ``identity`` (what the run is: its config and start, as text) is kept in the
-    resume state, so that a resume can be checked against it (``train.run``). Returns a
-    summary with the best validation metrics and the wall time.
+    resume state, so that a resume can be checked against it (``train.run``); ``run_meta`` is
+    recorded with every checkpoint beside its validation (``train.run``: the data's digest).
+
+    A stage with ``validate_start`` (fine-tuning) validates its start once, before its first
+    step, on the same scenes: logged first as ``"epoch": 0, "start": true`` (never a kept
+    checkpoint; ``read_metrics`` leaves it out unless asked), kept in the resume state so
+    that a resumed run does not validate it again, and set against the kept epoch at the end.
+    With ``progress``, validation shows its own bar, and a stage with ``max_minutes`` shows
+    the share of its budget spent. Returns a summary with the best validation metrics (and
+    the start's, ``start``) and the wall time.
     """
     dist_info = dist_info or DistInfo()
     out_dir = Path(out_dir)
@@ -303,6 +342,7 @@ def fit(
     clock = time.process_time if optim_cfg.budget_clock == "cpu" else time.perf_counter
     spent = 0.0  # seconds of the budget's clock used by training steps
     validated_at = 0.0  # ``spent`` at the last validation (for ``eval_every_minutes``)
+    start_val: dict[str, float] | None = None  # the start's validation (``validate_start``)
     trained_on = machine()  # recorded with every checkpoint (the zoo cards name it)
     if resume is not None:
         state = resume if isinstance(resume, dict) else load_resume_state(resume, stage.name)
@@ -320,6 +360,7 @@ def fit(
         elapsed = state["elapsed"]
         spent = state.get("spent", elapsed)  # states written before budget_clock: wall time
         validated_at = state.get("validated_at", spent)
+        start_val = state.get("start_val")
         if average is not None:
             average.load_state_dict(state["ema"])
 
@@ -340,6 +381,17 @@ def fit(
         objective = DistributedDataParallel(objective, device_ids=device_ids)
 
     log = MetricLog(out_dir, stage.name, main, fresh=resume is None)
+    show = progress and main  # bars: the epoch's steps, each validation pass
+    if stage.validate_start and resume is None and main:
+        v0 = time.perf_counter()
+        stage.objective.eval()
+        start_val = stage.validate(progress=show)
+        stage.objective.train()
+        log.write({"epoch": 0, "step": 0, "start": True,
+                   **{f"val_{k}": v for k, v in start_val.items()},
+                   "val_seconds": round(time.perf_counter() - v0, 4)})  # fmt: skip
+        tqdm.write(f"[{stage.name}] start (epoch 0, not trained): " + " ".join(
+            f"val_{k}={v:.4g}" for k, v in start_val.items()))  # fmt: skip
     rate = None  # agent-windows per second of the last epoch run here
     nonfinite = 0
     for epoch in range(start_epoch, optim_cfg.epochs):
@@ -349,9 +401,12 @@ def fit(
         sums: dict[str, float] = {}
         agents = 0
         stop = False
+        if optim_cfg.max_minutes is not None:  # the budget, not the epochs, ends such a run
+            desc = f"{stage.name} epoch {epoch + 1} ({optim_cfg.max_minutes:g} min budget)"
+        else:
+            desc = f"{stage.name} epoch {epoch + 1}/{optim_cfg.epochs}"
         bar = tqdm(itertools.islice(loader, steps_per_epoch), total=steps_per_epoch,
-                   desc=f"{stage.name} epoch {epoch + 1}/{optim_cfg.epochs}", unit="batch",
-                   disable=not (progress and main), leave=False)  # fmt: skip
+                   desc=desc, unit="batch", disable=not show, leave=False)  # fmt: skip
         for batch in bar:
             if not stage.context:
                 batch = batch.without_context()
@@ -394,7 +449,11 @@ def fit(
                 for key, value in logs.items():
                     sums[key] = sums.get(key, 0.0) + value * batch.num_agents
                 agents += batch.num_agents
-                bar.set_postfix(loss=f"{logs['loss']:.4f}")
+                post = {"loss": f"{logs['loss']:.4f}"}
+                if optim_cfg.max_minutes is not None:  # the share of the budget spent
+                    used = (spent + clock() - c0) / (60 * optim_cfg.max_minutes)
+                    post["budget"] = f"{min(1.0, used):.0%}"
+                bar.set_postfix(post)
                 stop = _should_stop(step, max_steps, spent + clock() - c0,
                                     optim_cfg.max_minutes, dist_info, device)  # fmt: skip
                 if stop:
@@ -424,10 +483,11 @@ def fit(
             v0 = time.perf_counter()
             # what each checkpoint written at this evaluation records beside its validation
             at = {"epoch": epoch + 1, "step": step, "train_seconds": round(elapsed, 2),
-                  "dataset": train.info.name, "machine": trained_on}  # fmt: skip
+                  "dataset": train.info.name, "machine": trained_on,
+                  **(run_meta or {})}  # fmt: skip
             stage.objective.eval()
             if average is not None:  # the raw weights too, for the comparison
-                raw = stage.validate()
+                raw = stage.validate(progress=show)
                 record.update({f"val_raw_{k}": v for k, v in raw.items()})
                 if raw["score"] < best_raw["score"]:
                     best_raw = {**raw, "epoch": epoch + 1}
@@ -435,7 +495,7 @@ def fit(
                             f"weights are {stage.name}{ckpt.SUFFIX})"}  # fmt: skip
                     ckpt.save(out_dir / f"{stage.name}_raw{ckpt.SUFFIX}", stage.payload(meta))
             with _averaged(average):
-                val = stage.validate()
+                val = stage.validate(progress=show)
                 record.update({f"val_{k}": v for k, v in val.items()})
                 if val["score"] < best["score"]:
                     best = {**val, "epoch": epoch + 1}
@@ -459,6 +519,7 @@ def fit(
                 "epoch": epoch, "step": step, "best": best, "elapsed": elapsed, "spent": spent,
                 "validated_at": validated_at,
                 **({"identity": identity} if identity is not None else {}),
+                **({"start_val": start_val} if start_val is not None else {}),
                 **({"ema": average.state_dict(), "best_raw": best_raw}
                    if average is not None else {}),
             })  # fmt: skip
@@ -477,6 +538,18 @@ def fit(
         tqdm.write(f"[{stage.name}] the time budget of {optim_cfg.max_minutes:g} min "
                    f"({optim_cfg.budget_clock} clock) ended the stage after {step} of its "
                    f"{total} steps, {how}; to train every step: {unset}")  # fmt: skip
+    if start_val is not None and "epoch" in best and main:
+        tqdm.write(f"[{stage.name}] kept epoch {best['epoch']} against its start (epoch 0, the "
+                   f"same validation scenes): {against_start(best, start_val)}")  # fmt: skip
     return {"best": best, "train_seconds": elapsed, "budget_seconds": spent, "steps": step,
-            "budget_reached": budget_reached,
+            "budget_reached": budget_reached, "start": start_val,
             "samples_per_second": rate}  # fmt: skip
+
+
+def against_start(best: dict[str, float], start: dict[str, float]) -> str:
+    """The kept validation set against the start's: ``min_ade 0.1691 -> 0.1650 (-2.4 %)`` for
+    minADE and minFDE (the score alone for a stage without them)."""
+    keys = [k for k in ("min_ade", "min_fde") if k in start and k in best] or ["score"]
+    return ", ".join(f"{k} {start[k]:.4f} -> {best[k]:.4f} "
+                     f"({100 * (best[k] / start[k] - 1):+.1f} %)" if start[k] else
+                     f"{k} {start[k]:.4f} -> {best[k]:.4f}" for k in keys)  # fmt: skip

@@ -4,7 +4,9 @@ shared loop, DDP-aware."""
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
+import shlex
 import time
 import typing
 import warnings
@@ -12,9 +14,10 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
 import torch
 
-from trajpref.config import ExperimentConfig, save_config, to_dict
+from trajpref.config import ExperimentConfig, OptimConfig, save_config, to_dict
 from trajpref.data import run_splits
 from trajpref.data.registry import NAMES
 from trajpref.device import resolve_device
@@ -23,12 +26,13 @@ from trajpref.io import check_output_dir, write_json
 from trajpref.models import checkpoint as ckpt
 from trajpref.results import command_line, machine
 from trajpref.train.distributed import barrier, cleanup, init_from_env
-from trajpref.train.loop import check_resume_matches, fit, load_resume_state
+from trajpref.train.loop import check_resume_matches, fit, load_resume_state, set_aside
 from trajpref.train.stages import (
     build_denoiser_stage,
     build_finetune_stage,
     build_generator_stage,
 )
+from trajpref.types import TrajectoryDataset
 
 Pretraining = Literal["diffusion", "generator"]
 STAGES: tuple[str, ...] = typing.get_args(Pretraining)
@@ -59,15 +63,50 @@ validation interval, arithmetic and checkpoints kept. Everything else that shape
 (data, model, noise schedule, seed, the rest of its section, its start) must be as it was."""
 
 
-def run_identity(cfg: ExperimentConfig, name: str, start: str | None = None) -> str:
+def run_identity(cfg: ExperimentConfig, name: str, start: str | None = None,
+                 data: dict[str, dict[str, str]] | None = None) -> str:  # fmt: skip
     """What a stage's resume state records of its run (JSON text): the config sections that
-    shape stage ``name`` (data, model, diffusion, seed, its own section less ``RESUME_FREE``)
-    and ``start``, the hash of the checkpoint it starts from (the generator stage's denoiser,
-    fine-tuning's generator)."""
+    shape stage ``name`` (data, model, diffusion, seed, its own section less ``RESUME_FREE``),
+    ``start``, the hash of the checkpoint it starts from (the generator stage's denoiser,
+    fine-tuning's generator), and with ``data`` the fingerprint of what it reads
+    (``data_fingerprint``, under the key ``data_files``)."""
     full = to_dict(cfg)
     own = {k: v for k, v in full[name].items() if k not in RESUME_FREE}
     keep = {k: full[k] for k in ("data", "model", "diffusion", "seed")}
-    return json.dumps({**keep, name: own, "start": start}, sort_keys=True, default=str)
+    files = {"data_files": data} if data is not None else {}
+    return json.dumps({**keep, name: own, "start": start, **files}, sort_keys=True, default=str)
+
+
+def data_fingerprint(train: TrajectoryDataset, val: TrajectoryDataset) -> dict[str, dict[str, str]]:
+    """What a run reads, as ``{split: {file: "<N> windows, <digest>"}}`` for its training and
+    validation splits: per source file (a window's ``scene_id`` before ``@`` or ``#``), the
+    number of windows and a 16-digit BLAKE2 digest of their ids and values (positions, agent
+    types, context agents). A digest of the windows rather than of the files' bytes or times:
+    a copied or touched file is the same data, while changed lines, a changed reader or
+    another folder behind the same path are not. Cheap: one pass over arrays in memory (zara1:
+    a few milliseconds)."""
+    out: dict[str, dict[str, str]] = {}
+    for split, dataset in (("train", train), ("val", val)):
+        digests: dict[str, Any] = {}
+        counts: dict[str, int] = {}
+        for scene in dataset.scenes:
+            source = scene.scene_id.split("@", 1)[0].split("#", 1)[0]
+            h = digests.setdefault(source, hashlib.blake2b(digest_size=8))
+            counts[source] = counts.get(source, 0) + 1
+            h.update(scene.scene_id.encode())
+            for values in (scene.history, scene.future, scene.agent_type, scene.context,
+                           scene.context_reverse):  # fmt: skip
+                if values is not None:
+                    h.update(str(values.shape).encode())
+                    h.update(np.ascontiguousarray(values).tobytes())
+        out[split] = {f: f"{counts[f]} windows, {digests[f].hexdigest()}" for f in sorted(counts)}
+    return out
+
+
+def data_digest(data: dict[str, dict[str, str]]) -> str:
+    """A 12-digit digest of a ``data_fingerprint``: recorded in each checkpoint's meta
+    (``data_hash``), so that a result can be tied to the data it was trained and validated on."""
+    return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:12]
 
 
 def _differences(saved: Any, now: Any, prefix: str = "") -> list[str]:
@@ -78,33 +117,113 @@ def _differences(saved: Any, now: Any, prefix: str = "") -> list[str]:
     return [] if saved == now else [f"{prefix.rstrip('.')}: {saved!r} -> {now!r}"]
 
 
+def _shown(changes: list[str]) -> str:
+    return "; ".join(changes[:3]) + (f" (and {len(changes) - 3} more)" if len(changes) > 3 else "")
+
+
+def resume_command(out_dir: str | Path, name: str, resume: str | Path) -> str | None:
+    """The command that started the run's last session, as ``<name>_run.json`` records it,
+    made to resume from ``resume``: for the ``trajpref`` command its ``--resume`` is replaced
+    (and ``python .../trajpref`` shortened to ``trajpref``); another command (a script that
+    resumes by itself) is given as it was. None without a record."""
+    try:
+        command = json.loads(run_record_path(out_dir, name).read_text())[-1]["command"]
+        args = shlex.split(command)
+    except (OSError, ValueError, LookupError, TypeError, AttributeError):
+        return None
+    if len(args) < 2 or Path(args[1]).name != "trajpref":
+        return command
+    rest, skip = [], False
+    for arg in args[2:]:  # the same options, --resume replaced
+        if skip:
+            skip = False
+        elif arg == "--resume":
+            skip = True
+        elif not arg.startswith("--resume="):
+            rest.append(arg)
+    return shlex.join(["trajpref", *rest, "--resume", str(resume)])
+
+
 def check_resume(state: dict[str, Any], identity: str, epochs: int, out_dir: Path,
-                 resume: str | Path, name: str) -> None:  # fmt: skip
+                 resume: str | Path, name: str,
+                 max_minutes: float | None = None) -> None:  # fmt: skip
     """A resume state belongs to this run folder, was written by a run of the same config and
-    start (``run_identity``; states older than the record are not checked) and has epochs left
-    to train; else a one-line ``ConfigError`` before anything is written."""
+    start (``run_identity``; states older than the record are not checked; the data are
+    checked apart, ``check_resume_data``) and has something left to train: epochs, and with
+    ``max_minutes`` time in its budget; else a one-line ``ConfigError`` before anything is
+    written. A changed config is refused with the command that started the run (its run
+    record), which restores every option; the pretraining stages also name their
+    ``<name>_config.yaml``, which their ``--config`` reads whole (fine-tuning's ``--config``
+    reads only the finetune section)."""
     resume = Path(resume)
     if resume.resolve().parent != out_dir.resolve():
         raise ConfigError(f"--resume {resume}: a run resumes in its own folder (--out "
                           f"{resume.parent}), not in {out_dir}")  # fmt: skip
     saved = state.get("identity")
     if saved is not None:
-        changed = _differences(json.loads(saved), json.loads(identity))
+        saved_run, now_run = json.loads(saved), json.loads(identity)
+        saved_run.pop("data_files", None)  # the data are compared once read
+        now_run.pop("data_files", None)
+        changed = _differences(saved_run, now_run)
         if changed:
-            shown = "; ".join(changed[:3]) + (f" (and {len(changed) - 3} more)"
-                                              if len(changed) > 3 else "")  # fmt: skip
-            which = (
-                "the checkpoint it starts from" if changed[0].startswith("start") else "its config"
-            )
+            start = changed[0].startswith("start")
+            which = "the checkpoint it starts from" if start else "its config"
+            command = resume_command(out_dir, name, resume)
+            config = out_dir / f"{name}_config.yaml"
+            if name != "finetune" and not start:  # train --config reads the whole file
+                how = f"its config as it was (--config {config})" + (
+                    f" or as the command that started it did: {command}" if command else ""
+                )
+            elif command:
+                how = f"{which} as it was, as the command that started it did: {command}"
+            else:  # finetune --config reads its finetune section only
+                how = (f"{which} as it was (the options it was started with; {config} holds "
+                       "its resolved config)")  # fmt: skip
             raise ConfigError(f"--resume {resume}: this run differs from the one that wrote the "
-                              f"state ({shown}); resume with {which} as it was (--config "
-                              f"{out_dir / f'{name}_config.yaml'}); only {name}."
+                              f"state ({_shown(changed)}); resume with {how}; only {name}."
                               f"{{{','.join(RESUME_FREE)}}} may change")  # fmt: skip
     done = int(state["epoch"]) + 1
     if done >= epochs:
         raise ConfigError(f"--resume {resume}: the state has finished {done} epochs and this run "
                           f"has {epochs}: nothing left to train (raise {name}.epochs to train "
                           "longer)")  # fmt: skip
+    spent = float(state.get("spent", state.get("elapsed", 0.0)))  # the budget clock's seconds
+    if max_minutes is not None and spent >= 60 * max_minutes:
+        raise ConfigError(f"--resume {resume}: the budget of {max_minutes:g} min is spent (the "
+                          f"state has trained {spent / 60:.3g} min): nothing left to train "
+                          f"(raise {name}.max_minutes to train longer)")  # fmt: skip
+
+
+def check_resume_data(state: dict[str, Any], data: dict[str, dict[str, str]],
+                      resume: str | Path) -> None:  # fmt: skip
+    """The data a resumed run reads are those its state was trained on (``data_fingerprint``,
+    in the state's identity; a state written before the fingerprint is not checked), or a
+    one-line ``ConfigError`` naming each changed file, before anything is written."""
+    saved = json.loads(state.get("identity") or "{}").get("data_files")
+    if saved is None:
+        return
+    changed = [f"{split} {f}: {saved.get(split, {}).get(f, 'absent')} -> "
+               f"{data.get(split, {}).get(f, 'absent')}"
+               for split in sorted(set(saved) | set(data))
+               for f in sorted(set(saved.get(split, {})) | set(data.get(split, {})))
+               if saved.get(split, {}).get(f) != data.get(split, {}).get(f)]  # fmt: skip
+    if changed:
+        raise ConfigError(f"--resume {resume}: the data differ from those the state was trained "
+                          f"on ({_shown(changed)}); a run resumes on its own data: put them back "
+                          "as they were, or start a new run (without --resume)")  # fmt: skip
+
+
+def finished(path: str | Path, optim: OptimConfig) -> bool:
+    """Whether the resume state at ``path`` has nothing left to train under ``optim`` (its
+    epochs done, or its ``max_minutes`` spent), which a resume refuses: a script that trains
+    or resumes skips such a stage. False when there is no such file."""
+    path = Path(path)
+    if not path.is_file():
+        return False
+    state = load_resume_state(path)
+    spent = float(state.get("spent", state["elapsed"]))
+    budget = optim.max_minutes is not None and spent >= 60 * optim.max_minutes
+    return int(state["epoch"]) + 1 >= optim.epochs or budget
 
 
 def epochs_done(path: str | Path) -> int:
@@ -180,33 +299,42 @@ def _run(
     ``start`` is the hash of the checkpoint it starts from, when it has one (the generator's
     denoiser, fine-tuning's generator).
 
-    The run folder and the resume state are checked before any data is read and before
-    anything is written (a failed check leaves nothing behind)."""
+    The run folder and the resume state are checked before any data is read, the data the
+    state was trained on once they are read, and all before anything is written (a failed
+    check leaves nothing behind). A new run in a folder that holds another's moves that run's
+    metrics log and run record aside (``loop.set_aside``)."""
     check_output_dir(out_dir)
     out_dir = Path(out_dir)
-    identity = run_identity(cfg, name, start)
+    section = getattr(cfg, name)
     state = None
     if resume is not None:
         state = load_resume_state(resume, name)
-        check_resume(state, identity, getattr(cfg, name).epochs, out_dir, resume, name)
+        check_resume(state, run_identity(cfg, name, start), section.epochs, out_dir, resume,
+                     name, section.max_minutes)  # fmt: skip
     dev = resolve_device(device)
     info, dev = init_from_env(dev)
     torch.set_num_threads(max(1, torch.get_num_threads() // max(1, info.world_size)))
     try:
         train, val = run_splits(cfg.data, data_root)
+        data = data_fingerprint(train, val)
+        if state is not None:
+            check_resume_data(state, data, resume)
         built, optim = build(train, val, dev)
         if state is not None:
             check_resume_matches(state, built.trainable, resume, optim.ema_epochs > 0)
         if info.is_main:
             out_dir.mkdir(parents=True, exist_ok=True)
+            if state is None:  # another run's log and record are not this run's
+                set_aside(out_dir, name)
             save_config(cfg, out_dir / "config.yaml")  # the run's last stage
             save_config(cfg, out_dir / f"{name}_config.yaml")  # this stage's, kept
             record_session(out_dir, name, cfg.seed, dev, info.world_size, state is not None)
         barrier(info)
-        start = time.perf_counter()
+        start_time = time.perf_counter()
         summary = fit(built, train, cfg.data, optim, out_dir, dev, cfg.seed, state, info,
-                      progress, max_steps, identity)  # fmt: skip
-        summary["wall_seconds"] = time.perf_counter() - start
+                      progress, max_steps, run_identity(cfg, name, start, data),
+                      {"data_hash": data_digest(data)})  # fmt: skip
+        summary["wall_seconds"] = time.perf_counter() - start_time
         barrier(info)  # every rank done (rank 0 may still have been writing) before teardown
         summary["train_agents"] = train.num_agents
         summary["rank"] = info.rank  # only rank 0 validates: other ranks' "best" is empty
@@ -258,6 +386,25 @@ def train_stage(
                 STAGE_NAMES[stage], start)  # fmt: skip
 
 
+def check_config_of_start(cfg: ExperimentConfig, payload: dict[str, Any],
+                          start: str | Path) -> None:  # fmt: skip
+    """``cfg``'s network and noise schedule (its ``model`` and ``diffusion`` sections) are
+    those of the start checkpoint ``payload`` (as ``rl.presets.finetune_config`` resolves
+    them), or a one-line ``ConfigError``: a config resolved from another start would mix that
+    start's settings (a speed clamp, a width) into this one's weights. The data may differ
+    (``data.dataset=FOLDER`` fine-tunes on other data)."""
+    own = to_dict(ckpt.config_of(payload))
+    now = to_dict(cfg)
+    for section in ("model", "diffusion"):
+        for key in sorted(set(own[section]) | set(now[section])):
+            if own[section].get(key) != now[section].get(key):
+                raise ConfigError(
+                    f"{start}: the config was not resolved from this start ({section}.{key} = "
+                    f"{own[section].get(key)!r} in the start, {now[section].get(key)!r} in the "
+                    f"config); build it with rl.presets.finetune_config({str(start)!r}, ...)"
+                )
+
+
 def finetune(
     cfg: ExperimentConfig,
     start: str | Path,
@@ -269,11 +416,14 @@ def finetune(
     max_steps: int | None = None,
 ) -> dict[str, Any]:
     """RLHF / RLHF-ReS fine-tuning from the generator checkpoint ``start`` (DDP-aware);
-    ``cfg`` comes from ``rl.presets.finetune_config``."""
+    ``cfg`` comes from ``rl.presets.finetune_config`` with the same ``start``: its network
+    and noise schedule (``model``, ``diffusion``) must be the start's, or a ``ConfigError``
+    names the first difference before anything is written."""
     cfg = with_absolute_folders(cfg)
     payload = ckpt.load(start)
     if payload["kind"] != "generator":
         raise ConfigError(f"{start}: fine-tuning starts from a generator checkpoint")
+    check_config_of_start(cfg, payload, start)
 
     def build(train, val, dev):
         return build_finetune_stage(cfg, payload, val, dev), cfg.finetune

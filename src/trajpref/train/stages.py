@@ -11,6 +11,7 @@ from typing import Any
 
 import torch
 from torch import nn
+from tqdm.auto import tqdm
 
 from trajpref.config import DataConfig, ExperimentConfig, GeneratorTrainConfig, ModelConfig
 from trajpref.data.loader import SceneLoader
@@ -40,8 +41,9 @@ class Stage:
     """``forward(batch, generator) -> (loss, logs)``; holds the trainable and frozen parts."""
     trainable: nn.Module
     """The module whose parameters are optimised and saved."""
-    validate: Callable[[], dict[str, float]]
-    """Validation metrics; must include ``score`` (lower is better)."""
+    validate: Callable[..., dict[str, float]]
+    """``validate(progress=False)``: validation metrics; must include ``score`` (lower is
+    better). ``progress`` shows a bar over the validation batches."""
     payload: Callable[[dict[str, Any]], dict[str, Any]]
     """Turns the trainable module (+ metadata) into a checkpoint payload."""
     collect: Callable[[Batch, torch.Generator], Any] | None = None
@@ -62,6 +64,9 @@ class Stage:
     """Whether training batches keep their context-only agents (``Batch.context``): only for
     a generator built with ``ModelConfig.context_agents``; the others train on batches without
     them, so that their augmentation draws are what they were before context existed."""
+    validate_start: bool = False
+    """Whether the loop validates the start once before training (fine-tuning: its start is
+    a trained generator, whose validation is what the run must beat); logged as epoch 0."""
 
 
 def data_scale(dataset: TrajectoryDataset) -> float:
@@ -82,14 +87,14 @@ def _leapfrog_validation(predictor: DiffusionPredictor, val: TrajectoryDataset, 
     """Validation of a generator: minADE_K + minFDE_K of its leapfrog samples (lower is
     better), plus ``keys`` of the evaluation's result."""
 
-    def validate() -> dict[str, float]:
+    def validate(progress: bool = False) -> dict[str, float]:
         # in eval mode whoever calls it (a generator trained with dropout samples without it
         # at prediction time), each module's mode restored after
         modes = [(m, m.training) for m in predictor.modules()]
         predictor.eval()
         try:
             res = evaluate(predictor, val, samples, seed=0, device=device, max_agents=max_agents,
-                           progress=False, scorer=scorer)  # fmt: skip
+                           progress=progress, scorer=scorer)  # fmt: skip
         finally:
             for module, mode in modes:
                 module.training = mode
@@ -136,10 +141,12 @@ def build_denoiser_stage(
     val_set = val.evenly_spaced(cfg.denoiser.eval_max_scenes)
 
     @torch.no_grad()
-    def validate() -> dict[str, float]:
+    def validate(progress: bool = False) -> dict[str, float]:
         gen = torch.Generator().manual_seed(12345)
         total, agents = 0.0, 0
-        for batch in SceneLoader(val_set, max_agents=cfg.data.max_agents):
+        loader = SceneLoader(val_set, max_agents=cfg.data.max_agents)
+        for batch in tqdm(loader, desc="denoiser validation", unit="batch", disable=not progress,
+                          leave=False):  # fmt: skip
             loss, _ = objective(batch.to(device), gen)
             total += float(loss) * batch.num_agents
             agents += batch.num_agents
@@ -267,7 +274,8 @@ def build_finetune_stage(
 ) -> Stage:  # fmt: skip
     """Stage 3, from a generator checkpoint payload ``start``. Validation: minADE_K +
     minFDE_K of the policy's leapfrog samples (lower is better), with maxATS/maxFTS,
-    meanATS and top-1 recall logged (scored at the paper's every-3 steps)."""
+    meanATS and top-1 recall logged (scored at the paper's every-3 steps). The loop validates
+    the start too, once, before the first step (``validate_start``: epoch 0 of the log)."""
     if start["kind"] != "generator":
         raise ConfigError("fine-tuning starts from a generator checkpoint")
     torch.manual_seed(cfg.seed)
@@ -292,4 +300,4 @@ def build_finetune_stage(
                  payload, objective.collect_frozen if epochs > 1 else None, epochs,
                  networks=(sampler.generator, sampler.denoiser),
                  nonfinite_hint="lower the learning rate or clip the reward",
-                 context=sampler.generator.cfg.context_agents)  # fmt: skip
+                 context=sampler.generator.cfg.context_agents, validate_start=True)  # fmt: skip
