@@ -149,6 +149,7 @@ def timing(args, test, leap, scorer, extra) -> None:
         scorer.rank(batch, pred)
         elapsed += time.perf_counter() - start
     extra["ms_to_rank_k_samples_per_scene"] = 1000 * elapsed / n
+    extra["timing_threads"] = torch.get_num_threads()
     extra["timing_scenes"] = n
     print(f"ranking K={args.samples} samples: {extra['ms_to_rank_k_samples_per_scene']:.1f} "
           f"ms per scene (mean over {n} scenes, {torch.get_num_threads()} threads)")  # fmt: skip
