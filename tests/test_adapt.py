@@ -171,6 +171,36 @@ def test_evaluate_in_context_reports_before_and_after(model, long_walks):
     assert out["before"]["min_ade"] != out["after"]["min_ade"]
 
 
+def test_zero_adaptation_steps_report_before_and_after_as_equal(model, long_walks):
+    # the natural control: 0 steps predict the windows with context unadapted, so "before" is
+    # defined and "after" equals it (they were null though 9 windows have context)
+    zero = dataclasses.replace(CFG, steps=0)
+    out = evaluate_in_context(model, long_walks, zero, num_samples=4, seed=0)
+    assert out["windows_with_context"] == 9
+    assert out["before"] == out["after"] and out["after"]["scenes"] == 9
+    # and it is the "before" of a run with steps, on the same windows and draws
+    adapted = evaluate_in_context(model, long_walks, CFG, num_samples=4, seed=0)
+    assert adapted["before"] == out["before"]
+
+
+def test_cli_in_context_shows_progress_unless_told_not_to(tmp_path, tiny_run, capsys):
+    root = write_dataset(tmp_path / "data", frames=40)
+    argv = ["evaluate", "--dataset", root, "--model", tiny_run / "generator.safetensors",
+            "--samples", "2", "--device", "cpu", "--in-context", "40", "--adapt-steps",
+            "1"]  # fmt: skip
+    assert main([str(a) for a in argv]) == 0
+    err = capsys.readouterr().err
+    assert "in-context" in err and "0/21 [" in err  # the adapted pass, window by window
+    assert "before" in err and "0/9 [" in err  # the unadapted pass on the windows with context
+    assert main([str(a) for a in argv] + ["--no-progress"]) == 0
+    assert capsys.readouterr().err == ""
+    # 0 steps: before and after printed, and said to be the same predictions
+    assert main([str(a) for a in argv[:-2]] + ["--adapt-steps", "0", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert " before (windows with context): minADE" in out
+    assert "(no adaptation step: as before)" in out
+
+
 def test_cli_evaluate_in_context(tmp_path, tiny_run, capsys):
     root = write_dataset(tmp_path / "data", frames=40)
     out = tmp_path / "res.json"

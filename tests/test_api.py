@@ -41,8 +41,9 @@ def test_readme_example_runs_as_written(data_root, tmp_path, monkeypatch):
     code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
     assert 'from_checkpoint("zara1/denoiser")' in code  # a published model, by name
     monkeypatch.chdir(tmp_path)
+    out = re.search(r"# from: trajpref predict .*--out (\S+)", code).group(1)  # the file it loads
     argv = ["predict", "--dataset", "zara1", "--data-root", str(data_root), "--model", "cv",
-            "--out", "pred.npz", "--no-progress", "--device", "cpu"]  # fmt: skip
+            "--out", out, "--no-progress", "--device", "cpu"]  # fmt: skip
     assert main(argv) == 0
     namespace: dict = {}
     exec(compile(code, str(README), "exec"), namespace)  # noqa: S102 - our own README
@@ -57,7 +58,7 @@ def test_readme_example_runs_as_written(data_root, tmp_path, monkeypatch):
     assert all(len(set(col)) == 5 for col in idx.T.tolist())  # five distinct futures per agent
     assert namespace["futures"].shape == (20, *samples.shape[1:])  # predict_scene
     # the same numbers from tensors (the scorer's noise is seeded)
-    pred = np.load("pred.npz")
+    pred = np.load(out)
     agents = pred["scene"] == 0
     t_order, t_res = rank_samples(namespace["scorer"], torch.from_numpy(pred["history"][agents]),
                                   torch.from_numpy(pred["pred"][:, agents]))  # fmt: skip

@@ -258,11 +258,21 @@ def test_the_step_hint_keeps_the_time_step_given_and_names_an_assumed_interval(c
     from synthetic import write_dataset
 
     long = write_dataset(tmp_path / "long", frames=44)
-    # read every 2 frames at the assumed 0.4 s: following the old hint alone went back and forth
+    # read every 2 frames at the assumed 0.4 s: the files' own interval is not known, so no
+    # --time-step number is advised (--time-step 1 was wrong whenever 2 was right, e.g. for
+    # 10 Hz files read at --time-step 4); the interval is asked for instead
     code, _, err = _run(capsys, "evaluate", "--dataset", long, "--samples", "2", "--no-progress",
                         "--model", "zara1/generator", "--units", "m", "--time-step",
                         "2")  # fmt: skip
     assert code == 0 and err.strip().endswith(
-        "this data steps 0.8 s, the model's 0.4 s (--time-step 1 reads it at the model's step; "
-        "0.4 s between frames is the default: give the file's own with --frame-interval)"
+        "this data steps 0.8 s, the model's 0.4 s (0.4 s between frames is assumed: give the "
+        "files' own with --frame-interval; --time-step 0.4 / that interval then reads them at "
+        "the model's step)"
+    )
+    # with the interval given, the hint is a number again
+    code, _, err = _run(capsys, "evaluate", "--dataset", long, "--samples", "2", "--no-progress",
+                        "--model", "zara1/generator", "--units", "m", "--time-step", "2",
+                        "--frame-interval", "0.1")  # fmt: skip
+    assert code == 0 and err.strip().endswith(
+        "this data steps 0.2 s, the model's 0.4 s (--time-step 4 reads it at the model's step)"
     )

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import torch
+from tqdm.auto import tqdm
 
 from trajpref.config import GeneratorTrainConfig
 from trajpref.data.transforms import to_model_frame
@@ -236,13 +237,14 @@ class InContextPrediction:
 def adapt_and_predict(
     model: DiffusionPredictor, dataset: TrajectoryDataset, cfg: AdaptConfig | None = None,
     num_samples: int = 20, seed: int = 0, indices: list[int] | None = None,
-    device: torch.device | str | None = None,
+    device: torch.device | str | None = None, progress: bool | str = False,
 ) -> InContextPrediction:  # fmt: skip
     """Predict the windows ``indices`` (default: all) of ``dataset``, each by its own copy of
     the generator adapted on its context windows (``context_windows``); windows without
     context are predicted by ``model`` unchanged. Window i's draws come from
     ``torch.Generator().manual_seed(window_seed(seed, i))``, so a window's prediction does not
-    depend on which other windows are predicted."""
+    depend on which other windows are predicted. ``progress``: a progress bar over the
+    windows (a string: its label)."""
     cfg = cfg or AdaptConfig()
     _check_model(model)
     device = model.device if device is None else torch.device(device)
@@ -253,7 +255,8 @@ def adapt_and_predict(
             raise ConfigError(f"window index {i} outside 0..{len(dataset) - 1}")
     start = time.perf_counter()
     preds, contexts = [], []
-    for i in indices:
+    label = progress if isinstance(progress, str) else f"in-context {dataset.info.name}"
+    for i in tqdm(indices, desc=label, unit="window", disable=not progress, leave=False):
         rng = torch.Generator().manual_seed(window_seed(seed, i))
         batch = collate([dataset[i]]).to(device)
         use = ctx[i] if cfg.steps > 0 else []
@@ -279,23 +282,31 @@ def _metrics(dataset: TrajectoryDataset, indices: list[int], preds: list[torch.T
 def evaluate_in_context(
     model: DiffusionPredictor, dataset: TrajectoryDataset, cfg: AdaptConfig | None = None,
     num_samples: int = 20, seed: int = 0, indices: list[int] | None = None,
-    device: torch.device | str | None = None,
+    device: torch.device | str | None = None, progress: bool = False,
 ) -> dict:  # fmt: skip
     """The usual metrics (minADE/minFDE per agent and joint) of ``adapt_and_predict`` over the
     windows ``indices``, plus ``windows``, ``windows_with_context``, ``seconds_per_window`` and,
     on the windows that have context, ``before`` and ``after``: the metrics of the unadapted
-    model (same draws' seed) and of the adapted copies (None when no window has context)."""
+    model (same draws' seed) and of the adapted copies (None when no window has context; with
+    ``cfg.steps`` 0 the two are the same predictions, and equal). ``progress``: progress bars
+    over the windows (the adapted pass, then the unadapted one on the windows with context)."""
     cfg = cfg or AdaptConfig()
-    res = adapt_and_predict(model, dataset, cfg, num_samples, seed, indices, device)
+    name = dataset.info.name
+    res = adapt_and_predict(model, dataset, cfg, num_samples, seed, indices, device,
+                            progress and f"in-context {name}")  # fmt: skip
     out = _metrics(dataset, res.indices, res.pred)
     out.update(windows=len(res.indices), windows_with_context=res.windows_with_context,
                seconds_per_window=res.seconds / max(len(res.indices), 1))  # fmt: skip
     with_ctx = [(i, p) for i, p, c in zip(res.indices, res.pred, res.context, strict=True) if c]
     out["before"] = out["after"] = None
-    if with_ctx and cfg.steps > 0:
+    if with_ctx:
         idx = [i for i, _ in with_ctx]
-        unadapted = dataclasses.replace(cfg, steps=0)  # same per-window seeds, no steps
-        base = adapt_and_predict(model, dataset, unadapted, num_samples, seed, idx, device)
-        out["before"] = _metrics(dataset, idx, base.pred)
         out["after"] = _metrics(dataset, idx, [p for _, p in with_ctx])
+        if cfg.steps == 0:  # nothing adapted: the predictions are the unadapted ones already
+            out["before"] = dict(out["after"])
+        else:
+            unadapted = dataclasses.replace(cfg, steps=0)  # same per-window seeds, no steps
+            base = adapt_and_predict(model, dataset, unadapted, num_samples, seed, idx, device,
+                                     progress and f"before {name}")  # fmt: skip
+            out["before"] = _metrics(dataset, idx, base.pred)
     return out

@@ -69,8 +69,9 @@ def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> N
                    help=f"which split to read (default {split_default})")  # fmt: skip
     p.add_argument("--data-root", default=None, help="data folder (default: $TRAJPREF_DATA)")
     p.add_argument("--frame-interval", type=float, default=None,
-                   help="seconds between frames, for a folder dataset (default 0.4; "
-                   "TrajNet++ files: the fps their scenes declare)")  # fmt: skip
+                   help="seconds between frames, for a folder dataset (default: the step of "
+                   "a frame column headed time or timestamp, read as seconds; TrajNet++ "
+                   "files: the fps their scenes declare; else 0.4, assumed)")  # fmt: skip
     p.add_argument("--units", default=None,
                    help="coordinate units, for a folder dataset (default unknown)")  # fmt: skip
     p.add_argument("--delimiter", default=None, help="text columns separated by: comma, "
@@ -81,8 +82,9 @@ def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> N
                    "in the dataset's units (default 1e6); larger is an error")  # fmt: skip
     p.add_argument("--time-step", type=float, default=1.0, metavar="F",
                    help="read text track files every F frame steps, positions interpolated "
-                   "in time (e.g. 4 for 10 Hz data and a 2.5 Hz model; default 1: as "
-                   "recorded; docs/data_format.md)")  # fmt: skip
+                   "in time (e.g. 4 for 10 Hz data and a 2.5 Hz model; give the files' 0.1 s "
+                   "with --frame-interval too, unless their frame column is a time in "
+                   "seconds; default 1: as recorded; docs/data_format.md)")  # fmt: skip
     p.add_argument("--protocol", default="all", choices=list(PROTOCOLS),
                    help="which windows count: all (default: every window with a fully observed "
                    "agent) or sgan (windows with at least two, as Social-GAN's loader keeps; "
@@ -141,7 +143,14 @@ def _add_scorer_arg(p: argparse.ArgumentParser, what: str) -> None:
     p.add_argument("--scorer", default=None, help=f"a denoiser (or generator) checkpoint: {what}")
 
 
-def _add_selection_args(p: argparse.ArgumentParser) -> None:
+RANK_SCORE_EVERY = 3
+"""``--score-every``'s default for ``predict --rank`` and ``evaluate --scorer``: the paper's 34
+steps of 100, ``TrajectoryScorer``'s own (``--keep`` selects at ``SelectionConfig``'s)."""
+
+
+def _add_selection_args(p: argparse.ArgumentParser, scorer: str) -> None:
+    """The options of ``--keep``'s selection and of the score's steps; ``scorer``: the other
+    option that scores (``--rank`` or ``--scorer``), which the score's options apply to too."""
     p.add_argument("--keep", type=int, default=None, metavar="K'",
                    help="keep K' of the --samples futures (default: keep all)")  # fmt: skip
     p.add_argument("--select", default="score-facility", choices=METHODS,
@@ -158,14 +167,18 @@ def _add_selection_args(p: argparse.ArgumentParser) -> None:
                    "exp(-z / T), z the standardised residual (2)")  # fmt: skip
     p.add_argument("--select-per", default="agent", choices=["agent", "scene"],
                    help="per agent, or one set of indices per scene (joint metrics)")  # fmt: skip
-    p.add_argument("--score-every", type=int, default=9,
-                   help="selection's score steps: every this many of the S (9)")  # fmt: skip
+    p.add_argument("--score-every", type=int, default=None, metavar="E",
+                   help="the score's steps: every E of the S, for --keep's score selections "
+                   f"(default {SelectionConfig.score_every}) and for {scorer} (default "
+                   f"{RANK_SCORE_EVERY}: the paper's 34 of 100)")  # fmt: skip
     p.add_argument("--score-from", type=int, default=0,
-                   help="selection's first score step (0, the lowest noise level; a later one "
-                   "keeps only the noisier steps, docs/selection.md)")  # fmt: skip
-    p.add_argument("--score-precision", default="fp32", choices=PRECISIONS,
-                   help="arithmetic of selection's score passes (bf16: about 3x faster on a "
-                   "CPU with bfloat16 instructions; docs/selection.md)")  # fmt: skip
+                   help="the score's first step (0, the lowest noise level; a later one "
+                   "keeps only the noisier steps, docs/selection.md), for --keep's score "
+                   f"selections and {scorer}")  # fmt: skip
+    p.add_argument("--score-precision", default=None, choices=PRECISIONS,
+                   help="arithmetic of the score's passes, for --keep's score selections and "
+                   f"{scorer} (default fp32; bf16: about 3x faster on a CPU with bfloat16 "
+                   "instructions; docs/selection.md)")  # fmt: skip
     p.add_argument("--trust-speed", type=float, default=0.0, metavar="V",
                    help="score-* selections: agents observed faster than V (the scorer's "
                    "model units per step, as --max-speed) are selected without the score, "
@@ -224,7 +237,7 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--out", default=None, help="also write the JSON result to this file")
     _add_scorer_arg(ev, "adds max_ats, max_fts and the top-1/top-5 recall of the "
                     "ground-truth-free ranking")  # fmt: skip
-    _add_selection_args(ev)
+    _add_selection_args(ev, "--scorer")
     ev.add_argument(
         "--bins",
         nargs="?",
@@ -293,7 +306,7 @@ def build_parser() -> argparse.ArgumentParser:
         "ground truth used); saves `order` and `residual` [K, B] too",
     )
     _add_scorer_arg(pr, "the denoiser that ranks (default: the model's own)")
-    _add_selection_args(pr)
+    _add_selection_args(pr, "--rank")
     pr.set_defaults(func=cmd_predict)
 
     pl = sub.add_parser("plot", help="PNG of one scene: histories, ground truth, samples")
@@ -309,6 +322,17 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("stage", choices=["diffusion", "generator"])
     tr.add_argument("--config", default=None, help="YAML config (default: built-in defaults)")
     tr.add_argument("--dataset", default=None, help="shortcut for --set data.dataset=NAME")
+    tr.add_argument("--frame-interval", type=float, default=None, metavar="SECONDS",
+                    help="a folder dataset's seconds between frames (--set "
+                    "data.frame_interval; default: a time/timestamp column's step, TrajNet++ "
+                    "files' declared fps, else 0.4 assumed); the model records it")  # fmt: skip
+    tr.add_argument("--units", default=None, help="a folder dataset's coordinate units (--set "
+                    "data.units; default unknown); the model records them")  # fmt: skip
+    tr.add_argument("--time-step", type=float, default=None, metavar="F",
+                    help="read text track files every F frame steps (--set data.time_step; "
+                    "e.g. 4 for 10 Hz data and a 0.4 s model, with --frame-interval 0.1 "
+                    "unless the files' frame column is a time in seconds); the model records "
+                    "it")  # fmt: skip
     tr.add_argument("--denoiser", default=None, help="generator stage: the denoiser "
                     "checkpoint (default OUT/denoiser.safetensors)")  # fmt: skip
     _add_run_args(
@@ -506,7 +530,9 @@ def cmd_data_stats(args) -> int:
             for s in ds.scenes
         ),
         "units": ds.info.units,
-        "frame_interval": ds.info.frame_interval,
+        "frame_interval": ds.info.frame_interval,  # seconds per window step: time step included
+        "interval_from": ds.info.interval_from,
+        "time_step": ds.info.time_step,
         "t_hist": ds.info.t_hist,
         "t_fut": ds.info.t_fut,
         "mean_speed": speed,  # the dataset's units per second
@@ -527,9 +553,27 @@ def cmd_data_stats(args) -> int:
             elif key == "mean_speed":
                 value = f"{value:.4g} {ds.info.units}/s"
             elif key == "frame_interval":
-                value = f"{value:g} s"
+                value = f"{value:g} s{_interval_note(ds.info)}"
+            elif key in ("interval_from", "time_step"):
+                continue  # in frame_interval's note
             print(f"{key:>{width}}: {value}")
     return 0
+
+
+INTERVAL_NOTES = {"dataset": "", "given": "given", "declared": "declared by the TrajNet++ scenes",
+                  "timestamps": "the files' time column, in seconds",
+                  "default": "assumed: none given (--frame-interval)"}  # fmt: skip
+"""How ``data stats`` says where a frame interval comes from (``DatasetInfo.interval_from``)."""
+
+
+def _interval_note(info) -> str:
+    """`` (0.1 s between frames: the files' time column, in seconds; read every 4)`` after the
+    step ``data stats`` prints; empty for a built-in dataset read as recorded."""
+    source = INTERVAL_NOTES.get(info.interval_from, info.interval_from)
+    if info.time_step == 1.0:
+        return f" ({source})" if source else ""
+    frame = f"{info.frame_interval / info.time_step:g} s between frames"
+    return f" ({frame}{f': {source}' if source else ''}; read every {info.time_step:g})"
 
 
 def _predictor(args):
@@ -554,44 +598,114 @@ def same_units(a: str, b: str) -> bool:
     return a == b or (a in METRE_UNITS and b in METRE_UNITS)
 
 
-def _warn_if_trained_otherwise(spec: str, ds, time_step: float = 1.0,
-                               interval_assumed: bool = False) -> None:  # fmt: skip
-    """One warning when the model was trained on a built-in dataset whose units or time step
-    differ from this data's (known ones only): its predictions would be in the wrong units or
-    at the wrong pace. ``time_step``: the ``--time-step`` the data was read with (the hint
-    replaces it); ``interval_assumed``: the frame interval is the 0.4 s default, not given."""
+UNKNOWN_UNITS = ("", "unknown")
+
+
+def model_timing(header: dict) -> dict:
+    """The pace and units a checkpoint's model was trained at, from its header (what
+    ``train.run.data_timing`` recorded in its meta, else a built-in dataset's own): the keys
+    ``trained_on`` (its ``data.dataset``), ``step`` (seconds per window step; None for a model
+    trained on a folder before the record, 2026-12-06), ``known`` (whether that step's frame
+    interval was given, declared or read from time stamps rather than assumed), ``time_step``
+    (its ``data.time_step``) and ``units``."""
+    data = header["config"]["data"]
+    read_every = float(data.get("time_step", 1.0))
+    out = {"trained_on": data["dataset"], "step": None, "known": False,
+           "time_step": read_every, "units": "unknown"}  # fmt: skip
+    timing = (header.get("meta") or {}).get("data_timing")
+    source = SPECS.get(data["dataset"])
+    if isinstance(timing, dict):
+        out.update(step=float(timing["frame_interval"]),
+                   known=timing.get("interval_from") != "default",
+                   units=str(timing.get("units") or "unknown"))  # fmt: skip
+    elif source is not None:
+        out.update(step=source.frame_interval * read_every, known=True, units=source.units)
+    return out
+
+
+def _same_path(a: str, b: str) -> bool:
+    with contextlib.suppress(OSError, RuntimeError):
+        return Path(a).expanduser().resolve() == Path(b).expanduser().resolve()
+    return False
+
+
+def _step_hint(info, model: dict) -> str:
+    """How to read ``info``'s data at the model's step (``_warn_if_trained_otherwise``): only
+    advice that this data can take (``--time-step`` resamples text track files alone;
+    ``--frame-interval`` is not read where the data state their own)."""
+    step, model_step, every = info.frame_interval, model["step"], info.time_step
+    frame = step / every  # seconds between the files' frames, as read
+    assumed = info.interval_from == "default"
+    interval = (f"{frame:g} s between frames is assumed: give the files' own with "
+                "--frame-interval")  # fmt: skip
+    if not info.text_tracks:
+        if info.interval_from == "dataset":
+            return f"--time-step does not resample {info.name}'s windows"
+        fixed = "--time-step does not resample TrajNet++ scenes"
+        if info.interval_from == "declared":
+            return f"its TrajNet++ scenes declare {1 / frame:.4g} fps; {fixed}"
+        return f"{interval}; {fixed}" if assumed else fixed
+    ratio = every * model_step / step
+    if not 0.1 <= ratio <= 100:  # beyond what --time-step takes
+        reads = f"no --time-step reads it at the model's step ({ratio:.4g} would be needed)"
+    else:
+        reads = f"--time-step {ratio:.4g} reads it at the model's step"
+    model_frame = model_step / model["time_step"]
+    if assumed and model["known"]:  # only the model's step is known: no --time-step number
+        return (f"{interval}; --time-step {model_step:g} / that interval then reads them at "
+                "the model's step")  # fmt: skip
+    if assumed:  # both assume 0.4 s: the ratio of their time steps holds if the files step alike
+        if _same_path(model["trained_on"], info.name):
+            return f"{reads} (the same files)"
+        return (f"{reads} if these files step as the model's training files did (both assume "
+                f"{frame:g} s between frames: --frame-interval gives this data's)")  # fmt: skip
+    if not model["known"]:
+        return (f"{reads}, if the model's training files were {model_frame:g} s apart as "
+                "assumed when it was trained")  # fmt: skip
+    return reads
+
+
+def _warn_if_trained_otherwise(spec: str, ds) -> None:
+    """One warning when the model was trained on data whose units or pace differ from this
+    data's (as far as both are known): its predictions would be in the wrong units or at the
+    wrong pace. The model's side: what its checkpoint recorded of its training data
+    (``model_timing``: a built-in dataset's own, or a folder's interval, time step and units);
+    this data's: ``ds.info`` (its step with the ``--time-step`` it was read with, and where
+    its interval comes from). A model trained on a folder before that record is compared
+    only with the same folder read at another ``--time-step``."""
     if spec == "cv":
         return
     try:
-        header = read_checkpoint_header(ckpt.resolve_path(spec))
-        trained_on = header["config"]["data"]["dataset"]
-        read_every = float(header["config"]["data"].get("time_step", 1.0))  # data.time_step
-    except (TrajprefError, KeyError, TypeError, ValueError):
+        model = model_timing(read_checkpoint_header(ckpt.resolve_path(spec)))
+    except (TrajprefError, KeyError, TypeError, ValueError, AttributeError):
         return  # not a checkpoint this check can read: loading it has said what it needed
-    source = SPECS.get(trained_on)
-    if source is None:  # a user folder: its units and step were not recorded
-        return
+    info = ds.info
     problems = []
-    if ds.info.units not in ("", "unknown") and not same_units(ds.info.units, source.units):
-        problems.append(f"this data is in {ds.info.units}, the model's in {source.units}")
-    step, model_step = ds.info.frame_interval, source.frame_interval * read_every
-    if step > 0 and not math.isclose(step, model_step, rel_tol=0.01):
-        frame = step / time_step  # seconds between the file's frames, as read
-        hint = (f"--time-step {time_step * model_step / step:.4g} reads it at the model's "
-                "step")  # fmt: skip
-        if interval_assumed:
-            hint += (f"; {frame:g} s between frames is the default: give the file's own with "
-                     "--frame-interval")  # fmt: skip
-        problems.append(f"this data steps {step:g} s, the model's {model_step:g} s ({hint})")
+    units = model["units"]
+    if (info.units not in UNKNOWN_UNITS and units not in UNKNOWN_UNITS
+            and not same_units(info.units, units)):  # fmt: skip
+        problems.append(f"this data is in {info.units}, the model's in {units}")
+    if model["step"] is None:  # a folder model without the record: its time step alone
+        every = model["time_step"]
+        if (info.text_tracks and _same_path(model["trained_on"], info.name)
+                and not math.isclose(info.time_step, every, rel_tol=0.01)):  # fmt: skip
+            steps = "frame step" if info.time_step == 1 else "frame steps"
+            problems.append(f"this data is read every {info.time_step:g} {steps} of its "
+                            f"files, the model's (the same folder) every {every:g} "
+                            f"(--time-step {every:g} reads it at the model's step)")  # fmt: skip
+    elif info.frame_interval > 0 and not math.isclose(info.frame_interval, model["step"],
+                                                      rel_tol=0.01):  # fmt: skip
+        problems.append(f"this data steps {info.frame_interval:g} s, the model's "
+                        f"{model['step']:g} s ({_step_hint(info, model)})")  # fmt: skip
     if problems:
-        warnings.warn(f"{spec} was trained on {trained_on}: {'; '.join(problems)}",
+        warnings.warn(f"{spec} was trained on {model['trained_on']}: {'; '.join(problems)}",
                       stacklevel=2)  # fmt: skip
 
 
 def _warn_trained(args, ds) -> None:
-    """``_warn_if_trained_otherwise`` with the command's reading options."""
-    _warn_if_trained_otherwise(args.model, ds, args.time_step,
-                               not _interval_given(args))  # fmt: skip
+    """``_warn_if_trained_otherwise`` for the command's model (``ds.info`` holds how the data
+    was read: its --time-step and where its frame interval comes from)."""
+    _warn_if_trained_otherwise(args.model, ds)
 
 
 def _set_generator(model, flag: str, **setting) -> None:
@@ -606,33 +720,86 @@ def _set_generator(model, flag: str, **setting) -> None:
         raise ConfigError(f"{flag}: {in_section(str(err), ModelConfig, 'model.')}") from None
 
 
-def _scorer(path: str, device):
-    return TrajectoryScorer.from_checkpoint(path, device)
+def _scorer(path: str, device, args=None, every: int = RANK_SCORE_EVERY):
+    """The scorer of checkpoint ``path``; with a command's ``args``, at its --score-every
+    (default ``every``), --score-from and --score-precision."""
+    scorer = TrajectoryScorer.from_checkpoint(path, device)
+    if args is None:
+        return scorer
+    every = args.score_every if args.score_every is not None else every
+    steps = score_timesteps(scorer.schedule.num_steps, every, args.score_from)
+    return scorer.with_steps(steps, args.score_precision or "fp32")
 
 
-def _selecting(args, model, device):
+SELECTION_FLAGS = {"method": "--select", "per": "--select-per", "drop": "--drop",
+                   "trust_speed": "--trust-speed", "bandwidth": "--bandwidth",
+                   "temperature": "--select-temperature", "score_every": "--score-every",
+                   "score_from": "--score-from"}  # fmt: skip
+"""``SelectionConfig`` fields and the options that set them."""
+SELECTION_ONLY = ("method", "per", "drop", "trust_speed", "bandwidth", "temperature")
+"""The selection's own settings (the score's steps serve --rank and --scorer too)."""
+
+
+def _selection_config(args) -> SelectionConfig:
+    """--keep's selection as the options give it (score steps at the selection's default)."""
+    return SelectionConfig(keep=args.keep or 1, method=args.select, drop=args.drop,
+                           per=args.select_per, seed=args.seed, bandwidth=args.bandwidth,
+                           temperature=args.select_temperature, trust_speed=args.trust_speed,
+                           score_every=(SelectionConfig.score_every if args.score_every is None
+                                        else args.score_every),
+                           score_from=args.score_from)  # fmt: skip
+
+
+def _warn_unread(args, cfg: SelectionConfig, scores: bool) -> None:
+    """One warning naming the selection and score options given that nothing reads: with
+    --keep, those its --select does not read; without, every selection option. The score's
+    options (--score-every, --score-from, --score-precision) count as read when ``scores``
+    (--rank or --scorer scores too)."""
+    given = [k for k in SELECTION_FLAGS if getattr(cfg, k) != getattr(SelectionConfig, k)]
+    score = [SELECTION_FLAGS[k] for k in given if k not in SELECTION_ONLY]
+    if args.score_precision not in (None, "fp32"):
+        score.append("--score-precision")
+    if args.keep is not None:
+        unread = [SELECTION_FLAGS[k] for k in cfg.unread()]
+        if not cfg.uses_score and args.score_precision not in (None, "fp32"):
+            unread.append("--score-precision")
+        unread = [f for f in unread if not (scores and f in score)]
+        if unread:
+            warnings.warn(f"--select {args.select} does not read {', '.join(unread)}: "
+                          f"{'it changes' if len(unread) == 1 else 'they change'} nothing",
+                          stacklevel=3)  # fmt: skip
+        return
+    selection = [SELECTION_FLAGS[k] for k in given if k in SELECTION_ONLY]
+    score = [] if scores else score
+    clauses = []
+    for flags, needs in ((selection, "--keep"), (score, f"--keep or {_score_option(args)}")):
+        if flags:
+            clauses.append(f"{', '.join(flags)} only {'apply' if len(flags) > 1 else 'applies'}"
+                           f" with {needs}")  # fmt: skip
+    if clauses:
+        one = len(selection) + len(score) == 1
+        warnings.warn(f"{'; '.join(clauses)}: here {'it changes' if one else 'they change'} "
+                      "nothing", stacklevel=3)  # fmt: skip
+
+
+def _score_option(args) -> str:
+    """The command's option that scores beside --keep: --rank (predict) or --scorer."""
+    return "--rank" if args.command == "predict" else "--scorer"
+
+
+def _selecting(args, model, device, scores: bool = False):
     """The model, wrapped to keep --keep of its --samples futures when asked, and the number
-    of futures it returns."""
+    of futures it returns. ``scores``: the command scores beside the selection (--rank,
+    --scorer), so the score's options are read whatever --select is."""
+    cfg = _selection_config(args)
+    _warn_unread(args, cfg, scores)
     if args.keep is None:
         return model, args.samples
-    cfg = SelectionConfig(keep=args.keep, method=args.select, drop=args.drop,
-                          per=args.select_per, seed=args.seed, bandwidth=args.bandwidth,
-                          temperature=args.select_temperature,
-                          trust_speed=args.trust_speed)  # fmt: skip
-    flags = {"drop": "--drop", "trust_speed": "--trust-speed", "bandwidth": "--bandwidth",
-             "temperature": "--select-temperature"}  # fmt: skip
-    ignored = [flags[name] for name in cfg.unread()]
-    if ignored:
-        warnings.warn(f"--select {args.select} does not read {', '.join(ignored)}: "
-                      "it changes nothing", stacklevel=2)  # fmt: skip
     scorer = None
     if cfg.uses_score:
         if args.scorer is None and args.model == "cv":
             raise ConfigError(f"--select {args.select} with --model cv needs --scorer")
-        every = TrajectoryScorer.from_checkpoint(args.scorer or args.model, device)
-        steps = score_timesteps(every.schedule.num_steps, args.score_every, args.score_from)
-        scorer = TrajectoryScorer(every.denoiser, every.schedule, every.scale, steps,
-                                  precision=args.score_precision)  # fmt: skip
+        scorer = _scorer(args.scorer or args.model, device, args, cfg.score_every)
     return SelectingPredictor(model, cfg, args.samples, scorer), args.keep
 
 
@@ -679,11 +846,22 @@ def _model_fields(args) -> dict:
 def _selection_fields(args) -> dict:
     if args.keep is None:
         return {}
+    every = SelectionConfig.score_every if args.score_every is None else args.score_every
     return {"candidates": args.samples, "select": args.select, "select_per": args.select_per,
             "drop": args.drop, "bandwidth": args.bandwidth,
             "select_temperature": args.select_temperature, "trust_speed": args.trust_speed,
-            "score_every": args.score_every, "score_from": args.score_from,
-            "score_precision": args.score_precision}  # fmt: skip
+            "score_every": every, "score_from": args.score_from,
+            "score_precision": args.score_precision or "fp32"}  # fmt: skip
+
+
+def _scorer_fields(args, scorer) -> dict:
+    """``evaluate --scorer``: the scorer and the steps its metrics were computed at."""
+    if scorer is None:
+        return {}
+    every = RANK_SCORE_EVERY if args.score_every is None else args.score_every
+    return {"scorer": args.scorer, "scorer_score_every": every,
+            "scorer_score_from": args.score_from, "scorer_score_steps": len(scorer.steps),
+            "scorer_score_precision": scorer.precision}  # fmt: skip
 
 
 SCORE_LINE = (("max_ats", "maxATS"), ("max_fts", "maxFTS"), ("mean_ats", "meanATS"))
@@ -743,8 +921,8 @@ def cmd_evaluate(args) -> int:
     if args.out:
         check_output_file(args.out)
     model, device = _predictor(args)
-    scorer = _scorer(args.scorer, device) if args.scorer else None
-    model, samples = _selecting(args, model, device)
+    scorer = _scorer(args.scorer, device, args) if args.scorer else None
+    model, samples = _selecting(args, model, device, scores=scorer is not None)
     ds = _load(args)
     _warn_trained(args, ds)
     start = time.perf_counter()
@@ -765,6 +943,7 @@ def cmd_evaluate(args) -> int:
         "samples": samples,
         "seed": args.seed,
         **_selection_fields(args),
+        **_scorer_fields(args, scorer),
         **{k: v for k, v in result.items() if k != "bins"},
         "units": ds.info.units,
         "seconds": round(seconds, 3),
@@ -807,6 +986,7 @@ def _evaluate_in_context(args) -> int:
     windows that had context, before/after on them and seconds per window."""
     if args.keep is not None or args.scorer or args.bins is not None:
         raise ConfigError("--in-context does not combine with --keep, --scorer or --bins")
+    _warn_unread(args, _selection_config(args), scores=False)
     cfg = AdaptConfig(ctx_frames=args.in_context, steps=args.adapt_steps, lr=args.adapt_lr,
                       params=args.adapt_params, trust=args.adapt_trust,
                       objective=args.adapt_objective)  # fmt: skip
@@ -815,7 +995,8 @@ def _evaluate_in_context(args) -> int:
     model, device = _predictor(args)
     ds = _load(args)
     _warn_trained(args, ds)
-    result = evaluate_in_context(model, ds, cfg, args.samples, args.seed, device=device)
+    result = evaluate_in_context(model, ds, cfg, args.samples, args.seed, device=device,
+                                 progress=not args.no_progress)  # fmt: skip
     out = {"dataset": ds.info.name, "split": ds.info.split, "protocol": ds.info.protocol,
            "model": args.model, **_model_fields(args), "samples": args.samples,
            "seed": args.seed,
@@ -845,6 +1026,7 @@ def _evaluate_in_context(args) -> int:
             print(
                 f"  {key:>6} (windows with context): minADE {out[key]['min_ade']:.4f}  "
                 f"minFDE {out[key]['min_fde']:.4f}"
+                + (" (no adaptation step: as before)" if key == "after" and not cfg.steps else "")
             )
     return 0
 
@@ -864,8 +1046,8 @@ def cmd_predict(args) -> int:
     if args.rank:
         if args.scorer is None and args.model in ("cv",):
             raise TrajprefError("--rank with --model cv needs --scorer CHECKPOINT")
-        scorer = _scorer(args.scorer or args.model, device)
-    model, samples = _selecting(args, model, device)
+        scorer = _scorer(args.scorer or args.model, device, args)
+    model, samples = _selecting(args, model, device, scores=scorer is not None)
     ds = _load(args)
     _warn_trained(args, ds)
     arrays = predict_dataset(
@@ -938,6 +1120,10 @@ def cmd_train(args) -> int:
     overrides = list(args.overrides)
     if args.dataset is not None:
         overrides.append(f"data.dataset={args.dataset}")
+    for key in ("frame_interval", "units", "time_step"):  # shortcuts for --set, as --dataset
+        value = getattr(args, key)
+        if value is not None:
+            overrides.append(f"data.{key}={json.dumps(value)}")
     cfg = load_config(args.config, overrides)
     if args.seed is not None:
         cfg = dataclasses.replace(cfg, seed=args.seed)

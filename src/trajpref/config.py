@@ -46,6 +46,12 @@ DATA_GENERATOR_ONLY = ("partial_future",)
 them at their defaults (``DataConfig.denoiser_part``)."""
 
 
+BUILTIN_DATASETS = ("eth", "hotel", "univ", "zara1", "zara2", "sdd", "nba", "robo", "robo-sim",
+                    "robo-mix")  # fmt: skip
+"""The datasets ``data.registry`` reads by name (``data.registry.NAMES``); any other
+``DataConfig.dataset`` is a folder or file path."""
+
+
 @dataclass
 class DataConfig:
     """Which data to train on and how to batch and augment it."""
@@ -95,6 +101,18 @@ class DataConfig:
     time_step: float = 1.0
     """Read text track files every this many frame steps, positions interpolated in time
     (1: as recorded), as ``--time-step``; both splits are read alike."""
+    frame_interval: float | None = None
+    """Seconds between consecutive frames of a folder dataset's files (``dataset`` or
+    ``val_dataset`` given as a path), as ``--frame-interval`` (None: what the files say: the
+    step of a frame column headed ``time`` or ``timestamp``, read as seconds, or the fps that
+    TrajNet++ scenes declare, which wins over a value given; else 0.4 s, assumed). Built-in
+    datasets know their own and refuse it. A model records the interval it trained at (this
+    times ``time_step``), so that ``evaluate``, ``predict`` and ``plot`` warn about data at
+    another step (docs/data_format.md)."""
+    units: str | None = None
+    """Coordinate units of a folder dataset, as ``--units`` (None: unknown; TrajNet++ files:
+    m). Recorded in the model, so that data in other units is warned about; built-in datasets
+    know their own and refuse it."""
     extra_time_step: float = 0.0
     """A second copy of the training split's text track files, read every this many frame
     steps (positions interpolated in time, as ``time_step`` reads them), joins the training
@@ -138,6 +156,15 @@ class DataConfig:
             raise ConfigError("DataConfig.val_cut and holdout_scene exclude each other: the "
                               "held-out scene is the validation split")  # fmt: skip
         _positive(self, "max_agents", "scale_min", "scale_max", "max_coord", "time_step")
+        interval = self.frame_interval
+        number = isinstance(interval, (int, float)) and not isinstance(interval, bool)
+        if interval is not None and not (number and math.isfinite(interval) and interval > 0):
+            raise ConfigError(f"DataConfig.frame_interval must be a number of seconds > 0 or "
+                              f"null (what the files say), got {interval!r}")  # fmt: skip
+        if self.units is not None and not (isinstance(self.units, str) and self.units.strip()):
+            raise ConfigError(f"DataConfig.units must be a unit name (e.g. m) or null (unknown), "
+                              f"got {self.units!r}")  # fmt: skip
+        self._check_folder_description()
         if self.extra_time_step < 0 or self.extra_time_step == self.time_step:
             raise ConfigError(f"DataConfig.extra_time_step must be 0 (off) or a positive step "
                               f"other than time_step ({self.time_step:g}), "
@@ -158,6 +185,20 @@ class DataConfig:
             raise ConfigError("DataConfig.scale_min must be <= scale_max")
         if self.max_gap is not None and self.max_gap < 0:
             raise ConfigError("DataConfig.max_gap must be >= 0 or null")
+
+    def _check_folder_description(self) -> None:
+        """``frame_interval`` and ``units`` describe a folder: refused when every dataset the
+        config reads is a built-in one (``BUILTIN_DATASETS``), which knows its own."""
+        if self.frame_interval is None and self.units is None:
+            return
+        read = [d for d in (self.dataset, self.val_dataset) if d]
+        if all(d in BUILTIN_DATASETS for d in read):
+            given = [k for k in ("frame_interval", "units") if getattr(self, k) is not None]
+            one = len(given) == 1
+            raise ConfigError(f"DataConfig.{' and '.join(given)} describe{'s' if one else ''} a "
+                              f"folder dataset; {self.dataset} is a built-in one and knows its "
+                              f"own units and frame interval: leave {'it' if one else 'them'} "
+                              "unset")  # fmt: skip
 
     def denoiser_part(self) -> DataConfig:
         """This data config as the denoiser stage trains on it: the generator-only settings

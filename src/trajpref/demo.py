@@ -89,11 +89,16 @@ def run(out: Path, data_root: str | None, samples: int, seed: int, config: Path,
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="python -m trajpref.demo",
+        description="make demo: the whole pipeline on the CPU in a few minutes (simulate Robo, "
+        "train the denoiser and the generator, fine-tune with RLHF-ReS, evaluate, plot)",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
     parser.add_argument("--out", default="out/demo", help="output folder")
-    parser.add_argument("--data-root", default=None, help="data folder (default $TRAJPREF_DATA)")
-    parser.add_argument("--samples", type=int, default=20)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--data-root", default=None, help="data folder; None: $TRAJPREF_DATA")
+    parser.add_argument("--samples", type=int, default=20, help="K, futures per agent")
+    parser.add_argument("--seed", type=int, default=0, help="seed of training and evaluation")
     parser.add_argument("--config", default=str(DEFAULT_CONFIG), help="pipeline config (YAML)")
     parser.add_argument(
         "--set",
@@ -101,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="override a config value (repeatable)",
+        help="override a config value (repeatable); default: none",
     )
     args = parser.parse_args(argv)
     try:

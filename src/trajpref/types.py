@@ -78,6 +78,10 @@ class Scene:
         return int(self.history.shape[0])
 
 
+INTERVAL_SOURCES = ("dataset", "given", "declared", "timestamps", "default")
+"""Where a split's frame interval comes from (``DatasetInfo.interval_from``)."""
+
+
 @dataclass
 class DatasetInfo:
     """What a split is and how to read its numbers."""
@@ -99,6 +103,17 @@ class DatasetInfo:
     protocol: str = "all"
     """Which windows count: ``all`` (every window with a fully observed agent) or ``sgan``
     (only windows with at least two, as the Social-GAN loader counts them; docs/data.md)."""
+    interval_from: str = "given"
+    """Where ``frame_interval`` comes from (``INTERVAL_SOURCES``): ``dataset`` (a built-in
+    dataset's own), ``given`` (by the caller: ``--frame-interval``, ``data.frame_interval``),
+    ``declared`` (the fps of TrajNet++ scenes), ``timestamps`` (the step of text files whose
+    frame column is named as seconds, ``time`` or ``timestamp``) or ``default`` (none of these:
+    0.4 s assumed, so the seconds are a guess)."""
+    time_step: float = 1.0
+    """The ``--time-step`` the data was read with (``frame_interval`` already includes it)."""
+    text_tracks: bool = False
+    """Read from text track files, which ``--time-step`` can resample (ETH/UCY, NBA, a folder
+    of text files); windows cut already (SDD, Robo, TrajNet++ scenes, simulations) cannot be."""
 
 
 @dataclass

@@ -477,3 +477,69 @@ def test_reversed_context_is_read_for_the_training_split_of_a_run_that_trains_wi
     assert train.scenes[0].context_reverse is None  # off: no memory spent on them
     train, val = run_splits(DataConfig(dataset=root, reverse=True, reverse_context=True))
     assert len(train.scenes[0].context_reverse) == 2 and val.scenes[0].context_reverse is None
+
+
+def _timed(folder: Path, step: float, count: int = 40, header: str = "timestamp,id,x,y",
+           name: str = "log.csv") -> None:  # fmt: skip
+    folder.mkdir(parents=True, exist_ok=True)
+    rows = "".join(f"{round(100 + k * step, 6)},{a},{0.1 * k:.3f},{a}\n"
+                   for k in range(count) for a in (1, 2))  # fmt: skip
+    (folder / name).write_text(f"{header}\n{rows}")
+
+
+def test_a_time_column_in_seconds_gives_the_frame_interval_unless_one_is_given(tmp_path):
+    # 10 Hz files whose frame column is headed timestamp: 0.1 s between frames, not the 0.4 s
+    # default, so data stats, a model's step check and TrajNet++ output read the right pace
+    _timed(tmp_path / "ts", 0.1, count=100)
+    info = load_dataset(str(tmp_path / "ts"), "test").info
+    assert (info.frame_interval, info.interval_from, info.time_step) == (0.1, "timestamps", 1.0)
+    info = load_dataset(str(tmp_path / "ts"), "test", options=ReadOptions(time_step=4)).info
+    assert info.frame_interval == pytest.approx(0.4) and info.time_step == 4
+    info = load_dataset(str(tmp_path / "ts"), "test", frame_interval=0.2).info
+    assert (info.frame_interval, info.interval_from) == (0.2, "given")
+    # frame numbers (a frame header, or none) keep the assumed default, and say so
+    _timed(tmp_path / "fr", 1, header="frame,agent,x,y")
+    info = load_dataset(str(tmp_path / "fr"), "test").info
+    assert (info.frame_interval, info.interval_from, info.text_tracks) == (0.4, "default", True)
+
+
+@pytest.mark.parametrize("case, match", [
+    ("ms", r"steps 100, which is no plausible number of seconds between frames "
+           r"\(milliseconds\? nanoseconds\?\)"),
+    ("mixed", r"the files' time columns step differently \(0\.1 in a\.csv, 0\.4 in b\.csv\)"),
+    ("untimed", r"a\.csv's frame column is a time in seconds, b\.csv's is not"),
+])  # fmt: skip
+def test_time_columns_that_give_no_one_interval_keep_the_default_and_say_so(tmp_path, case,
+                                                                           match):  # fmt: skip
+    from trajpref.data import FrameRateWarning
+
+    folder = tmp_path / case
+    if case == "ms":
+        _timed(folder, 100, header="time,id,x,y")
+    else:
+        _timed(folder, 0.1, name="a.csv")
+        _timed(folder, 0.4, name="b.csv", header="timestamp,id,x,y" if case == "mixed"
+               else "frame,id,x,y")  # fmt: skip
+    with pytest.warns(FrameRateWarning, match=match + r": 0\.4 s between frames is assumed; "
+                      r"pass the files' own with --frame-interval"):  # fmt: skip
+        info = load_dataset(str(folder), "test").info
+    assert (info.frame_interval, info.interval_from) == (0.4, "default")
+
+
+def test_run_splits_read_a_folder_at_the_data_configs_interval_and_units(tmp_path):
+    for split in ("train", "val"):
+        _timed(tmp_path / "d" / split, 1, header="frame,agent,x,y")
+    data = DataConfig(dataset=str(tmp_path / "d"), frame_interval=0.1, units="m", time_step=2)
+    train, val = run_splits(data)
+    for info in (train.info, val.info):
+        assert (info.frame_interval, info.interval_from, info.units) == (0.2, "given", "m")
+    # a built-in dataset knows its own: describing it is refused
+    with pytest.raises(ConfigError, match=r"DataConfig\.frame_interval describes a folder "
+                       r"dataset; zara1 is a built-in one and knows its own units and frame "
+                       r"interval: leave it unset"):  # fmt: skip
+        DataConfig(dataset="zara1", frame_interval=0.1)
+    with pytest.raises(ConfigError, match=r"DataConfig\.frame_interval must be a number of "
+                       r"seconds > 0 or null"):  # fmt: skip
+        DataConfig(dataset=str(tmp_path / "d"), frame_interval=0)
+    with pytest.raises(ConfigError, match=r"DataConfig\.units must be a unit name"):
+        DataConfig(dataset=str(tmp_path / "d"), units="")

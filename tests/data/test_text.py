@@ -600,3 +600,43 @@ def test_old_mac_line_ends_read_like_unix_ones(tmp_path):
                        ) as info:  # fmt: skip
         read_tracks(write_text(tmp_path / "d.csv", dup.replace("\n", "\r")))
     assert info.value.line == 47
+
+
+def _timestamped(path, first: str, count: int, step: str = "0.1"):
+    """A ``timestamp,id,x,y`` file of two walkers, times ``first + k * step`` written as the
+    shortest decimals (as a logger writes seconds)."""
+    from decimal import Decimal
+
+    times = [Decimal(first) + k * Decimal(step) for k in range(count)]
+    rows = "".join(f"{t},{a},{0.1 * k:.4f},{a}\n" for k, t in enumerate(times) for a in (1, 2))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("timestamp,id,x,y\n" + rows)
+    return times
+
+
+@pytest.mark.parametrize("first", ["227.3", "1700000000.1"])
+def test_resampled_seconds_give_scene_ids_without_float_noise(tmp_path, first):
+    # 10 Hz seconds read every 4 steps: the grid 227.3 + 0.4 j is a rounded float sum, and the
+    # ids read 227.70000000000002; now each is the decimal it stands for, one per window
+    from decimal import Decimal
+
+    times = _timestamped(tmp_path / "d" / "log.csv", first, 200)
+    scenes = read_folder(tmp_path / "d", 8, 12, pattern="*.csv",
+                         options=ReadOptions(time_step=4))  # fmt: skip
+    ids = [s.scene_id for s in scenes]
+    want = [f"log.csv@frame={times[0] + 4 * j * Decimal('0.1')}" for j in range(len(ids))]
+    assert ids == want and len(set(ids)) == len(ids) == 50 - 19
+    # read as recorded, an id is the file's own text
+    scenes = read_folder(tmp_path / "d", 8, 12, pattern="*.csv")
+    assert [s.scene_id for s in scenes[:2]] == [f"log.csv@frame={t}" for t in times[:2]]
+
+
+def test_frame_labels_stay_distinct_when_frames_round_alike():
+    from trajpref.data.text import frame_labels
+
+    assert frame_labels(np.array([227.3, 227.3 + 0.4]), 1e-12) == ["227.3", "227.7"]
+    assert frame_labels(np.array([227.3, 227.3 + 0.4])) == ["227.3", "227.70000000000002"]
+    # two frames closer than the rounding: every label is its float's exact text
+    close = np.array([0.1, 0.1 + 1e-9, 0.5])
+    labels = frame_labels(close, 1e-6)
+    assert len(set(labels)) == 3 and labels == ["0.1", "0.100000001", "0.5"]

@@ -157,6 +157,67 @@ def test_cli_evaluate_with_scorer_and_predict_rank(tiny_run, walks, tmp_path, ca
     assert code == 2 and "--scorer" in capsys.readouterr().err
 
 
+def test_rank_and_scorer_score_at_the_score_options(tiny_run, walks, tmp_path, capsys):
+    # --score-every/--score-from/--score-precision were accepted and ignored by --rank and
+    # --scorer; they apply now, and without them both score as before (every 3 of S)
+    import numpy as np
+
+    gen, den = str(tiny_run / "generator.safetensors"), str(tiny_run / "denoiser.safetensors")
+    base = ["predict", "--dataset", str(walks), "--model", gen, "--samples", "4", "--rank",
+            "--no-progress"]  # fmt: skip
+    runs = {}
+    for name, flags in (("default", []), ("three", ["--score-every", "3"]),
+                        ("nine", ["--score-every", "9"]),
+                        ("bf16", ["--score-precision", "bf16"])):  # fmt: skip
+        out = tmp_path / f"{name}.npz"
+        assert main([*base, *flags, "--out", str(out)]) == 0
+        assert capsys.readouterr().err == ""
+        runs[name] = dict(np.load(out))
+    assert np.array_equal(runs["default"]["residual"], runs["three"]["residual"])
+    assert not np.allclose(runs["default"]["residual"], runs["nine"]["residual"])
+    assert not np.array_equal(runs["default"]["residual"], runs["bf16"]["residual"])
+    # --score-every 9 ranks as rank_samples does with a scorer at steps 0 and 9
+    scorer = TrajectoryScorer.from_checkpoint(gen)
+    nine = scorer.with_steps(score_timesteps(scorer.schedule.num_steps, 9))
+    plain = runs["default"]
+    for b in range(int(plain["scene"].max()) + 1):
+        agents = plain["scene"] == b
+        _, total = rank_samples(nine, plain["history"][agents], plain["pred"][:, agents])
+        assert np.allclose(np.sort(total), runs["nine"]["residual"][:, b], rtol=1e-5)
+    # evaluate --scorer: the metrics at the steps asked for, which the JSON names
+    ev = ["evaluate", "--dataset", str(walks), "--model", gen, "--samples", "4", "--scorer",
+          den, "--json", "--no-progress"]  # fmt: skip
+    assert main(ev) == 0
+    default = json.loads(capsys.readouterr().out)
+    assert main([*ev, "--score-every", "9", "--score-precision", "bf16"]) == 0
+    nine = json.loads(capsys.readouterr().out)
+    assert (default["scorer_score_steps"], nine["scorer_score_steps"]) == (4, 2)
+    assert nine["scorer_score_precision"] == "bf16" and nine["max_ats"] != default["max_ats"]
+
+
+def test_score_and_selection_options_that_nothing_reads_say_so(tiny_run, walks, tmp_path,
+                                                              capsys):  # fmt: skip
+    gen = str(tiny_run / "generator.safetensors")
+    base = ["predict", "--dataset", str(walks), "--model", gen, "--samples", "4",
+            "--no-progress", "--out", str(tmp_path / "p.npz")]  # fmt: skip
+    cases = [
+        (["--score-every", "5"], "--score-every only applies with --keep or --rank: here it "
+         "changes nothing"),
+        (["--score-every", "5", "--drop", "0.5"], "--drop only applies with --keep; "
+         "--score-every only applies with --keep or --rank: here they change nothing"),
+        (["--keep", "2", "--select", "kmeans", "--score-every", "5", "--score-precision",
+          "bf16"], "--select kmeans does not read --score-every, --score-precision: they "
+         "change nothing"),
+        (["--rank", "--score-every", "5", "--score-from", "1"], None),
+        (["--keep", "2", "--select", "kmeans", "--rank", "--score-every", "5"], None),
+        (["--keep", "2", "--score-every", "5", "--score-precision", "bf16"], None),
+    ]  # fmt: skip
+    for flags, warning in cases:
+        assert main([*base, *flags]) == 0, flags
+        err = capsys.readouterr().err
+        assert err == (f"trajpref: warning: {warning}\n" if warning else ""), flags
+
+
 def test_cli_plot_with_scorer(tiny_run, walks, tmp_path):
     out = tmp_path / "fig2.png"
     model, scorer = str(tiny_run / "generator.safetensors"), str(tiny_run / "denoiser.safetensors")

@@ -1,6 +1,7 @@
 """Keeping K' of K samples: hand-checked picks, the score's role, determinism, and that the
 ground truth is never read."""
 
+import dataclasses
 import itertools
 import json
 
@@ -12,7 +13,7 @@ from synthetic import make_scene
 from trajpref.cli import main
 from trajpref.errors import ConfigError
 from trajpref.models import checkpoint as ckpt
-from trajpref.score import TrajectoryScorer
+from trajpref.score import TrajectoryScorer, score_timesteps
 from trajpref.score.selection import (
     MEDOID_PASSES,
     SelectingPredictor,
@@ -311,15 +312,57 @@ def test_select_for_scene_keeps_k_of_numpy_samples_without_the_future(tiny_run, 
     assert isinstance(idx, np.ndarray) and idx.shape == (3, scene.history.shape[0])
     for p in range(idx.shape[1]):
         assert len(set(idx[:, p].tolist())) == 3
-    # the same as the batch path, and a tensor in gives a tensor out
+    # the same as the batch path at the config's score steps (every 9 of S), and a tensor in
+    # gives a tensor out
     batch = collate([scene])
-    d = scorer.residual(batch, torch.as_tensor(samples, dtype=torch.float32)).sum(-1)
-    ref = select_samples(torch.as_tensor(samples, dtype=torch.float32), cfg, d, batch)
+    futures = torch.as_tensor(samples, dtype=torch.float32)
+    at_nine = scorer.with_steps(score_timesteps(scorer.schedule.num_steps, 9))
+    ref = select_samples(futures, cfg, at_nine.residual(batch, futures).sum(-1), batch)
     assert np.array_equal(idx, ref.numpy())
+    # score_every=None scores at the scorer's own steps (from_checkpoint's: every 3)
+    own = dataclasses.replace(cfg, score_every=None)
+    ref = select_samples(futures, own, scorer.residual(batch, futures).sum(-1), batch)
+    assert np.array_equal(select_for_scene(scorer, scene.history, samples, own), ref.numpy())
     out = select_for_scene(scorer, torch.as_tensor(scene.history), torch.as_tensor(samples), cfg)
     assert isinstance(out, torch.Tensor)
     kept = samples[idx, np.arange(idx.shape[1])]  # [K', P, T_f, 2]
     assert kept.shape == (3, *scene.future.shape)
+
+
+def test_the_documented_python_selection_keeps_what_the_cli_keeps(tiny_run, walks, tmp_path):
+    # `select_for_scene(scorer, history, samples, SelectionConfig(keep=K'))` is the README's
+    # Python version of `predict --keep K'`: with the defaults of both they score at the same
+    # steps (every 9 of S) and keep the same samples, scene by scene; and so do the README's
+    # 34-step setting and `--score-every 3`
+    from trajpref.score.selection import select_for_scene
+
+    gen = str(tiny_run / "generator.safetensors")
+    plain, kept = tmp_path / "plain.npz", tmp_path / "kept.npz"
+    base = ["predict", "--dataset", str(walks), "--model", gen, "--samples", "4",
+            "--no-progress", "--device", "cpu"]  # fmt: skip
+    assert main([*base, "--out", str(plain)]) == 0
+    scorer = TrajectoryScorer.from_checkpoint(gen)  # the default: the paper's every 3
+    p = np.load(plain)
+    for flags, cfg in (([], SelectionConfig(keep=2)),
+                       (["--score-every", "3", "--drop", "0.5"],
+                        SelectionConfig(keep=2, drop=0.5, score_every=3))):  # fmt: skip
+        assert main([*base, "--keep", "2", *flags, "--out", str(kept)]) == 0
+        k = np.load(kept)
+        for b in range(int(p["scene"].max()) + 1):
+            agents = p["scene"] == b
+            idx = select_for_scene(scorer, p["history"][agents], p["pred"][:, agents], cfg)
+            assert np.array_equal(idx, k["kept"][:, agents]), (flags, b)
+
+
+def test_score_steps_are_checked_and_unread_without_the_score():
+    with pytest.raises(ConfigError, match="score_every must be an integer >= 1 or None"):
+        SelectionConfig(score_every=0)
+    with pytest.raises(ConfigError, match="score_from must be an integer >= 0"):
+        SelectionConfig(score_from=-1)
+    with pytest.raises(ConfigError, match="score_from needs score_every"):
+        SelectionConfig(score_every=None, score_from=3)
+    assert SelectionConfig(method="kmeans", score_every=3).unread() == ["score_every"]
+    assert SelectionConfig(method="score-kmeans", score_every=3).unread() == []
 
 
 @pytest.mark.parametrize("keep", [0, 5.0, "5", True])

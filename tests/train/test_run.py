@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from trajpref.errors import ConfigError
-from trajpref.train import read_metrics
+from trajpref.train import read_metrics, run
 from trajpref.train.run import record_session, run_record_path, train_stage
 
 
@@ -229,6 +229,77 @@ def test_a_fingerprint_ignores_file_times_and_tells_splits_and_files_apart(tiny_
     (data / "val" / "walk0.txt").write_text((data / "train" / "walk0.txt").read_text())
     after = data_fingerprint(*run_splits(cfg))
     assert after["train"] == before["train"] and after["val"] != before["val"]
+
+
+def test_a_state_from_before_the_folders_interval_and_units_resumes(tiny_cfg, tmp_path):
+    # data.frame_interval and data.units were added after resume states recorded their run:
+    # at their defaults they stay out of the identity, so an older state resumes; once set,
+    # a change is refused as any other
+    from trajpref.config import to_dict
+    from trajpref.train.run import check_resume, run_identity
+
+    old = to_dict(tiny_cfg)
+    for key in ("frame_interval", "units"):
+        del old["data"][key]  # what a state of before the keys recorded
+    keep = {k: old[k] for k in ("data", "model", "diffusion", "seed")}
+    own = {k: v for k, v in old["denoiser"].items() if k not in run.RESUME_FREE}
+    state = {"epoch": 0, "identity": json.dumps({**keep, "denoiser": own, "start": None},
+                                                sort_keys=True, default=str)}  # fmt: skip
+    last = tmp_path / "denoiser_last.pt"
+    check_resume(state, run_identity(tiny_cfg, "denoiser"), 2, tmp_path, last, "denoiser")
+    set_ = dataclasses.replace(tiny_cfg, data=dataclasses.replace(tiny_cfg.data,
+                                                                  frame_interval=0.1))  # fmt: skip
+    state = {"epoch": 0, "identity": run_identity(set_, "denoiser")}
+    other = dataclasses.replace(tiny_cfg, data=dataclasses.replace(tiny_cfg.data,
+                                                                   frame_interval=0.2))  # fmt: skip
+    with pytest.raises(ConfigError, match=r"data\.frame_interval: 0\.1 -> 0\.2"):
+        check_resume(state, run_identity(other, "denoiser"), 2, tmp_path, last, "denoiser")
+
+
+def test_a_state_whose_scene_ids_had_float_noise_resumes(tiny_cfg, tmp_path):
+    # seconds read every 4 steps: the ids of before 2026-12-06 read 12.700000000000001, now
+    # 12.7; a state that fingerprinted the old ids resumes on the same data, and is refused on
+    # other data as any state is
+    from decimal import Decimal
+
+    from trajpref.data import run_splits, text
+    from trajpref.train.run import data_fingerprint
+
+    data = tmp_path / "logs"
+    for split in ("train", "val"):
+        rows = [f"{Decimal('12.3') + k * Decimal('0.1')},{a},{0.1 * k + a:.3f},{a}"
+                for k in range(100) for a in (1, 2)]  # fmt: skip
+        (data / split).mkdir(parents=True)
+        (data / split / "log.csv").write_text("timestamp,id,x,y\n" + "\n".join(rows) + "\n")
+    cfg = dataclasses.replace(tiny_cfg, data=dataclasses.replace(
+        tiny_cfg.data, dataset=str(data), time_step=4.0))  # fmt: skip
+    out = tmp_path / "run"
+    train_stage("diffusion", cfg, out, device="cpu", progress=False, max_steps=1)
+    last = out / "denoiser_last.pt"
+    with text.exact_frame_labels():
+        before = data_fingerprint(*run_splits(cfg.data))
+    assert before != data_fingerprint(*run_splits(cfg.data))  # the ids changed
+    state = torch.load(last, weights_only=True)
+    identity = json.loads(state["identity"])
+    state["identity"] = json.dumps({**identity, "data_files": before}, sort_keys=True)
+    torch.save(state, last)
+    train_stage("diffusion", cfg, out, device="cpu", progress=False, resume=str(last))
+    torch.save(state, last)  # the old state again, on changed data
+    log = data / "train" / "log.csv"
+    log.write_text("".join(log.read_text().splitlines(keepends=True)[:-10]))
+    with pytest.raises(ConfigError, match="the data differ from those the state was trained on"):
+        train_stage("diffusion", cfg, out, device="cpu", progress=False, resume=str(last))
+
+
+def test_a_checkpoint_records_the_pace_and_units_it_trained_at(tiny_cfg, tmp_path):
+    from trajpref.models import checkpoint as ckpt
+
+    data = dataclasses.replace(tiny_cfg.data, frame_interval=0.1, units="m", time_step=0.5)
+    cfg = dataclasses.replace(tiny_cfg, data=data)
+    train_stage("diffusion", cfg, tmp_path, device="cpu", progress=False, max_steps=1)
+    meta = ckpt.load(tmp_path / "denoiser.safetensors")["meta"]
+    assert meta["data_timing"] == {"frame_interval": pytest.approx(0.05), "interval_from": "given",
+                                   "time_step": 0.5, "units": "m"}  # fmt: skip
 
 
 def test_finetune_refuses_a_config_resolved_from_another_start(tiny_run, tmp_path):

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from trajpref.config import BUILTIN_DATASETS
 from trajpref.data import arrays, text, trajnet
 from trajpref.data.robo_sim import simulate
 from trajpref.errors import ConfigError, DataError, TrajprefError
@@ -27,7 +28,7 @@ if TYPE_CHECKING:
 
 ETH_UCY = ("eth", "hotel", "univ", "zara1", "zara2")
 """The five ETH/UCY leave-one-out folds."""
-NAMES = (*ETH_UCY, "sdd", "nba", "robo", "robo-sim", "robo-mix")
+NAMES = BUILTIN_DATASETS
 """Built-in dataset names."""
 SPLITS = ("train", "val", "test")
 USER_TEXT = ("*.txt", "*.csv")
@@ -35,7 +36,11 @@ USER_TEXT = ("*.txt", "*.csv")
 ignoring case (``a.TXT``, ``b.Csv``)."""
 DEFAULT_FRAME_INTERVAL = 0.4
 """Seconds between frames of a user folder when none is given (and, for TrajNet++ files,
-none is declared)."""
+none is declared; for text files, their frame column is not named as seconds)."""
+SECONDS_STEPS = (1e-3, 60.0)
+"""The frame steps of a ``time``/``timestamp`` column (``text.SECONDS_COLUMNS``) that are read
+as seconds; a step outside (milliseconds, nanoseconds) leaves ``DEFAULT_FRAME_INTERVAL`` with
+a ``FrameRateWarning``."""
 
 FEET_TO_METRES = 0.3048
 
@@ -117,18 +122,22 @@ def load_dataset(
     """Load one split of a dataset as a list of scenes in absolute coordinates.
 
     ``frame_interval`` and ``units`` describe user folders (a path ``name``) only; built-in
-    datasets know their own. ``frame_interval`` None: ``DEFAULT_FRAME_INTERVAL`` (0.4 s) for
-    text files, the declared ``fps`` of TrajNet++ files (``trajnet_interval``; a value given
-    that differs from it is ignored with a ``FrameRateWarning``). ``options`` (delimiter,
-    ``max_gap``, ``max_coord``) apply to every reader that they make sense for (the bound to
-    all of them). ``protocol`` is one of ``PROTOCOLS`` (``apply_protocol``).
+    datasets know their own. ``frame_interval`` None: for text files the step of their frame
+    column when its header names it as seconds (``time``, ``timestamp``: ``text_interval``),
+    else ``DEFAULT_FRAME_INTERVAL`` (0.4 s); the declared ``fps`` of TrajNet++ files
+    (``trajnet_interval``; a value given that differs from it is ignored with a
+    ``FrameRateWarning``). ``info.interval_from`` says which; ``info.frame_interval`` is that
+    interval times ``options.time_step``, the seconds between a window's steps. ``options``
+    (delimiter, ``max_gap``, ``max_coord``) apply to every reader that they make sense for (the
+    bound to all of them). ``protocol`` is one of ``PROTOCOLS`` (``apply_protocol``).
     """
     _check_split(split)
     check_protocol(protocol)
     data = _load(name, split, root, frame_interval, units, options)
     step = options.time_step if options is not None else 1.0
     if step != 1.0:  # read every ``step`` frame steps: each window step spans that much more
-        info = dataclasses.replace(data.info, frame_interval=data.info.frame_interval * step)
+        info = dataclasses.replace(data.info, frame_interval=data.info.frame_interval * step,
+                                   time_step=step)  # fmt: skip
         data = TrajectoryDataset(data.scenes, info)
     return apply_protocol(data, protocol)
 
@@ -287,11 +296,14 @@ def run_splits(
     The training loop reads its data this way, and so does anything that must see the windows a
     checkpoint trained on (``models.checkpoint.config_of(...).data``)."""
     options = text.ReadOptions(data.delimiter, data.max_gap, data.max_coord, data.time_step)
-    val = load_dataset(data.val_dataset or data.dataset, "val", root, options=options)
+    # a folder's frame interval and units (built-in datasets know their own)
+    described = {"frame_interval": data.frame_interval, "units": data.units or "unknown"}
+    val = load_dataset(data.val_dataset or data.dataset, "val", root, options=options,
+                       **described)  # fmt: skip
     # agents that leave the view count as targets in training only (``partial_future``)
     options = dataclasses.replace(options, partial_future=data.partial_future,
                                   reverse_context=data.reverse_context)  # fmt: skip
-    train = load_dataset(data.dataset, "train", root, options=options)
+    train = load_dataset(data.dataset, "train", root, options=options, **described)
     if data.holdout_scene:
         train, val = hold_out_scene(train, val, data.holdout_scene)
     if data.val_cut:
@@ -316,35 +328,43 @@ def _load(
     if options.time_step != 1.0 and name in ("sdd", "robo", "robo-sim", "robo-mix"):
         raise ConfigError(f"time_step resamples text track files; {name} comes as windows "
                           "already cut (or simulated)")  # fmt: skip
-    if name == "robo-sim":
-        return _robo_sim(split)
-    if name == "robo-mix":
-        return _robo_mix(split, root, options)
     if name in NAMES:
-        base = resolve_data_root(root)
-        spec = SPECS[name]
-        if name in ETH_UCY:
-            folder = base / "eth_ucy" / name / split
-            scenes = text.read_folder(
-                folder, spec.t_hist, spec.t_fut, options=options, units=spec.units
-            )
-            source = folder
-        elif name == "sdd":
-            scenes, source = _sdd(base, split, options)
-        elif name == "nba":
-            scenes, source = _nba(base, split, spec, options)
-        else:  # robo
-            scenes, source = _robo(base, split, options)
-        info = DatasetInfo(
-            name, split, spec.units, spec.frame_interval, spec.t_hist, spec.t_fut, str(source)
-        )
-        return TrajectoryDataset(scenes, info)
+        data = _built_in(name, split, root, options)
+        info = dataclasses.replace(data.info, interval_from="dataset",
+                                   text_tracks=name in (*ETH_UCY, "nba"))  # fmt: skip
+        return TrajectoryDataset(data.scenes, info)
     path = Path(name).expanduser()
     if path.exists() or path.is_symlink() or os.sep in name or name.startswith("."):
         return _user_folder(path, split, frame_interval, units, options)
     raise TrajprefError(
         f"unknown dataset {name!r}; choose one of {', '.join(NAMES)} or pass a folder path"
     )
+
+
+def _built_in(name: str, split: str, root: str | Path | None,
+              options: text.ReadOptions) -> TrajectoryDataset:  # fmt: skip
+    """A built-in dataset read from the data root."""
+    if name == "robo-sim":
+        return _robo_sim(split)
+    if name == "robo-mix":
+        return _robo_mix(split, root, options)
+    base = resolve_data_root(root)
+    spec = SPECS[name]
+    if name in ETH_UCY:
+        folder = base / "eth_ucy" / name / split
+        scenes = text.read_folder(folder, spec.t_hist, spec.t_fut, options=options,
+                                  units=spec.units)  # fmt: skip
+        source = folder
+    elif name == "sdd":
+        scenes, source = _sdd(base, split, options)
+    elif name == "nba":
+        scenes, source = _nba(base, split, spec, options)
+    else:  # robo
+        scenes, source = _robo(base, split, options)
+    info = DatasetInfo(
+        name, split, spec.units, spec.frame_interval, spec.t_hist, spec.t_fut, str(source)
+    )
+    return TrajectoryDataset(scenes, info)
 
 
 def _user_folder(
@@ -374,10 +394,49 @@ def _user_folder(
                             folder)  # fmt: skip
         files = text.track_files(folder, "*.ndjson")
         return _trajnet(files, str(path), split, frame_interval, units, options, folder)
-    scenes = text.read_folder(folder, 8, 12, pattern=USER_TEXT, options=options, units=units)
-    interval = DEFAULT_FRAME_INTERVAL if frame_interval is None else frame_interval
-    info = DatasetInfo(str(path), split, units, interval, 8, 12, str(folder))
+    steps: dict[Path, tuple[str | None, float]] = {}
+    scenes = text.read_folder(folder, 8, 12, pattern=USER_TEXT, options=options, units=units,
+                              steps=steps)  # fmt: skip
+    interval, source = text_interval(steps, frame_interval, folder)
+    info = DatasetInfo(str(path), split, units, interval, 8, 12, str(folder),
+                       interval_from=source, text_tracks=True)  # fmt: skip
     return TrajectoryDataset(scenes, info)
+
+
+def text_interval(steps: dict[Path, tuple[str | None, float]], given: float | None,
+                  source: Path) -> tuple[float, str]:  # fmt: skip
+    """Seconds between frames of a folder's text files, and where they come from
+    (``DatasetInfo.interval_from``), from ``steps`` (each file's header name of its frame
+    column and its frame step, ``text.read_files``) and ``given``, the interval the user
+    passed (None: none). ``given`` wins. Else, when every file's frame column is named as
+    seconds (``text.SECONDS_COLUMNS``: ``time``, ``timestamp``) and they all step alike, by a
+    step in ``SECONDS_STEPS``: that step (``timestamps``). Else ``DEFAULT_FRAME_INTERVAL``
+    (``default``), with a ``FrameRateWarning`` when time columns were there but gave no one
+    interval in seconds."""
+    if given is not None:
+        return given, "given"
+    stepped = {path: (name, step) for path, (name, step) in steps.items() if step > 0}
+    timed = {path: step for path, (name, step) in stepped.items() if name in text.SECONDS_COLUMNS}
+    if not timed:
+        return DEFAULT_FRAME_INTERVAL, "default"
+    why = None
+    first = next(iter(timed.values()))
+    if len(timed) < len(stepped):
+        untimed = next(path for path in stepped if path not in timed)
+        why = (f"{next(iter(timed)).name}'s frame column is a time in seconds, "
+               f"{untimed.name}'s is not")  # fmt: skip
+    elif any(not math.isclose(step, first, rel_tol=1e-3) for step in timed.values()):
+        where = ", ".join(f"{step:.6g} in {path.name}" for path, step in timed.items())
+        why = f"the files' time columns step differently ({where})"
+    elif not SECONDS_STEPS[0] <= first <= SECONDS_STEPS[1]:
+        why = (f"the files' time column steps {first:.6g}, which is no plausible number of "
+               f"seconds between frames (milliseconds? nanoseconds?)")  # fmt: skip
+    if why is not None:
+        warnings.warn(f"{source}: {why}: {DEFAULT_FRAME_INTERVAL:g} s between frames is "
+                      "assumed; pass the files' own with --frame-interval (data.frame_interval "
+                      "in training)", trajnet.FrameRateWarning, stacklevel=4)  # fmt: skip
+        return DEFAULT_FRAME_INTERVAL, "default"
+    return float(f"{first:.9g}"), "timestamps"
 
 
 def split_folders(path: Path) -> dict[str, Path]:
@@ -427,7 +486,11 @@ def _trajnet(
     if not scenes:
         raise DataError("no TrajNet++ scene has 20 frames of its primary agent", source)
     interval = trajnet_interval(rates, frame_interval, source)
-    info = DatasetInfo(name, split, units, interval, 8, 12, str(source))
+    if len(rates) == 1:
+        origin = "declared"  # the files' own rate, whatever was given
+    else:
+        origin = "default" if frame_interval is None else "given"
+    info = DatasetInfo(name, split, units, interval, 8, 12, str(source), interval_from=origin)
     return TrajectoryDataset(scenes, info)
 
 

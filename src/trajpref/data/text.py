@@ -16,6 +16,7 @@ numbers and never a frames x agents array. A file's scenes are views into two ar
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import fnmatch
 import os
@@ -118,6 +119,12 @@ class Tracks:
     """[R, 2] float32 positions, in the dataset's units (``scale`` applied)."""
     agent_type: np.ndarray
     """[A] int64 agent-type flag per agent (the type on the agent's last row in the file)."""
+    frame_name: str | None = None
+    """The header's name of the frame column, lower case (None: no header)."""
+    frame_noise: float = 0.0
+    """How far the frame numbers may lie from their exact values: 0 for frames as read, a
+    few units of float64's rounding for a resampled grid (``resample_tracks``), which the
+    scene ids' labels round away (``frame_labels``)."""
 
     @property
     def num_rows(self) -> int:
@@ -131,6 +138,8 @@ class _Layout:
     delimiter: str | None
     header_line: int | None
     """1-based number of a header line to skip (None: no header)."""
+    frame_name: str | None = None
+    """The header's name of the first (frame) column, lower case."""
 
 
 def _sep_name(delimiter: str | None) -> str:
@@ -176,8 +185,13 @@ def check_file(path: Path) -> None:
     raise DataError("no such file", path)
 
 
+SECONDS_COLUMNS = ("time", "timestamp", "time_s", "timestamp_s", "seconds")
+"""Header names of a frame column whose values are times in seconds: unless a frame interval
+is given, a folder of such files takes their frame step (``frame_step``) as its interval in
+seconds (``DatasetInfo.interval_from == "timestamps"``)."""
+
 _HEADER_ROLES = {
-    "frame": {"frame", "frames", "frame_id", "frameid", "f", "t", "time", "timestamp", "step"},
+    "frame": {"frame", "frames", "frame_id", "frameid", "f", "t", "step", *SECONDS_COLUMNS},
     "agent": {"agent", "agent_id", "agentid", "id", "ped", "ped_id", "pedid", "pedestrian",
               "person", "person_id", "track", "track_id", "trackid", "obj", "object_id", "p"},
     "x": {"x", "pos_x", "x_m", "px"},
@@ -225,7 +239,9 @@ def _layout(path: Path, options: ReadOptions) -> _Layout:
                 is_header = not any(_is_float(t) for t in tokens)
                 if is_header:
                     _check_header(tokens, path, lineno)
-                return _Layout(delimiter, lineno if is_header else None)
+                    name = tokens[0].strip("\"'").lower() if tokens else None
+                    return _Layout(delimiter, lineno, name)
+                return _Layout(delimiter, None)
     except OSError as exc:
         raise DataError(f"cannot read file ({exc.strerror or exc})", path) from None
     return _Layout(None if options.delimiter == "whitespace" else options.delimiter, None)
@@ -405,7 +421,7 @@ def read_tracks(
     if rounding:  # float32 rounded the positions: by how much of a step, in (agent, frame) order
         _check_precision(values[order, 2:4] * scale, a_idx, rounding, path, options.time_step)
     del values
-    return Tracks(path, frames, agents, f_idx, a_idx, xy[order], agent_type)
+    return Tracks(path, frames, agents, f_idx, a_idx, xy[order], agent_type, layout.frame_name)
 
 
 EXACT_ID_LIMIT = 2**53
@@ -650,13 +666,14 @@ def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int |
             future[c : c + _CHUNK][~seen[:, t_hist:]] = np.nan  # seen: [C, T]
     kind = tracks.agent_type[a_idx[start_row]]  # [W]
     name = tracks.path.name
+    labels = frame_labels(frames[firsts], tracks.frame_noise) if n_w else []  # [S]
     for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
         out.scenes.append(
             Scene(
                 history=history[a:b],
                 future=future[a:b],
                 agent_type=kind[a:b],
-                scene_id=f"{name}@frame={_frame_label(frames[start[a]])}",
+                scene_id=f"{name}@frame={labels[i]}",
                 context=context[i],
                 context_reverse=context_reverse[i],
             )
@@ -668,6 +685,59 @@ def _frame_label(frame: float) -> str:
     """A frame number as text, exact and without an exponent: ``780``, ``1700000000.1``
     (``:g`` kept six digits, so large frame numbers gave colliding scene ids)."""
     return np.format_float_positional(float(frame), trim="-")
+
+
+LABEL_ULPS = 16
+"""How far, in units of float64's spacing at a resampled file's largest frame number, its
+frames may lie from their exact values (``Tracks.frame_noise``): the grid ``origin + j * step``
+is rounded by a few such units."""
+
+
+_EXACT_LABELS = [False]
+"""Set by ``exact_frame_labels``: every label is its float's exact text, as before 2026-12-06."""
+
+
+@contextlib.contextmanager
+def exact_frame_labels() -> Iterator[None]:
+    """Within it, ``frame_labels`` gives every frame its float's exact text, float noise and
+    all: the scene ids a reader gave before 2026-12-06, which the data fingerprints of resume
+    states written then hold (``train.run``)."""
+    before = _EXACT_LABELS[0]
+    _EXACT_LABELS[0] = True
+    try:
+        yield
+    finally:
+        _EXACT_LABELS[0] = before
+
+
+NOISE_DIGITS = 4
+"""A resampled frame's label is rounded only when that drops at least this many characters: a
+run of float noise (``227.70000000000002`` -> ``227.7``), not the last digit of a repeating
+decimal (``796.6666666666666`` stays: eth's paced copy, every 5/3 steps, keeps its ids)."""
+
+
+def frame_labels(frames: np.ndarray, noise: float = 0.0) -> list[str]:
+    """Distinct frame numbers [S] of one file as scene-id text. ``noise`` 0 (frames as read):
+    each float's exact shortest text (``_frame_label``: ``780``, ``1700000000.1``). Otherwise
+    the shortest decimal within ``noise`` of it where that sheds a run of float noise
+    (``NOISE_DIGITS``), so that a grid resampled from seconds reads ``227.7``, not
+    ``227.70000000000002``. Distinct frames keep distinct labels: should two round alike
+    (frames closer than ``noise``), every label is its float's exact text."""
+    values = np.asarray(frames, np.float64).tolist()
+    exact = [_frame_label(v) for v in values]
+    if not noise > 0 or _EXACT_LABELS[0]:
+        return exact
+    labels = []
+    for value, text in zip(values, exact, strict=True):
+        for digits in range(18):
+            short = f"{value:.{digits}f}"
+            if abs(float(short) - value) <= noise:
+                short = np.format_float_positional(float(short), trim="-")
+                break
+        else:
+            short = text
+        labels.append(short if len(text) - len(short) >= NOISE_DIGITS else text)
+    return labels if len(set(labels)) == len(set(values)) else exact
 
 
 def _context(
@@ -736,14 +806,10 @@ def resample_tracks(tracks: Tracks, factor: float) -> Tracks:
     own rows (a gap is not bridged). ``factor`` 1 returns ``tracks`` itself."""
     if factor == 1.0:
         return tracks
-    _, step = _missing_frames(tracks.frames)
+    step = frame_step(tracks.frames)
     if step <= 0:
         return tracks
-    # the step as the whole file's span over its number of steps: the most common jump alone is
-    # off by float64's rounding on large frame numbers (Unix times: 0.0999999 for 0.1), and
-    # a grid built from it drifts off the rows over thousands of steps
     span = float(tracks.frames[-1] - tracks.frames[0])
-    step = span / max(float(np.rint(span / step)), 1.0)
     # a frame "on" a grid point: within a millionth of a step, or within float64's rounding at
     # the frames' magnitude (Unix-time frame numbers: 1.7e9 s is rounded to 2.4e-7 already)
     largest = float(np.abs(tracks.frames).max())
@@ -779,9 +845,24 @@ def resample_tracks(tracks: Tracks, factor: float) -> Tracks:
     a_idx = np.concatenate(a_parts)  # [R'] agent index per new row (non-decreasing)
     used = np.unique(f_idx)  # [F'] grid frames that hold a row
     frame_index = np.searchsorted(used, f_idx).astype(tracks.frame_index.dtype)
-    return Tracks(tracks.path, origin + grid[used], tracks.agents, frame_index,
+    frames = origin + grid[used]  # [F'] each a rounded sum: a few units of float64's spacing off
+    noise = LABEL_ULPS * float(np.spacing(np.abs(frames).max()))
+    return Tracks(tracks.path, frames, tracks.agents, frame_index,
                   a_idx.astype(tracks.agent_index.dtype), np.concatenate(xy_parts),
-                  tracks.agent_type)  # fmt: skip
+                  tracks.agent_type, tracks.frame_name, noise)  # fmt: skip
+
+
+def frame_step(frames: np.ndarray) -> float:
+    """A file's frame step (0 with fewer than two frames): its most common jump between
+    unique frames [F], refined as the whole span over its number of such steps, since the
+    most common jump alone is off by float64's rounding on large frame numbers (Unix times:
+    0.0999999 for 0.1), and a grid built from it drifts off the rows over thousands of
+    steps."""
+    _, step = _missing_frames(frames)
+    if step <= 0:
+        return 0.0
+    span = float(frames[-1] - frames[0])
+    return span / max(float(np.rint(span / step)), 1.0)
 
 
 def _grid(span: float, every: float, tol: float) -> np.ndarray:
@@ -887,14 +968,19 @@ def read_files(
     options: ReadOptions | None = None,
     units: str = "unknown",
     where: Path | None = None,
+    steps: dict[Path, tuple[str | None, float]] | None = None,
 ) -> list[Scene]:
     """Read track files into scenes, in the given order. Windows that span missing frames
-    give one ``GapWarning`` for all files (naming ``where``, else the first file)."""
+    give one ``GapWarning`` for all files (naming ``where``, else the first file). ``steps``
+    (a dict) receives each file's header name of its frame column (None: no header) and its
+    frame step as recorded (``frame_step``, before any resampling)."""
     options = options or ReadOptions()
     scenes: list[Scene] = []
     gap = [0, 0, 0]  # scenes, agent-windows, largest run of missing frames
     for path in files:
         tracks = read_tracks(path, with_type, options, scale, units)
+        if steps is not None:
+            steps[path] = (tracks.frame_name, frame_step(tracks.frames))
         tracks = resample_tracks(tracks, options.time_step)
         out = _window(tracks, t_hist, t_fut, stride, options.max_gap, options.partial_future,
                       options.reverse_context)  # fmt: skip
@@ -915,11 +1001,14 @@ def read_folder(
     pattern: str | tuple[str, ...] = "*.txt",
     options: ReadOptions | None = None,
     units: str = "unknown",
+    steps: dict[Path, tuple[str | None, float]] | None = None,
 ) -> list[Scene]:
-    """Read every track file in ``folder`` matching ``pattern`` (sorted by name) into scenes."""
+    """Read every track file in ``folder`` matching ``pattern`` (sorted by name) into scenes
+    (``steps`` as ``read_files`` fills it)."""
     folder = Path(folder)
     files = track_files(folder, pattern)
-    scenes = read_files(files, t_hist, t_fut, stride, scale, with_type, options, units, folder)
+    scenes = read_files(files, t_hist, t_fut, stride, scale, with_type, options, units, folder,
+                        steps)  # fmt: skip
     if not scenes:
         raise DataError(
             f"no agent is observed in {t_hist + t_fut} consecutive frames in any file", folder

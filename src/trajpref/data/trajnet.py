@@ -36,7 +36,8 @@ from trajpref.types import Scene
 
 class FrameRateWarning(UserWarning):
     """TrajNet++ scenes declare frame rates that disagree with each other or with the frame
-    interval the user gave (``registry.trajnet_interval`` says which one is used)."""
+    interval the user gave (``registry.trajnet_interval`` says which one is used), or the time
+    columns of text files do not give one interval (``registry.text_interval``)."""
 
 
 @dataclass

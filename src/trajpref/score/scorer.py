@@ -130,6 +130,16 @@ class TrajectoryScorer(DenoiserShapes):
         schedule = DDPMSchedule.from_config(cfg.diffusion)
         return cls(denoiser.to(device), schedule.to(device), payload["scale"], **kwargs)
 
+    def with_steps(self, steps: list[int], precision: str | None = None) -> TrajectoryScorer:
+        """This scorer at other score steps (and ``precision``; None: its own), sharing its
+        denoiser and schedule; itself when nothing changes."""
+        precision = self.precision if precision is None else precision
+        if list(steps) == list(self.steps) and precision == self.precision:
+            return self
+        return TrajectoryScorer(self.denoiser, self.schedule, self.scale, list(steps),
+                                self.seed, self.shared_noise, self.speed_ref,
+                                precision)  # fmt: skip
+
     def check_shapes(self, batch: Batch, futures: torch.Tensor) -> None:
         """DataError unless the batch's histories are [N, T_h, 2] and futures [M, N, T_f, 2]
         with this scorer's T_h and T_f."""

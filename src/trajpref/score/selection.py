@@ -24,7 +24,7 @@ from trajpref.config import check_choices
 from trajpref.data import transforms
 from trajpref.errors import ConfigError
 from trajpref.metrics import scene_sum
-from trajpref.score.scorer import TrajectoryScorer, scene_batch
+from trajpref.score.scorer import TrajectoryScorer, scene_batch, score_timesteps
 from trajpref.types import Batch
 
 Method = Literal["first", "random", "kmeans", "fps", "facility", "medoids", "top",
@@ -47,9 +47,10 @@ class SelectionConfig:
 
     keep: int = 5
     """K', the samples kept per agent (or per scene). The defaults below are an early choice
-    on zara1's and eth's validation splits; the settings chosen since for each published
-    generator are in ``benchmarks/selection_chosen.json`` and the README's selection table
-    (zara1's: ``drop=0.2, bandwidth=1.0, trust_speed=0.445`` with 34 score steps)."""
+    on zara1's and eth's validation splits, and the CLI's (``--keep`` selects with them); the
+    settings chosen since for each published generator are in
+    ``benchmarks/selection_chosen.json`` and the README's selection table (zara1's:
+    ``drop=0.2, bandwidth=1.0, trust_speed=0.445, score_every=3``, 34 score steps)."""
     method: Method = "score-facility"
     """Without the score: ``first`` (the generator's first K'), ``random``, or coverage of
     the endpoints by ``kmeans``, ``fps`` (farthest-point) or ``facility`` (greedy facility
@@ -82,6 +83,15 @@ class SelectionConfig:
     observed step, first to last observed position, as ``model.max_speed`` measures it) is
     selected by the method's score-free counterpart (``SCORE_FREE``): the scorer never saw
     such a pace. With ``per="scene"`` a scene with any such agent falls back. 0: off."""
+    score_every: int | None = 9
+    """Score methods only: the score's steps are every this many of the scorer's S diffusion
+    steps, from ``score_from`` (9: 12 of 100, the CLI's ``--score-every`` default, so that
+    ``select_for_scene(scorer, h, s, SelectionConfig(keep=5))`` keeps what ``--keep 5``
+    keeps; 3: the paper's 34). None: the scorer's own steps (``TrajectoryScorer.steps``;
+    ``from_checkpoint`` builds the paper's 34 unless given ``steps``)."""
+    score_from: int = 0
+    """Score methods only: the first score step (0, the lowest noise level), as
+    ``--score-from``; not read with ``score_every`` None."""
 
     def __post_init__(self) -> None:
         check_choices(self)
@@ -96,6 +106,18 @@ class SelectionConfig:
                               f"got {self.bandwidth} and {self.temperature}")  # fmt: skip
         if not self.trust_speed >= 0:
             raise ConfigError(f"selection trust_speed must be >= 0, got {self.trust_speed}")
+        every = self.score_every
+        if every is not None and (isinstance(every, bool) or not isinstance(every, int)
+                                  or every < 1):  # fmt: skip
+            raise ConfigError(f"selection score_every must be an integer >= 1 or None (the "
+                              f"scorer's own steps), got {every!r}")  # fmt: skip
+        if isinstance(self.score_from, bool) or not isinstance(self.score_from, int) or (
+                self.score_from < 0):  # fmt: skip
+            raise ConfigError(f"selection score_from must be an integer >= 0, "
+                              f"got {self.score_from!r}")  # fmt: skip
+        if self.score_from and every is None:
+            raise ConfigError("selection score_from needs score_every (None keeps the scorer's "
+                              "own steps)")  # fmt: skip
 
     @property
     def uses_score(self) -> bool:
@@ -108,7 +130,8 @@ class SelectionConfig:
         methods, a bandwidth outside facility location)."""
         reads = {"drop": self.uses_score, "trust_speed": self.uses_score,
                  "temperature": self.method in WEIGHTED,
-                 "bandwidth": self.method.endswith("facility")}  # fmt: skip
+                 "bandwidth": self.method.endswith("facility"),
+                 "score_every": self.uses_score, "score_from": self.uses_score}  # fmt: skip
         return [k for k, read in reads.items() if not read and getattr(self, k) != getattr(
             SelectionConfig, k)]  # fmt: skip
 
@@ -337,15 +360,25 @@ def within_pace(batch: Batch, scale: float, trust_speed: float) -> torch.Tensor 
     return observed_pace(batch, scale) <= trust_speed
 
 
+def score_steps(scorer: TrajectoryScorer, cfg: SelectionConfig) -> TrajectoryScorer:
+    """``scorer`` at the selection's score steps (``cfg.score_every`` from ``cfg.score_from``;
+    ``score_every`` None: its own steps), sharing its denoiser."""
+    if cfg.score_every is None:
+        return scorer
+    steps = score_timesteps(scorer.schedule.num_steps, cfg.score_every, cfg.score_from)
+    return scorer.with_steps(steps)
+
+
 @torch.no_grad()
 def select_with_scorer(pred: torch.Tensor, cfg: SelectionConfig, batch: Batch,
                        scorer: TrajectoryScorer | None,
                        generator: torch.Generator | None = None) -> torch.Tensor:  # fmt: skip
-    """``select_samples`` with the residual and the pace gate computed by ``scorer`` (only for
-    the methods that read the score): pred [K, N, T_f, 2] -> idx [K', N]."""
+    """``select_samples`` with the residual and the pace gate computed by ``scorer`` at the
+    config's score steps (``score_steps``; only for the methods that read the score):
+    pred [K, N, T_f, 2] -> idx [K', N]."""
     residual = trusted = None
     if cfg.uses_score:
-        d = scorer.residual(batch, pred)  # [K, N, T_f]
+        d = score_steps(scorer, cfg).residual(batch, pred)  # [K, N, T_f]
         residual = d[..., -1] if cfg.final else d.sum(-1)  # [K, N]
         trusted = within_pace(batch, scorer.scale, cfg.trust_speed)  # [N] or None
     return select_samples(pred, cfg, residual, batch, generator, trusted)
@@ -356,7 +389,8 @@ def select_for_scene(scorer: TrajectoryScorer, history, samples, cfg: SelectionC
     """Keep ``cfg.keep`` of the K sampled futures of ONE scene given only its history (the
     planning use, beside ``rank_samples``): history [P, T_h, 2], samples [K, P, T_f, 2]
     (numpy arrays or tensors, in the scorer's units and lengths; the scorer checks them, and
-    its score is computed only for the methods that read it). Returns idx [K', P], sample
+    its score is computed only for the methods that read it, at ``cfg``'s score steps: with
+    the defaults, what ``trajpref predict --keep`` keeps). Returns idx [K', P], sample
     indices per agent in selection order (with ``cfg.per="scene"`` the P columns are equal):
     numpy when neither input is a tensor, else a tensor. Take the futures with
     ``samples[idx, np.arange(P)]``."""

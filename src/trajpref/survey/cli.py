@@ -137,8 +137,7 @@ def cmd_build(args, check_data_args: Callable[[argparse.Namespace], None],
 
     def warn(ds) -> None:  # as `evaluate` warns, for every checkpoint: methods and scorer
         for spec in dict.fromkeys([*cfg.models.values(), *([cfg.scorer] if cfg.scorer else [])]):
-            warn_if_trained_otherwise(spec, ds, args.time_step,
-                                      not getattr(args, "_interval_given", True))  # fmt: skip
+            warn_if_trained_otherwise(spec, ds)  # ds.info: its step, source and time step
 
     study = build_study(cfg, args.out, progress=not args.no_progress, on_data=warn)
     print(f"wrote {study.folder}: {len(study.scenes)} scenes x {len(study.methods)} panels "

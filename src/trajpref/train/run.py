@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from trajpref.config import ExperimentConfig, OptimConfig, save_config, to_dict
-from trajpref.data import run_splits
+from trajpref.data import run_splits, text
 from trajpref.data.registry import NAMES
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError
@@ -69,7 +69,9 @@ def run_identity(cfg: ExperimentConfig, name: str, start: str | None = None,
     shape stage ``name`` (data, model, diffusion, seed, its own section less ``RESUME_FREE``),
     ``start``, the hash of the checkpoint it starts from (the generator stage's denoiser,
     fine-tuning's generator), and with ``data`` the fingerprint of what it reads
-    (``data_fingerprint``, under the key ``data_files``)."""
+    (``data_fingerprint``, under the key ``data_files``). ``check_resume`` compares a key that
+    an older state lacks as null: a key added since with a null default (``data.frame_interval``,
+    ``data.units``) leaves such a state resumable."""
     full = to_dict(cfg)
     own = {k: v for k, v in full[name].items() if k not in RESUME_FREE}
     keep = {k: full[k] for k in ("data", "model", "diffusion", "seed")}
@@ -101,6 +103,17 @@ def data_fingerprint(train: TrajectoryDataset, val: TrajectoryDataset) -> dict[s
                     h.update(np.ascontiguousarray(values).tobytes())
         out[split] = {f: f"{counts[f]} windows, {digests[f].hexdigest()}" for f in sorted(counts)}
     return out
+
+
+def data_timing(train: TrajectoryDataset) -> dict[str, Any]:
+    """What a checkpoint records of the pace and units of the data it trained on (its meta's
+    ``data_timing``): ``frame_interval``, the seconds between a window's steps (the files'
+    interval times ``time_step``), ``interval_from`` (``DatasetInfo.interval_from``: whether
+    those seconds are known or the 0.4 s default assumed), ``time_step`` and ``units``.
+    ``evaluate``, ``predict`` and ``plot`` compare it with the data they are given."""
+    info = train.info
+    return {"frame_interval": info.frame_interval, "interval_from": info.interval_from,
+            "time_step": info.time_step, "units": info.units}  # fmt: skip
 
 
 def data_digest(data: dict[str, dict[str, str]]) -> str:
@@ -213,6 +226,21 @@ def check_resume_data(state: dict[str, Any], data: dict[str, dict[str, str]],
                           "as they were, or start a new run (without --resume)")  # fmt: skip
 
 
+def _matches_before_exact_labels(state: dict[str, Any], cfg: ExperimentConfig,
+                                 root: str | None) -> bool:  # fmt: skip
+    """Whether a resume state's data are the run's data with the scene ids of before
+    2026-12-06, when frames that ``time_step`` resampled kept their float noise in their ids
+    (``227.70000000000002``, now ``227.7``: ``text.frame_labels``): such a state resumes.
+    Read again only when the fingerprints differ."""
+    with text.exact_frame_labels():
+        before = data_fingerprint(*run_splits(cfg.data, root))
+    try:
+        check_resume_data(state, before, "")
+    except ConfigError:
+        return False
+    return True
+
+
 def finished(path: str | Path, optim: OptimConfig) -> bool:
     """Whether the resume state at ``path`` has nothing left to train under ``optim`` (its
     epochs done, or its ``max_minutes`` spent), which a resume refuses: a script that trains
@@ -318,7 +346,11 @@ def _run(
         train, val = run_splits(cfg.data, data_root)
         data = data_fingerprint(train, val)
         if state is not None:
-            check_resume_data(state, data, resume)
+            try:
+                check_resume_data(state, data, resume)
+            except ConfigError:
+                if not _matches_before_exact_labels(state, cfg, data_root):
+                    raise
         built, optim = build(train, val, dev)
         if state is not None:
             check_resume_matches(state, built.trainable, resume, optim.ema_epochs > 0)
@@ -333,7 +365,8 @@ def _run(
         start_time = time.perf_counter()
         summary = fit(built, train, cfg.data, optim, out_dir, dev, cfg.seed, state, info,
                       progress, max_steps, run_identity(cfg, name, start, data),
-                      {"data_hash": data_digest(data)})  # fmt: skip
+                      {"data_hash": data_digest(data),
+                       "data_timing": data_timing(train)})  # fmt: skip
         summary["wall_seconds"] = time.perf_counter() - start_time
         barrier(info)  # every rank done (rank 0 may still have been writing) before teardown
         summary["train_agents"] = train.num_agents
