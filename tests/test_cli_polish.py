@@ -276,3 +276,39 @@ def test_the_step_hint_keeps_the_time_step_given_and_names_an_assumed_interval(c
     assert code == 0 and err.strip().endswith(
         "this data steps 0.2 s, the model's 0.4 s (--time-step 4 reads it at the model's step)"
     )
+
+
+def test_the_sampling_flags_say_when_a_generator_takes_no_denoising_step(
+    capsys, monkeypatch, walks, tiny_run
+):
+    gen = tiny_run / "generator.safetensors"
+    base = ["evaluate", "--dataset", walks, "--model", gen, "--samples", "2", "--no-progress",
+            "--device", "cpu", "--stochastic"]  # fmt: skip
+    code, _, err = _run(capsys, *base)
+    assert (code, err) == (0, "")  # tau > 0: the flag acts
+    load = cli.load_predictor
+
+    def without_steps(*args, **kwargs):
+        model = load(*args, **kwargs)
+        model.tau = 0
+        return model
+
+    monkeypatch.setattr(cli, "load_predictor", without_steps)
+    code, _, err = _run(capsys, *base)
+    assert code == 0
+    assert err.strip() == (
+        f"trajpref: warning: {gen} takes no denoising step (model.tau 0): its "
+        "samples are the generator's own, and --stochastic changes nothing"
+    )
+
+
+def test_the_denoiser_stage_answers_to_its_file_name_and_subcommands_are_named(
+    capsys, tmp_path, monkeypatch
+):
+    code, _, err = _run(capsys, "data")
+    assert code == 2 and "the following arguments are required: COMMAND" in err
+    seen = []
+    # main() builds its parser on each call, so the parser takes the patched command
+    monkeypatch.setattr(cli, "cmd_train", lambda args: seen.append(args.stage) or 0)
+    code, _, _ = _run(capsys, "train", "denoiser", "--out", tmp_path / "r")
+    assert code == 0 and seen == ["diffusion"]

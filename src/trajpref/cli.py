@@ -114,7 +114,9 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
                        "since 2026-11-24)")  # fmt: skip
     steps.add_argument("--stochastic", action="store_true",
                        help="diffusion models: DDPM's ancestral noise in the tau denoising "
-                       "steps (what the published generators were trained with)")  # fmt: skip
+                       "steps (how generators published before 2026-11-24 sampled; those "
+                       "published since 2026-11-27 have no denoising step, tau 0, so neither "
+                       "flag changes them, and it says so)")  # fmt: skip
     p.add_argument("--max-speed", type=float, default=None,
                    help="generators: see agents faster than this many model units per "
                    "observed step at that speed and scale their prediction back up (0: off; "
@@ -217,10 +219,10 @@ def build_parser() -> argparse.ArgumentParser:
         description="Human trajectory prediction with a diffusion model refined by RLHF.",
     )
     parser.add_argument("--version", action="version", version=f"trajpref {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     data = sub.add_parser("data", help="inspect datasets")
-    data_sub = data.add_subparsers(dest="data_command", required=True)
+    data_sub = data.add_subparsers(dest="data_command", required=True, metavar="COMMAND")
     stats = data_sub.add_parser("stats", help="counts and basic statistics of one split")
     _add_data_args(stats)
     stats.add_argument("--json", action="store_true", help="print JSON")
@@ -319,7 +321,11 @@ def build_parser() -> argparse.ArgumentParser:
     pl.set_defaults(func=cmd_plot)
 
     tr = sub.add_parser("train", help="train the denoiser (diffusion) or the generator")
-    tr.add_argument("stage", choices=["diffusion", "generator"])
+    tr.add_argument("stage", choices=["diffusion", "denoiser", "generator"],
+                    help="diffusion (also called denoiser: the stage's files are denoiser.*): "
+                    "the denoiser of Eq. 2, the diffusion score's model; generator: the "
+                    "leapfrog generator trained through a frozen denoiser "
+                    "(--denoiser)")  # fmt: skip
     tr.add_argument("--config", default=None, help="YAML config (default: built-in defaults)")
     tr.add_argument("--dataset", default=None, help="shortcut for --set data.dataset=NAME")
     tr.add_argument("--frame-interval", type=float, default=None, metavar="SECONDS",
@@ -397,7 +403,7 @@ def build_parser() -> argparse.ArgumentParser:
     ft.set_defaults(func=cmd_finetune)
 
     cf = sub.add_parser("config", help="the training config's keys, values and meanings")
-    cf_sub = cf.add_subparsers(dest="config_command", required=True)
+    cf_sub = cf.add_subparsers(dest="config_command", required=True, metavar="COMMAND")
     show = cf_sub.add_parser("show", help="print every config key with its value and docstring")
     show.add_argument("--config", default=None, help="YAML config to resolve (default: the "
                       "built-in defaults)")  # fmt: skip
@@ -420,14 +426,18 @@ def build_parser() -> argparse.ArgumentParser:
     co.add_argument("groups", nargs="+", metavar="NAME=DIR[,DIR...]",
                     help="a group of runs (e.g. the seeds of one setting) or one run folder; "
                     "changes are against the first group")  # fmt: skip
-    co.add_argument("--stage", choices=compare.STAGES, default="generator")
+    co.add_argument("--stage", choices=compare.STAGES, default="generator",
+                    help="which stage's <stage>_metrics.jsonl to read (default "
+                    "generator)")  # fmt: skip
     co.add_argument("--metrics", nargs="+", default=None,
                     help="validated metrics to show (keys of <stage>_metrics.jsonl; default "
                     "val_min_ade val_min_fde, for the denoiser val_denoise_loss); the kept "
                     "epoch is always the lowest val_score, as the training loop keeps "
                     "it")  # fmt: skip
     co.add_argument("--shares", nargs="+", type=float, default=[0.25, 0.5, 0.75, 1.0],
-                    help="shares of each run's schedule at which to show its curve")  # fmt: skip
+                    help="shares of each run's schedule (its epochs, or its time budget when "
+                    "that ended it) at which to show its curve (default 0.25 0.5 0.75 "
+                    "1)")  # fmt: skip
     co.add_argument("--json", action="store_true", help="print the numbers as JSON")
     co.set_defaults(func=cmd_compare)
     return parser
@@ -584,6 +594,10 @@ def _predictor(args):
         flag = "--deterministic" if args.deterministic else "--stochastic"
         if not hasattr(model, "stochastic"):
             raise ConfigError(f"{flag} applies to diffusion checkpoints only")
+        if model.sampler == "leapfrog" and model.tau == 0:
+            warnings.warn(f"{args.model} takes no denoising step (model.tau 0): its samples are "
+                          f"the generator's own, and {flag} changes nothing",
+                          stacklevel=2)  # fmt: skip
         model.stochastic = bool(args.stochastic)
     for flag, name in (("--max-speed", "max_speed"), ("--spread-scale", "spread_scale"),
                        ("--max-log-sigma", "max_log_sigma")):  # fmt: skip
@@ -963,8 +977,9 @@ def cmd_evaluate(args) -> int:
     else:
         print(
             f"{ds.info.name}/{ds.info.split}{_protocol_tag(ds, args.holdout_scene)}  "
-            f"model={args.model}  K={samples}  "
-            f"({out['agents']} agents, {out['scenes']} scenes, units {ds.info.units})"
+            f"model={args.model}{'' if args.sampler is None else f' ({args.sampler} sampler)'}"
+            f"  K={samples}  ({out['agents']} agents, {out['scenes']} scenes, "
+            f"units {ds.info.units})"
             + ("" if args.keep is None else f", kept by {args.select} of {args.samples}")
         )
         print(
@@ -1336,6 +1351,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
+        if getattr(args, "command", None) == "train" and args.stage == "denoiser":
+            args.stage = "diffusion"  # the stage's other name, as its files and compare call it
     except SystemExit as exc:  # --help, --version, or a usage error (already printed)
         return exc.code if isinstance(exc.code, int) else 2
     before = _resume_state(args)[1]

@@ -32,7 +32,7 @@ def add_parser(
     of docs/architecture.md, so it may not import them)."""
     sv = subparsers.add_parser("survey", help="a human-evaluation study (the paper's Table 3): "
                                "build, serve, simulate, analyze")  # fmt: skip
-    sub = sv.add_subparsers(dest="survey_command", required=True)
+    sub = sv.add_subparsers(dest="survey_command", required=True, metavar="COMMAND")
 
     b = sub.add_parser("build", help="pick scenes, render each method's top futures, blind them")
     add_data_args(b)  # --dataset, --split, --data-root, ... as `trajpref evaluate` has them
