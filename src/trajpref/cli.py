@@ -9,7 +9,6 @@ import dataclasses
 import json
 import math
 import os
-import shlex
 import sys
 import textwrap
 import time
@@ -53,7 +52,13 @@ from trajpref.score.scorer import PRECISIONS
 from trajpref.score.selection import METHODS, SelectingPredictor, SelectionConfig
 from trajpref.survey.cli import add_parser as add_survey_parser
 from trajpref.train import compare
-from trajpref.train.run import STAGE_NAMES, finetune, last_state_path, train_stage
+from trajpref.train.run import (
+    STAGE_NAMES,
+    cli_resume_command,
+    finetune,
+    last_state_path,
+    train_stage,
+)
 from trajpref.types import collate
 from trajpref.viz.plot import plot_scene, plot_scene_scored
 
@@ -1328,19 +1333,9 @@ def _resume_hint(args, argv: list[str], before: tuple[int, int] | None) -> str:
         resume = args.resume  # no epoch ended in this run: the state it started from
     else:
         return "; no epoch ended, so there is nothing to resume (run the command again)"
-    rest, skip = [], False
-    for arg in argv:  # the same command, with --resume replaced
-        if skip:
-            skip = False
-        elif arg == "--resume":
-            skip = True
-        elif not arg.startswith("--resume="):
-            rest.append(arg)
     # under torchrun, the same number of processes (another count changes the batches)
     world = int(os.environ.get("WORLD_SIZE", "1") or 1)
-    launcher = (["torchrun", f"--nproc_per_node={world}", "-m", "trajpref.cli"] if world > 1
-                else ["trajpref"])  # fmt: skip
-    command = shlex.join([*launcher, *rest, "--resume", resume])
+    command = cli_resume_command(argv, resume, world)
     return f"; to continue from the last finished epoch:\n  {command}"
 
 

@@ -127,3 +127,20 @@ def test_the_seed_defaults_to_0_not_to_the_starts(tiny_run, tmp_path):
     assert finetune_config(str(start), "rlhf").seed == 0
     assert finetune_config(str(start), "rlhf", seed=3).seed == 3
     assert finetune_config(str(start), "rlhf", overrides=["seed=5"], seed=3).seed == 5
+
+
+def test_a_folder_models_description_is_dropped_for_a_built_in_dataset(tiny_run, tmp_path):
+    payload = ckpt.load(tiny_run / "generator.safetensors")
+    payload["config"]["data"].update(frame_interval=0.1, units="m")  # trained on a folder
+    start = tmp_path / "folder.safetensors"
+    ckpt.save(start, payload)
+    cfg = finetune_config(str(start), "rlhf", overrides=["data.dataset=zara1"])
+    assert (cfg.data.dataset, cfg.data.frame_interval, cfg.data.units) == ("zara1", None, None)
+    # on another folder, or on its own, the description stays
+    cfg = finetune_config(str(start), "rlhf", overrides=[f"data.dataset={tmp_path}"])
+    assert (cfg.data.frame_interval, cfg.data.units) == (0.1, "m")
+    assert finetune_config(str(start), "rlhf").data.frame_interval == 0.1
+    # given for a built-in dataset by the user, it is still refused
+    with pytest.raises(ConfigError, match="zara1 is a built-in one"):
+        finetune_config(str(start), "rlhf", overrides=["data.dataset=zara1",
+                                                       "data.units=m"])  # fmt: skip

@@ -100,9 +100,36 @@ def test_epochs_done_reads_a_resume_state(tiny_cfg, tmp_path):
 # --- resumes: the command to follow, the data, the time budget; a replaced run's record
 
 
-def _record(out, name, command):
+def _record(out, name, command, **session):
     out.mkdir(parents=True, exist_ok=True)
-    run_record_path(out, name).write_text(json.dumps([{"command": command}]))
+    run_record_path(out, name).write_text(json.dumps([{"command": command, **session}]))
+
+
+def test_the_resume_advice_keeps_the_seed_and_the_launcher_it_ran_with(tmp_path):
+    from trajpref.train.run import resume_command
+
+    out, last = tmp_path / "ft", tmp_path / "ft" / "finetune_last.pt"
+    # a run without --seed ran with the seed it recorded (once the start's): the advice says it
+    _record(out, "finetune", "python /venv/bin/trajpref finetune --method rlhf --out o",
+            seed=1, world_size=1)  # fmt: skip
+    assert resume_command(out, "finetune", last) == (
+        f"trajpref finetune --method rlhf --out o --seed 1 --resume {last}"
+    )
+    _record(out, "finetune", "python /venv/bin/trajpref finetune --seed=4 --out o", seed=4)
+    assert resume_command(out, "finetune", last) == (
+        f"trajpref finetune --seed=4 --out o --resume {last}"
+    )
+    # torchrun (and python -m trajpref.cli) record the module's file: the advice resumes it,
+    # with the same number of processes
+    _record(out, "finetune", "python /x/site-packages/trajpref/cli.py train generator --out o "
+            "--resume o/old.pt", seed=0, world_size=2)  # fmt: skip
+    assert resume_command(out, "finetune", last) == (
+        f"torchrun --nproc_per_node=2 -m trajpref.cli train generator --out o --seed 0 "
+        f"--resume {last}"
+    )
+    # a script that resumes by itself is given as it ran
+    _record(out, "finetune", "python /x/benchmarks/cli.py --seed 2", seed=2)
+    assert resume_command(out, "finetune", last) == "python /x/benchmarks/cli.py --seed 2"
 
 
 def test_a_refused_resume_gives_the_command_that_started_the_run(tiny_cfg, tmp_path):

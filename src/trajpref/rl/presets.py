@@ -7,7 +7,13 @@ import math
 from pathlib import Path
 from typing import Any
 
-from trajpref.config import ExperimentConfig, FinetuneConfig, load_config, to_dict
+from trajpref.config import (
+    BUILTIN_DATASETS,
+    ExperimentConfig,
+    FinetuneConfig,
+    load_config,
+    to_dict,
+)
 from trajpref.errors import ConfigError
 from trajpref.models import checkpoint
 
@@ -95,6 +101,18 @@ def _override_keys(overrides: list[str]) -> set[str]:
     return {text.partition("=")[0].strip() for text in overrides}
 
 
+def _undescribed(data: dict[str, Any], overrides: list[str]) -> list[str]:
+    """Overrides that drop the start's folder description (``data.frame_interval``,
+    ``data.units``) when ``overrides`` move fine-tuning to a built-in dataset, which knows its
+    own and refuses one; a description the overrides give themselves stays theirs."""
+    given = {k: v for k, _, v in (o.partition("=") for o in overrides)}
+    dataset = given.get("data.dataset", "").strip()
+    if dataset not in BUILTIN_DATASETS:
+        return []
+    return [f"data.{key}=null" for key in ("frame_interval", "units")
+            if data.get(key) is not None and f"data.{key}" not in given]  # fmt: skip
+
+
 def _check_reads(cfg: ExperimentConfig, method: str, overrides: list[str]) -> None:
     """Refuse settings the method does not read: the control with an RL-only setting named in
     ``overrides`` or changed from its default (by a YAML file), RLHF-ReS with the set-aware
@@ -158,6 +176,7 @@ def finetune_config(
     # the start's resolved config (a file older than a changed default keeps its own value)
     resolved = to_dict(checkpoint.config_of(payload))
     base = {k: v for k, v in resolved.items() if k != "finetune"}
+    extra += _undescribed(base.get("data", {}), overrides or [])
     cfg = load_config(config, [*extra, *(overrides or [])], base=base, sections=("finetune",))
     if cfg.finetune.method != method:
         raise ConfigError(f"finetune.method={cfg.finetune.method} contradicts --method {method}; "

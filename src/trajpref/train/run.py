@@ -134,27 +134,48 @@ def _shown(changes: list[str]) -> str:
     return "; ".join(changes[:3]) + (f" (and {len(changes) - 3} more)" if len(changes) > 3 else "")
 
 
-def resume_command(out_dir: str | Path, name: str, resume: str | Path) -> str | None:
-    """The command that started the run's last session, as ``<name>_run.json`` records it,
-    made to resume from ``resume``: for the ``trajpref`` command its ``--resume`` is replaced
-    (and ``python .../trajpref`` shortened to ``trajpref``); another command (a script that
-    resumes by itself) is given as it was. None without a record."""
-    try:
-        command = json.loads(run_record_path(out_dir, name).read_text())[-1]["command"]
-        args = shlex.split(command)
-    except (OSError, ValueError, LookupError, TypeError, AttributeError):
-        return None
-    if len(args) < 2 or Path(args[1]).name != "trajpref":
-        return command
+def cli_resume_command(argv: list[str], resume: str | Path, world_size: int = 1,
+                       seed: int | None = None) -> str:  # fmt: skip
+    """The ``trajpref`` command ``argv`` (its arguments after the program name) made to resume
+    from ``resume``: its ``--resume`` replaced, launched by ``torchrun`` with the same number
+    of processes when ``world_size`` > 1 (another count changes the batches), and with
+    ``--seed seed`` added when ``argv`` gives none (a run without ``--seed`` records the seed
+    it ran with, which another default would not restore)."""
     rest, skip = [], False
-    for arg in args[2:]:  # the same options, --resume replaced
+    for arg in argv:  # the same options, --resume replaced
         if skip:
             skip = False
         elif arg == "--resume":
             skip = True
         elif not arg.startswith("--resume="):
             rest.append(arg)
-    return shlex.join(["trajpref", *rest, "--resume", str(resume)])
+    if seed is not None and not any(a == "--seed" or a.startswith("--seed=") for a in rest):
+        rest += ["--seed", str(seed)]
+    launcher = (["torchrun", f"--nproc_per_node={world_size}", "-m", "trajpref.cli"]
+                if world_size > 1 else ["trajpref"])  # fmt: skip
+    return shlex.join([*launcher, *rest, "--resume", str(resume)])
+
+
+def resume_command(out_dir: str | Path, name: str, resume: str | Path) -> str | None:
+    """The command that started the run's last session, as ``<name>_run.json`` records it,
+    made to resume from ``resume`` (``cli_resume_command``, with the session's process count
+    and seed) when it ran the ``trajpref`` command (``python .../bin/trajpref``, or
+    ``.../trajpref/cli.py`` under ``torchrun`` or ``python -m trajpref.cli``); another command
+    (a script that resumes by itself) is given as it was. None without a record."""
+    try:
+        session = json.loads(run_record_path(out_dir, name).read_text())[-1]
+        command = session["command"]
+        args = shlex.split(command)
+    except (OSError, ValueError, LookupError, TypeError, AttributeError):
+        return None
+    program = Path(args[1]) if len(args) > 1 else None
+    if program is None or not (program.name == "trajpref" or (
+            program.name == "cli.py" and program.parent.name == "trajpref")):  # fmt: skip
+        return command
+    world = session.get("world_size", 1)
+    seed = session.get("seed")
+    return cli_resume_command(args[2:], resume, world if isinstance(world, int) else 1,
+                              seed if isinstance(seed, int) else None)  # fmt: skip
 
 
 def check_resume(state: dict[str, Any], identity: str, epochs: int, out_dir: Path,
