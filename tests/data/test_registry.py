@@ -317,7 +317,7 @@ def test_a_held_out_scene_leaves_training_and_is_the_whole_validation_split():
     files = ("biwi_hotel", "students001", "students003", "crowds_zara02")
     train = TrajectoryDataset([_from(f"{f}_train.txt", i) for i, f in enumerate(files)], info)
     val = TrajectoryDataset([_from("biwi_hotel_val.txt", 4), _from("students001_val.txt", 5)],
-                            dataclasses.replace(info, split="val"))  # fmt: skip
+                            dataclasses.replace(info, split="val", source="fold/val"))  # fmt: skip
     kept, held = hold_out_scene(train, val, "students")
     assert [s.scene_id for s in kept.scenes] == [
         "biwi_hotel_train.txt@frame=0", "crowds_zara02_train.txt@frame=30"]  # fmt: skip
@@ -543,3 +543,22 @@ def test_run_splits_read_a_folder_at_the_data_configs_interval_and_units(tmp_pat
         DataConfig(dataset=str(tmp_path / "d"), frame_interval=0)
     with pytest.raises(ConfigError, match=r"DataConfig\.units must be a unit name"):
         DataConfig(dataset=str(tmp_path / "d"), units="")
+
+
+def test_holding_out_a_scene_of_a_folder_without_splits_validates_each_window_once(tmp_path):
+    from synthetic import write_dataset
+
+    root = write_dataset(tmp_path / "d", frames=30)
+    flat = tmp_path / "flat"
+    flat.mkdir()
+    for f in (root / "train").iterdir():  # one folder, read as every split
+        (flat / f.name).write_bytes(f.read_bytes())
+    train, val = run_splits(DataConfig(dataset=str(flat), holdout_scene="walk1"))
+    whole = load_dataset(str(flat), "train")
+    held = [s.scene_id for s in whole.scenes if s.scene_id.startswith("walk1")]
+    assert [s.scene_id for s in val.scenes] == held  # once, not twice
+    assert len(train) + len(val) == len(whole)
+    # with split folders the held-out scene's validation windows join its training ones
+    _, val = run_splits(DataConfig(dataset=str(root), holdout_scene="walk0"))
+    own = load_dataset(str(root), "train").scenes + load_dataset(str(root), "val").scenes
+    assert len(val) == sum(s.scene_id.startswith("walk0") for s in own) > len(held)

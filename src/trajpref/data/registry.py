@@ -178,7 +178,8 @@ def hold_out_scene(
     """Model selection on a scene the model has not trained on: the training windows of the
     files whose name starts with ``prefix`` (one of a fold's training scenes, e.g.
     ``biwi_hotel`` or ``students``) leave the training split, and that scene's windows of both
-    splits become the validation split (the other scenes' validation windows are dropped).
+    splits become the validation split (the other scenes' validation windows are dropped; when
+    both splits read the same files, a folder without split sub-folders, its windows once).
     An ETH/UCY fold's usual validation split holds files of the very scenes it trains on; this
     one asks what the fold's test asks, how a model does on a new scene."""
     if not prefix:
@@ -193,7 +194,8 @@ def hold_out_scene(
         )
     if not kept:
         raise ConfigError(f"holding out {prefix!r} leaves {train.info.name} no training file")
-    held += [s for s in val.scenes if scene_file(s).startswith(prefix)]
+    if val.info.source != train.info.source:  # a folder without split sub-folders: the same
+        held += [s for s in val.scenes if scene_file(s).startswith(prefix)]  # windows again
     note = f" (held-out scene {prefix})"
     train_info = dataclasses.replace(train.info, source=train.info.source + f" minus {prefix}*")
     val_info = dataclasses.replace(val.info, source=train.info.source + note)
