@@ -58,7 +58,7 @@ from trajpref.results import (
     table_lines,
     update_readme,
 )
-from trajpref.rl.presets import equal_budget_args
+from trajpref.rl.presets import EQUAL_BUDGET_WARMUP, equal_budget_args
 from trajpref.train import read_metrics
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -93,7 +93,7 @@ def main() -> None:
     parser.add_argument(
         "--warmup",
         type=int,
-        default=4,
+        default=EQUAL_BUDGET_WARMUP,
         help="learning-rate warm-up steps, the same for every method (the default 20 would "
         "leave the RL methods, which fit ~16 steps in 4 CPU minutes, below the full rate)",
     )

@@ -68,7 +68,7 @@ from trajpref.io import read_checkpoint_header, write_json
 from trajpref.models import checkpoint as ckpt
 from trajpref.models.baseline import ConstantVelocity
 from trajpref.results import command_line, machine
-from trajpref.rl.presets import equal_budget_args
+from trajpref.rl.presets import EQUAL_BUDGET_WARMUP, equal_budget_args
 from trajpref.score.scorer import NOISE_LAYOUT, TrajectoryScorer
 from trajpref.types import TrajectoryDataset
 
@@ -769,7 +769,7 @@ def parse_args(argv: list[str] | None, setup: Setup) -> argparse.Namespace:
     parser.add_argument(
         "--warmup",
         type=int,
-        default=4,
+        default=EQUAL_BUDGET_WARMUP,
         help="full mode: learning-rate warm-up steps (equal_budget.py's)",
     )
     parser.add_argument(

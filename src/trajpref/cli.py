@@ -721,12 +721,6 @@ def _warn_if_trained_otherwise(spec: str, ds) -> None:
                       stacklevel=2)  # fmt: skip
 
 
-def _warn_trained(args, ds) -> None:
-    """``_warn_if_trained_otherwise`` for the command's model (``ds.info`` holds how the data
-    was read: its --time-step and where its frame interval comes from)."""
-    _warn_if_trained_otherwise(args.model, ds)
-
-
 def _set_generator(model, flag: str, **setting) -> None:
     """Change a sampling setting of a leapfrog predictor's generator (ConfigError for other
     models)."""
@@ -943,7 +937,7 @@ def cmd_evaluate(args) -> int:
     scorer = _scorer(args.scorer, device, args) if args.scorer else None
     model, samples = _selecting(args, model, device, scores=scorer is not None)
     ds = _load(args)
-    _warn_trained(args, ds)
+    _warn_if_trained_otherwise(args.model, ds)
     start = time.perf_counter()
     result = evaluate(
         model, ds, samples, args.seed, device, args.max_agents,
@@ -1014,7 +1008,7 @@ def _evaluate_in_context(args) -> int:
         check_output_file(args.out)
     model, device = _predictor(args)
     ds = _load(args)
-    _warn_trained(args, ds)
+    _warn_if_trained_otherwise(args.model, ds)
     result = evaluate_in_context(model, ds, cfg, args.samples, args.seed, device=device,
                                  progress=not args.no_progress)  # fmt: skip
     out = {"dataset": ds.info.name, "split": ds.info.split, "protocol": ds.info.protocol,
@@ -1069,7 +1063,7 @@ def cmd_predict(args) -> int:
         scorer = _scorer(args.scorer or args.model, device, args)
     model, samples = _selecting(args, model, device, scores=scorer is not None)
     ds = _load(args)
-    _warn_trained(args, ds)
+    _warn_if_trained_otherwise(args.model, ds)
     arrays = predict_dataset(
         model, ds, samples, args.seed, device, args.max_agents,
         progress=not args.no_progress, scorer=scorer,
@@ -1106,7 +1100,7 @@ def cmd_plot(args) -> int:
         raise ConfigError(f"--scene {args.scene}: scene indices start at 0")
     model, device = _predictor(args)
     ds = _load(args)
-    _warn_trained(args, ds)
+    _warn_if_trained_otherwise(args.model, ds)
     if not 0 <= args.scene < len(ds):
         raise TrajprefError(f"--scene {args.scene}: the split has scenes 0..{len(ds) - 1}")
     scene = ds[args.scene]

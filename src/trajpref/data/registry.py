@@ -487,22 +487,20 @@ def _trajnet(
             rates.setdefault(rate, path.name)
     if not scenes:
         raise DataError("no TrajNet++ scene has 20 frames of its primary agent", source)
-    interval = trajnet_interval(rates, frame_interval, source)
-    if len(rates) == 1:
-        origin = "declared"  # the files' own rate, whatever was given
-    else:
-        origin = "default" if frame_interval is None else "given"
+    interval, origin = trajnet_interval(rates, frame_interval, source)
     info = DatasetInfo(name, split, units, interval, 8, 12, str(source), interval_from=origin)
     return TrajectoryDataset(scenes, info)
 
 
-def trajnet_interval(rates: dict[float, str], given: float | None, source: Path) -> float:
+def trajnet_interval(rates: dict[float, str], given: float | None,
+                     source: Path) -> tuple[float, str]:  # fmt: skip
     """Seconds between frames of TrajNet++ files whose scenes declare the frame rates
     ``rates`` (fps -> a file declaring it), with ``given`` the interval the user passed
-    (None: none). One rate: ``1 / fps``, and a ``FrameRateWarning`` when ``given`` differs
-    (the files' own rate is used). Several rates: ``given`` with a ``FrameRateWarning``, or a
-    ``DataError`` without one, since one dataset's windows would step different times. No
-    rate: ``given``, else ``DEFAULT_FRAME_INTERVAL``."""
+    (None: none), and where they come from (``DatasetInfo.interval_from``, as
+    ``text_interval``). One rate: ``1 / fps`` (``declared``), and a ``FrameRateWarning`` when
+    ``given`` differs (the files' own rate is used). Several rates: ``given`` with a
+    ``FrameRateWarning``, or a ``DataError`` without one, since one dataset's windows would
+    step different times. No rate: ``given``, else ``DEFAULT_FRAME_INTERVAL`` (``default``)."""
     where = ", ".join(f"{rate:g} fps in {file}" for rate, file in sorted(rates.items()))
     if len(rates) > 1:
         if given is None:
@@ -513,9 +511,9 @@ def trajnet_interval(rates: dict[float, str], given: float | None, source: Path)
         warnings.warn(f"{source}: the TrajNet++ scenes declare different frame rates "
                       f"({where}); all are read at the frame interval given, {given:g} s",
                       trajnet.FrameRateWarning, stacklevel=3)  # fmt: skip
-        return given
+        return given, "given"
     if not rates:
-        return DEFAULT_FRAME_INTERVAL if given is None else given
+        return (DEFAULT_FRAME_INTERVAL, "default") if given is None else (given, "given")
     (rate,) = rates
     own = 1.0 / rate
     if given is not None and not math.isclose(given, own, rel_tol=1e-6):
@@ -523,7 +521,7 @@ def trajnet_interval(rates: dict[float, str], given: float | None, source: Path)
                       f"frames), which is used: the frame interval given ({given:g} s, "
                       "--frame-interval) is ignored", trajnet.FrameRateWarning,
                       stacklevel=3)  # fmt: skip
-    return own
+    return own, "declared"
 
 
 def _carve_val(n: int, fraction: float = VAL_FRACTION) -> np.ndarray:

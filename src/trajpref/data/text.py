@@ -291,6 +291,23 @@ def file_lines(fh: BinaryIO) -> Iterator[bytes]:
             yield from raw.splitlines(keepends=True)
 
 
+def _data_content(path: Path, layout: _Layout, errors: str = "strict") -> Iterator[tuple[int, str]]:
+    """``(line number, content)`` of each data line of a text track file: the header skipped,
+    a byte-order mark dropped, a ``#`` comment cut, blank lines skipped; text that is not
+    UTF-8 is a ``DataError`` naming its line (``errors="replace"``: decoded anyway)."""
+    with open_data_file(path) as fh:
+        for lineno, raw in enumerate(file_lines(fh), start=1):
+            if lineno == layout.header_line:
+                continue
+            try:
+                line = raw.decode("utf-8-sig" if lineno == 1 else "utf-8", errors)  # a BOM
+            except UnicodeDecodeError:
+                raise DataError("not UTF-8 text", path, lineno) from None
+            content = line.split("#", 1)[0]
+            if content.strip():
+                yield lineno, content
+
+
 def _parse_slow(path: Path, layout: _Layout, with_type: bool):
     """Line-by-line parser: the reference for what is accepted, and the source of the
     line-numbered error messages. Returns ``(values [R, 4], kinds [R] | None, lines [R])``."""
@@ -300,33 +317,23 @@ def _parse_slow(path: Path, layout: _Layout, with_type: bool):
     values = array("d")
     kinds: list[str] = []
     lines = array("q")
-    with open_data_file(path) as fh:
-        for lineno, raw in enumerate(file_lines(fh), start=1):
-            if lineno == layout.header_line:
-                continue
-            try:
-                line = raw.decode("utf-8-sig" if lineno == 1 else "utf-8")  # a BOM is dropped
-            except UnicodeDecodeError:
-                raise DataError("not UTF-8 text", path, lineno) from None
-            content = line.split("#", 1)[0]
-            if not content.strip():
-                continue
-            fields = _split(content.rstrip("\r\n"), delimiter)
-            if len(fields) != n_cols:
-                message = (
-                    f"expected {n_cols} columns ({expect}) separated by {_sep_name(delimiter)}, "
-                    f"found {len(fields)}"
-                )
-                raise DataError(message + _column_hint(content, delimiter, len(fields), n_cols),
-                                path, lineno)  # fmt: skip
-            try:
-                values.extend(float(v) for v in fields[:4])
-            except ValueError:
-                bad = next(v for v in fields[:4] if not _is_float(v))
-                raise DataError(f"not a number: {bad!r}", path, lineno) from None
-            if with_type:
-                kinds.append(fields[4])
-            lines.append(lineno)
+    for lineno, content in _data_content(path, layout):
+        fields = _split(content.rstrip("\r\n"), delimiter)
+        if len(fields) != n_cols:
+            message = (
+                f"expected {n_cols} columns ({expect}) separated by {_sep_name(delimiter)}, "
+                f"found {len(fields)}"
+            )
+            raise DataError(message + _column_hint(content, delimiter, len(fields), n_cols),
+                            path, lineno)  # fmt: skip
+        try:
+            values.extend(float(v) for v in fields[:4])
+        except ValueError:
+            bad = next(v for v in fields[:4] if not _is_float(v))
+            raise DataError(f"not a number: {bad!r}", path, lineno) from None
+        if with_type:
+            kinds.append(fields[4])
+        lines.append(lineno)
     table = np.frombuffer(values, dtype=np.float64).reshape(-1, 4)  # [R, 4]
     return table, (np.asarray(kinds, dtype="U16") if with_type else None), np.asarray(lines)
 
@@ -352,19 +359,11 @@ def _data_lines(path: Path, layout: _Layout, rows: Iterable[int]) -> dict[int, i
     accepted: a re-scan only done to word an error."""
     wanted = sorted(set(int(r) for r in rows))
     found: dict[int, int] = {}
-    row = -1
-    with open(path, "rb") as fh:
-        for lineno, raw in enumerate(file_lines(fh), start=1):
-            if lineno == layout.header_line:
-                continue
-            text = raw.decode("utf-8-sig" if lineno == 1 else "utf-8", "replace")  # a BOM
-            if not text.split("#", 1)[0].strip():
-                continue
-            row += 1
-            if row == wanted[len(found)]:
-                found[row] = lineno
-                if len(found) == len(wanted):
-                    break
+    for row, (lineno, _) in enumerate(_data_content(path, layout, "replace")):
+        if row == wanted[len(found)]:
+            found[row] = lineno
+            if len(found) == len(wanted):
+                break
     return found
 
 
@@ -455,15 +454,10 @@ def _exact_number(token: str) -> int | Decimal:
 def _agent_tokens(path: Path, layout: _Layout) -> list[str]:
     """The agent column's text of every data row, in file order (rows as ``_parse_slow``
     finds them)."""
-    tokens = []
-    with open_data_file(path) as fh:
-        for lineno, raw in enumerate(file_lines(fh), start=1):
-            if lineno == layout.header_line:
-                continue
-            content = raw.decode("utf-8-sig" if lineno == 1 else "utf-8").split("#", 1)[0]
-            if content.strip():
-                tokens.append(_split(content.rstrip("\r\n"), layout.delimiter)[1])
-    return tokens
+    return [
+        _split(content.rstrip("\r\n"), layout.delimiter)[1]
+        for _, content in _data_content(path, layout)
+    ]
 
 
 def _id_label(value) -> str:

@@ -216,16 +216,25 @@ def check_resume(state: dict[str, Any], identity: str, epochs: int, out_dir: Pat
             raise ConfigError(f"--resume {resume}: this run differs from the one that wrote the "
                               f"state ({_shown(changed)}); resume with {how}; only {name}."
                               f"{{{','.join(RESUME_FREE)}}} may change")  # fmt: skip
+    why = _nothing_left(state, epochs, max_minutes, name)
+    if why is not None:
+        raise ConfigError(f"--resume {resume}: {why}")
+
+
+def _nothing_left(state: dict[str, Any], epochs: int, max_minutes: float | None,
+                  name: str) -> str | None:  # fmt: skip
+    """Why a resume state of stage ``name`` has nothing left to train under ``epochs`` and
+    ``max_minutes`` (its epochs done, or its budget spent), or None when it has."""
     done = int(state["epoch"]) + 1
     if done >= epochs:
-        raise ConfigError(f"--resume {resume}: the state has finished {done} epochs and this run "
-                          f"has {epochs}: nothing left to train (raise {name}.epochs to train "
-                          "longer)")  # fmt: skip
+        return (f"the state has finished {done} epochs and this run has {epochs}: nothing left "
+                f"to train (raise {name}.epochs to train longer)")  # fmt: skip
     spent = float(state.get("spent", state.get("elapsed", 0.0)))  # the budget clock's seconds
     if max_minutes is not None and spent >= 60 * max_minutes:
-        raise ConfigError(f"--resume {resume}: the budget of {max_minutes:g} min is spent (the "
-                          f"state has trained {spent / 60:.3g} min): nothing left to train "
-                          f"(raise {name}.max_minutes to train longer)")  # fmt: skip
+        return (f"the budget of {max_minutes:g} min is spent (the state has trained "
+                f"{spent / 60:.3g} min): nothing left to train (raise {name}.max_minutes to "
+                "train longer)")  # fmt: skip
+    return None
 
 
 def check_resume_data(state: dict[str, Any], data: dict[str, dict[str, str]],
@@ -270,9 +279,7 @@ def finished(path: str | Path, optim: OptimConfig) -> bool:
     if not path.is_file():
         return False
     state = load_resume_state(path)
-    spent = float(state.get("spent", state["elapsed"]))
-    budget = optim.max_minutes is not None and spent >= 60 * optim.max_minutes
-    return int(state["epoch"]) + 1 >= optim.epochs or budget
+    return _nothing_left(state, optim.epochs, optim.max_minutes, "stage") is not None
 
 
 def epochs_done(path: str | Path) -> int:
