@@ -17,5 +17,7 @@ def test_demo_runs_the_whole_pipeline(tmp_path, capsys, monkeypatch):
     assert "robo-sim test split" in out
     for name in ("constant velocity (K=5)", "pretrained (leapfrog)", "RLHF-ReS"):
         assert name in out
+    # the tiny model is named as the demo's, not mistaken for the published Robo model
+    assert "demo model (1 generator epoch," in out and "not the published" in out
     assert (tmp_path / "robo_scene0_scored.png").stat().st_size > 1000
     assert (tmp_path / "run" / "rlhf-res" / "finetune.safetensors").is_file()

@@ -64,7 +64,15 @@ def run(out: Path, data_root: str | None, samples: int, seed: int, config: Path,
         "pretrained (leapfrog)": ckpt.load_predictor(generator),
         "RLHF-ReS": ckpt.load_predictor(run_dir / "rlhf-res" / f"finetune{ckpt.SUFFIX}"),
     }
-    print(f"[4/5] {where} ({test.num_agents} agents, {len(test)} scenes), metres, K={samples}:")
+    # The demo's models are small and briefly trained: say so wherever their output is shown,
+    # so a figure taken out of the demo is not read as the published Robo model's.
+    ft = ft_cfg.finetune
+    ft_budget = (f"{ft.epochs} RLHF-ReS epochs" if ft.steps_per_epoch is None
+                 else f"{ft.epochs * ft.steps_per_epoch} RLHF-ReS steps")  # fmt: skip
+    epochs = cfg.generator.epochs
+    demo_model = f"demo model ({epochs} generator epoch{'s' * (epochs != 1)}, {ft_budget})"
+    print(f"[4/5] {where} ({test.num_agents} agents, {len(test)} scenes), metres, K={samples}; "
+          f"the {demo_model}, not the published configs/robo.yaml one:")  # fmt: skip
     print(f"  {'method':<26} {'minADE':>7} {'minFDE':>7} {'jADE':>7} {'jFDE':>7} "
           f"{'maxATS':>7} {'maxFTS':>7}")  # fmt: skip
     for name, model in models.items():
@@ -80,9 +88,10 @@ def run(out: Path, data_root: str | None, samples: int, seed: int, config: Path,
     agent_ats = res.agent_ats.numpy()  # [K, P]
     figs = [
         plot_scene(scene.history, scene.future, pred.numpy(), out / "robo_scene0_rlhf_res.png",
-                   "m", f"{where}, scene 0, RLHF-ReS, K={samples}"),
+                   "m", f"{where}, scene 0, RLHF-ReS {demo_model}, K={samples}"),
         plot_scene_scored(scene.history, scene.future, pred.numpy(), agent_ats,
-                          out / "robo_scene0_scored.png", "m", f"{where}, scene 0"),
+                          out / "robo_scene0_scored.png", "m",
+                          f"{where}, scene 0, {demo_model}"),
     ]  # fmt: skip
     total = time.perf_counter() - t0
     print(f"[5/5] wrote {', '.join(str(f) for f in figs)} (total {total:.0f} s)")
