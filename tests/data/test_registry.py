@@ -505,6 +505,13 @@ def test_a_time_column_in_seconds_gives_the_frame_interval_unless_one_is_given(t
 
 @pytest.mark.parametrize("case, match", [
     ("ms", r"steps 100, which is no plausible number of seconds between frames "
+           r"\(milliseconds\? nanoseconds\? as milliseconds that is 0\.1 s, "
+           r"--frame-interval 0\.1\)"),
+    # 30 fps in milliseconds: 33 is no number of seconds between frames either
+    ("ms30", r"steps 33, which is no plausible number of seconds between frames "
+             r"\(milliseconds\? nanoseconds\? as milliseconds that is 0\.033 s, "
+             r"--frame-interval 0\.033\)"),
+    ("ns", r"steps 1e\+08, which is no plausible number of seconds between frames "
            r"\(milliseconds\? nanoseconds\?\)"),
     ("mixed", r"the files' time columns step differently \(0\.1 in a\.csv, 0\.4 in b\.csv\)"),
     ("untimed", r"a\.csv's frame column is a time in seconds, b\.csv's is not"),
@@ -514,8 +521,8 @@ def test_time_columns_that_give_no_one_interval_keep_the_default_and_say_so(tmp_
     from trajpref.data import FrameRateWarning
 
     folder = tmp_path / case
-    if case == "ms":
-        _timed(folder, 100, header="time,id,x,y")
+    if case in ("ms", "ms30", "ns"):
+        _timed(folder, {"ms": 100, "ms30": 33, "ns": 1e8}[case], header="time,id,x,y")
     else:
         _timed(folder, 0.1, name="a.csv")
         _timed(folder, 0.4, name="b.csv", header="timestamp,id,x,y" if case == "mixed"

@@ -640,3 +640,80 @@ def test_frame_labels_stay_distinct_when_frames_round_alike():
     close = np.array([0.1, 0.1 + 1e-9, 0.5])
     labels = frame_labels(close, 1e-6)
     assert len(set(labels)) == 3 and labels == ["0.1", "0.100000001", "0.5"]
+
+
+NS = 1_700_000_000_000_000_123  # a Unix time in nanoseconds: beyond 2**53, float64 rounds it
+
+
+def test_frame_numbers_beyond_float64_integers_stay_exact(tmp_path):
+    from trajpref.data.text import frame_step, read_files
+
+    # nanosecond timestamps at 10 Hz: float64 rounded every frame to a multiple of 256, so the
+    # scene ids named frames that are not in the file (...000 for ...123)
+    rows = [(NS + k * 100_000_000, a, 0.3 * k, a) for k in range(24) for a in (1, 2)]
+    path = write_tracks(tmp_path / "ns.txt", rows)
+    steps = {}
+    scenes = read_files([path], 8, 12, steps=steps)
+    assert [s.scene_id for s in scenes] == [f"ns.txt@frame={NS + k * 100_000_000}"
+                                            for k in range(5)]  # fmt: skip
+    assert steps[path] == (None, 100_000_000.0)
+    assert frame_step(read_tracks(path).frames) == 100_000_000.0
+    # read every 2 steps, the grid's frames are exact too
+    paced = read_files([path], 3, 4, options=ReadOptions(time_step=2))
+    assert paced[1].scene_id == f"ns.txt@frame={NS + 200_000_000}"
+    # frames one apart beyond 2**53: float64 merged neighbours into one frame and called the
+    # next row a duplicate
+    rows = [(2**53 + 1 + k, 1, 0.3 * k, 0) for k in range(22)]
+    scenes = window_scenes(read_tracks(write_tracks(tmp_path / "one.txt", rows)), 8, 12)
+    assert [s.scene_id for s in scenes] == [f"one.txt@frame={2**53 + 1 + k}" for k in range(3)]
+    # non-integer frames beyond 2**53 are read exactly from their text as well
+    rows = [(f"{NS + k}.5", 1, 0.3 * k, 0) for k in range(20)]
+    (scene,) = window_scenes(read_tracks(write_tracks(tmp_path / "dec.txt", rows)), 8, 12)
+    assert scene.scene_id == f"dec.txt@frame={NS}.5"
+    # two agents logged 1 ns apart are at different frames, not one (float64 merged them
+    # silently into windows of two agents)
+    rows = [(NS + k * 100_000_000 + a, a, 0.3 * k, a) for k in range(24) for a in (0, 1)]
+    tracks = read_tracks(write_tracks(tmp_path / "apart.txt", rows))
+    assert len(tracks.frames) == 48
+    # a repeated row names its exact frame and lines
+    dup = write_tracks(tmp_path / "dup.txt", [*rows, (NS + 1, 1, 5.0, 5.0)])
+    with pytest.raises(DataError, match=rf"duplicate row for frame {NS + 1}, agent 1 \(also "
+                       r"on line 2\)") as info:  # fmt: skip
+        read_tracks(dup)
+    assert info.value.line == 49
+
+
+def test_frame_numbers_float64_cannot_keep_apart_ask_to_rescale(tmp_path):
+    # frames from 0 to beyond 2**53 in one file: no origin makes float64 hold them all, and
+    # 2**53 and 2**53 + 1 (two agents' rows) became one frame without a word
+    rows = [(k, 1, 0.3 * k, 0) for k in range(21)]
+    rows += [(2**53, 2, 0.0, 0.0), (2**53 + 1, 3, 1.0, 1.0)]
+    with pytest.raises(DataError, match=r"frame numbers \(column 1\) 9007199254740992 and "
+                       r"9007199254740993 are 1 apart, but the file's frames span "
+                       r"9007199254740993 .*rescale the time column"):  # fmt: skip
+        read_tracks(write_tracks(tmp_path / "far.txt", rows))
+    # far apart yet held apart by float64: read as before
+    rows[-1] = (2**53 + 8, 3, 1.0, 1.0)
+    tracks = read_tracks(write_tracks(tmp_path / "far.txt", rows))
+    assert len(tracks.frames) == 23
+
+
+def test_numbers_only_in_the_syntax_numpy_reads(tmp_path):
+    # Python's float reads "1_12" and "11_2" both as 112 (digit separators), so two
+    # camera_track ids became one agent, whose track jumped from one walker to the other;
+    # numpy refuses them and the line parser, which took over, accepted them
+    rows = "".join(f"{f * 10} 1_12 {f * 0.3} 0\n" for f in range(10))
+    rows += "".join(f"{f * 10} 11_2 {f * 0.3} 5\n" for f in range(10, 20))
+    with pytest.raises(DataError, match="not a number: '1_12'") as info:
+        read_tracks(write_text(tmp_path / "cam.txt", rows))
+    assert info.value.line == 1
+    # and digits of other scripts (Arabic-Indic, full-width)
+    for digits in ("\u0661\u0662", "\uff11\uff12"):
+        path = write_text(tmp_path / "u.txt", f"0 1 2 3\n10 {digits} 2 3\n")
+        with pytest.raises(DataError, match="not a number") as info:
+            read_tracks(path)
+        assert info.value.line == 2
+    # a first line of such fields is a data line to refuse, not a header to skip
+    with pytest.raises(DataError, match="not a number: '1_0'") as info:
+        read_tracks(write_text(tmp_path / "h.txt", "1_0 2_0 3_0 4_0\n0 1 2 3\n"))
+    assert info.value.line == 1

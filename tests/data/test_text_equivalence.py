@@ -119,3 +119,23 @@ def test_nba_files_match_the_dense_reference(data_root):
     for path in files:
         new = window_scenes(read_tracks(path, True, scale=FEET_TO_METRES), 8, 12)
         assert_same(new, dense_reference(path, 8, 12, scale=FEET_TO_METRES, with_type=True))
+
+
+@pytest.mark.parametrize("time_step", [1.0, 2.0, 1.5])
+def test_read_files_is_the_per_file_reader(tmp_path, time_step):
+    # read_files works out each file's frame step once, for the steps it reports and for the
+    # resampling: the same scenes as reading, resampling and windowing each file on its own
+    from trajpref.data.text import ReadOptions, frame_step, read_files, resample_tracks
+
+    files = [random_tracks(tmp_path / f"r{seed}.txt", seed) for seed in (1, 3, 5)]
+    steps = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GapWarning)
+        got = read_files(files, 3, 4, options=ReadOptions(time_step=time_step), steps=steps)
+        want = []
+        for path in files:
+            tracks = read_tracks(path)
+            assert steps[path] == (None, frame_step(tracks.frames)) and steps[path][1] == 10
+            want += window_scenes(resample_tracks(tracks, time_step), 3, 4)
+    assert len(want) > 20
+    assert_same(got, want)

@@ -281,3 +281,55 @@ def test_old_mac_line_ends_and_an_upper_case_suffix(tmp_path):
     with pytest.raises(DataError, match="'x' must be a number") as info:
         read_trajnet(mac)
     assert info.value.line == 8
+
+
+def _raw_file(path, scenes: list[str], tracks: list[tuple[str, str, float, float]]):
+    """A scene file whose numbers are written as given (``"3.0"``, ``"9007199254740993"``)."""
+    lines = [f'{{"scene": {{{s}}}}}' for s in scenes]
+    lines += [f'{{"track": {{"f": {f}, "p": {p}, "x": {x}, "y": {y}}}}}' for f, p, x, y in tracks]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_ids_and_frames_written_as_floats_beyond_2_53_stay_exact(tmp_path):
+    big = 2**53  # 9007199254740993.0 is read by json as the float 9007199254740992.0
+    # agent big on frames 0..190, agent big + 1 on 200..300: float ids merged them into one
+    # track of 31 frames and its scene read half of another agent's walk without a word
+    tracks = [(str(f), f"{big}.0", f / 10, 0.0) for f in range(0, 200, 10)]
+    tracks += [(str(f), f"{big + 1}.0", 100 + f / 10, 5.0) for f in range(200, 310, 10)]
+    path = _raw_file(tmp_path / "a.ndjson", [f'"id": 1, "p": {big + 1}.0, "s": 0, "e": 300'],
+                     tracks)  # fmt: skip
+    with pytest.raises(DataError, match=f"scene 1: its primary agent {big + 1} has 11 frames"):
+        read_trajnet(path)
+    # both at the same frames: two agents (it was "duplicate row"), the float-written ids and
+    # frames read as the integers they are
+    tracks = [(f"{f}.0", f"{p}.0", f / 10, y) for f in range(0, 200, 10)
+              for p, y in ((big, 0.0), (big + 1, 1.0))]  # fmt: skip
+    path = _raw_file(tmp_path / "b.ndjson", [f'"id": 1, "p": {big + 1}.0, "s": 0, "e": 190.0'],
+                     tracks)  # fmt: skip
+    (scene,) = read_trajnet(path).scenes
+    np.testing.assert_array_equal(scene.history[:, 0, 1], [1, 0])  # the primary first
+    # nanosecond frames written as floats: 100 ns apart, two frames, not one
+    ns = 1_700_000_000_000_000_000
+    tracks = [(f"{ns + 10**8 * k + 100 * a}.0", str(a + 1), k / 10, a) for k in range(20)
+              for a in (0, 1)]  # fmt: skip
+    path = _raw_file(tmp_path / "c.ndjson", [f'"id": 1, "p": 1, "s": {ns}, "e": {ns + 10**10}'],
+                     tracks)  # fmt: skip
+    from trajpref.data.text import GapWarning
+
+    with pytest.warns(GapWarning, match="the file steps 100 frames"):  # 100 ns, 1e8 - 100, ...
+        (scene,) = read_trajnet(path).scenes
+    assert scene.num_agents == 1  # agent 2 is never at agent 1's frames
+
+
+def test_integers_too_large_for_float64_or_int64_are_read_or_refused_as_data(tmp_path):
+    # frames of 1e20 overflowed int64 and ids of 400 digits overflowed float (OverflowError)
+    huge = 10**20
+    tracks = [(str(huge + 10 * k), str(10**400), k / 10, 0.0) for k in range(20)]
+    path = _raw_file(tmp_path / "a.ndjson", [f'"id": 1, "p": {10**400}, "s": {huge}, '
+                     f'"e": {huge + 190}'], tracks)  # fmt: skip
+    (scene,) = read_trajnet(path).scenes
+    np.testing.assert_allclose(scene.future[0, :, 0], np.arange(8, 20) / 10)
+    path.write_text(path.read_text().replace('"x": 0.0', '"x": 1e400'))
+    with pytest.raises(DataError, match="'x' is NaN or infinite"):
+        read_trajnet(path)

@@ -37,10 +37,12 @@ ignoring case (``a.TXT``, ``b.Csv``)."""
 DEFAULT_FRAME_INTERVAL = 0.4
 """Seconds between frames of a user folder when none is given (and, for TrajNet++ files,
 none is declared; for text files, their frame column is not named as seconds)."""
-SECONDS_STEPS = (1e-3, 60.0)
+SECONDS_STEPS = (1e-3, 10.0)
 """The frame steps of a ``time``/``timestamp`` column (``text.SECONDS_COLUMNS``) that are read
 as seconds; a step outside (milliseconds, nanoseconds) leaves ``DEFAULT_FRAME_INTERVAL`` with
-a ``FrameRateWarning``."""
+a ``FrameRateWarning``. The ceiling is 10 s, not more: a log in milliseconds at 17-100 Hz
+steps 10-60, which a 60 s ceiling read as seconds (a 30 fps file at 33 s between frames, its
+speeds a thousand times too low)."""
 
 FEET_TO_METRES = 0.3048
 
@@ -432,7 +434,10 @@ def text_interval(steps: dict[Path, tuple[str | None, float]], given: float | No
         why = f"the files' time columns step differently ({where})"
     elif not SECONDS_STEPS[0] <= first <= SECONDS_STEPS[1]:
         why = (f"the files' time column steps {first:.6g}, which is no plausible number of "
-               f"seconds between frames (milliseconds? nanoseconds?)")  # fmt: skip
+               f"seconds between frames (milliseconds? nanoseconds?")  # fmt: skip
+        ms = first / 1000
+        why += (f" as milliseconds that is {ms:.6g} s, --frame-interval {ms:.6g})"
+                if SECONDS_STEPS[0] <= ms <= SECONDS_STEPS[1] else ")")  # fmt: skip
     if why is not None:
         warnings.warn(f"{source}: {why}: {DEFAULT_FRAME_INTERVAL:g} s between frames is "
                       "assumed; pass the files' own with --frame-interval (data.frame_interval "

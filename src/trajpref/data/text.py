@@ -19,13 +19,14 @@ from __future__ import annotations
 import contextlib
 import errno
 import fnmatch
+import math
 import os
 import re
 import warnings
 from array import array
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
-from decimal import Decimal, InvalidOperation
+from decimal import Decimal, InvalidOperation, localcontext
 from pathlib import Path
 from typing import BinaryIO
 
@@ -107,7 +108,7 @@ class Tracks:
 
     path: Path
     frames: np.ndarray
-    """[F] float64 sorted unique frame numbers."""
+    """[F] float64 sorted unique frame numbers, counted from ``frame_origin``."""
     agents: np.ndarray
     """[A] float64 sorted unique agent ids; an object array of exact ints (or Decimals) when
     an id reaches ``EXACT_ID_LIMIT`` (2**53), which float64 cannot hold exactly."""
@@ -125,6 +126,11 @@ class Tracks:
     """How far the frame numbers may lie from their exact values: 0 for frames as read, a
     few units of float64's rounding for a resampled grid (``resample_tracks``), which the
     scene ids' labels round away (``frame_labels``)."""
+    frame_origin: int = 0
+    """What ``frames`` count from, exactly: 0, unless a frame number reaches
+    ``EXACT_ID_LIMIT`` (2**53; nanosecond timestamps), which float64 rounds; then the file's
+    smallest frame (rounded down to an integer), and ``frames`` are the exact distances from
+    it (``_frame_numbers``). Scene ids add it back (``frame_labels``)."""
 
     @property
     def num_rows(self) -> int:
@@ -152,9 +158,21 @@ def _split(content: str, delimiter: str | None) -> list[str]:
     return [field.strip() for field in content.split(delimiter)]
 
 
-def _is_float(v: str) -> bool:
+def _to_float(v: str) -> float:
+    """A field's number, in the syntax numpy's parser reads: Python's ``float`` also reads
+    digit separators (``1_12`` and ``11_2`` both as 112, so two camera_track ids became one
+    agent) and digits of other scripts, which numpy refuses; the line parser took them."""
+    if not v.isascii() or "_" in v:
+        raise ValueError(f"not a number: {v!r}")
+    return float(v)
+
+
+def _is_float(v: str, strict: bool = True) -> bool:
+    """Whether ``v`` is a number (``_to_float``); not ``strict``: whether Python's ``float``
+    reads it, which is how a header is told from data (a line of ``1_0`` is a data line to
+    refuse, not a header to skip)."""
     try:
-        float(v)
+        _to_float(v) if strict else float(v)
     except ValueError:
         return False
     return True
@@ -236,7 +254,7 @@ def _layout(path: Path, options: ReadOptions) -> _Layout:
                 elif delimiter == "whitespace":
                     delimiter = None
                 tokens = [t for t in re.split(r"[\s,;|]+", content) if t]
-                is_header = not any(_is_float(t) for t in tokens)
+                is_header = not any(_is_float(t, strict=False) for t in tokens)
                 if is_header:
                     _check_header(tokens, path, lineno)
                     name = tokens[0].strip("\"'").lower() if tokens else None
@@ -327,7 +345,7 @@ def _parse_slow(path: Path, layout: _Layout, with_type: bool):
             raise DataError(message + _column_hint(content, delimiter, len(fields), n_cols),
                             path, lineno)  # fmt: skip
         try:
-            values.extend(float(v) for v in fields[:4])
+            values.extend(_to_float(v) for v in fields[:4])
         except ValueError:
             bad = next(v for v in fields[:4] if not _is_float(v))
             raise DataError(f"not a number: {bad!r}", path, lineno) from None
@@ -405,7 +423,8 @@ def read_tracks(
         return [int(known[r]) for r in rows]
 
     xy, rounding = _checked_xy(values, scale, options.max_coord, units, path, line_of)  # [R, 2]
-    frames, f_idx = np.unique(values[:, 0], return_inverse=True)  # [F], [R]
+    column, origin = _frame_numbers(values[:, 0], path, layout)  # [R] counted from origin
+    frames, f_idx = np.unique(column, return_inverse=True)  # [F], [R]
     ids = _agent_ids(values[:, 1], path, layout)  # [R] float64, or exact beyond 2**53
     agents, a_idx = np.unique(ids, return_inverse=True)  # [A], [R]
     agent_type = np.zeros(len(agents), np.int64)  # [A]
@@ -416,16 +435,18 @@ def read_tracks(
     f_idx, a_idx = f_idx[order].astype(index), a_idx[order].astype(index)
     same = (f_idx[1:] == f_idx[:-1]) & (a_idx[1:] == a_idx[:-1])  # [R-1]
     if same.any():
-        _raise_duplicate(np.flatnonzero(same), order, f_idx, a_idx, frames, agents, path, line_of)
+        _raise_duplicate(np.flatnonzero(same), order, f_idx, a_idx, frames, agents, path, line_of,
+                         origin)  # fmt: skip
     if rounding:  # float32 rounded the positions: by how much of a step, in (agent, frame) order
         _check_precision(values[order, 2:4] * scale, a_idx, rounding, path, options.time_step)
     del values
-    return Tracks(path, frames, agents, f_idx, a_idx, xy[order], agent_type, layout.frame_name)
+    return Tracks(path, frames, agents, f_idx, a_idx, xy[order], agent_type, layout.frame_name,
+                  frame_origin=origin)  # fmt: skip
 
 
 EXACT_ID_LIMIT = 2**53
-"""Agent ids at least this large (in absolute value) are beyond float64's exact integers:
-``_agent_ids`` re-reads them from the text."""
+"""Agent ids and frame numbers at least this large (in absolute value) are beyond float64's
+exact integers: ``_agent_ids`` and ``_frame_numbers`` re-read them from the text."""
 
 
 def _agent_ids(parsed: np.ndarray, path: Path, layout: _Layout) -> np.ndarray:
@@ -435,14 +456,40 @@ def _agent_ids(parsed: np.ndarray, path: Path, layout: _Layout) -> np.ndarray:
     ids (9007199254740993 reads as 9007199254740992) and two agents would become one."""
     if not len(parsed) or float(np.abs(parsed).max()) < EXACT_ID_LIMIT:
         return parsed
-    tokens = _agent_tokens(path, layout)
-    if len(tokens) != len(parsed):  # the parsers disagree on rows: the slow one's are the rows
-        raise DataError(f"agent ids of 2**53 ({EXACT_ID_LIMIT}) or more (column 2) could not "
-                        "be read exactly: renumber the agents below 2**53", path)  # fmt: skip
-    try:
-        return np.array([_exact_number(t) for t in tokens], dtype=object)
-    except InvalidOperation:
-        raise DataError("an agent id (column 2) is not a number", path) from None
+    exact = _exact_column(path, layout, 1, len(parsed), "agent ids", "an agent id",
+                          "renumber the agents below 2**53")  # fmt: skip
+    return np.array(exact, dtype=object)
+
+
+def _frame_numbers(parsed: np.ndarray, path: Path, layout: _Layout) -> tuple[np.ndarray, int]:
+    """[R] the frame numbers of a file's rows as float64, and the exact integer they count
+    from: ``parsed`` (the float64 column) and 0 when every frame is below ``EXACT_ID_LIMIT``;
+    else the frames read again from the text as exact numbers, counted from the smallest
+    (rounded down), since float64 rounds nanosecond timestamps (1700000000000000123 reads as
+    1700000000000000000): scene ids named frames the file does not hold, frames one apart
+    became one (a "duplicate row") and rows of two agents logged 100 ns apart one frame. The
+    distances from it are exact below 2**53 (104 days of nanoseconds); a file whose frames
+    float64 cannot keep apart even so is a ``DataError`` asking to rescale its time column."""
+    if not len(parsed) or float(np.abs(parsed).max()) < EXACT_ID_LIMIT:
+        return parsed, 0
+    advice = "rescale the time column (nanoseconds to microseconds, say) or subtract its start"
+    exact = _exact_column(path, layout, 0, len(parsed), "frame numbers", "a frame number", advice)
+    origin = math.floor(min(exact))
+    column = np.array([float(v - origin) for v in exact])  # [R] exact below 2**53
+    first: dict[float, int | Decimal] = {}  # the exact frame of each float: two would merge
+    for value, number in zip(column.tolist(), exact, strict=True):
+        other = first.setdefault(value, number)
+        if other != number:
+            lo, hi = sorted((other, number))
+            low, high = min(exact), max(exact)
+            raise DataError(
+                f"frame numbers (column 1) {_exact_text(lo)} and {_exact_text(hi)} are "
+                f"{_exact_text(hi - lo)} apart, but the file's frames span "
+                f"{_exact_text(high - low)} (from {_exact_text(low)} to {_exact_text(high)}), "
+                f"too far for float64 to keep them apart (2**53 = {EXACT_ID_LIMIT}): {advice}",
+                path,
+            )
+    return column, origin
 
 
 def _exact_number(token: str) -> int | Decimal:
@@ -451,13 +498,26 @@ def _exact_number(token: str) -> int | Decimal:
     return int(value) if value == value.to_integral_value() else value
 
 
-def _agent_tokens(path: Path, layout: _Layout) -> list[str]:
-    """The agent column's text of every data row, in file order (rows as ``_parse_slow``
-    finds them)."""
-    return [
-        _split(content.rstrip("\r\n"), layout.delimiter)[1]
-        for _, content in _data_content(path, layout)
-    ]
+def _exact_text(value: int | Decimal) -> str:
+    """An exact number as text without an exponent: ``9007199254740993``, ``2.5``."""
+    return str(value) if isinstance(value, int) else format(value, "f")
+
+
+def _exact_column(path: Path, layout: _Layout, column: int, rows: int, what: str, one: str,
+                  advice: str) -> list[int | Decimal]:  # fmt: skip
+    """Column ``column`` (0-based) of every data row as exact numbers (``_exact_number``), in
+    file order: the text read again, rows as ``_parse_slow`` finds them. ``rows`` is how many
+    rows the parser read; ``what`` and ``one`` name the column's values (plural, one) in the
+    errors, and ``advice`` says what to do when the two parsers disagree on the rows."""
+    tokens = [_split(content.rstrip("\r\n"), layout.delimiter)[column]
+              for _, content in _data_content(path, layout)]  # fmt: skip
+    if len(tokens) != rows:  # the parsers disagree on rows: the slow one's are the rows
+        raise DataError(f"{what} of 2**53 ({EXACT_ID_LIMIT}) or more (column {column + 1}) "
+                        f"could not be read exactly: {advice}", path)  # fmt: skip
+    try:
+        return [_exact_number(t) for t in tokens]
+    except InvalidOperation:
+        raise DataError(f"{one} (column {column + 1}) is not a number", path) from None
 
 
 def _id_label(value) -> str:
@@ -548,13 +608,15 @@ def _kind_flags(kinds: np.ndarray, path: Path, line_of) -> np.ndarray:
     return flags[inverse]
 
 
-def _raise_duplicate(pos, order, f_idx, a_idx, frames, agents, path, line_of):
-    """Report the smallest duplicated (frame, agent) pair at its second row in the file."""
+def _raise_duplicate(pos, order, f_idx, a_idx, frames, agents, path, line_of, origin=0):
+    """Report the smallest duplicated (frame, agent) pair at its second row in the file, the
+    frame exact (``origin`` added; ``:g`` wrote 1700000000.1 as 1.7e+09)."""
     first = pos[np.lexsort((a_idx[pos], f_idx[pos]))[0]]  # sorted position of the pair's 1st row
     line_first, line_second = line_of([int(order[first]), int(order[first + 1])])
-    f, a = frames[f_idx[first]], agents[a_idx[first]]
+    (f,) = frame_labels(frames[f_idx[first], None], 0.0, origin)
+    a = agents[a_idx[first]]
     raise DataError(
-        f"duplicate row for frame {f:g}, agent {_id_label(a)} (also on line {line_first})",
+        f"duplicate row for frame {f}, agent {_id_label(a)} (also on line {line_first})",
         path,
         line_second,
     )
@@ -660,7 +722,7 @@ def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int |
             future[c : c + _CHUNK][~seen[:, t_hist:]] = np.nan  # seen: [C, T]
     kind = tracks.agent_type[a_idx[start_row]]  # [W]
     name = tracks.path.name
-    labels = frame_labels(frames[firsts], tracks.frame_noise) if n_w else []  # [S]
+    labels = frame_labels(frames[firsts], tracks.frame_noise, tracks.frame_origin) if n_w else []
     for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
         out.scenes.append(
             Scene(
@@ -712,14 +774,27 @@ steps (its paced copy) changed 160 of its 1,445 training scene ids this way on 2
 resume states that recorded the old ids still resume on unchanged data."""
 
 
-def frame_labels(frames: np.ndarray, noise: float = 0.0) -> list[str]:
+def frame_labels(frames: np.ndarray, noise: float = 0.0, origin: int = 0) -> list[str]:
     """Distinct frame numbers [S] of one file as scene-id text. ``noise`` 0 (frames as read):
     each float's exact shortest text (``_frame_label``: ``780``, ``1700000000.1``). Otherwise
     the shortest decimal within ``noise`` of it where that sheds a run of float noise
     (``NOISE_DIGITS``), so that a grid resampled from seconds reads ``227.7``, not
     ``227.70000000000002``. Distinct frames keep distinct labels: should two round alike
-    (frames closer than ``noise``), every label is its float's exact text."""
-    values = np.asarray(frames, np.float64).tolist()
+    (frames closer than ``noise``), every label is its float's exact text. ``origin``
+    (``Tracks.frame_origin``: what the frames count from) is added to each label exactly."""
+    labels = _float_labels(np.asarray(frames, np.float64).tolist(), noise)
+    return [_add_origin(label, origin) for label in labels] if origin else labels
+
+
+def _add_origin(label: str, origin: int) -> str:
+    """``origin + label`` as exact text (``1700000000000000123``, ``1700000000000000123.5``)."""
+    with localcontext() as ctx:
+        ctx.prec = len(label) + len(str(origin)) + 2  # room for every digit of the sum
+        return _exact_text(Decimal(label) + origin)
+
+
+def _float_labels(values: list[float], noise: float) -> list[str]:
+    """``frame_labels`` of the float frame numbers ``values``, no origin added."""
     exact = [_frame_label(v) for v in values]
     if not noise > 0 or _EXACT_LABELS[0]:
         return exact
@@ -794,15 +869,17 @@ def _context(
     return [hist[i:j] if j > i else empty for i, j in zip(a, b, strict=True)]
 
 
-def resample_tracks(tracks: Tracks, factor: float) -> Tracks:
+def resample_tracks(tracks: Tracks, factor: float, step: float | None = None) -> Tracks:
     """The tracks as if annotated every ``factor`` frame steps: frames ``f_0 + j * factor *
-    step`` (``step`` the file's frame step), each agent's position linearly interpolated
-    between its two annotated rows around each such frame. An agent has no row at a frame
-    before its first row, after its last, or inside a jump of more than one frame step in its
-    own rows (a gap is not bridged). ``factor`` 1 returns ``tracks`` itself."""
+    step`` (``step`` the file's frame step, ``frame_step(tracks.frames)``, computed here unless
+    the caller has it), each agent's position linearly interpolated between its two annotated
+    rows around each such frame. An agent has no row at a frame before its first row, after
+    its last, or inside a jump of more than one frame step in its own rows (a gap is not
+    bridged). ``factor`` 1 returns ``tracks`` itself."""
     if factor == 1.0:
         return tracks
-    step = frame_step(tracks.frames)
+    if step is None:
+        step = frame_step(tracks.frames)
     if step <= 0:
         return tracks
     span = float(tracks.frames[-1] - tracks.frames[0])
@@ -845,7 +922,7 @@ def resample_tracks(tracks: Tracks, factor: float) -> Tracks:
     noise = LABEL_ULPS * float(np.spacing(np.abs(frames).max()))
     return Tracks(tracks.path, frames, tracks.agents, frame_index,
                   a_idx.astype(tracks.agent_index.dtype), np.concatenate(xy_parts),
-                  tracks.agent_type, tracks.frame_name, noise)  # fmt: skip
+                  tracks.agent_type, tracks.frame_name, noise, tracks.frame_origin)  # fmt: skip
 
 
 def frame_step(frames: np.ndarray) -> float:
@@ -975,9 +1052,10 @@ def read_files(
     gap = [0, 0, 0]  # scenes, agent-windows, largest run of missing frames
     for path in files:
         tracks = read_tracks(path, with_type, options, scale, units)
+        step = frame_step(tracks.frames)  # as recorded: for ``steps`` and the resampling
         if steps is not None:
-            steps[path] = (tracks.frame_name, frame_step(tracks.frames))
-        tracks = resample_tracks(tracks, options.time_step)
+            steps[path] = (tracks.frame_name, step)
+        tracks = resample_tracks(tracks, options.time_step, step)
         out = _window(tracks, t_hist, t_fut, stride, options.max_gap, options.partial_future,
                       options.reverse_context)  # fmt: skip
         scenes.extend(out.scenes)

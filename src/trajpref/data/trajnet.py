@@ -16,14 +16,16 @@ from __future__ import annotations
 import json
 import math
 import warnings
-from collections import defaultdict
+from collections import Counter, defaultdict
 from dataclasses import dataclass, field
+from decimal import Decimal
 from pathlib import Path
 
 import numpy as np
 
 from trajpref.data.text import (
     DEFAULT_MAX_COORD,
+    EXACT_ID_LIMIT,
     GapWarning,
     check_file,
     file_lines,
@@ -51,14 +53,40 @@ class TrajnetScenes:
     """The ``fps`` values the scene rows declare."""
 
 
-def _number(value, what: str, path: Path, line: int, integer: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+def _number(value, what: str, path: Path, line: int, integer: bool = False):
+    """A field's number: an exact ``int`` when ``integer`` (ids and frames, of any size), else a
+    float. ``value`` is what json read: an int, a float, or a Decimal for a float written beyond
+    ``EXACT_ID_LIMIT`` (``_exact_floats``), whose float64 value would be rounded."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, Decimal)):
         raise DataError(f"{what} must be a number, got {value!r}", path, line)
+    if integer and isinstance(value, int):
+        return value  # exact, however large
+    if integer and isinstance(value, Decimal):
+        if value != value.to_integral_value():
+            raise DataError(f"{what} must be an integer, got {value}", path, line)
+        return int(value)
+    try:
+        value = float(value)
+    except OverflowError:  # an int beyond float's range (10**400)
+        value = math.inf
     if not math.isfinite(value):
         raise DataError(f"{what} is NaN or infinite", path, line)
-    if integer and value != int(value):
-        raise DataError(f"{what} must be an integer, got {value!r}", path, line)
+    if integer:
+        if value != int(value):
+            raise DataError(f"{what} must be an integer, got {value}", path, line)
+        return int(value)
     return value
+
+
+def _exact_floats(obj: dict, text: str) -> dict:
+    """``obj`` (one line's JSON object), read again with its floats as Decimals when one of
+    its fields is a float beyond ``EXACT_ID_LIMIT`` (2**53): json reads ``"p":
+    9007199254740993.0`` as the float 9007199254740992.0, so two agents (or frames) would
+    merge. Lines without such a float, all but a few, are not read twice."""
+    inner = next(iter(obj.values()))
+    if any(isinstance(v, float) and abs(v) >= EXACT_ID_LIMIT for v in inner.values()):
+        return json.loads(text, parse_float=Decimal)
+    return obj
 
 
 def _fields(obj: dict, keys: tuple[str, ...], kind: str, path: Path, line: int) -> list:
@@ -110,13 +138,14 @@ def read_trajnet(
                 or not (isinstance(obj.get("track"), dict) or isinstance(obj.get("scene"), dict))
             ):
                 raise DataError('expected {"scene": {...}} or {"track": {...}}', path, line)
+            obj = _exact_floats(obj, text)
             if "track" in obj:
                 track = obj["track"]
                 if track.get("prediction_number") is not None:
                     continue  # a prediction, not an observation
                 f, p, x, y = _fields(track, ("f", "p", "x", "y"), "track", path, line)
-                f = int(_number(f, "frame 'f'", path, line, integer=True))
-                p = int(_number(p, "agent 'p'", path, line, integer=True))
+                f = _number(f, "frame 'f'", path, line, integer=True)
+                p = _number(p, "agent 'p'", path, line, integer=True)
                 x, y = _number(x, "'x'", path, line), _number(y, "'y'", path, line)
                 with np.errstate(over="ignore"):
                     xy32 = np.array([x, y], np.float32)  # [2]
@@ -138,7 +167,7 @@ def read_trajnet(
             scene = obj["scene"]
             sid, p, s, e = _fields(scene, ("id", "p", "s", "e"), "scene", path, line)
             named = zip(("id", "p", "s", "e"), (sid, p, s, e), strict=True)
-            sid, p, s, e = (int(_number(v, f"scene {k!r}", path, line, integer=True))
+            sid, p, s, e = (_number(v, f"scene {k!r}", path, line, integer=True)
                             for k, v in named)  # fmt: skip
             if s > e:
                 raise DataError(f"scene {sid}: start frame {s} is after end frame {e}", path, line)
@@ -158,8 +187,10 @@ def read_trajnet(
     for f in frames:
         for p in rows[f]:
             frames_of[p].append(f)
-    jumps, counts = np.unique(np.diff(np.array(frames, np.int64)), return_counts=True)
-    step = int(jumps[np.argmax(counts)]) if len(jumps) else 1  # the file's frame step
+    # the file's frame step: the most common jump (the smallest on ties), in Python ints, which
+    # hold frames of any size exactly (int64 overflowed beyond 9.2e18)
+    jumps = Counter(b - a for a, b in zip(frames, frames[1:], strict=False))
+    step = min(jumps, key=lambda j: (-jumps[j], j)) if jumps else 1
     gaps: list[int] = []  # scene ids whose window spans a frame its primary agent misses
     scenes = []
     for line, sid, p, s, e in scene_rows:
