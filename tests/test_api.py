@@ -140,3 +140,177 @@ def test_batch_entry_points_check_shapes(scorer, walks):
     with pytest.raises(DataError, match=rf"futures: expected \[M, {n}, 12, 2\]"):
         scorer.score(batch, batch.future[None, :-1])
     assert scorer.rank(batch, batch.future[None].repeat(3, 1, 1, 1)).shape == (3, 2)
+
+
+# --- a planner's calls on the published models (the walkthrough of 2026-12-06) ---------------
+
+
+def _tracks(p: int = 3, dt: float = 0.4, seed: int = 0) -> np.ndarray:
+    """[P, 8, 2] agents walking about 1.3 m/s, one position every ``dt`` seconds, metres."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(8)[:, None] * dt  # [8, 1]
+    heading = rng.uniform(0, 2 * np.pi, p)  # [P]
+    v = 1.3 * np.stack([np.cos(heading), np.sin(heading)], -1)  # [P, 2]
+    return (rng.uniform(-3, 3, (p, 1, 2)) + t[None] * v[:, None]).astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def robo():
+    from trajpref.models.registry import load_predictor
+
+    return load_predictor("robo/generator", device="cpu")
+
+
+@pytest.fixture(scope="module")
+def zara1():
+    from trajpref.models.registry import load_predictor
+
+    return load_predictor("zara1/generator", device="cpu")
+
+
+def test_loaded_models_and_scorers_know_their_training_step_and_units(robo, zara1, scorer):
+    from trajpref.models.registry import load_predictor
+
+    assert (robo.frame_interval, robo.units) == (0.5, "m")
+    assert (zara1.frame_interval, zara1.units) == (0.4, "m")
+    sdd = load_predictor("sdd/generator")
+    assert (sdd.frame_interval, sdd.units) == (0.4, "px")
+    assert (scorer.frame_interval, scorer.units) == (0.4, "m")
+    assert scorer.with_steps([0]).frame_interval == 0.4  # kept by a scorer at other steps
+    robo_scorer = TrajectoryScorer.from_checkpoint("robo/denoiser")
+    assert (robo_scorer.frame_interval, robo_scorer.units) == (0.5, "m")
+    assert load_predictor("cv").predict is not None  # the baseline has no step: any pace
+
+
+def test_a_step_or_unit_other_than_the_models_warns_as_the_cli_does(robo, scorer):
+    from trajpref.errors import ConfigError
+    from trajpref.score import predict_scene
+
+    history = _tracks(3, dt=0.4)
+    with pytest.warns(UserWarning, match=r"this model was trained on robo-sim: this data steps "
+                      r"0\.4 s, the model's 0\.5 s \(resample the history to one position "
+                      r"every 0\.5 s"):  # fmt: skip
+        futures = predict_scene(robo, history, frame_interval=0.4)
+    assert futures.shape == (20, 3, 12, 2)
+    with pytest.warns(UserWarning, match="this data is in px, the model's in m"):
+        predict_scene(robo, _tracks(3, dt=0.5), frame_interval=0.5, units="px")
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        predict_scene(robo, _tracks(3, dt=0.5), frame_interval=0.5, units="metres")
+        predict_scene(robo, _tracks(3, dt=0.5))  # nothing said, nothing compared
+    with pytest.raises(ConfigError, match="frame_interval: seconds between"):
+        predict_scene(robo, history, frame_interval=0)
+    history, samples = _walk()
+    with pytest.warns(UserWarning, match="this scorer was trained on zara1: this data steps 0.5"):
+        rank_samples(scorer, history, samples, frame_interval=0.5)
+
+
+def test_models_with_agent_roles_say_so_and_the_docs_give_the_order(robo, zara1):
+    from trajpref.score import predict_scene
+
+    assert (robo.agent_roles, zara1.agent_roles) == (3, 0)
+    doc = predict_scene.__doc__
+    assert "model.agent_roles" in doc and "leader, follower" in doc
+    python = README.read_text().split("## Python API", 1)[1].split("\n## ", 1)[0]
+    assert "model.agent_roles" in python and "leader, follower, approacher" in python
+
+
+def test_context_neighbours_reach_a_model_that_reads_them(zara1, robo):
+    from trajpref.score import predict_scene
+    from trajpref.types import Scene, collate
+
+    history = _tracks(2, seed=3)
+    near = history[:1] + np.array([0.6, 0.0], np.float32)  # [1, 8, 2] beside agent 0
+    alone = predict_scene(zara1, history)
+    with_ctx = predict_scene(zara1, history, context=near)
+    nan = np.full((2, 12, 2), np.nan, np.float32)
+    batch = collate([Scene(history, nan, np.zeros(2, np.int64), "s", context=near)])
+    np.testing.assert_allclose(with_ctx, zara1.predict(batch, 20).numpy(), atol=1e-5)
+    assert np.abs(with_ctx - alone).max() > 1e-3  # the neighbour is read
+    part = near.copy()
+    part[0, :3] = np.nan  # seen in the last 5 frames only: fewer than model.context_frames
+    assert zara1.reads_context and zara1.context_frames == 8
+    np.testing.assert_array_equal(predict_scene(zara1, history, context=part), alone)
+    with pytest.raises(DataError, match=r"context: 1 value\(s\) not finite .*NaN marks an unseen"):
+        predict_scene(zara1, history, context=np.where(near > 1e9, 0, near) + np.array(
+            [[[np.inf, 0]] + [[0, 0]] * 7]))  # fmt: skip
+    with pytest.raises(DataError, match=r"context: expected \[C, 8, 2\]"):
+        predict_scene(zara1, history, context=near[:, 1:])
+    assert not robo.reads_context
+    with pytest.warns(UserWarning, match="reads no context-only neighbours"):
+        predict_scene(robo, _tracks(2, dt=0.5), context=near)
+
+
+def test_predict_scenes_equals_the_loop_on_a_published_generator(zara1):
+    from trajpref.score import predict_scene, predict_scenes
+
+    histories = [_tracks(p, seed=p) + 10.0 * p for p in (1, 3, 2)]
+    together = predict_scenes(zara1, histories)
+    for history, got in zip(histories, together, strict=True):
+        np.testing.assert_allclose(got, predict_scene(zara1, history), atol=1e-4)
+
+
+def test_chosen_selection_settings_are_those_the_benchmarks_recorded():
+    import json
+    import shlex
+
+    from trajpref.errors import ConfigError
+    from trajpref.score.selection import CHOSEN, SelectionConfig, chosen_selection
+
+    root = README.parent / "benchmarks"
+    chosen = json.loads((root / "selection_chosen.json").read_text())
+    metas = [json.loads(p.read_text()) for p in (root / "results" / "meta").glob("select_*")]
+    flags = {"--drop": "drop", "--temperature": "temperature", "--bandwidth": "bandwidth",
+             "--score-every": "score_every", "--score-from": "score_from"}  # fmt: skip
+    for dataset, rows in chosen.items():
+        rows = [rows] if isinstance(rows, str) else rows
+        name = "eth/generator-pace" if dataset == "eth (pace)" else f"{dataset}/generator"
+        stem = "select_" + ("eth_pace" if dataset == "eth (pace)" else dataset)
+        results = json.loads((root / "results" / f"{stem}.json").read_text())
+        for row, cheap in zip(rows, (False, True), strict=False):
+            run = next(r for r in results if r["method"] == row and r["seed"] == 0)
+            argv = shlex.split(run["command"])
+            given = {flags[a]: float(argv[i + 1]) for i, a in enumerate(argv) if a in flags}
+            cfg = chosen_selection(name, keep=3, cheap=cheap)
+            assert cfg.method == "score-facility" == row[len("select-") :].split("-d")[0]
+            for key, value in given.items():
+                assert getattr(cfg, key) == pytest.approx(value), (name, cheap, key)
+            assert cfg.score_from == given.get("score_from", 0)
+            # the gate's V: what the same run printed and recorded in its meta file
+            recorded = {round(m["trust_speed"], 4) for m in metas
+                        if isinstance(m, dict) and m.get("command") == run["command"]}  # fmt: skip
+            assert recorded == {cfg.trust_speed}, (name, cheap, recorded)
+    assert set(CHOSEN) == {"zara1/generator", "eth/generator", "robo/generator",
+                           "robo-mix/generator", "eth/generator-pace"}  # fmt: skip
+    readme = SelectionConfig(keep=5, drop=0.2, bandwidth=1.0, trust_speed=0.445, score_every=3)
+    assert chosen_selection("zara1/generator") == readme  # the README's spelled-out setting
+    with pytest.raises(ConfigError, match="no chosen selection setting for 'hotel/generator'"):
+        chosen_selection("hotel/generator")
+
+
+def test_resolve_device_refuses_what_this_machine_lacks_in_one_line():
+    from trajpref.device import resolve_device
+    from trajpref.errors import ConfigError
+
+    assert resolve_device(torch.device("cpu")) == torch.device("cpu")
+    if not torch.cuda.is_available():
+        with pytest.raises(ConfigError, match="no CUDA GPU is available"):
+            resolve_device(torch.device("cuda"))
+    if not torch.backends.mps.is_available():
+        with pytest.raises(ConfigError, match="device 'mps' requested"):
+            resolve_device("mps")
+    for value in (None, 0, 1.5):
+        with pytest.raises(ConfigError, match="expected a name or a torch.device"):
+            resolve_device(value)
+    with pytest.raises(ConfigError, match="unsupported device 'meta'"):
+        resolve_device("meta")
+
+
+def test_the_python_section_says_what_a_planner_needs():
+    python = README.read_text().split("## Python API", 1)[1].split("\n## ", 1)[0]
+    for needed in ("model.frame_interval", "frame_interval=", "OMP_NUM_THREADS=1",
+                   "docs/score.md", "predict_scenes", "chosen_selection", "progress=False",
+                   "context="):  # fmt: skip
+        assert needed in python, needed

@@ -316,6 +316,7 @@ def test_finetune_names_its_reward_and_evaluate_records_the_checkpoint(
     assert code == 0 and last.startswith("fine-tuned (rlhf, set-aware reward) in ")
     tuned = tmp_path / "ft" / "finetune.safetensors"
     assert read_checkpoint_header(tuned)["meta"]["method"] == "rlhf"  # the stored value stays
+    assert read_checkpoint_header(tuned)["meta"]["reward"] == "set"  # the file says its reward
     base = ["evaluate", "--dataset", walks, "--samples", "2", "--json", "--no-progress",
             "--device", "cpu"]  # fmt: skip
     code, out, _ = _run(capsys, *base, "--model", tuned, "--out", tmp_path / "e.json")

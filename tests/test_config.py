@@ -57,6 +57,24 @@ def test_literal_fields_name_their_choices():
     assert FinetuneConfig(method="rlhf").method == "rlhf"
 
 
+def test_finetune_reward_is_any_name_and_nothing_else():
+    """A config names its reward: a built-in or one registered from Python, whose registry the
+    config cannot see (fine-tuning checks it), so any well-formed name is a config's; a
+    checkpoint whose config names a user's reward then loads without it registered."""
+    for name in ("score", "set", "sda", "comfort", "Comfort_2", "my-reward"):
+        assert load_config(None, [f"finetune.reward={name}"]).finetune.reward == name
+    refused = r"^finetune\.reward must be a reward's name \(score, set, sda, or one registered"
+    for value in ("''", "9lives", "'two words'", "a.b", "café", "1", "[sda]"):
+        with pytest.raises(ConfigError, match=refused):
+            load_config(None, [f"finetune.reward={value}"])
+    with pytest.raises(ConfigError, match="may not be null"):
+        load_config(None, ["finetune.reward=null"])
+    with pytest.raises(ConfigError, match=r"^finetune\.reward must be .*, got 3$"):
+        FinetuneConfig(reward=3)
+    cfg = load_config(None, ["finetune.reward=comfort"])
+    assert experiment_from_dict(to_dict(cfg)).finetune.reward == "comfort"
+
+
 @pytest.mark.parametrize(
     ("override", "name"),
     [("model.bogus=1", "bogus"), ("nosection.key=1", "nosection"), ("bogus=3", "bogus")],

@@ -42,10 +42,11 @@ from trajpref.io import (
     read_checkpoint_header,
     write_json,
 )
-from trajpref.metrics import METRE_UNITS, SCENE_SIZE_EDGES, check_bin_edges
+from trajpref.metrics import SCENE_SIZE_EDGES, check_bin_edges
 from trajpref.models import checkpoint as ckpt
 from trajpref.models import zoo
 from trajpref.models.registry import load_predictor
+from trajpref.models.timing import model_timing, timing_problems, trained_otherwise
 from trajpref.rl.presets import EQUAL_BUDGET_VALIDATIONS, EQUAL_BUDGET_WARMUP, finetune_config
 from trajpref.score import TrajectoryScorer, score_timesteps
 from trajpref.score.scorer import PRECISIONS
@@ -363,8 +364,10 @@ def build_parser() -> argparse.ArgumentParser:
         "set-aware reward (each sample rewarded by its marginal gain in a score-weighted DPP "
         "over its agent's K endpoints: plausible samples that cover what the others do not; "
         "with --method rlhf), --set finetune.reward=sda the paper's hand-crafted social "
-        "baseline (Sec. 8.1). docs/rlhf.md describes every setting (trajpref config show "
-        "lists them).",
+        "baseline (Sec. 8.1). A reward of your own is registered from Python "
+        "(trajpref.rl.register_reward, docs/rlhf.md); this command cannot register one and "
+        "refuses its name. docs/rlhf.md describes every setting (trajpref config show lists "
+        "them).",
     )
     ft.add_argument("--method", required=True, choices=["rlhf", "rlhf-res", "control"],
                     help="rlhf: the policy and value losses on all K samples of each agent "
@@ -611,37 +614,6 @@ def _predictor(args):
     return model, device
 
 
-def same_units(a: str, b: str) -> bool:
-    """Whether two unit names mean the same (``m``, ``metres``, ``Meters``; else literally)."""
-    a, b = a.strip().lower(), b.strip().lower()
-    return a == b or (a in METRE_UNITS and b in METRE_UNITS)
-
-
-UNKNOWN_UNITS = ("", "unknown")
-
-
-def model_timing(header: dict) -> dict:
-    """The pace and units a checkpoint's model was trained at, from its header (what
-    ``train.run.data_timing`` recorded in its meta, else a built-in dataset's own): the keys
-    ``trained_on`` (its ``data.dataset``), ``step`` (seconds per window step; None for a model
-    trained on a folder before the record, 2026-12-06), ``known`` (whether that step's frame
-    interval was given, declared or read from time stamps rather than assumed), ``time_step``
-    (its ``data.time_step``) and ``units``."""
-    data = header["config"]["data"]
-    read_every = float(data.get("time_step", 1.0))
-    out = {"trained_on": data["dataset"], "step": None, "known": False,
-           "time_step": read_every, "units": "unknown"}  # fmt: skip
-    timing = (header.get("meta") or {}).get("data_timing")
-    source = SPECS.get(data["dataset"])
-    if isinstance(timing, dict):
-        out.update(step=float(timing["frame_interval"]),
-                   known=timing.get("interval_from") != "default",
-                   units=str(timing.get("units") or "unknown"))  # fmt: skip
-    elif source is not None:
-        out.update(step=source.frame_interval * read_every, known=True, units=source.units)
-    return out
-
-
 def _same_path(a: str, b: str) -> bool:
     with contextlib.suppress(OSError, RuntimeError):
         return Path(a).expanduser().resolve() == Path(b).expanduser().resolve()
@@ -699,11 +671,8 @@ def _warn_if_trained_otherwise(spec: str, ds) -> None:
     except (TrajprefError, KeyError, TypeError, ValueError, AttributeError):
         return  # not a checkpoint this check can read: loading it has said what it needed
     info = ds.info
-    problems = []
-    units = model["units"]
-    if (info.units not in UNKNOWN_UNITS and units not in UNKNOWN_UNITS
-            and not same_units(info.units, units)):  # fmt: skip
-        problems.append(f"this data is in {info.units}, the model's in {units}")
+    step = info.frame_interval if info.frame_interval > 0 else None
+    problems = timing_problems(model, step, info.units, lambda m: _step_hint(info, m))
     if model["step"] is None:  # a folder model without the record: its time step alone
         every = model["time_step"]
         if (info.text_tracks and _same_path(model["trained_on"], info.name)
@@ -712,13 +681,8 @@ def _warn_if_trained_otherwise(spec: str, ds) -> None:
             problems.append(f"this data is read every {info.time_step:g} {steps} of its "
                             f"files, the model's (the same folder) every {every:g} "
                             f"(--time-step {every:g} reads it at the model's step)")  # fmt: skip
-    elif info.frame_interval > 0 and not math.isclose(info.frame_interval, model["step"],
-                                                      rel_tol=0.01):  # fmt: skip
-        problems.append(f"this data steps {info.frame_interval:g} s, the model's "
-                        f"{model['step']:g} s ({_step_hint(info, model)})")  # fmt: skip
     if problems:
-        warnings.warn(f"{spec} was trained on {model['trained_on']}: {'; '.join(problems)}",
-                      stacklevel=2)  # fmt: skip
+        warnings.warn(trained_otherwise(spec, model, problems), stacklevel=2)
 
 
 def _set_generator(model, flag: str, **setting) -> None:
@@ -827,7 +791,7 @@ def _model_fields(args) -> dict:
     ``models.checkpoint.header_model_hash``), ``weights_hash`` (the weights' own content hash,
     which a fine-tuned model's ``start_hash`` names), and for a fine-tuned model
     ``finetune_method``, ``finetune_reward`` and ``start_hash`` (the header's ``meta.method``,
-    ``config.finetune.reward`` and ``meta.from``). None for cv."""
+    ``models.checkpoint.finetune_reward`` and ``meta.from``). None for cv."""
     if args.model == "cv":
         return {"model_hash": None, "weights_hash": None}
     path = ckpt.resolve_path(args.model)
@@ -849,9 +813,7 @@ def _model_fields(args) -> dict:
            "weights_hash": header.get("hash")}  # fmt: skip
     meta = header.get("meta") or {}
     if meta.get("method") is not None:
-        reward = (header["config"].get("finetune") or {}).get("reward")
-        out.update(finetune_method=meta["method"],
-                   finetune_reward=None if meta["method"] == "control" else reward,
+        out.update(finetune_method=meta["method"], finetune_reward=ckpt.finetune_reward(header),
                    start_hash=meta.get("from"))  # fmt: skip
     return out
 

@@ -739,12 +739,14 @@ class FinetuneConfig(OptimConfig):
     """Eq. 15's ratio p_theta / p_0 against the frozen ``reference`` (as printed; a trust
     region around G_0), or against the ``rollout`` policy (standard PPO: p_theta / p_old)."""
 
-    reward: Literal["score", "set", "sda"] = "score"
+    reward: str = "score"
     """``score``: each sample's per-step diffusion score r (Eq. 6); ``set``: each sample's
     marginal gain in a score-weighted DPP over its K samples' endpoints (rl/set_reward.py),
     which rewards plausible samples that cover what the others do not; ``sda``: the paper's
     hand-crafted baseline reward (Sec. 8.1), keeping social groups found in the observed
-    motion at their observed distances (rl/sda.py, docs/sda.md; no diffusion score)."""
+    motion at their observed distances (rl/sda.py, docs/sda.md; no diffusion score); or the
+    name of a reward registered from Python (``trajpref.rl.register_reward``, docs/rlhf.md:
+    fine-tuning refuses a name that is not registered in its process)."""
     set_bandwidth: float = 0.5
     """``set`` reward: endpoint similarity bandwidth, in units of the median squared distance."""
     set_alpha: float = 1.0
@@ -777,8 +779,22 @@ class FinetuneConfig(OptimConfig):
     which cancels the between-sample part of the reward's variance (measured in
     docs/rlhf.md); the critic is still trained. Costs a second rollout and score per step."""
 
+    @staticmethod
+    def is_reward_name(name: object) -> bool:
+        """Whether ``name`` can name a reward (``reward``, ``rl.register_reward``): an ASCII
+        letter, then ASCII letters, digits, ``_`` or ``-``. Whether a reward of that name
+        exists is decided where rewards are looked up (``rl.rewards``), not here."""
+        return (isinstance(name, str) and name[:1].isascii() and name[:1].isalpha()
+                and all(c.isascii() and (c.isalnum() or c in "_-") for c in name))  # fmt: skip
+
     def __post_init__(self) -> None:
         super().__post_init__()  # OptimConfig checks every Literal field, these included
+        if not self.is_reward_name(self.reward):
+            raise ConfigError(
+                "finetune.reward must be a reward's name (score, set, sda, or one registered "
+                "from Python with trajpref.rl.register_reward: an ASCII letter, then letters, "
+                f"digits, '_' or '-'), got {self.reward!r}"
+            )
         if self.baseline == "antithetic" and self.likelihood != "sample":
             raise ConfigError("finetune.baseline=antithetic needs finetune.likelihood=sample")
         _positive(self, "explore_std", "ppo_epochs", "set_bandwidth")

@@ -23,3 +23,8 @@ class DataError(TrajprefError, ValueError):
 
 class ConfigError(TrajprefError, ValueError):
     """An invalid configuration value."""
+
+
+class RewardError(TrajprefError, ValueError):
+    """A fine-tuning reward (``trajpref.rl.register_reward``) returned something other than a
+    finite [M, N, T_f] tensor."""

@@ -150,6 +150,47 @@ def test_generator_payload_keeps_a_critic(tmp_path, cfg):
     _assert_same_state(ckpt.load(tmp_path / "g.safetensors")["critic"], critic.state_dict())
 
 
+def test_a_finetuned_generator_records_its_reward_in_its_metadata(tmp_path, cfg):
+    den = ckpt.denoiser_payload(_denoiser(cfg), cfg, 0.7, {})
+    set_cfg = load_config(None, [*TINY_OVERRIDES, "finetune.reward=set"])
+    for method, want in (("rlhf", "set"), ("rlhf-res", "set"), ("control", None)):
+        meta = {"epoch": 1, "method": method, "from": "abc"}
+        ckpt.save(tmp_path / "f.safetensors", ckpt.generator_payload(_generator(cfg), den,
+                                                                     set_cfg, meta))  # fmt: skip
+        header = _header(tmp_path / "f.safetensors")
+        assert header["meta"] == {**meta, "reward": want}, method  # the file alone says it
+        assert ckpt.finetune_reward(header) == want
+        assert ckpt.finetune_reward(ckpt.load(tmp_path / "f.safetensors")) == want
+    # a generator that is no fine-tune gets no reward field (pretraining's meta is as given)
+    plain = ckpt.generator_payload(_generator(cfg), den, set_cfg, {"epoch": 1})
+    assert plain["meta"] == {"epoch": 1} and ckpt.finetune_reward(plain) is None
+    # a reward the caller records itself is kept
+    given = ckpt.generator_payload(
+        _generator(cfg), den, set_cfg, {"method": "rlhf", "reward": "sda"}
+    )
+    assert given["meta"]["reward"] == "sda"
+
+
+def test_a_finetuned_file_written_before_the_reward_was_recorded_still_loads(tmp_path, cfg):
+    den = ckpt.denoiser_payload(_denoiser(cfg), cfg, 0.7, {})
+    sda_cfg = load_config(None, [*TINY_OVERRIDES, "finetune.reward=sda"])
+    payload = ckpt.generator_payload(_generator(cfg), den, sda_cfg, {"method": "rlhf"})
+    del payload["meta"]["reward"]  # as written before meta.reward existed
+    path = tmp_path / "old.safetensors"
+    ckpt.save(path, payload)
+    loaded = ckpt.load(path)
+    assert "reward" not in loaded["meta"] and ckpt.build_generator(loaded)[0] is not None
+    assert ckpt.finetune_reward(loaded) == "sda"  # from its config's finetune section
+    # older still: a config without finetune.reward (the diffusion score was the only reward)
+    del payload["config"]["finetune"]["reward"]
+    ckpt.save(path, payload)
+    loaded = ckpt.load(path)
+    assert ckpt.config_of(loaded).finetune.reward == "score"
+    assert ckpt.finetune_reward(_header(path)) == "score" == ckpt.finetune_reward(loaded)
+    payload["meta"]["method"] = "control"
+    assert ckpt.finetune_reward(payload) is None
+
+
 def _publish_generator(tmp_path, cfg, gen_seed: int, den_seed: int = 0, name: str = "g"):
     src = tmp_path / "run" / f"{name}.safetensors"
     den_payload = ckpt.denoiser_payload(_denoiser(cfg, den_seed), cfg, 0.7, {})

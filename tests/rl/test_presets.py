@@ -4,6 +4,7 @@ protocol and the seed, resolved from a tiny start checkpoint."""
 import dataclasses
 import typing
 
+import numpy as np
 import pytest
 import torch
 import yaml
@@ -14,18 +15,21 @@ from trajpref.errors import ConfigError
 from trajpref.models import checkpoint as ckpt
 from trajpref.rl.presets import (
     CONTROL_READS,
+    READ_WHEN,
     RL_ONLY,
     equal_budget_args,
     equal_budget_overrides,
     finetune_config,
 )
 from trajpref.train.stages import build_finetune_stage
-from trajpref.types import collate
+from trajpref.types import Scene, collate
 
 
 def _other_value(name: str):
     """A valid value of a FinetuneConfig field other than its default."""
     default = getattr(FinetuneConfig(), name)
+    if name == "reward":  # a name: any reward's (sda's is built in)
+        return "sda"
     hint = typing.get_type_hints(FinetuneConfig)[name]
     if typing.get_origin(hint) is typing.Literal:
         return next(c for c in typing.get_args(hint) if c != default)
@@ -144,3 +148,167 @@ def test_a_folder_models_description_is_dropped_for_a_built_in_dataset(tiny_run,
     with pytest.raises(ConfigError, match="zara1 is a built-in one"):
         finetune_config(str(start), "rlhf", overrides=["data.dataset=zara1",
                                                        "data.units=m"])  # fmt: skip
+
+
+def test_the_rl_methods_refuse_a_setting_that_their_other_settings_leave_unread(tiny_run):
+    start = str(tiny_run / "generator.safetensors")
+    refused = {
+        ("rlhf", None, ("finetune.set_bandwidth=0.1",)):
+            r"^finetune\.set_bandwidth: a setting of the set-aware reward \(finetune\.reward="
+            r"set\), and this run's reward is score, so it has no effect; leave it out or set "
+            r"finetune\.reward=set$",
+        ("rlhf", None, ("finetune.reward=sda", "finetune.set_alpha=2", "finetune.set_bandwidth=1")):
+            r"^finetune\.set_bandwidth, finetune\.set_alpha: settings of the set-aware reward "
+            r".* reward is sda, so they have no effect; leave them out",
+        ("rlhf-res", None, ("finetune.sda_radius=3",)):
+            r"^finetune\.sda_radius: a setting of the SDA reward \(finetune\.reward=sda\)",
+        ("rlhf", None, ("finetune.reward=sda", "finetune.score_every=3")):
+            r"^finetune\.score_every: .* reward is sda, which computes no diffusion score",
+        ("rlhf", "paper", ("finetune.explore_std=0.2",)):
+            r"^finetune\.explore_std: .* this run's likelihood is mean, which does not explore",
+        ("rlhf-res", None, ("finetune.likelihood=mean", "finetune.explore=smooth")):
+            r"^finetune\.explore: .*finetune\.likelihood=sample",
+        ("rlhf-res", None, ("finetune.clip=0.1",)):
+            r"^finetune\.clip: a setting of the clipped PPO ratio .* its ratio is always 1",
+        ("rlhf", None, ("finetune.baseline=antithetic", "finetune.value_target=reward",
+                        "finetune.gamma=0.9")):
+            r"^finetune\.gamma: .* advantage is antithetic .* value target the reward",
+        # two rules at once: both named
+        ("rlhf", None, ("finetune.sda_drift=1", "finetune.clip=0.1")):
+            r"^finetune\.sda_drift: .*; finetune\.clip: ",
+        # named at its default value: still no effect, still refused
+        ("rlhf", None, ("finetune.set_alpha=1.0",)): r"^finetune\.set_alpha: ",
+    }  # fmt: skip
+    for (method, preset, overrides), message in refused.items():
+        with pytest.raises(ConfigError, match=message):
+            finetune_config(start, method, preset, overrides=list(overrides))
+    accepted = [
+        ("rlhf", None, ("finetune.reward=set", "finetune.set_bandwidth=0.1",
+                        "finetune.set_alpha=2")),
+        ("rlhf-res", None, ("finetune.reward=sda", "finetune.sda_radius=3", "finetune.sda_drift=1",
+                            "finetune.sda_tolerance=0.3", "finetune.reward_clip=2")),
+        ("rlhf", None, ("finetune.reward=set", "finetune.score_every=3")),
+        ("rlhf-res", None, ("finetune.explore=smooth", "finetune.explore_std=0.1")),
+        ("rlhf", None, ("finetune.ppo_epochs=2", "finetune.clip=0.1")),
+        ("rlhf", None, ("finetune.ratio_against=reference", "finetune.clip=0.1")),
+        ("rlhf", None, ("finetune.baseline=antithetic", "finetune.gae_lambda=0.5")),
+        ("rlhf", None, ("finetune.value_target=reward", "finetune.gae_lambda=0.5")),
+        ("rlhf", "paper", ("finetune.clip=0.1",)),
+        # the preset's own values are not the user's: its score_every and clip stay
+        ("rlhf-res", "paper", ("finetune.reward=sda",)),
+        ("rlhf", "paper", ("finetune.ratio_against=rollout",)),
+    ]  # fmt: skip
+    for method, preset, overrides in accepted:
+        finetune_config(start, method, preset, overrides=list(overrides))
+
+
+def test_a_yaml_file_that_changes_an_unread_setting_is_refused(tiny_run, tmp_path):
+    start = str(tiny_run / "generator.safetensors")
+    changed = tmp_path / "changed.yaml"
+    changed.write_text("finetune:\n  set_bandwidth: 0.3\n")
+    with pytest.raises(ConfigError, match=r"^finetune\.set_bandwidth: .* reward is score"):
+        finetune_config(start, "rlhf", config=changed)
+    cfg = finetune_config(start, "rlhf", config=changed, overrides=["finetune.reward=set"])
+    assert cfg.finetune.set_bandwidth == 0.3
+    # an RL run's own finetune_config.yaml (every key, at its values) is fine
+    own = tmp_path / "finetune_config.yaml"
+    own.write_text(yaml.safe_dump(to_dict(finetune_config(start, "rlhf-res", "paper"))))
+    assert finetune_config(start, "rlhf-res", config=own).finetune.likelihood == "mean"
+
+
+def test_the_benchmarks_fine_tuning_methods_are_all_accepted(tiny_run):
+    """The published tables' runs (benchmarks/equal_budget.py, benchmarks/reproduce.py, the
+    paper preset) set no setting that they leave unread."""
+    from bench import load_benchmark
+
+    start = str(tiny_run / "generator.safetensors")
+    jobs = {**load_benchmark("equal_budget").METHODS, **load_benchmark("reproduce").TRAIN_ARGS}
+    for args in jobs.values():
+        sets = [args[i + 1] for i, a in enumerate(args) if a == "--set"]
+        for method in args[args.index("--methods") + 1 :]:
+            if method.startswith("--"):
+                break
+            finetune_config(start, method, overrides=sets, equal_budget=4)
+    for method in ("rlhf", "rlhf-res"):
+        finetune_config(start, method, "paper")
+
+
+def test_every_conditional_setting_is_an_rl_setting():
+    keys = [k for rule in READ_WHEN for k in rule.keys]
+    assert set(keys) <= set(RL_ONLY) and len(keys) == len(set(keys))
+
+
+# one config under which each rule reads its keys, and one under which it does not
+_READ_WHEN_CASES = {
+    "set_bandwidth": (["finetune.reward=set"], ["finetune.reward=score"]),
+    "sda_radius": (["finetune.reward=sda"], ["finetune.reward=score"]),
+    "score_every": (["finetune.reward=score"], ["finetune.reward=sda"]),
+    "explore_std": (["finetune.likelihood=sample"], ["finetune.likelihood=mean"]),
+    "clip": (["finetune.ratio_against=reference"], ["finetune.ratio_against=rollout"]),
+    "gamma": (["finetune.baseline=antithetic", "finetune.value_target=return"],
+              ["finetune.baseline=antithetic", "finetune.value_target=reward"]),
+}  # fmt: skip
+
+
+def _walks_with_a_group(train):
+    """Three synthetic walks and a scene of two persons walking side by side, 0.8 apart and
+    drifting 0.04 apart per step (0.28 over the history): an SDA group at the default
+    thresholds (radius 1.5, drift 0.5) that half of either threshold breaks up."""
+    t_h, t_f = train.scenes[0].history.shape[1], train.scenes[0].future.shape[1]
+    t = np.arange(t_h + t_f, dtype=np.float32)[:, None]  # [T, 1]
+    pair = np.stack([t * [0.4, 0.0], t * [0.4, 0.04] + [0.0, 0.8]]).astype(np.float32)
+    scene = Scene(pair[:, :t_h], pair[:, t_h:], np.zeros(2, np.int64), "pair")  # [2, T, 2]
+    return collate([*train.scenes[:3], scene])
+
+
+@pytest.mark.parametrize("rule", range(len(READ_WHEN)))
+def test_an_unread_setting_leaves_the_rl_loss_as_it_was(tiny_run, walks, rule):
+    """What READ_WHEN claims, on a policy moved away from its reference: under the settings
+    where a rule does not read its keys, changing one leaves the loss bit for bit as it was;
+    under those where it reads them, the loss moves."""
+    start = ckpt.load(tiny_run / "generator.safetensors")
+    train = load_dataset(str(walks), "train")
+    batch = _walks_with_a_group(train)
+    rule = READ_WHEN[rule]
+    reads, unread = _READ_WHEN_CASES[rule.keys[0]]
+
+    def loss(*overrides: str) -> torch.Tensor:
+        cfg = load_config(None, ["finetune.method=rlhf", *overrides], base=start["config"])
+        stage = build_finetune_stage(cfg, start, train, torch.device("cpu"))
+        gen = torch.Generator().manual_seed(1)
+        with torch.no_grad():  # the policy leaves the reference, so ratios and KL are not 1, 0
+            for p in stage.objective.policy.parameters():
+                p.add_(0.005 * torch.randn(p.shape, generator=gen))
+        value, _ = stage.objective(batch, torch.Generator().manual_seed(0))
+        return value.detach()
+
+    assert rule.reads(load_config(None, reads).finetune)
+    assert not rule.reads(load_config(None, unread).finetune)
+    for key in rule.keys:
+        value = _other_value(key)
+        base, other = loss(*unread), loss(*unread, f"finetune.{key}={value}")
+        assert torch.equal(base, other), key
+        assert not torch.equal(loss(*reads), loss(*reads, f"finetune.{key}={value}")), key
+
+
+def test_a_yaml_value_that_the_preset_would_replace_is_refused(tiny_run, tmp_path):
+    start = str(tiny_run / "generator.safetensors")
+    mine = tmp_path / "mine.yaml"
+    mine.write_text("finetune:\n  clip: 0.1\n  lr: 1.0e-4\n  policy_weight: 0.5\n")
+    with pytest.raises(ConfigError, match=r"^finetune\.clip \(0\.1 in .*mine\.yaml, 0\.2 in the "
+                       r"preset\), finetune\.policy_weight \(0\.5 .*, 1\.0 in the preset\): "
+                       r"--preset sets these keys after the --config file, so the file's values "
+                       r"have no effect"):  # fmt: skip
+        finetune_config(start, "rlhf", "paper", config=mine)
+    # --set changes a preset's value; the file's keys the preset does not set stay the file's
+    ft = finetune_config(start, "rlhf", "paper", config=mine, overrides=[
+        "finetune.clip=0.1", "finetune.policy_weight=0.5"]).finetune  # fmt: skip
+    assert (ft.clip, ft.policy_weight, ft.lr, ft.kl_form) == (0.1, 0.5, 1e-4, "paper")
+    # a paper run's own finetune_config.yaml (every key) with the preset again is fine, and
+    # --method still wins over the file's method
+    own = tmp_path / "finetune_config.yaml"
+    own.write_text(yaml.safe_dump(to_dict(finetune_config(start, "rlhf", "paper"))))
+    assert finetune_config(start, "rlhf", "paper", config=own).finetune.kl_form == "paper"
+    res = finetune_config(start, "rlhf-res", "paper", config=own, overrides=[
+        "finetune.policy_weight=1.0", "finetune.value_weight=5.0"]).finetune  # fmt: skip
+    assert (res.method, res.policy_weight) == ("rlhf-res", 1.0)

@@ -11,6 +11,7 @@ from trajpref.config import load_config
 from trajpref.data import load_dataset
 from trajpref.errors import ConfigError
 from trajpref.models import checkpoint as ckpt
+from trajpref.rl.presets import finetune_config
 from trajpref.rl.sda import LONE_REWARD, sda_reward, social_groups
 from trajpref.train.stages import build_finetune_stage
 from trajpref.types import AGENT_BALL, Scene, collate
@@ -172,5 +173,8 @@ def test_sda_thresholds_are_checked(tiny_run):
     for key in ("sda_radius", "sda_drift", "sda_tolerance"):
         with pytest.raises(ConfigError, match=key):
             load_config(None, [f"finetune.{key}=0"], base=start["config"])
-    with pytest.raises(ConfigError, match="'sda'"):
-        load_config(None, ["finetune.reward=groups"], base=start["config"])
+    # any name is a config's reward; fine-tuning refuses one that is not a reward here
+    assert load_config(None, ["finetune.reward=groups"], base=start["config"]).finetune.reward
+    with pytest.raises(ConfigError, match=r"^finetune\.reward=groups: no such reward .*sda"):
+        finetune_config(str(tiny_run / "generator.safetensors"), "rlhf",
+                        overrides=["finetune.reward=groups"])  # fmt: skip

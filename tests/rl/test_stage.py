@@ -272,3 +272,17 @@ def test_validation_samples_without_dropout_whatever_mode_the_caller_left(tiny_r
     assert all(m.training for m in drops)  # the caller's modes are restored
     stage.objective.eval()
     assert stage.validate() == first  # as the training loop validates
+
+
+def test_a_finetuned_checkpoint_records_its_method_reward_and_start(tiny_run, tmp_path):
+    from trajpref.io import read_checkpoint_header
+    from trajpref.rl.presets import finetune_config
+
+    start_path = tiny_run / "generator.safetensors"
+    cfg = finetune_config(str(start_path), "rlhf-res", overrides=[
+        "finetune.reward=sda", "finetune.epochs=1", "finetune.steps_per_epoch=1",
+        "finetune.eval_max_scenes=2"])  # fmt: skip
+    finetune(cfg, start_path, tmp_path, device="cpu", progress=False)
+    meta = read_checkpoint_header(tmp_path / "finetune.safetensors")["meta"]
+    start_hash = read_checkpoint_header(start_path)["hash"]
+    assert (meta["method"], meta["reward"], meta["from"]) == ("rlhf-res", "sda", start_hash)

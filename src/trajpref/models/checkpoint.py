@@ -114,6 +114,11 @@ def denoiser_payload(denoiser: Denoiser, cfg: ExperimentConfig, scale: float,
 def generator_payload(generator: Generator, denoiser: dict[str, Any], cfg: ExperimentConfig,
                       meta: dict[str, Any],
                       critic: torch.nn.Module | None = None) -> dict[str, Any]:  # fmt: skip
+    """A generator's payload. A fine-tuned one (``meta`` names its ``method``) also records
+    its ``reward`` in ``meta`` (``cfg.finetune.reward``; None for the control, which has
+    none), unless ``meta`` gives it: the file alone says how it was made."""
+    if "method" in meta and "reward" not in meta:
+        meta = {**meta, "reward": _run_reward(meta["method"], cfg.finetune.reward)}
     state = _cpu_state(generator)
     out = {"format": FORMAT, "kind": "generator", "config": to_dict(cfg),
            "scale": denoiser["scale"], "state_dict": state, "hash": state_hash(state),
@@ -121,6 +126,26 @@ def generator_payload(generator: Generator, denoiser: dict[str, Any], cfg: Exper
     if critic is not None:
         out["critic"] = _cpu_state(critic)
     return out
+
+
+def _run_reward(method: str, reward: str | None) -> str | None:
+    """The reward a fine-tuning run of ``method`` trained with: None for the control."""
+    return None if method == "control" else reward
+
+
+def finetune_reward(header: dict[str, Any]) -> str | None:
+    """The reward a fine-tuned checkpoint was trained with (``score``, ``set``, ``sda``, or
+    the name of a reward registered with ``trajpref.rl.register_reward``), from
+    its header or payload: ``meta.reward``, or for a file written before it was recorded,
+    its config's ``finetune.reward`` (``score`` where that predates the option too). None
+    for the control and for a checkpoint that is no fine-tune (no ``meta.method``)."""
+    meta = header.get("meta") or {}
+    if meta.get("method") is None:
+        return None
+    if "reward" in meta:
+        return meta["reward"]
+    section = (header.get("config") or {}).get("finetune") or {}
+    return _run_reward(meta["method"], section.get("reward", "score"))
 
 
 # ----------------------------------------------------------------------------- files
@@ -523,6 +548,11 @@ def load_predictor(path: str | Path, *, sampler: Sampler | None = None, device: 
     """A ``DiffusionPredictor`` from a checkpoint file, on ``device``, in eval mode.
 
     ``sampler`` and ``device`` are keyword-only, as in ``registry.load_predictor``, so that the
-    two functions cannot be called with their arguments in different orders.
+    two functions cannot be called with their arguments in different orders. The predictor
+    carries its training data's step and units (``models.timing.attach_timing``:
+    ``frame_interval``, ``units``, ``timing``).
     """
-    return predictor_from_payload(load(path), sampler).to(device).eval()
+    from trajpref.models.timing import attach_timing
+
+    payload = load(path)
+    return attach_timing(predictor_from_payload(payload, sampler).to(device).eval(), payload)

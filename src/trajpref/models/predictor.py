@@ -7,6 +7,7 @@ all call it; the networks' coordinate frame is ``data.transforms.to_model_frame`
 
 from __future__ import annotations
 
+import operator
 import typing
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -70,11 +71,21 @@ class Rollout:
     """[K, N, T_f, 2] the exploration noise added to Y^tau, or None."""
 
 
+def as_integer(value) -> int | None:
+    """``value`` as a Python int when it is an integer (an ``int``, a numpy integer, a 0-d
+    integer tensor; never a bool), else None: what the count arguments of the public API
+    accept, so that ``np.int64(20)`` from a planner's arrays counts as 20."""
+    if isinstance(value, bool) or (isinstance(value, torch.Tensor) and value.dtype == torch.bool):
+        return None  # (numpy's bool refuses operator.index itself)
+    try:
+        return operator.index(value)
+    except TypeError:
+        return None
+
+
 def check_histories(history: torch.Tensor, t_hist: int) -> None:
     """``DataError`` unless ``history`` is [N, T_h, 2] with this ``t_hist``, finite, and in
-    coordinates whose float32 rounding stays within a small share of a median step (the text
-    reader's rule, ``data.text.float32_precision_loss``; map coordinates such as UTM eastings
-    are not within it: subtract an origin first)."""
+    coordinates float32 can hold (``check_coordinates``)."""
     if history.ndim != 3 or tuple(history.shape[1:]) != (t_hist, 2):
         raise DataError(f"history: expected [N, {t_hist}, 2] (agents, observed steps, x/y; this "
                         f"model's T_h = {t_hist}), got {list(history.shape)}")  # fmt: skip
@@ -86,6 +97,16 @@ def check_histories(history: torch.Tensor, t_hist: int) -> None:
             f"{first}; every target needs all {t_hist} observed positions (an agent seen for "
             "only part of the history can be a neighbour: Scene.context)"
         )
+    check_coordinates(history)
+
+
+def check_coordinates(history: torch.Tensor) -> None:
+    """``DataError`` unless the finite histories [N, T_h, 2] are in coordinates whose float32
+    rounding stays within a small share of a median step (the text reader's rule,
+    ``data.text.float32_precision_loss``; map coordinates such as UTM eastings are not within
+    it: subtract an origin first). The one check of the prediction (``predict``) and of the
+    one-scene scoring calls (``score.scene_batch``: ``rank_samples``, ``select_for_scene``),
+    with one advice."""
     if history.numel() == 0:
         return
     steps = (history[:, 1:] - history[:, :-1]).norm(dim=-1).flatten()  # [N * (T_h - 1)]
@@ -93,8 +114,9 @@ def check_histories(history: torch.Tensor, t_hist: int) -> None:
     rounding = float(torch.finfo(torch.float32).eps) * largest / 2  # half a float32 spacing
     problem = float32_precision_loss(largest, rounding, steps.cpu().numpy())
     if problem is not None:
-        raise DataError(f"history: {problem}: subtract an origin from x and y before "
-                        "predicting, and add it back to the predictions")  # fmt: skip
+        raise DataError(f"history: {problem}: subtract an origin from x and y (from the history "
+                        "and any samples alike) before predicting or ranking, and add it back "
+                        "to the predictions")  # fmt: skip
 
 
 class DiffusionPredictor(DenoiserShapes, nn.Module):
@@ -129,6 +151,40 @@ class DiffusionPredictor(DenoiserShapes, nn.Module):
         self.sampler = sampler
         self.stochastic = stochastic
         self.name = f"diffusion-{sampler}"
+        self.timing: dict | None = None
+        """What the checkpoint recorded of the training data (``models.timing.model_timing``:
+        ``trained_on``, ``step``, ``known``, ``time_step``, ``units``); None when built in code
+        or when the header says nothing of it. ``checkpoint.load_predictor`` sets it."""
+        self.frame_interval: float | None = None
+        """Seconds per step of the data the model was trained on (its histories and futures
+        step at this pace), from the checkpoint; None where unknown."""
+        self.units: str | None = None
+        """Units of the data the model was trained on (``m``, ``px``), from the checkpoint;
+        None where unknown."""
+
+    @property
+    def agent_roles(self) -> int:
+        """How many agent roles the sampling network knows (``ModelConfig.agent_roles``; 0:
+        none). A model with roles reads each agent's place in the list as its role: the
+        agents must be listed in its training data's order (robo: leader, follower,
+        approacher), at most this many."""
+        net = self.generator if self.sampler == "leapfrog" else self.denoiser
+        return int(net.cfg.agent_roles)
+
+    @property
+    def reads_context(self) -> bool:
+        """Whether the model reads context-only neighbours (``Batch.context``,
+        ``predict_scene(context=...)``): a leapfrog generator built with
+        ``ModelConfig.context_agents``."""
+        gen = self.generator
+        return self.sampler == "leapfrog" and gen is not None and bool(gen.cfg.context_agents)
+
+    @property
+    def context_frames(self) -> int:
+        """The last history frames a context-only neighbour must be seen in, without a break,
+        to be read (``ModelConfig.context_frames``; 0 there means all T_h)."""
+        frames = self.generator.cfg.context_frames if self.generator is not None else 0
+        return int(frames) or self.t_hist
 
     def condition(self, batch: Batch) -> Condition:
         """Features and (on first use) the denoiser's context of a batch (no gradient into
@@ -211,8 +267,10 @@ class DiffusionPredictor(DenoiserShapes, nn.Module):
         """Absolute future positions [K, N, T_f, 2]. The batch's histories must be [N, T_h, 2]
         with this model's T_h, finite, and in coordinates float32 can hold to within a small
         share of a step (``check_histories``); ``num_samples`` >= 1."""
-        if isinstance(num_samples, bool) or not isinstance(num_samples, int) or num_samples < 1:
+        count = as_integer(num_samples)  # numpy integers count too
+        if count is None or count < 1:
             raise ConfigError(f"num_samples must be an integer >= 1, got {num_samples!r}")
+        num_samples = count
         check_histories(batch.history, self.denoiser.cfg.t_hist)
         y = self.sample_normalised(batch, num_samples, generator)  # [K, N, T_f, 2]
         return from_model_frame(y, batch, self.scale)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import copy
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import torch
 from torch import nn
@@ -23,7 +23,8 @@ from trajpref.metrics import scene_sum
 from trajpref.models.critic import Critic
 from trajpref.models.losses import generator_loss
 from trajpref.models.predictor import Condition, DiffusionPredictor, Rollout
-from trajpref.rl import ppo, sda
+from trajpref.rl import ppo
+from trajpref.rl.rewards import call_reward, handcrafted_reward, hide_future
 from trajpref.rl.set_reward import marginal_gains
 from trajpref.score.scorer import TrajectoryScorer, score_timesteps
 from trajpref.types import Batch
@@ -49,29 +50,6 @@ def step_reward(scorer: TrajectoryScorer, context: torch.Tensor, futures: torch.
     return r.clamp(-clip, clip) if clip is not None else r
 
 
-HandcraftedReward = Callable[[Batch, torch.Tensor, FinetuneConfig], torch.Tensor]
-"""A per-step reward beside the diffusion score, as a plain callable: (the batch with its
-future hidden, futures [M, N, T_f, 2] in absolute coordinates, the fine-tuning config) -> r
-[M, N, T_f], higher is better."""
-
-
-def sda_step_reward(batch: Batch, futures: torch.Tensor, cfg: FinetuneConfig) -> torch.Tensor:
-    """``finetune.reward=sda``: rl/sda.py's reward at the config's thresholds."""
-    return sda.sda_reward(batch.history, batch.scene, futures, cfg.sda_radius, cfg.sda_drift,
-                          cfg.sda_tolerance, batch.agent_type)  # fmt: skip
-
-
-REWARDS: dict[str, HandcraftedReward] = {"sda": sda_step_reward}
-"""Hand-crafted rewards by ``finetune.reward`` name. ``score`` and ``set`` are not here: they
-need the frozen denoiser and the ground truth's residual (Eq. 6)."""
-
-
-def hide_future(batch: Batch) -> Batch:
-    """The batch with its future replaced by NaN: what a hand-crafted reward is given, so it
-    cannot read the ground truth even by mistake."""
-    return replace(batch, future=torch.full_like(batch.future, math.nan))
-
-
 @dataclass
 class Actions:
     """K actions of one rollout and what the update needs of them. [K, N, T_f] each."""
@@ -87,7 +65,7 @@ class Actions:
     sample (``sample`` likelihood) or the denoised sample (``mean``)."""
     score: torch.Tensor | None = None
     """r, the clipped per-step diffusion score (Eq. 6), or the hand-crafted reward in its place
-    (``REWARDS``; then also what RLHF-ReS's k* maximises)."""
+    (built-in or registered: ``rl.rewards``; then also what RLHF-ReS's k* maximises)."""
     div: torch.Tensor | None = None
     """The KL penalty (Eq. 13)."""
     reward: torch.Tensor | None = None
@@ -148,6 +126,9 @@ class RLObjective(nn.Module):
         )
         self.rl = cfg
         self.reg_cfg = reg_cfg
+        # a hand-crafted reward's callable, looked up once (a name not registered in this
+        # process is refused here, before any step); None for the diffusion score's rewards
+        self.handcrafted = handcrafted_reward(cfg.reward) if cfg.method != "control" else None
         steps = score_timesteps(sampler.schedule.num_steps, cfg.score_every)
         self.scorer = TrajectoryScorer(self.denoiser, sampler.schedule, sampler.scale, steps)
         t_f = sampler.denoiser.cfg.t_fut
@@ -324,12 +305,10 @@ class RLObjective(nn.Module):
         they share the noise)."""
         rl = self.rl
         futures = torch.cat([a.action for a in acts])  # [K * len(acts), N, T_f, 2]
-        if rl.reward in REWARDS:  # hand-crafted, in the data's units, blind to the future
+        if self.handcrafted is not None:  # in the data's units, blind to the future
             observed = hide_future(batch)
             absolute = from_model_frame(futures, observed, self.sampler.scale)  # [M, N, T_f, 2]
-            scores = REWARDS[rl.reward](observed, absolute, rl)  # [M, N, T_f]
-            if rl.reward_clip is not None:
-                scores = scores.clamp(-rl.reward_clip, rl.reward_clip)
+            scores = call_reward(rl.reward, self.handcrafted, observed, absolute, rl)  # [M, N, T_f]
         else:
             scores = step_reward(self.scorer, context, futures, target, rl.reward_clip)
         for a, r in zip(acts, scores.chunk(len(acts)), strict=True):

@@ -4,18 +4,24 @@ resolution of a fine-tuning run's config from its starting checkpoint."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import yaml
 
 from trajpref.config import (
     BUILTIN_DATASETS,
     ExperimentConfig,
     FinetuneConfig,
     load_config,
+    resolve_config,
     to_dict,
 )
 from trajpref.errors import ConfigError
 from trajpref.models import checkpoint
+from trajpref.rl.rewards import SCORE_REWARDS, check_reward
 
 PAPER_WEIGHTS = {"rlhf": (1.0, 5.0), "rlhf-res": (0.3, 1.5)}
 """(policy, value) weights of Eq. 17 (alpha_p, alpha_v) and Eq. 20 (beta_p, beta_v)."""
@@ -60,6 +66,61 @@ RL_ONLY = ("policy_weight", "value_weight", "clip", "value_clip", "kl_coef", "kl
 """The ``FinetuneConfig`` fields that only the RL methods read (their policy and value
 losses, the reward, the exploration and the PPO updates): the control has none of these, so
 ``finetune_config`` refuses a control whose config changes one of them."""
+
+
+@dataclass(frozen=True)
+class ReadWhen:
+    """RL settings that the RL methods read only under some other setting (a reward, a
+    likelihood, a PPO update): given without it, they have no effect."""
+
+    keys: tuple[str, ...]
+    """The ``FinetuneConfig`` fields."""
+    reads: Callable[[FinetuneConfig], bool]
+    """Whether a run with this config reads them."""
+    owner: str
+    """What they belong to, as the error names it."""
+    unread: Callable[[FinetuneConfig], str]
+    """Why this run does not read them (from its config)."""
+    fix: str
+    """What to do instead of leaving them out."""
+
+
+READ_WHEN = (
+    ReadWhen(("set_bandwidth", "set_alpha"), lambda ft: ft.reward == "set",
+             "the set-aware reward (finetune.reward=set)",
+             lambda ft: f"this run's reward is {ft.reward}", "or set finetune.reward=set"),
+    ReadWhen(("sda_radius", "sda_drift", "sda_tolerance"), lambda ft: ft.reward == "sda",
+             "the SDA reward (finetune.reward=sda)",
+             lambda ft: f"this run's reward is {ft.reward}", "or set finetune.reward=sda"),
+    # sda and a registered reward (rl.rewards.register_reward) compute no diffusion score
+    ReadWhen(("score_every",), lambda ft: ft.reward in SCORE_REWARDS,
+             "the diffusion score (finetune.reward=score or set)",
+             lambda ft: f"this run's reward is {ft.reward}, which computes no diffusion score",
+             "or choose finetune.reward=score or set"),
+    ReadWhen(("explore_std", "explore"), lambda ft: ft.likelihood == "sample",
+             "the sample likelihood's exploration (finetune.likelihood=sample)",
+             lambda ft: f"this run's likelihood is {ft.likelihood}, which does not explore",
+             "or set finetune.likelihood=sample"),
+    # with one update on its own rollout and the ratio p_theta / p_old, the ratio is 1
+    ReadWhen(("clip",), lambda ft: ft.ratio_against == "reference" or ft.ppo_epochs > 1,
+             "the clipped PPO ratio (finetune.ratio_against=reference or ppo_epochs > 1)",
+             lambda ft: "this run takes one update per rollout with the ratio against the "
+             "rollout policy (ppo_epochs=1, ratio_against=rollout): its ratio is always 1",
+             "or set finetune.ppo_epochs above 1 (or finetune.ratio_against=reference)"),
+    # the antithetic baseline replaces the TD advantage, and a reward value target no return
+    ReadWhen(("gamma", "gae_lambda"),
+             lambda ft: ft.baseline == "critic" or ft.value_target == "return",
+             "the TD advantage and return (finetune.baseline=critic or value_target=return)",
+             lambda ft: "this run's advantage is antithetic (baseline=antithetic) and its "
+             "value target the reward (value_target=reward)",
+             "or set finetune.value_target=return"),
+)  # fmt: skip
+"""What the RL methods read only under another setting: ``finetune_config`` refuses a run
+that names one of these keys (or whose YAML file changes one) where it is not read (a
+preset's own values are not refused). Every other RL_ONLY key is read by both RL methods
+(``rlhf-res`` refuses ``reward=set`` itself). A registered reward reads none of the
+conditional keys, as ``sda`` reads none but its own: its own settings are its closure's."""
+
 
 EQUAL_BUDGET_WARMUP = 4
 """The equal-budget protocol's warm-up steps, the same for every method (the default 20 would
@@ -113,14 +174,21 @@ def _undescribed(data: dict[str, Any], overrides: list[str]) -> list[str]:
             if data.get(key) is not None and f"data.{key}" not in given]  # fmt: skip
 
 
-def _check_reads(cfg: ExperimentConfig, method: str, overrides: list[str]) -> None:
+def _check_reads(cfg: ExperimentConfig, method: str, overrides: list[str],
+                 preset: str | None = None) -> None:  # fmt: skip
     """Refuse settings the method does not read: the control with an RL-only setting named in
-    ``overrides`` or changed from its default (by a YAML file), RLHF-ReS with the set-aware
-    reward."""
+    ``overrides`` or changed from its default (by a YAML file), an RL method with a setting
+    of ``READ_WHEN`` that its other settings leave unread (named or changed alike; a value
+    the ``preset`` sets is its own), RLHF-ReS with the set-aware reward."""
+    default, named = FinetuneConfig(), _override_keys(overrides)
+
+    def given(key: str, preset_keys: tuple[str, ...] = ()) -> bool:
+        return f"finetune.{key}" in named or (
+            key not in preset_keys and getattr(cfg.finetune, key) != getattr(default, key)
+        )
+
     if method == "control":
-        default, named = FinetuneConfig(), _override_keys(overrides)
-        changed = [k for k in RL_ONLY if f"finetune.{k}" in named
-                   or getattr(cfg.finetune, k) != getattr(default, k)]  # fmt: skip
+        changed = [k for k in RL_ONLY if given(k)]
         if changed:
             keys = ", ".join(f"finetune.{k}" for k in changed)
             raise ConfigError(
@@ -129,11 +197,53 @@ def _check_reads(cfg: ExperimentConfig, method: str, overrides: list[str]) -> No
                 f"{'this has' if len(changed) == 1 else 'these have'} no effect; leave "
                 f"{'it' if len(changed) == 1 else 'them'} out"
             )
+        return
+    check_reward(cfg.finetune.reward)  # a name registered in this process, or a built-in
     if method == "rlhf-res" and cfg.finetune.reward == "set":
         raise ConfigError(
             "finetune.reward=set rewards each sample by what it adds to its K samples' set, "
             "and RLHF-ReS trains only each scene's best-scored sample, which undoes the set "
             "view (docs/rlhf.md): use it with --method rlhf"
+        )
+    preset_keys = tuple(PRESETS[preset]) if preset else ()
+    unread = []
+    for rule in READ_WHEN:
+        changed = [k for k in rule.keys if given(k, preset_keys)]
+        if changed and not rule.reads(cfg.finetune):
+            one = len(changed) == 1
+            unread.append(
+                f"{', '.join(f'finetune.{k}' for k in changed)}: "
+                f"{'a setting' if one else 'settings'} of {rule.owner}, and "
+                f"{rule.unread(cfg.finetune)}, so {'it has' if one else 'they have'} no "
+                f"effect; leave {'it' if one else 'them'} out {rule.fix}"
+            )
+    if unread:
+        raise ConfigError("; ".join(unread))
+
+
+def _check_file_under_preset(cfg: ExperimentConfig, config: str | Path, base: dict[str, Any],
+                             preset_keys: set[str], overrides: list[str]) -> None:  # fmt: skip
+    """Refuse a ``--config`` file whose finetune section gives a key that the preset sets
+    (and ``overrides`` does not) another value: the preset, applied after the file, would
+    replace it without a word."""
+    loaded = yaml.safe_load(resolve_config(config).read_text()) or {}
+    given = loaded.get("finetune") if isinstance(loaded, dict) else None
+    if not isinstance(given, dict):
+        return
+    from_file = load_config(config, [], base=base, sections=("finetune",)).finetune
+    named = _override_keys(overrides)
+    lost = [k for k in sorted(given) if f"finetune.{k}" in preset_keys
+            and f"finetune.{k}" not in named
+            and getattr(from_file, k) != getattr(cfg.finetune, k)]  # fmt: skip
+    if lost:
+        one = len(lost) == 1
+        pairs = ", ".join(f"finetune.{k} ({getattr(from_file, k)!r} in {config}, "
+                          f"{getattr(cfg.finetune, k)!r} in the preset)" for k in lost)  # fmt: skip
+        raise ConfigError(
+            f"{pairs}: --preset sets {'this key' if one else 'these keys'} after the --config "
+            f"file, so the file's {'value has' if one else 'values have'} no effect; change "
+            f"a preset's value with --set (e.g. --set finetune.{lost[0]}="
+            f"{getattr(from_file, lost[0])}), or leave {'it' if one else 'them'} out of the file"
         )
 
 
@@ -155,8 +265,13 @@ def finetune_config(
     is then refused), then ``overrides``.
 
     Refused: a preset for the control, a control whose overrides name (or whose YAML file
-    changes) a setting it does not read (``RL_ONLY``), RLHF-ReS with the set-aware reward,
-    and any ``model.*`` or ``diffusion.*`` change (the network is the start's)."""
+    changes) a setting it does not read (``RL_ONLY``), an RL method whose ``reward`` is
+    neither built in nor registered in this process (``rl.rewards.check_reward``: the CLI
+    cannot register one), an RL method given a setting its other
+    settings leave unread (``READ_WHEN``: e.g. ``set_bandwidth`` without ``reward=set``),
+    RLHF-ReS with the set-aware reward, a ``config`` file that gives a key of the preset
+    another value (the preset would replace it), and any ``model.*`` or ``diffusion.*``
+    change (the network is the start's)."""
     payload = start if isinstance(start, dict) else checkpoint.load(start)
     if payload["kind"] != "generator":
         where = "the start" if isinstance(start, dict) else str(start)
@@ -193,5 +308,9 @@ def finetune_config(
                 f"(`trajpref evaluate --spread-scale/--max-speed`, or "
                 f"models.checkpoint.set_generator_setting)"
             )
-    _check_reads(cfg, method, overrides or [])
+    _check_reads(cfg, method, overrides or [], preset)
+    if preset and config is not None:
+        # --method wins over a file's method, with or without a preset
+        preset_keys = _override_keys(preset_overrides(preset, method)) - {"finetune.method"}
+        _check_file_under_preset(cfg, config, base, preset_keys, overrides or [])
     return cfg

@@ -12,7 +12,9 @@ and needs no ground truth (Lemma 1). Eq. 7's mean of ratios is offered too, unde
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
+from os import PathLike
 
 import numpy as np
 import torch
@@ -30,6 +32,8 @@ from trajpref.metrics import ade_fde, scene_sum
 from trajpref.models import checkpoint
 from trajpref.models.denoiser import Denoiser, DenoiserShapes
 from trajpref.models.encoder import scene_features
+from trajpref.models.predictor import as_integer, check_coordinates
+from trajpref.models.timing import attach_timing, check_pace
 from trajpref.types import AGENT_BALL, AGENT_PERSON, Batch
 
 NOISE_LAYOUT = "scene-slot"
@@ -120,15 +124,25 @@ class TrajectoryScorer(DenoiserShapes):
         if precision not in PRECISIONS:
             raise ConfigError(f"scorer precision must be one of {PRECISIONS}, got {precision!r}")
         self.precision = precision
+        self.timing: dict | None = None
+        """What the checkpoint recorded of the training data (``models.timing.model_timing``);
+        None when built in code. ``from_checkpoint`` sets it, with the two below."""
+        self.frame_interval: float | None = None
+        """Seconds per step of the data the denoiser was trained on; None where unknown."""
+        self.units: str | None = None
+        """Units of the data the denoiser was trained on (``m``, ``px``); None where unknown."""
 
     @classmethod
     def from_checkpoint(cls, path, device="cpu", **kwargs) -> TrajectoryScorer:
-        """From a denoiser checkpoint, or the denoiser embedded in a generator checkpoint."""
+        """From a denoiser checkpoint, or the denoiser embedded in a generator checkpoint; it
+        carries the checkpoint's training step and units (``frame_interval``, ``units``)."""
         device = resolve_device(device)  # "auto" as the CLI reads it; a missing GPU in one line
-        payload = checkpoint.denoiser_of(checkpoint.load(path))
+        header = checkpoint.load(path)
+        payload = checkpoint.denoiser_of(header)
         denoiser, cfg = checkpoint.build_denoiser(payload)
         schedule = DDPMSchedule.from_config(cfg.diffusion)
-        return cls(denoiser.to(device), schedule.to(device), payload["scale"], **kwargs)
+        scorer = cls(denoiser.to(device), schedule.to(device), payload["scale"], **kwargs)
+        return attach_timing(scorer, header)
 
     def with_steps(self, steps: list[int], precision: str | None = None) -> TrajectoryScorer:
         """This scorer at other score steps (and ``precision``; None: its own), sharing its
@@ -136,9 +150,12 @@ class TrajectoryScorer(DenoiserShapes):
         precision = self.precision if precision is None else precision
         if list(steps) == list(self.steps) and precision == self.precision:
             return self
-        return TrajectoryScorer(self.denoiser, self.schedule, self.scale, list(steps),
-                                self.seed, self.shared_noise, self.speed_ref,
-                                precision)  # fmt: skip
+        other = TrajectoryScorer(self.denoiser, self.schedule, self.scale, list(steps),
+                                 self.seed, self.shared_noise, self.speed_ref,
+                                 precision)  # fmt: skip
+        other.timing, other.frame_interval, other.units = (self.timing, self.frame_interval,
+                                                           self.units)  # fmt: skip
+        return other
 
     def check_shapes(self, batch: Batch, futures: torch.Tensor) -> None:
         """DataError unless the batch's histories are [N, T_h, 2] and futures [M, N, T_f, 2]
@@ -258,9 +275,11 @@ ArrayLike = np.ndarray | torch.Tensor
 """What the public API accepts: a numpy array (or anything ``np.asarray`` reads) or a tensor."""
 
 
-def _float_tensor(name: str, value, device: torch.device) -> torch.Tensor:
+def _float_tensor(name: str, value, device: torch.device, unseen: bool = False) -> torch.Tensor:
     """``value`` as float32 on ``device``; DataError for non-numbers and for values that are
-    not finite after the float32 conversion (NaN, inf, or beyond float32's range)."""
+    not finite after the float32 conversion (NaN, inf, or beyond float32's range; with
+    ``unseen``, NaN is let through: a frame where a neighbour was not seen). Any numpy view
+    (reversed, strided) is read as its values."""
     if isinstance(value, torch.Tensor):
         if value.is_complex() or value.dtype == torch.bool:
             raise DataError(f"{name}: expected real numbers, got a {value.dtype} tensor")
@@ -271,26 +290,37 @@ def _float_tensor(name: str, value, device: torch.device) -> torch.Tensor:
                 array = np.asarray(value, dtype=np.float32)
         except (TypeError, ValueError) as exc:
             raise DataError(f"{name}: expected an array of numbers ({exc})") from None
+        if any(stride < 0 for stride in array.strides):  # h[::-1]: torch cannot wrap it
+            array = array.copy()
         tensor = torch.from_numpy(array).to(device)
-    finite = torch.isfinite(tensor)
+    finite = torch.isfinite(tensor) | (tensor.isnan() if unseen else False)
     if not bool(finite.all()):
         bad = (~finite).nonzero()
+        what = "inf or beyond +-3.4e38; NaN marks an unseen frame" if unseen else (
+            "NaN, inf or beyond +-3.4e38")  # fmt: skip
         raise DataError(
-            f"{name}: {len(bad)} value(s) not finite after conversion to float32 (NaN, inf or "
-            f"beyond +-3.4e38), the first at index {bad[0].tolist()}"
+            f"{name}: {len(bad)} value(s) not finite after conversion to float32 ({what}), "
+            f"the first at index {bad[0].tolist()}"
         )
     return tensor
 
 
-def _agent_types(value, p: int, device: torch.device) -> torch.Tensor:
+def _agent_types(value, p: int, device: torch.device, name: str = "agent_type") -> torch.Tensor:
     if value is None:
         return torch.full((p,), AGENT_PERSON, dtype=torch.int64, device=device)
-    types = torch.as_tensor(np.asarray(value.cpu() if isinstance(value, torch.Tensor) else value))
+    try:
+        array = np.array(value.cpu() if isinstance(value, torch.Tensor) else value)  # a copy
+        types = torch.as_tensor(array)
+    except (TypeError, ValueError) as exc:
+        raise DataError(f"{name}: expected {p} integer flags [P] ({exc})") from None
+    if types.dtype == torch.bool:  # True would read as 1, a ball
+        raise DataError(f"{name}: expected integer flags {AGENT_PERSON} (person) or "
+                        f"{AGENT_BALL} (ball), got booleans")  # fmt: skip
     if tuple(types.shape) != (p,) or types.is_floating_point() or types.is_complex():
-        raise DataError(f"agent_type: expected {p} integer flags [P], got {list(types.shape)} "
+        raise DataError(f"{name}: expected {p} integer flags [P], got {list(types.shape)} "
                         f"of {types.dtype}")  # fmt: skip
     if bool(((types != AGENT_PERSON) & (types != AGENT_BALL)).any()):
-        raise DataError(f"agent_type: flags must be {AGENT_PERSON} (person) or "
+        raise DataError(f"{name}: flags must be {AGENT_PERSON} (person) or "
                         f"{AGENT_BALL} (ball), got {sorted(set(types.tolist()))}")  # fmt: skip
     return types.to(device=device, dtype=torch.int64)
 
@@ -309,22 +339,33 @@ def rank_samples(
     samples: ArrayLike,
     agent_type: ArrayLike | None = None,
     final: bool = False,
+    *,
+    frame_interval: float | None = None,
+    units: str | None = None,
 ) -> tuple[ArrayLike, ArrayLike]:
     """Rank sampled futures of ONE scene given only its history (the planning use).
 
     history [P, T_h, 2] and samples [K, P, T_f, 2], absolute coordinates in the units the
-    scorer's data had (metres for the published ETH/UCY and Robo models), with T_h and T_f
-    the scorer's (``scorer.t_hist``, ``scorer.t_fut``: 8 and 12 for the published models).
-    Each may be a numpy array (what ``trajpref predict`` exports) or a torch tensor.
-    ``agent_type`` [P]: 0 person (the default), 1 ball. ``final``: rank by the last step
-    only (FTS order) instead of all steps (ATS order).
+    scorer's data had (``scorer.units``: metres for the published ETH/UCY and Robo models),
+    with T_h and T_f the scorer's (``scorer.t_hist``, ``scorer.t_fut``: 8 and 12 for the
+    published models), one position every ``scorer.frame_interval`` seconds. Each may be a
+    numpy array (what ``trajpref predict`` exports) or a torch tensor. ``agent_type`` [P]: 0
+    person (the default), 1 ball. ``final``: rank by the last step only (FTS order) instead of
+    all steps (ATS order). ``frame_interval`` (seconds between the positions) and ``units``,
+    when given, are compared with the scorer's, with a warning where they differ (as
+    ``predict_scene``).
 
     Returns ``(order [K] int64, residual [K] float32)``: sample indices best first, and each
     sample's residual summed over agents and steps (lower is more human-like). Both are numpy
     arrays when neither ``history`` nor ``samples`` is a tensor, else tensors on the scorer's
-    device. Wrong shapes, non-numbers and non-finite values raise ``DataError``.
+    device. The score is computed at the scorer's steps (``scorer.steps``; 34 from
+    ``from_checkpoint``: ``scorer.with_steps([0])`` is 10-25x cheaper). The order depends
+    on the scorer's ``seed`` and on the order the agents are listed in (docs/score.md).
+    Wrong shapes, non-numbers, non-finite values and coordinates too large for float32 raise
+    ``DataError``.
     """
-    batch, futs = scene_batch(scorer, history, samples, agent_type)
+    batch, futs = scene_batch(scorer, history, samples, agent_type, frame_interval=frame_interval,
+                              units=units)  # fmt: skip
     d = scorer.residual(batch, futs)  # [K, P, T_f]
     total = (d[..., -1] if final else d.sum(-1)).sum(-1)  # [K]
     order = total.argsort()  # [K]
@@ -334,41 +375,173 @@ def rank_samples(
 
 
 def predict_scene(model, history: ArrayLike, num_samples: int = 20,
-                  agent_type: ArrayLike | None = None, seed: int = 0) -> ArrayLike:  # fmt: skip
+                  agent_type: ArrayLike | None = None, seed: int = 0, *,
+                  frame_interval: float | None = None, units: str | None = None,
+                  context: ArrayLike | None = None) -> ArrayLike:  # fmt: skip
     """Sample the futures of ONE scene from its agents' histories (the planning use, beside
-    ``rank_samples``): history [P, T_h, 2] absolute positions in the model's units (metres
-    for the published ETH/UCY and Robo models) -> [K, P, T_f, 2] absolute future positions.
+    ``rank_samples``): history [P, T_h, 2] absolute positions -> [K, P, T_f, 2] absolute
+    future positions, in the model's units (``model.units``: metres for the published
+    ETH/UCY and Robo models, pixels for sdd) and at its step (``model.frame_interval``
+    seconds between positions: 0.4 for ETH/UCY and sdd, 0.5 for robo and robo-mix, 0.48 for
+    nba), histories and futures alike.
 
     ``model`` is what ``models.registry.load_predictor`` returns (a published name, a
     checkpoint or ``cv``). ``agent_type`` [P]: 0 person (the default), 1 ball. ``seed`` seeds
-    the sampling (the published generators draw no noise: every seed gives the same). A numpy
-    array (or anything ``np.asarray`` reads) gives a numpy array back, a tensor a tensor on
-    the model's device. Wrong shapes, non-numbers, non-finite values and coordinates too
-    large for float32 raise ``DataError``."""
+    the sampling (the published generators draw no noise: every seed gives the same).
+
+    ``frame_interval`` (seconds between the history's positions) and ``units``, when given,
+    are compared with the model's, with a ``UserWarning`` where they differ (the CLI's
+    check): a model trained on 0.5 s steps reads 0.4 s tracks as slower agents, and its 12
+    steps then span 6 s, not 4.8.
+
+    Agent order: a model with agent roles (``model.agent_roles`` > 0: robo/generator and
+    robo-mix/generator, 3 roles) reads each agent's place in ``history`` as its role, so the
+    agents must be listed in its training data's order (robo: leader, follower,
+    approacher); listed otherwise its futures are about constant velocity, with no error
+    (at most ``agent_roles`` agents, else a DataError). Other models give each agent the same
+    futures whatever the order.
+
+    ``context`` [C, T_h, 2]: neighbours that are seen but not predicted, NaN at the frames
+    where they were not seen; read only by a model with ``model.reads_context`` (the
+    published zara1, zara2, univ and eth generators), and only those seen in the last
+    ``model.context_frames`` frames without a break (all 8 for the published ones): others
+    are ignored. Every target in ``history`` needs all T_h positions (docs/score.md, "Python:
+    the planning calls").
+
+    A numpy array (or anything ``np.asarray`` reads) gives a numpy array back, a tensor a
+    tensor on the model's device. Wrong shapes, non-numbers, non-finite values and
+    coordinates too large for float32 raise ``DataError``; a model name or a scorer in place
+    of the model, or a bad ``num_samples``, ``ConfigError``. Several scenes at once:
+    ``predict_scenes``."""
+    return _predict(model, [history], num_samples, [agent_type], seed, frame_interval, units,
+                    [context], single=True)[0]  # fmt: skip
+
+
+def predict_scenes(model, histories, num_samples: int = 20, agent_types=None, seed: int = 0, *,
+                   frame_interval: float | None = None, units: str | None = None,
+                   contexts=None) -> list[ArrayLike]:  # fmt: skip
+    """``predict_scene`` for several scenes in one batch (one pass of the networks instead of
+    one per scene): ``histories`` a list of [P_b, T_h, 2] (the scenes may differ in P) ->
+    a list of [K, P_b, T_f, 2], in the same order. ``agent_types`` and ``contexts``: None, or
+    one entry (None or an array) per scene. For a model that draws no noise (every published
+    generator) each scene's futures equal ``predict_scene``'s for it alone, to float32
+    rounding (about 1e-5 m); a model that draws noise draws it across the batch, so the
+    numbers differ from the loop's (with the same spread). Each result is a tensor when its
+    history was one, else a numpy array. The checks and the warnings are
+    ``predict_scene``'s, naming ``histories[b]``."""
+    if isinstance(histories, (np.ndarray, torch.Tensor)) and histories.ndim == 3:
+        raise DataError("histories: expected a list of scenes' histories [P, T_h, 2]; got "
+                        f"one array {list(histories.shape)}: predict_scene takes one "
+                        "scene")  # fmt: skip
+    histories = list(histories)
+    b = len(histories)
+    agent_types = [None] * b if agent_types is None else list(agent_types)
+    contexts = [None] * b if contexts is None else list(contexts)
+    for name, value in (("agent_types", agent_types), ("contexts", contexts)):
+        if len(value) != b:
+            raise DataError(f"{name}: expected one entry per scene ({b}), got {len(value)}")
+    return _predict(model, histories, num_samples, agent_types, seed, frame_interval, units,
+                    contexts, single=False)  # fmt: skip
+
+
+def _check_model(model) -> None:
+    """ConfigError unless ``model`` predicts (a name or a scorer in its place says what to do)."""
+    if isinstance(model, (str, PathLike)):
+        raise ConfigError(f"model: got the name {str(model)!r}, not a model: load it once "
+                          f"with trajpref.models.registry.load_predictor({str(model)!r}) and "
+                          "pass what it returns (loading reads the file: not in the "
+                          "loop)")  # fmt: skip
+    if isinstance(model, TrajectoryScorer):
+        raise ConfigError("model: got a TrajectoryScorer, which ranks futures but does not "
+                          "sample them: predict with trajpref.models.registry.load_predictor("
+                          "'DATASET/generator') and rank with the scorer "
+                          "(rank_samples)")  # fmt: skip
+    if not callable(getattr(model, "predict", None)):
+        raise ConfigError(f"model: expected a predictor (trajpref.models.registry."
+                          f"load_predictor), got a {type(model).__name__}")  # fmt: skip
+
+
+def _check_scorer(scorer) -> None:
+    """ConfigError unless ``scorer`` is a TrajectoryScorer (a name or a predictor in its place
+    says what to do)."""
+    if isinstance(scorer, TrajectoryScorer):
+        return
+    if isinstance(scorer, (str, PathLike)):
+        raise ConfigError(f"scorer: got the name {str(scorer)!r}, not a scorer: build it once "
+                          f"with TrajectoryScorer.from_checkpoint({str(scorer)!r})")  # fmt: skip
+    if hasattr(scorer, "denoiser") and hasattr(scorer, "predict"):
+        raise ConfigError("scorer: got a predictor, which samples futures; rank them with "
+                          "TrajectoryScorer.from_checkpoint('DATASET/denoiser') (or "
+                          "TrajectoryScorer(model.denoiser, model.schedule, "
+                          "model.scale))")  # fmt: skip
+    raise ConfigError(f"scorer: expected a TrajectoryScorer, got a {type(scorer).__name__}")
+
+
+def _predict(model, histories: list, num_samples, agent_types: list, seed, frame_interval,
+             units, contexts: list, single: bool) -> list[ArrayLike]:  # fmt: skip
+    """``predict_scene`` (``single``) and ``predict_scenes``: one batch of every scene."""
+    _check_model(model)
+    check_pace(model, frame_interval, units, stacklevel=4)  # the user's line
+    count = as_integer(num_samples)  # numpy integers count too
+    if count is None or count < 1:
+        raise ConfigError(f"num_samples must be an integer >= 1, got {num_samples!r}")
+    if not histories:
+        raise DataError("histories: no scenes to predict")
     device = getattr(model, "device", torch.device("cpu"))
-    hist = _float_tensor("history", history, device)  # [P, T_h, 2]
     t_h = getattr(model, "t_hist", None)  # None: any length (the constant-velocity baseline)
     t_f = getattr(model, "t_fut", 12)
-    if hist.ndim == 3 and hist.shape[0] == 0:
-        raise DataError("history: the scene has no agents (P = 0)")
-    if hist.ndim != 3 or hist.shape[2] != 2 or hist.shape[1] != (t_h or hist.shape[1]):
-        want = (
-            f"[P, {t_h}, 2] (agents, observed steps, x/y; this model's T_h = {t_h})"
-            if t_h
-            else "[P, T_h, 2] (agents, observed steps, x/y)"
-        )
-        raise DataError(f"history: expected {want}, got {list(hist.shape)}")
-    batch = _one_scene(hist, t_f, agent_type)
-    pred = model.predict(batch, num_samples, torch.Generator().manual_seed(seed))
-    return pred if isinstance(history, torch.Tensor) else pred.cpu().numpy()
+    scenes = []
+    given = zip(histories, agent_types, contexts, strict=True)
+    for i, (history, agent_type, context) in enumerate(given):
+        name = "history" if single else f"histories[{i}]"
+        hist = _float_tensor(name, history, device)  # [P, T_h, 2]
+        if hist.ndim == 3 and hist.shape[0] == 0:
+            raise DataError(f"{name}: the scene has no agents (P = 0)")
+        if hist.ndim != 3 or hist.shape[2] != 2 or hist.shape[1] != (t_h or hist.shape[1]):
+            want = (
+                f"[P, {t_h}, 2] (agents, observed steps, x/y; this model's T_h = {t_h})"
+                if t_h
+                else "[P, T_h, 2] (agents, observed steps, x/y)"
+            )
+            raise DataError(f"{name}: expected {want}, got {list(hist.shape)}")
+        types = _agent_types(agent_type, hist.shape[0], device,
+                             "agent_type" if single else f"agent_types[{i}]")  # fmt: skip
+        ctx = None
+        if context is not None:
+            what = "context" if single else f"contexts[{i}]"
+            ctx = _float_tensor(what, context, device, unseen=True)  # [C, T_h, 2]
+            if ctx.ndim != 3 or tuple(ctx.shape[1:]) != tuple(hist.shape[1:]):
+                raise DataError(f"{what}: expected [C, {hist.shape[1]}, 2] (neighbours, the "
+                                f"history's observed steps, x/y; NaN where not seen), got "
+                                f"{list(ctx.shape)}")  # fmt: skip
+        scenes.append((hist, types, ctx))
+    if any(c is not None and len(c) for _, _, c in scenes) and not getattr(
+            model, "reads_context", False):  # fmt: skip
+        warnings.warn("this model reads no context-only neighbours (model.reads_context is "
+                      "False): the context changes nothing; a neighbour seen over the whole "
+                      "history can be listed as an agent instead", stacklevel=3)  # fmt: skip
+    batch = _join(scenes, t_f)
+    pred = model.predict(batch, count, torch.Generator().manual_seed(seed))  # [K, N, T_f, 2]
+    out, start = [], 0
+    for history, (hist, _, _) in zip(histories, scenes, strict=True):
+        part = pred[:, start : start + hist.shape[0]]  # [K, P_b, T_f, 2]
+        start += hist.shape[0]
+        out.append(part if isinstance(history, torch.Tensor) else part.cpu().numpy())
+    return out
 
 
 def scene_batch(scorer: TrajectoryScorer, history: ArrayLike, samples: ArrayLike,
-                agent_type: ArrayLike | None = None) -> tuple[Batch, torch.Tensor]:  # fmt: skip
+                agent_type: ArrayLike | None = None, *, frame_interval: float | None = None,
+                units: str | None = None) -> tuple[Batch, torch.Tensor]:  # fmt: skip
     """One scene's history [P, T_h, 2] and samples [K, P, T_f, 2] (arrays or tensors, the
     scorer's units and lengths) as a one-scene Batch with an unknown (NaN) future, and the
-    samples as a float32 tensor on the scorer's device. DataError for wrong shapes and
-    non-finite values (``rank_samples`` documents the conventions)."""
+    samples as a float32 tensor on the scorer's device. DataError for wrong shapes,
+    non-finite values and coordinates too large for float32 (``predict_scene``'s check,
+    ``models.predictor.check_coordinates``); ConfigError for something other than a scorer;
+    a warning where ``frame_interval`` or ``units`` differ from the scorer's (``rank_samples``
+    documents the conventions)."""
+    _check_scorer(scorer)
+    check_pace(scorer, frame_interval, units, name="this scorer", stacklevel=4)
     device = scorer.device
     hist = _float_tensor("history", history, device)  # [P, T_h, 2]
     futs = _float_tensor("samples", samples, device)  # [K, P, T_f, 2]
@@ -389,19 +562,32 @@ def scene_batch(scorer: TrajectoryScorer, history: ArrayLike, samples: ArrayLike
             f"samples: expected [K, {p}, {t_f}, 2] (samples, the history's {p} agents, "
             f"future steps, x/y; this scorer's T_f = {t_f}), got {list(futs.shape)}{hint}"
         )
-    return _one_scene(hist, t_f, agent_type), futs
+    check_coordinates(hist)  # map coordinates rank differently in float32: predict's rule
+    types = _agent_types(agent_type, p, device)
+    return _join([(hist, types, None)], t_f), futs
 
 
-def _one_scene(hist: torch.Tensor, t_f: int, agent_type: ArrayLike | None) -> Batch:
-    """One scene's checked history [P, T_h, 2] as a one-scene Batch on its device, with an
-    unknown (NaN) future of T_f steps, never read."""
-    p, device = hist.shape[0], hist.device
+def _join(scenes: list[tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]],
+          t_f: int) -> Batch:  # fmt: skip
+    """Checked scenes (history [P_b, T_h, 2], agent types [P_b], context [C_b, T_h, 2] or
+    None) as one Batch on their device, with an unknown (NaN) future of T_f steps, never
+    read."""
+    hist = torch.cat([h for h, _, _ in scenes])  # [N, T_h, 2]
+    device = hist.device
+    sizes = torch.tensor([len(h) for h, _, _ in scenes], device=device)  # [B]
+    b = len(scenes)
+    ctx = [(i, c) for i, (_, _, c) in enumerate(scenes) if c is not None and len(c)]
+    context = torch.cat([c for _, c in ctx]) if ctx else None  # [M, T_h, 2]
+    context_scene = (torch.cat([torch.full((len(c),), i, dtype=torch.int64, device=device)
+                                for i, c in ctx]) if ctx else None)  # [M]  # fmt: skip
     return Batch(
         history=hist,
-        future=hist.new_full((p, t_f, 2), float("nan")),  # [P, T_f, 2]
-        scene=torch.zeros(p, dtype=torch.int64, device=device),
-        agent_type=_agent_types(agent_type, p, device),
-        num_scenes=1,
+        future=hist.new_full((len(hist), t_f, 2), float("nan")),  # [N, T_f, 2]
+        scene=torch.repeat_interleave(torch.arange(b, device=device), sizes),  # [N]
+        agent_type=torch.cat([t for _, t, _ in scenes]),
+        num_scenes=b,
+        context=context,
+        context_scene=context_scene,
     )
 
 

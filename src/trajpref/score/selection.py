@@ -24,6 +24,7 @@ from trajpref.config import check_choices
 from trajpref.data import transforms
 from trajpref.errors import ConfigError
 from trajpref.metrics import scene_sum
+from trajpref.models.predictor import as_integer
 from trajpref.score.scorer import TrajectoryScorer, scene_batch, score_timesteps
 from trajpref.types import Batch
 
@@ -48,9 +49,10 @@ class SelectionConfig:
     keep: int = 5
     """K', the samples kept per agent (or per scene). The defaults below are an early choice
     on zara1's and eth's validation splits, and the CLI's (``--keep`` selects with them); the
-    settings chosen since for each published generator are in
-    ``benchmarks/selection_chosen.json`` and the README's selection table (zara1's:
-    ``drop=0.2, bandwidth=1.0, trust_speed=0.445, score_every=3``, 34 score steps)."""
+    settings chosen since for each published generator are ``chosen_selection(name)`` (and
+    ``cheap=True`` for its cheap setting), as ``benchmarks/selection_chosen.json`` and the
+    README's selection table name them (zara1's: ``drop=0.2, bandwidth=1.0,
+    trust_speed=0.445, score_every=3``, 34 score steps)."""
     method: Method = "score-facility"
     """Without the score: ``first`` (the generator's first K'), ``random``, or coverage of
     the endpoints by ``kmeans``, ``fps`` (farthest-point) or ``facility`` (greedy facility
@@ -82,7 +84,9 @@ class SelectionConfig:
     """Score methods only: an agent observed faster than this (the scorer's model units per
     observed step, first to last observed position, as ``model.max_speed`` measures it) is
     selected by the method's score-free counterpart (``SCORE_FREE``): the scorer never saw
-    such a pace. With ``per="scene"`` a scene with any such agent falls back. 0: off."""
+    such a pace. With ``per="scene"`` a scene with any such agent falls back. 0: off.
+    Model units, not metres: metres per step divided by ``scorer.scale`` (zara1's 0.445 is
+    0.655 m per 0.4 s step); ``chosen_selection`` holds each published model's value."""
     score_every: int | None = 9
     """Score methods only: the score's steps are every this many of the scorer's S diffusion
     steps, from ``score_from`` (9: 12 of 100, the CLI's ``--score-every`` default, so that
@@ -95,6 +99,10 @@ class SelectionConfig:
 
     def __post_init__(self) -> None:
         check_choices(self)
+        for name in ("keep", "iters", "seed", "score_every", "score_from"):
+            value = as_integer(getattr(self, name))  # numpy integers count as integers
+            if value is not None:
+                setattr(self, name, value)
         if isinstance(self.keep, bool) or not isinstance(self.keep, int) or self.keep < 1:
             raise ConfigError(f"selection keep must be an integer >= 1, got {self.keep!r}")
         if not 0 <= self.drop < 1:
@@ -134,6 +142,45 @@ class SelectionConfig:
                  "score_every": self.uses_score, "score_from": self.uses_score}  # fmt: skip
         return [k for k, read in reads.items() if not read and getattr(self, k) != getattr(
             SelectionConfig, k)]  # fmt: skip
+
+
+_FACILITY = {"method": "score-facility", "drop": 0.2, "temperature": 2.0, "score_every": 3}
+CHOSEN: dict[str, dict[str, dict]] = {
+    "zara1/generator": {"chosen": {**_FACILITY, "bandwidth": 1.0, "trust_speed": 0.4450},
+                        "cheap": {"score_every": 100}},
+    "eth/generator": {"chosen": {**_FACILITY, "bandwidth": 0.5, "trust_speed": 0.4255},
+                      "cheap": {"score_every": 50}},
+    "robo/generator": {"chosen": {**_FACILITY, "bandwidth": 0.5, "trust_speed": 0.2801},
+                       "cheap": {"score_every": 100, "score_from": 99}},
+    "robo-mix/generator": {"chosen": {**_FACILITY, "bandwidth": 1.0, "trust_speed": 0.2796},
+                           "cheap": {"score_every": 100}},
+    "eth/generator-pace": {"chosen": {**_FACILITY, "drop": 0.3, "bandwidth": 0.5,
+                                      "trust_speed": 0.4255}},
+}  # fmt: skip
+"""The selection settings chosen on the validation splits for the published generators that
+have them, each scored by its dataset's denoiser (``DATASET/denoiser``): ``chosen`` at the
+paper's 34 score steps, and ``cheap`` (what changes from it: the most score steps within 2x
+the prediction's cost), the README selection table's rows that
+``benchmarks/selection_chosen.json`` names. ``trust_speed`` is the 99th percentile of the
+scorer's training split's observed pace in model units per step (metres per step /
+``scorer.scale``), as ``benchmarks/selection.py --trust-quantile 0.99`` printed it for those
+rows (rounded to 4 digits; their meta files record it, and a test checks both)."""
+
+
+def chosen_selection(model: str, keep: int = 5, cheap: bool = False,
+                     per: Literal["agent", "scene"] = "agent") -> SelectionConfig:  # fmt: skip
+    """The ``SelectionConfig`` chosen for the published generator ``model`` (``CHOSEN``), for
+    ``select_for_scene`` with its dataset's scorer, keeping ``keep``: the chosen setting at 34
+    score steps, or with ``cheap`` its cheap setting (1 or 2 score steps). ConfigError for a
+    model without chosen settings (the list names those with them)."""
+    entry = CHOSEN.get(model)
+    if entry is None or (cheap and "cheap" not in entry):
+        have = sorted(CHOSEN) if not cheap else sorted(k for k, v in CHOSEN.items() if "cheap" in v)
+        what = "cheap " if cheap else ""
+        raise ConfigError(f"no chosen {what}selection setting for {model!r}; published "
+                          f"generators with one: {', '.join(have)}")  # fmt: skip
+    settings = {**entry["chosen"], **(entry["cheap"] if cheap else {})}
+    return SelectionConfig(keep=keep, per=per, **settings)
 
 
 def _pairwise(x: torch.Tensor, centers: torch.Tensor) -> torch.Tensor:
@@ -313,6 +360,8 @@ def _target_weight(residual: torch.Tensor | None, cfg: SelectionConfig,
     samples, T ``cfg.temperature``), 1 for the score-free ``facility`` and ``medoids``."""
     if not cfg.uses_score:
         return torch.ones(features.shape[:2], dtype=features.dtype, device=features.device)
+    if residual.shape[0] < 2:  # one sample has no spread: z = 0 (std would warn and be NaN)
+        return torch.ones_like(residual)
     z = (residual - residual.mean(0)) / residual.std(0).clamp(min=1e-12)  # [K, M]
     return torch.exp(-z / cfg.temperature)
 
@@ -385,7 +434,8 @@ def select_with_scorer(pred: torch.Tensor, cfg: SelectionConfig, batch: Batch,
 
 
 def select_for_scene(scorer: TrajectoryScorer, history, samples, cfg: SelectionConfig,
-                     agent_type=None):  # fmt: skip
+                     agent_type=None, *, frame_interval: float | None = None,
+                     units: str | None = None):  # fmt: skip
     """Keep ``cfg.keep`` of the K sampled futures of ONE scene given only its history (the
     planning use, beside ``rank_samples``): history [P, T_h, 2], samples [K, P, T_f, 2]
     (numpy arrays or tensors, in the scorer's units and lengths; the scorer checks them, and
@@ -393,8 +443,11 @@ def select_for_scene(scorer: TrajectoryScorer, history, samples, cfg: SelectionC
     the defaults, what ``trajpref predict --keep`` keeps). Returns idx [K', P], sample
     indices per agent in selection order (with ``cfg.per="scene"`` the P columns are equal):
     numpy when neither input is a tensor, else a tensor. Take the futures with
-    ``samples[idx, np.arange(P)]``."""
-    batch, pred = scene_batch(scorer, history, samples, agent_type)  # pred [K, P, T_f, 2]
+    ``samples[idx, np.arange(P)]``. ``chosen_selection`` gives each published model's chosen
+    ``cfg``. ``frame_interval`` and ``units``: as ``rank_samples``. The checks are
+    ``rank_samples``' (``scene_batch``)."""
+    batch, pred = scene_batch(scorer, history, samples, agent_type, frame_interval=frame_interval,
+                              units=units)  # pred [K, P, T_f, 2]  # fmt: skip
     generator = torch.Generator().manual_seed(cfg.seed)
     idx = select_with_scorer(pred, cfg, batch, scorer, generator)  # [K', P]
     if isinstance(history, torch.Tensor) or isinstance(samples, torch.Tensor):
@@ -437,12 +490,12 @@ class SelectingPredictor:
     @torch.no_grad()
     def predict(self, batch: Batch, num_samples: int | None = None,
                 generator: torch.Generator | None = None) -> torch.Tensor:  # fmt: skip
-        if num_samples is not None and num_samples != self.cfg.keep:
-            raise ConfigError(f"this selector keeps {self.cfg.keep} samples, asked for "
-                              f"{num_samples}")  # fmt: skip
         """[K', N, T_f, 2]: K (``candidates``) samples drawn from the base predictor, and the
         K' (``cfg.keep``) of them the selection keeps, in its order; their indices among the
         K are left in ``last_kept``."""
+        if num_samples is not None and num_samples != self.cfg.keep:
+            raise ConfigError(f"this selector keeps {self.cfg.keep} samples, asked for "
+                              f"{num_samples}")  # fmt: skip
         pred = self.base.predict(batch, self.candidates, generator)  # [K, N, T_f, 2]
         self.last_kept = self.select(batch, pred)  # [K', N]
         return gather(pred, self.last_kept)

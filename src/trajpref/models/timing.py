@@ -1,0 +1,125 @@
+"""The pace and units a checkpoint's model was trained at, and the comparison of them with the
+data handed to it (the CLI's warning on a dataset, ``predict_scene``'s on a planner's arrays).
+
+A model trained on 0.5 s steps reads 0.4 s tracks as slower walkers, and its 12 future steps
+span 6 s, not 4.8 s; a model trained in pixels reads metres as a near standstill. Nothing in
+the numbers shows it, so both entry points compare what they are told of the data with what
+the checkpoint recorded of its training data.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+import warnings
+from collections.abc import Callable
+from typing import Any
+
+from trajpref.data.registry import SPECS
+from trajpref.errors import ConfigError
+from trajpref.metrics import METRE_UNITS
+
+UNKNOWN_UNITS = ("", "unknown")
+"""Unit names that say nothing (a folder read without ``--units``)."""
+
+
+def same_units(a: str, b: str) -> bool:
+    """Whether two unit names mean the same (``m``, ``metres``, ``Meters``; else literally)."""
+    a, b = a.strip().lower(), b.strip().lower()
+    return a == b or (a in METRE_UNITS and b in METRE_UNITS)
+
+
+def model_timing(header: dict) -> dict:
+    """The pace and units a checkpoint's model was trained at, from its header (what
+    ``train.run.data_timing`` recorded in its meta, else a built-in dataset's own): the keys
+    ``trained_on`` (its ``data.dataset``), ``step`` (seconds per window step; None for a model
+    trained on a folder before the record, 2026-12-06), ``known`` (whether that step's frame
+    interval was given, declared or read from time stamps rather than assumed), ``time_step``
+    (its ``data.time_step``) and ``units``."""
+    data = header["config"]["data"]
+    read_every = float(data.get("time_step", 1.0))
+    out = {"trained_on": data["dataset"], "step": None, "known": False,
+           "time_step": read_every, "units": "unknown"}  # fmt: skip
+    timing = (header.get("meta") or {}).get("data_timing")
+    source = SPECS.get(data["dataset"])
+    if isinstance(timing, dict):
+        out.update(step=float(timing["frame_interval"]),
+                   known=timing.get("interval_from") != "default",
+                   units=str(timing.get("units") or "unknown"))  # fmt: skip
+    elif source is not None:
+        out.update(step=source.frame_interval * read_every, known=True, units=source.units)
+    return out
+
+
+def attach_timing(obj: Any, header: dict) -> Any:
+    """Give a loaded predictor or scorer what its checkpoint says of its training data:
+    ``timing`` (``model_timing``'s record, None when the header has none that it reads),
+    ``frame_interval`` (seconds per step, None unless known) and ``units`` (None unless
+    known). Returns ``obj``."""
+    try:
+        timing = model_timing(header)
+    except (KeyError, TypeError, ValueError, AttributeError):
+        timing = None  # a header without the data section: nothing is known
+    obj.timing = timing
+    obj.frame_interval = timing["step"] if timing and timing["known"] else None
+    units = timing["units"] if timing else "unknown"
+    obj.units = None if units in UNKNOWN_UNITS else units
+    return obj
+
+
+def timing_problems(model: dict, step: float | None, units: str | None,
+                    hint: Callable[[dict], str]) -> list[str]:  # fmt: skip
+    """How data stepping ``step`` seconds (None: not known) in ``units`` (None or
+    ``UNKNOWN_UNITS``: not known) differs from what the model (``model_timing``'s record) was
+    trained on: a list of phrases, empty when nothing known differs. The step is compared
+    within 1 % only where the model's is recorded; ``hint(model)`` says how to read the data
+    at the model's step (the CLI names its options, Python the resampling)."""
+    problems = []
+    known = [u for u in (units, model["units"]) if u is not None and u not in UNKNOWN_UNITS]
+    if len(known) == 2 and not same_units(*known):
+        problems.append(f"this data is in {units}, the model's in {model['units']}")
+    if (step is not None and step > 0 and model["step"] is not None
+            and not math.isclose(step, model["step"], rel_tol=0.01)):  # fmt: skip
+        problems.append(f"this data steps {step:g} s, the model's {model['step']:g} s "
+                        f"({hint(model)})")  # fmt: skip
+    return problems
+
+
+def trained_otherwise(name: str, model: dict, problems: list[str]) -> str:
+    """The one warning line for ``timing_problems``' findings."""
+    return f"{name} was trained on {model['trained_on']}: {'; '.join(problems)}"
+
+
+def _resample_hint(model: dict) -> str:
+    step = model["step"]
+    return (f"resample the history to one position every {step:g} s; the futures step "
+            f"{step:g} s too")  # fmt: skip
+
+
+def check_pace(
+    obj: Any,
+    frame_interval: float | None,
+    units: str | None,
+    name: str = "this model",
+    stacklevel: int = 3,
+) -> None:
+    """Warn (``UserWarning``) when ``frame_interval`` (seconds between the positions handed
+    to ``obj``) or ``units`` differ from what ``obj`` (a predictor or scorer carrying
+    ``attach_timing``'s record) was trained on: the Python side of the CLI's warning. Only
+    what both sides know is compared: ``frame_interval`` against a recorded, known step; units
+    against recorded units. ConfigError for a ``frame_interval`` that is not a number > 0."""
+    if frame_interval is not None:
+        if (isinstance(frame_interval, bool) or not isinstance(frame_interval, numbers.Real)
+                or not math.isfinite(frame_interval) or frame_interval <= 0):  # fmt: skip
+            raise ConfigError(f"frame_interval: seconds between the history's positions, a "
+                              f"number > 0, got {frame_interval!r}")  # fmt: skip
+        frame_interval = float(frame_interval)
+    if units is not None and not isinstance(units, str):
+        raise ConfigError(f"units: a unit name such as 'm' or 'px', got {units!r}")
+    timing = getattr(obj, "timing", None)
+    if timing is None or (frame_interval is None and units is None):
+        return
+    known = dict(timing, step=getattr(obj, "frame_interval", None))  # compare known steps only
+    problems = timing_problems(known, frame_interval, units, _resample_hint)
+    if problems:
+        warnings.warn(trained_otherwise(name, timing, problems), stacklevel=stacklevel)
