@@ -261,3 +261,94 @@ def test_analysis_never_writes_into_the_database(synthetic_study, tmp_path):
     )
     assert empty.read_bytes() == b"" and not (tmp_path / "r2").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["empty.sqlite", "report", "study"]
+
+
+# ---- leaving raters out, ids that differ by case, units ------------------------------------
+def test_excluded_raters_are_left_out_and_named():
+    study = _study()
+    rows = _rows(study)
+    full = analyze(study, rows)
+    result = analyze(study, rows, exclude=["r1", "r6"])
+    assert (full.raters, result.raters, result.complete_raters) == (6, 4, 4)
+    assert result.excluded == ["r1", "r6"] and result.excluded_answers == 2 * 6
+    a = next(r for r in result.rows if r.method == "B")
+    assert a.human == pytest.approx(5 - np.mean([2, 3, 4, 5]) / 4)  # raters 2..5 only
+    text = result.markdown()
+    assert "Excluded raters (--exclude-rater): r1, r6 (12 answers)" in text
+    assert result.to_dict()["excluded"] == ["r1", "r6"]
+
+
+def test_excluding_every_human_rater_is_an_error_not_a_switch_to_synthetic_raters():
+    study = _study()
+    rows = _rows(study, raters=2)
+    rows += [("syn-1", "synthetic", *r[2:]) for r in rows if r[0] == "r1"]
+    with pytest.raises(ConfigError, match="no answers from human raters left after "
+                       "--exclude-rater r1, r2"):  # fmt: skip
+        analyze(study, rows, exclude=["r1", "r2"])
+
+
+def test_rater_ids_that_differ_only_by_case_are_reported():
+    study = _study()
+    rows = [(r[0].replace("r1", "R2"), *r[1:]) for r in _rows(study)]  # R2 and r2: one person?
+    result = analyze(study, rows)
+    assert result.case_variants == [["R2", "r2"]] and result.raters == 6
+    assert "Rater ids that differ only by case, counted as different raters: R2 = r2" in (
+        result.markdown()
+    )
+
+
+def test_a_tie_for_the_best_method_is_said():
+    study = _study(("A", "B"))
+    rows = [r for r in _rows(study) if r[0] == "r1"]
+    rows = [(*r[:4], 5, 5, True) for r in rows]  # A and B both all 5s
+    assert "**A** has the highest (tied with B:" in analyze(study, rows).legend()
+
+
+@pytest.mark.parametrize("units, label", [("m", "ADE of the shown futures [m]"),
+                                          ("px", "ADE of the shown futures [px]"),
+                                          ("unknown", "ADE of the shown futures (units "
+                                                      "unknown)")])  # fmt: skip
+def test_the_figure_and_the_report_name_each_axis_unit(units, label):
+    from trajpref.survey.analyze import figure_data
+
+    study = _study()
+    study = Study(**{**study.__dict__, "dataset": {"units": units}})
+    result = analyze(study, _rows(study))
+    names, columns, marks, xlims = figure_data(result)
+    assert list(columns) == ["human score (rating 1-5)", "ATS (ratio, no unit)",
+                             "FTS (ratio, no unit)", label]  # fmt: skip
+    assert xlims == {"human score (rating 1-5)": (0.0, 5.4)} and names[0] == "A"
+    assert set(marks) == set(list(columns)[:3])
+    ade = "ADE [px]" if units == "px" else "ADE [m]" if units == "m" else "ADE (units unknown)"
+    assert f"| answers | {ade} |" in result.markdown()
+
+
+def test_the_report_files_are_owner_only_and_the_figure_is_not(synthetic_study, store):
+    import os
+
+    from trajpref.survey.simulate import SimulateConfig, simulate
+
+    simulate(store.study, store, SimulateConfig(raters=2))
+    old = os.umask(0o022)
+    try:
+        _, paths = run_analysis(synthetic_study, out=synthetic_study.parent / "new" / "report")
+    finally:
+        os.umask(old)
+    modes = {k: oct(p.stat().st_mode & 0o777) for k, p in paths.items()}
+    assert modes == {"markdown": "0o600", "json": "0o600", "figure": "0o644"}
+
+
+def test_run_analysis_finds_excluded_raters_in_any_case_and_refuses_unknown_ones(
+    synthetic_study, store
+):
+    from trajpref.survey.simulate import SimulateConfig, simulate
+
+    simulate(store.study, store, SimulateConfig(raters=3))
+    result, _ = run_analysis(synthetic_study, exclude=["SYNTHETIC-02"])
+    assert result.excluded == ["synthetic-02"] and result.raters == 2
+    with pytest.raises(ConfigError) as err:
+        run_analysis(synthetic_study, exclude=["synthetic-2"])
+    assert str(err.value) == (
+        f"--exclude-rater synthetic-2: no such rater in {store.path} (did you mean "
+        "synthetic-02?); its raters: synthetic-01, synthetic-02, synthetic-03"
+    )

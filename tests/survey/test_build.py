@@ -197,3 +197,18 @@ def test_build_refuses_to_overwrite_and_leaves_nothing_on_failure(
 def test_build_config_checks_its_values(change, message):
     with pytest.raises(ConfigError, match=message):
         BuildConfig(**{"dataset": "zara1", "models": {"a": "cv"}, **change})
+
+
+def test_a_study_folder_is_owner_only_whatever_the_umask(tmp_path):
+    import os
+
+    from trajpref.survey.study import make_synthetic_study
+
+    old = os.umask(0o002)  # a shared-group umask: 0775 folders
+    try:
+        (tmp_path / "empty").mkdir()  # an existing empty --out is replaced
+        for out in (tmp_path / "new", tmp_path / "empty"):
+            study = make_synthetic_study(out, scenes=1)
+            assert oct(study.folder.stat().st_mode & 0o777) == "0o700"
+    finally:
+        os.umask(old)

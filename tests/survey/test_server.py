@@ -188,3 +188,13 @@ def test_answers_survive_a_killed_server(synthetic_study):
     with sqlite3.connect(synthetic_study / "answers.sqlite") as db:
         rows = db.execute("SELECT scene, panel, social, kinetics FROM answers").fetchall()
     assert sorted(rows) == sorted((s, p, 2, 5) for s, p in acked) and len(rows) == 6
+
+
+def test_a_rater_id_typed_with_other_capitals_resumes_the_same_rater(client, store):
+    r = client.put("/api/raters/Alice/answers/s01/A", json={"social": 5, "kinetics": 4})
+    assert r.json()["answered"] == 1
+    r = client.put("/api/raters/alice/answers/s01/B", json={"social": 3, "kinetics": 3})
+    assert r.json()["answered"] == 2  # the same rater: two answers, not one each
+    got = client.get("/api/raters/ALICE").json()
+    assert got["rater"] == "alice" and got["answered"] == 2
+    assert store.raters() == {"alice": "human"}

@@ -59,3 +59,10 @@ def test_simulate_refuses_existing_ids_and_bad_settings(store):
         SimulateConfig(raters=0)
     with pytest.raises(ConfigError, match="prefix"):
         SimulateConfig(prefix="a b")
+
+
+def test_a_prefix_in_capitals_gives_lower_case_ids_and_meets_existing_ones(store):
+    ids = simulate(store.study, store, SimulateConfig(raters=2, prefix="Pilot"))
+    assert ids == ["pilot-01", "pilot-02"] and set(store.raters()) == set(ids)
+    with pytest.raises(ConfigError, match="pilot-01, pilot-02 already exist"):
+        simulate(store.study, store, SimulateConfig(raters=2, prefix="PILOT"))

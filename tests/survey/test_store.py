@@ -353,3 +353,65 @@ def test_read_only_opening_writes_nothing_and_claims_nothing(synthetic_study, tm
     writer = AnswerStore(bare, study)  # serve / simulate claim it
     writer.close()
     assert _study_id(bare) == study.study_id
+
+
+# ---- rater ids are not case-sensitive ------------------------------------------------------
+def test_rater_ids_that_differ_only_by_case_are_one_rater(store):
+    store.save("Alice", "s01", "A", OK)
+    store.save("alice", "s01", "B", OK)
+    store.save("ALICE", "s01", "A", {"social": 1, "kinetics": 1})
+    assert store.raters() == {"alice": "human"}
+    assert [r[:3] + r[5:] for r in _rows(store.path)] == [("alice", "s01", "A", 2),
+                                                          ("alice", "s01", "B", 1)]  # fmt: skip
+    got = store.progress("ALiCe")
+    assert got["rater"] == "alice" and got["answered"] == 2
+
+
+def test_a_mixed_case_id_of_an_older_database_resumes_under_any_case(store):
+    now = "2026-12-05T00:00:00"
+    _raw(store.path, f"INSERT INTO raters VALUES ('Bob', 'human', '{now}', NULL)",
+         f"INSERT INTO answers VALUES ('Bob', 's01', 'A', 3, 3, 1, '{now}', '{now}')")  # fmt: skip
+    assert store.progress("bob")["answered"] == 1
+    store.save("BOB", "s01", "B", OK)
+    assert store.raters() == {"Bob": "human"}  # no second rater
+    assert [r[0] for r in _rows(store.path)] == ["Bob", "Bob"]
+
+
+def test_case_variants_of_one_id_among_the_raters_are_listed(store):
+    from trajpref.survey.store import case_variants
+
+    now = "2026-12-05T00:00:00"
+    _raw(store.path, *[f"INSERT INTO raters VALUES ('{r}', 'human', '{now}', NULL)"
+                       for r in ("Carol", "CAROL", "dave", "Erin", "erin")])  # fmt: skip
+    assert case_variants(store.raters()) == [["CAROL", "Carol"], ["Erin", "erin"]]
+    with pytest.raises(AnswerError, match="matches 2 raters that differ only by case") as err:
+        store.save("carol", "s01", "A", OK)  # neither is the lower-case id: ambiguous
+    assert err.value.status == 409 and _rows(store.path) == []
+    store.save("ERIN", "s01", "A", OK)  # the lower-case id exists: that one
+    assert [r[0] for r in _rows(store.path)] == ["erin"]
+
+
+# ---- answers are personal data: owner-only files ------------------------------------------
+def test_a_new_database_and_its_wal_files_are_owner_only(synthetic_study, tmp_path):
+    import os
+
+    old = os.umask(0o022)
+    try:
+        for path in (synthetic_study / DATABASE, tmp_path / "elsewhere.sqlite"):
+            s = AnswerStore(path, load_study(synthetic_study))
+            s.save("r1", "s01", "A", OK)
+            files = [path, path.with_name(path.name + "-wal"), path.with_name(path.name + "-shm")]
+            assert {f.name: oct(f.stat().st_mode & 0o777) for f in files} == {
+                f.name: "0o600" for f in files
+            }
+            s.close()
+    finally:
+        os.umask(old)
+
+
+def test_opening_a_database_others_can_read_warns(synthetic_study, tmp_path):
+    path = tmp_path / "shared.sqlite"
+    AnswerStore(path, load_study(synthetic_study)).close()
+    path.chmod(0o644)
+    with pytest.warns(UserWarning, match=r"other users have access to it \(mode 644\).*chmod 600"):
+        AnswerStore(path, load_study(synthetic_study)).close()

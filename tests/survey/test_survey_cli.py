@@ -54,13 +54,21 @@ def test_a_missing_study_folder(capsys, tmp_path):
             lambda s: s.replace('"method": "methodalpha"', '"method": "other"', 1),
             "not one of the methods",
         ),
-        (lambda s: s.replace('"ats": ', '"ats": "high", "x": ', 1), "expected a number"),
+        # the number moves to a key that comes again later (JSON: the last one counts)
+        (lambda s: s.replace('"ats": ', '"ats": "high", "max_ats": ', 1), "expected a number"),
+        (lambda s: s.replace('"ats": ', '"ats": 0.5, "atz": ', 1), "unknown key 'atz'"),
         (lambda s: "[]", "expected an object"),
     ],
 )
 def test_a_corrupt_manifest_is_one_line_and_nothing_is_written(
-    capsys, synthetic_study, damage, text
+    capsys, monkeypatch, synthetic_study, damage, text
 ):
+    import uvicorn
+
+    def started(*args, **kwargs):  # a manifest that loads would serve until killed: fail instead
+        raise AssertionError("serve started on a corrupt manifest")
+
+    monkeypatch.setattr(uvicorn.Server, "run", started)
     manifest = synthetic_study / "manifest.json"
     manifest.write_text(damage(manifest.read_text()))
     before = sorted(p.name for p in synthetic_study.iterdir())
@@ -247,3 +255,66 @@ def test_the_documented_survey_commands_parse_and_name_published_models():
     )
     options = [o for a in survey.choices["build"]._actions for o in a.option_strings]
     assert [o for o in options if f"`{o}" not in table] == ["-h", "--help"]
+
+
+def test_analyze_leaves_out_the_raters_named_by_exclude_rater(capsys, synthetic_study):
+    code, _, _ = _run(capsys, "survey", "simulate", synthetic_study, "--raters", "4")
+    excluded = ["--exclude-rater", "synthetic-01", "--exclude-rater", "Synthetic-03"]
+    code, out, _ = _run(capsys, "survey", "analyze", synthetic_study, "--json", *excluded)
+    data = json.loads(out)
+    assert code == 0 and data["raters"] == 2
+    assert data["excluded"] == ["synthetic-01", "synthetic-03"] and data["excluded_answers"] == 18
+    code, _, err = _run(capsys, "survey", "analyze", synthetic_study, "--exclude-rater", "nobody")
+    _one_line_error(code, err, "--exclude-rater nobody: no such rater in ")
+
+
+def test_export_writes_one_csv_row_per_answer_with_the_method_behind_each_panel(
+    capsys, synthetic_study, tmp_path
+):
+    import csv
+    import os
+
+    from trajpref.survey.manifest import DATABASE, load_study
+    from trajpref.survey.store import AnswerStore
+
+    study = load_study(synthetic_study)
+    store = AnswerStore(synthetic_study / DATABASE, study)
+    for rater, social in (("Alice", 5), ("bob", 2), ("test-run", 1)):
+        store.save_many(rater, [(s.id, p.id, {"social": social, "kinetics": 3})
+                                for s in study.scenes for p in s.panels])  # fmt: skip
+    store.close()
+    _run(capsys, "survey", "simulate", synthetic_study, "--raters", "2")
+    path = tmp_path / "out" / "answers.csv"
+    old = os.umask(0o022)
+    try:
+        code, out, _ = _run(capsys, "survey", "export", synthetic_study, "--csv", path,
+                            "--exclude-rater", "TEST-RUN")  # fmt: skip
+    finally:
+        os.umask(old)
+    assert code == 0 and f"wrote 18 answers of 2 human raters to {path}" in out
+    assert oct(path.stat().st_mode & 0o777) == "0o600"
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 2 * 9 and {r["rater"] for r in rows} == {"alice", "bob"}
+    method = {(s.id, p.id): p.key for s in study.scenes for p in s.panels}
+    for r in rows:
+        key = method[(r["scene"], r["panel"])]
+        assert r["method"] == key.method and float(r["ats"]) == key.ats
+        assert float(r["ade"]) == key.ade and r["units"] == "m" and r["kind"] == "human"
+        assert float(r["human_score"]) == (int(r["social"]) + 3) / 2
+    assert [r["position"] for r in rows[:3]] == ["1", "2", "3"]
+    code, out, _ = _run(capsys, "survey", "export", synthetic_study, "--csv", path, "--raters",
+                        "synthetic")  # fmt: skip
+    assert code == 0 and "SYNTHETIC" in out
+
+
+def test_export_errors_write_nothing(capsys, synthetic_study, tmp_path):
+    code, _, err = _run(capsys, "survey", "export", synthetic_study, "--csv", tmp_path / "a.csv")
+    _one_line_error(code, err, "no answers yet")
+    code, _, err = _run(capsys, "survey", "export", synthetic_study, "--csv", tmp_path)
+    _one_line_error(code, err, f"--csv {tmp_path}: is an existing folder, not a file")
+    _run(capsys, "survey", "simulate", synthetic_study, "--raters", "1")
+    code, _, err = _run(capsys, "survey", "export", synthetic_study, "--csv",
+                        tmp_path / "new" / "a.csv", "--exclude-rater", "synthetic-9")  # fmt: skip
+    _one_line_error(code, err, "(did you mean synthetic-01?)")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["study"]

@@ -16,6 +16,9 @@
   panel's mean human score against its ATS, n = scenes x methods), and Kendall tau within
   each scene, averaged over scenes. p-values: exact for few pairs (Spearman by enumeration
   up to 8, Kendall by scipy's exact method without ties), else the usual approximations.
+- Raters left out by request (``--exclude-rater``: a failed attention check, a test run) are
+  dropped before anything is computed and named in the report; rater ids that differ only by
+  case (an older or imported database) are counted apart, with a warning.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ from scipy import stats
 from trajpref.errors import ConfigError
 from trajpref.io import atomic_path, check_output_dir, check_output_file, dumps_json
 from trajpref.survey.manifest import DATABASE, GROUND_TRUTH, Study, load_study
-from trajpref.survey.store import AnswerStore
+from trajpref.survey.store import AnswerStore, case_variants, private_output
 from trajpref.viz.plot import plot_survey_summary
 
 RaterKind = Literal["auto", "human", "synthetic", "all"]
@@ -180,6 +183,15 @@ class MethodRow:
     """Mean maxATS_K of the method's samples (the paper's Table 1 measure)."""
     max_fts: float = math.nan
     """Mean maxFTS_K."""
+    ade: float = math.nan
+    """Mean ADE of the shown futures over scenes, in the data's units (0 for the ground
+    truth)."""
+    ade_sd: float = math.nan
+    """Its standard deviation over scenes."""
+    fde: float = math.nan
+    """Mean FDE of the shown futures over scenes, in the data's units."""
+    fde_sd: float = math.nan
+    """Its standard deviation over scenes."""
     marks: dict[str, str] = field(default_factory=dict)
     """column -> stars against the best method."""
 
@@ -215,6 +227,15 @@ class Analysis:
     ignored: dict[str, int] = field(default_factory=lambda: dict(NOTHING_IGNORED))
     """Answers in the database that match no panel of the study or no rater
     (``AnswerStore.ignored``): ``answers``, ``unknown_panels``, ``unknown_raters``."""
+    excluded: list[str] = field(default_factory=list)
+    """Raters left out on request (``--exclude-rater``), as stored."""
+    excluded_answers: int = 0
+    """Their answers to this study's panels."""
+    case_variants: list[list[str]] = field(default_factory=list)
+    """Groups of the raters used whose ids differ only by case (an older or imported
+    database): counted as different raters."""
+    units: str = "unknown"
+    """The data's coordinate units (of ADE and FDE)."""
 
     def to_dict(self) -> dict[str, Any]:
         return _finite(asdict(self))
@@ -236,14 +257,20 @@ class Analysis:
 
     def legend(self) -> str:
         n_h = self.complete_raters
+        top = next(r.human for r in self.rows if r.method == self.best)
+        tied = [r.method for r in self.rows
+                if r.method not in (self.best, GROUND_TRUTH) and r.human == top]  # fmt: skip
+        tie = (f" (tied with {', '.join(tied)}: of equal methods the first given to `survey "
+               "build` is named)" if tied else "")  # fmt: skip
         return (
-            f"Mean ± sd. Rows by human score; **{self.best}** has the highest. Marks: "
+            f"Mean ± sd. Rows by human score; **{self.best}** has the highest{tie}. Marks: "
             f"two-sided Wilcoxon signed-rank test of {self.best} against the row, human "
             f"score paired over raters (each rater's mean over the scenes, n = {n_h} raters "
             f"who answered every panel), ATS/FTS paired over scenes (n = {self.scenes}); "
             "p-values Holm-adjusted within each column; *** p < 0.001, ** p < 0.01, "
             "* p < 0.05, ns not significant. Human score = mean of the two ratings (1-5); "
-            "ATS/FTS = the diffusion score of the futures each panel shows."
+            "ATS/FTS = the diffusion score of the futures each panel shows (a ratio, no "
+            f"unit); ADE/FDE = their distance to the real futures, {unit_text(self.units)}."
         )
 
     def markdown(self) -> str:
@@ -261,13 +288,23 @@ class Analysis:
         if self.ignored["answers"]:
             text = ignored_text(self.ignored)
             out += ["", f"{text[0].upper()}{text[1:]}: they are not in the tables below."]
+        if self.excluded:
+            out += ["", f"Excluded raters (--exclude-rater): {', '.join(self.excluded)} "
+                    f"({self.excluded_answers} answer{'' if self.excluded_answers == 1 else 's'}"
+                    "): they are not in the tables below."]  # fmt: skip
+        if self.case_variants:
+            text = case_variants_text(self.case_variants)
+            out += ["", f"{text[0].upper()}{text[1:]}."]
         out += ["", self.table(), "", self.legend(), "",
                 "## Per criterion", "",
-                "| Method | Social appropriateness | Kinetics | answers | maxATS_K | maxFTS_K |",
-                "|---|---|---|---|---|---|"]  # fmt: skip
+                "| Method | Social appropriateness | Kinetics | answers | "
+                f"{with_unit('ADE', self.units)} | {with_unit('FDE', self.units)} | maxATS_K | "
+                "maxFTS_K |",
+                "|---|---|---|---|---|---|---|---|"]  # fmt: skip
         for r in self.rows:
             out.append(f"| {r.method} | {_pm(r.social, r.social_sd)} | "
-                       f"{_pm(r.kinetics, r.kinetics_sd)} | {r.answers} | {_num(r.max_ats)} | "
+                       f"{_pm(r.kinetics, r.kinetics_sd)} | {r.answers} | "
+                       f"{_pm(r.ade, r.ade_sd)} | {_pm(r.fde, r.fde_sd)} | {_num(r.max_ats)} | "
                        f"{_num(r.max_fts)} |")  # fmt: skip
         out += ["", "## Tests", "", f"Best method: {self.best}.", "",
                 "| Against | Column | n | W | p | p (Holm) | | Null distribution |",
@@ -297,6 +334,23 @@ def ignored_text(ignored: dict[str, int]) -> str:
     return (f"ignored: {n} answer{'' if n == 1 else 's'} ({ignored['unknown_panels']} to "
             f"scenes or panels this study does not have, {ignored['unknown_raters']} from "
             "raters not in the raters table)")  # fmt: skip
+
+
+def case_variants_text(groups: list[list[str]]) -> str:
+    """What the warning and the report say about rater ids that differ only by case."""
+    names = "; ".join(" = ".join(g) for g in groups)
+    return (f"rater ids that differ only by case, counted as different raters: {names} (a "
+            "database written before ids were made case-insensitive, or imported; if they are "
+            "one person, leave all but one out with --exclude-rater)")  # fmt: skip
+
+
+def with_unit(name: str, units: str | None) -> str:
+    """``ADE [m]``; ``ADE (units unknown)`` when the data did not say."""
+    return f"{name} [{units}]" if units and units != "unknown" else f"{name} (units unknown)"
+
+
+def unit_text(units: str | None) -> str:
+    return f"in {units}" if units and units != "unknown" else "in the data's units (unknown)"
 
 
 def _finite(obj: Any) -> Any:
@@ -335,21 +389,38 @@ def _mean_sd(values: list[float] | np.ndarray) -> tuple[float, float]:
     return float(v.mean()), float(v.std(ddof=1)) if v.size > 1 else 0.0
 
 
+def select_rows(rows: list[tuple], rater_kind: RaterKind = "auto",
+                exclude: list[str] | tuple[str, ...] = ()) -> tuple[list[tuple], str]:  # fmt: skip
+    """The rows (``AnswerStore.rows()`` or ``records()`` as tuples: rater first, kind second)
+    of the chosen raters, and the kind chosen. ``auto`` picks human raters when there are
+    any, else synthetic ones, and decides before ``exclude`` (stored ids) is applied: leaving
+    out every human rater is an error, never a silent switch to synthetic raters."""
+    if rater_kind == "auto":
+        rater_kind = "human" if any(r[1] == "human" for r in rows) else "synthetic"
+    left = set(exclude)
+    rows = [r for r in rows if r[0] not in left and rater_kind in ("all", r[1])]
+    if not rows:
+        after = f" left after --exclude-rater {', '.join(exclude)}" if exclude else " yet"
+        raise ConfigError(f"no answers from {rater_kind} raters{after}")
+    return rows, rater_kind
+
+
 def analyze(study: Study, rows: list[tuple], rater_kind: RaterKind = "auto",
-            ignored: dict[str, int] | None = None) -> Analysis:  # fmt: skip
+            ignored: dict[str, int] | None = None,
+            exclude: list[str] | tuple[str, ...] = ()) -> Analysis:  # fmt: skip
     """The analysis of ``rows`` (``AnswerStore.rows()``: rater, kind, scene, panel, social,
     kinetics, submitted). ``rater_kind``: ``auto`` uses the human raters when there are any,
-    else the synthetic ones. ``ignored`` (``AnswerStore.ignored()``) is reported as given."""
+    else the synthetic ones. ``ignored`` (``AnswerStore.ignored()``) is reported as given.
+    ``exclude``: rater ids (as stored, ``AnswerStore.find_raters``) whose answers are left
+    out and named in the report."""
     ignored = dict(ignored or NOTHING_IGNORED)
     if not rows:
         note = f"; {ignored_text(ignored)}" if ignored["answers"] else ""
         raise ConfigError(f"no answers to this study's panels yet{note}")
-    if rater_kind == "auto":
-        rater_kind = "human" if any(r[1] == "human" for r in rows) else "synthetic"
-    if rater_kind != "all":
-        rows = [r for r in rows if r[1] == rater_kind]
-    if not rows:
-        raise ConfigError(f"no answers from {rater_kind} raters yet")
+    excluded = list(dict.fromkeys(exclude))
+    left_out = set(excluded)
+    excluded_answers = sum(1 for r in rows if r[0] in left_out)
+    rows, rater_kind = select_rows(rows, rater_kind, excluded)
     synthetic = study.synthetic or any(r[1] == "synthetic" for r in rows)
     method_of = {(s.id, p.id): p.key.method for s in study.scenes for p in s.panels}
     keys = {(s.id, p.id): p.key for s in study.scenes for p in s.panels}
@@ -376,6 +447,7 @@ def analyze(study: Study, rows: list[tuple], rater_kind: RaterKind = "auto",
             *_mean_sd([k.ats for k in ks]), *_mean_sd([k.fts for k in ks]),
             float(np.mean([k.max_ats for k in ks if k.max_ats is not None] or [math.nan])),
             float(np.mean([k.max_fts for k in ks if k.max_fts is not None] or [math.nan])),
+            *_mean_sd([k.ade for k in ks]), *_mean_sd([k.fde for k in ks]),
         )  # fmt: skip
     candidates = [m for m in methods if m != GROUND_TRUTH and math.isfinite(table[m].human)]
     if not candidates:
@@ -435,14 +507,48 @@ def analyze(study: Study, rows: list[tuple], rater_kind: RaterKind = "auto",
         title=study.title, dataset=study.dataset, rater_kind=rater_kind, synthetic=synthetic,
         raters=len(raters), complete_raters=len(complete), scenes=len(study.scenes),
         panels=study.num_panels, best=best, rows=[table[m] for m in ordered], tests=tests,
-        agreement=agreement, ignored=ignored,
+        agreement=agreement, ignored=ignored, excluded=excluded,
+        excluded_answers=excluded_answers, case_variants=case_variants(raters),
+        units=str(study.dataset.get("units") or "unknown"),
     )  # fmt: skip
 
 
-def run_analysis(folder: str | Path, db: str | Path | None = None, out: str | Path | None = None,
-                 rater_kind: RaterKind = "auto") -> tuple[Analysis, dict[str, Path]]:  # fmt: skip
+Columns = dict[str, tuple[np.ndarray, np.ndarray]]
+"""Axis title -> (mean [M], sd [M]), as ``plot_survey_summary`` takes them."""
+
+
+def figure_data(
+    result: Analysis,
+) -> tuple[list[str], Columns, dict[str, list[str]], dict[str, tuple[float, float]]]:
+    """What ``plot_survey_summary`` draws: the methods, and per axis (its title names the
+    quantity and its unit) the means and sds, the marks and fixed x ranges. The ground truth
+    draws no ATS, FTS or ADE bar (0 by definition)."""
+    names = [r.method for r in result.rows]
+    gt = np.array([math.nan if r.method == GROUND_TRUTH else 0.0 for r in result.rows])  # [M]
+    human = "human score (rating 1-5)"
+    labels = {human: "human", "ATS (ratio, no unit)": "ats", "FTS (ratio, no unit)": "fts",
+              with_unit("ADE of the shown futures", result.units): "ade"}  # fmt: skip
+    columns = {}
+    for label, col in labels.items():
+        mean = np.array([getattr(r, col) for r in result.rows])  # [M]
+        sd = np.array([getattr(r, f"{col}_sd") for r in result.rows])  # [M]
+        columns[label] = (mean if col == "human" else mean + gt, sd)
+    marks = {label: [r.marks.get(col, "") for r in result.rows]
+             for label, col in labels.items() if col != "ade"}  # fmt: skip
+    return names, columns, marks, {human: (0.0, 5.4)}
+
+
+def run_analysis(
+    folder: str | Path,
+    db: str | Path | None = None,
+    out: str | Path | None = None,
+    rater_kind: RaterKind = "auto",
+    exclude: list[str] | tuple[str, ...] = (),
+) -> tuple[Analysis, dict[str, Path]]:
     """Read a study and its answers, analyse, write ``analysis.md``, ``analysis.json`` and
-    ``analysis.png`` into ``out`` (default: the study folder).
+    ``analysis.png`` into ``out`` (default: the study folder). ``exclude``: rater ids to
+    leave out (``--exclude-rater``; any case; an id that names no rater is an error).
+    ``analysis.md`` and ``.json`` name the excluded raters: they are written owner-only.
 
     The database is opened read-only (nothing is ever written into it). The output paths are
     checked before the answers are read, and the three files are renamed into place together
@@ -459,32 +565,23 @@ def run_analysis(folder: str | Path, db: str | Path | None = None, out: str | Pa
     store = AnswerStore(db or study.folder / DATABASE, study, readonly=True)
     try:
         rows, ignored = store.rows(), store.ignored()
+        excluded = store.find_raters(list(exclude))
     finally:
         store.close()
-    result = analyze(study, rows, rater_kind, ignored)
+    result = analyze(study, rows, rater_kind, ignored, excluded)
     if ignored["answers"]:
         warnings.warn(f"{store.path}: {ignored_text(ignored)}", stacklevel=2)
-    names = [r.method for r in result.rows]
-    marks = {label: [r.marks.get(col, "") for r in result.rows]
-             for label, col in (("human score (1-5)", "human"), ("ATS", "ats"),
-                                ("FTS", "fts"))}  # fmt: skip
-    nan = [math.nan if r.method == GROUND_TRUTH else 0.0 for r in result.rows]
-    columns = {
-        "human score (1-5)": (np.array([r.human for r in result.rows]),
-                              np.array([r.human_sd for r in result.rows])),
-        "ATS": (np.array([r.ats for r in result.rows]) + nan,
-                np.array([r.ats_sd for r in result.rows])),
-        "FTS": (np.array([r.fts for r in result.rows]) + nan,
-                np.array([r.fts_sd for r in result.rows])),
-    }  # fmt: skip
+    if result.case_variants:
+        warnings.warn(f"{store.path}: {case_variants_text(result.case_variants)}", stacklevel=2)
+    names, columns, marks, xlims = figure_data(result)
     label = "SYNTHETIC raters - not human data. " if result.synthetic else ""
-    # all three written to temporary files first, renamed only when every one is complete
-    with (atomic_path(paths["markdown"]) as markdown, atomic_path(paths["json"]) as js,
-          atomic_path(paths["figure"]) as figure):  # fmt: skip
+    # all three written to temporary files first, renamed only when every one is complete;
+    # the figure's first: it creates a new --out folder (and removes it again on failure)
+    with (atomic_path(paths["figure"]) as figure, private_output(paths["markdown"]) as markdown,
+          private_output(paths["json"]) as js):  # fmt: skip
         plot_survey_summary(names, columns, marks, figure,
                             f"{label}{result.title} ({result.raters} raters, "
-                            f"{result.scenes} scenes)",
-                            xlims={"human score (1-5)": (0.0, 5.4)})  # fmt: skip
+                            f"{result.scenes} scenes)", xlims=xlims)  # fmt: skip
         markdown.write_text(result.markdown(), encoding="utf-8")
         js.write_text(dumps_json(result.to_dict(), indent=2) + "\n")
     return result, paths

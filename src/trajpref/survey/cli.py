@@ -1,4 +1,4 @@
-"""``trajpref survey build | serve | analyze | simulate``: registered on the main parser by
+"""``trajpref survey build | serve | analyze | export | simulate``: registered on the main parser by
 :func:`add_parser`."""
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ from collections.abc import Callable
 from trajpref.errors import ConfigError
 from trajpref.survey.analyze import run_analysis
 from trajpref.survey.build import BuildConfig, build_study
+from trajpref.survey.export import export_csv
 from trajpref.survey.manifest import DATABASE, load_study
 from trajpref.survey.simulate import SimulateConfig, simulate
 from trajpref.survey.store import AnswerStore
@@ -24,14 +25,14 @@ def add_parser(
     check_data_args: Callable[[argparse.Namespace], None],
     warn_if_trained_otherwise: Callable[..., None],
 ) -> argparse.ArgumentParser:
-    """Add ``survey`` and its four commands to the main parser's sub-commands.
+    """Add ``survey`` and its five commands to the main parser's sub-commands.
 
     ``survey build`` reads data as ``trajpref evaluate`` does, with the main CLI's own data
     options, their checks and its warning for a model trained on data in other units or at
     another step: ``trajpref.cli`` passes them in (``survey`` sits below ``cli`` in the layers
     of docs/architecture.md, so it may not import them)."""
     sv = subparsers.add_parser("survey", help="a human-evaluation study (the paper's Table 3): "
-                               "build, serve, simulate, analyze")  # fmt: skip
+                               "build, serve, simulate, analyze, export")  # fmt: skip
     sub = sv.add_subparsers(dest="survey_command", required=True, metavar="COMMAND")
 
     b = sub.add_parser("build", help="pick scenes, render each method's top futures, blind them")
@@ -81,14 +82,18 @@ def add_parser(
     a.add_argument("--db", default=None, help="answers database (default STUDY/answers.sqlite)")
     a.add_argument("--out", default=None, help="folder for analysis.md/.json/.png "
                    "(default: the study folder)")  # fmt: skip
-    a.add_argument(
-        "--raters",
-        default="auto",
-        choices=["auto", "human", "synthetic", "all"],
-        help="whose answers (default auto: human raters if any, else synthetic)",
-    )
+    _add_rater_args(a)
     a.add_argument("--json", action="store_true", help="print JSON instead of Markdown")
     a.set_defaults(func=cmd_analyze)
+
+    e = sub.add_parser("export", help="the answers as a CSV table (R, pandas, SPSS)")
+    e.add_argument("study", help="a study folder")
+    e.add_argument("--csv", required=True, metavar="FILE", help="the CSV file to write: one "
+                   "row per answer, with the method and scores behind each panel (owner-only: "
+                   "rater ids are personal data)")  # fmt: skip
+    e.add_argument("--db", default=None, help="answers database (default STUDY/answers.sqlite)")
+    _add_rater_args(e)
+    e.set_defaults(func=cmd_export)
 
     m = sub.add_parser("simulate", help="synthetic raters (demos and tests only)")
     m.add_argument("study", help="a study folder")
@@ -99,6 +104,19 @@ def add_parser(
     m.add_argument("--db", default=None, help="answers database (default STUDY/answers.sqlite)")
     m.set_defaults(func=cmd_simulate)
     return sv
+
+
+def _add_rater_args(p: argparse.ArgumentParser) -> None:
+    """Whose answers ``analyze`` and ``export`` use: ``--raters`` and ``--exclude-rater``."""
+    p.add_argument(
+        "--raters",
+        default="auto",
+        choices=["auto", "human", "synthetic", "all"],
+        help="whose answers (default auto: human raters if any, else synthetic)",
+    )
+    p.add_argument("--exclude-rater", action="append", default=[], metavar="ID",
+                   help="leave this rater's answers out, e.g. one who failed an attention check "
+                   "or a test run (repeatable; any case)")  # fmt: skip
 
 
 def parse_models(items: list[str]) -> dict[str, str]:
@@ -157,12 +175,23 @@ def cmd_serve(args) -> int:
 
 def cmd_analyze(args) -> int:
 
-    result, paths = run_analysis(args.study, args.db, args.out, args.raters)
+    result, paths = run_analysis(args.study, args.db, args.out, args.raters, args.exclude_rater)
     if args.json:
         print(json.dumps(result.to_dict()))
     else:
         print(result.markdown())
         print(f"wrote {paths['markdown']}, {paths['json']}, {paths['figure']}")
+    return 0
+
+
+def cmd_export(args) -> int:
+
+    done = export_csv(args.study, args.csv, args.db, args.raters, args.exclude_rater)
+    label = " SYNTHETIC raters or study: not human data;" if done["synthetic"] else ""
+    print(f"wrote {done['answers']} answers of {done['raters']} {done['kind']} raters to "
+          f"{done['path']} (owner-only: rater ids are personal data);{label} columns: "
+          "rater, kind, ..., method, social, kinetics, human_score, ats, fts, ade, fde "
+          "(docs/survey.md)")  # fmt: skip
     return 0
 
 

@@ -15,6 +15,7 @@ page only ever sees :meth:`Study.public`.
 
 from __future__ import annotations
 
+import difflib
 import hashlib
 import json
 import math
@@ -51,6 +52,18 @@ IMAGE_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}\.png$")
 """Image file names: a plain name in ``images/``, never a path."""
 METHOD_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9 _.+-]{0,39}$")
 """Method names given to ``survey build``."""
+KEYS = {
+    "manifest": ("format", "title", "instructions", "created", "synthetic", "dataset", "build",
+                 "methods", "scenes", "key"),
+    "scene": ("id", "reference", "panels"),
+    "panel": ("id", "image"),
+    "key scene": ("source", "index", "agents", "stratum", "panels"),
+    "key panel": ("method", "ats", "fts", "ade", "fde", "max_ats", "max_fts", "shown"),
+}  # fmt: skip
+"""The keys each object of the manifest may have (what ``manifest_dict`` writes); any other
+key is an error naming it, so that a misspelt key a researcher adds by hand (``instruction``
+for ``instructions``) is not silently ignored. The records ``dataset`` and ``build`` and the
+entries of ``shown`` take any key."""
 
 
 @dataclass(frozen=True)
@@ -275,6 +288,23 @@ class _Reader:
             raise self.fail(f"{where}.{key}", f"expected {_kind_name(kind)}, got {value!r:.40}")
         return value
 
+    def keys(self, obj: Any, kind: str, where: str) -> None:
+        """``obj`` is an object whose keys are all among ``KEYS[kind]``; else an error naming
+        each unknown key, the closest allowed one, and the allowed ones."""
+        if not isinstance(obj, dict):
+            raise self.fail(where, "expected an object")
+        allowed = KEYS[kind]
+        unknown = sorted(k for k in obj if k not in allowed)
+        if not unknown:
+            return
+        named = []
+        for k in unknown:
+            close = difflib.get_close_matches(str(k), allowed, n=1, cutoff=0.6)
+            named.append(f"{k!r:.40}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+        keys = ", ".join(sorted(allowed))
+        plural = "s" if len(unknown) > 1 else ""
+        raise self.fail(where, f"unknown key{plural} {', '.join(named)}; the keys are: {keys}")
+
     def number(self, obj: Any, key: str, where: str, optional: bool = False) -> float | None:
         value = self.get(obj, key, (int, float), where, optional)
         if value is None:
@@ -297,8 +327,10 @@ def _kind_name(kind: type | tuple[type, ...]) -> str:
 
 
 def load_study(folder: str | Path) -> Study:
-    """Read and check a study folder: the manifest parses, every id is well-formed and unique,
-    every panel has a key, every image is a plain file name that exists in ``images/``.
+    """Read and check a study folder: the manifest parses, every object has only known keys
+    (``KEYS``: a misspelt key is an error naming the closest one), every id is well-formed and
+    unique, every panel has a key, every image is a plain file name that exists in
+    ``images/``.
 
     Raises ``ConfigError`` for a missing folder or manifest, ``DataError`` for a corrupt one.
     """
@@ -313,8 +345,7 @@ def load_study(folder: str | Path) -> Study:
     except (ValueError, UnicodeDecodeError) as exc:
         raise DataError(f"corrupt manifest: not valid JSON ({exc})", path) from None
     r = _Reader(path)
-    if not isinstance(raw, dict):
-        raise r.fail("top level", "expected an object")
+    r.keys(raw, "manifest", "top level")
     fmt = r.get(raw, "format", str, "manifest")
     if fmt != FORMAT:
         raise r.fail("format", f"expected {FORMAT!r}, got {fmt!r:.40}")
@@ -344,21 +375,25 @@ def load_study(folder: str | Path) -> Study:
 
     for i, s in enumerate(scenes_raw):
         where = f"scenes[{i}]"
+        r.keys(s, "scene", where)
         sid = r.ident(r.get(s, "id", str, where), f"{where}.id")
         if any(x.id == sid for x in scenes):
             raise r.fail(f"{where}.id", f"scene {sid} appears twice")
         ref = r.get(s, "reference", str, where, optional=True)
         ref = image(ref, f"{where}.reference") if ref is not None else None
         skey = r.get(key, sid, dict, "key")
+        r.keys(skey, "key scene", f"key.{sid}")
         pkeys = r.get(skey, "panels", dict, f"key.{sid}")
         panels: list[Panel] = []
         for j, p in enumerate(r.get(s, "panels", list, where)):
             pwhere = f"{where}.panels[{j}]"
+            r.keys(p, "panel", pwhere)
             pid = r.ident(r.get(p, "id", str, pwhere), f"{pwhere}.id")
             if any(x.id == pid for x in panels):
                 raise r.fail(f"{pwhere}.id", f"panel {pid} appears twice in scene {sid}")
             k = r.get(pkeys, pid, dict, f"key.{sid}.panels")
             kw = f"key.{sid}.panels.{pid}"
+            r.keys(k, "key panel", kw)
             method = r.get(k, "method", str, kw)
             if method not in methods:
                 raise r.fail(f"{kw}.method", f"{method!r:.40} is not one of the methods")

@@ -21,7 +21,7 @@ import numpy as np
 
 from trajpref.errors import ConfigError
 from trajpref.survey.manifest import GROUND_TRUTH, RATING_MAX, RATING_MIN, Study
-from trajpref.survey.store import RATER_RE, AnswerStore
+from trajpref.survey.store import RATER_RE, AnswerStore, check_rater
 
 
 @dataclass
@@ -33,7 +33,8 @@ class SimulateConfig:
     seed: int = 0
     """Seeds the raters' biases and noise."""
     prefix: str = "synthetic"
-    """Rater ids are ``{prefix}-01``, ``{prefix}-02``, ..."""
+    """Rater ids are ``{prefix}-01``, ``{prefix}-02``, ... in lower case (rater ids are not
+    case-sensitive: ``check_rater``)."""
     top: float = 4.2
     """Expected rating of a panel that shows the ground truth."""
     slope: float = 1.2
@@ -56,8 +57,8 @@ def simulate(study: Study, store: AnswerStore, cfg: SimulateConfig) -> list[str]
     """Write ``cfg.raters`` synthetic raters' answers to every panel; returns their ids.
     Refuses ids that exist already (run it again with another ``--prefix``)."""
     width = max(2, len(str(cfg.raters)))
-    ids = [f"{cfg.prefix}-{i + 1:0{width}d}" for i in range(cfg.raters)]
-    taken = sorted(set(ids) & set(store.raters()))
+    ids = [check_rater(f"{cfg.prefix}-{i + 1:0{width}d}") for i in range(cfg.raters)]
+    taken = sorted(set(ids) & {r.lower() for r in store.raters()})
     if taken:
         raise ConfigError(f"raters {', '.join(taken[:3])}{' ...' if len(taken) > 3 else ''} "
                           "already exist in this database; use another --prefix")  # fmt: skip

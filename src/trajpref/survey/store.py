@@ -9,6 +9,9 @@ Schema (``SCHEMA``)::
             PRIMARY KEY (rater, scene, panel))
         social, kinetics: 1..5 (CHECK); revision: 1, +1 for each later change
 
+Rater ids are not case-sensitive: ``Alice`` and ``alice`` are one rater, stored as ``alice``
+(an older file's ``Alice`` keeps its spelling and is found under any case).
+
 Every write is validated here (rater id, known scene and panel, ratings integers in 1..5),
 runs in one transaction, and is committed (``synchronous=FULL``: on disk, not only handed to
 the operating system) before the call returns; a second answer for the same panel updates the
@@ -18,13 +21,19 @@ A file made elsewhere (answers collected on paper and imported) is checked when 
 the tables have the columns of ``SCHEMA``, every rating is an integer in 1..5, every kind is
 ``human`` or ``synthetic``, no answer or rater appears twice, and the file belongs to this
 study. ``analyze`` opens the file read-only (``readonly=True``): it never writes into it.
+
+The answers are personal data: a new file is created owner-only (0600; SQLite gives its
+``-wal`` and ``-shm`` files the same mode), and opening one that other users can read warns.
 """
 
 from __future__ import annotations
 
 import contextlib
+import difflib
+import os
 import re
 import sqlite3
+import tempfile
 import threading
 import warnings
 from collections.abc import Iterator
@@ -36,7 +45,10 @@ from trajpref.errors import ConfigError, TrajprefError
 from trajpref.survey.manifest import CRITERIA, RATING_MAX, RATING_MIN, Study
 
 RATER_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.@-]{0,63}$")
-"""Rater ids: what a person types (letters, digits, ``_ . @ -``, at most 64)."""
+"""Rater ids: what a person types (letters, digits, ``_ . @ -``, at most 64); not
+case-sensitive (``check_rater`` gives the lower-case form)."""
+FILE_MODE = 0o600
+"""The mode of a new answers database (and of SQLite's -wal and -shm beside it): owner only."""
 KINDS = ("human", "synthetic")
 """Who gave an answer."""
 
@@ -92,10 +104,83 @@ def _count(n: int, what: str) -> str:
 
 
 def check_rater(rater: Any) -> str:
+    """A valid rater id in its canonical, lower-case form (``Alice`` -> ``alice``): ids are
+    not case-sensitive, so that a person who types their id once with a capital and once
+    without is one rater, not two."""
     if not isinstance(rater, str) or not RATER_RE.match(rater):
         raise AnswerError("rater id: 1-64 ASCII letters (A-Z, a-z), digits or '_.@-', starting "
                           "with a letter or digit", 422)  # fmt: skip
-    return rater
+    return rater.lower()  # ASCII only (RATER_RE): the same as SQLite's lower()
+
+
+def case_variants(raters: Any) -> list[list[str]]:
+    """Groups of rater ids that differ only by case (``[["Alice", "alice"]]``): possible in
+    a file written before ids were made case-insensitive, or imported; each group sorted."""
+    groups: dict[str, list[str]] = {}
+    for r in raters:
+        groups.setdefault(str(r).lower(), []).append(str(r))
+    return sorted(sorted(g) for g in groups.values() if len(g) > 1)
+
+
+def _create_private(path: Path) -> None:
+    """Create ``path`` as an empty file of mode ``FILE_MODE`` (SQLite takes an empty file
+    as a new database) unless it exists: SQLite itself would create it with the umask's
+    mode, 0644 under the usual 022."""
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, FILE_MODE)
+    except FileExistsError:
+        return  # made meanwhile by another process (or a link): checked like any file
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot create the answers database "
+                          f"({exc.strerror or exc})") from None  # fmt: skip
+    try:
+        os.fchmod(fd, FILE_MODE)  # whatever the umask took away (e.g. 0277 -> 0400)
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def private_output(path: str | Path) -> Iterator[Path]:
+    """A temporary path beside ``path``, renamed onto it on success as an owner-only file
+    (``FILE_MODE``): for what holds rater ids (``survey export``'s CSV, ``analyze``'s report
+    of excluded raters). Like ``trajpref.io.atomic_path``, whose files take the umask's mode;
+    folders it creates are removed again on failure."""
+    path = Path(path)
+    made = [f for f in (path.parent, *path.parent.parents) if not f.exists()]
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
+        os.close(fd)  # mkstemp: mode 0600 whatever the umask
+    except OSError as exc:
+        raise TrajprefError(f"{path}: cannot write ({exc.strerror or exc})") from None
+    tmp = Path(name)
+    done = False
+    try:
+        yield tmp
+        try:
+            os.chmod(tmp, FILE_MODE)
+            os.replace(tmp, path)
+        except OSError as exc:
+            raise TrajprefError(f"{path}: cannot write ({exc.strerror or exc})") from None
+        done = True
+    finally:
+        tmp.unlink(missing_ok=True)
+        if not done:
+            for folder in made:  # innermost first
+                with contextlib.suppress(OSError):
+                    folder.rmdir()
+
+
+def _warn_if_shared(path: Path) -> None:
+    """One warning when other users may read or write the answers database."""
+    try:
+        mode = path.stat().st_mode & 0o777
+    except OSError:
+        return
+    if mode & 0o077:
+        warnings.warn(f"{path}: other users have access to it (mode {mode:o}); the answers "
+                      f"are personal data: make it owner-only with `chmod 600 {path}` (its "
+                      "-wal and -shm files follow)", stacklevel=3)  # fmt: skip
 
 
 def check_ratings(ratings: Any) -> tuple[int, int]:
@@ -143,6 +228,11 @@ class AnswerStore:
             raise ConfigError(f"{self.path}: cannot create the answers database: there is no "
                               f"folder {self.path.parent}")  # fmt: skip
         self._lock = threading.Lock()
+        if not readonly:
+            if self.path.exists():
+                _warn_if_shared(self.path)
+            else:
+                _create_private(self.path)
         try:
             if readonly:  # a URI, so that SQLite itself refuses any write
                 self.db = sqlite3.connect(f"{self.path.resolve().as_uri()}?mode=ro", uri=True,
@@ -288,6 +378,20 @@ class AnswerStore:
         if panel not in self.panels[scene]:
             raise AnswerError(f"scene {scene} has no panel {str(panel)!r:.40}", 404)
 
+    def _stored_id(self, rater: str) -> str:
+        """The id under which the canonical (lower-case) ``rater`` is stored: itself, or the
+        one id of an older file that differs from it only by case (``Alice``). Several such
+        ids and none of them lower case: ambiguous, 409. Call under the lock."""
+        ids = [r[0] for r in self.db.execute("SELECT rater FROM raters WHERE lower(rater) = ?",
+                                             (rater,))]  # fmt: skip
+        if not ids or rater in ids:
+            return rater
+        if len(ids) == 1:
+            return ids[0]
+        raise AnswerError(f"rater id {rater} matches {len(ids)} raters that differ only by "
+                          f"case ({', '.join(sorted(ids))}); ask the study's researcher "
+                          "which is yours", 409)  # fmt: skip
+
     def _rater_row(self, rater: str, kind: str, create: bool) -> tuple[str, str | None] | None:
         row = self.db.execute("SELECT kind, submitted_at FROM raters WHERE rater = ?",
                               (rater,)).fetchone()  # fmt: skip
@@ -311,7 +415,7 @@ class AnswerStore:
                   kind: str = "human") -> dict[str, int]:  # fmt: skip
         """``save`` for several ``(scene, panel, ratings)`` of one rater, in one transaction:
         all are written or none. Returns the revision of the last one."""
-        check_rater(rater)
+        rater = check_rater(rater)
         if kind not in KINDS:
             raise AnswerError(f"kind must be one of {KINDS}", 422)
         checked = []
@@ -321,6 +425,7 @@ class AnswerStore:
         now = _now()
         revision = 0
         with self._tx():
+            rater = self._stored_id(rater)
             row = self._rater_row(rater, kind, create=True)
             if row is not None and row[1] is not None:
                 raise AnswerError(f"rater {rater} has already submitted; answers are final", 409)
@@ -340,8 +445,9 @@ class AnswerStore:
 
     def submit(self, rater: str, kind: str = "human") -> dict[str, Any]:
         """Mark a rater's answers final; 409 while panels are unanswered. Idempotent."""
-        check_rater(rater)
+        rater = check_rater(rater)
         with self._tx():
+            rater = self._stored_id(rater)
             row = self._rater_row(rater, kind, create=False)
             answered = self._answered(rater) if row is not None else 0
             if answered < self.total:
@@ -360,9 +466,11 @@ class AnswerStore:
 
     def progress(self, rater: str) -> dict[str, Any]:
         """A rater's answers so far: ``{"rater", "answers": {scene: {panel: {social,
-        kinetics}}}, "answered", "total", "submitted"}`` (empty for an unknown rater)."""
-        check_rater(rater)
+        kinetics}}}, "answered", "total", "submitted"}`` (empty for an unknown rater);
+        ``rater`` is the id as stored (lower case, or an older file's spelling)."""
+        rater = check_rater(rater)
         with self._lock:
+            rater = self._stored_id(rater)
             row = self.db.execute("SELECT kind, submitted_at FROM raters WHERE rater = ?",
                                   (rater,)).fetchone()  # fmt: skip
             rows = self.db.execute(
@@ -413,3 +521,48 @@ class AnswerStore:
     def raters(self) -> dict[str, str]:
         """rater -> kind."""
         return dict(self._read("SELECT rater, kind FROM raters"))
+
+    def records(self) -> list[dict[str, Any]]:
+        """Every answer of this study (those :meth:`rows` gives) with its revision and time
+        stamps: ``rater``, ``kind``, ``submitted_at``, ``scene``, ``panel``, ``social``,
+        ``kinetics``, ``revision``, ``created_at``, ``updated_at`` (``survey export``)."""
+        names = ("rater", "kind", "submitted_at", "scene", "panel", "social", "kinetics",
+                 "revision", "created_at", "updated_at")  # fmt: skip
+        rows = self._read(
+            """SELECT a.rater, r.kind, r.submitted_at, a.scene, a.panel, a.social, a.kinetics,
+                      a.revision, a.created_at, a.updated_at
+               FROM answers a JOIN raters r USING (rater)
+               ORDER BY a.rater, a.scene, a.panel"""
+        )
+        return [dict(zip(names, r, strict=True)) for r in rows
+                if r[4] in self.panels.get(r[3], ())]  # fmt: skip
+
+    def find_raters(self, ids: list[str], option: str = "--exclude-rater") -> list[str]:
+        """The stored ids of ``ids`` (each as stored, or differing only by case when that
+        names one rater), in order, without repeats. A ``ConfigError`` naming ``option``, the
+        id, the closest stored ids and this file for an id that names no rater (a typo would
+        otherwise exclude nobody) or several."""
+        known = sorted(self.raters())
+        out: list[str] = []
+        for rater in ids:
+            if rater in known:
+                found = rater
+            else:
+                same = [k for k in known if k.lower() == rater.lower()]
+                if len(same) > 1:
+                    raise ConfigError(f"{option} {rater}: {len(same)} raters of {self.path} "
+                                      f"differ from it only by case ({', '.join(same)}); give "
+                                      "one exactly")  # fmt: skip
+                if not same:
+                    lower = {k.lower(): k for k in known}
+                    close = difflib.get_close_matches(rater.lower(), list(lower), n=1)
+                    hint = (f" (did you mean {', '.join(lower[c] for c in close)}?)" if close
+                            else "")  # fmt: skip
+                    listed = ", ".join(known[:8]) + (f", ... ({len(known)} in all)"
+                                                     if len(known) > 8 else "")  # fmt: skip
+                    raise ConfigError(f"{option} {rater}: no such rater in {self.path}{hint}; "
+                                      f"its raters: {listed or 'none'}")  # fmt: skip
+                found = same[0]
+            if found not in out:
+                out.append(found)
+        return out

@@ -194,7 +194,7 @@ def write_study(
 
     ``methods`` lists the panels of every scene (``GROUND_TRUTH`` among them when it is rated);
     each scene's panels are put in a random order (seeded) and named A, B, ... The folder
-    appears only once complete.
+    appears only once complete, owner-only (0700): the raters' answers go into it.
     """
     out = Path(out)
     _check_out(out)
@@ -209,6 +209,7 @@ def write_study(
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.building-", dir=out.parent))
     try:
+        os.chmod(tmp, 0o700)  # owner-only: the answers (personal data) will be kept in it
         (tmp / IMAGES).mkdir()
         entries = []
         width = max(2, len(str(len(scenes))))

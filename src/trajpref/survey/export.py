@@ -1,0 +1,74 @@
+"""``trajpref survey export``: the answers as one CSV table for R, pandas or SPSS.
+
+One row per answer (long format), unblinded: the rater, the scene and panel as the rater saw
+them, the method behind the panel and what the key says about it (ATS, FTS, ADE, FDE in the
+data's units), the two ratings and their mean, and when the answer was given. The same raters
+as ``analyze`` (``--raters``, ``--exclude-rater``). Rater ids are personal data: the file is
+written owner-only (0600), atomically.
+"""
+
+from __future__ import annotations
+
+import csv
+import warnings
+from pathlib import Path
+
+from trajpref.errors import ConfigError
+from trajpref.io import check_output_file
+from trajpref.survey.analyze import RaterKind, case_variants_text, select_rows
+from trajpref.survey.manifest import DATABASE, load_study
+from trajpref.survey.store import AnswerStore, case_variants, private_output
+
+COLUMNS = (
+    "rater", "kind", "submitted_at", "scene", "panel", "position", "method", "social",
+    "kinetics", "human_score", "ats", "fts", "ade", "fde", "units", "source", "agents",
+    "stratum", "revision", "created_at", "updated_at",
+)  # fmt: skip
+"""The CSV's columns. ``position``: the picture's place in the order every rater sees (1 =
+first); ``human_score``: the mean of the two ratings; ``ade``/``fde`` in ``units``;
+``created_at``/``updated_at``: the answer's first and last save (UTC); ``submitted_at``:
+when the rater submitted (empty if not)."""
+
+
+def export_csv(folder: str | Path, path: str | Path, db: str | Path | None = None,
+               rater_kind: RaterKind = "auto",
+               exclude: list[str] | tuple[str, ...] = ()) -> dict[str, object]:  # fmt: skip
+    """Write the answers of ``folder``'s study to the CSV file ``path``; returns ``{"path",
+    "answers", "raters", "kind", "synthetic"}``. The output path is checked before the answers
+    are read; nothing is written on error."""
+    study = load_study(folder)
+    path = check_output_file(path, what="--csv")
+    store = AnswerStore(db or study.folder / DATABASE, study, readonly=True)
+    try:
+        records = store.records()
+        excluded = store.find_raters(list(exclude))
+    finally:
+        store.close()
+    if not records:
+        raise ConfigError(f"{store.path}: no answers to this study's panels yet")
+    keyed = [(r["rater"], r["kind"], r) for r in records]
+    chosen, kind = select_rows(keyed, rater_kind, excluded)
+    raters = sorted({r[0] for r in chosen})
+    if case_variants(raters):
+        warnings.warn(f"{store.path}: {case_variants_text(case_variants(raters))}", stacklevel=2)
+    units = str(study.dataset.get("units") or "unknown")
+    where = {}
+    position = 0
+    for s in study.scenes:
+        for p in s.panels:
+            position += 1
+            where[(s.id, p.id)] = (position, s, p.key)
+    with private_output(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
+        out = csv.writer(fh)
+        out.writerow(COLUMNS)
+        for _, _, r in chosen:
+            pos, scene, key = where[(r["scene"], r["panel"])]
+            out.writerow([
+                r["rater"], r["kind"], r["submitted_at"] or "", r["scene"], r["panel"], pos,
+                key.method, r["social"], r["kinetics"], (r["social"] + r["kinetics"]) / 2,
+                key.ats, key.fts, key.ade, key.fde, units, scene.source, scene.agents,
+                scene.stratum, r["revision"], r["created_at"], r["updated_at"],
+            ])  # fmt: skip
+    synthetic = study.synthetic or any(r[1] == "synthetic" for r in chosen)
+    return {"path": path, "answers": len(chosen), "raters": len(raters), "kind": kind,
+            "synthetic": synthetic}  # fmt: skip
