@@ -58,6 +58,16 @@ LIMITS = {
     "documents it (docs/data.md). That is knowledge of the test file the other defaults do "
     "not use, so this is a variant beside eth's default, never the default; eth's validation "
     "split cannot choose it (docs/pretraining.md, 'eth at two paces').",
+    "sdd/generator": "One of its 20 samples (index 14) is untrained noise: log sigma at the "
+    "cap (+1) with a large normalised shift, jumps of up to about 400 px in one step where "
+    "the history's largest is 55 px (40 test scenes). minADE20 / minFDE20 take each agent's "
+    "best sample, so the other 19 carry them; a figure, a planner or a selection that uses "
+    "every sample sees it (drop sample 14; the published cap on log sigma, `max_log_sigma: "
+    "1`, limits its spread, not its shape). The cause is in the best-of-K training "
+    "(docs/pretraining.md, 'eth: every sample trained').",
+    "zara2/rlhf-res": "One of its 20 samples (index 14) is noise after the fine-tuning, with "
+    "jumps of up to 30 m in one step (its start, `zara2/generator`, has none): minADE20 / "
+    "minFDE20 do not see it, figures and planners that use every sample do.",
     "zara1/generator": "The CPU default (160 generator epochs without denoising steps, dropout "
     "0.2; its best validation epoch is under Training above) is 0.04 m short of LED's own "
     "minFDE20 (0.18 / 0.26); the "
