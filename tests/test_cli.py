@@ -399,3 +399,122 @@ def test_finetune_help_explains_each_method_the_rewards_and_the_seed(capsys):
                  "finetune.reward=set", "--equal-budget MINUTES", "the run's seed (default 0, "
                  "whatever seed the start was trained with)"):  # fmt: skip
         assert part in text, part
+
+
+# --- under torchrun: what runs, what is printed once, the advice after SIGTERM or a failure
+
+
+def _torchrun_env(monkeypatch, rank, world=2, local=None, nodes=None):
+    """The variables torchrun sets for a worker (without starting any process group)."""
+    monkeypatch.setenv("WORLD_SIZE", str(world))
+    monkeypatch.setenv("RANK", str(rank))
+    monkeypatch.setenv("LOCAL_WORLD_SIZE", str(local or world))
+    monkeypatch.setenv("GROUP_WORLD_SIZE", str(nodes or 1))
+
+
+def test_predict_and_evaluate_refuse_torchrun_and_rank_0_alone_says_why(
+    capsys, monkeypatch, folder, tmp_path
+):
+    out = tmp_path / "pred.npz"
+    argv = ["predict", "--dataset", folder, "--samples", "2", "--out", out, "--no-progress"]
+    _torchrun_env(monkeypatch, rank=0)
+    code, stdout, err = _run(capsys, *argv)
+    assert code == 2 and stdout == "" and not out.exists()
+    assert err.startswith("trajpref: error: trajpref predict runs in one process; under torchrun")
+    _torchrun_env(monkeypatch, rank=1)  # the other ranks stop as well, silently
+    code, stdout, err = _run(capsys, "evaluate", "--dataset", folder, "--json", "--no-progress")
+    assert (code, stdout, err) == (2, "", "")
+
+
+def test_an_error_every_rank_meets_is_printed_by_rank_0_only(capsys, monkeypatch, folder,
+                                                             tmp_path):  # fmt: skip
+    argv = ["train", "diffusion", "--dataset", folder, "--set", "denoiser.epoch=2",
+            "--out", tmp_path / "r", "--no-progress"]  # fmt: skip
+    _torchrun_env(monkeypatch, rank=1)
+    assert _run(capsys, *argv) == (2, "", "")
+    _torchrun_env(monkeypatch, rank=0)
+    code, _, err = _run(capsys, *argv)
+    assert code == 2 and err.count("trajpref: error:") == 1 and "denoiser.epochs" in err
+
+
+def _state_then(exc_or_signal):
+    """A stand-in for train_stage: an epoch's state is written, then ``exc_or_signal``
+    (an exception to raise, or a signal sent to this process)."""
+    import os
+    import signal
+    from pathlib import Path
+
+    import torch
+
+    def fake(stage, cfg, out, *args, **kwargs):
+        Path(out).mkdir(parents=True, exist_ok=True)
+        torch.save({"stage": "denoiser"}, Path(out) / "denoiser_last.pt")
+        if isinstance(exc_or_signal, signal.Signals):
+            os.kill(os.getpid(), exc_or_signal)  # its handler runs before the next line
+            raise AssertionError("the signal did not stop training")
+        raise exc_or_signal
+
+    return fake
+
+
+def test_sigterm_during_training_gets_the_resume_advice(capsys, monkeypatch, tmp_path):
+    """A scheduler's cancel or preemption (SIGTERM, which torchrun forwards) is advised as
+    Ctrl-C is (it ended the process silently)."""
+    import shlex
+    import signal
+
+    import trajpref.cli as cli
+
+    monkeypatch.setattr(cli, "train_stage", _state_then(signal.SIGTERM))
+    run = tmp_path / "run"
+    code, _, err = _run(capsys, "train", "diffusion", "--out", run, "--no-progress")
+    first, command = err.strip().splitlines()
+    assert code == 143
+    assert first == "trajpref: terminated (SIGTERM); to continue from the last finished epoch:"
+    assert shlex.split(command)[-2:] == ["--resume", str(run / "denoiser_last.pt")]
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # restored after the command
+
+
+def test_the_resume_advice_under_torchrun_repeats_the_launcher_it_ran_under(capsys, monkeypatch,
+                                                                           tmp_path):  # fmt: skip
+    """Several machines: the launcher's own options (here read from a stand-in), with a note
+    to run it on each machine; unreadable options: the per-machine count and --nnodes (not
+    --nproc_per_node=WORLD_SIZE), and a note to add the launcher's options."""
+    import shlex
+
+    import trajpref.cli as cli
+
+    run = tmp_path / "run"
+    argv = ["train", "diffusion", "--out", run, "--no-progress"]
+    monkeypatch.setattr(cli, "train_stage", _state_then(KeyboardInterrupt()))
+    _torchrun_env(monkeypatch, rank=0, world=16, local=8, nodes=2)
+    launcher = [".venv/bin/torchrun", "--nnodes", "2", "--node_rank", "0", "--nproc_per_node",
+                "8", "--master_addr", "10.0.0.1", "--master_port", "29500", "-m",
+                "trajpref.cli"]  # fmt: skip
+    monkeypatch.setattr(cli, "launcher_command", lambda: launcher, raising=False)
+    code, _, err = _run(capsys, *argv)
+    lines = err.strip().splitlines()
+    assert code == 130 and shlex.split(lines[1]) == [
+        *launcher, *map(str, argv), "--resume", str(run / "denoiser_last.pt")]  # fmt: skip
+    assert "on each of the 2 machines" in lines[2]
+    monkeypatch.setattr(cli, "launcher_command", lambda: None, raising=False)
+    code, _, err = _run(capsys, *argv)
+    lines = err.strip().splitlines()
+    assert shlex.split(lines[1])[:5] == ["torchrun", "--nnodes=2", "--nproc_per_node=8", "-m",
+                                         "trajpref.cli"]  # fmt: skip
+    assert "rendezvous" in lines[2]
+
+
+def test_a_failed_process_under_torchrun_gets_the_resume_advice(capsys, monkeypatch, tmp_path):
+    """Another rank died (killed, out of memory): this one's collective fails with a
+    RuntimeError; rank 0 says how to continue, and torch's traceback follows."""
+    import trajpref.cli as cli
+
+    failure = RuntimeError("[gloo/transport/tcp/pair.cc:553] Connection closed by peer")
+    monkeypatch.setattr(cli, "train_stage", _state_then(failure))
+    _torchrun_env(monkeypatch, rank=0)
+    with pytest.raises(RuntimeError, match="Connection closed"):
+        main(["train", "diffusion", "--out", str(tmp_path / "run"), "--no-progress"])
+    err = capsys.readouterr().err
+    assert err.startswith("trajpref: a process of this run failed; to continue from the last")
+    assert "--resume" in err

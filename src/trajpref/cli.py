@@ -9,8 +9,10 @@ import dataclasses
 import json
 import math
 import os
+import signal
 import sys
 import textwrap
+import threading
 import time
 import warnings
 from pathlib import Path
@@ -29,11 +31,17 @@ from trajpref.config import (
     load_config,
 )
 from trajpref.data import PROTOCOLS, ReadOptions, hold_out_scene, load_dataset, mean_speed
+from trajpref.data.loader import SceneLoader
 from trajpref.data.registry import NAMES, SPECS, split_folders
 from trajpref.data.trajnet import write_trajnet, write_trajnet_truth
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, TrajprefError
-from trajpref.evaluation import evaluate, predict_dataset, resolve_collision_radius
+from trajpref.evaluation import (
+    evaluate,
+    predict_dataset,
+    resolve_collision_radius,
+    sampled_batches,
+)
 from trajpref.io import (
     atomic_path,
     check_output_dir,
@@ -42,7 +50,7 @@ from trajpref.io import (
     read_checkpoint_header,
     write_json,
 )
-from trajpref.metrics import SCENE_SIZE_EDGES, check_bin_edges
+from trajpref.metrics import SCENE_SIZE_EDGES, check_bin_edges, min_ade_fde
 from trajpref.models import checkpoint as ckpt
 from trajpref.models import zoo
 from trajpref.models.registry import load_predictor
@@ -53,6 +61,12 @@ from trajpref.score.scorer import PRECISIONS
 from trajpref.score.selection import METHODS, SelectingPredictor, SelectionConfig
 from trajpref.survey.cli import add_parser as add_survey_parser
 from trajpref.train import compare
+from trajpref.train.distributed import (
+    env_info,
+    fallback_launcher,
+    launcher_command,
+    launcher_note,
+)
 from trajpref.train.run import (
     STAGE_NAMES,
     cli_resume_command,
@@ -61,7 +75,7 @@ from trajpref.train.run import (
     train_stage,
 )
 from trajpref.types import collate
-from trajpref.viz.plot import plot_scene, plot_scene_scored
+from trajpref.viz.plot import FORMATS, check_limits, plot_scene, plot_scene_scored
 
 
 def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> None:
@@ -317,13 +331,52 @@ def build_parser() -> argparse.ArgumentParser:
     _add_selection_args(pr, "--rank")
     pr.set_defaults(func=cmd_predict)
 
-    pl = sub.add_parser("plot", help="PNG of one scene: histories, ground truth, samples")
+    pl = sub.add_parser("plot", help="a figure of one scene (PNG, PDF or SVG): histories, "
+                        "ground truth, samples",
+                        description="A figure of one scene, and its minADE/minFDE printed. A "
+                        "model that samples at random (cv, --stochastic, a bare denoiser) is run "
+                        "over the split's batches up to the scene's, as predict and evaluate run "
+                        "it, so that the figure shows their samples at --seed and --max-agents "
+                        "(a late scene with --sampler full takes a while); a model whose samples "
+                        "do not change with the seed is run on the scene alone.")  # fmt: skip
     _add_data_args(pl)
     _add_model_args(pl)
     pl.add_argument("--scene", type=int, default=0, help="scene index in the split (default 0)")
-    pl.add_argument("--out", required=True, help="output .png file")
-    _add_scorer_arg(pl, "draw each agent's top-2 samples shaded by their diffusion score, "
-                    "beside the ground truth (the paper's Fig. 2)")  # fmt: skip
+    pl.add_argument("--out", required=True, help="output figure: .png, .pdf or .svg, written "
+                    "in the format its suffix names")  # fmt: skip
+    _add_scorer_arg(pl, "beside the ground truth, draw each agent's best samples by their "
+                    "diffusion score (ATS) against the ground truth, thickest and darkest the "
+                    "best (the paper's Fig. 2; --draw-samples: how many, default 2; each "
+                    "agent's own best, where predict --rank orders whole scenes)")  # fmt: skip
+    pl.add_argument("--dpi", type=float, default=None,
+                    help="a PNG's pixels per inch (default 120; e.g. 300 for print); PDF and "
+                    "SVG are vector files")  # fmt: skip
+    pl.add_argument("--width", type=float, default=None, metavar="INCHES",
+                    help="the figure's width; its text has its printed size at this width, so "
+                    "give the width it is printed at: 3.3 for a paper's column, where --scorer "
+                    "stacks its two panels (default 6.4; 7 with --scorer). A title wider than "
+                    "that widens the canvas: the one made is long, so give --title or "
+                    "--no-title")  # fmt: skip
+    pl.add_argument("--limits", default="auto", metavar="auto|all|X0,X1,Y0,Y1",
+                    help="the axes: auto (default) holds every history and ground truth and the "
+                    "bulk of the samples, leaving out a sample that reaches farther from its "
+                    "agent's last observed position than 3 interquartile ranges (and a quarter of "
+                    "the quartile) above the upper quartile of that agent's samples' reaches (it "
+                    "runs off the axes); all holds every "
+                    "sample drawn; or the x and y ranges in the data's units (write "
+                    "--limits=-5,5,-3,3 when the first is negative)")  # fmt: skip
+    pl.add_argument("--draw-samples", type=int, default=None, metavar="N",
+                    help="samples drawn per agent: the first N of the --samples K (default all); "
+                    "with --scorer, the N best by score (default 2). The minADE/minFDE printed "
+                    "count all K")  # fmt: skip
+    titles = pl.add_mutually_exclusive_group()
+    titles.add_argument("--title", default=None,
+                        help="the figure's title, in place of the one made (the split, scene, "
+                        "model, K and the settings that change the samples: the seed where the "
+                        "model draws at random, the sampler, --max-speed and the like, and the "
+                        "scorer)")  # fmt: skip
+    titles.add_argument("--no-title", action="store_true",
+                        help="no title (a paper's caption says it)")  # fmt: skip
     pl.set_defaults(func=cmd_plot)
 
     tr = sub.add_parser("train", help="train the denoiser (diffusion) or the generator")
@@ -1055,34 +1108,135 @@ def cmd_predict(args) -> int:
     return 0
 
 
-def cmd_plot(args) -> int:
-    _check_model_args(args)
-    check_output_file(args.out, ".png")
+def _check_plot_args(args) -> None:
+    """plot's own options, before any model or data is read: --out's format, --dpi, --width,
+    --limits (parsed into ``args.limits``), --draw-samples and --scene."""
+    path = check_output_file(args.out)
+    if path.suffix.lower() not in FORMATS:
+        raise ConfigError(f"--out {path}: the output must be a .png file, or .pdf or .svg "
+                          "(its suffix names the format)")  # fmt: skip
+    if args.dpi is not None and not (math.isfinite(args.dpi) and 10 <= args.dpi <= 2400):
+        raise ConfigError(f"--dpi takes pixels per inch from 10 to 2400, got {args.dpi:g}")
+    if args.width is not None and not (math.isfinite(args.width) and 1 <= args.width <= 40):
+        raise ConfigError(f"--width takes inches from 1 to 40, got {args.width:g}")
+    if args.limits not in ("auto", "all"):
+        try:
+            box = tuple(float(v) for v in args.limits.split(","))
+        except ValueError:
+            box = ()
+        if len(box) != 4:
+            raise ConfigError(f"--limits takes auto, all or X0,X1,Y0,Y1 (four numbers in the "
+                              f"data's units), got {args.limits!r}")  # fmt: skip
+        try:
+            args.limits = check_limits(box)
+        except ConfigError as err:
+            raise ConfigError(f"--limits {args.limits}: {err}") from None
+    if args.draw_samples is not None and args.draw_samples < 1:
+        raise ConfigError(f"--draw-samples must be >= 1, got {args.draw_samples}")
     if args.scene < 0:
         raise ConfigError(f"--scene {args.scene}: scene indices start at 0")
+
+
+def _plot_samples(model, ds, args, device) -> tuple[object, torch.Tensor, bool]:
+    """The scene's batch (the scene alone) and its samples pred [K, P, T_f, 2] as predict and
+    evaluate draw them at --seed and --max-agents, and whether the model draws at random.
+    A model whose samples do not change with the seed is run on the scene alone; one that
+    draws at random runs over the split's batches in order up to the scene's, as those
+    commands do (one random stream in batch order), so that the figure's samples are theirs."""
+    one = collate([ds[args.scene]]).to(device)
+    pred = model.predict(one, args.samples, torch.Generator().manual_seed(args.seed))
+    other = model.predict(one, args.samples, torch.Generator().manual_seed(args.seed + 1))
+    if torch.equal(pred, other):  # the draws change nothing: this is predict's sample
+        return one, pred, False
+    groups = SceneLoader(ds, max_agents=args.max_agents, shuffle=False).batches()
+    stop = next(j for j, g in enumerate(groups) if args.scene in g)
+    for j, (batch, drawn) in enumerate(sampled_batches(model, ds, args.samples, args.seed,
+                                                       device, args.max_agents,
+                                                       not args.no_progress, "plot")):  # fmt: skip
+        if j == stop:
+            where = int(np.flatnonzero(groups[j] == args.scene)[0])  # the scene in its batch
+            return one, drawn[:, batch.scene == where], True  # [K, P, T_f, 2]
+    raise AssertionError("the scene's batch was not reached")  # pragma: no cover
+
+
+def _plot_title(args, ds, scene, random: bool) -> str:
+    """The figure's title: --title, none with --no-title, else where the scene is from, then
+    the model and what changes its samples (the seed and --max-agents where it draws at
+    random), and the scorer."""
+    if args.no_title:
+        return ""
+    if args.title is not None:
+        return args.title
+    info = ds.info
+    # a folder without split sub-folders is read whole whatever --split says
+    split = "" if _same_path(info.source, info.name) else f"/{info.split}"
+    where = f"{info.name}{split} scene {args.scene} ({scene.scene_id})"
+    if info.protocol != "all":
+        where += f", protocol {info.protocol}"
+    if args.holdout_scene:
+        where += f", held-out scene {args.holdout_scene}*"
+    settings = [args.model, f"K={args.samples}"]
+    if random:
+        settings.append(f"seed {args.seed}")
+        if args.max_agents != 1024:
+            settings.append(f"max-agents {args.max_agents}")
+    if args.sampler:
+        settings.append(f"sampler {args.sampler}")
+    if args.stochastic or args.deterministic:
+        settings.append("stochastic" if args.stochastic else "deterministic")
+    for name in MODEL_SETTINGS:
+        if getattr(args, name, None) is not None:
+            settings.append(f"{name.replace('_', '-')} {getattr(args, name):g}")
+    scorer = f"; ranked by {args.scorer}" if args.scorer else ""
+    return f"{where}\n{', '.join(settings)}{scorer}"
+
+
+def _print_scene_metrics(args, scene, pred: torch.Tensor, units: str, order=None,
+                         scores=None) -> None:  # fmt: skip
+    """The scene's minADE_K/minFDE_K over all K samples (as evaluate computes them), mean
+    and per agent; with a scorer, each agent's drawn samples' scores, best first."""
+    future = torch.as_tensor(scene.future, dtype=pred.dtype, device=pred.device)  # [P, T_f, 2]
+    ade, fde = (v.cpu().numpy() for v in min_ade_fde(pred, future))  # [P], [P]
+    k = pred.shape[0]
+    print(f"scene {args.scene} ({scene.scene_id}): minADE_{k} {ade.mean():.4f} {units}, "
+          f"minFDE_{k} {fde.mean():.4f} {units} (the mean of its {len(ade)} agents; "
+          f"every sample counts)")  # fmt: skip
+    for i in range(len(ade)):
+        line = f"  agent {i}: minADE {ade[i]:.4f}  minFDE {fde[i]:.4f}"
+        if scores is not None:
+            shown = ", ".join(f"{scores[j, i]:.3f}" for j in order[:, i])
+            line += f"  ATS of the drawn: {shown}"
+        print(line)
+
+
+def cmd_plot(args) -> int:
+    _check_model_args(args)
+    _check_plot_args(args)
     model, device = _predictor(args)
     ds = _load(args)
     _warn_if_trained_otherwise(args.model, ds)
+    if args.scorer and not (args.scorer == args.model or _same_path(args.scorer, args.model)):
+        _warn_if_trained_otherwise(args.scorer, ds)  # as survey build checks its scorer
     if not 0 <= args.scene < len(ds):
         raise TrajprefError(f"--scene {args.scene}: the split has scenes 0..{len(ds) - 1}")
     scene = ds[args.scene]
-    gen = torch.Generator()
-    gen.manual_seed(args.seed)
-    batch = collate([scene]).to(device)
-    pred = model.predict(batch, args.samples, gen)  # [K, P, T_f, 2]
-    title = (
-        f"{ds.info.name}/{ds.info.split} scene {args.scene} ({scene.scene_id}), "
-        f"{args.model}, K={args.samples}"
-    )
+    batch, pred, random = _plot_samples(model, ds, args, device)  # pred [K, P, T_f, 2]
+    title = _plot_title(args, ds, scene, random)
+    style = {"limits": args.limits, "width": args.width, "dpi": args.dpi}
+    samples = pred.cpu().numpy()  # [K, P, T_f, 2]
+    order = scores = None
     if args.scorer:
-        res = _scorer(args.scorer, device).score(batch, pred)
-        agent_ats = res.agent_ats.cpu().numpy()  # [K, P]
-        plot_scene_scored(scene.history, scene.future, pred.cpu().numpy(), agent_ats, args.out,
-                          ds.info.units, title)  # fmt: skip
+        scores = _scorer(args.scorer, device).score(batch, pred).agent_ats.cpu().numpy()  # [K, P]
+        top = min(args.draw_samples or 2, args.samples)
+        order = np.argsort(-scores, axis=0, kind="stable")[:top]  # [top, P] as drawn
+        plot_scene_scored(scene.history, scene.future, samples, scores, args.out,
+                          ds.info.units, title, top, agent_type=scene.agent_type,
+                          **style)  # fmt: skip
     else:
-        plot_scene(scene.history, scene.future, pred.cpu().numpy(), args.out, ds.info.units,
-                   title, scene.agent_type)  # fmt: skip
+        plot_scene(scene.history, scene.future, samples, args.out, ds.info.units, title,
+                   scene.agent_type, max_samples=args.draw_samples, **style)  # fmt: skip
     print(f"wrote {args.out}")
+    _print_scene_metrics(args, scene, pred, ds.info.units, order, scores)
     return 0
 
 
@@ -1289,10 +1443,40 @@ def _resume_hint(args, argv: list[str], before: tuple[int, int] | None) -> str:
         resume = args.resume  # no epoch ended in this run: the state it started from
     else:
         return "; no epoch ended, so there is nothing to resume (run the command again)"
-    # under torchrun, the same number of processes (another count changes the batches)
-    world = int(os.environ.get("WORLD_SIZE", "1") or 1)
-    command = cli_resume_command(argv, resume, world)
-    return f"; to continue from the last finished epoch:\n  {command}"
+    # under torchrun, the launcher's own options (the same processes repeat the run's draws)
+    info = env_info()
+    launcher = launcher_command()
+    if info.enabled:
+        command = cli_resume_command(argv, resume, info.world_size, None,
+                                     launcher or fallback_launcher(info))  # fmt: skip
+        note = launcher_note(info, launcher is not None)
+    else:
+        command, note = cli_resume_command(argv, resume), ""
+    return f"; to continue from the last finished epoch:\n  {command}{note}"
+
+
+TRAINING = ("train", "finetune")
+"""The commands that run under torchrun (each process a rank); the others run in one."""
+
+
+class Terminated(Exception):
+    """SIGTERM (a scheduler's cancel or preemption, forwarded by torchrun) during training."""
+
+
+def _raise_terminated(signum, frame) -> None:
+    raise Terminated
+
+
+def _refuse_under_torchrun(args) -> str | None:
+    """Why a command other than training does not run under torchrun (None when it may):
+    each process would run the whole command, printing and writing its output N times."""
+    if args.command in TRAINING or not env_info().enabled:
+        return None
+    return (
+        f"trajpref {args.command} runs in one process; under torchrun each of the "
+        f"{env_info().world_size} processes would run all of it and write its output: "
+        f"run it without torchrun (trajpref {args.command} ...)"
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -1307,25 +1491,54 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:  # --help, --version, or a usage error (already printed)
         return exc.code if isinstance(exc.code, int) else 2
     before = _resume_state(args)[1]
+    main_rank = _is_main_process()  # under torchrun, rank 0 alone prints what all ranks share
+    refused = _refuse_under_torchrun(args)
+    if refused is not None:
+        if main_rank:
+            print(f"trajpref: error: {refused}", file=sys.stderr)
+        return 2
+    training = args.command in TRAINING
+    # SIGTERM gets the advice Ctrl-C gets (the default would end silently); signal handlers
+    # can only be set from the main thread
+    on_term = training and threading.current_thread() is threading.main_thread()
+    if on_term:
+        previous = signal.signal(signal.SIGTERM, _raise_terminated)
     try:
         with warnings.catch_warnings():
             warnings.showwarning = _one_line_warning  # restored when the command ends
             return args.func(args)
-    except TrajprefError as exc:
-        print(f"trajpref: error: {exc}", file=sys.stderr)
+    except TrajprefError as exc:  # the same on every rank (input, config, data)
+        if main_rank:
+            print(f"trajpref: error: {exc}", file=sys.stderr)
         return 2
+    except Terminated:
+        if main_rank:
+            print(f"trajpref: terminated (SIGTERM){_resume_hint(args, argv, before)}",
+                  file=sys.stderr)  # fmt: skip
+        return 143
+    except RuntimeError:
+        # under torchrun, a rank that died (killed, out of memory) fails the others in their
+        # next collective: say how to continue, then torch's own traceback
+        if training and env_info().enabled and main_rank:
+            print(f"trajpref: a process of this run failed{_resume_hint(args, argv, before)}",
+                  file=sys.stderr)  # fmt: skip
+        raise
     except BrokenPipeError:  # stdout closed early (`| head`): not an error of the command
         with contextlib.suppress(OSError, ValueError):
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
     except OSError as exc:  # a file the command could not read or write
         where = f"{exc.filename}: " if exc.filename else ""
-        print(f"trajpref: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        rank = "" if main_rank else f"[rank {os.environ.get('RANK')}] "  # may be its own
+        print(f"trajpref: error: {rank}{where}{exc.strerror or exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        if _is_main_process():
+        if main_rank:
             print(f"trajpref: interrupted{_resume_hint(args, argv, before)}", file=sys.stderr)
         return 130
+    finally:
+        if on_term:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

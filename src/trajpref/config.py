@@ -61,7 +61,8 @@ class DataConfig:
     val_dataset: str | None = None
     """Dataset for validation when it differs (Robo: train on robo-sim, validate on robo)."""
     max_agents: int = 512
-    """Agents per training batch (whole scenes are packed up to this budget)."""
+    """Agents per training batch (whole scenes are packed up to this budget); with several
+    processes (torchrun) the batch over all of them, each rank taking a share."""
     rotate: bool = True
     """Randomly rotate each training scene."""
     flip: bool = False

@@ -434,3 +434,47 @@ def test_a_new_run_in_a_used_folder_moves_the_earlier_runs_record_aside(tiny_cfg
         "denoiser_run.replaced-3.json",
         "denoiser_metrics.replaced-3.jsonl",
     }
+
+
+def test_the_resume_advice_repeats_a_torchrun_launch_as_it_was_recorded(tmp_path):
+    """The run record keeps the launcher's own command line (--standalone, --nnodes, the
+    rendezvous): the advice repeats it, and for several machines says to run it on each."""
+    from trajpref.train.run import resume_command
+
+    out, last = tmp_path / "d", tmp_path / "d" / "denoiser_last.pt"
+    _record(out, "denoiser", "python /x/trajpref/cli.py train diffusion --out o", seed=0,
+            world_size=2, launcher=".venv/bin/torchrun --standalone --nproc_per_node 2 -m "
+            "trajpref.cli")  # fmt: skip
+    assert resume_command(out, "denoiser", last) == (
+        f".venv/bin/torchrun --standalone --nproc_per_node 2 -m trajpref.cli train diffusion "
+        f"--out o --seed 0 --resume {last}"
+    )
+    _record(out, "denoiser", "python /x/trajpref/cli.py train diffusion --out o", seed=0,
+            world_size=16, nodes=2, launcher="torchrun --nnodes 2 --node_rank 0 "
+            "--nproc_per_node 8 --master_addr h -m trajpref.cli")  # fmt: skip
+    assert resume_command(out, "denoiser", last) == (
+        "torchrun --nnodes 2 --node_rank 0 --nproc_per_node 8 --master_addr h -m trajpref.cli "
+        f"train diffusion --out o --seed 0 --resume {last} (on each of the 2 machines, with "
+        "the launcher options it was started with there)"
+    )
+
+
+def test_a_state_that_processes_wrote_under_the_old_batching_is_refused(tiny_cfg, tmp_path):
+    """Before the processes shared each batch, N processes took 1/N of the steps: such a
+    state (no world_size in it; its run record says how many wrote it) cannot continue under
+    the current rule, and a resume says so instead of mixing the two."""
+    out = tmp_path / "old"
+    train_stage("diffusion", tiny_cfg, out, device="cpu", progress=False, max_steps=1)
+    last = out / "denoiser_last.pt"
+    state = torch.load(last, weights_only=True)
+    state.pop("world_size", None), state.pop("rank_generators", None)
+    torch.save(state, last)
+    record = json.loads(run_record_path(out, "denoiser").read_text())
+    record[-1]["world_size"] = 2
+    run_record_path(out, "denoiser").write_text(json.dumps(record))
+    with pytest.raises(ConfigError, match="written on 2 processes by an earlier trajpref"):
+        train_stage("diffusion", tiny_cfg, out, device="cpu", progress=False, resume=str(last))
+    record[-1]["world_size"] = 1  # one process's older state resumes as before
+    run_record_path(out, "denoiser").write_text(json.dumps(record))
+    train_stage("diffusion", tiny_cfg, out, device="cpu", progress=False, resume=str(last))
+    assert torch.load(last, weights_only=True)["world_size"] == 1

@@ -4,6 +4,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from PIL import Image
 
+from trajpref.errors import ConfigError
 from trajpref.viz import (
     plot_curves,
     plot_panel,
@@ -95,9 +96,9 @@ def test_a_tall_or_flat_scene_is_shown_in_a_readable_box(tmp_path, monkeypatch):
     seen = {}
     original = plot._save
 
-    def keep(fig, out):
+    def keep(fig, out, *args):
         seen["axes"] = [(ax.get_xlim(), ax.get_ylim()) for ax in fig.axes]
-        return original(fig, out)
+        return original(fig, out, *args)
 
     monkeypatch.setattr(plot, "_save", keep)
     t = np.arange(20, dtype=float)
@@ -110,3 +111,170 @@ def test_a_tall_or_flat_scene_is_shown_in_a_readable_box(tmp_path, monkeypatch):
         assert 0.35 - 1e-6 <= (y1 - y0) / (x1 - x0) <= 1.3 + 1e-6
         assert x0 <= walk[:, 0].min() and walk[:, 0].max() <= x1
         assert y0 <= walk[:, 1].min() and walk[:, 1].max() <= y1
+
+
+# --- a paper author's figures (review of 2026-12: formats, limits, ranks, colours) ---
+
+
+@pytest.fixture
+def drawn(monkeypatch):
+    """The figures the plot functions make, kept when they are saved."""
+    import trajpref.viz.plot as plot
+
+    figs = []
+    original = plot._save
+
+    def keep(fig, out, *args, **kwargs):
+        figs.append(fig)
+        return original(fig, out, *args, **kwargs)
+
+    monkeypatch.setattr(plot, "_save", keep)
+    return figs
+
+
+def _lines(fig, prefix):
+    return {line.get_gid(): line for ax in fig.axes for line in ax.get_lines()
+            if (line.get_gid() or "").startswith(prefix)}  # fmt: skip
+
+
+def _all_figures(hist, fut, pred, out):
+    def name(what):
+        return out.with_name(what + out.suffix)
+
+    x, box = np.arange(3.0), (-10.0, 10.0, -5.0, 5.0)
+    bars = {"h": (np.ones(1), np.ones(1))}
+    return [
+        plot_scene(hist, fut, pred, name("scene")),
+        plot_scene_scored(hist, fut, pred, np.zeros(pred.shape[:2]), name("scored")),
+        plot_panel(hist, pred[:2], np.ones((2, 3)), name("panel"), box),
+        plot_survey_summary(["a"], bars, {}, name("summary")),
+        plot_curves({"a": [(x, x, {"label": "a"})]}, name("curves"), "x", "y"),
+    ]
+
+
+def test_every_figure_is_written_in_the_format_its_suffix_names(tmp_path):
+    """A PNG was written into a .pdf or .svg name (LaTeX then failed on it)."""
+    hist, fut, pred = _scene()
+    for suffix, magic in ((".pdf", b"%PDF"), (".svg", b"<svg"), (".PNG", PNG)):
+        for out in _all_figures(hist, fut, pred, tmp_path / f"f{suffix}"):
+            head = out.read_bytes()[:400]
+            assert magic in head, (out, head[:20])
+    # a suffix that names no format it writes: refused before anything is written
+    for name in ("f.jpg", "f.eps", "f"):
+        with pytest.raises(ConfigError, match=r"format its suffix names \(\.png, \.pdf, \.svg\)"):
+            plot_scene(hist, fut, pred, tmp_path / name)
+        assert not (tmp_path / name).exists()
+
+
+def test_dpi_sets_a_pngs_pixels_and_width_its_printed_size(tmp_path):
+    hist, fut, pred = _scene()
+    w1 = Image.open(plot_scene(hist, fut, pred, tmp_path / "a.png", dpi=100)).size[0]
+    w2 = Image.open(plot_scene(hist, fut, pred, tmp_path / "b.png", dpi=200)).size[0]
+    assert 1.9 < w2 / w1 < 2.1
+    # a paper's column: 3.3 inches at 100 dpi, legend and labels included (the scored figure
+    # stacks its panels; it was 11 inches wide, its text then 2.7 pt in print)
+    for out in (plot_scene(hist, fut, pred, tmp_path / "c.png", width=3.3, dpi=100),
+                plot_scene_scored(hist, fut, pred, np.zeros((5, 3)), tmp_path / "d.png",
+                                  width=3.3, dpi=100)):  # fmt: skip
+        assert 300 <= Image.open(out).size[0] <= 350
+    with pytest.raises(ConfigError, match="width"):
+        plot_scene(hist, fut, pred, tmp_path / "e.png", width=0)
+
+
+def test_a_far_out_sample_does_not_set_the_axes(tmp_path, drawn):
+    """One sample 100 m out made the scene a small blob in the middle of the axes."""
+    hist, fut, pred = _scene(p=3, k=20)
+    pred[4, 1] += np.linspace(0, 100, 12)[:, None]  # [T_f, 2] one sample runs away
+    plot_scene(hist, fut, pred, tmp_path / "a.png")
+    plot_scene_scored(hist, fut, pred, np.eye(20, 3)[::-1] + (np.arange(20) == 4)[:, None],
+                      tmp_path / "b.png")  # fmt: skip  # the far-out sample ranked best
+    truth_max = max(hist[..., 0].max(), fut[..., 0].max())
+    scene_max = max(truth_max, np.delete(pred, 4, 0)[..., 0].max())  # the other samples
+    for fig, shown_max in zip(drawn, (scene_max, truth_max), strict=True):
+        x1 = fig.axes[0].get_xlim()[1]
+        assert shown_max <= x1 < 30, x1  # the rest of the scene fills the axes
+    drawn.clear()
+    plot_scene(hist, fut, pred, tmp_path / "c.png", limits="all")
+    assert drawn[0].axes[0].get_xlim()[1] >= pred[..., 0].max()
+    plot_scene(hist, fut, pred, tmp_path / "d.png", limits=(-1, 2, -3, 4))
+    assert drawn[1].axes[0].get_xlim() == (-1, 2) and drawn[1].axes[0].get_ylim() == (-3, 4)
+    with pytest.raises(ConfigError, match="x0 < x1"):
+        plot_scene(hist, fut, pred, tmp_path / "e.png", limits=(2, 1, 0, 1))
+
+
+def test_max_samples_caps_the_samples_drawn_per_agent(tmp_path, drawn):
+    hist, fut, pred = _scene(p=3, k=20)
+    plot_scene(hist, fut, pred, tmp_path / "a.png", max_samples=4)
+    for line in _lines(drawn[0], "samples-").values():
+        xy = line.get_xydata()
+        starts = np.isfinite(xy[:, 0]) & ~np.isfinite(np.r_[np.nan, xy[:-1, 0]])
+        assert starts.sum() == 4
+    assert len(_lines(drawn[0], "samples-")) == 3
+
+
+def test_the_ground_truth_is_drawn_over_the_samples_and_the_position_marker(tmp_path, drawn):
+    """Twenty samples buried the dashed ground truth, and a walker standing still hid its
+    ground truth under its position marker; its end is marked on top now."""
+    hist, fut, pred = _scene()
+    hist[0], fut[0] = hist[0, -1], hist[0, -1]  # standing still
+    plot_scene(hist, fut, pred, tmp_path / "a.png")
+    truth, ends = _lines(drawn[0], "truth-"), _lines(drawn[0], "truth-end-")
+    samples, marks = _lines(drawn[0], "samples-"), _lines(drawn[0], "position-")
+    for i in range(3):
+        assert truth[f"truth-{i}"].get_zorder() > samples[f"samples-{i}"].get_zorder()
+        assert ends[f"truth-end-{i}"].get_zorder() > marks[f"position-{i}"].get_zorder()
+    np.testing.assert_allclose(ends["truth-end-0"].get_xydata()[0], hist[0, -1])
+
+
+def test_agents_get_colour_blind_safe_colours_and_markers_beyond_the_palette(tmp_path, drawn):
+    from matplotlib.colors import to_hex
+
+    from trajpref.viz.plot import PALETTE
+
+    hist, fut, pred = _scene(p=14, k=2)
+    plot_scene(hist, fut, pred, tmp_path / "a.png")
+    marks = _lines(drawn[0], "position-")
+    styles = {(to_hex(m.get_color()), m.get_marker()) for m in marks.values()}
+    assert len(styles) == 14  # no two agents alike
+    assert {c for c, _ in styles} <= {c.lower() for c in PALETTE}
+
+
+def test_the_legend_is_neutral_and_explains_every_marker(tmp_path, drawn):
+    """The legend's lines were agent 0's colour, and the ball's star had no entry."""
+    from matplotlib.colors import to_hex
+
+    hist, fut, pred = _scene()
+    ball = np.array([0, 0, 1])
+    plot_scene(hist, fut, pred, tmp_path / "a.png", agent_type=ball)
+    plot_scene_scored(hist, fut, pred, np.zeros((5, 3)), tmp_path / "b.png", agent_type=ball)
+    for fig in drawn:
+        legend = fig.legends[0]
+        texts = [t.get_text() for t in legend.get_texts()]
+        assert "the ball" in texts and "last observed position" in texts
+        assert any(t.startswith("ground truth") for t in texts)
+        colours = {to_hex(h.get_color()) for h in legend.legend_handles}
+        assert colours == {to_hex("0.15")}
+    star = _lines(drawn[1], "position-2")
+    assert {m.get_marker() for m in star.values()} == {"*"}  # in both panels of Fig. 2
+
+
+def test_the_ranked_panel_shades_by_rank_and_says_what_it_shows(tmp_path, drawn):
+    """The second-ranked sample was 0.97-1.0 opaque (shaded min-max over all K) and the
+    title said top-2 whatever K was."""
+    hist, fut, pred = _scene(k=5)
+    scores = np.array([1.0, 0.99, -5, -6, -7])[:, None].repeat(3, 1)  # [K, P] two close
+    plot_scene_scored(hist, fut, pred, scores, tmp_path / "a.png", score_name="S's ATS")
+    ranked = drawn[0].axes[1]
+    assert ranked.get_title() == "each agent's 2 best of K = 5 samples\nby S's ATS"
+    lines = _lines(drawn[0], "rank")
+    for i in range(3):
+        best, second = lines[f"rank0-{i}"], lines[f"rank1-{i}"]
+        assert best.get_alpha() == 1.0 and second.get_alpha() <= 0.5
+        assert best.get_linewidth() > second.get_linewidth()
+    texts = [t.get_text() for t in drawn[0].legends[0].get_texts()]
+    assert "best by score" in texts and "2nd by score" in texts
+    # K = 1: nothing is ranked, and the title does not say top-2
+    plot_scene_scored(hist, fut, pred[:1], scores[:1], tmp_path / "b.png")
+    title = drawn[1].axes[1].get_title()
+    assert "K = 1" in title and "2" not in title
+    assert len(_lines(drawn[1], "rank")) == 3

@@ -26,13 +26,12 @@ from torch.nn.parallel import DistributedDataParallel
 from tqdm.auto import tqdm
 
 from trajpref.config import DataConfig, OptimConfig
-from trajpref.data.loader import SceneLoader
 from trajpref.data.transforms import augment
 from trajpref.errors import ConfigError, TrajprefError
 from trajpref.io import atomic_path, dumps_json, load_tensors
 from trajpref.models import checkpoint as ckpt
 from trajpref.results import machine
-from trajpref.train.distributed import DistInfo
+from trajpref.train.distributed import DistInfo, RankBatches, gather_generators
 from trajpref.train.ema import WeightAverage, ema_decay
 from trajpref.train.stages import Stage
 from trajpref.types import TrajectoryDataset
@@ -98,7 +97,7 @@ class MetricLog:
         if self.tb is not None:
             for key, value in record.items():
                 number = isinstance(value, (int, float)) and not isinstance(value, bool)
-                if number and key != "epoch":  # the start row's ``start: true`` is no number
+                if number and key not in ("epoch", "processes"):  # ``start: true``: no number
                     self.tb.add_scalar(f"{self.stage}/{key}", value, record["epoch"])
             self.tb.flush()
 
@@ -175,7 +174,8 @@ def save_resume_state(path: Path, state: dict[str, Any]) -> None:
 
 RESUME_KEYS = ("stage", "trainable", "optimizer", "scheduler", "noise_gen", "aug_gen", "epoch",
                "step", "best", "elapsed")  # fmt: skip
-"""What every resume state holds (``spent`` was added later and may be missing)."""
+"""What every resume state holds (``spent``, and each rank's random generators with the
+process count, ``rank_generators`` and ``world_size``, were added later and may be missing)."""
 
 
 def load_resume_state(path: str | Path, stage: str | None = None) -> dict[str, Any]:
@@ -231,6 +231,28 @@ def check_resume_matches(state: dict[str, Any], module: nn.Module, path: str | P
                 f"--resume {path}: its weights do not fit this run's model ({key}: {got} in the "
                 f"file, {want} here); resume with the run's own config.yaml"
             )
+
+
+def _rank_generators(state: dict[str, Any], rank: int) -> dict[str, torch.Tensor] | None:
+    """The states of rank ``rank``'s random generators (``noise_gen``, ``aug_gen``) in a
+    resume state: its own (``rank_generators``, one entry per rank of the run that wrote it),
+    or None for a rank that run did not have. A state written before each rank's were kept
+    holds rank 0's alone."""
+    per_rank = state.get("rank_generators")
+    if per_rank is None:
+        per_rank = [{"noise_gen": state["noise_gen"], "aug_gen": state["aug_gen"]}]
+    return per_rank[rank] if rank < len(per_rank) else None
+
+
+def _summed(agents: int, sums: dict[str, float],
+            device: torch.device) -> tuple[int, dict[str, float]]:  # fmt: skip
+    """An epoch's agents and agent-weighted logs summed over the ranks (a collective; every
+    rank logs the same keys, in the same order)."""
+    keys = list(sums)
+    t = torch.tensor([agents, *(sums[k] for k in keys)], dtype=torch.float64, device=device)
+    torch.distributed.all_reduce(t)
+    values = t.tolist()
+    return int(values[0]), dict(zip(keys, values[1:], strict=True))
 
 
 def _should_stop(step: int, max_steps: int | None, seconds: float, max_minutes: float | None,
@@ -311,14 +333,20 @@ def fit(
     With ``progress``, validation shows its own bar, and a stage with ``max_minutes`` shows
     the share of its budget spent. Returns a summary with the best validation metrics (and
     the start's, ``start``) and the wall time.
+
+    Under DDP (``dist_info``) the ranks share each of the one-process run's batches
+    (``train.distributed.RankBatches``): the same steps, learning rates and batches as on one
+    process, other random draws. The log's ``train_*`` values and ``samples_per_second`` are
+    the whole batches', summed over the ranks; each rank's random generators are saved, and a
+    resume restores each rank's own.
     """
     dist_info = dist_info or DistInfo()
     out_dir = Path(out_dir)
     main = dist_info.is_main
     if main:
         out_dir.mkdir(parents=True, exist_ok=True)
-    loader = SceneLoader(train, max_agents=data_cfg.max_agents, shuffle=True, seed=seed,
-                         rank=dist_info.rank, world_size=dist_info.world_size)  # fmt: skip
+    # the one-process run's batches, each split among the ranks (train.distributed)
+    loader = RankBatches(train, data_cfg.max_agents, seed, dist_info)
     steps_per_epoch = len(loader)
     if optim_cfg.steps_per_epoch is not None:
         steps_per_epoch = min(steps_per_epoch, optim_cfg.steps_per_epoch)
@@ -353,8 +381,10 @@ def fit(
         for group in optimizer.param_groups:  # the state brings its own; the config decides
             group["fused"] = fused_flag(optim_cfg)
         sched.load_state_dict(state["scheduler"])
-        noise_gen.set_state(state["noise_gen"])
-        aug_gen.set_state(state["aug_gen"])
+        own = _rank_generators(state, dist_info.rank)
+        if own is not None:  # a rank the state's run did not have keeps its seeded start
+            noise_gen.set_state(own["noise_gen"])
+            aug_gen.set_state(own["aug_gen"])
         start_epoch, step, best = state["epoch"] + 1, state["step"], state["best"]
         best_raw = state.get("best_raw", best_raw)
         elapsed = state["elapsed"]
@@ -378,7 +408,17 @@ def fit(
     objective: nn.Module = stage.objective
     if dist_info.enabled:
         device_ids = [device] if device.type == "cuda" else None
-        objective = DistributedDataParallel(objective, device_ids=device_ids)
+        # a stage whose steps leave trainable parameters without gradients (the control's
+        # critic) has DDP look for them each step; they keep no gradient, as on one process
+        unused = stage.unused_parameters
+        objective = DistributedDataParallel(objective, device_ids=device_ids,
+                                            find_unused_parameters=unused)  # fmt: skip
+        idle = loader.idle_batches()
+        if idle and main:
+            tqdm.write(f"[{stage.name}] {idle} of the {len(loader)} batches of an epoch hold "
+                       f"fewer scenes than the {dist_info.world_size} processes: in each, a "
+                       "process without a scene repeats one at zero weight (the training is "
+                       "the same, that process's time is lost)")  # fmt: skip
 
     log = MetricLog(out_dir, stage.name, main, fresh=resume is None)
     show = progress and main  # bars: the epoch's steps, each validation pass
@@ -407,7 +447,7 @@ def fit(
             desc = f"{stage.name} epoch {epoch + 1}/{optim_cfg.epochs}"
         bar = tqdm(itertools.islice(loader, steps_per_epoch), total=steps_per_epoch,
                    desc=desc, unit="batch", disable=not show, leave=False)  # fmt: skip
-        for batch in bar:
+        for batch, mine, whole in bar:
             if not stage.context:
                 batch = batch.without_context()
             batch = augment(batch, aug_gen, rotate=data_cfg.rotate, flip=data_cfg.flip,
@@ -423,6 +463,11 @@ def fit(
                 with precision_autocast(device, optim_cfg.precision):  # validation stays fp32
                     loss, logs = objective(batch, noise_gen, *collected)
                 loss = loss.float()  # autocast may hand back a bfloat16 scalar
+                # DDP averages the ranks' gradients: weighted by their shares of the batch's
+                # agents, the average is the gradient of the whole batch's (per-agent) loss
+                weighted = loss
+                if dist_info.enabled:
+                    weighted = loss * (dist_info.world_size * mine / whole)
                 finite = torch.isfinite(loss.detach()).to(torch.int32)
                 if dist_info.enabled:  # every rank skips together, or DDP's all-reduce would hang
                     torch.distributed.all_reduce(finite, op=torch.distributed.ReduceOp.MIN)
@@ -436,7 +481,7 @@ def fit(
                         )
                     continue
                 optimizer.zero_grad(set_to_none=True)
-                loss.backward()
+                weighted.backward()
                 grad_norm = torch.nn.utils.clip_grad_norm_(params, optim_cfg.grad_clip)
                 optimizer.step()
                 budget["share"] = _budget_share(spent + clock() - c0, optim_cfg, dist_info,
@@ -447,8 +492,8 @@ def fit(
                 step += 1
                 logs = {"loss": float(loss.detach()), "grad_norm": float(grad_norm), **logs}
                 for key, value in logs.items():
-                    sums[key] = sums.get(key, 0.0) + value * batch.num_agents
-                agents += batch.num_agents
+                    sums[key] = sums.get(key, 0.0) + value * mine
+                agents += mine
                 post = {"loss": f"{logs['loss']:.4f}"}
                 if optim_cfg.max_minutes is not None:  # the share of the budget spent
                     used = (spent + clock() - c0) / (60 * optim_cfg.max_minutes)
@@ -463,12 +508,14 @@ def fit(
         elapsed += time.perf_counter() - t0
         spent += clock() - c0
         epoch_seconds = time.perf_counter() - t0
+        if dist_info.enabled:  # the whole batches': every rank's agents and losses
+            agents, sums = _summed(agents, sums, device)
         rate = agents / max(1e-9, epoch_seconds)
         record: dict[str, Any] = {
             "epoch": epoch + 1, "step": step, "lr": sched.get_last_lr()[0],
             "train_seconds": round(elapsed, 2),
             f"budget_{optim_cfg.budget_clock}_seconds": round(spent, 4),
-            "samples_per_second": round(rate, 1),
+            "samples_per_second": round(rate, 1), "processes": dist_info.world_size,
         }  # fmt: skip
         if optim_cfg.budget_schedule:  # how much of the time budget the schedule has used
             record["budget_share"] = round(budget["share"], 6)
@@ -484,7 +531,7 @@ def fit(
             # what each checkpoint written at this evaluation records beside its validation
             at = {"epoch": epoch + 1, "step": step, "train_seconds": round(elapsed, 2),
                   "dataset": train.info.name, "machine": trained_on,
-                  **(run_meta or {})}  # fmt: skip
+                  "processes": dist_info.world_size, **(run_meta or {})}  # fmt: skip
             stage.objective.eval()
             if average is not None:  # the raw weights too, for the comparison
                 raw = stage.validate(progress=show)
@@ -510,12 +557,15 @@ def fit(
             stage.objective.train()
             # 4 decimals: at 0.01 s a small validation pass on a fast host was logged as 0
             record["val_seconds"] = round(time.perf_counter() - v0, 4)
+        # every rank's random generators (a collective): each resumes its own draws
+        generators = gather_generators({"noise_gen": noise_gen, "aug_gen": aug_gen}, dist_info)
         if main:
             log.write(record)
             save_resume_state(out_dir / f"{stage.name}_last.pt", {
                 "stage": stage.name, "trainable": stage.trainable.state_dict(),
                 "optimizer": optimizer.state_dict(), "scheduler": sched.state_dict(),
                 "noise_gen": noise_gen.get_state(), "aug_gen": aug_gen.get_state(),
+                "rank_generators": generators, "world_size": dist_info.world_size,
                 "epoch": epoch, "step": step, "best": best, "elapsed": elapsed, "spent": spent,
                 "validated_at": validated_at,
                 **({"identity": identity} if identity is not None else {}),

@@ -6,7 +6,9 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import os
 import shlex
+import sys
 import time
 import typing
 import warnings
@@ -22,10 +24,16 @@ from trajpref.data import run_splits, text
 from trajpref.data.registry import NAMES
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError
-from trajpref.io import check_output_dir, write_json
+from trajpref.io import atomic_path, check_output_dir, write_json
 from trajpref.models import checkpoint as ckpt
 from trajpref.results import command_line, machine
-from trajpref.train.distributed import barrier, cleanup, init_from_env
+from trajpref.train.distributed import (
+    DistInfo,
+    barrier,
+    cleanup,
+    init_from_env,
+    launcher_command,
+)
 from trajpref.train.loop import check_resume_matches, fit, load_resume_state, set_aside
 from trajpref.train.stages import (
     build_denoiser_stage,
@@ -135,12 +143,16 @@ def _shown(changes: list[str]) -> str:
 
 
 def cli_resume_command(argv: list[str], resume: str | Path, world_size: int = 1,
-                       seed: int | None = None) -> str:  # fmt: skip
+                       seed: int | None = None,
+                       launcher: list[str] | None = None) -> str:  # fmt: skip
     """The ``trajpref`` command ``argv`` (its arguments after the program name) made to resume
-    from ``resume``: its ``--resume`` replaced, launched by ``torchrun`` with the same number
-    of processes when ``world_size`` > 1 (another count changes the batches), and with
-    ``--seed seed`` added when ``argv`` gives none (a run without ``--seed`` records the seed
-    it ran with, which another default would not restore)."""
+    from ``resume``: its ``--resume`` replaced, started by ``launcher`` when given (the
+    torchrun command line before ``argv``, as the run was launched:
+    ``train.distributed.launcher_command``), else by ``torchrun`` with ``world_size``
+    processes when ``world_size`` > 1, and with ``--seed seed`` added when ``argv`` gives none
+    (a run without ``--seed`` records the seed it ran with, which another default would not
+    restore). The same process count repeats the run's random draws; another continues the
+    same schedule with other draws (``train.loop.fit``)."""
     rest, skip = [], False
     for arg in argv:  # the same options, --resume replaced
         if skip:
@@ -151,17 +163,19 @@ def cli_resume_command(argv: list[str], resume: str | Path, world_size: int = 1,
             rest.append(arg)
     if seed is not None and not any(a == "--seed" or a.startswith("--seed=") for a in rest):
         rest += ["--seed", str(seed)]
-    launcher = (["torchrun", f"--nproc_per_node={world_size}", "-m", "trajpref.cli"]
-                if world_size > 1 else ["trajpref"])  # fmt: skip
+    if launcher is None:
+        launcher = (["torchrun", f"--nproc_per_node={world_size}", "-m", "trajpref.cli"]
+                    if world_size > 1 else ["trajpref"])  # fmt: skip
     return shlex.join([*launcher, *rest, "--resume", str(resume)])
 
 
 def resume_command(out_dir: str | Path, name: str, resume: str | Path) -> str | None:
     """The command that started the run's last session, as ``<name>_run.json`` records it,
-    made to resume from ``resume`` (``cli_resume_command``, with the session's process count
-    and seed) when it ran the ``trajpref`` command (``python .../bin/trajpref``, or
-    ``.../trajpref/cli.py`` under ``torchrun`` or ``python -m trajpref.cli``); another command
-    (a script that resumes by itself) is given as it was. None without a record."""
+    made to resume from ``resume`` (``cli_resume_command``, with the session's launcher, or
+    its process count, and seed) when it ran the ``trajpref`` command (``python
+    .../bin/trajpref``, or ``.../trajpref/cli.py`` under ``torchrun`` or ``python -m
+    trajpref.cli``); another command (a script that resumes by itself) is given as it was.
+    None without a record."""
     try:
         session = json.loads(run_record_path(out_dir, name).read_text())[-1]
         command = session["command"]
@@ -174,8 +188,19 @@ def resume_command(out_dir: str | Path, name: str, resume: str | Path) -> str | 
         return command
     world = session.get("world_size", 1)
     seed = session.get("seed")
-    return cli_resume_command(args[2:], resume, world if isinstance(world, int) else 1,
-                              seed if isinstance(seed, int) else None)  # fmt: skip
+    launcher = session.get("launcher")
+    command = cli_resume_command(
+        args[2:],
+        resume,
+        world if isinstance(world, int) else 1,
+        seed if isinstance(seed, int) else None,
+        shlex.split(launcher) if isinstance(launcher, str) else None,
+    )
+    nodes = session.get("nodes", 1)
+    if isinstance(nodes, int) and nodes > 1:
+        command += (f" (on each of the {nodes} machines, with the launcher options it was "
+                    "started with there)")  # fmt: skip
+    return command
 
 
 def check_resume(state: dict[str, Any], identity: str, epochs: int, out_dir: Path,
@@ -302,7 +327,8 @@ def run_record_path(out_dir: str | Path, name: str) -> Path:
 
 
 def record_session(out_dir: str | Path, name: str, seed: int, device: torch.device,
-                   world_size: int, resumed: bool) -> dict[str, Any]:  # fmt: skip
+                   world_size: int, resumed: bool,
+                   info: DistInfo | None = None) -> dict[str, Any]:  # fmt: skip
     """Append this session's conditions to ``<name>_run.json`` (a JSON list, one entry per
     start or resume) and return the entry.
 
@@ -310,8 +336,10 @@ def record_session(out_dir: str | Path, name: str, seed: int, device: torch.devi
     count changes the order of floating-point reductions, and a Robo generator trained with
     seed 1 kept validation minFDE20 0.2958 on one thread (twice, to the fourth digit) but
     0.3083 on two (docs/pretraining.md, "Robo with roles and dropout 0.2 published"). So each
-    session writes the threads, the device, the number of processes, the machine, torch's
-    version and the command beside the config."""
+    session writes the threads (each process's), the device, the number of processes, the
+    machine, torch's version and the command beside the config; under torchrun (``info``)
+    also the machines and the launcher's command line, when it can be read
+    (``distributed.launcher_command``), which the resume advice repeats."""
     path = run_record_path(out_dir, name)
     sessions: list[dict[str, Any]] = []
     if path.is_file():
@@ -334,8 +362,66 @@ def record_session(out_dir: str | Path, name: str, seed: int, device: torch.devi
         "machine": machine(),
         "command": command_line(),
     }
+    if info is not None and info.enabled:
+        entry["nodes"] = info.nodes
+        launcher = launcher_command()
+        if launcher is not None:
+            entry["launcher"] = shlex.join(launcher)
     write_json(path, [*sessions, entry])
     return entry
+
+
+def set_threads(info: DistInfo) -> None:
+    """Each process's threads under torchrun. An ``OMP_NUM_THREADS`` in the environment is a
+    per-process count (torchrun sets 1 where it is unset, and says so) and is kept; without
+    one (another launcher), the threads torch would take are shared among the machine's
+    processes. Warns (once per machine) when the processes' threads exceed its cores."""
+    if not info.enabled:
+        return
+    if not os.environ.get("OMP_NUM_THREADS"):
+        torch.set_num_threads(max(1, torch.get_num_threads() // info.local_world_size))
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    threads = torch.get_num_threads()
+    if info.local_rank == 0 and info.local_world_size * threads > cores:
+        warnings.warn(f"{info.local_world_size} processes of {threads} thread(s) each on this "
+                      f"machine's {cores} cores: they wait on each other (start fewer, or set "
+                      "OMP_NUM_THREADS lower)", stacklevel=2)  # fmt: skip
+
+
+def _note_processes(path: Path, info: DistInfo) -> None:
+    """Say at the head of a run's config file that the run trained on several processes."""
+    text = path.read_text()
+    with atomic_path(path) as tmp:
+        tmp.write_text(f"# trained on {info.world_size} processes ({info.nodes} machine(s)) "
+                       "under torchrun; data.max_agents is each step's batch over all of them, "
+                       "as on one process\n" + text)  # fmt: skip
+
+
+def check_resume_processes(state: dict[str, Any], out_dir: Path, name: str,
+                           resume: str | Path) -> None:  # fmt: skip
+    """A resume state written on several processes before the processes shared each batch
+    (each took whole batches: 1/N of one process's steps at N times its batch, under the
+    same step-counted schedule) cannot continue under the current rule: a one-line
+    ``ConfigError``. Such a state records no ``world_size``; its run record says how many
+    processes wrote it. A state that records its count may resume on another (a note is
+    printed: same schedule, other random draws)."""
+    if "world_size" in state:
+        return
+    try:
+        sessions = json.loads(run_record_path(out_dir, name).read_text())
+        worlds = [int(s.get("world_size", 1)) for s in sessions]
+    except (OSError, ValueError, TypeError, AttributeError):
+        worlds = []
+    if any(w > 1 for w in worlds):
+        raise ConfigError(
+            f"--resume {resume}: the state was written on {max(worlds)} processes by an "
+            "earlier trajpref, under which each process took whole batches (1/N of one "
+            "process's steps); the processes now share each batch, so it cannot continue: "
+            "start the run again without --resume"
+        )
 
 
 def _run(
@@ -367,9 +453,10 @@ def _run(
         state = load_resume_state(resume, name)
         check_resume(state, run_identity(cfg, name, start), section.epochs, out_dir, resume,
                      name, section.max_minutes)  # fmt: skip
+        check_resume_processes(state, out_dir, name, resume)
     dev = resolve_device(device)
     info, dev = init_from_env(dev)
-    torch.set_num_threads(max(1, torch.get_num_threads() // max(1, info.world_size)))
+    set_threads(info)
     try:
         train, val = run_splits(cfg.data, data_root)
         data = data_fingerprint(train, val)
@@ -386,9 +473,18 @@ def _run(
             out_dir.mkdir(parents=True, exist_ok=True)
             if state is None:  # another run's log and record are not this run's
                 set_aside(out_dir, name)
-            save_config(cfg, out_dir / "config.yaml")  # the run's last stage
-            save_config(cfg, out_dir / f"{name}_config.yaml")  # this stage's, kept
-            record_session(out_dir, name, cfg.seed, dev, info.world_size, state is not None)
+            for path in (out_dir / "config.yaml", out_dir / f"{name}_config.yaml"):
+                save_config(cfg, path)  # the run's last stage's; this stage's, kept
+                if info.enabled:
+                    _note_processes(path, info)
+            record_session(out_dir, name, cfg.seed, dev, info.world_size, state is not None,
+                           info)  # fmt: skip
+            if state is not None and state.get("world_size", 1) != info.world_size:
+                print(f"[{name}] resumed on {info.world_size} process(es) from a state "
+                      f"written on {state.get('world_size', 1)}: the batches, steps and "
+                      "learning rates continue as they were; the random draws (noise, "
+                      "augmentation) are not those an uninterrupted run would take",
+                      file=sys.stderr)  # fmt: skip
         barrier(info)
         start_time = time.perf_counter()
         summary = fit(built, train, cfg.data, optim, out_dir, dev, cfg.seed, state, info,

@@ -67,6 +67,10 @@ class Stage:
     validate_start: bool = False
     """Whether the loop validates the start once before training (fine-tuning: its start is
     a trained generator, whose validation is what the run must beat); logged as epoch 0."""
+    unused_parameters: bool = False
+    """Whether a step leaves some of ``trainable``'s parameters without a gradient (the
+    fine-tuning control never calls its critic): DDP then finds them each step
+    (``find_unused_parameters``), where it would otherwise stop the run."""
 
 
 def data_scale(dataset: TrajectoryDataset) -> float:
@@ -300,4 +304,5 @@ def build_finetune_stage(
                  payload, objective.collect_frozen if epochs > 1 else None, epochs,
                  networks=(sampler.generator, sampler.denoiser),
                  nonfinite_hint="lower the learning rate or clip the reward",
-                 context=sampler.generator.cfg.context_agents, validate_start=True)  # fmt: skip
+                 context=sampler.generator.cfg.context_agents, validate_start=True,
+                 unused_parameters=cfg.finetune.method == "control")  # fmt: skip

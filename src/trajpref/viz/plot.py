@@ -1,7 +1,19 @@
-"""Scene figures: histories, ground truth and sampled futures, in the dataset's units."""
+"""Scene figures: histories, ground truth and sampled futures, in the dataset's units.
+
+Every ``plot_*`` function writes the format that its file name's suffix names (``FORMATS``:
+PNG, PDF or SVG); any other suffix is a ``ConfigError`` before anything is drawn (a PNG
+written under a ``.pdf`` name broke LaTeX). ``dpi`` sets a PNG's pixels per inch.
+
+The scene figures (``plot_scene``, ``plot_scene_scored``) give each agent a colour of a
+colour-blind-safe palette (``PALETTE``) and, beyond its length, another marker (``MARKERS``);
+their legend, in a neutral colour, explains the line styles and markers. By default their
+axes hold every history and ground truth and the bulk of the samples, not a sample that runs
+far out (``scene_limits``)."""
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from pathlib import Path
 
 import matplotlib
@@ -9,8 +21,220 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib import patheffects  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
 
+from trajpref.errors import ConfigError  # noqa: E402
 from trajpref.io import atomic_path  # noqa: E402
+
+FORMATS = {".png": "png", ".pdf": "pdf", ".svg": "svg"}
+"""The file suffixes a figure may have, and the format each writes (not EPS: PostScript has
+no transparency, and the samples' would be lost)."""
+DPI = 120
+"""A PNG's pixels per inch unless ``dpi`` says otherwise."""
+PALETTE = ("#0072B2", "#E69F00", "#009E73", "#D55E00", "#CC79A7", "#56B4E9")
+"""The agents' colours: Okabe and Ito's colour-blind-safe set (their black is the legend's
+neutral colour, their pale yellow does not show as a thin line on white)."""
+MARKERS = ("o", "s", "^", "D", "v", "P")
+"""The agents' position markers: agent ``i`` has ``MARKERS[i // len(PALETTE)]``, so agents
+that share a colour differ in marker."""
+BALL = 1
+"""``agent_type`` of the ball (``trajpref.types.AGENT_BALL``): drawn with a star."""
+NEUTRAL = "0.15"
+"""The legend's colour: it explains line styles and markers, not an agent."""
+LIMITS = ("auto", "all")
+"""``limits``' names: ``auto`` leaves out samples that run far out; ``all`` holds them."""
+FAR_OUT = 3.0
+"""A sample runs far out when its reach lies more than this many interquartile ranges above
+the upper quartile of its agent's samples' reaches (Tukey's far-out fence; ``far_out``)."""
+SCENE_WIDTH = 6.4
+"""``plot_scene``'s default width in inches."""
+SCORED_WIDTH = 7.0
+"""``plot_scene_scored``'s default width in inches (a two-column page's text width)."""
+_STYLE = {"font.size": 8, "axes.titlesize": 9, "axes.labelsize": 8, "xtick.labelsize": 7,
+          "ytick.labelsize": 7, "legend.fontsize": 7, "pdf.fonttype": 42}  # fmt: skip
+"""Text in points at the printed size (a figure made ``width`` inches wide shows it so), and
+TrueType fonts embedded in PDF files (as journals ask)."""
+
+
+def figure_format(out: str | Path) -> str:
+    """The format a figure named ``out`` is written in, by its suffix (any case); a
+    ``ConfigError`` naming the suffixes there are for any other."""
+    suffix = Path(out).suffix.lower()
+    if suffix not in FORMATS:
+        got = f"{suffix} is none of them" if suffix else "it has none"
+        raise ConfigError(f"{out}: a figure is written in the format its suffix names "
+                          f"({', '.join(FORMATS)}); {got}")  # fmt: skip
+    return FORMATS[suffix]
+
+
+def agent_style(i: int) -> tuple[str, str]:
+    """Agent ``i``'s colour and position marker."""
+    return PALETTE[i % len(PALETTE)], MARKERS[(i // len(PALETTE)) % len(MARKERS)]
+
+
+def far_out(history: np.ndarray, pred: np.ndarray) -> np.ndarray:
+    """[K, P] True for the samples that run far out: a sample's reach is its farthest point
+    from its agent's last observed position, and it is far out when that lies more than
+    ``FAR_OUT`` interquartile ranges above the upper quartile of its agent's K reaches, and
+    more than a quarter of that quartile above it (so that of samples of almost equal reach
+    none is far out).
+
+    history [P, T_h, 2], pred [K, P, T_f, 2]."""
+    start = history[:, -1]  # [P, 2]
+    reach = np.linalg.norm(pred - start[None, :, None], axis=-1).max(-1)  # [K, P]
+    q1, q3 = np.nanpercentile(reach, [25, 75], axis=0)  # [P], [P]
+    fence = q3 + np.maximum(FAR_OUT * (q3 - q1), 0.25 * q3)  # [P]
+    return reach > fence[None]  # NaN reaches compare False: their points are dropped later
+
+
+def check_limits(limits) -> str | tuple[float, float, float, float]:
+    """``limits`` checked: ``"auto"``, ``"all"`` or ``(x0, x1, y0, y1)``, finite, x0 < x1 and
+    y0 < y1 (ConfigError otherwise)."""
+    if isinstance(limits, str):
+        if limits not in LIMITS:
+            raise ConfigError(f"limits: 'auto', 'all' or (x0, x1, y0, y1), got {limits!r}")
+        return limits
+    try:
+        box = tuple(float(v) for v in limits)
+    except (TypeError, ValueError):
+        box = ()
+    if len(box) != 4 or not all(math.isfinite(v) for v in box):
+        raise ConfigError(f"limits: 'auto', 'all' or four finite numbers (x0, x1, y0, y1), "
+                          f"got {limits!r}")  # fmt: skip
+    if not (box[0] < box[1] and box[2] < box[3]):
+        raise ConfigError(f"limits (x0, x1, y0, y1) need x0 < x1 and y0 < y1, got {box}")
+    return box
+
+
+def scene_limits(
+    history: np.ndarray,
+    future: np.ndarray,
+    pred: np.ndarray | None = None,
+    limits="auto",
+    far: np.ndarray | None = None,
+) -> tuple[float, float, float, float]:
+    """The axes' (x0, x1, y0, y1) of a scene figure. ``auto``: every history and ground truth
+    and the samples that do not run far out (``far_out``, or ``far`` [K, P] when given);
+    ``all``: every sample too; the box gets a 5 % margin and is widened (or heightened) to an
+    aspect between 0.35 and 1.3, so that a scene much taller than wide keeps a readable
+    panel. A given (x0, x1, y0, y1) is returned as it is.
+
+    history [P, T_h, 2], future [P, T_f, 2], pred [K, P, T_f, 2] or None."""
+    limits = check_limits(limits)
+    if not isinstance(limits, str):
+        return limits
+    parts = [history.reshape(-1, 2), future.reshape(-1, 2)]
+    if pred is not None and pred.size:
+        keep = np.ones(pred.shape[:2], bool)  # [K, P]
+        if limits == "auto":
+            keep = ~(far_out(history, pred) if far is None else far)
+        parts.append(pred[keep].reshape(-1, 2))
+    pts = np.concatenate(parts)  # [M, 2]
+    pts = pts[np.isfinite(pts).all(-1)]
+    if not len(pts):
+        return -1.0, 1.0, -1.0, 1.0
+    lo, hi = pts.min(0), pts.max(0)  # [2]
+    centre, half = (lo + hi) / 2, (hi - lo) / 2 * 1.05  # [2], [2]
+    if half.max() <= 1e-9 * max(1.0, float(np.abs(centre).max())):  # one point: 1 unit around
+        half = np.ones(2)
+    aspect = float(np.clip(half[1] / max(half[0], 1e-12), 0.35, 1.3))
+    half = np.maximum(half, [half[1] / aspect, half[0] * aspect])  # [2]
+    return (float(centre[0] - half[0]), float(centre[0] + half[0]),
+            float(centre[1] - half[1]), float(centre[1] + half[1]))  # fmt: skip
+
+
+def _check_size(width: float | None, dpi: float | None) -> None:
+    if width is not None and not (math.isfinite(width) and 1.0 <= width <= 40.0):
+        raise ConfigError(f"width: the figure's width in inches, 1 to 40, got {width}")
+    if dpi is not None and not (math.isfinite(dpi) and 10 <= dpi <= 2400):
+        raise ConfigError(f"dpi: pixels per inch of a PNG, 10 to 2400, got {dpi}")
+
+
+def _joined(paths: np.ndarray) -> np.ndarray:
+    """[S, T, 2] paths as one [S * (T + 1), 2] polyline broken by NaN rows (one artist)."""
+    gap = np.full((paths.shape[0], 1, 2), np.nan)
+    return np.concatenate([paths, gap], 1).reshape(-1, 2)
+
+
+def _halo(width: float) -> list:
+    """A white outline under a line or text, so that it shows over the samples."""
+    return [patheffects.withStroke(linewidth=width, foreground="white")]
+
+
+def _legend_handles(samples: str | None, ranks: Sequence[tuple[str, float, float]] = (),
+                    ball: bool = False) -> list[Line2D]:  # fmt: skip
+    """The legend's entries, all in ``NEUTRAL``: what each line style and marker means."""
+    handles = [
+        Line2D([], [], color=NEUTRAL, lw=2.0, marker="o", ms=3, label="history"),
+        Line2D([], [], color=NEUTRAL, lw=1.6, ls="--", marker="x", ms=5, mew=1.4,
+               label="ground truth (x: its end)"),
+    ]  # fmt: skip
+    if samples:
+        handles.append(Line2D([], [], color=NEUTRAL, lw=0.8, alpha=0.6, label=samples))
+    for label, lw, alpha in ranks:
+        handles.append(Line2D([], [], color=NEUTRAL, lw=lw, alpha=alpha, label=label))
+    handles.append(Line2D([], [], color=NEUTRAL, ls="none", marker="o", ms=6, mfc="white",
+                          mec="black", mew=0.6, label="last observed position"))  # fmt: skip
+    if ball:
+        handles.append(Line2D([], [], color=NEUTRAL, ls="none", marker="*", ms=9, mfc="white",
+                              mec="black", mew=0.6, label="the ball"))  # fmt: skip
+    return handles
+
+
+def _draw_agent(ax, i: int, history: np.ndarray, future: np.ndarray | None, ball: bool,
+                label: bool = False) -> None:  # fmt: skip
+    """Agent ``i``'s history, its last observed position and (unless None) its ground truth,
+    drawn over the samples: the ground truth last, with a white outline and its end marked,
+    so that a walker standing still shows it on top of its position marker.
+
+    history [T_h, 2], future [T_f, 2]."""
+    c, m = agent_style(i)
+    ax.plot(history[:, 0], history[:, 1], color=c, lw=2.0, marker=m, ms=2.5, zorder=3,
+            gid=f"history-{i}")  # fmt: skip
+    ax.plot(*history[-1], marker="*" if ball else m, ms=10 if ball else 6.5, color=c, mec="black",
+            mew=0.6, ls="none", zorder=4, gid=f"position-{i}")  # fmt: skip
+    if future is not None:
+        gt = np.concatenate([history[-1:], future], 0)  # [T_f+1, 2]
+        ax.plot(gt[:, 0], gt[:, 1], color=c, lw=1.6, ls="--", zorder=5, path_effects=_halo(3.2),
+                gid=f"truth-{i}")  # fmt: skip
+        ax.plot(*gt[-1], marker="x", ms=5, mew=1.4, color=c, ls="none", zorder=6,
+                path_effects=_halo(3.0), gid=f"truth-end-{i}")  # fmt: skip
+    if label:
+        ax.annotate(str(i), history[-1], xytext=(5, 4), textcoords="offset points", fontsize=7,
+                    color=c, fontweight="bold", zorder=7, path_effects=_halo(2.0))  # fmt: skip
+
+
+def _set_axes(ax, box: tuple[float, float, float, float], units: str, ylabel: bool = True):
+    ax.set_xlim(box[0], box[1])
+    ax.set_ylim(box[2], box[3])
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel(f"x [{units}]")
+    if ylabel:
+        ax.set_ylabel(f"y [{units}]")
+    ax.grid(alpha=0.3)
+
+
+def _legend_below(fig, axes, handles: list[Line2D], title: str, width: float,
+                  suptitle: str = "") -> None:  # fmt: skip
+    """The legend, centred under the laid-out ``axes`` and their x labels, and ``suptitle``
+    centred above them and their titles (the layout is then frozen; the saved canvas grows
+    to hold both). The legend's columns fit the figure's ``width`` in inches."""
+    fig.draw_without_rendering()  # lay out: the axes and their labels have their places now
+    renderer = fig.canvas.get_renderer()
+    boxes = [ax.get_tightbbox(renderer) for ax in axes]
+    left, right = min(b.x0 for b in boxes), max(b.x1 for b in boxes)
+    bottom, top = min(b.y0 for b in boxes), max(b.y1 for b in boxes)
+    fig.set_layout_engine("none")
+    to_figure = fig.transFigure.inverted()
+    x, y = to_figure.transform(((left + right) / 2, bottom))
+    ncols = len(handles) if width >= 8 else 4 if width >= 6 else 2
+    fig.legend(handles=handles, loc="upper center", bbox_to_anchor=(x, y), ncols=ncols,
+               frameon=False, title=title, title_fontsize=7,
+               columnspacing=1.2, handlelength=2.2)  # fmt: skip
+    if suptitle:  # 6 points above the panels' titles, never over them
+        x, y = to_figure.transform(((left + right) / 2, top + 6 * fig.dpi / 72))
+        fig.text(x, y, suptitle, ha="center", va="bottom", fontsize=9, gid="suptitle")
 
 
 def plot_scene(
@@ -21,45 +245,74 @@ def plot_scene(
     units: str = "m",
     title: str = "",
     agent_type: np.ndarray | None = None,
+    *,
+    limits="auto",
+    max_samples: int | None = None,
+    width: float | None = None,
+    dpi: float | None = None,
 ) -> Path:
-    """Write a PNG of one scene.
+    """Write a figure of one scene, in the format ``out``'s suffix names (``FORMATS``).
 
-    history [P, T_h, 2], future [P, T_f, 2], pred [K, P, T_f, 2] or None; absolute coordinates.
-    Each agent has its own colour: history solid with dots, ground truth dashed, samples thin.
+    history [P, T_h, 2], future [P, T_f, 2], pred [K, P, T_f, 2] or None; absolute
+    coordinates; agent_type [P] (``BALL`` draws a star). Each agent has its own colour (and,
+    beyond ``len(PALETTE)`` agents, marker): history solid with dots, samples thin, the ground
+    truth dashed on top with its end marked. ``limits``: ``auto`` (default: the samples that
+    run far out do not widen the axes, ``scene_limits``), ``all`` or (x0, x1, y0, y1).
+    ``max_samples``: draw only each agent's first so many samples. ``width``: inches (default
+    ``SCENE_WIDTH``; text is at its printed size, so 3.3 suits a paper's column); ``dpi``: a
+    PNG's pixels per inch (default ``DPI``). An empty ``title`` draws none.
     """
+    figure_format(out)
+    _check_size(width, dpi)
+    if max_samples is not None and max_samples < 1:
+        raise ConfigError(f"max_samples: at least 1 sample per agent, got {max_samples}")
+    if pred is not None and max_samples is not None:
+        pred = pred[:max_samples]  # [K', P, T_f, 2]
+    box = scene_limits(history, future, pred, limits)
     p = history.shape[0]
-    colours = plt.get_cmap("tab10" if p <= 10 else "tab20")
-    fig, ax = plt.subplots(figsize=(6.4, 6.0), dpi=120)
-    for i in range(p):
-        c = colours(i % colours.N)
-        label_gt = "ground truth" if i == 0 else None
-        label_hist = "history" if i == 0 else None
-        if pred is not None:
-            for k in range(pred.shape[0]):
-                path = np.concatenate([history[i, -1:], pred[k, i]], 0)  # [T_f+1, 2]
-                ax.plot(
-                    path[:, 0],
-                    path[:, 1],
-                    color=c,
-                    lw=0.8,
-                    alpha=0.35,
-                    label="samples" if i == 0 and k == 0 else None,
-                )
-        gt = np.concatenate([history[i, -1:], future[i]], 0)  # [T_f+1, 2]
-        ax.plot(gt[:, 0], gt[:, 1], color=c, lw=1.8, ls="--", label=label_gt)
-        ax.plot(
-            history[i, :, 0], history[i, :, 1], color=c, lw=2.2, marker="o", ms=3, label=label_hist
-        )
-        marker = "*" if agent_type is not None and agent_type[i] == 1 else "o"
-        ax.plot(*history[i, -1], marker=marker, color=c, ms=8, mec="black", mew=0.6)
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel(f"x [{units}]")
-    ax.set_ylabel(f"y [{units}]")
-    if title:
-        ax.set_title(title, fontsize=9)
-    ax.grid(alpha=0.3)
-    ax.legend(loc="best", fontsize=8)
-    return _save(fig, out)
+    ball = agent_type is not None and bool((np.asarray(agent_type) == BALL).any())
+    aspect = (box[3] - box[2]) / (box[1] - box[0])
+    w = SCENE_WIDTH if width is None else width
+    with plt.rc_context(_STYLE):
+        # the axes' aspect sets the height; "compressed" keeps no empty band around them
+        fig, ax = plt.subplots(figsize=(w, (w - 0.7) * aspect + 0.8), dpi=dpi or DPI,
+                               layout="compressed")  # fmt: skip
+        for i in range(p):
+            if pred is not None:
+                start = np.repeat(history[None, i, -1:], len(pred), 0)  # [K', 1, 2]
+                line = _joined(np.concatenate([start, pred[:, i]], 1))  # [K'(T_f+2), 2]
+                ax.plot(line[:, 0], line[:, 1], color=agent_style(i)[0], lw=0.8, alpha=0.45,
+                        zorder=1, gid=f"samples-{i}")  # fmt: skip
+            is_ball = agent_type is not None and int(agent_type[i]) == BALL
+            _draw_agent(ax, i, history[i], future[i], is_ball)
+        _set_axes(ax, box, units)
+        if title:
+            ax.set_title(title, fontsize=9)
+        samples = None if pred is None else f"samples ({len(pred)} per agent)"
+        _legend_below(fig, [ax], _legend_handles(samples, ball=ball),
+                      "colour and marker: one agent", w)  # fmt: skip
+        return _save(fig, out, dpi)
+
+
+def _ordinal(n: int) -> str:
+    return {1: "best", 2: "2nd", 3: "3rd"}.get(n, f"{n}th")
+
+
+def rank_style(rank: int, top: int) -> tuple[float, float]:
+    """Line width and opacity of the sample ranked ``rank`` (0: best) of the ``top`` shown:
+    from 2.2 and opaque down to 1.0 and 0.4, by rank alone (not by the score's value)."""
+    share = rank / max(top - 1, 1)
+    return 2.2 - 1.2 * share, 1.0 - 0.6 * share
+
+
+def scored_title(k: int, top: int, score_name: str = "diffusion score (ATS)") -> str:
+    """The ranked panel's title, on two lines: which samples of how many, ranked by what."""
+    if k == 1:
+        return "each agent's one sample (K = 1):\nnothing to rank"
+    if top >= k:
+        return f"each agent's {k} samples,\nranked by {score_name}"
+    best = "best" if top == 1 else f"{top} best"
+    return f"each agent's {best} of K = {k} samples\nby {score_name}"
 
 
 def plot_scene_scored(
@@ -71,57 +324,73 @@ def plot_scene_scored(
     units: str = "m",
     title: str = "",
     top: int = 2,
+    *,
+    score_name: str = "diffusion score (ATS)",
+    agent_type: np.ndarray | None = None,
+    limits="auto",
+    width: float | None = None,
+    dpi: float | None = None,
 ) -> Path:
     """Two panels, as the paper's Fig. 2: the ground truth alone, then each agent's ``top``
-    samples by score, shaded by their score (darker = higher).
+    samples by score (at most K), the best thickest and opaque, each next one thinner and
+    lighter (by rank, as the legend says; ``rank_style``). The ranked panel's title says how
+    many of how many samples, ranked by ``score_name`` (``scored_title``).
 
     history [P, T_h, 2], future [P, T_f, 2], pred [K, P, T_f, 2], scores [K, P] (higher is
-    better, e.g. each agent's ATS).
+    better, e.g. each agent's ATS), agent_type [P] (``BALL`` draws a star). ``limits``:
+    ``auto`` (default: every history and ground truth and the shown samples that do not run
+    far out among their agent's K), ``all`` or (x0, x1, y0, y1). ``width``: inches (default
+    ``SCORED_WIDTH``; below 5 the panels are stacked, one above the other, so that 3.3 suits
+    a paper's column); ``dpi``: a PNG's pixels per inch (default ``DPI``). An empty
+    ``title`` draws none.
     """
-    p = history.shape[0]
-    colours = plt.get_cmap("tab10" if p <= 10 else "tab20")
-    shown = [pred[np.argsort(-scores[:, i])[:top], i] for i in range(p)]  # P x [top, T_f, 2]
-    pts = np.concatenate([history.reshape(-1, 2), future.reshape(-1, 2),
-                          *(s.reshape(-1, 2) for s in shown)])  # fmt: skip  # [M, 2]
-    lo, hi = pts.min(0), pts.max(0)  # [2]
-    centre, half = (lo + hi) / 2, (hi - lo) / 2 * 1.05 + 1e-6  # [2], [2] with a margin
-    # the shown box is widened (or heightened) to an aspect in [0.35, 1.3], so that a scene
-    # much taller or wider than the other way keeps readable panels and titles
-    aspect = float(np.clip(half[1] / half[0], 0.35, 1.3))
-    half = np.maximum(half, [half[1] / aspect, half[0] * aspect])  # [2]
-    # "compressed": the two equal-aspect panels keep no empty band around them
-    fig, axes = plt.subplots(1, 2, figsize=(11, 1.2 + 5 * aspect), dpi=120, sharex=True,
-                             sharey=True, layout="compressed")  # fmt: skip
-    for i in range(p):
-        c = colours(i % colours.N)
-        for ax in axes:
-            ax.plot(history[i, :, 0], history[i, :, 1], color=c, lw=2.2, marker="o", ms=3)
-            ax.plot(*history[i, -1], marker="o", color=c, ms=7, mec="black", mew=0.6)
-        gt = np.concatenate([history[i, -1:], future[i]], 0)  # [T_f+1, 2]
-        axes[0].plot(gt[:, 0], gt[:, 1], color=c, lw=2.0, ls="--")
-        axes[0].annotate(str(i), history[i, 0], fontsize=7, color=c)
-        s = scores[:, i]  # [K]
-        lo, hi = float(s.min()), float(s.max())
-        for rank, k in enumerate(np.argsort(-s)[:top]):
-            weight = 1.0 if hi == lo else (float(s[k]) - lo) / (hi - lo)
-            path = np.concatenate([history[i, -1:], pred[k, i]], 0)  # [T_f+1, 2]
-            axes[1].plot(path[:, 0], path[:, 1], color=c, lw=2.0 - 0.6 * rank,
-                         alpha=0.3 + 0.7 * weight)  # fmt: skip
-    axes[0].set_title("ground truth", fontsize=9)
-    # a tall scene makes narrow panels: the long title then takes two lines, not its neighbour's
-    sep = "\n" if aspect > 0.8 else " "
-    axes[1].set_title(f"top-{top} samples per agent{sep}by diffusion score (darker = higher)",
-                      fontsize=9)  # fmt: skip
-    for ax in axes:
-        ax.set_xlim(centre[0] - half[0], centre[0] + half[0])
-        ax.set_ylim(centre[1] - half[1], centre[1] + half[1])
-        ax.set_aspect("equal", adjustable="box")
-        ax.set_xlabel(f"x [{units}]")
-        ax.grid(alpha=0.3)
-    axes[0].set_ylabel(f"y [{units}]")
-    if title:
-        fig.suptitle(title, fontsize=9)
-    return _save(fig, out)
+    figure_format(out)
+    _check_size(width, dpi)
+    if top < 1:
+        raise ConfigError(f"top: at least 1 sample per agent, got {top}")
+    k, p = pred.shape[:2]
+    top = min(top, k)
+    order = np.argsort(-scores, axis=0, kind="stable")[:top]  # [top, P] best first
+    shown = np.take_along_axis(pred, order[..., None, None], 0)  # [top, P, T_f, 2]
+    far = np.take_along_axis(far_out(history, pred), order, 0)  # [top, P]
+    box = scene_limits(history, future, shown, limits, far=far)
+    aspect = (box[3] - box[2]) / (box[1] - box[0])
+    ball = agent_type is not None and bool((np.asarray(agent_type) == BALL).any())
+    w = SCORED_WIDTH if width is None else width
+    stacked = w < 5
+    with plt.rc_context(_STYLE):
+        # "compressed": the equal-aspect panels keep no empty band around them
+        if stacked:
+            size = (w, 2 * (w - 0.7) * aspect + 1.2)
+        else:
+            size = (w, (w - 1.0) / 2 * aspect + 1.0)
+        fig, axes = plt.subplots(2 if stacked else 1, 1 if stacked else 2, figsize=size,
+                                 dpi=dpi or DPI, sharex=True, sharey=True,
+                                 layout="compressed")  # fmt: skip
+        for i in range(p):
+            c = agent_style(i)[0]
+            is_ball = agent_type is not None and int(agent_type[i]) == BALL
+            for rank in range(top):
+                lw, alpha = rank_style(rank, top)
+                path = np.concatenate([history[i, -1:], shown[rank, i]], 0)  # [T_f+1, 2]
+                axes[1].plot(path[:, 0], path[:, 1], color=c, lw=lw, alpha=alpha,
+                             zorder=2 - rank / top, gid=f"rank{rank}-{i}")  # fmt: skip
+            _draw_agent(axes[0], i, history[i], future[i], is_ball, label=True)
+            _draw_agent(axes[1], i, history[i], None, is_ball)
+        axes[0].set_title("ground truth", fontsize=9)
+        axes[1].set_title(scored_title(k, top, score_name), fontsize=9)
+        for j, ax in enumerate(axes):
+            _set_axes(ax, box, units, ylabel=j == 0 or stacked)
+            if stacked and j == 0:
+                ax.set_xlabel("")
+                ax.tick_params(labelbottom=False)
+        ranks = [(f"{_ordinal(r + 1)} by score", *rank_style(r, top)) for r in range(top)]
+        if k == 1:
+            ranks = [("its one sample", *rank_style(0, 1))]
+        _legend_below(fig, list(axes), _legend_handles(None, ranks, ball),
+                      "colour and marker: one agent (its number beside it)", w,
+                      title)  # fmt: skip
+        return _save(fig, out, dpi)
 
 
 def plot_panel(
@@ -139,8 +408,10 @@ def plot_panel(
 
     history [P, T_h, 2], paths [R, P, T_f, 2] (best first), weights [R, P] in [0, 1];
     ``limits`` (x0, x1, y0, y1) are the same for every panel of a scene; ``dashed`` draws
-    the paths as the ground truth is drawn in Fig. 2 (the study's reference image).
+    the paths as the ground truth is drawn in Fig. 2 (the study's reference image). (Its
+    look is the study's: a study's panels keep it whatever the scene figures change.)
     """
+    figure_format(out)
     p = history.shape[0]
     colours = plt.get_cmap("tab10" if p <= 10 else "tab20")
     aspect = (limits[3] - limits[2]) / max(limits[1] - limits[0], 1e-9)
@@ -177,6 +448,7 @@ def plot_survey_summary(
     names [M]; columns: label -> (mean [M], sd [M]) (NaN draws no bar); marks: label -> [M]
     strings ("", "ns", "*", ...); xlims: label -> fixed x range (e.g. the rating scale).
     """
+    figure_format(out)
     m = len(names)
     fig, axes = plt.subplots(1, len(columns), figsize=(3.6 * len(columns), 0.9 + 0.55 * m),
                              dpi=120, sharey=True, squeeze=False)  # fmt: skip
@@ -217,6 +489,7 @@ def plot_curves(
     has its own y range; the first panel carries the legend."""
     if not panels:
         raise ValueError("plot_curves needs at least one panel")
+    figure_format(out)
     n = len(panels)
     cols = min(columns, n)
     rows = -(-n // cols)
@@ -238,16 +511,23 @@ def plot_curves(
     return _save(fig, out)
 
 
-def _save(fig, out: str | Path) -> Path:
-    """Lay out, write as PNG through a temporary file, close. The saved canvas grows to hold
-    every title and label (``bbox_inches="tight"``), so nothing is clipped however long the
-    title or however tall the axes' aspect."""
-    if fig.get_layout_engine() is None:  # a figure with its own layout engine keeps it
-        fig.tight_layout()
+NO_DATE = {"pdf": {"CreationDate": None}, "svg": {"Date": None}}
+"""Vector files carry no creation date, so that the same figure is the same bytes."""
+
+
+def _save(fig, out: str | Path, dpi: float | None = None) -> Path:
+    """Lay out, write in the format ``out``'s suffix names (``figure_format``) through a
+    temporary file, close. The saved canvas grows to hold every title and label
+    (``bbox_inches="tight"``), so nothing is clipped however long the title or however tall
+    the axes' aspect. ``dpi``: a PNG's pixels per inch (default: the figure's own)."""
     out = Path(out)
     try:
+        fmt = figure_format(out)
+        if fig.get_layout_engine() is None:  # a figure with its own layout engine keeps it
+            fig.tight_layout()
         with atomic_path(out) as tmp:
-            fig.savefig(tmp, format="png", bbox_inches="tight", pad_inches=0.1)
+            fig.savefig(tmp, format=fmt, dpi=dpi or fig.dpi, bbox_inches="tight",
+                        pad_inches=0.1, metadata=NO_DATE.get(fmt))  # fmt: skip
     finally:
         plt.close(fig)
     return out
