@@ -518,3 +518,18 @@ def test_a_failed_process_under_torchrun_gets_the_resume_advice(capsys, monkeypa
     err = capsys.readouterr().err
     assert err.startswith("trajpref: a process of this run failed; to continue from the last")
     assert "--resume" in err
+
+
+@pytest.mark.parametrize("command", ["evaluate", "predict"])
+def test_a_scorer_trained_on_other_units_is_warned_of_as_plot_warns(capsys, walks, tmp_path,
+                                                                   command):  # fmt: skip
+    """evaluate --scorer and predict --rank --scorer ranked metres-trained scores on pixels
+    without a word (plot and survey build warned)."""
+    argv = [command, "--dataset", walks, "--units", "px", "--model", "cv", "--samples", "2",
+            "--scorer", "zara1/denoiser", "--device", "cpu", "--no-progress", "--score-every",
+            "100"]  # fmt: skip
+    argv += ["--json"] if command == "evaluate" else ["--rank", "--out", tmp_path / "p.npz"]
+    code, _, err = _run(capsys, *argv)
+    assert code == 0
+    assert ("trajpref: warning: zara1/denoiser was trained on zara1: this data is in px, the "
+            "model's in m") in err  # fmt: skip

@@ -738,6 +738,16 @@ def _warn_if_trained_otherwise(spec: str, ds) -> None:
         warnings.warn(trained_otherwise(spec, model, problems), stacklevel=2)
 
 
+def _warn_model_and_scorer(args, ds) -> None:
+    """``_warn_if_trained_otherwise`` for the command's model and, when it names another one,
+    its ``--scorer`` (a scorer of other units or pace ranks on what it cannot read; as
+    ``survey build`` checks its scorer)."""
+    _warn_if_trained_otherwise(args.model, ds)
+    scorer = getattr(args, "scorer", None)
+    if scorer and not (scorer == args.model or _same_path(scorer, args.model)):
+        _warn_if_trained_otherwise(scorer, ds)
+
+
 def _set_generator(model, flag: str, **setting) -> None:
     """Change a sampling setting of a leapfrog predictor's generator (ConfigError for other
     models)."""
@@ -952,7 +962,7 @@ def cmd_evaluate(args) -> int:
     scorer = _scorer(args.scorer, device, args) if args.scorer else None
     model, samples = _selecting(args, model, device, scores=scorer is not None)
     ds = _load(args)
-    _warn_if_trained_otherwise(args.model, ds)
+    _warn_model_and_scorer(args, ds)
     start = time.perf_counter()
     result = evaluate(
         model, ds, samples, args.seed, device, args.max_agents,
@@ -1078,7 +1088,7 @@ def cmd_predict(args) -> int:
         scorer = _scorer(args.scorer or args.model, device, args)
     model, samples = _selecting(args, model, device, scores=scorer is not None)
     ds = _load(args)
-    _warn_if_trained_otherwise(args.model, ds)
+    _warn_model_and_scorer(args, ds)
     arrays = predict_dataset(
         model, ds, samples, args.seed, device, args.max_agents,
         progress=not args.no_progress, scorer=scorer,
@@ -1214,9 +1224,7 @@ def cmd_plot(args) -> int:
     _check_plot_args(args)
     model, device = _predictor(args)
     ds = _load(args)
-    _warn_if_trained_otherwise(args.model, ds)
-    if args.scorer and not (args.scorer == args.model or _same_path(args.scorer, args.model)):
-        _warn_if_trained_otherwise(args.scorer, ds)  # as survey build checks its scorer
+    _warn_model_and_scorer(args, ds)
     if not 0 <= args.scene < len(ds):
         raise TrajprefError(f"--scene {args.scene}: the split has scenes 0..{len(ds) - 1}")
     scene = ds[args.scene]
