@@ -55,6 +55,12 @@ def test_predict_scenes_names_the_scene_at_fault(model, scenes):
         predict_scenes(model, histories[0])
     with pytest.raises(DataError, match="no scenes"):
         predict_scenes(model, [])
+    # the constant-velocity baseline takes any T_h, but one batch needs one (a raw RuntimeError)
+    from trajpref.models.baseline import ConstantVelocity
+
+    with pytest.raises(DataError, match=r"histories\[1\]: 7 observed steps, but histories\[0\] "
+                       r"has 8: the scenes of one call need the same number"):  # fmt: skip
+        predict_scenes(ConstantVelocity(), [histories[0], histories[1][:, 1:]])
 
 
 def test_ranking_and_selection_refuse_map_coordinates_as_prediction_does(model, scorer, scenes):

@@ -93,3 +93,19 @@ def test_processes_beyond_the_cores_are_warned_of(monkeypatch, threads):
     torch.set_num_threads(1)
     with pytest.warns(UserWarning, match="3 processes of 1 thread"):
         set_threads(DistInfo(0, 3, 0, 3))
+
+
+@pytest.mark.parametrize("rank", [0, 1])
+def test_more_processes_than_gpus_is_refused_on_every_rank(monkeypatch, rank):
+    """It was raised on ranks above 0 only, which print nothing: torchrun failed without a
+    cause."""
+    from trajpref.errors import ConfigError
+    from trajpref.train.distributed import init_from_env
+
+    for key, value in (("WORLD_SIZE", "2"), ("LOCAL_WORLD_SIZE", "2"), ("RANK", str(rank)),
+                       ("LOCAL_RANK", str(rank))):  # fmt: skip
+        monkeypatch.setenv(key, value)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 1)
+    with pytest.raises(ConfigError, match=r"torchrun started 2 processes on this machine but "
+                       r"it has 1 GPU\(s\)"):  # fmt: skip
+        init_from_env(torch.device("cuda"))

@@ -278,3 +278,20 @@ def test_the_ranked_panel_shades_by_rank_and_says_what_it_shows(tmp_path, drawn)
     title = drawn[1].axes[1].get_title()
     assert "K = 1" in title and "2" not in title
     assert len(_lines(drawn[1], "rank")) == 3
+
+
+def test_a_box_far_from_square_and_a_huge_figure_are_refused_before_drawing(tmp_path):
+    """--limits=0,1,0,1000 drew a 781 x 683,619 px PNG (4.5 GB); width 40 at dpi 2400 too."""
+    from trajpref.viz.plot import plot_scene
+
+    history = np.zeros((1, 8, 2)) + np.linspace(0, 1, 8)[None, :, None]  # [P, T_h, 2]
+    future = np.zeros((1, 12, 2)) + np.linspace(1, 2, 12)[None, :, None]  # [P, T_f, 2]
+    out = tmp_path / "f.png"
+    with pytest.raises(ConfigError, match=r"1000 high and 1 wide; .* 1000x as tall as it is "
+                       r"wide \(at most 20\)"):  # fmt: skip
+        plot_scene(history, future, None, out, limits=(0, 1, 0, 1000))
+    with pytest.raises(ConfigError, match=r"at most 20000 a side"):
+        plot_scene(history, future, None, out, width=40, dpi=2400)
+    assert not out.exists()
+    plot_scene(history, future, None, out, limits=(0, 2, 0, 2))  # a square box draws
+    assert out.stat().st_size > 1000

@@ -514,6 +514,10 @@ def _predict(model, histories: list, num_samples, agent_types: list, seed, frame
                 raise DataError(f"{what}: expected [C, {hist.shape[1]}, 2] (neighbours, the "
                                 f"history's observed steps, x/y; NaN where not seen), got "
                                 f"{list(ctx.shape)}")  # fmt: skip
+        if scenes and hist.shape[1] != scenes[0][0].shape[1]:  # one batch, one T_h
+            raise DataError(f"{name}: {hist.shape[1]} observed steps, but histories[0] has "
+                            f"{scenes[0][0].shape[1]}: the scenes of one call need the same "
+                            "number")  # fmt: skip
         scenes.append((hist, types, ctx))
     if any(c is not None and len(c) for _, _, c in scenes) and not getattr(
             model, "reads_context", False):  # fmt: skip

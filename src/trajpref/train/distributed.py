@@ -78,7 +78,7 @@ def init_from_env(device: torch.device) -> tuple[DistInfo, torch.device]:
         return info, device
     if device.type == "cuda":
         count = torch.cuda.device_count()
-        if info.local_rank >= count:
+        if info.local_world_size > count:  # every rank says so: rank 0 is the one that prints
             raise ConfigError(f"torchrun started {info.local_world_size} processes on this machine "
                               f"but it has {count} GPU(s): start at most {count} "
                               "(--nproc_per_node), or train on the CPU (--device cpu)")  # fmt: skip

@@ -88,6 +88,23 @@ def far_out(history: np.ndarray, pred: np.ndarray) -> np.ndarray:
     return reach > fence[None]  # NaN reaches compare False: their points are dropped later
 
 
+MAX_ASPECT = 20.0
+"""How much taller than wide (or wider than tall) an explicit ``limits`` box may be: x and y
+share one scale, so the figure takes the box's shape (0-1 by 0-1000 made a 683,619 px tall
+PNG and took 4.5 GB)."""
+
+MAX_PIXELS = 20_000
+"""The most pixels a figure may have on a side (``width`` or height times ``dpi``)."""
+
+
+def _check_pixels(size: tuple[float, float], dpi: float) -> None:
+    """ConfigError for a figure of ``size`` inches at ``dpi`` beyond ``MAX_PIXELS`` a side."""
+    w, h = size[0] * dpi, size[1] * dpi
+    if max(w, h) > MAX_PIXELS:
+        raise ConfigError(f"the figure would be {w:.0f} x {h:.0f} pixels (at most {MAX_PIXELS} "
+                          "a side): a smaller width or dpi")  # fmt: skip
+
+
 def check_limits(limits) -> str | tuple[float, float, float, float]:
     """``limits`` checked: ``"auto"``, ``"all"`` or ``(x0, x1, y0, y1)``, finite, x0 < x1 and
     y0 < y1 (ConfigError otherwise)."""
@@ -104,6 +121,13 @@ def check_limits(limits) -> str | tuple[float, float, float, float]:
                           f"got {limits!r}")  # fmt: skip
     if not (box[0] < box[1] and box[2] < box[3]):
         raise ConfigError(f"limits (x0, x1, y0, y1) need x0 < x1 and y0 < y1, got {box}")
+    ratio = (box[3] - box[2]) / (box[1] - box[0])
+    if not 1 / MAX_ASPECT <= ratio <= MAX_ASPECT:  # the axes keep x and y at one scale
+        raise ConfigError(f"limits {box}: {box[3] - box[2]:g} high and {box[1] - box[0]:g} "
+                          f"wide; x and y are drawn at one scale, so the figure would be "
+                          f"{max(ratio, 1 / ratio):.0f}x as {'tall' if ratio > 1 else 'wide'} "
+                          f"as it is {'wide' if ratio > 1 else 'tall'} "
+                          f"(at most {MAX_ASPECT:g})")  # fmt: skip
     return box
 
 
@@ -275,6 +299,7 @@ def plot_scene(
     w = SCENE_WIDTH if width is None else width
     with plt.rc_context(_STYLE):
         # the axes' aspect sets the height; "compressed" keeps no empty band around them
+        _check_pixels((w, (w - 0.7) * aspect + 0.8), dpi or DPI)
         fig, ax = plt.subplots(figsize=(w, (w - 0.7) * aspect + 0.8), dpi=dpi or DPI,
                                layout="compressed")  # fmt: skip
         for i in range(p):
@@ -364,6 +389,7 @@ def plot_scene_scored(
             size = (w, 2 * (w - 0.7) * aspect + 1.2)
         else:
             size = (w, (w - 1.0) / 2 * aspect + 1.0)
+        _check_pixels(size, dpi or DPI)
         fig, axes = plt.subplots(2 if stacked else 1, 1 if stacked else 2, figsize=size,
                                  dpi=dpi or DPI, sharex=True, sharey=True,
                                  layout="compressed")  # fmt: skip
