@@ -63,15 +63,6 @@ def test_shuffle_is_seeded_and_changes_with_epoch():
     assert a != [b.tolist() for b in loader.batches()]
 
 
-@pytest.mark.parametrize("world", [2, 3])
-def test_ranks_see_equal_batch_counts(world):
-    ds = _dataset([2] * 11)
-    counts = [len(SceneLoader(ds, max_agents=4, rank=r, world_size=world)) for r in range(world)]
-    assert len(set(counts)) == 1
-
-
 def test_bad_loader_args():
     with pytest.raises(ValueError):
         SceneLoader(_dataset([1]), max_agents=0)
-    with pytest.raises(ValueError):
-        SceneLoader(_dataset([1]), rank=2, world_size=2)

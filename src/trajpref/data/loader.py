@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Iterator
 
 import numpy as np
@@ -19,8 +18,8 @@ class SceneLoader:
     batch's scenes have similar agent counts and the padded per-scene attention
     (B * P_max^2) never grows with the whole batch (N^2), even on UNIV's 50+ agent scenes.
 
-    With ``world_size > 1`` each rank takes every ``world_size``-th batch (for DDP); the list is
-    padded with repeats so that all ranks see the same number of batches.
+    Under DDP every rank builds the same batches (the same seed and epoch) and takes a share
+    of each (``train.distributed.RankBatches``), so N processes train the one-process schedule.
     """
 
     def __init__(
@@ -30,21 +29,15 @@ class SceneLoader:
         max_scenes: int = 256,
         shuffle: bool = False,
         seed: int = 0,
-        rank: int = 0,
-        world_size: int = 1,
         pool: int = 64,
     ):
         if max_agents < 1 or max_scenes < 1:
             raise ConfigError("max_agents and max_scenes must be positive")
-        if not 0 <= rank < world_size:
-            raise ConfigError(f"rank {rank} outside world of size {world_size}")
         self.dataset = dataset
         self.max_agents = max_agents
         self.max_scenes = max_scenes
         self.shuffle = shuffle
         self.seed = seed
-        self.rank = rank
-        self.world_size = world_size
         self.pool = pool
         self.epoch = 0
         self._sizes = np.array([s.num_agents for s in dataset.scenes])  # [S]
@@ -54,7 +47,7 @@ class SceneLoader:
         self.epoch = epoch
 
     def batches(self) -> list[np.ndarray]:
-        """Scene indices of every batch this rank will see, in order."""
+        """Scene indices of every batch, in order (the same on every rank)."""
         n = len(self._sizes)
         if self.shuffle:
             rng = np.random.default_rng((self.seed, self.epoch))
@@ -84,12 +77,6 @@ class SceneLoader:
         if self.shuffle:
             rng = np.random.default_rng((self.seed, self.epoch, 1))
             groups = [groups[j] for j in rng.permutation(len(groups))]
-        if self.world_size > 1:
-            # pad by repeating the first batches so every rank sees the same count (as
-            # torch's DistributedSampler does); DDP would hang on unequal counts
-            short = -len(groups) % self.world_size
-            groups = groups + list(itertools.islice(itertools.cycle(groups), short))
-            groups = groups[self.rank :: self.world_size]
         return groups
 
     def __iter__(self) -> Iterator[Batch]:
