@@ -75,6 +75,7 @@ from trajpref.train.run import (
     train_stage,
 )
 from trajpref.types import collate
+from trajpref.viz import plot
 from trajpref.viz.plot import FORMATS, check_limits, plot_scene, plot_scene_scored
 
 
@@ -151,7 +152,7 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
                    "default: the file's model.max_log_sigma; docs/pretraining.md, 'A cap on "
                    "the samples' sigma')")  # fmt: skip
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
-    p.add_argument("--max-agents", type=int, default=1024,
+    p.add_argument("--max-agents", type=int, default=MAX_AGENTS,
                    help="agents per batch of whole scenes (default 1024). Lower it to save "
                    "memory, but note that it is not only a memory setting: the random draws "
                    "come from one stream in batch order, so another batching gives each agent "
@@ -164,6 +165,9 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
 def _add_scorer_arg(p: argparse.ArgumentParser, what: str) -> None:
     p.add_argument("--scorer", default=None, help=f"a denoiser (or generator) checkpoint: {what}")
 
+
+MAX_AGENTS = 1024
+"""``--max-agents``' default: agents per evaluation batch of whole scenes."""
 
 RANK_SCORE_EVERY = 3
 """``--score-every``'s default for ``predict --rank`` and ``evaluate --scorer``: the paper's 34
@@ -1125,10 +1129,13 @@ def _check_plot_args(args) -> None:
     if path.suffix.lower() not in FORMATS:
         raise ConfigError(f"--out {path}: the output must be a .png file, or .pdf or .svg "
                           "(its suffix names the format)")  # fmt: skip
-    if args.dpi is not None and not (math.isfinite(args.dpi) and 10 <= args.dpi <= 2400):
-        raise ConfigError(f"--dpi takes pixels per inch from 10 to 2400, got {args.dpi:g}")
-    if args.width is not None and not (math.isfinite(args.width) and 1 <= args.width <= 40):
-        raise ConfigError(f"--width takes inches from 1 to 40, got {args.width:g}")
+    if not plot.in_range(args.dpi, plot.DPI_RANGE):
+        low, high = plot.DPI_RANGE
+        raise ConfigError(f"--dpi takes pixels per inch from {low:g} to {high:g}, "
+                          f"got {args.dpi:g}")  # fmt: skip
+    if not plot.in_range(args.width, plot.WIDTH_RANGE):
+        low, high = plot.WIDTH_RANGE
+        raise ConfigError(f"--width takes inches from {low:g} to {high:g}, got {args.width:g}")
     if args.limits not in ("auto", "all"):
         try:
             box = tuple(float(v) for v in args.limits.split(","))
@@ -1188,7 +1195,7 @@ def _plot_title(args, ds, scene, random: bool) -> str:
     settings = [args.model, f"K={args.samples}"]
     if random:
         settings.append(f"seed {args.seed}")
-        if args.max_agents != 1024:
+        if args.max_agents != MAX_AGENTS:
             settings.append(f"max-agents {args.max_agents}")
     if args.sampler:
         settings.append(f"sampler {args.sampler}")

@@ -168,11 +168,25 @@ def scene_limits(
             float(centre[1] - half[1]), float(centre[1] + half[1]))  # fmt: skip
 
 
+WIDTH_RANGE = (1.0, 40.0)
+"""A figure's width in inches, least and most (``width``; the CLI's ``--width``)."""
+
+DPI_RANGE = (10.0, 2400.0)
+"""A raster figure's pixels per inch, least and most (``dpi``; the CLI's ``--dpi``)."""
+
+
+def in_range(value: float | None, bounds: tuple[float, float]) -> bool:
+    """Whether ``value`` is None (the default) or a finite number within ``bounds``."""
+    return value is None or (math.isfinite(value) and bounds[0] <= value <= bounds[1])
+
+
 def _check_size(width: float | None, dpi: float | None) -> None:
-    if width is not None and not (math.isfinite(width) and 1.0 <= width <= 40.0):
-        raise ConfigError(f"width: the figure's width in inches, 1 to 40, got {width}")
-    if dpi is not None and not (math.isfinite(dpi) and 10 <= dpi <= 2400):
-        raise ConfigError(f"dpi: pixels per inch of a PNG, 10 to 2400, got {dpi}")
+    if not in_range(width, WIDTH_RANGE):
+        raise ConfigError(f"width: the figure's width in inches, {WIDTH_RANGE[0]:g} to "
+                          f"{WIDTH_RANGE[1]:g}, got {width}")  # fmt: skip
+    if not in_range(dpi, DPI_RANGE):
+        raise ConfigError(f"dpi: pixels per inch of a PNG, {DPI_RANGE[0]:g} to "
+                          f"{DPI_RANGE[1]:g}, got {dpi}")  # fmt: skip
 
 
 def _joined(paths: np.ndarray) -> np.ndarray:
