@@ -76,11 +76,12 @@ def check_output_dir(path: str | Path, what: str = "--out") -> Path:
 
 
 @contextlib.contextmanager
-def atomic_path(path: str | Path) -> Iterator[Path]:
+def atomic_path(path: str | Path, mode: int | None = None) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it onto ``path`` only on success.
 
-    The file gets the umask's mode (as ``open()`` would give it). Folders created for it are
-    removed again when the write fails; an ``OSError`` becomes a one-line ``TrajprefError``."""
+    The file gets ``mode``, or with None the umask's mode (as ``open()`` would give it).
+    Folders created for it are removed again when the write fails; an ``OSError`` becomes a
+    one-line ``TrajprefError``."""
     path = Path(path)
     existing = _nearest_existing(path.parent)
     try:
@@ -94,7 +95,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     done = False
     try:
         yield tmp_path
-        os.chmod(tmp_path, file_mode())
+        os.chmod(tmp_path, file_mode() if mode is None else mode)
         try:
             os.replace(tmp_path, path)
         except OSError as exc:

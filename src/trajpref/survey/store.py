@@ -33,7 +33,6 @@ import difflib
 import os
 import re
 import sqlite3
-import tempfile
 import threading
 import warnings
 from collections.abc import Iterator
@@ -42,6 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from trajpref.errors import ConfigError, TrajprefError
+from trajpref.io import atomic_path
 from trajpref.survey.manifest import CRITERIA, RATING_MAX, RATING_MIN, Study
 
 RATER_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.@-]{0,63}$")
@@ -139,36 +139,11 @@ def _create_private(path: Path) -> None:
         os.close(fd)
 
 
-@contextlib.contextmanager
-def private_output(path: str | Path) -> Iterator[Path]:
-    """A temporary path beside ``path``, renamed onto it on success as an owner-only file
-    (``FILE_MODE``): for what holds rater ids (``survey export``'s CSV, ``analyze``'s report
-    of excluded raters). Like ``trajpref.io.atomic_path``, whose files take the umask's mode;
-    folders it creates are removed again on failure."""
-    path = Path(path)
-    made = [f for f in (path.parent, *path.parent.parents) if not f.exists()]
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
-        os.close(fd)  # mkstemp: mode 0600 whatever the umask
-    except OSError as exc:
-        raise TrajprefError(f"{path}: cannot write ({exc.strerror or exc})") from None
-    tmp = Path(name)
-    done = False
-    try:
-        yield tmp
-        try:
-            os.chmod(tmp, FILE_MODE)
-            os.replace(tmp, path)
-        except OSError as exc:
-            raise TrajprefError(f"{path}: cannot write ({exc.strerror or exc})") from None
-        done = True
-    finally:
-        tmp.unlink(missing_ok=True)
-        if not done:
-            for folder in made:  # innermost first
-                with contextlib.suppress(OSError):
-                    folder.rmdir()
+def private_output(path: str | Path) -> contextlib.AbstractContextManager[Path]:
+    """``trajpref.io.atomic_path`` for an owner-only file (``FILE_MODE``, whatever the umask):
+    for what holds rater ids (``survey export``'s CSV, ``analyze``'s report of excluded
+    raters)."""
+    return atomic_path(path, mode=FILE_MODE)
 
 
 def _warn_if_shared(path: Path) -> None:
