@@ -247,6 +247,7 @@ _READ_WHEN_CASES = {
     "clip": (["finetune.ratio_against=reference"], ["finetune.ratio_against=rollout"]),
     "gamma": (["finetune.baseline=antithetic", "finetune.value_target=return"],
               ["finetune.baseline=antithetic", "finetune.value_target=reward"]),
+    "kl_form": (["finetune.kl_coef=0.1"], ["finetune.kl_coef=0"]),
 }  # fmt: skip
 
 

@@ -114,6 +114,11 @@ READ_WHEN = (
              lambda ft: "this run's advantage is antithetic (baseline=antithetic) and its "
              "value target the reward (value_target=reward)",
              "or set finetune.value_target=return"),
+    # a coefficient of 0 multiplies the KL term away, whatever its form
+    ReadWhen(("kl_form",), lambda ft: ft.kl_coef > 0,
+             "the KL penalty (finetune.kl_coef > 0)",
+             lambda ft: "this run's finetune.kl_coef is 0, so its reward has no KL term",
+             "or set finetune.kl_coef above 0"),
 )  # fmt: skip
 """What the RL methods read only under another setting: ``finetune_config`` refuses a run
 that names one of these keys (or whose YAML file changes one) where it is not read (a
