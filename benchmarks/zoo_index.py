@@ -50,9 +50,13 @@ DATA = {
 """What each dataset's models were trained and tested on."""
 
 LIMITS = {
-    "eth": "eth's test walkers are faster than any training scene: a quarter move above 2 m/s "
-    "and carry 42 % of the error, so the default model is far from the paper's LED row "
-    "(0.33 / 0.60); validation (the other scenes) does not see that shift.",
+    "eth": "eth's test walkers are faster than any training scene: a quarter (89 of 364 "
+    "agent-windows) move above 2 m/s, and they carried 35-44 % of the minFDE20 error in the "
+    "breakdowns on file (`benchmarks/results/meta/speed_breakdown_eth*.json`, generators of "
+    "2026-11-22 to 2026-11-28: 44 % for the 0.759-minFDE20 default of 2026-11-25, 38 % for "
+    "the 0.672 one of 2026-11-28; today's default has none on file), so the default model is "
+    "far from the paper's LED row (0.33 / 0.60); validation (the other scenes) does not see "
+    "that shift.",
     "eth/generator-pace": "Labelled: trained on a second copy of its training files read every "
     "5/3 frame steps (`data.extra_time_step`), the pace of eth's test file as its provenance "
     "documents it (docs/data.md). That is knowledge of the test file the other defaults do "
@@ -72,8 +76,9 @@ LIMITS = {
     "1`, limits its spread, not its shape). The cause is in the best-of-K training "
     "(docs/pretraining.md, 'eth: every sample trained').",
     "zara2/rlhf-res": "One of its 20 samples (index 14) is noise after the fine-tuning, with "
-    "jumps of up to 30 m in one step (its start, `zara2/generator`, has none): minADE20 / "
-    "minFDE20 do not see it, figures and planners that use every sample do.",
+    "jumps of up to 30 m in one step (its start, zara2's default generator of 2026-11-24, "
+    "weights hash 78f430a04523bf9a, since replaced and not today's `zara2/generator`, had "
+    "none): minADE20 / minFDE20 do not see it, figures and planners that use every sample do.",
     "zara1/generator": "The CPU default (160 generator epochs without denoising steps, dropout "
     "0.2; its best validation epoch is under Training above) is 0.04 m short of LED's own "
     "minFDE20 (0.18 / 0.26); the "
@@ -82,8 +87,7 @@ LIMITS = {
     "is no better on the test split (docs/pretraining.md).",
     "robo": "Trained on our simulator only (docs/robo_sim.md says how it differs from the real "
     "robots).",
-    "robo/generator": "Its test minFDE20 is 0.0006 m above the paper's LED row (0.22 / 0.35), "
-    "its minADE20 0.03 m behind. It expects scenes of at most 3 robots listed as leader, "
+    "robo/generator": "It expects scenes of at most 3 robots listed as leader, "
     "follower, approacher (`model.agent_roles`): listed in another order it is 3-5x worse, "
     "about constant velocity (`benchmarks/robo_order.py`); for robots whose roles are unknown "
     "use the generator without roles, `git show "
@@ -102,14 +106,17 @@ LIMITS = {
     "nba": "A 6-epoch denoiser and 40 generator epochs without denoising steps over 203,511 "
     "windows, to fit the 45-minute CPU budget; twice the generator epochs did not improve "
     "validation (docs/pretraining.md). Our 8 + 12 split is not LED's 10 + 20, so LED's NBA "
-    "numbers are not comparable. No full-sampler test row (56,386 test windows).",
-    "univ": "No full-sampler test row: univ's test split is large (24,334 agent-windows) and "
-    "the 100-step sampler was only timed on it.",
-    "denoiser": "As a predictor it runs the full 100-step sampler (about 15x slower than a "
-    "generator's leapfrog). As a scorer (`--scorer`, `TrajectoryScorer`) see docs/score.md: "
-    "its ranking matches the paper's top-5 recall on zara1, is at chance on eth.",
+    "numbers are not comparable; its minADE20 / minFDE20 average over all 11 agents of a "
+    "window, the ball included.",
+    "denoiser": "As a scorer (`--scorer`, `TrajectoryScorer`) see docs/score.md: its ranking "
+    "matches the paper's top-5 recall on zara1, is at chance on eth.",
 }
-"""Known limits, by dataset, by model name and by kind (all that apply are listed)."""
+"""Known limits, by dataset, by model name and by kind (all that apply are listed); the
+generated ones (``generated_limits``) follow them."""
+
+LED_GAP = {"robo/generator": "robo"}
+"""Models whose card states its distance to the seed paper's LED row (paper_tables.json),
+computed from its test row: the name -> the paper's dataset."""
 
 STAGE_SECTIONS = {"denoiser": ("data", "model", "diffusion", "denoiser"),
                   "generator": ("data", "model", "diffusion", "generator")}  # fmt: skip
@@ -224,6 +231,7 @@ def _test_row(row: dict[str, Any]) -> dict[str, Any]:
     keys = ("split", "samples", "seed", "min_ade", "min_fde", "joint_min_ade", "joint_min_fde",
             "date", "machine", "command")  # fmt: skip
     out = {k: row.get(k) for k in keys}
+    out["protocol"] = row.get("protocol", "all")  # the windows counted (docs/data.md)
     out["method"] = row["method"]
     return out
 
@@ -233,7 +241,11 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
     dataset, stem = name.split("/")
     head = zoo.header(path)
     kind, meta = head["kind"], head.get("meta") or {}
+    # a card's test row is the default protocol's (``all``): the same file and method also
+    # has ``sgan`` rows, often the newer ones
+    rows = [r for r in rows if r.get("protocol", "all") == "all"]
     by_file = newest_rows(rows)
+    den_threads = None  # where a generator card's denoiser command takes its threads from
     entry: dict[str, Any] = {"name": name, "dataset": dataset, "kind": kind,
                              "file": f"{dataset}/{path.name}", "hash": head["hash"]}  # fmt: skip
     spec = SPECS.get(dataset)
@@ -279,7 +291,7 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
             from_today = meta.get("from") == today
             row, start = tuned_row(rows, dataset, stem, from_today), f"{dataset}/generator"
             run = _meta(dataset, None)
-            machine = row["machine"] if row else None
+            machine, machine_from = (row["machine"] if row else None), "test row"
             train_cmd = []
             if not from_today:  # fine-tuned from a default since replaced
                 suffix = row["method"].removeprefix(stem) if row else ""
@@ -296,8 +308,9 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
             entry["method"] = "pretrained" + (f"-{variant}" if variant else "")
             row = by_file.get((name, entry["method"]))
             run = _meta(dataset, variant)
-            machine = (run.get("train_machine") or run.get("trained_on")
-                       or (row or {}).get("machine"))  # fmt: skip
+            machine = run.get("train_machine") or run.get("trained_on")
+            machine_from = "training" if machine else "test row"
+            machine = machine or (row or {}).get("machine")
             out = f"runs/{dataset}" + (f"-{variant}" if variant else "")
             den = ""
             if variant and entry["denoiser"] == f"{dataset}/denoiser":
@@ -312,11 +325,14 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
                 # the denoiser's own settings: a data flag adopted for the generator stage only
                 # (data.flip, data.reverse) is off in the published denoiser's file
                 den_file = path.parent / f"{Path(ref['path']).stem}.safetensors" if ref else None
-                den_cfg = (to_dict(ckpt.config_of(zoo.header(den_file)))
-                           if den_file is not None and den_file.is_file() else cfg)  # fmt: skip
-                dsets = "".join(f" --set {s}" for s in overrides(dataset, "denoiser", den_cfg))
-                train_cmd.insert(0, f"trajpref train diffusion --config configs/{dataset}.yaml "
-                                    f"--out {out}{dsets}")  # fmt: skip
+                den_head = (zoo.header(den_file) if den_file is not None and den_file.is_file()
+                            else None)  # fmt: skip
+                den_cfg = to_dict(ckpt.config_of(den_head)) if den_head else cfg
+                den_machine, den_from = denoiser_machine((den_head or {}).get("meta") or {},
+                                                         rows, dataset, variant)  # fmt: skip
+                train_cmd.insert(0, denoiser_command(dataset, out, den_cfg, den_machine))
+                if den_from != "training" and thread_prefix(den_machine):
+                    den_threads = den_from
             ref = head.get("weights_ref")
             if ref:  # a settings-only variant: its base's run, then the settings
                 base = f"{dataset}/{Path(ref['path']).stem}"
@@ -333,19 +349,17 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
     else:
         entry["sampler"] = "full"
         entry["method"] = "denoiser" + (f"-{variant}" if variant else "")
-        # the full-sampler row of the generator run that trained (and references) it
-        row = next((r for r in rows if r["method"] == "full-sampler" and r["dataset"] == dataset
-                    and _zoo_file(r.get("checkpoint")) == f"{dataset}/generator"
-                    + (f"-{variant}" if variant else "")), None)  # fmt: skip
+        row = _full_sampler_row(rows, dataset, variant)
         run = _meta(dataset, variant)
-        machine = (row or {}).get("machine") or _any_machine(rows, dataset, variant)
+        machine, machine_from = denoiser_machine(meta, rows, dataset, variant)
         out = f"runs/{dataset}" + (f"-{variant}" if variant else "")
-        sets = "".join(f" --set {s}" for s in overrides(dataset, kind, cfg))
-        train_cmd = [f"trajpref train diffusion --config configs/{dataset}.yaml --out {out}{sets}"]
+        train_cmd = [denoiser_command(dataset, out, cfg, machine)]
         seconds = (run.get("stage_seconds") or {}).get("denoiser") or meta.get("train_seconds")
         minutes = {"denoiser": round(seconds / 60, 1) if seconds else None}
     entry["train"] = {
         "machine": machine,
+        "machine_from": machine_from,
+        **({"denoiser_threads_from": den_threads} if den_threads else {}),
         "machine_short": machine_short(machine),
         "minutes": minutes,
         "estimate": None if variant else _cost_estimate(dataset, kind, cfg),
@@ -354,7 +368,10 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
         "commands": train_cmd,
     }
     entry["test"] = _test_row(row) if row else None
+    full_row = any(r["method"] == "full-sampler" and r["dataset"] == dataset
+                   and r.get("split") == "test" for r in rows)  # fmt: skip
     entry["limits"] = [LIMITS[k] for k in (dataset, name, kind) if k in LIMITS]
+    entry["limits"] += generated_limits(name, kind, entry["test"], full_row)
     entry["card"] = f"{dataset}/{stem}.md"
     return entry
 
@@ -379,10 +396,133 @@ def _cost_estimate(dataset: str, kind: str, cfg: dict[str, Any]) -> dict[str, An
             "minutes": {k: cost[k]["minutes"] for k in stages}}  # fmt: skip
 
 
+def _full_sampler_row(rows: list[dict[str, Any]], dataset: str,
+                      variant: str | None) -> dict[str, Any] | None:  # fmt: skip
+    """The full-sampler row of the generator run that trained (and references) a denoiser."""
+    name = f"{dataset}/generator" + (f"-{variant}" if variant else "")
+    return next((r for r in rows if r["method"] == "full-sampler" and r["dataset"] == dataset
+                 and _zoo_file(r.get("checkpoint")) == name), None)  # fmt: skip
+
+
+MACHINE_FROM = {
+    "training": "On {machine}",
+    "test row": "No training record names the machine; the one that evaluated its test row "
+    "(below) was {machine}",
+    "another row": "No training record names the machine, and it has no test row of its own; "
+    "the one that evaluated the `pretrained` row of {dataset} (its generator's) was {machine}",
+}
+"""Where a card's machine comes from: a training record (``trained_on``, ``train_machine``,
+a checkpoint's ``meta.machine``), the run that evaluated its test row, or another row of its
+dataset; the last two say so on the card."""
+
+
+def denoiser_machine(meta: dict[str, Any], rows: list[dict[str, Any]], dataset: str,
+                     variant: str | None) -> tuple[str | None, str]:  # fmt: skip
+    """A published denoiser's machine and where it comes from (a ``MACHINE_FROM`` key): its
+    checkpoint's own record of the training process (``meta.machine``; no published denoiser
+    has one today: each was trained before the field, or reused by a later run), else the
+    machine of its full-sampler test row, else that of its dataset's ``pretrained`` row."""
+    if meta.get("machine"):
+        return meta["machine"], "training"
+    row = _full_sampler_row(rows, dataset, variant)
+    if row is not None:
+        return row.get("machine"), "test row"
+    return _any_machine(rows, dataset, variant), "another row"
+
+
+def denoiser_command(dataset: str, out: str, cfg: dict[str, Any], machine: str | None) -> str:
+    """The command that trains a published denoiser again: its config's ``--set`` values,
+    the thread count of ``machine`` in front as the generator commands have it (a seed
+    repeats its run exactly only at the same count)."""
+    sets = "".join(f" --set {s}" for s in overrides(dataset, "denoiser", cfg))
+    return (
+        f"{thread_prefix(machine)}trajpref train diffusion --config configs/{dataset}.yaml "
+        f"--out {out}{sets}"
+    )
+
+
 def _any_machine(rows: list[dict[str, Any]], dataset: str, variant: str | None) -> str | None:
-    method = "pretrained" + (f"-{variant}" if variant else "")
-    row = next((r for r in rows if r["dataset"] == dataset and r["method"] == method), None)
+    """The machine of the generator's ``pretrained`` row that its card shows (the newest row
+    of that file), else of any ``pretrained`` row of the dataset."""
+    suffix = f"-{variant}" if variant else ""
+    method = f"pretrained{suffix}"
+    row = newest_rows(rows).get((f"{dataset}/generator{suffix}", method)) or next(
+        (r for r in rows if r["dataset"] == dataset and r["method"] == method), None
+    )
     return row["machine"] if row else None
+
+
+def speed_note(speed: dict[str, Any], dataset: str) -> str:
+    """A denoiser's cost as a predictor, from ``benchmarks/speed.py``'s record (``speed``):
+    the range of full-sampler / leapfrog ratios over the published generators it timed, and
+    the ratio for the dataset's default generator where it timed one; "" without a record."""
+    timed = speed.get("models") or {}
+    if not timed:
+        return ""
+    ratios = [m["full_over_leapfrog"] for m in timed.values()]
+    own = timed.get(f"{dataset}/generator")
+    mine = (f", {own['full_over_leapfrog']:.1f}x beside `{dataset}/generator`" if own
+            else "")  # fmt: skip
+    return (f"As a predictor it runs the full 100-step sampler, which took "
+            f"{min(ratios):.1f}-{max(ratios):.1f}x the time per scene of each published "
+            f"generator's leapfrog in `benchmarks/results/meta/speed.json` "
+            f"({speed.get('date')}, the README's speed table){mine}.")  # fmt: skip
+
+
+def led_gap(row: dict[str, Any], led: list[float]) -> str:
+    """The sentence that places a test row against the seed paper's LED row ``led`` (minADE20,
+    minFDE20), computed from the row (a hand-written distance went stale when the row
+    changed)."""
+
+    def side(ours: float, theirs: float) -> str:
+        gap = round(ours - theirs, 3)
+        if gap == 0:
+            return "level with"
+        return f"{abs(gap):.3f} m {'above' if gap > 0 else 'below'}"
+
+    return (
+        f"Its test minFDE20 is {side(row['min_fde'], led[1])} the paper's LED row "
+        f"({led[0]:.2f} / {led[1]:.2f}), its minADE20 {side(row['min_ade'], led[0])}."
+    )
+
+
+def subset_note(dataset: str) -> str:
+    """Where a dataset has no full-sampler row over its whole test split, the cell that
+    ``benchmarks/reproduce.py`` measured on evenly spaced test agents (docs/reproduce.md's ‡
+    cells), from its stored state; "" when there is none or it covers the whole split."""
+    path = RESULTS / "meta" / "reproduce" / f"{dataset}_full-sampler.json"
+    if not path.is_file():
+        return ""
+    cell = json.loads(path.read_text())
+    if cell["agents"] >= cell["split_agents"]:
+        return ""
+    res = cell["result"]
+    return (f"No full-sampler row covers its whole test split ({cell['split_agents']:,} "
+            f"agent-windows); `benchmarks/reproduce.py` measured the 100-step sampler on "
+            f"{cell['agents']:,} of its {cell['split_agents']:,}, evenly spaced: "
+            f"{res['min_ade']:.3f} / {res['min_fde']:.3f} ({cell['date']}, docs/reproduce.md, "
+            "the cells marked ‡).")  # fmt: skip
+
+
+def generated_limits(name: str, kind: str, test: dict[str, Any] | None,
+                     full_row: bool) -> list[str]:  # fmt: skip
+    """The card limits computed from the repository's files: the distance to the paper's LED
+    row (``LED_GAP``), the subset full-sampler cell of a dataset without a whole-split
+    full-sampler row (``full_row``: whether it has one), and a denoiser's cost as a
+    predictor."""
+    dataset = name.split("/")[0]
+    out = []
+    if name in LED_GAP and test:
+        paper = json.loads((ROOT / "benchmarks" / "paper_tables.json").read_text())
+        out.append(led_gap(test, paper["tables"]["table1"]["rows"][LED_GAP[name]]["LED"]))
+    if not full_row and (note := subset_note(dataset)):
+        out.append(note)
+    if kind == "denoiser":
+        speed_path = RESULTS / "meta" / "speed.json"
+        speed = json.loads(speed_path.read_text()) if speed_path.is_file() else {}
+        if note := speed_note(speed, dataset):
+            out.append(note)
+    return out
 
 
 def _estimate_lines(estimate: dict[str, Any] | None) -> list[str]:
@@ -475,6 +615,31 @@ def _merged_changes(changes: list[dict[str, Any]]) -> list[tuple[dict[str, Any],
     return merged
 
 
+def _training_line(e: dict[str, Any]) -> str:
+    """The card's first Training line: the machine (and where the card has it from, when
+    that is not a training record), the minutes per stage and the best epoch."""
+    t = e["train"]
+    stages = ", ".join(f"{k} stage {v} min" for k, v in t["minutes"].items() if v is not None)
+    stages += f", best validation epoch {t['epochs']}" if t.get("epochs") else ""
+    source = t.get("machine_from", "training") if t["machine"] else "training"
+    where = MACHINE_FROM[source].format(machine=t["machine"] or "an unrecorded machine",
+                                        dataset=e["dataset"])  # fmt: skip
+    if source == "training":
+        text = f"{where}: {stages}."
+    else:
+        if any(c.startswith("OMP_NUM_THREADS=") for c in t["commands"][-1:]):
+            where += ". The thread count in front of its command is that run's"
+        text = f"{where}. {stages[:1].upper()}{stages[1:]}."
+    den_from = t.get("denoiser_threads_from")
+    if den_from:
+        run = (f"`{e['denoiser']}`'s test row" if den_from == "test row"
+               else f"the `pretrained` row of {e['dataset']}")  # fmt: skip
+        text += (f" The denoiser's command (the first) carries the thread count of the run "
+                 f"that evaluated {run}: no training record names the denoiser's "
+                 "machine.")  # fmt: skip
+    return text
+
+
 def card(e: dict[str, Any]) -> str:
     """A short Markdown model card."""
     d, t, test = e["data"], e["train"], e["test"]
@@ -498,10 +663,7 @@ def card(e: dict[str, Any]) -> str:
         "",
         "## Training",
         "",
-        f"On {t['machine'] or 'an unrecorded machine'}: "
-        + ", ".join(f"{k} stage {v} min" for k, v in t["minutes"].items() if v is not None)
-        + (f", best validation epoch {t['epochs']}" if t.get("epochs") else "")
-        + ".",
+        _training_line(e),
         *_estimate_lines(t.get("estimate")),
         "",
         "```bash",
@@ -513,7 +675,8 @@ def card(e: dict[str, Any]) -> str:
     ]
     if test:
         lines += [
-            f"{test['split']} split, K = {test['samples']}, seed {test['seed']} "
+            f"{test['split']} split, protocol `{test['protocol']}`, K = {test['samples']}, "
+            f"seed {test['seed']} "
             f"(row `{test['method']}`, {test['date']}, evaluated on {test['machine']}):",
             "",
             "| minADE | minFDE | joint minADE | joint minFDE |",

@@ -531,5 +531,5 @@ def test_a_scorer_trained_on_other_units_is_warned_of_as_plot_warns(capsys, walk
     argv += ["--json"] if command == "evaluate" else ["--rank", "--out", tmp_path / "p.npz"]
     code, _, err = _run(capsys, *argv)
     assert code == 0
-    assert ("trajpref: warning: zara1/denoiser was trained on zara1: this data is in px, the "
-            "model's in m") in err  # fmt: skip
+    assert ("trajpref: warning: zara1/denoiser was trained on the zara1 fold (leave-one-out: "
+            "the other four scenes): this data is in px, the model's in m") in err  # fmt: skip

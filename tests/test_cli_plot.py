@@ -135,8 +135,9 @@ def test_the_ranked_figure_names_its_scorer_and_warns_of_one_trained_otherwise(
     code, _, err = _run(capsys, *base, "--units", "px", "--scorer", "zara1/denoiser", "--out",
                         tmp_path / "f.png", "--draw-samples", "3")  # fmt: skip
     assert code == 0
-    assert err == ("trajpref: warning: zara1/denoiser was trained on zara1: this data is in px, "
-                   "the model's in m\n")  # fmt: skip
+    assert err == ("trajpref: warning: zara1/denoiser was trained on the zara1 fold "
+                   "(leave-one-out: the other four scenes): this data is in px, the model's "
+                   "in m\n")  # fmt: skip
     name, args, kwargs = drawn[-1]
     assert name == "plot_scene_scored" and args[6].endswith("; ranked by zara1/denoiser")
     assert args[7] == 3  # --draw-samples: the best 3 per agent

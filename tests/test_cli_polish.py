@@ -63,20 +63,21 @@ def test_non_finite_metrics_are_null_in_json_with_a_warning(capsys, monkeypatch,
 def test_a_model_trained_in_other_units_or_at_another_step_is_named_in_one_warning(
     capsys, walks, tiny_run
 ):
-    base = ["evaluate", "--dataset", walks, "--samples", "2", "--no-progress", "--device", "cpu"]
+    base = ["evaluate", "--dataset", walks, "--no-progress", "--device", "cpu"]
     # a published pedestrian model (metres, 0.4 s) on pixel data read at 0.1 s steps
     code, _, err = _run(capsys, *base, "--model", "zara1/generator", "--units", "px",
-                        "--frame-interval", "0.1")  # fmt: skip
+                        "--frame-interval", "0.1", "--samples", "20")  # fmt: skip
     assert code == 0
     assert err.strip() == (
-        "trajpref: warning: zara1/generator was trained on zara1: this data is in px, the "
-        "model's in m; this data steps 0.1 s, the model's 0.4 s (--time-step 4 reads it at "
-        "the model's step)"
+        "trajpref: warning: zara1/generator was trained on the zara1 fold (leave-one-out: the "
+        "other four scenes): this data is in px, the model's in m; this data steps 0.1 s, the "
+        "model's 0.4 s (--time-step 4 reads it at the model's step)"
     )
     # the same data described as the model's: silent; so is a model trained on a user folder
-    # (its units were not recorded) and the constant-velocity baseline
-    for model in ("zara1/generator", tiny_run / "generator.safetensors", "cv"):
-        code, _, err = _run(capsys, *base, "--model", model, "--units", "m")
+    # (its units were not recorded) and the constant-velocity baseline (each at its own K)
+    for model, k in (("zara1/generator", 20), (tiny_run / "generator.safetensors", 4),
+                     ("cv", 4)):  # fmt: skip
+        code, _, err = _run(capsys, *base, "--model", model, "--units", "m", "--samples", k)
         assert (code, err) == (0, ""), model
 
 
@@ -282,7 +283,7 @@ def test_the_sampling_flags_say_when_a_generator_takes_no_denoising_step(
     capsys, monkeypatch, walks, tiny_run
 ):
     gen = tiny_run / "generator.safetensors"
-    base = ["evaluate", "--dataset", walks, "--model", gen, "--samples", "2", "--no-progress",
+    base = ["evaluate", "--dataset", walks, "--model", gen, "--samples", "4", "--no-progress",
             "--device", "cpu", "--stochastic"]  # fmt: skip
     code, _, err = _run(capsys, *base)
     assert (code, err) == (0, "")  # tau > 0: the flag acts

@@ -49,3 +49,22 @@ def test_nothing_to_time_is_a_clear_error():
         time_predictors({}, _dataset(2), 1)
     with pytest.raises(ConfigError, match="at least one scene"):
         time_predictors({"a": Recorder("a", [])}, _dataset(0), 1)
+
+
+def test_a_models_name_is_refused_before_any_work_with_how_to_load_it(capsys):
+    """evaluate('hotel/generator', ds) drew a progress bar, then raised a bare AttributeError."""
+    from trajpref.errors import TrajprefError
+    from trajpref.evaluation import evaluate, predict_dataset
+    from trajpref.models.baseline import ConstantVelocity
+
+    data = _dataset(3)
+    for call in (evaluate, predict_dataset):
+        with pytest.raises(TypeError, match=r"model must be a predictor .*got str: load it "
+                           r"first, trajpref\.models\.registry\.load_predictor\('hotel/generator'"
+                           r"\)") as err:  # fmt: skip
+            call("hotel/generator", data, progress=True)
+        assert isinstance(err.value, TrajprefError)  # the CLI's one-line kind
+        with pytest.raises(TypeError, match=r"got str: load it first, trajpref\.data\."
+                           r"load_dataset\('hotel', split\)"):  # fmt: skip
+            call(ConstantVelocity(), "hotel", progress=True)
+    assert capsys.readouterr().err == ""  # no progress bar was drawn

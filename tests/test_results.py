@@ -1,6 +1,7 @@
 """Result rows and the README tables made from them."""
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -8,7 +9,10 @@ from bench import load_benchmark
 
 from trajpref.results import (
     FIELDS,
+    PEER_COLUMNS,
+    PEER_HEADERS,
     RUNNABLE_STARTS,
+    SECONDARY_MARK,
     START_SUFFIXES,
     ResultConflict,
     accuracy_table,
@@ -17,6 +21,7 @@ from trajpref.results import (
     finetune_start,
     make_row,
     merge_rows,
+    peers_notes,
     peers_table,
     read_rows,
     selection_table,
@@ -92,7 +97,7 @@ def test_peers_table_averages_our_folds_only_when_all_five_are_there():
     assert ours_all.startswith("| **trajpref** (`pretrained`) | all |")
     assert "**0.30 / 0.60**" in ours_all  # mean of 0.1..0.5 and of 0.2..1.0
     assert "| sgan | **0.50 / 0.90** |" in ours_sgan and "0.30 / 0.60" not in ours_sgan
-    assert peer == "| Peer | sgan | 0.35 / 0.42 | – | – | – | – | – | – | – | – |"
+    assert peer == "| Peer | sgan | 0.35 / 0.42 | – | – | – | – | – | – | – | – | – |"
 
 
 def test_peers_table_gives_each_named_method_its_own_line():
@@ -108,6 +113,50 @@ def test_peers_table_gives_each_named_method_its_own_line():
     assert "**0.10 / 0.30**" in ours[1] and "0.90" not in lines
 
 
+def test_our_nba_rows_have_their_own_column_beside_the_peers_nba_split():
+    """Our NBA is the rebound split (8 + 12, the ball an agent); the peers' is LED's 10 + 20:
+    the two never share a column."""
+    peers = {"methods": {"Peer": {"protocol": "all", "nba": [0.81, 1.10], "source": "s"}}}
+    rows = [_row("nba", ade=0.21, fde=0.35)]
+    header, _, ours, peer = peers_table(peers, rows).splitlines()
+    names = [c.strip() for c in header.split("|")[1:-1]]
+    ours_cells = dict(zip(names, [c.strip() for c in ours.split("|")[1:-1]], strict=True))
+    peer_cells = dict(zip(names, [c.strip() for c in peer.split("|")[1:-1]], strict=True))
+    led, rebound = PEER_HEADERS["nba"], PEER_HEADERS["nba-rebound"]
+    assert "10 + 20" in led and "8 + 12" in rebound and "ball" in rebound
+    assert ours_cells[led] == "–" and ours_cells[rebound] == "**0.21 / 0.35**"
+    assert peer_cells[led] == "0.81 / 1.10" and peer_cells[rebound] == "–"
+
+
+def test_a_peer_number_quoted_second_hand_is_marked():
+    peers = {"methods": {"Peer": {"protocol": "sgan", "eth": [0.35, 0.42], "sdd": [7.5, 12.0],
+                                  "secondary": ["sdd"], "source": "s"}}}  # fmt: skip
+    (peer,) = peers_table(peers, []).splitlines()[2:]
+    assert "| 0.35 / 0.42 |" in peer and f"| 7.50 / 12.00 {SECONDARY_MARK} |" in peer
+
+
+def test_the_peers_notes_state_the_average_the_nba_split_and_protocol_sources():
+    peers = {"methods": {"Peer": {"protocol": "sgan", "source": "s", "protocol_source": {
+        "repository": "org/peer", "commit": "abc1234", "lines": ["loader.py:104"],
+        "reads": "keeps windows with more than one agent"}}}}  # fmt: skip
+    note = peers_notes(peers)
+    assert "unweighted mean of the five fold means" in note
+    assert "ball" in note and "10 + 20" in note and SECONDARY_MARK in note
+    assert "Peer: `sgan` (org/peer at abc1234, loader.py:104" in note
+
+
+def test_the_peers_files_paper_rows_are_the_papers_table():
+    """The seed paper's rows in the peers table are typed in twice (benchmarks/peers.json and
+    benchmarks/paper_tables.json); every cell the peers table has a column for agrees."""
+    peers = json.loads((ROOT / "benchmarks" / "peers.json").read_text())["methods"]
+    paper = json.loads((ROOT / "benchmarks" / "paper_tables.json").read_text())
+    rows = paper["tables"]["table1"]["rows"]
+    for name, column in (("the paper: LED column", "LED"), ("the paper: RLHF-ReS", "RLHF-ReS")):
+        for dataset in paper["datasets"]:  # the seven datasets, not the paper's 7-set avg
+            assert dataset in PEER_COLUMNS, dataset
+            assert peers[name].get(dataset) == rows[dataset][column], (name, dataset)
+
+
 def test_the_peers_file_has_a_source_and_a_protocol_for_every_method():
     peers = json.loads((ROOT / "benchmarks" / "peers.json").read_text())
     for name, entry in peers["methods"].items():
@@ -117,6 +166,14 @@ def test_the_peers_file_has_a_source_and_a_protocol_for_every_method():
             if col in entry:
                 ade, fde = entry[col]
                 assert 0 < ade < fde, (name, col)
+        assert set(entry.get("secondary", [])) <= set(entry) & set(PEER_COLUMNS), name
+        assert "nba-rebound" not in entry, name  # no peer's number is on our split yet
+        if "protocol_source" in entry:  # read from the peer's public code
+            src = entry["protocol_source"]
+            assert entry["protocol"] != "unknown" and src["repository"] and src["lines"], name
+            assert re.fullmatch(r"[0-9a-f]{7,40}", src["commit"]), name
+    assert set(peers["columns"]) == set(PEER_COLUMNS)
+    assert peers["methods"]["MART (ECCV 2024)"]["protocol"] == "sgan"
 
 
 def test_write_meta_records_where_and_how_then_the_fields(tmp_path, monkeypatch):

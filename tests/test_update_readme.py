@@ -66,3 +66,32 @@ def test_the_cost_note_names_the_probe_and_the_older_entries_machine_and_probe()
     note = module._older(estimates, run)
     assert "sdd from 2026-11-24 (on host A, in a cold probe)" in note
     assert "nba from 2026-11-27." in note  # same machine and probe: only its date
+
+
+def test_the_score_column_says_which_run_measured_it(tmp_path):
+    """The score column comes from benchmarks/score.py's own run, not from the latencies' run:
+    its note gives the date, machine and command of that run's rows."""
+    import json
+
+    meta = tmp_path / "meta"
+    meta.mkdir()
+    record = {"dataset": "zara1", "params": {"denoiser": 1e6, "generator": 7e5},
+              "stage_seconds": {"denoiser": 600.0, "generator": 600.0},
+              "samples_per_second": {"denoiser": 3000.0, "generator": 800.0},
+              "ms_per_scene": {"leapfrog": 6.0, "full": 80.0},
+              "speedup_full_over_leapfrog": 13.3}  # fmt: skip
+    (meta / "pretrained_zara1.json").write_text(json.dumps(record))
+    (meta / "score_zara1.json").write_text(
+        json.dumps(
+            {"ms_to_rank_k_samples_per_scene": 42.39, "timing_threads": 2, "timing_scenes": 100}
+        )
+    )
+    (tmp_path / "score_zara1.json").write_text(json.dumps([
+        {"method": "pretrained", "date": "2026-12-06", "machine": "host X, 2 threads",
+         "command": "python benchmarks/score.py --dataset zara1 --data-root d"}]))  # fmt: skip
+    table = _module().speed_table(meta)
+    assert "| 42.4 |" in table
+    note = table.splitlines()[-1]
+    assert note.startswith("_Score K=20:")
+    assert "zara1: `python benchmarks/score.py --dataset <D>" in note
+    assert "2026-12-06, host X, 2 threads (100 test scenes, 2 threads)" in note

@@ -142,3 +142,105 @@ def test_a_cards_overrides_read_back_as_the_values_they_set():
             f"generator.budget_schedule={zoo._scalar(False)}"]  # fmt: skip
     cfg = load_config(zoo.ROOT / "configs" / "hotel.yaml", sets)
     assert cfg.generator.max_minutes is None and cfg.generator.budget_schedule is False
+
+
+def _rows(dataset, method, checkpoint, **fields):
+    row = {"dataset": dataset, "method": method, "seed": 0, "split": "test", "samples": 20,
+           "protocol": "all", "checkpoint": checkpoint, "machine": "m, 2 CPU cores, 1 threads",
+           "min_ade": 0.1, "min_fde": 0.2, "joint_min_ade": 0.3, "joint_min_fde": 0.4,
+           "date": "2026-12-01", "command": "python benchmarks/x.py"}  # fmt: skip
+    return {**row, **fields}
+
+
+def test_a_cards_test_row_is_the_all_protocol_row_and_says_so(monkeypatch):
+    """The same checkpoint and method has a row per protocol (``sgan`` rows are often the
+    newer); the card's and the index's test row is the ``all`` one, and says so."""
+    zoo = load_benchmark("zoo_index")
+    monkeypatch.setattr(zoo, "_meta", lambda dataset, variant: {})
+    path = ROOT / "models" / "zara2" / "generator.safetensors"
+    ckpt = "models/zara2/generator.safetensors"
+    rows = [_rows("zara2", "pretrained", ckpt, min_fde=0.21),
+            _rows("zara2", "pretrained", ckpt, protocol="sgan", min_fde=0.99,
+                  date="2026-12-06")]  # fmt: skip
+    entry = zoo.describe("zara2/generator", path, rows)
+    assert entry["test"]["protocol"] == "all" and entry["test"]["min_fde"] == 0.21
+    assert "test split, protocol `all`, K = 20, seed 0" in zoo.card(entry)
+    den = zoo.describe(
+        "zara2/denoiser",
+        path.with_name("denoiser.safetensors"),
+        [_rows("zara2", "full-sampler", ckpt, protocol="sgan", min_fde=0.99)],
+    )
+    assert den["test"] is None  # an sgan row alone is not the card's test row
+
+
+def test_a_denoiser_card_says_whose_machine_it_names_and_its_commands_carry_the_threads(
+    monkeypatch,
+):
+    """No training record names a published denoiser's machine: the card names the machine
+    that evaluated its test row as such, and its command carries that run's thread count as
+    the generator commands do."""
+    zoo = load_benchmark("zoo_index")
+    monkeypatch.setattr(zoo, "_meta", lambda dataset, variant: {"stage_seconds": {
+        "denoiser": 600.0}})  # fmt: skip
+    path = ROOT / "models" / "zara2" / "denoiser.safetensors"
+    rows = [_rows("zara2", "full-sampler", "models/zara2/generator.safetensors",
+                  machine="evaluator, 2 CPU cores, 2 threads")]  # fmt: skip
+    entry = zoo.describe("zara2/denoiser", path, rows)
+    assert entry["train"]["machine_from"] == "test row"
+    assert entry["train"]["commands"][0].startswith("OMP_NUM_THREADS=2 trajpref train diffusion")
+    text = zoo.card(entry)
+    assert "No training record names the machine; the one that evaluated its test row" in text
+    assert "thread count in front of its command is that run's" in text
+    gen = zoo.describe("zara2/generator", path.with_name("generator.safetensors"), rows)
+    assert gen["train"]["commands"][0] == entry["train"]["commands"][0]  # the same denoiser
+    assert "the thread count of the run that evaluated" in zoo.card(gen)
+
+
+def test_the_denoisers_speed_limit_quotes_the_timing_file():
+    zoo = load_benchmark("zoo_index")
+    speed = {"date": "2026-12-03", "models": {
+        "eth/generator": {"full_over_leapfrog": 26.07},
+        "eth/generator-pace": {"full_over_leapfrog": 10.55},
+        "univ/generator": {"full_over_leapfrog": 98.76}}}  # fmt: skip
+    text = zoo.speed_note(speed, "eth")
+    assert "10.6-98.8x" in text and "benchmarks/results/meta/speed.json" in text
+    assert "2026-12-03" in text and "26.1x beside `eth/generator`" in text
+    assert "15x" not in zoo.speed_note(speed, "robo")  # no line of its own: the range only
+    assert zoo.speed_note({"models": {}}, "eth") == ""
+
+
+def test_robos_distance_to_the_papers_led_row_is_computed_from_its_row():
+    zoo = load_benchmark("zoo_index")
+    row = {"min_ade": 0.24617, "min_fde": 0.34564}
+    text = zoo.led_gap(row, [0.22, 0.35])
+    assert text.startswith("Its test minFDE20 is 0.004 m below the paper's LED row (0.22 / 0.35)")
+    assert "its minADE20 0.026 m above" in text
+    assert "0.005 m above" in zoo.led_gap({"min_ade": 0.2, "min_fde": 0.355}, [0.22, 0.35])
+
+
+def test_a_fine_tune_from_a_replaced_start_names_that_start_not_todays_generator():
+    """zara2/rlhf-res started from the default of 2026-11-24; its card must not call today's
+    ``zara2/generator`` its start."""
+    zoo = load_benchmark("zoo_index")
+    from trajpref.models import zoo as published
+
+    head = published.header(ROOT / "models" / "zara2" / "rlhf-res.safetensors")
+    limit = zoo.LIMITS["zara2/rlhf-res"]
+    assert head["meta"]["from"] in limit and "its start, `zara2/generator`" not in limit
+
+
+def test_a_subset_full_sampler_cell_is_quoted_where_no_whole_split_row_exists(
+    tmp_path, monkeypatch
+):
+    import json
+
+    zoo = load_benchmark("zoo_index")
+    (tmp_path / "meta" / "reproduce").mkdir(parents=True)
+    cell = {"result": {"min_ade": 0.2959, "min_fde": 0.5275}, "agents": 5998,
+            "split_agents": 24334, "date": "2026-12-05"}  # fmt: skip
+    (tmp_path / "meta" / "reproduce" / "univ_full-sampler.json").write_text(json.dumps(cell))
+    monkeypatch.setattr(zoo, "RESULTS", tmp_path)
+    text = zoo.subset_note("univ")
+    assert "0.296 / 0.527" in text and "5,998 of its 24,334" in text
+    assert "docs/reproduce.md" in text and "2026-12-05" in text
+    assert zoo.subset_note("hotel") == ""

@@ -5,16 +5,19 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import csv
 import dataclasses
 import json
 import math
 import os
+import shlex
 import signal
 import sys
 import textwrap
 import threading
 import time
 import warnings
+from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +35,7 @@ from trajpref.config import (
 )
 from trajpref.data import PROTOCOLS, ReadOptions, hold_out_scene, load_dataset, mean_speed
 from trajpref.data.loader import SceneLoader
-from trajpref.data.registry import NAMES, SPECS, split_folders
+from trajpref.data.registry import ETH_UCY, NAMES, SPECS, check_protocol_for, split_folders
 from trajpref.data.trajnet import write_trajnet, write_trajnet_truth
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, TrajprefError
@@ -47,6 +50,7 @@ from trajpref.io import (
     check_output_dir,
     check_output_file,
     dumps_json,
+    json_safe,
     read_checkpoint_header,
     write_json,
 )
@@ -55,6 +59,7 @@ from trajpref.models import checkpoint as ckpt
 from trajpref.models import zoo
 from trajpref.models.registry import load_predictor
 from trajpref.models.timing import model_timing, timing_problems, trained_otherwise
+from trajpref.results import machine
 from trajpref.rl.presets import EQUAL_BUDGET_VALIDATIONS, EQUAL_BUDGET_WARMUP, finetune_config
 from trajpref.score import TrajectoryScorer, score_timesteps
 from trajpref.score.scorer import PRECISIONS
@@ -120,7 +125,9 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", default="cv", help="'cv' (constant velocity), a published model "
                    "(DATASET/NAME, see `trajpref models`) or a checkpoint path")  # fmt: skip
     p.add_argument("--samples", type=int, default=20, help="K, samples per agent (default 20)")
-    p.add_argument("--seed", type=int, default=0, help="random seed for sampling (default 0)")
+    p.add_argument("--seed", type=int, default=None, help="random seed for sampling (default 0; "
+                   "a model that draws no noise, such as a published generator, gives the "
+                   "same samples at every seed, and says so)")  # fmt: skip
     p.add_argument(
         "--sampler",
         default=None,
@@ -260,7 +267,16 @@ def build_parser() -> argparse.ArgumentParser:
     _add_data_args(ev)
     _add_model_args(ev)
     ev.add_argument("--json", action="store_true", help="print JSON")
-    ev.add_argument("--out", default=None, help="also write the JSON result to this file")
+    ev.add_argument("--out", default=None, metavar="FILE.json|FILE.csv",
+                    help="also write the result to this file: .json (the JSON that --json "
+                    "prints) or .csv (a header and one row, nested results such as --bins' "
+                    "as dotted columns); with what made it (model settings, version, date, "
+                    "machine, command)")  # fmt: skip
+    ev.add_argument("--allow-overlap", action="store_true",
+                    help="evaluate an ETH/UCY fold's model (or scorer) on another fold "
+                    "anyway: its leave-one-out training files hold most of that fold's "
+                    "windows, so it is refused without this flag; the result records "
+                    "'overlap'")  # fmt: skip
     _add_scorer_arg(ev, "adds max_ats, max_fts and the top-1/top-5 recall of the "
                     "ground-truth-free ranking")  # fmt: skip
     _add_selection_args(ev, "--scorer")
@@ -314,9 +330,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--format",
         choices=["npz", "trajnet"],
         default="npz",
-        help="npz: every array (default); trajnet: a TrajNet++ prediction file that "
-        "trajnetplusplustools' evaluator reads (one TrajNet++ scene per agent; "
-        "docs/data_format.md)",
+        help="npz: every array, and meta: a JSON string of what made them (model, hashes, "
+        "dataset, split, protocol, seed, K, version, command; default); trajnet: a TrajNet++ "
+        "prediction file that trajnetplusplustools' evaluator reads (one TrajNet++ scene "
+        "per agent; docs/data_format.md)",
     )
     pr.add_argument(
         "--truth",
@@ -345,7 +362,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "do not change with the seed is run on the scene alone.")  # fmt: skip
     _add_data_args(pl)
     _add_model_args(pl)
-    pl.add_argument("--scene", type=int, default=0, help="scene index in the split (default 0)")
+    pl.add_argument("--scene", default="0", metavar="INDEX|SCENE_ID",
+                    help="the scene: its index in the split as read (with --protocol) or its "
+                    "scene id, e.g. biwi_eth.txt@frame=830 (printed by plot, and saved by "
+                    "predict as scene_id; default 0)")  # fmt: skip
     pl.add_argument("--out", required=True, help="output figure: .png, .pdf or .svg, written "
                     "in the format its suffix names")  # fmt: skip
     _add_scorer_arg(pl, "beside the ground truth, draw each agent's best samples by their "
@@ -527,12 +547,19 @@ def _check_data_args(args) -> None:
                       f"knows its own ({spec.units}, {spec.frame_interval:g} s), so they are "
                       "ignored", stacklevel=2)  # fmt: skip
     _read_options(args)  # --delimiter, --max-gap, --max-coord, --time-step
+    if args.command in PROTOCOL_CHECKED:  # sgan is ETH/UCY's counting (not SDD's, NBA's)
+        check_protocol_for(args.dataset, args.protocol)
     if args.holdout_scene is not None:
         if not args.holdout_scene:
             raise ConfigError("--holdout-scene needs a file-name prefix, e.g. biwi_hotel")
         if args.split != "val":
             raise ConfigError(f"--holdout-scene selects a validation split: use it with "
                               f"--split val, not --split {args.split}")  # fmt: skip
+
+
+PROTOCOL_CHECKED = ("data", "evaluate", "predict", "plot")
+"""The commands that refuse ``--protocol sgan`` on a built-in dataset other than an ETH/UCY
+fold (``data.registry.check_protocol_for``)."""
 
 
 def _read_options(args) -> ReadOptions:
@@ -565,8 +592,12 @@ def _load(args):
 
 
 def _check_model_args(args) -> None:
-    """The options every sampling command takes (checked before any model or data is read)."""
+    """The options every sampling command takes (checked before any model or data is read);
+    fills in --seed's default, 0 (None until here, so that a command can tell it was given)."""
     _check_data_args(args)
+    if not hasattr(args, "_seed_given"):  # a command may check twice
+        args._seed_given = args.seed is not None
+        args.seed = 0 if args.seed is None else args.seed
     if args.samples < 1:
         raise ConfigError("--samples must be >= 1")
     if args.max_agents < 1:
@@ -671,6 +702,34 @@ def _predictor(args):
     return model, device
 
 
+def _warn_fixed_sampling(args, model) -> None:
+    """evaluate, predict and plot: one warning each when --samples asks a generator that
+    emits a fixed set of K (``model.samples``, trained best-of-K) for fewer (it takes the
+    first of its set, an arbitrary subset), and when --seed is given to a model that draws no
+    noise (a leapfrog generator with no denoising step or deterministic ones, without --keep's
+    selection, which draws with the seed)."""
+    generator = getattr(model, "generator", None)
+    if getattr(model, "sampler", None) != "leapfrog" or generator is None:
+        return
+    fixed, asked = generator.samples, args.samples
+    selects = getattr(args, "keep", None) is not None  # plot has no --keep
+    if asked < fixed:
+        keep = args.keep if selects else asked
+        warnings.warn(f"{args.model} emits a set of K = {fixed} samples (trained best-of-"
+                      f"{fixed}), and --samples {asked} takes its first {asked}, an arbitrary "
+                      f"subset: to keep {keep} chosen from all {fixed}, give --samples {fixed} "
+                      f"--keep {keep} (--select facility without the score, score-facility "
+                      "with it; docs/selection.md), or --sampler full for independent "
+                      "draws", stacklevel=2)  # fmt: skip
+    if args._seed_given and not selects and (model.tau == 0 or not model.stochastic):
+        steps = ("no denoising step, model.tau 0" if model.tau == 0
+                 else "its denoising steps are the posterior mean")  # fmt: skip
+        recorded = "" if args.command == "plot" else " (it is still recorded)"
+        warnings.warn(f"{args.model} draws no noise ({steps}): every seed gives the same "
+                      f"samples, and --seed {args.seed} changes nothing{recorded}",
+                      stacklevel=2)  # fmt: skip
+
+
 def _same_path(a: str, b: str) -> bool:
     with contextlib.suppress(OSError, RuntimeError):
         return Path(a).expanduser().resolve() == Path(b).expanduser().resolve()
@@ -739,7 +798,79 @@ def _warn_if_trained_otherwise(spec: str, ds) -> None:
                             f"files, the model's (the same folder) every {every:g} "
                             f"(--time-step {every:g} reads it at the model's step)")  # fmt: skip
     if problems:
-        warnings.warn(trained_otherwise(spec, model, problems), stacklevel=2)
+        named = dict(model, trained_on=_training_data(model["trained_on"]))
+        warnings.warn(trained_otherwise(spec, named, problems), stacklevel=2)
+
+
+def _training_data(dataset: str) -> str:
+    """How a warning names a model's training data (its ``data.dataset``): an ETH/UCY fold's
+    model was trained on the other four scenes (leave-one-out), not on the fold's own."""
+    if dataset in ETH_UCY:
+        return f"the {dataset} fold (leave-one-out: the other four scenes)"
+    return dataset
+
+
+def _trained_on(spec: str) -> str | None:
+    """The ``data.dataset`` that checkpoint ``spec`` (a path or a published name) was trained
+    on; None for cv or a file whose header this cannot read (loading it says what is wrong)."""
+    if spec == "cv":
+        return None
+    try:
+        path = ckpt.resolve_path(spec)
+        if path.suffix == ckpt.LEGACY_SUFFIX:
+            with warnings.catch_warnings():  # loading the model warns of the legacy format
+                warnings.simplefilter("ignore", FutureWarning)
+                header = ckpt.load(path)
+        else:
+            header = read_checkpoint_header(path)
+        dataset = header["config"]["data"]["dataset"]
+    except (TrajprefError, KeyError, TypeError, ValueError, AttributeError, OSError):
+        return None
+    return dataset if isinstance(dataset, str) else None
+
+
+def _fold_overlaps(args) -> list[tuple[str, str, str]]:
+    """``(role, checkpoint, fold)`` for each checkpoint of the command (``model``: --model;
+    ``scorer``: a --scorer naming another one) trained on an ETH/UCY fold other than
+    --dataset's. Social-GAN's leave-one-out folders give each fold's training split the other
+    four scenes' ``*_train`` files, which hold most of their windows (84 % of the rows of
+    zara1's test file are in the zara2 fold's training files): such a model has seen this
+    data, whatever the split."""
+    if args.dataset not in ETH_UCY:
+        return []
+    specs = {"model": args.model}
+    scorer = getattr(args, "scorer", None)
+    if scorer and not (scorer == args.model or _same_path(scorer, args.model)):
+        specs["scorer"] = scorer
+    found = []
+    for role, spec in specs.items():
+        fold = _trained_on(spec)
+        if fold in ETH_UCY and fold != args.dataset:
+            found.append((role, spec, fold))
+    return found
+
+
+def _check_fold_overlap(args) -> str | None:
+    """evaluate: refuse a model (or scorer) trained on another ETH/UCY fold than --dataset's,
+    unless --allow-overlap, which warns and returns what the result records as ``overlap``
+    (``zara2 model on zara1``); predict and plot: warn. None when nothing overlaps."""
+    found = _fold_overlaps(args)
+    if not found:
+        return None
+    data = args.dataset
+    trained = " and ".join(f"{spec} was trained on {_training_data(fold)}, {data} among them"
+                           for _, spec, fold in found)  # fmt: skip
+    own = " and ".join(dict.fromkeys(fold for _, _, fold in found))
+    instead = " ".join(f"--{role} {data}/{'generator' if role == 'model' else 'denoiser'}"
+                       for role, _, _ in found)  # fmt: skip
+    problem = (f"{trained}: those training files hold most of {data}'s windows, so this uses "
+               f"data it trained on (its own fold is {own}; evaluate each fold with its own "
+               f"fold's models, e.g. {instead} on --dataset {data})")  # fmt: skip
+    if args.command == "evaluate" and not args.allow_overlap:
+        raise ConfigError(f"{problem}; --allow-overlap evaluates it anyway and records the "
+                          "overlap in the result")  # fmt: skip
+    warnings.warn(problem, stacklevel=2)
+    return "; ".join(f"{fold} {role} on {data}" for role, _, fold in found)
 
 
 def _warn_model_and_scorer(args, ds) -> None:
@@ -885,6 +1016,77 @@ def _model_fields(args) -> dict:
     return out
 
 
+def _sampling_fields(model) -> dict:
+    """How the command's predictor samples, as its options left it: ``sampler`` (leapfrog or
+    full; None for cv), ``stochastic_steps`` (ancestral noise in the denoising steps), and the
+    generator's ``max_speed``, ``spread_scale`` and ``max_log_sigma`` in effect (the file's
+    unless an option replaced them; None where no generator samples: cv, the full sampler)."""
+    sampler = getattr(model, "sampler", None)
+    generator = getattr(model, "generator", None) if sampler == "leapfrog" else None
+    stochastic = getattr(model, "stochastic", None)
+    return {"sampler": sampler,
+            "stochastic_steps": None if stochastic is None else bool(stochastic),
+            **{name: None if generator is None else getattr(generator.cfg, name)
+               for name in MODEL_SETTINGS}}  # fmt: skip
+
+
+def _command_line(args) -> str:
+    """The command as typed (``main``'s arguments), for a result's ``command``."""
+    argv = getattr(args, "argv", None)
+    return shlex.join(["trajpref", *(sys.argv[1:] if argv is None else argv)])
+
+
+def _run_fields(args, device) -> dict:
+    """Where and how a result was made: trajpref's and torch's versions, the UTC time, the
+    machine (as the benchmark rows describe it: ``results.machine``), the device, torch's
+    threads, --max-agents (it orders the random draws) and the command."""
+    return {"max_agents": args.max_agents, "device": str(device),
+            "threads": torch.get_num_threads(), "trajpref_version": __version__,
+            "torch_version": torch.__version__,
+            "date": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+            "machine": machine(), "command": _command_line(args)}  # fmt: skip
+
+
+RESULT_SUFFIXES = (".json", ".csv")
+"""The files ``evaluate --out`` writes, by suffix."""
+
+
+def _check_result_file(path: str) -> None:
+    """``evaluate --out``: a writable .json or .csv file (checked before any work)."""
+    check_output_file(path)
+    suffix = Path(path).suffix.lower()
+    if suffix not in RESULT_SUFFIXES:
+        given = suffix or "no suffix"
+        raise ConfigError(f"--out {path}: the output must be a .json or .csv file (its "
+                          f"suffix names the format), not {given}")  # fmt: skip
+
+
+def _flat(out: dict, prefix: str = "") -> dict:
+    """A result's nested dicts (``bins``, in-context's ``before``) as dotted keys."""
+    flat = {}
+    for key, value in out.items():
+        if isinstance(value, dict):
+            flat.update(_flat(value, f"{prefix}{key}."))
+        else:
+            flat[f"{prefix}{key}"] = value
+    return flat
+
+
+def _write_result(path: str, out: dict) -> None:
+    """Write ``evaluate``'s result as its suffix says: JSON, or CSV (a header and one row;
+    null and non-finite numbers as empty cells, nested results as dotted columns)."""
+    if Path(path).suffix.lower() != ".csv":
+        write_json(path, out)
+        return
+    row = _flat(json_safe(out))
+    with atomic_path(path) as tmp:
+        with open(tmp, "w", newline="", encoding="utf-8") as fh:
+            writer = csv.writer(fh)
+            writer.writerow(row)
+            writer.writerow(["" if v is None else json.dumps(v) if isinstance(v, (bool, list))
+                             else v for v in row.values()])  # fmt: skip
+
+
 def _selection_fields(args) -> dict:
     if args.keep is None:
         return {}
@@ -927,7 +1129,9 @@ def _parse_bins(text: str | None) -> tuple[int, ...] | None:
 
 
 def _protocol_tag(ds, holdout: str | None = None) -> str:
-    tag = "" if ds.info.protocol == "all" else f" (protocol {ds.info.protocol})"
+    """`` (protocol all)`` after the split in evaluate's header, whichever the protocol (a
+    pasted log says which windows counted), and the held-out scene when there is one."""
+    tag = f" (protocol {ds.info.protocol})"
     return tag + (f" (held-out scene {holdout}*)" if holdout else "")
 
 
@@ -955,14 +1159,17 @@ def _print_bins(bins: dict) -> None:
 
 def cmd_evaluate(args) -> int:
     _check_model_args(args)
+    if args.out:
+        _check_result_file(args.out)
+    overlap = _check_fold_overlap(args)  # refused unless --allow-overlap
     if args.in_context is not None:
-        return _evaluate_in_context(args)
+        return _evaluate_in_context(args, overlap)
     bins = _parse_bins(args.bins)
     if args.collision_radius is not None:
         resolve_collision_radius(args.collision_radius, "")  # ConfigError unless > 0
-    if args.out:
-        check_output_file(args.out)
     model, device = _predictor(args)
+    _warn_fixed_sampling(args, model)
+    sampling = _sampling_fields(model)
     scorer = _scorer(args.scorer, device, args) if args.scorer else None
     model, samples = _selecting(args, model, device, scores=scorer is not None)
     ds = _load(args)
@@ -989,6 +1196,9 @@ def cmd_evaluate(args) -> int:
         **{k: v for k, v in result.items() if k != "bins"},
         "units": ds.info.units,
         "seconds": round(seconds, 3),
+        "overlap": overlap,
+        **sampling,
+        **_run_fields(args, device),
     }
     if bins is not None:
         out["bins"] = result["bins"]
@@ -999,7 +1209,7 @@ def cmd_evaluate(args) -> int:
         why = " (no agent has a neighbour)" if set(bad) <= collisions else ""
         warnings.warn(f"{', '.join(bad)} not finite{why}: {where}", stacklevel=1)
     if args.out:
-        write_json(args.out, out)
+        _write_result(args.out, out)
     if args.json:
         print(dumps_json(out))
     else:
@@ -1024,18 +1234,18 @@ def cmd_evaluate(args) -> int:
     return 0
 
 
-def _evaluate_in_context(args) -> int:
+def _evaluate_in_context(args, overlap: str | None = None) -> int:
     """``evaluate --in-context``: the usual metrics with per-window adaptation, plus the
-    windows that had context, before/after on them and seconds per window."""
+    windows that had context, before/after on them and seconds per window. ``overlap``: what
+    ``_check_fold_overlap`` allowed."""
     if args.keep is not None or args.scorer or args.bins is not None:
         raise ConfigError("--in-context does not combine with --keep, --scorer or --bins")
     _warn_unread(args, _selection_config(args), scores=False)
     cfg = AdaptConfig(ctx_frames=args.in_context, steps=args.adapt_steps, lr=args.adapt_lr,
                       params=args.adapt_params, trust=args.adapt_trust,
                       objective=args.adapt_objective)  # fmt: skip
-    if args.out:
-        check_output_file(args.out)
     model, device = _predictor(args)
+    sampling = _sampling_fields(model)
     ds = _load(args)
     _warn_if_trained_otherwise(args.model, ds)
     result = evaluate_in_context(model, ds, cfg, args.samples, args.seed, device=device,
@@ -1046,14 +1256,16 @@ def _evaluate_in_context(args) -> int:
            "in_context": args.in_context, "adapt_steps": cfg.steps, "adapt_lr": cfg.lr,
            "adapt_params": cfg.params, "adapt_trust": cfg.trust,
            "adapt_objective": cfg.objective, **result,
-           "units": ds.info.units}  # fmt: skip
+           "units": ds.info.units, "overlap": overlap, **sampling,
+           **_run_fields(args, device)}  # fmt: skip
     if args.out:
-        write_json(args.out, out)
+        _write_result(args.out, out)
     if args.json:
         print(dumps_json(out))
         return 0
     print(
-        f"{ds.info.name}/{ds.info.split}  model={args.model}  K={args.samples}  in-context "
+        f"{ds.info.name}/{ds.info.split}{_protocol_tag(ds, args.holdout_scene)}  "
+        f"model={args.model}  K={args.samples}  in-context "
         f"{cfg.ctx_frames} frames, {cfg.steps} steps of {cfg.params} at lr {cfg.lr:g}"
     )
     print(
@@ -1084,7 +1296,10 @@ def cmd_predict(args) -> int:
         check_output_file(args.truth, ".ndjson")
     if trajnet and args.rank:
         raise ConfigError("--rank saves order/residual arrays: use --format npz")
+    overlap = _check_fold_overlap(args)  # a warning
     model, device = _predictor(args)
+    _warn_fixed_sampling(args, model)
+    sampling = _sampling_fields(model)
     scorer = None
     if args.rank:
         if args.scorer is None and args.model in ("cv",):
@@ -1104,9 +1319,10 @@ def cmd_predict(args) -> int:
             write_trajnet_truth(args.truth, arrays["history"], arrays["future"], arrays["scene"],
                                 interval)  # fmt: skip
     else:
+        meta = _predict_meta(args, ds, samples, scorer, overlap, sampling, device)
         with atomic_path(args.out) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez_compressed(fh, **arrays)
+            with open(tmp, "wb") as fh:  # meta: a 0-d string, read without pickle
+                np.savez_compressed(fh, **arrays, meta=np.array(dumps_json(meta)))
     summary = {
         "out": args.out,
         "agents": int(arrays["future"].shape[0]),
@@ -1120,6 +1336,20 @@ def cmd_predict(args) -> int:
         else f"wrote {args.out}: pred {tuple(arrays['pred'].shape)} [K, N, T_f, 2]"
     )
     return 0
+
+
+def _predict_meta(args, ds, samples: int, scorer, overlap, sampling: dict, device) -> dict:
+    """What made a ``predict`` .npz (its ``meta`` array, JSON): the data (dataset, split,
+    protocol), the model and its hashes, K, the seed, the selection and ranking, the sampling
+    settings, and where and how it ran (``_run_fields``)."""
+    rank = ({"rank_scorer": args.scorer or args.model, "rank_score_steps": len(scorer.steps)}
+            if scorer is not None else {})  # fmt: skip
+    return {"dataset": ds.info.name, "split": ds.info.split, "protocol": ds.info.protocol,
+            **({"holdout_scene": args.holdout_scene} if args.holdout_scene else {}),
+            "units": ds.info.units, "frame_interval": ds.info.frame_interval,
+            "model": args.model, **_model_fields(args), "samples": samples, "seed": args.seed,
+            **_selection_fields(args), **rank, "overlap": overlap, **sampling,
+            **_run_fields(args, device)}  # fmt: skip
 
 
 def _check_plot_args(args) -> None:
@@ -1150,8 +1380,43 @@ def _check_plot_args(args) -> None:
             raise ConfigError(f"--limits {args.limits}: {err}") from None
     if args.draw_samples is not None and args.draw_samples < 1:
         raise ConfigError(f"--draw-samples must be >= 1, got {args.draw_samples}")
-    if args.scene < 0:
-        raise ConfigError(f"--scene {args.scene}: scene indices start at 0")
+    scene = str(args.scene).strip()
+    if scene.lstrip("-").isdigit():  # an index; anything else is a scene id
+        args.scene = int(scene)
+        if args.scene < 0:
+            raise ConfigError(f"--scene {args.scene}: scene indices start at 0")
+    elif not scene:
+        raise ConfigError("--scene takes a scene index or a scene id such as "
+                          "biwi_eth.txt@frame=830")  # fmt: skip
+
+
+def _scene_index(args, ds) -> int:
+    """``--scene``'s index in the split as read: the index given, or the scene whose id it
+    names (``plot`` prints ids; ``predict`` saves them as ``scene_id``)."""
+    where = f"{ds.info.name}/{ds.info.split} (protocol {ds.info.protocol})"
+    if isinstance(args.scene, int):
+        if not 0 <= args.scene < len(ds):
+            raise TrajprefError(f"--scene {args.scene}: the split has scenes 0..{len(ds) - 1}")
+        return args.scene
+    ids = [s.scene_id for s in ds.scenes]
+    if args.scene in ids:
+        return ids.index(args.scene)
+    file, _, frame = args.scene.partition("@frame=")
+    same = [i for i in ids if i.partition("@frame=")[0] == file]
+    if same and frame.lstrip("-").isdigit():  # the ids of that file nearest the frame asked
+        same.sort(key=lambda i: abs(int(i.partition("@frame=")[2] or 0) - int(frame)))
+        near = f"; the nearest of {file}: {', '.join(same[:3])}"
+    elif same:
+        near = f"; {file}'s first: {same[0]}"
+    else:
+        files = sorted({i.partition("@")[0] for i in ids})
+        near = f"; its files: {', '.join(files[:5])}{', ...' if len(files) > 5 else ''}"
+    dropped = (" (--protocol sgan leaves out the scenes of fewer than two agents)"
+               if ds.info.protocol == "sgan" else "")  # fmt: skip
+    raise TrajprefError(f"--scene {args.scene}: no scene of {where} has this id{dropped}"
+                        f"{near}. Ids are FILE@frame=FIRST_FRAME: plot prints its scene's, "
+                        "and `trajpref predict ... --out p.npz` saves every scene's as "
+                        "scene_id (in index order); --scene also takes an index")  # fmt: skip
 
 
 def _plot_samples(model, ds, args, device) -> tuple[object, torch.Tensor, bool]:
@@ -1229,11 +1494,12 @@ def _print_scene_metrics(args, scene, pred: torch.Tensor, units: str, order=None
 def cmd_plot(args) -> int:
     _check_model_args(args)
     _check_plot_args(args)
+    _check_fold_overlap(args)  # a warning
     model, device = _predictor(args)
+    _warn_fixed_sampling(args, model)
     ds = _load(args)
     _warn_model_and_scorer(args, ds)
-    if not 0 <= args.scene < len(ds):
-        raise TrajprefError(f"--scene {args.scene}: the split has scenes 0..{len(ds) - 1}")
+    args.scene = _scene_index(args, ds)
     scene = ds[args.scene]
     batch, pred, random = _plot_samples(model, ds, args, device)  # pred [K, P, T_f, 2]
     title = _plot_title(args, ds, scene, random)
@@ -1501,6 +1767,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
+        args.argv = argv  # the command as typed, which a result records (_command_line)
         if getattr(args, "command", None) == "train" and args.stage == "denoiser":
             args.stage = "diffusion"  # the stage's other name, as its files and compare call it
     except SystemExit as exc:  # --help, --version, or a usage error (already printed)

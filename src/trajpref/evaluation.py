@@ -11,7 +11,7 @@ import torch
 from tqdm.auto import tqdm
 
 from trajpref.data.loader import SceneLoader
-from trajpref.errors import ConfigError
+from trajpref.errors import ConfigError, TrajprefError
 from trajpref.metrics import (
     BinnedMetrics,
     CollisionAccumulator,
@@ -40,6 +40,30 @@ class Predictor(Protocol):
     ) -> torch.Tensor: ...
 
 
+class NotAPredictor(TrajprefError, TypeError):
+    """What the evaluation loop was handed is not a loaded predictor or dataset (a model's
+    name, a dataset's name)."""
+
+
+def check_inputs(model: object, dataset: object) -> None:
+    """``NotAPredictor`` unless ``model`` has a ``predict`` method and ``dataset`` is a
+    ``TrajectoryDataset``: before any work, and saying how to load each from its name."""
+    if not callable(getattr(model, "predict", None)):
+        hint = ""
+        if isinstance(model, str):
+            hint = (f": load it first, trajpref.models.registry.load_predictor({model!r}), "
+                    "and pass what it returns")  # fmt: skip
+        raise NotAPredictor(f"model must be a predictor (an object with predict(batch, K, "
+                            f"generator)), got {type(model).__name__}{hint}")  # fmt: skip
+    if not isinstance(dataset, TrajectoryDataset):
+        hint = ""
+        if isinstance(dataset, str):
+            hint = (f": load it first, trajpref.data.load_dataset({dataset!r}, split), and "
+                    "pass what it returns")  # fmt: skip
+        raise NotAPredictor(f"dataset must be a TrajectoryDataset, got "
+                            f"{type(dataset).__name__}{hint}")  # fmt: skip
+
+
 @torch.no_grad()
 def sampled_batches(
     model: Predictor, dataset: TrajectoryDataset, num_samples: int = 20, seed: int = 0,
@@ -48,6 +72,7 @@ def sampled_batches(
 ) -> Iterator[tuple[Batch, torch.Tensor]]:  # fmt: skip
     """The one pass over a split: ``(batch, pred [K, N, T_f, 2])`` for every batch of whole
     scenes, in dataset order, with one seeded CPU generator for the whole pass."""
+    check_inputs(model, dataset)
     gen = torch.Generator().manual_seed(seed)  # CPU: draws are identical on every device
     loader = SceneLoader(dataset, max_agents=max_agents, shuffle=False)
     for batch in tqdm(loader, desc=desc, unit="batch", disable=not progress, leave=False):
@@ -85,7 +110,11 @@ def evaluate(
     docs/social.md); when off, these keys hold None. With ``bins`` (upper edges of scene-size
     bins, e.g. ``metrics.SCENE_SIZE_EDGES``), ``out["bins"]`` maps each bin's label to the same
     metrics over its scenes (maxATS / maxFTS / meanATS with a scorer).
+
+    ``model`` is a loaded predictor (``load_predictor(name)``), not a name: ``NotAPredictor``
+    (a ``TypeError``) otherwise, before any work.
     """
+    check_inputs(model, dataset)
     radius = resolve_collision_radius(collision_radius, dataset.info.units)
     if bins is not None:
         try:
@@ -141,6 +170,7 @@ def predict_dataset(
     selecting model (``SelectingPredictor``) adds ``kept`` [K, N]: each kept sample's index
     among the samples it drew, in ``pred``'s order (after the ranking, when there is one).
     """
+    check_inputs(model, dataset)
     parts: dict[str, list[np.ndarray]] = {k: [] for k in ("history", "future", "pred", "scene")}
     parts["agent_type"] = []
     offset = 0

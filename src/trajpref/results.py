@@ -407,8 +407,23 @@ def table_lines(text: str, heading: str | None = None) -> dict[tuple[str, str], 
     return out
 
 
-PEER_COLUMNS = ("eth", "hotel", "univ", "zara1", "zara2", "avg", "sdd", "nba", "robo")
-"""Columns of the peers table: the five ETH/UCY folds, their average, SDD, NBA and Robo."""
+PEER_COLUMNS = ("eth", "hotel", "univ", "zara1", "zara2", "avg", "sdd", "nba", "nba-rebound",
+                "robo")  # fmt: skip
+"""Columns of the peers table: the five ETH/UCY folds, their average, SDD, NBA on LED's split
+(the peers'), NBA on the rebound split (ours) and Robo."""
+PEER_HEADERS = {
+    "nba": "nba, LED's 10 + 20",
+    "nba-rebound": "nba, rebound 8 + 12 (ball counted)",
+}
+"""Header of a column whose key alone would mislead: the two NBA splits do not compare."""
+OUR_DATASET = {"nba": None, "nba-rebound": "nba"}
+"""The dataset whose rows fill our cells of a column (default: the column's own name): our
+NBA data is SocialVAE's rebound split (8 observed + 12 predicted steps at 0.48 s, 10 players
+and the ball, every one an agent of the metrics), never LED's 10 + 20 split the peers report,
+so it has its own column."""
+SECONDARY_MARK = "§"
+"""Marks a peer's cell whose number is quoted second-hand (``secondary`` in peers.json): as
+printed by another paper than the method's own."""
 
 
 def _pair(values: Any) -> str:
@@ -419,10 +434,12 @@ def peers_table(peers: dict[str, Any], rows: list[dict[str, Any]],
                 methods: Sequence[str] = ("pretrained",)) -> str:  # fmt: skip
     """Markdown table: our rows of each of ``methods`` (test split, K = 20, seed-mean) under
     each evaluation protocol beside the published peers (``benchmarks/peers.json``), minADE20
-    / minFDE20 per column. The ETH/UCY average is ours only when all five folds are there; a
-    method with no row under a protocol gets no line for it."""
+    / minFDE20 per column (``PEER_COLUMNS``; our rows of a dataset go where ``OUR_DATASET``
+    says). Our ETH/UCY average is the unweighted mean of the five fold means, there only
+    when all five folds are; a method with no row under a protocol gets no line for it. A
+    peer's cell listed in its ``secondary`` is marked ``SECONDARY_MARK``."""
     lines = [
-        "| method | protocol | " + " | ".join(PEER_COLUMNS) + " |",
+        "| method | protocol | " + " | ".join(PEER_HEADERS.get(c, c) for c in PEER_COLUMNS) + " |",
         "|---|---|" + "---|" * len(PEER_COLUMNS),
     ]
     merged = [r for r in merge_rows(rows) if r["split"] == "test" and r["samples"] == 20]
@@ -431,9 +448,10 @@ def peers_table(peers: dict[str, Any], rows: list[dict[str, Any]],
         for protocol in ("all", "sgan"):
             cells = {}
             for col in PEER_COLUMNS:
-                xs = [r for r in merged if r["dataset"] == col and r["method"] == method
+                dataset = OUR_DATASET.get(col, col)
+                xs = [r for r in merged if r["dataset"] == dataset and r["method"] == method
                       and r["protocol"] == protocol]  # fmt: skip
-                if xs:
+                if dataset is not None and xs:
                     cells[col] = [sum(r[k] for r in xs) / len(xs) for k in ("min_ade", "min_fde")]
             if all(f in cells for f in folds):
                 cells["avg"] = [sum(cells[f][i] for f in folds) / len(folds) for i in (0, 1)]
@@ -442,6 +460,40 @@ def peers_table(peers: dict[str, Any], rows: list[dict[str, Any]],
                              + " | ".join(f"**{_pair(cells.get(c))}**" if c in cells else "–"
                                           for c in PEER_COLUMNS) + " |")  # fmt: skip
     for name, entry in peers["methods"].items():
+        quoted = set(entry.get("secondary", []))
         lines.append(f"| {name} | {entry.get('protocol', 'unknown')} | "
-                     + " | ".join(_pair(entry.get(c)) for c in PEER_COLUMNS) + " |")  # fmt: skip
+                     + " | ".join(_pair(entry.get(c))
+                                  + (f" {SECONDARY_MARK}" if c in quoted and entry.get(c) else "")
+                                  for c in PEER_COLUMNS) + " |")  # fmt: skip
     return "\n".join(lines)
+
+
+def peers_notes(peers: dict[str, Any]) -> str:
+    """What the peers table's cells mean beyond its header: how our average is taken, the two
+    NBA columns, the second-hand mark, and each protocol read from a peer's public code
+    (``protocol_source`` in peers.json: repository, commit, file:line, what the code does)."""
+    parts = [
+        "The protocol column is about the ETH/UCY cells: on SDD, NBA and Robo every row counts "
+        "every agent of its split's windows (`--protocol sgan` is refused there).",
+        "Our `avg` is the unweighted mean of the five fold means (each fold counts once, "
+        "whatever its number of agent-windows), shown only when all five folds have a row; a "
+        "peer's `avg` is as its source printed it.",
+        "NBA: the peers' column is LED's 10 + 20 split (10 observed + 20 predicted frames); "
+        "ours is SocialVAE's rebound split (8 + 12 steps at 0.48 s) in its own column, and its "
+        "minADE / minFDE average over all 11 agents of a window, the ball included: the two "
+        "columns do not compare.",
+        f"{SECONDARY_MARK} marks a number quoted second-hand, as printed in another paper than "
+        f"the method's own (named in the `source` of `benchmarks/peers.json`); check it "
+        f"against the method's own paper before citing it.",
+    ]
+    read = []
+    for name, entry in peers["methods"].items():
+        src = entry.get("protocol_source")
+        if src:
+            where = ", ".join(src["lines"])
+            read.append(f"{name}: `{entry['protocol']}` ({src['repository']} at "
+                        f"{src['commit']}, {where}: {src['reads']})")  # fmt: skip
+    if read:
+        parts.append("Protocols read from a peer's public code: " + "; ".join(read) + "; "
+                     "`unknown`: not checked.")  # fmt: skip
+    return " ".join(parts)

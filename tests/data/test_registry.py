@@ -569,3 +569,21 @@ def test_holding_out_a_scene_of_a_folder_without_splits_validates_each_window_on
     _, val = run_splits(DataConfig(dataset=str(root), holdout_scene="walk0"))
     own = load_dataset(str(root), "train").scenes + load_dataset(str(root), "val").scenes
     assert len(val) == sum(s.scene_id.startswith("walk0") for s in own) > len(held)
+
+
+def test_sgan_is_refused_for_built_in_datasets_other_than_the_eth_ucy_folds():
+    """--protocol sgan on SDD silently evaluated 1,478 of its 2,829 test agents."""
+    from trajpref.data.registry import NAMES, check_protocol_for
+
+    for name in NAMES:
+        check_protocol_for(name, "all")
+        if name in ETH_UCY:
+            check_protocol_for(name, "sgan")
+        else:
+            with pytest.raises(ConfigError, match=r"^--protocol sgan is Social-GAN's ETH/UCY "
+                               r"counting .* the SDD and NBA peers count every agent .*"
+                               rf"use --protocol all \(the default\) for {name} "):  # fmt: skip
+                check_protocol_for(name, "sgan")
+    check_protocol_for("/some/own/folder", "sgan")  # one's own data: either protocol
+    with pytest.raises(TrajprefError, match="unknown protocol"):
+        check_protocol_for("eth", "SGAN")

@@ -181,8 +181,10 @@ def test_build_warns_as_evaluate_when_a_model_was_trained_in_other_units_or_step
     problems = ("this data is in ft, the model's in m; this data steps 0.1 s, the model's 0.4 s "
                 "(--time-step 4 reads it at the model's step)")  # fmt: skip
     assert err.splitlines() == [
-        f"trajpref: warning: zara1/generator was trained on zara1: {problems}",
-        f"trajpref: warning: zara1/denoiser was trained on zara1: {problems}",
+        f"trajpref: warning: zara1/generator was trained on the zara1 fold (leave-one-out: the "
+        f"other four scenes): {problems}",
+        f"trajpref: warning: zara1/denoiser was trained on the zara1 fold (leave-one-out: the "
+        f"other four scenes): {problems}",
     ]
 
 

@@ -150,6 +150,24 @@ def check_protocol(protocol: str) -> None:
         raise TrajprefError(f"unknown protocol {protocol!r}; choose one of {', '.join(PROTOCOLS)}")
 
 
+def check_protocol_for(name: str, protocol: str) -> None:
+    """Raise a ``ConfigError`` when ``protocol`` does not apply to the dataset ``name``:
+    ``sgan`` is the counting of Social-GAN's ETH/UCY loader, so it is refused for the other
+    built-in datasets (on SDD it would silently drop the windows of lone agents, about half
+    the test agents, and the SDD and NBA peers count every agent; on NBA and Robo it changes
+    nothing). A folder of one's own data may use either protocol."""
+    check_protocol(protocol)
+    if protocol != "sgan" or name in ETH_UCY or name not in NAMES:
+        return
+    raise ConfigError(
+        f"--protocol sgan is Social-GAN's ETH/UCY counting (windows with at least "
+        f"{SGAN_MIN_AGENTS} agents), for the ETH/UCY folds ({', '.join(ETH_UCY)}) only; the "
+        "SDD and NBA peers count every agent (on sdd, sgan would drop the lone agents' "
+        "windows, about half of the test agents): use --protocol all (the default) for "
+        f"{name} (docs/data.md, 'Evaluation protocols')"
+    )
+
+
 def apply_protocol(dataset: TrajectoryDataset, protocol: str) -> TrajectoryDataset:
     """The scenes of ``dataset`` that count under ``protocol``, with ``info.protocol`` set.
 

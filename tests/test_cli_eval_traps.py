@@ -1,0 +1,271 @@
+"""Traps a paper author met in evaluate, predict and plot (walkthrough 62): another ETH/UCY
+fold's model, --protocol sgan off ETH/UCY, --samples below a generator's K, a seed that
+changes nothing, --out's format and provenance, plot --scene by id, the protocol in the
+header."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+from synthetic import straight_rows, write_tracks
+
+from trajpref import __version__
+from trajpref.cli import main
+from trajpref.data import load_dataset
+from trajpref.models import checkpoint as ckpt
+
+FOLDS = ("zara1", "zara2")
+
+
+def _run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture(scope="module")
+def fold_root(tmp_path_factory):
+    """A data root with two tiny ETH/UCY folds (eth_ucy/<fold>/<split>/*.txt): straight
+    walkers in pairs, and one loner."""
+    root = tmp_path_factory.mktemp("root")
+    for fold in FOLDS:
+        for split in ("train", "val", "test"):
+            rows = straight_rows(24, agents=2) + [(10 * f, 9, 0.0, 0.5 * f) for f in range(30, 50)]
+            write_tracks(root / "eth_ucy" / fold / split / f"{fold}_{split}.txt", rows)
+    return root
+
+
+@pytest.fixture(scope="module")
+def zara2_model(tiny_run, tmp_path_factory):
+    """The tiny generator (K = 4, two deterministic denoising steps), its header saying it was
+    trained on the zara2 fold."""
+    payload = ckpt.load(tiny_run / "generator.safetensors")
+    payload["config"]["data"]["dataset"] = "zara2"
+    payload["meta"] = {k: v for k, v in payload["meta"].items() if k != "data_timing"}
+    path = tmp_path_factory.mktemp("zara2") / "generator.safetensors"
+    ckpt.save(path, payload)
+    return path
+
+
+def _base(command, fold_root, model, dataset="zara1"):
+    return [command, "--dataset", dataset, "--data-root", fold_root, "--model", model,
+            "--samples", "4", "--no-progress", "--device", "cpu"]  # fmt: skip
+
+
+# finding 1: another fold's model has trained on this fold's windows
+
+
+def test_evaluate_refuses_another_folds_model_naming_its_own_fold(
+    capsys, fold_root, zara2_model, tmp_path
+):
+    out = tmp_path / "e.json"
+    code, stdout, err = _run(capsys, *_base("evaluate", fold_root, zara2_model), "--out", out)
+    assert code == 2 and stdout == "" and err.count("\n") == 1
+    assert err.startswith(f"trajpref: error: {zara2_model} was trained on the zara2 fold "
+                          "(leave-one-out: the other four scenes), zara1 among them")  # fmt: skip
+    assert "uses data it trained on" in err and "its own fold is zara2" in err
+    assert "e.g. --model zara1/generator on --dataset zara1" in err
+    assert "--allow-overlap" in err and not out.exists()
+    # any split of the other fold; a --scorer of another fold too
+    code, _, err = _run(capsys, *_base("evaluate", fold_root, zara2_model), "--split", "train")
+    assert code == 2 and "zara1 among them" in err
+    code, _, err = _run(capsys, *_base("evaluate", fold_root, "cv"), "--scorer", zara2_model)
+    assert code == 2 and f"{zara2_model} was trained on the zara2 fold" in err
+
+
+def test_allow_overlap_evaluates_warns_and_records_it(capsys, fold_root, zara2_model):
+    code, out, err = _run(capsys, *_base("evaluate", fold_root, zara2_model), "--json",
+                          "--allow-overlap")  # fmt: skip
+    assert code == 0 and err.count("trajpref: warning:") == 1 and "zara1 among them" in err
+    assert json.loads(out)["overlap"] == "zara2 model on zara1"
+    # its own fold: nothing to say or record
+    code, out, err = _run(capsys, *_base("evaluate", fold_root, zara2_model, "zara2"), "--json")
+    assert (code, err) == (0, "") and json.loads(out)["overlap"] is None
+
+
+def test_predict_and_plot_warn_of_another_folds_model(capsys, fold_root, zara2_model, tmp_path):
+    for command, out in (("predict", tmp_path / "p.npz"), ("plot", tmp_path / "p.png")):
+        code, _, err = _run(capsys, *_base(command, fold_root, zara2_model), "--out", out)
+        assert code == 0 and err.count("\n") == 1, command
+        assert err.startswith(f"trajpref: warning: {zara2_model} was trained on the zara2 fold")
+    meta = json.loads(np.load(tmp_path / "p.npz")["meta"].item())
+    assert meta["overlap"] == "zara2 model on zara1"
+
+
+def test_the_units_warning_says_a_fold_model_was_trained_on_the_other_scenes(
+    capsys, walks, zara2_model
+):
+    code, _, err = _run(capsys, "evaluate", "--dataset", walks, "--units", "px", "--model",
+                        zara2_model, "--samples", "4", "--no-progress")  # fmt: skip
+    assert code == 0
+    assert err == (f"trajpref: warning: {zara2_model} was trained on the zara2 fold "
+                   "(leave-one-out: the other four scenes): this data is in px, the model's "
+                   "in m\n")  # fmt: skip
+
+
+# finding 2: sgan is ETH/UCY's counting
+
+
+@pytest.mark.parametrize("command", ["data stats", "evaluate", "predict", "plot"])
+def test_protocol_sgan_is_refused_on_sdd(capsys, command, tmp_path):
+    argv = [*command.split(), "--dataset", "sdd", "--protocol", "sgan"]
+    if command in ("predict", "plot"):
+        argv += ["--out", tmp_path / ("p.npz" if command == "predict" else "p.png")]
+    code, out, err = _run(capsys, *argv)
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert "--protocol sgan is Social-GAN's ETH/UCY counting" in err
+    assert "the SDD and NBA peers count every agent" in err and "--protocol all" in err
+
+
+@pytest.mark.parametrize("dataset", ["nba", "robo", "robo-mix", "robo-sim"])
+def test_protocol_sgan_is_refused_on_other_built_in_datasets(capsys, dataset):
+    code, _, err = _run(capsys, "data", "stats", "--dataset", dataset, "--protocol", "sgan")
+    assert code == 2 and "ETH/UCY folds (eth, hotel, univ, zara1, zara2) only" in err
+
+
+def test_protocol_sgan_stays_for_eth_ucy_folds_and_own_folders(capsys, fold_root, walks):
+    code, out, _ = _run(capsys, "data", "stats", "--dataset", "zara1", "--data-root", fold_root,
+                        "--protocol", "sgan", "--json")  # fmt: skip
+    assert code == 0 and json.loads(out)["protocol"] == "sgan"
+    code, out, _ = _run(capsys, "data", "stats", "--dataset", walks, "--protocol", "sgan", "--json")
+    assert code == 0 and json.loads(out)["protocol"] == "sgan"
+
+
+# findings 4 and 6: --samples below a fixed K; a seed that changes nothing
+
+
+def test_samples_below_the_generators_k_warn_once_pointing_at_keep(capsys, walks, tiny_run):
+    gen = tiny_run / "generator.safetensors"
+    base = ["--dataset", walks, "--model", gen, "--no-progress", "--device", "cpu"]
+    code, _, err = _run(capsys, "evaluate", *base, "--samples", "2")
+    assert code == 0 and err.count("\n") == 1
+    assert err.startswith(f"trajpref: warning: {gen} emits a set of K = 4 samples")
+    assert "--samples 2 takes its first 2" in err and "--samples 4 --keep 2" in err
+    assert "docs/selection.md" in err
+    code, _, err = _run(capsys, "predict", *base, "--samples", "3", "--out", walks.parent / "p.npz")
+    assert code == 0 and "--samples 3 takes its first 3" in err
+    code, _, err = _run(capsys, "plot", *base, "--samples", "3", "--out", walks.parent / "p.png")
+    assert code == 0 and err.count("\n") == 1 and "--samples 3 takes its first 3" in err
+    for samples in ("4", "3 --keep 2"):  # all of its K: silent; --keep of fewer: said too
+        code, _, err = _run(capsys, "evaluate", *base, "--samples", *samples.split())
+        assert code == 0 and ("takes its first" in err) == (samples != "4")
+    code, _, err = _run(capsys, "evaluate", *base, "--model", "cv", "--samples", "1")
+    assert (code, err) == (0, "")  # cv draws each sample on its own
+
+
+def test_a_seed_given_to_a_model_that_draws_no_noise_is_said_to_change_nothing(
+    capsys, walks, tiny_run
+):
+    gen = tiny_run / "generator.safetensors"
+    base = ["evaluate", "--dataset", walks, "--model", gen, "--samples", "4", "--no-progress",
+            "--device", "cpu", "--json"]  # fmt: skip
+    code, out, err = _run(capsys, *base, "--seed", "1")
+    assert code == 0 and json.loads(out)["seed"] == 1
+    assert err == (f"trajpref: warning: {gen} draws no noise (its denoising steps are the "
+                   "posterior mean): every seed gives the same samples, and --seed 1 changes "
+                   "nothing (it is still recorded)\n")  # fmt: skip
+    for flags in ([], ["--seed", "1", "--stochastic"], ["--seed", "1", "--keep", "2",
+                                                       "--select", "random"]):  # fmt: skip
+        code, _, err = _run(capsys, *base, *flags)
+        assert (code, err) == (0, ""), flags
+    code, _, err = _run(capsys, *base[:4], "cv", *base[5:], "--seed", "1")
+    assert (code, err) == (0, "")  # cv draws with the seed
+    code, _, err = _run(capsys, "plot", *base[1:-1], "--seed", "1", "--out", walks.parent / "s.png")
+    assert code == 0 and err.endswith("--seed 1 changes nothing\n")  # a figure records no seed
+
+
+# finding 5: --out's format, and what made a result
+
+
+def test_evaluate_out_writes_json_or_csv_by_suffix_and_refuses_others(capsys, walks, tmp_path):
+    base = ["evaluate", "--dataset", walks, "--samples", "3", "--no-progress", "--json",
+            "--bins", "2"]  # fmt: skip
+    code, out, _ = _run(capsys, *base, "--out", tmp_path / "r.json")
+    assert code == 0 and json.loads((tmp_path / "r.json").read_text()) == json.loads(out)
+    code, out, _ = _run(capsys, *base, "--out", tmp_path / "r.CSV")
+    assert code == 0
+    with open(tmp_path / "r.CSV", newline="") as fh:
+        rows = list(csv.reader(fh))
+    assert len(rows) == 2 and len(rows[0]) == len(rows[1])
+    row = dict(zip(*rows, strict=True))
+    res = json.loads(out)
+    assert float(row["min_ade"]) == res["min_ade"] and row["dataset"] == str(walks)
+    assert row["model"] == "cv" and row["sampler"] == "" and row["overlap"] == ""
+    assert row["bins.<=2.agents"] == str(res["bins"]["<=2"]["agents"])  # nested: dotted
+    assert row["trajpref_version"] == __version__ and row["command"].startswith("trajpref ")
+    for name in ("r.txt", "r"):
+        code, _, err = _run(capsys, *base, "--out", tmp_path / name)
+        assert code == 2 and "the output must be a .json or .csv file" in err
+        assert not (tmp_path / name).exists()
+
+
+def test_evaluate_json_records_what_made_it(capsys, walks, tiny_run):
+    gen = tiny_run / "generator.safetensors"
+    argv = ["evaluate", "--dataset", walks, "--model", gen, "--samples", "4", "--no-progress",
+            "--device", "cpu", "--json", "--max-speed", "0.5", "--spread-scale", "0.9",
+            "--max-agents", "7"]  # fmt: skip
+    code, out, _ = _run(capsys, *argv)
+    res = json.loads(out)
+    assert code == 0
+    assert (res["sampler"], res["stochastic_steps"]) == ("leapfrog", False)
+    assert (res["max_speed"], res["spread_scale"]) == (0.5, 0.9)
+    assert "max_log_sigma" in res  # the file's own: none given
+    assert (res["max_agents"], res["device"], res["trajpref_version"]) == (7, "cpu", __version__)
+    assert res["torch_version"] and res["threads"] >= 1 and "CPU cores" in res["machine"]
+    assert res["date"].endswith("Z") and res["date"][4] == "-"
+    assert res["command"] == "trajpref " + " ".join(str(a) for a in argv)
+    code, out, _ = _run(capsys, "evaluate", "--dataset", walks, "--model", gen, "--no-progress",
+                        "--json", "--sampler", "full", "--samples", "2")  # fmt: skip
+    full = json.loads(out)
+    assert code == 0 and (full["sampler"], full["max_speed"]) == ("full", None)  # no generator
+
+
+def test_predict_npz_carries_its_provenance(capsys, walks, tiny_run, tmp_path):
+    gen = tiny_run / "generator.safetensors"
+    out = tmp_path / "p.npz"
+    code, _, _ = _run(capsys, "predict", "--dataset", walks, "--model", gen, "--samples", "4",
+                      "--seed", "3", "--protocol", "sgan", "--no-progress", "--device", "cpu",
+                      "--out", out)  # fmt: skip
+    assert code == 0
+    with np.load(out) as z:  # no pickle needed
+        meta = json.loads(z["meta"].item())
+        assert z["meta"].shape == () and z["pred"].shape[0] == 4
+    assert (meta["dataset"], meta["split"], meta["protocol"]) == (str(walks), "test", "sgan")
+    assert (meta["model"], meta["samples"], meta["seed"]) == (str(gen), 4, 3)
+    assert meta["model_hash"] and meta["weights_hash"] and meta["sampler"] == "leapfrog"
+    assert meta["trajpref_version"] == __version__
+    assert meta["command"].startswith("trajpref predict ")
+
+
+# finding 9: plot --scene by id
+
+
+def test_plot_takes_a_scene_id_and_names_how_to_find_one(capsys, walks, tmp_path):
+    ids = [s.scene_id for s in load_dataset(str(walks), "test").scenes]
+    base = ["plot", "--dataset", walks, "--samples", "2", "--no-progress", "--out",
+            tmp_path / "f.png"]  # fmt: skip
+    code, out, _ = _run(capsys, *base, "--scene", ids[3])
+    assert code == 0 and f"scene 3 ({ids[3]}): minADE_2" in out
+    code, by_index, _ = _run(capsys, *base, "--scene", "3")
+    assert code == 0 and by_index == out
+    file, _, frame = ids[3].partition("@frame=")
+    code, _, err = _run(capsys, *base, "--scene", f"{file}@frame={int(frame) + 1}")
+    assert code == 2 and err.count("\n") == 1 and "has this id" in err
+    assert f"the nearest of {file}: {ids[3]}" in err and "saves every scene's as scene_id" in err
+    code, _, err = _run(capsys, *base, "--scene", "nope.txt@frame=1")
+    assert code == 2 and "its files: walk0.txt" in err
+    code, _, err = _run(capsys, *base, "--scene", "-1")
+    assert code == 2 and "scene indices start at 0" in err
+
+
+# finding 11: the header names the protocol
+
+
+def test_the_evaluate_header_always_names_the_protocol(capsys, walks):
+    for protocol in ("all", "sgan"):
+        code, out, _ = _run(capsys, "evaluate", "--dataset", walks, "--samples", "1",
+                            "--no-progress", "--protocol", protocol)  # fmt: skip
+        assert code == 0 and out.startswith(f"{walks}/test (protocol {protocol})  model=cv")
