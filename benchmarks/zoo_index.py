@@ -23,6 +23,7 @@ from typing import Any
 
 from trajpref.config import GENERATOR_ONLY, load_config, to_dict
 from trajpref.data.registry import SPECS
+from trajpref.io import dotted
 from trajpref.models import checkpoint as ckpt
 from trajpref.models import zoo
 from trajpref.results import START_SUFFIXES, read_rows
@@ -123,20 +124,10 @@ STAGE_SECTIONS = {"denoiser": ("data", "model", "diffusion", "denoiser"),
 """Config sections that shape each kind's training (the others are not its settings)."""
 
 
-def _flat(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in d.items():
-        if isinstance(value, dict):
-            out.update(_flat(value, f"{prefix}{key}."))
-        else:
-            out[f"{prefix}{key}"] = value
-    return out
-
-
 def overrides(dataset: str, kind: str, config: dict[str, Any]) -> list[str]:
     """``--set`` values that turn configs/<dataset>.yaml into the checkpoint's config."""
-    base = _flat(to_dict(load_config(ROOT / "configs" / f"{dataset}.yaml")))
-    got = _flat(config)
+    base = dotted(to_dict(load_config(ROOT / "configs" / f"{dataset}.yaml")))
+    got = dotted(config)
     skip = {f"model.{k}" for k in GENERATOR_ONLY} if kind == "denoiser" else set()
     keys = [k for k in got if k.split(".")[0] in STAGE_SECTIONS[kind] and base.get(k) != got[k]
             and k not in skip]  # fmt: skip

@@ -119,3 +119,11 @@ def test_an_unwritable_folder_is_refused(tmp_path):
             check_output_file(locked / "x.json")
     finally:
         locked.chmod(0o700)
+
+
+def test_dotted_flattens_nested_dicts_one_level_of_keys():
+    from trajpref.io import dotted
+
+    nested = {"min_ade": 0.2, "bins": {"<=5": {"min_fde": 0.3}, "6-10": {}}, "seed": None}
+    assert dotted(nested) == {"min_ade": 0.2, "bins.<=5.min_fde": 0.3, "seed": None}
+    assert dotted({}) == {}

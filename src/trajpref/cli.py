@@ -49,6 +49,7 @@ from trajpref.io import (
     atomic_path,
     check_output_dir,
     check_output_file,
+    dotted,
     dumps_json,
     json_safe,
     read_checkpoint_header,
@@ -1061,24 +1062,13 @@ def _check_result_file(path: str) -> None:
                           f"suffix names the format), not {given}")  # fmt: skip
 
 
-def _flat(out: dict, prefix: str = "") -> dict:
-    """A result's nested dicts (``bins``, in-context's ``before``) as dotted keys."""
-    flat = {}
-    for key, value in out.items():
-        if isinstance(value, dict):
-            flat.update(_flat(value, f"{prefix}{key}."))
-        else:
-            flat[f"{prefix}{key}"] = value
-    return flat
-
-
 def _write_result(path: str, out: dict) -> None:
     """Write ``evaluate``'s result as its suffix says: JSON, or CSV (a header and one row;
     null and non-finite numbers as empty cells, nested results as dotted columns)."""
     if Path(path).suffix.lower() != ".csv":
         write_json(path, out)
         return
-    row = _flat(json_safe(out))
+    row = dotted(json_safe(out))
     with atomic_path(path) as tmp:
         with open(tmp, "w", newline="", encoding="utf-8") as fh:
             writer = csv.writer(fh)

@@ -118,6 +118,18 @@ def _remove_new_folders(folder: Path, existing: Path) -> None:
             return
 
 
+def dotted(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested dicts as one level of dotted keys: ``{"a": {"b": 1}, "c": 2}`` ->
+    ``{"a.b": 1, "c": 2}`` (a CSV row of a nested result, the keys a config sets)."""
+    out: dict[str, Any] = {}
+    for key, value in d.items():
+        if isinstance(value, dict):
+            out.update(dotted(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
 def json_safe(obj: Any) -> Any:
     """``obj`` with every non-finite float (NaN, +-Infinity) replaced by ``None``, so that it
     serialises as strict JSON (``null``); numpy scalars become Python numbers."""
