@@ -21,7 +21,7 @@ demo: $(STAMP)
 	$(BIN)/python -m trajpref.demo --out out/demo
 
 test: $(STAMP)
-	$(BIN)/lint-imports
+	PYTHONPATH=src $(BIN)/lint-imports
 	$(BIN)/python -m pytest -q
 	$(BIN)/ruff check .
 

@@ -2,10 +2,38 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
 from pathlib import Path
 
 import pytest
+
+
+def trajpref_source_problem(origin: str | None, repo: Path) -> str | None:
+    """Why the ``trajpref`` that ``origin`` (its ``__init__.py``, or ``None`` when it cannot be
+    found) names is not the one under ``repo/src``, the checkout these tests belong to; ``None``
+    when it is. In a copy of the repository, a virtual environment whose editable install
+    points at another checkout would otherwise test that checkout's code."""
+    expected = (repo / "src" / "trajpref").resolve()
+    if origin is None:
+        where = "is not importable"
+    else:
+        found = Path(origin).resolve().parent
+        if found == expected:
+            return None
+        where = f"is imported from {found}"
+    return (
+        f"trajpref {where}, not from this checkout's {expected}: the tests would not test this "
+        "tree. Give this checkout its own environment (`make install` here, after removing a "
+        ".venv copied from elsewhere) or run with PYTHONPATH=src."
+    )
+
+
+def pytest_configure(config):
+    spec = importlib.util.find_spec("trajpref")
+    problem = trajpref_source_problem(spec and spec.origin, Path(__file__).resolve().parents[1])
+    if problem:
+        raise pytest.UsageError(problem)
 
 
 @pytest.fixture

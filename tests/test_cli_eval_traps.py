@@ -15,6 +15,7 @@ from synthetic import straight_rows, write_tracks
 from trajpref import __version__
 from trajpref.cli import main
 from trajpref.data import load_dataset
+from trajpref.data.registry import ETH_UCY
 from trajpref.models import checkpoint as ckpt
 
 FOLDS = ("zara1", "zara2")
@@ -106,6 +107,104 @@ def test_the_units_warning_says_a_fold_model_was_trained_on_the_other_scenes(
                    "in m\n")  # fmt: skip
 
 
+# walkthrough 62 (a contributor), item 4: a folder of a fold's Social-GAN files is that fold;
+# the advice names a published model only where there is one
+
+
+def _sgan_folder(root, test_files, splits=True):
+    """A folder laid out like Social-GAN's: ``test/`` holds ``test_files`` (tiny straight
+    walkers), ``train/`` and ``val/`` other scenes' ``*_train``/``*_val`` files; with
+    ``splits`` False the test files lie in the folder itself."""
+    rows = straight_rows(24, agents=2)
+    for name in test_files:
+        write_tracks(root / ("test" if splits else "") / name, rows)
+    if splits:
+        for split in ("train", "val"):
+            write_tracks(root / split / f"biwi_hotel_{split}.txt", rows)
+    return root
+
+
+@pytest.mark.parametrize(("files", "splits"), [(["crowds_zara01.txt"], True),
+                                               (["CROWDS_ZARA01.TXT"], False)])  # fmt: skip
+def test_a_folder_of_a_folds_sgan_files_is_that_fold(capsys, zara2_model, tmp_path, files,
+                                                     splits):  # fmt: skip
+    folder = _sgan_folder(tmp_path / "mine", files, splits)
+    code, stdout, err = _run(capsys, *_base("evaluate", tmp_path, zara2_model, folder))
+    assert code == 2 and stdout == "" and err.count("\n") == 1
+    assert err.startswith(f"trajpref: error: {zara2_model} was trained on the zara2 fold "
+                          "(leave-one-out: the other four scenes), zara1 among them: "
+                          f"--dataset {folder} holds zara1's Social-GAN test files "
+                          "(crowds_zara01)")  # fmt: skip
+    assert "its own fold is zara2" in err and "--model zara1/generator on that folder" in err
+    code, out, err = _run(capsys, *_base("evaluate", tmp_path, zara2_model, folder), "--json",
+                          "--allow-overlap")  # fmt: skip
+    assert code == 0 and err.count("trajpref: warning:") == 1
+    assert json.loads(out)["overlap"] == f"zara2 model on zara1 ({folder})"
+
+
+def test_the_real_zara1_folder_given_as_a_path_is_the_zara1_fold(capsys, zara2_model):
+    from trajpref.data.registry import SGAN_TEST_FILES, resolve_data_root, sgan_folds
+
+    try:
+        root = resolve_data_root() / "eth_ucy"
+    except Exception:  # noqa: BLE001 - no data root here
+        pytest.skip("needs TRAJPREF_DATA")
+    if not (root / "zara1" / "test").is_dir():
+        pytest.skip("needs the ETH/UCY folds")
+    for fold, names in SGAN_TEST_FILES.items():  # the release's test file names
+        assert sorted(p.stem for p in (root / fold / "test").glob("*.txt")) == list(names)
+        assert sgan_folds(root / fold) == (fold,)
+    code, _, err = _run(capsys, "evaluate", "--dataset", root / "zara1", "--model", zara2_model,
+                        "--samples", "4", "--no-progress")  # fmt: skip
+    assert code == 2 and "zara1 among them" in err
+
+
+def test_a_folder_of_its_own_folds_files_or_others_is_not_refused(capsys, zara2_model, tmp_path):
+    own = _sgan_folder(tmp_path / "own", ["crowds_zara02.txt"])
+    code, out, err = _run(capsys, *_base("evaluate", tmp_path, zara2_model, own), "--json")
+    assert (code, err) == (0, "") and json.loads(out)["overlap"] is None
+    # uni_examples and crowds_zara03 are in every fold's training split, no fold's test
+    other = _sgan_folder(tmp_path / "other", ["uni_examples.txt", "crowds_zara03.txt"])
+    code, out, err = _run(capsys, *_base("evaluate", tmp_path, zara2_model, other), "--json")
+    assert (code, err) == (0, "") and json.loads(out)["overlap"] is None
+
+
+def test_a_folder_of_several_folds_files_overlaps_every_folds_model(capsys, zara2_model, tmp_path):
+    folder = _sgan_folder(tmp_path / "both", ["crowds_zara02.txt", "students003.txt"])
+    code, _, err = _run(capsys, *_base("evaluate", tmp_path, zara2_model, folder))
+    assert code == 2 and "zara2 fold (leave-one-out: the other four scenes), univ among them" in err
+    assert "holds univ and zara2's Social-GAN test files (students001, students003, " in err
+    assert "evaluate each fold's scenes apart" in err
+
+
+def test_the_advice_names_a_published_model_only_where_there_is_one(
+    capsys, fold_root, zara2_model, tmp_path, monkeypatch
+):
+    from trajpref.models import zoo
+
+    shelf = tmp_path / "zoo"
+    (shelf / "zara1").mkdir(parents=True)
+    (shelf / "zara1" / "denoiser.safetensors").write_bytes(b"")  # a denoiser, no generator
+    monkeypatch.setattr(zoo, "ZOO_DIR", shelf)
+    code, _, err = _run(capsys, *_base("evaluate", fold_root, zara2_model))
+    assert code == 2 and "--model zara1/generator" not in err
+    assert "its own fold is zara2; evaluate each fold with its own fold's models: on --dataset " \
+        "zara1, a model of your own trained on the zara1 fold);" in err  # fmt: skip
+    scorer = tmp_path / "scorer.safetensors"  # another file trained on the zara2 fold
+    scorer.write_bytes(zara2_model.read_bytes())
+    code, _, err = _run(capsys, *_base("evaluate", fold_root, zara2_model), "--scorer", scorer)
+    assert code == 2 and "on --dataset zara1, a model of your own trained on the zara1 fold " \
+        "and --scorer zara1/denoiser);" in err  # fmt: skip
+
+
+def test_the_dataset_help_lists_the_registrys_names(monkeypatch):
+    from trajpref import cli
+
+    monkeypatch.setattr(cli, "NAMES", (*cli.NAMES, "zara1b"))
+    text = cli.build_parser()._subparsers._group_actions[0].choices["evaluate"].format_help()
+    assert "zara1b" in " ".join(text.split())
+
+
 # finding 2: sgan is ETH/UCY's counting
 
 
@@ -123,7 +222,7 @@ def test_protocol_sgan_is_refused_on_sdd(capsys, command, tmp_path):
 @pytest.mark.parametrize("dataset", ["nba", "robo", "robo-mix", "robo-sim"])
 def test_protocol_sgan_is_refused_on_other_built_in_datasets(capsys, dataset):
     code, _, err = _run(capsys, "data", "stats", "--dataset", dataset, "--protocol", "sgan")
-    assert code == 2 and "ETH/UCY folds (eth, hotel, univ, zara1, zara2) only" in err
+    assert code == 2 and f"ETH/UCY folds ({', '.join(ETH_UCY)}) only" in err
 
 
 def test_protocol_sgan_stays_for_eth_ucy_folds_and_own_folders(capsys, fold_root, walks):

@@ -246,3 +246,12 @@ def test_a_checks_message_names_the_key_as_the_user_wrote_it():
         load_config(None, ["finetune.gamma=2"])  # already in the user's words: unchanged
     with pytest.raises(ConfigError, match=r"^diffusion needs beta_start <= beta_end < 1"):
         load_config(None, ["diffusion.beta_start=0.5"])  # "DiffusionConfig needs ..."
+
+
+def test_the_dataset_fields_docstring_names_every_built_in_dataset():
+    # config show prints it; it once left out robo (walkthrough 62, item 4)
+    from trajpref.config import BUILTIN_DATASETS, DataConfig, field_docs
+
+    doc = field_docs(DataConfig)["dataset"]
+    names = doc.split("``")[3].split()  # "Dataset name (``BUILTIN_DATASETS``: ``eth ...``)"
+    assert names == list(BUILTIN_DATASETS)

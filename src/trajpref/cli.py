@@ -35,7 +35,15 @@ from trajpref.config import (
 )
 from trajpref.data import PROTOCOLS, ReadOptions, hold_out_scene, load_dataset, mean_speed
 from trajpref.data.loader import SceneLoader
-from trajpref.data.registry import ETH_UCY, NAMES, SPECS, check_protocol_for, split_folders
+from trajpref.data.registry import (
+    ETH_UCY,
+    NAMES,
+    SGAN_TEST_FILES,
+    SPECS,
+    check_protocol_for,
+    sgan_folds,
+    split_folders,
+)
 from trajpref.data.trajnet import write_trajnet, write_trajnet_truth
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, TrajprefError
@@ -89,8 +97,8 @@ def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> N
     p.add_argument(
         "--dataset",
         required=True,
-        help="eth hotel univ zara1 zara2 sdd nba robo robo-sim robo-mix, or a folder of "
-        "'frame agent x y' text files (with train/val/test sub-folders when present)",
+        help=f"{' '.join(NAMES)}, or a folder of 'frame agent x y' text files (with "
+        "train/val/test sub-folders when present)",
     )
     p.add_argument("--split", default=split_default, choices=["train", "val", "test"],
                    help=f"which split to read (default {split_default})")  # fmt: skip
@@ -830,14 +838,25 @@ def _trained_on(spec: str) -> str | None:
     return dataset if isinstance(dataset, str) else None
 
 
+def _data_folds(dataset: str) -> tuple[str, ...]:
+    """The ETH/UCY folds whose data ``dataset`` is: a fold's name, or a folder holding
+    Social-GAN's test files of folds (``registry.sgan_folds``: ``eth_ucy/zara1`` given as a
+    path, or a folder of ``crowds_zara01.txt``, is the zara1 fold); empty otherwise."""
+    if dataset in ETH_UCY:
+        return (dataset,)
+    return () if dataset in NAMES else sgan_folds(dataset)
+
+
 def _fold_overlaps(args) -> list[tuple[str, str, str]]:
     """``(role, checkpoint, fold)`` for each checkpoint of the command (``model``: --model;
-    ``scorer``: a --scorer naming another one) trained on an ETH/UCY fold other than
-    --dataset's. Social-GAN's leave-one-out folders give each fold's training split the other
-    four scenes' ``*_train`` files, which hold most of their windows (84 % of the rows of
-    zara1's test file are in the zara2 fold's training files): such a model has seen this
-    data, whatever the split."""
-    if args.dataset not in ETH_UCY:
+    ``scorer``: a --scorer naming another one) trained on an ETH/UCY fold other than the
+    data's (``_data_folds``: --dataset's fold, or the folds whose Social-GAN test files a
+    --dataset folder holds). Social-GAN's leave-one-out folders give each fold's training split
+    the other four scenes' ``*_train`` files, which hold most of their windows (84 % of the
+    rows of zara1's test file are in the zara2 fold's training files): such a model has seen
+    this data, whatever the split."""
+    folds = _data_folds(args.dataset)
+    if not folds:
         return []
     specs = {"model": args.model}
     scorer = getattr(args, "scorer", None)
@@ -846,32 +865,59 @@ def _fold_overlaps(args) -> list[tuple[str, str, str]]:
     found = []
     for role, spec in specs.items():
         fold = _trained_on(spec)
-        if fold in ETH_UCY and fold != args.dataset:
+        if fold in ETH_UCY and any(f != fold for f in folds):
             found.append((role, spec, fold))
     return found
 
 
 def _check_fold_overlap(args) -> str | None:
-    """evaluate: refuse a model (or scorer) trained on another ETH/UCY fold than --dataset's,
-    unless --allow-overlap, which warns and returns what the result records as ``overlap``
-    (``zara2 model on zara1``); predict and plot: warn. None when nothing overlaps."""
+    """evaluate: refuse a model (or scorer) trained on another ETH/UCY fold than the data's
+    (``_fold_overlaps``), unless --allow-overlap, which warns and returns what the result
+    records as ``overlap`` (``zara2 model on zara1``; for a folder, its path after); predict
+    and plot: warn. None when nothing overlaps. The advice names the data's fold's published
+    model (``zara1/generator``) only where there is one (``trajpref models``)."""
     found = _fold_overlaps(args)
     if not found:
         return None
     data = args.dataset
-    trained = " and ".join(f"{spec} was trained on {_training_data(fold)}, {data} among them"
-                           for _, spec, fold in found)  # fmt: skip
+    folds = _data_folds(data)
+    folder = data not in ETH_UCY
+    trained = " and ".join(
+        f"{spec} was trained on {_training_data(fold)}, "
+        f"{' and '.join(f for f in folds if f != fold)} among them"
+        for _, spec, fold in found
+    )
+    scenes = " and ".join(folds)
+    where = ""
+    if folder:
+        files = ", ".join(name for f in folds for name in SGAN_TEST_FILES[f])
+        where = f"--dataset {data} holds {scenes}'s Social-GAN test files ({files}), and "
     own = " and ".join(dict.fromkeys(fold for _, _, fold in found))
-    instead = " ".join(f"--{role} {data}/{'generator' if role == 'model' else 'denoiser'}"
-                       for role, _, _ in found)  # fmt: skip
-    problem = (f"{trained}: those training files hold most of {data}'s windows, so this uses "
-               f"data it trained on (its own fold is {own}; evaluate each fold with its own "
-               f"fold's models, e.g. {instead} on --dataset {data})")  # fmt: skip
+    target = f"--dataset {data}" if not folder else "that folder"
+    if len(folds) > 1:
+        advice = "evaluate each fold's scenes apart, each with its own fold's models"
+    else:
+        published = zoo.published()
+        picks = []
+        for role, _, _ in found:
+            name = f"{folds[0]}/{'generator' if role == 'model' else 'denoiser'}"
+            picks.append((f"--{role} {name}", name in published))
+        if all(ok for _, ok in picks):
+            advice = (f"evaluate each fold with its own fold's models, e.g. "
+                      f"{' '.join(p for p, _ in picks)} on {target}")  # fmt: skip
+        else:
+            picks = [p if ok else f"a {role} of your own trained on the {folds[0]} fold"
+                     for (p, ok), (role, _, _) in zip(picks, found, strict=True)]  # fmt: skip
+            advice = (f"evaluate each fold with its own fold's models: on {target}, "
+                      f"{' and '.join(picks)}")  # fmt: skip
+    problem = (f"{trained}: {where}those training files hold most of {scenes}'s windows, so "
+               f"this uses data it trained on (its own fold is {own}; {advice})")  # fmt: skip
     if args.command == "evaluate" and not args.allow_overlap:
         raise ConfigError(f"{problem}; --allow-overlap evaluates it anyway and records the "
                           "overlap in the result")  # fmt: skip
     warnings.warn(problem, stacklevel=2)
-    return "; ".join(f"{fold} {role} on {data}" for role, _, fold in found)
+    tail = f" ({data})" if folder else ""
+    return "; ".join(f"{fold} {role} on {scenes}{tail}" for role, _, fold in found)
 
 
 def _warn_model_and_scorer(args, ds) -> None:

@@ -49,7 +49,9 @@ them at their defaults (``DataConfig.denoiser_part``)."""
 BUILTIN_DATASETS = ("eth", "hotel", "univ", "zara1", "zara2", "sdd", "nba", "robo", "robo-sim",
                     "robo-mix")  # fmt: skip
 """The datasets ``data.registry`` reads by name (``data.registry.NAMES``); any other
-``DataConfig.dataset`` is a folder or file path."""
+``DataConfig.dataset`` is a folder or file path. A new one also needs its entry in
+``data.registry.SPECS``, its branch there and a line in ``DataConfig.dataset``'s docstring
+(docs/data.md, "Adding a built-in dataset")."""
 
 
 @dataclass
@@ -57,7 +59,8 @@ class DataConfig:
     """Which data to train on and how to batch and augment it."""
 
     dataset: str = "zara1"
-    """Dataset name (``eth hotel univ zara1 zara2 sdd nba robo-sim robo-mix``) or a folder path."""
+    """Dataset name (``BUILTIN_DATASETS``: ``eth hotel univ zara1 zara2 sdd nba robo robo-sim
+    robo-mix``) or a folder path."""
     val_dataset: str | None = None
     """Dataset for validation when it differs (Robo: train on robo-sim, validate on robo)."""
     max_agents: int = 512
@@ -843,8 +846,11 @@ def to_dict(cfg: Any) -> dict[str, Any]:
     return dataclasses.asdict(cfg)
 
 
-def from_dict(cls: type, data: dict[str, Any] | None, where: str = "") -> Any:
-    """Build dataclass ``cls`` from a nested dict; unknown keys are an error."""
+def from_dict(cls: type, data: dict[str, Any] | None, where: str = "", stored: str = "") -> Any:
+    """Build dataclass ``cls`` from a nested dict; unknown keys are an error. ``stored``: what
+    wrote the dict when a program did (``"a checkpoint's config"``), so that a key this
+    version lacks is said to come from a newer trajpref, not to be a typo
+    (``unknown_key_message``)."""
     if data is not None and not isinstance(data, dict):
         section = where.rstrip(".") or cls.__name__
         raise ConfigError(f"config {section} must be a section (key: value lines), got {data!r}")
@@ -853,12 +859,12 @@ def from_dict(cls: type, data: dict[str, Any] | None, where: str = "") -> Any:
     known = [f.name for f in fields(cls)]
     unknown = sorted(set(data) - set(known), key=str)
     if unknown:
-        raise ConfigError(unknown_key_message([str(u) for u in unknown], known, where))
+        raise ConfigError(unknown_key_message([str(u) for u in unknown], known, where, stored))
     kwargs = {}
     for name, value in data.items():
         hint = hints[name]
         if dataclasses.is_dataclass(hint):
-            kwargs[name] = from_dict(hint, value, f"{where}{name}.")
+            kwargs[name] = from_dict(hint, value, f"{where}{name}.", stored)
         else:
             kwargs[name] = _coerce(value, hint, f"{where}{name}")
     try:
@@ -884,15 +890,23 @@ def in_section(message: str, cls: type, where: str) -> str:
     return out if out != message else f"{where.rstrip('.')}: {message}"
 
 
-def unknown_key_message(unknown: list[str], known: list[str], where: str = "") -> str:
+def unknown_key_message(unknown: list[str], known: list[str], where: str = "",
+                        stored: str = "") -> str:  # fmt: skip
     """One line for unknown config keys: the nearest valid key (difflib) and the valid keys of
-    the section (``where`` is its dotted prefix, e.g. ``"data."``; empty at the top level)."""
-    close = difflib.get_close_matches(unknown[0], known, n=1, cutoff=0.6)
-    hint = f" (did you mean {where}{close[0]}?)" if close else ""
+    the section (``where`` is its dotted prefix, e.g. ``"data."``; empty at the top level).
+    With ``stored`` (what wrote the config: a checkpoint's header) no typo is suggested: a
+    key this version lacks there was most likely written by a newer trajpref."""
     more = f"; also unknown: {', '.join(where + u for u in unknown[1:])}" if unknown[1:] else ""
     section = f"section {where.rstrip('.')}" if where else "the top level"
-    return (f"unknown config key {where}{unknown[0]}{hint}{more}; valid keys of {section}: "
-            f"{', '.join(known)} (all keys with their meaning: trajpref config show)")  # fmt: skip
+    valid = f"valid keys of {section}: {', '.join(known)}"
+    if stored:
+        return (f"unknown config key {where}{unknown[0]} in {stored}{more}: probably written by "
+                f"a newer trajpref than this one, which added the key; upgrade trajpref to read "
+                f"it ({valid})")  # fmt: skip
+    close = difflib.get_close_matches(unknown[0], known, n=1, cutoff=0.6)
+    hint = f" (did you mean {where}{close[0]}?)" if close else ""
+    return (f"unknown config key {where}{unknown[0]}{hint}{more}; {valid} (all keys with their "
+            "meaning: trajpref config show)")  # fmt: skip
 
 
 def field_docs(cls: type) -> dict[str, str]:
@@ -982,9 +996,10 @@ def upgrade_config_dict(data: dict[str, Any]) -> dict[str, Any]:
     return data
 
 
-def experiment_from_dict(data: dict[str, Any] | None) -> ExperimentConfig:
-    """An ``ExperimentConfig`` from a nested dict, in today's layout or an older one."""
-    return from_dict(ExperimentConfig, upgrade_config_dict(data or {}))
+def experiment_from_dict(data: dict[str, Any] | None, stored: str = "") -> ExperimentConfig:
+    """An ``ExperimentConfig`` from a nested dict, in today's layout or an older one.
+    ``stored``: what wrote it, when a program did (``from_dict``)."""
+    return from_dict(ExperimentConfig, upgrade_config_dict(data or {}), stored=stored)
 
 
 BUILTIN_CONFIGS = Path(__file__).resolve().parent / "configs"

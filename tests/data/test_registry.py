@@ -587,3 +587,75 @@ def test_sgan_is_refused_for_built_in_datasets_other_than_the_eth_ucy_folds():
     check_protocol_for("/some/own/folder", "sgan")  # one's own data: either protocol
     with pytest.raises(TrajprefError, match="unknown protocol"):
         check_protocol_for("eth", "SGAN")
+
+
+# walkthrough 62 (a contributor), items 3 and 4: a built-in name without its SPECS entry or its
+# branch is an error, never another dataset's data
+
+
+def test_names_specs_and_the_branches_agree():
+    from trajpref.data import registry
+
+    assert set(registry.NAMES) == set(registry.SPECS) == set(registry.BRANCHES)
+    assert set(registry.SGAN_TEST_FILES) == set(ETH_UCY)
+    listed = registry.__doc__.split("BUILTIN_DATASETS``: ``", 1)[1].split("``")[0].split()
+    assert listed == list(registry.NAMES)
+
+
+def test_every_built_in_name_reaches_its_own_branch(tmp_path, monkeypatch):
+    from trajpref.data import registry
+
+    seen = []
+    empty = ([], tmp_path)
+
+    def reader(tag):
+        def read(*args, **_):
+            seen.append(tag(args))
+            return empty
+
+        return read
+
+    monkeypatch.setattr(registry, "_sdd", reader(lambda a: "sdd"))
+    monkeypatch.setattr(registry, "_nba", reader(lambda a: "nba"))
+    monkeypatch.setattr(registry, "_robo", reader(lambda a: "robo"))
+    monkeypatch.setattr(registry, "_robo_sim", lambda split: seen.append("robo-sim") or "sim")
+    monkeypatch.setattr(registry, "_robo_mix", lambda *a: seen.append("robo-mix") or "mix")
+    monkeypatch.setattr(registry.text, "read_folder",
+                        lambda folder, *a, **k: seen.append(folder.parent.name) or [])  # fmt: skip
+    for name in registry.NAMES:
+        registry._built_in(name, "test", tmp_path, ReadOptions())
+        assert seen.pop() == name
+
+
+def test_a_built_in_name_without_specs_or_branch_is_a_clear_error(tmp_path, monkeypatch):
+    from trajpref.data import registry
+
+    monkeypatch.setattr(registry, "NAMES", (*registry.NAMES, "zara1b"))  # BUILTIN_DATASETS only
+    no_specs = (r"^built-in dataset 'zara1b' \(config\.BUILTIN_DATASETS\) has no entry in "
+                r"data\.registry\.SPECS \(its units and frame interval\); the datasets with "
+                r"one: eth, hotel, univ, ")  # fmt: skip
+    with pytest.raises(TrajprefError, match=no_specs):
+        load_dataset("zara1b", "test", tmp_path)
+    monkeypatch.setitem(registry.SPECS, "zara1b", registry.SPECS["zara1"])  # no branch yet
+    (tmp_path / "robo").mkdir()  # what the robo branch would have read
+    no_branch = (r"^built-in dataset 'zara1b' has no branch in data\.registry\._built_in "
+                 r"that reads it; the datasets it reads: eth, ")  # fmt: skip
+    with pytest.raises(TrajprefError, match=no_branch):
+        load_dataset("zara1b", "test", tmp_path)
+
+
+def test_sgan_folds_finds_a_folds_test_files_by_name(tmp_path):
+    from trajpref.data.registry import sgan_folds
+
+    rows = straight_rows(24)
+    write_tracks(tmp_path / "a" / "test" / "crowds_zara01.txt", rows)
+    write_tracks(tmp_path / "a" / "train" / "crowds_zara02_train.txt", rows)  # not a test file
+    write_tracks(tmp_path / "b" / "Students001.TXT", rows)  # no split folders, any case
+    write_tracks(tmp_path / "c" / "uni_examples.txt", rows)  # every fold trains on it
+    write_tracks(tmp_path / "d" / "biwi_eth.txt", rows)
+    write_tracks(tmp_path / "d" / "biwi_hotel.txt", rows)
+    assert sgan_folds(tmp_path / "a") == ("zara1",)
+    assert sgan_folds(tmp_path / "b") == ("univ",)
+    assert sgan_folds(tmp_path / "c") == ()
+    assert sgan_folds(tmp_path / "d") == ("eth", "hotel")
+    assert sgan_folds(tmp_path / "missing") == () and sgan_folds("zara1") == ()

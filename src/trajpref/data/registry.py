@@ -1,6 +1,7 @@
 """One entry point for every dataset: ``load_dataset(name, split, root)``.
 
-Names: ``eth hotel univ zara1 zara2 sdd nba robo robo-sim robo-mix``, or a path to a folder of
+Names: ``NAMES`` (``config.BUILTIN_DATASETS``: ``eth hotel univ zara1 zara2 sdd nba robo
+robo-sim robo-mix``), or a path to a folder of
 ``frame agent x y`` text files or TrajNet++ ``.ndjson`` scene files (with ``train/val/test``
 sub-folders when present), or to one ``.ndjson`` file. Formats: ``docs/data_format.md``.
 """
@@ -30,6 +31,9 @@ ETH_UCY = ("eth", "hotel", "univ", "zara1", "zara2")
 """The five ETH/UCY leave-one-out folds."""
 NAMES = BUILTIN_DATASETS
 """Built-in dataset names."""
+BRANCHES = (*ETH_UCY, "sdd", "nba", "robo", "robo-sim", "robo-mix")
+"""The names ``_built_in`` has a branch for (a test checks that they, ``NAMES`` and ``SPECS``
+agree)."""
 SPLITS = ("train", "val", "test")
 USER_TEXT = ("*.txt", "*.csv")
 """Track files of a user folder (Social-GAN text format; docs/data_format.md), matched
@@ -365,13 +369,23 @@ def _load(
 
 def _built_in(name: str, split: str, root: str | Path | None,
               options: text.ReadOptions) -> TrajectoryDataset:  # fmt: skip
-    """A built-in dataset read from the data root."""
+    """A built-in dataset read from the data root. Each name has its own branch (an ETH/UCY
+    fold: ``ETH_UCY``); a name of ``NAMES`` without ``SPECS`` entry or branch is an error."""
     if name == "robo-sim":
         return _robo_sim(split)
     if name == "robo-mix":
         return _robo_mix(split, root, options)
+    spec = SPECS.get(name)
+    if spec is None:
+        raise TrajprefError(f"built-in dataset {name!r} (config.BUILTIN_DATASETS) has no entry in "
+                            "data.registry.SPECS (its units and frame interval); the datasets "
+                            f"with one: {', '.join(SPECS)} (docs/data.md, \"Adding a built-in "
+                            "dataset\")")  # fmt: skip
+    if name not in BRANCHES:
+        raise TrajprefError(f"built-in dataset {name!r} has no branch in data.registry._built_in "
+                            f"that reads it; the datasets it reads: {', '.join(BRANCHES)} "
+                            "(docs/data.md, \"Adding a built-in dataset\")")  # fmt: skip
     base = resolve_data_root(root)
-    spec = SPECS[name]
     if name in ETH_UCY:
         folder = base / "eth_ucy" / name / split
         scenes = text.read_folder(folder, spec.t_hist, spec.t_fut, options=options,
@@ -381,8 +395,11 @@ def _built_in(name: str, split: str, root: str | Path | None,
         scenes, source = _sdd(base, split, options)
     elif name == "nba":
         scenes, source = _nba(base, split, spec, options)
-    else:  # robo
+    elif name == "robo":
         scenes, source = _robo(base, split, options)
+    else:  # a name added to BRANCHES without its branch here
+        raise AssertionError(f"data.registry._built_in: {name!r} is in BRANCHES but has no "
+                             "branch")  # fmt: skip
     info = DatasetInfo(
         name, split, spec.units, spec.frame_interval, spec.t_hist, spec.t_fut, str(source)
     )
@@ -482,6 +499,32 @@ def split_folders(path: Path) -> dict[str, Path]:
     except OSError as exc:  # a sub-folder that cannot be looked at
         raise text.folder_error(path, exc) from None
     return found
+
+
+SGAN_TEST_FILES = {"eth": ("biwi_eth",), "hotel": ("biwi_hotel",),
+                   "univ": ("students001", "students003"), "zara1": ("crowds_zara01",),
+                   "zara2": ("crowds_zara02",)}  # fmt: skip
+"""Each ETH/UCY fold's test files in Social-GAN's release (``eth_ucy/<fold>/test/<name>.txt``):
+the fold's own scenes, most of whose windows the other folds' leave-one-out training files
+hold (``uni_examples`` and ``crowds_zara03`` are in every fold's training split, no test)."""
+
+
+def sgan_folds(path: str | Path) -> tuple[str, ...]:
+    """The ETH/UCY folds (``ETH_UCY`` order) whose Social-GAN test files (``SGAN_TEST_FILES``,
+    matched by name ignoring case and suffix) a user folder holds, in itself or in its
+    ``train/ val/ test/`` sub-folders: ``eth_ucy/zara1`` given as a path, or a copy of
+    ``crowds_zara01.txt``, is the zara1 fold's data. Empty for anything else: a built-in name,
+    a file, a folder that is not there or cannot be read (loading it says why)."""
+    folder = Path(path).expanduser()
+    try:
+        if not folder.is_dir():
+            return ()
+        stems = set()
+        for sub in (folder, *split_folders(folder).values()):
+            stems |= {f.stem.lower() for f in text.matching_files(sub, USER_TEXT)}
+    except (OSError, TrajprefError):
+        return ()
+    return tuple(fold for fold in ETH_UCY if stems & set(SGAN_TEST_FILES[fold]))
 
 
 def _trajnet(

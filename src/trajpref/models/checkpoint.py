@@ -494,6 +494,9 @@ keeps the value it was trained and evaluated with (ancestral tau steps before 20
 
 
 def config_of(payload: dict[str, Any]) -> ExperimentConfig:
+    """The ``ExperimentConfig`` a payload was trained with: a key its header lacks takes its
+    default (or its ``LEGACY_DEFAULTS`` value); a key this version does not know is said to
+    come from a newer trajpref."""
     config = payload["config"]
     missing = {k: v for k, v in LEGACY_DEFAULTS.items() if k[1] not in config.get(k[0], {})}
     if missing:
@@ -501,7 +504,7 @@ def config_of(payload: dict[str, Any]) -> ExperimentConfig:
                   for section, values in config.items()}  # fmt: skip
         for (section, name), value in missing.items():
             config.setdefault(section, {})[name] = value
-    return experiment_from_dict(config)
+    return experiment_from_dict(config, stored="a checkpoint's config")
 
 
 def build_denoiser(payload: dict[str, Any]) -> tuple[Denoiser, ExperimentConfig]:

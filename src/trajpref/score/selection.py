@@ -8,6 +8,10 @@ shared by all its agents, what the joint metrics count).
 
 Shapes: pred [K, N, T_f, 2], residual [K, N] (one number per sample and agent, lower is more
 human-like), the result idx [K', N] (sample indices per agent, in selection order).
+
+Methods are named in ``Method`` and dispatched by their exact name: each has its own branch in
+``_select`` and its own entry in ``USES_SCORE`` (a name's prefix or suffix means nothing to
+the code; an unknown name is an error). Adding one: docs/selection.md, "Adding a method".
 """
 
 from __future__ import annotations
@@ -32,14 +36,24 @@ Method = Literal["first", "random", "kmeans", "fps", "facility", "medoids", "top
                  "score-first", "score-kmeans", "score-fps", "score-facility",
                  "score-medoids"]  # fmt: skip
 METHODS: tuple[str, ...] = typing.get_args(Method)
-USES_SCORE = {m: m == "top" or m.startswith("score-") for m in METHODS}
-"""Methods that read the diffusion score (the others select by the samples alone)."""
+USES_SCORE = {"first": False, "random": False, "kmeans": False, "fps": False, "facility": False,
+              "medoids": False, "top": True, "score-first": True, "score-kmeans": True,
+              "score-fps": True, "score-facility": True, "score-medoids": True}  # fmt: skip
+"""Whether each method reads the diffusion score (the others select by the samples alone);
+written out per method, as ``_select``'s branches are."""
 SCORE_FREE = {"top": "first", "score-first": "first", "score-kmeans": "kmeans",
               "score-fps": "fps", "score-facility": "facility",
               "score-medoids": "medoids"}  # fmt: skip
 """Each score method's counterpart without the score (``trust_speed`` falls back to it)."""
+DROPPING = ("score-first", "score-kmeans", "score-fps", "score-facility", "score-medoids")
+"""The score methods that drop the ``drop`` worst-scored samples, then select among the rest."""
 WEIGHTED = ("score-facility", "score-medoids")
 """The score methods that weight each sample as a target by exp(-z / temperature)."""
+FACILITY = ("facility", "score-facility")
+"""The methods that read ``bandwidth`` (facility location)."""
+if set(USES_SCORE) != set(METHODS) or set(SCORE_FREE) != {m for m in METHODS if USES_SCORE[m]}:
+    raise AssertionError("score.selection: USES_SCORE and SCORE_FREE must name every method "
+                         "of Method")  # fmt: skip
 
 
 @dataclass
@@ -136,9 +150,9 @@ class SelectionConfig:
         """The settings given away from their defaults that this method does not read (the
         score's drop and pace gate without the score, a temperature outside the weighted
         methods, a bandwidth outside facility location)."""
-        reads = {"drop": self.uses_score, "trust_speed": self.uses_score,
+        reads = {"drop": self.method in DROPPING, "trust_speed": self.uses_score,
                  "temperature": self.method in WEIGHTED,
-                 "bandwidth": self.method.endswith("facility"),
+                 "bandwidth": self.method in FACILITY,
                  "score_every": self.uses_score, "score_from": self.uses_score}  # fmt: skip
         return [k for k, read in reads.items() if not read and getattr(self, k) != getattr(
             SelectionConfig, k)]  # fmt: skip
@@ -321,7 +335,8 @@ def select_indices(features: torch.Tensor, keep: int, cfg: SelectionConfig,
 def _select(features: torch.Tensor, keep: int, cfg: SelectionConfig,
             residual: torch.Tensor | None,
             generator: torch.Generator | None) -> torch.Tensor:  # fmt: skip
-    """``select_indices`` for every item by ``cfg.method``: [K, M, F] -> [keep, M]."""
+    """``select_indices`` for every item by ``cfg.method``: [K, M, F] -> [keep, M]. Each
+    method has its own branch, matched by its exact name; a name without one is an error."""
     k, m_items, _ = features.shape
     method = cfg.method
     device = features.device
@@ -332,25 +347,29 @@ def _select(features: torch.Tensor, keep: int, cfg: SelectionConfig,
         return noise.argsort(0)[:keep]
     if method == "top":
         return residual.argsort(0)[:keep]
-    valid = torch.ones(k, m_items, dtype=torch.bool, device=device)
-    if method.startswith("score-"):
+    valid = torch.ones(k, m_items, dtype=torch.bool, device=device)  # [K, M]
+    if method in DROPPING:
         kept = max(keep, k - int(cfg.drop * k))  # the best `kept` by the score stay
         order = residual.argsort(0)  # [K, M] best first
         valid = torch.zeros_like(valid).scatter_(0, order[:kept], True)
         first = order[0]  # cover outward from the best-scored sample
     else:  # start from the sample nearest the mean of all K
-        first = (features - features.mean(0, keepdim=True)).pow(2).sum(-1).argmin(0)
+        first = (features - features.mean(0, keepdim=True)).pow(2).sum(-1).argmin(0)  # [M]
     if method == "score-first":  # the generator's own order, skipping the worst-scored
-        rank = torch.arange(k, device=device)[:, None] + k * (~valid).to(torch.int64)
+        rank = torch.arange(k, device=device)[:, None] + k * (~valid).to(torch.int64)  # [K, M]
         return rank.argsort(0)[:keep]
-    if method.endswith(("facility", "medoids")):
-        weight = _target_weight(residual, cfg, features)  # [K, M]
-        if method.endswith("facility"):
-            return _facility(features, valid, weight, keep, cfg.bandwidth)
-        return _medoids(features, valid, weight, keep, MEDOID_PASSES)
-    if method.endswith("fps"):
+    if method in ("kmeans", "score-kmeans"):
+        return _kmeans(features, valid, first, keep, cfg.iters)
+    if method in ("fps", "score-fps"):
         return _farthest_points(features, valid, first, keep)
-    return _kmeans(features, valid, first, keep, cfg.iters)
+    if method in ("facility", "score-facility"):
+        weight = _target_weight(residual, cfg, features)  # [K, M]
+        return _facility(features, valid, weight, keep, cfg.bandwidth)
+    if method in ("medoids", "score-medoids"):
+        weight = _target_weight(residual, cfg, features)  # [K, M]
+        return _medoids(features, valid, weight, keep, MEDOID_PASSES)
+    raise ConfigError(f"selection method {method!r} has no branch in score.selection._select "
+                      f"(the methods: {', '.join(METHODS)})")  # fmt: skip
 
 
 def _target_weight(residual: torch.Tensor | None, cfg: SelectionConfig,
@@ -358,7 +377,7 @@ def _target_weight(residual: torch.Tensor | None, cfg: SelectionConfig,
     """Each sample's weight as a target of the coverage methods [K, M]: exp(-z / T) for
     ``score-facility`` and ``score-medoids`` (z the residual standardised over the item's K
     samples, T ``cfg.temperature``), 1 for the score-free ``facility`` and ``medoids``."""
-    if not cfg.uses_score:
+    if cfg.method not in WEIGHTED:
         return torch.ones(features.shape[:2], dtype=features.dtype, device=features.device)
     if residual.shape[0] < 2:  # one sample has no spread: z = 0 (std would warn and be NaN)
         return torch.ones_like(residual)

@@ -78,8 +78,10 @@ def run_identity(cfg: ExperimentConfig, name: str, start: str | None = None,
     ``start``, the hash of the checkpoint it starts from (the generator stage's denoiser,
     fine-tuning's generator), and with ``data`` the fingerprint of what it reads
     (``data_fingerprint``, under the key ``data_files``). ``check_resume`` compares a key that
-    an older state lacks as null: a key added since with a null default (``data.frame_interval``,
-    ``data.units``) leaves such a state resumable."""
+    an older state lacks with its value in ``identity_defaults`` (the field's dataclass default,
+    or the old one where ``LEGACY_DEFAULTS`` records a change): a field added since whose
+    default reproduces the old behaviour (``data.frame_interval``, ``data.units``) leaves such a
+    state resumable."""
     full = to_dict(cfg)
     own = {k: v for k, v in full[name].items() if k not in RESUME_FREE}
     keep = {k: full[k] for k in ("data", "model", "diffusion", "seed")}
@@ -130,11 +132,42 @@ def data_digest(data: dict[str, dict[str, str]]) -> str:
     return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:12]
 
 
-def _differences(saved: Any, now: Any, prefix: str = "") -> list[str]:
-    """``key: saved -> now`` for each leaf that differs between two nested dicts."""
+def identity_defaults(name: str) -> dict[str, Any]:
+    """What ``run_identity`` records for stage ``name`` at every field's default (``start``
+    null, no ``data_files``): the value ``check_resume`` gives a key that a state written
+    before the field existed lacks. The dataclass default, except where the default has
+    changed since (``models.checkpoint.LEGACY_DEFAULTS``: such a state ran with the old one)."""
+    out = json.loads(run_identity(ExperimentConfig(), name))
+    for (section, key), value in ckpt.LEGACY_DEFAULTS.items():
+        if isinstance(out.get(section), dict) and key in out[section]:
+            out[section][key] = value
+    return out
+
+
+_ABSENT = object()
+"""A key one side of ``_differences`` lacks."""
+
+
+def _differences(saved: Any, now: Any, defaults: Any = None, prefix: str = "") -> list[str]:
+    """``key: saved -> now`` for each leaf that differs between two nested dicts. A key that
+    ``saved`` lacks is compared with its value in ``defaults`` (``identity_defaults``: the
+    state was written before the field existed) and shown as ``absent (default ...)``; a
+    key that ``now`` lacks was written by a newer trajpref, which this one cannot honour."""
     if isinstance(saved, dict) and isinstance(now, dict):
-        return [line for k in sorted(set(saved) | set(now), key=str)
-                for line in _differences(saved.get(k), now.get(k), f"{prefix}{k}.")]  # fmt: skip
+        defaults = defaults if isinstance(defaults, dict) else {}
+        lines = []
+        for k in sorted(set(saved) | set(now), key=str):
+            old, new, key = saved.get(k, _ABSENT), now.get(k, _ABSENT), f"{prefix}{k}"
+            if old is _ABSENT and k in defaults:
+                if defaults[k] != new:
+                    lines.append(f"{key}: absent (default {defaults[k]!r}) -> {new!r}")
+            elif new is _ABSENT:
+                lines.append(f"{key}: {old!r} -> not a key of this trajpref (a newer version "
+                             "wrote the state?)")  # fmt: skip
+            else:
+                lines += _differences(None if old is _ABSENT else old, new, defaults.get(k),
+                                      f"{key}.")  # fmt: skip
+        return lines
     return [] if saved == now else [f"{prefix.rstrip('.')}: {saved!r} -> {now!r}"]
 
 
@@ -223,7 +256,7 @@ def check_resume(state: dict[str, Any], identity: str, epochs: int, out_dir: Pat
         saved_run, now_run = json.loads(saved), json.loads(identity)
         saved_run.pop("data_files", None)  # the data are compared once read
         now_run.pop("data_files", None)
-        changed = _differences(saved_run, now_run)
+        changed = _differences(saved_run, now_run, identity_defaults(name))
         if changed:
             start = changed[0].startswith("start")
             which = "the checkpoint it starts from" if start else "its config"
