@@ -56,6 +56,7 @@ RETIRED_STARTS = (
     "-norole",
     "-drop30",
     "-nocontext",
+    "-reg0",
 )
 """Suffixes of the published default generators that a later default replaced after fine-tuning
 runs had started from them, oldest first: the scene-frame generators (replaced 2026-11-25 by
@@ -71,7 +72,8 @@ replaced by scale augmentation 0.8-1.25 with dropout 0.3), then that generator, 
 know which robot is which (2026-11-29, replaced by ``model.agent_roles``), then the roles
 generator with dropout 0.3 (2026-12-01, replaced by dropout 0.2), then eth's and zara1's
 generators that did not read the agents leaving the view (2026-12-02, replaced by
-``model.context_agents``).
+``model.context_agents``), then eth's generator trained without the sample-training term,
+one of whose 20 samples was noise (2026-12-06, replaced by ``generator.reg_weight`` 0.02).
 Their start row is ``pretrained<suffix>`` and their runs' rows carry the suffix; no run can
 begin from them now."""
 START_SUFFIXES = (ANCESTRAL_SUFFIX, *RETIRED_STARTS, "-long")

@@ -26,7 +26,7 @@ INDEX = Path(trajpref.__file__).parent / "zoo" / "index.json"
 GENERATORS = [(r["name"], r["dataset"]) for r in json.loads(INDEX.read_text())["models"]
               if r["kind"] == "generator"]  # fmt: skip
 
-BROKEN = {"eth/generator": 3, "sdd/generator": 14, "zara2/rlhf-res": 14}
+BROKEN = {"sdd/generator": 14, "zara2/rlhf-res": 14}
 """Published generators known to have one noise sample (by index), stated in their model
 cards: checked to still have it there, so a fixed one fails here until it leaves this list."""
 
