@@ -162,7 +162,7 @@ _FACILITY = {"method": "score-facility", "drop": 0.2, "temperature": 2.0, "score
 CHOSEN: dict[str, dict[str, dict]] = {
     "zara1/generator": {"chosen": {**_FACILITY, "bandwidth": 1.0, "trust_speed": 0.4450},
                         "cheap": {"score_every": 100}},
-    "eth/generator": {"chosen": {**_FACILITY, "bandwidth": 0.5, "trust_speed": 0.4255},
+    "eth/generator": {"chosen": {**_FACILITY, "bandwidth": 1.0, "trust_speed": 0.4255},
                       "cheap": {"score_every": 50}},
     "robo/generator": {"chosen": {**_FACILITY, "bandwidth": 0.5, "trust_speed": 0.2801},
                        "cheap": {"score_every": 100, "score_from": 99}},
