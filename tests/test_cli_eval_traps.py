@@ -368,3 +368,18 @@ def test_the_evaluate_header_always_names_the_protocol(capsys, walks):
         code, out, _ = _run(capsys, "evaluate", "--dataset", walks, "--samples", "1",
                             "--no-progress", "--protocol", protocol)  # fmt: skip
         assert code == 0 and out.startswith(f"{walks}/test (protocol {protocol})  model=cv")
+
+
+def test_a_missing_scene_id_with_frames_written_as_times_names_the_nearest():
+    """Frame labels written as times (0.4, 0.8, ...) are numbers too: the nearest ids are
+    named (an int() of them raised a traceback)."""
+    from types import SimpleNamespace
+
+    from trajpref.cli import _scene_index
+    from trajpref.errors import TrajprefError
+
+    scenes = [SimpleNamespace(scene_id=f"w.txt@frame={t}") for t in ("0.4", "0.8", "1.2")]
+    info = SimpleNamespace(name="mine", split="test", protocol="all")
+    ds = SimpleNamespace(info=info, scenes=scenes)
+    with pytest.raises(TrajprefError, match=r"the nearest of w\.txt: w\.txt@frame=0\.8, "):
+        _scene_index(SimpleNamespace(scene="w.txt@frame=0.9"), ds)

@@ -1426,6 +1426,16 @@ def _check_plot_args(args) -> None:
                           "biwi_eth.txt@frame=830")  # fmt: skip
 
 
+def _frame_number(text: str) -> float | None:
+    """A scene id's frame label as a number (frames may be written as times, e.g. 0.4), or
+    None when it is not one."""
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if math.isfinite(value) else None
+
+
 def _scene_index(args, ds) -> int:
     """``--scene``'s index in the split as read: the index given, or the scene whose id it
     names (``plot`` prints ids; ``predict`` saves them as ``scene_id``)."""
@@ -1439,9 +1449,10 @@ def _scene_index(args, ds) -> int:
         return ids.index(args.scene)
     file, _, frame = args.scene.partition("@frame=")
     same = [i for i in ids if i.partition("@frame=")[0] == file]
-    if same and frame.lstrip("-").isdigit():  # the ids of that file nearest the frame asked
-        same.sort(key=lambda i: abs(int(i.partition("@frame=")[2] or 0) - int(frame)))
-        near = f"; the nearest of {file}: {', '.join(same[:3])}"
+    asked, frames = _frame_number(frame), [_frame_number(i.partition("@frame=")[2]) for i in same]
+    if same and asked is not None and None not in frames:  # that file's ids nearest the frame
+        order = sorted(range(len(same)), key=lambda j: abs(frames[j] - asked))
+        near = f"; the nearest of {file}: {', '.join(same[j] for j in order[:3])}"
     elif same:
         near = f"; {file}'s first: {same[0]}"
     else:
