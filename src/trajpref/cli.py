@@ -566,7 +566,7 @@ def _check_data_args(args) -> None:
                               f"--split val, not --split {args.split}")  # fmt: skip
 
 
-PROTOCOL_CHECKED = ("data", "evaluate", "predict", "plot")
+PROTOCOL_CHECKED = ("data", "evaluate", "predict", "plot", "survey")
 """The commands that refuse ``--protocol sgan`` on a built-in dataset other than an ETH/UCY
 fold (``data.registry.check_protocol_for``)."""
 

@@ -320,3 +320,12 @@ def test_export_errors_write_nothing(capsys, synthetic_study, tmp_path):
                         tmp_path / "new" / "a.csv", "--exclude-rater", "synthetic-9")  # fmt: skip
     _one_line_error(code, err, "(did you mean synthetic-01?)")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["study"]
+
+
+def test_build_refuses_the_sgan_protocol_on_sdd(capsys, tmp_path):
+    """sgan is Social-GAN's ETH/UCY counting: a study of SDD under it would drop half its
+    agents, as evaluate refuses (checked before any data is read, so no data is needed)."""
+    code, _, err = _run(capsys, "survey", "build", "--dataset", "sdd", "--protocol", "sgan",
+                        "--models", "cv", "--out", tmp_path / "study")  # fmt: skip
+    assert code == 2 and "--protocol sgan is Social-GAN's ETH/UCY counting" in err
+    assert not (tmp_path / "study").exists()
