@@ -556,19 +556,13 @@ def _check_data_args(args) -> None:
                       f"knows its own ({spec.units}, {spec.frame_interval:g} s), so they are "
                       "ignored", stacklevel=2)  # fmt: skip
     _read_options(args)  # --delimiter, --max-gap, --max-coord, --time-step
-    if args.command in PROTOCOL_CHECKED:  # sgan is ETH/UCY's counting (not SDD's, NBA's)
-        check_protocol_for(args.dataset, args.protocol)
+    check_protocol_for(args.dataset, args.protocol)  # sgan is ETH/UCY's (not SDD's, NBA's)
     if args.holdout_scene is not None:
         if not args.holdout_scene:
             raise ConfigError("--holdout-scene needs a file-name prefix, e.g. biwi_hotel")
         if args.split != "val":
             raise ConfigError(f"--holdout-scene selects a validation split: use it with "
                               f"--split val, not --split {args.split}")  # fmt: skip
-
-
-PROTOCOL_CHECKED = ("data", "evaluate", "predict", "plot", "survey")
-"""The commands that refuse ``--protocol sgan`` on a built-in dataset other than an ETH/UCY
-fold (``data.registry.check_protocol_for``)."""
 
 
 def _read_options(args) -> ReadOptions:
@@ -819,20 +813,25 @@ def _training_data(dataset: str) -> str:
     return dataset
 
 
+def _checkpoint_header(spec: str) -> dict:
+    """Checkpoint ``spec``'s header (a path or a published name), its weights left unread; a
+    legacy ``.pt`` file is loaded whole, without its state dict (loading the model has warned
+    of the format, so this does not warn again)."""
+    path = ckpt.resolve_path(spec)
+    if path.suffix != ckpt.LEGACY_SUFFIX:
+        return read_checkpoint_header(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        return {k: v for k, v in ckpt.load(path).items() if k != "state_dict"}
+
+
 def _trained_on(spec: str) -> str | None:
     """The ``data.dataset`` that checkpoint ``spec`` (a path or a published name) was trained
     on; None for cv or a file whose header this cannot read (loading it says what is wrong)."""
     if spec == "cv":
         return None
     try:
-        path = ckpt.resolve_path(spec)
-        if path.suffix == ckpt.LEGACY_SUFFIX:
-            with warnings.catch_warnings():  # loading the model warns of the legacy format
-                warnings.simplefilter("ignore", FutureWarning)
-                header = ckpt.load(path)
-        else:
-            header = read_checkpoint_header(path)
-        dataset = header["config"]["data"]["dataset"]
+        dataset = _checkpoint_header(spec)["config"]["data"]["dataset"]
     except (TrajprefError, KeyError, TypeError, ValueError, AttributeError, OSError):
         return None
     return dataset if isinstance(dataset, str) else None
@@ -1039,13 +1038,7 @@ def _model_fields(args) -> dict:
     ``models.checkpoint.finetune_reward`` and ``meta.from``). None for cv."""
     if args.model == "cv":
         return {"model_hash": None, "weights_hash": None}
-    path = ckpt.resolve_path(args.model)
-    if path.suffix == ckpt.LEGACY_SUFFIX:
-        with warnings.catch_warnings():  # loading the model has warned of the legacy format
-            warnings.simplefilter("ignore", FutureWarning)
-            header = {k: v for k, v in ckpt.load(path).items() if k != "state_dict"}
-    else:
-        header = read_checkpoint_header(path)
+    header = _checkpoint_header(args.model)
     header = {**header, "config": {**header["config"], "model": dict(header["config"]["model"])}}
     model = header["config"]["model"]
     for name in MODEL_SETTINGS:
