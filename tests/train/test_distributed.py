@@ -109,3 +109,33 @@ def test_more_processes_than_gpus_is_refused_on_every_rank(monkeypatch, rank):
     with pytest.raises(ConfigError, match=r"torchrun started 2 processes on this machine but "
                        r"it has 1 GPU\(s\)"):  # fmt: skip
         init_from_env(torch.device("cuda"))
+
+
+def test_cleanup_frees_garbage_in_cycles_before_leaving_the_group(monkeypatch):
+    """A DDP wrapper left in a reference cycle holds the gloo group: ``cleanup`` collects it
+    while the group and the interpreter are whole, before ``destroy_process_group``."""
+    import gc
+    import weakref
+
+    import torch.distributed as dist
+
+    from trajpref.train import distributed
+
+    class Wrapper:  # stands in for a DDP module caught in a cycle
+        pass
+
+    held = Wrapper()
+    held.self = held  # a cycle: freed by the collector only
+    alive = weakref.ref(held)
+    del held
+    seen = []
+    monkeypatch.setattr(dist, "is_initialized", lambda: True)
+    monkeypatch.setattr(dist, "destroy_process_group", lambda: seen.append(alive() is None))
+    gc.disable()  # no automatic collection in between: only cleanup's counts
+    try:
+        distributed.cleanup(DistInfo(rank=0, world_size=2))
+    finally:
+        gc.enable()
+    assert seen == [True]
+    distributed.cleanup(DistInfo())  # one process: nothing to leave
+    assert seen == [True]

@@ -8,6 +8,7 @@ their shares' agents, so that DDP's average is the gradient of the whole batch's
 
 from __future__ import annotations
 
+import gc
 import os
 import sys
 import warnings
@@ -102,8 +103,13 @@ def cleanup(info: DistInfo) -> None:
     """Leave the process group. Call ``barrier`` first on the normal path: a rank that tears
     gloo down while another is still writing files can abort in gloo's threads ("terminate
     called without an active exception", seen once in CI); on an error path no barrier is
-    taken, so that a failed rank does not wait for one that will never come."""
+    taken, so that a failed rank does not wait for one that will never come.
+
+    Garbage is collected first: a DDP wrapper left in a reference cycle holds the gloo group
+    through its reducer, and freed only at interpreter exit it would tear gloo's threads down
+    while the interpreter is half gone (the same abort; pytorch/pytorch#179291 describes it)."""
     if info.enabled and dist.is_initialized():
+        gc.collect()
         dist.destroy_process_group()
 
 
