@@ -65,7 +65,7 @@ def test_a_folder_or_a_file_is_a_dataset(tmp_path):
     assert len(ds) == 1 and ds.info.units == "m" and ds.info.frame_interval == 0.4
     assert load_dataset(str(path), "test").num_agents == 2
     (tmp_path / "test" / "c.txt").write_text("0 1 2 3\n")
-    with pytest.raises(DataError, match=r"both text \(\*.txt, \*.csv\) and \*.ndjson"):
+    with pytest.raises(DataError, match=r"both text \(\*.txt, \*.csv, \*.tsv\) and \*.ndjson"):
         load_dataset(str(tmp_path), "test")
 
 

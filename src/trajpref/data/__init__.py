@@ -13,7 +13,7 @@ from trajpref.data.registry import (
     split_validation_in_time,
     with_paced_copy,
 )
-from trajpref.data.stats import mean_speed
+from trajpref.data.stats import mean_speed, speed_note, speed_text
 from trajpref.data.text import GapWarning, ReadOptions
 from trajpref.data.trajnet import FrameRateWarning, write_trajnet, write_trajnet_truth
 
@@ -31,6 +31,8 @@ __all__ = [
     "mean_speed",
     "resolve_data_root",
     "run_splits",
+    "speed_note",
+    "speed_text",
     "split_validation_in_time",
     "with_paced_copy",
     "write_trajnet",

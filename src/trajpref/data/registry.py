@@ -35,14 +35,16 @@ BRANCHES = (*ETH_UCY, "sdd", "nba", "robo", "robo-sim", "robo-mix")
 """The names ``_built_in`` has a branch for (a test checks that they, ``NAMES`` and ``SPECS``
 agree)."""
 SPLITS = ("train", "val", "test")
-USER_TEXT = ("*.txt", "*.csv")
+USER_TEXT = ("*.txt", "*.csv", "*.tsv")
 """Track files of a user folder (Social-GAN text format; docs/data_format.md), matched
-ignoring case (``a.TXT``, ``b.Csv``)."""
+ignoring case (``a.TXT``, ``b.Csv``). All are read alike, the separator sniffed from the
+first data line: a ``.tsv`` file's tabs are whitespace, as in the ETH/UCY ``.txt`` files."""
 DEFAULT_FRAME_INTERVAL = 0.4
 """Seconds between frames of a user folder when none is given (and, for TrajNet++ files,
 none is declared; for text files, their frame column is not named as seconds)."""
 SECONDS_STEPS = (1e-3, 10.0)
-"""The frame steps of a ``time``/``timestamp`` column (``text.SECONDS_COLUMNS``) that are read
+"""The frame steps of a ``time``/``timestamp`` column (``text.SECONDS_COLUMNS``; a
+``time_ms``/``timestamp_ms`` one's, ``text.MILLISECONDS_COLUMNS``, divided by 1000) that are read
 as seconds; a step outside (milliseconds, nanoseconds) leaves ``DEFAULT_FRAME_INTERVAL`` with
 a ``FrameRateWarning``. The ceiling is 10 s, not more: a log in milliseconds at 17-100 Hz
 steps 10-60, which a 60 s ceiling read as seconds (a 30 fps file at 33 s between frames, its
@@ -428,9 +430,8 @@ def _user_folder(
     has_text = bool(text.matching_files(folder, USER_TEXT))
     if text.matching_files(folder, ("*.ndjson",)):
         if has_text:
-            raise DataError("holds both text (*.txt, *.csv) and *.ndjson files: keep one "
-                            "format per folder",
-                            folder)  # fmt: skip
+            raise DataError(f"holds both text ({', '.join(USER_TEXT)}) and *.ndjson files: "
+                            "keep one format per folder", folder)  # fmt: skip
         files = text.track_files(folder, "*.ndjson")
         return _trajnet(files, str(path), split, frame_interval, units, options, folder)
     steps: dict[Path, tuple[str | None, float]] = {}
@@ -447,32 +448,44 @@ def text_interval(steps: dict[Path, tuple[str | None, float]], given: float | No
     """Seconds between frames of a folder's text files, and where they come from
     (``DatasetInfo.interval_from``), from ``steps`` (each file's header name of its frame
     column and its frame step, ``text.read_files``) and ``given``, the interval the user
-    passed (None: none). ``given`` wins. Else, when every file's frame column is named as
-    seconds (``text.SECONDS_COLUMNS``: ``time``, ``timestamp``) and they all step alike, by a
-    step in ``SECONDS_STEPS``: that step (``timestamps``). Else ``DEFAULT_FRAME_INTERVAL``
+    passed (None: none). ``given`` wins. Else, when every file's frame column is named as a
+    time (``text.column_seconds``: ``time``, ``timestamp`` in seconds, ``time_ms``,
+    ``timestamp_ms`` in milliseconds) and they all step alike, by a step in ``SECONDS_STEPS``
+    once in seconds: that step in seconds (``timestamps``). Else ``DEFAULT_FRAME_INTERVAL``
     (``default``), with a ``FrameRateWarning`` when time columns were there but gave no one
     interval in seconds."""
     if given is not None:
         return given, "given"
     stepped = {path: (name, step) for path, (name, step) in steps.items() if step > 0}
-    timed = {path: step for path, (name, step) in stepped.items() if name in text.SECONDS_COLUMNS}
+    timed: dict[Path, tuple[float, float, bool]] = {}  # seconds, as written, in milliseconds
+    for path, (name, step) in stepped.items():
+        per = text.column_seconds(name)
+        if per is not None:
+            timed[path] = (step * per, step, per != 1.0)
     if not timed:
         return DEFAULT_FRAME_INTERVAL, "default"
     why = None
-    first = next(iter(timed.values()))
+    first, written, ms = next(iter(timed.values()))
     if len(timed) < len(stepped):
         untimed = next(path for path in stepped if path not in timed)
-        why = (f"{next(iter(timed)).name}'s frame column is a time in seconds, "
+        unit = "milliseconds" if ms else "seconds"
+        why = (f"{next(iter(timed)).name}'s frame column is a time in {unit}, "
                f"{untimed.name}'s is not")  # fmt: skip
-    elif any(not math.isclose(step, first, rel_tol=1e-3) for step in timed.values()):
-        where = ", ".join(f"{step:.6g} in {path.name}" for path, step in timed.items())
+    elif any(not math.isclose(step, first, rel_tol=1e-3) for step, _, _ in timed.values()):
+        where = ", ".join(f"{raw:.6g} ms in {path.name}" if in_ms else f"{step:.6g} in {path.name}"
+                          for path, (step, raw, in_ms) in timed.items())  # fmt: skip
         why = f"the files' time columns step differently ({where})"
     elif not SECONDS_STEPS[0] <= first <= SECONDS_STEPS[1]:
-        why = (f"the files' time column steps {first:.6g}, which is no plausible number of "
-               f"seconds between frames (milliseconds? nanoseconds?")  # fmt: skip
-        ms = first / 1000
-        why += (f" as milliseconds that is {ms:.6g} s, --frame-interval {ms:.6g})"
-                if SECONDS_STEPS[0] <= ms <= SECONDS_STEPS[1] else ")")  # fmt: skip
+        if ms:
+            why = (f"the files' time column, in milliseconds, steps {written:.6g} ms "
+                   f"({first:.6g} s), which is no plausible number of seconds between "
+                   "frames")  # fmt: skip
+        else:
+            why = (f"the files' time column steps {first:.6g}, which is no plausible number "
+                   f"of seconds between frames (milliseconds? nanoseconds?")  # fmt: skip
+            in_s = first / 1000
+            why += (f" as milliseconds that is {in_s:.6g} s, --frame-interval {in_s:.6g})"
+                    if SECONDS_STEPS[0] <= in_s <= SECONDS_STEPS[1] else ")")  # fmt: skip
     if why is not None:
         warnings.warn(f"{source}: {why}: {DEFAULT_FRAME_INTERVAL:g} s between frames is "
                       "assumed; pass the files' own with --frame-interval (data.frame_interval "

@@ -207,9 +207,25 @@ SECONDS_COLUMNS = ("time", "timestamp", "time_s", "timestamp_s", "seconds")
 """Header names of a frame column whose values are times in seconds: unless a frame interval
 is given, a folder of such files takes their frame step (``frame_step``) as its interval in
 seconds (``DatasetInfo.interval_from == "timestamps"``)."""
+MILLISECONDS_COLUMNS = ("time_ms", "timestamp_ms")
+"""Header names of a frame column whose values are times in milliseconds: as
+``SECONDS_COLUMNS``, their frame step divided by 1000 (``column_seconds``)."""
+
+
+def column_seconds(name: str | None) -> float | None:
+    """Seconds per unit of a frame column headed ``name`` (lower case): 1 for a
+    ``SECONDS_COLUMNS`` name, 0.001 for a ``MILLISECONDS_COLUMNS`` one, None for anything else
+    (frame numbers, or no header)."""
+    if name in SECONDS_COLUMNS:
+        return 1.0
+    if name in MILLISECONDS_COLUMNS:
+        return 1e-3
+    return None
+
 
 _HEADER_ROLES = {
-    "frame": {"frame", "frames", "frame_id", "frameid", "f", "t", "step", *SECONDS_COLUMNS},
+    "frame": {"frame", "frames", "frame_id", "frameid", "f", "t", "step", *SECONDS_COLUMNS,
+              *MILLISECONDS_COLUMNS},
     "agent": {"agent", "agent_id", "agentid", "id", "ped", "ped_id", "pedid", "pedestrian",
               "person", "person_id", "track", "track_id", "trackid", "obj", "object_id", "p"},
     "x": {"x", "pos_x", "x_m", "px"},
@@ -220,12 +236,27 @@ _HEADER_ROLES = {
 
 def _check_header(tokens: list[str], path: Path, line: int) -> None:
     """Refuse a header whose names say the columns are not in the order they are read
-    (``frame agent x y``, by position): read anyway, such a file gives wrong tracks silently."""
+    (``frame agent x y``, by position): read anyway, such a file gives wrong tracks silently.
+    A header of two or three known names (``frame,x,y``) is refused naming the missing
+    column, which reordering could not supply."""
     roles = []
     for token in tokens[:4]:
         name = token.strip("\"'").lower()
         roles.append(next((r for r, names in _HEADER_ROLES.items() if name in names), None))
     known = [r for r in roles if r is not None]
+    if 2 <= len(tokens) < 4 and len(set(known)) == len(tokens):
+        # every column named, and one short: reordering cannot help (``frame,x,y``)
+        missing = [r for r in _HEADER_ROLES if r not in known]
+        one = " (a file of one agent: the same agent id on every row)" if "agent" in missing else ""
+        where = (f"it as column {list(_HEADER_ROLES).index(missing[0]) + 1}" if len(missing) == 1
+                 else "them in that order")  # fmt: skip
+        raise DataError(
+            f"the header names {len(tokens)} columns ({' '.join(tokens)}), where 4 are needed "
+            f"(frame agent x y, read by position): no {' or '.join(missing)} column was found; "
+            f"add {where}{one}",
+            path,
+            line,
+        )
     if len(known) >= 3 and any(r is not None and r != want for r, want in
                                zip(roles, _HEADER_ROLES, strict=False)):  # fmt: skip
         raise DataError(
@@ -366,7 +397,11 @@ def _column_hint(content: str, delimiter: str | None, found: int, n_cols: int) -
         held = "a tab" if sep == "\t" else repr(sep)
         return f"; the line holds {held}: pass --delimiter {_sep_name(sep)}"
     if found > n_cols and n_cols == 4:
-        return "; only frame agent x y are read (typed rows are an NBA-only format)"
+        other = "column" if found == 5 else f"{found - n_cols} columns"
+        nba = "; a 5th column of agent types is read for the NBA data only" if found == 5 else ""
+        return (f"; only frame agent x y are read, the first 4 columns, by position, not by "
+                f"header name: drop the other {other} (keep frame agent x y, in that order)"
+                f"{nba}")  # fmt: skip
     if found == 1 and delimiter is not None:
         return "; is the file whitespace-separated? pass --delimiter whitespace"
     return ""
