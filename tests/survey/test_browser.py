@@ -176,3 +176,50 @@ def test_without_a_browser_it_skips_with_the_install_line_but_fails_under_ci(mon
     monkeypatch.setenv("CI", "1")
     with pytest.raises(pytest.fail.Exception, match="CI is set"):
         _need_browser()
+
+
+def test_the_consent_step_comes_before_the_first_picture_and_keeps_line_breaks(
+    browser, synthetic_study
+):
+    import json
+
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    manifest = json.loads((synthetic_study / "manifest.json").read_text())
+    manifest["instructions"] = "Rate each picture.\n\nTake your time."
+    manifest["consent"] = "I agree to take part.\n\nMy answers are kept for a year."
+    (synthetic_study / "manifest.json").write_text(json.dumps(manifest))
+    d = browser
+    wait = WebDriverWait(d, 15)
+
+    def until(value: str) -> None:
+        wait.until(lambda _: d.find_element(By.TAG_NAME, "body").get_attribute("data-view")
+                   == value, f"the page never showed {value}")  # fmt: skip
+
+    with running(synthetic_study) as (url, _store):
+        d.get(url)
+        until("login")
+        instructions = d.find_element(By.ID, "instructions")
+        assert instructions.value_of_css_property("white-space") == "pre-line"
+        assert "Rate each picture.\n" in instructions.text  # not one run-on line
+        d.find_element(By.ID, "rater").send_keys("judge-2")
+        d.find_element(By.ID, "start").click()
+        until("consent")  # before the first picture
+        text = d.find_element(By.ID, "consent-text")
+        assert text.value_of_css_property("white-space") == "pre-line"
+        assert "I agree to take part.\n" in text.text and "kept for a year" in text.text
+        d.find_element(By.ID, "agree").click()
+        until("rate")
+        d.find_element(By.CSS_SELECTOR, 'button.rate[data-criterion="social"][data-value="4"]'
+                       ).click()  # fmt: skip
+        d.find_element(By.CSS_SELECTOR, 'button.rate[data-criterion="kinetics"][data-value="2"]'
+                       ).click()  # fmt: skip
+        wait.until(lambda _: d.find_element(By.TAG_NAME, "body").get_attribute("data-answered")
+                   == "1")  # fmt: skip
+        d.refresh()  # agreed once: not asked again
+        until("rate")
+    with sqlite3.connect(synthetic_study / "answers.sqlite") as db:
+        consents = db.execute("SELECT rater, agreed_at IS NOT NULL FROM consents").fetchall()
+        answers = db.execute("SELECT rater, social, kinetics FROM answers").fetchall()
+    assert consents == [("judge-2", 1)] and answers == [("judge-2", 4, 2)]

@@ -25,7 +25,7 @@ def _rename(obj: dict, old: str, new: str) -> None:
         (
             lambda m: _rename(m, "instructions", "instruction"),
             "top level: unknown key 'instruction' (did you mean 'instructions'?); the keys "
-            "are: build, created, dataset, format, instructions, key, methods, scenes, "
+            "are: build, consent, created, dataset, format, instructions, key, methods, scenes, "
             "synthetic, title",
         ),
         (

@@ -99,6 +99,8 @@ def test_progress_returns_what_a_rater_has_answered(store):
         "answered": 0,
         "total": 9,
         "submitted": False,
+        "consent_required": False,
+        "consented": False,
     }
     store.save("r1", "s02", "C", OK)
     got = store.progress("r1")
@@ -285,7 +287,7 @@ def test_answers_that_match_no_panel_or_no_rater_are_counted(store):
             "scene 's01', panel 'A'",
         ),
         (["DROP TABLE raters"],
-         "not an answers database (no raters table; it holds answers, meta)"),
+         "not an answers database (no raters table; it holds answers, consents, meta)"),
     ],
     ids=["column-typo", "csv-import-text", "out-of-range", "unknown-kind", "answered-twice",
          "no-raters-table"],

@@ -16,6 +16,10 @@
   panel's mean human score against its ATS, n = scenes x methods), and Kendall tau within
   each scene, averaged over scenes. p-values: exact for few pairs (Spearman by enumeration
   up to 8, Kendall by scipy's exact method without ties), else the usual approximations.
+- The best method is named (bold, "Best method") only when at least one rater answered every
+  panel and every method has at least ``MIN_ANSWERS`` answers: an unfinished pilot names none,
+  and no tests are run. A mark of a row that scores above the best method (the ground truth,
+  typically) carries ``ABOVE``: its stars then mean significantly *higher*.
 - Raters left out by request (``--exclude-rater``: a failed attention check, a test run) are
   dropped before anything is computed and named in the report; rater ids that differ only by
   case (an older or imported database) are counted apart, with a warning.
@@ -33,6 +37,7 @@ from typing import Any, Literal
 import numpy as np
 from scipy import stats
 
+from trajpref import __version__
 from trajpref.errors import ConfigError
 from trajpref.io import atomic_path, check_output_dir, check_output_file, dumps_json
 from trajpref.survey.manifest import DATABASE, GROUND_TRUTH, Study, load_study
@@ -48,6 +53,11 @@ EXACT_SPEARMAN_MAX_N = 8
 """Spearman's p-value is exact (by enumeration) up to this many pairs."""
 NOTHING_IGNORED = {"answers": 0, "unknown_panels": 0, "unknown_raters": 0}
 """``Analysis.ignored`` when every answer was used."""
+MIN_ANSWERS = 2
+"""A best method is named only when every method has at least this many answers (and at least
+one rater answered every panel)."""
+ABOVE = "↑"
+"""Follows the mark of a row that scores above the best method in that column."""
 
 
 def stars(p: float) -> str:
@@ -91,6 +101,9 @@ class Comparison:
     """``exact`` or ``normal approximation``."""
     mark: str = ""
     """Stars of ``p_holm``."""
+    higher: bool = False
+    """The row's mean over the pairs is above the best method's (its stars then mean
+    significantly *higher*)."""
 
 
 def wilcoxon(x: np.ndarray, y: np.ndarray) -> tuple[float, float, str]:
@@ -114,8 +127,10 @@ def wilcoxon(x: np.ndarray, y: np.ndarray) -> tuple[float, float, str]:
 
 
 def _compare(other: str, column: str, x: list[float], y: list[float]) -> Comparison:
+    """The best method's values ``x`` against the row's ``y``, paired."""
     w, p, method = wilcoxon(np.asarray(x, float), np.asarray(y, float))
-    return Comparison(other, column, len(x), w, p, method=method)
+    higher = bool(len(x)) and float(np.mean(y)) > float(np.mean(x))
+    return Comparison(other, column, len(x), w, p, method=method, higher=higher)
 
 
 def _corr(a: np.ndarray, b: np.ndarray) -> dict[str, float]:
@@ -216,8 +231,10 @@ class Analysis:
     """Scenes in the study."""
     panels: int
     """Panels in the study."""
-    best: str
-    """The method with the highest mean human score (ground truth excluded)."""
+    best: str | None
+    """The method with the highest mean human score (ground truth excluded); None when no
+    rater answered every panel or a method has fewer than ``MIN_ANSWERS`` answers
+    (``no_best``)."""
     rows: list[MethodRow]
     """Methods by mean human score, best first; the ground truth last."""
     tests: list[Comparison]
@@ -236,6 +253,16 @@ class Analysis:
     database): counted as different raters."""
     units: str = "unknown"
     """The data's coordinate units (of ADE and FDE)."""
+    no_best: str = ""
+    """Why no best method is named (``best`` None); empty otherwise."""
+    unused_synthetic: int = 0
+    """Synthetic raters left out because ``--raters auto`` chose the human raters."""
+    study_id: str = ""
+    """The study's id (``Study.study_id``, as the answers database records it)."""
+    provenance: dict[str, Any] = field(default_factory=dict)
+    """``trajpref`` (the version that analysed) and ``build``: what the manifest's build
+    record says of the versions and models that built the study (``trajpref_version``,
+    ``torch_version``, ``hashes``; empty for a study built before they were recorded)."""
 
     def to_dict(self) -> dict[str, Any]:
         return _finite(asdict(self))
@@ -244,7 +271,7 @@ class Analysis:
         """The Table-3 layout as Markdown."""
         lines = ["| Method | Human score (↑) | ATS (↑) | FTS (↑) |", "|---|---|---|---|"]
         for r in self.rows:
-            name = f"**{r.method}**" if r.method == self.best else r.method
+            name = f"**{r.method}**" if self.best and r.method == self.best else r.method
             gt = r.method == GROUND_TRUTH
             lines.append(
                 f"| {name} | {_pm(r.human, r.human_sd)}{_mark(r.marks.get('human'))} | "
@@ -257,20 +284,29 @@ class Analysis:
 
     def legend(self) -> str:
         n_h = self.complete_raters
+        units = (" Human score = mean of the two ratings (1-5); ATS/FTS = the diffusion score "
+                 "of the futures each panel shows (a ratio, no unit); ADE/FDE = their distance "
+                 f"to the real futures, {unit_text(self.units)}.")  # fmt: skip
+        gt = any(r.method == GROUND_TRUTH for r in self.rows)
+        unranked = " (the ground truth is not ranked: it is listed last)" if gt else ""
+        if not self.best:
+            return (f"Mean ± sd (n/a for one value). Rows by human score{unranked}; no best "
+                    f"method is named and no tests are run: {self.no_best}.{units}")  # fmt: skip
         top = next(r.human for r in self.rows if r.method == self.best)
         tied = [r.method for r in self.rows
                 if r.method not in (self.best, GROUND_TRUTH) and r.human == top]  # fmt: skip
         tie = (f" (tied with {', '.join(tied)}: of equal methods the first given to `survey "
                "build` is named)" if tied else "")  # fmt: skip
+        highest = "has the highest of the methods" if gt else "has the highest"
         return (
-            f"Mean ± sd. Rows by human score; **{self.best}** has the highest{tie}. Marks: "
-            f"two-sided Wilcoxon signed-rank test of {self.best} against the row, human "
-            f"score paired over raters (each rater's mean over the scenes, n = {n_h} raters "
-            f"who answered every panel), ATS/FTS paired over scenes (n = {self.scenes}); "
-            "p-values Holm-adjusted within each column; *** p < 0.001, ** p < 0.01, "
-            "* p < 0.05, ns not significant. Human score = mean of the two ratings (1-5); "
-            "ATS/FTS = the diffusion score of the futures each panel shows (a ratio, no "
-            f"unit); ADE/FDE = their distance to the real futures, {unit_text(self.units)}."
+            f"Mean ± sd (n/a for one value). Rows by human score{unranked}; **{self.best}** "
+            f"{highest}{tie}. Marks: two-sided Wilcoxon signed-rank test of {self.best} against "
+            f"the row, human score paired over raters (each rater's mean over the scenes, "
+            f"n = {n_h} raters who answered every panel), ATS/FTS paired over scenes "
+            f"(n = {self.scenes}); p-values Holm-adjusted within each column; *** p < 0.001, "
+            f"** p < 0.01, * p < 0.05, ns not significant. A {ABOVE} after a mark: the row "
+            f"scores *higher* than {self.best} in that column (e.g. the ground truth), so its "
+            f"stars mean significantly higher; without {ABOVE}, lower or equal.{units}"
         )
 
     def markdown(self) -> str:
@@ -285,6 +321,8 @@ class Analysis:
         out += [f"Data: {where}; {self.scenes} scenes, {self.panels} panels; raters: "
                 f"{self.raters} {self.rater_kind} ({self.complete_raters} answered every "
                 "panel)."]  # fmt: skip
+        if self.unused_synthetic:
+            out += ["", f"Not used: {unused_text(self.unused_synthetic)}."]
         if self.ignored["answers"]:
             text = ignored_text(self.ignored)
             out += ["", f"{text[0].upper()}{text[1:]}: they are not in the tables below."]
@@ -306,7 +344,12 @@ class Analysis:
                        f"{_pm(r.kinetics, r.kinetics_sd)} | {r.answers} | "
                        f"{_pm(r.ade, r.ade_sd)} | {_pm(r.fde, r.fde_sd)} | {_num(r.max_ats)} | "
                        f"{_num(r.max_fts)} |")  # fmt: skip
-        out += ["", "## Tests", "", f"Best method: {self.best}.", "",
+        named = (
+            f"Best method: {self.best}."
+            if self.best
+            else f"No best method is named and no tests are run: {self.no_best}."
+        )
+        out += ["", "## Tests", "", named, "",
                 "| Against | Column | n | W | p | p (Holm) | | Null distribution |",
                 "|---|---|---|---|---|---|---|---|"]  # fmt: skip
         for t in self.tests:
@@ -344,6 +387,14 @@ def case_variants_text(groups: list[list[str]]) -> str:
             "one person, leave all but one out with --exclude-rater)")  # fmt: skip
 
 
+def unused_text(n: int) -> str:
+    """What the report says of the synthetic raters ``--raters auto`` left out."""
+    return (
+        f"{n} synthetic rater{'' if n == 1 else 's'} (`--raters auto` uses the human raters "
+        "when there are any; `--raters synthetic` or `--raters all` includes them)"
+    )
+
+
 def with_unit(name: str, units: str | None) -> str:
     """``ADE [m]``; ``ADE (units unknown)`` when the data did not say."""
     return f"{name} [{units}]" if units and units != "unknown" else f"{name} (units unknown)"
@@ -369,7 +420,10 @@ def _num(x: float, digits: int = 2) -> str:
 
 
 def _pm(mean: float, sd: float) -> str:
-    return "–" if not math.isfinite(mean) else f"{mean:.2f} ± {_num(sd)}"
+    """``mean ± sd``; ``± n/a`` where the sd is undefined (one value)."""
+    if not math.isfinite(mean):
+        return "–"
+    return f"{mean:.2f} ± {_num(sd) if math.isfinite(sd) else 'n/a'}"
 
 
 def _p(p: float) -> str:
@@ -383,10 +437,11 @@ def _mark(mark: str | None) -> str:
 
 
 def _mean_sd(values: list[float] | np.ndarray) -> tuple[float, float]:
+    """Mean and sample sd; the sd is NaN (n/a) for one value, both NaN for none."""
     v = np.asarray(values, float)
     if v.size == 0:
         return math.nan, math.nan
-    return float(v.mean()), float(v.std(ddof=1)) if v.size > 1 else 0.0
+    return float(v.mean()), float(v.std(ddof=1)) if v.size > 1 else math.nan
 
 
 def select_rows(rows: list[tuple], rater_kind: RaterKind = "auto",
@@ -398,10 +453,18 @@ def select_rows(rows: list[tuple], rater_kind: RaterKind = "auto",
     if rater_kind == "auto":
         rater_kind = "human" if any(r[1] == "human" for r in rows) else "synthetic"
     left = set(exclude)
+    everyone = rows
     rows = [r for r in rows if r[0] not in left and rater_kind in ("all", r[1])]
     if not rows:
         after = f" left after --exclude-rater {', '.join(exclude)}" if exclude else " yet"
-        raise ConfigError(f"no answers from {rater_kind} raters{after}")
+        others = sorted({r[0] for r in everyone if r[0] not in left and r[1] != rater_kind})
+        hint = ""
+        if rater_kind != "all" and others:
+            kind = "synthetic" if rater_kind == "human" else "human"
+            hint = (f"; there {'is' if len(others) == 1 else 'are'} {len(others)} {kind} "
+                    f"rater{'' if len(others) == 1 else 's'}: use --raters {kind} (or --raters "
+                    "all)")  # fmt: skip
+        raise ConfigError(f"no answers from {rater_kind} raters{after}{hint}")
     return rows, rater_kind
 
 
@@ -420,6 +483,9 @@ def analyze(study: Study, rows: list[tuple], rater_kind: RaterKind = "auto",
     excluded = list(dict.fromkeys(exclude))
     left_out = set(excluded)
     excluded_answers = sum(1 for r in rows if r[0] in left_out)
+    unused = 0
+    if rater_kind == "auto" and any(r[1] == "human" for r in rows):
+        unused = len({r[0] for r in rows if r[1] == "synthetic" and r[0] not in left_out})
     rows, rater_kind = select_rows(rows, rater_kind, excluded)
     synthetic = study.synthetic or any(r[1] == "synthetic" for r in rows)
     method_of = {(s.id, p.id): p.key.method for s in study.scenes for p in s.panels}
@@ -452,13 +518,23 @@ def analyze(study: Study, rows: list[tuple], rater_kind: RaterKind = "auto",
     candidates = [m for m in methods if m != GROUND_TRUTH and math.isfinite(table[m].human)]
     if not candidates:
         raise ConfigError("no answers to any method's panels yet")
-    best = max(candidates, key=lambda m: (table[m].human, -methods.index(m)))
-    ordered = sorted((m for m in methods if m != GROUND_TRUTH), key=lambda m: -table[m].human)
+    best: str | None = max(candidates, key=lambda m: (table[m].human, -methods.index(m)))
+    unanswered_last = lambda m: (not math.isfinite(table[m].human), -table[m].human)  # noqa: E731
+    ordered = sorted((m for m in methods if m != GROUND_TRUTH), key=unanswered_last)
     ordered += [GROUND_TRUTH] if GROUND_TRUTH in methods else []
+    few = [m for m in methods if table[m].answers < MIN_ANSWERS]
+    no_best = ""
+    if not complete:
+        no_best = "no rater answered every panel"
+    elif few:
+        no_best = (f"{', '.join(few)} {'has' if len(few) == 1 else 'have'} fewer than "
+                   f"{MIN_ANSWERS} answers")  # fmt: skip
+    if no_best:
+        best = None
     # tests: human over complete raters, ATS/FTS over scenes
     tests: list[Comparison] = []
     rater_means = {r: {m: float(np.mean(per_rater[r][m])) for m in methods} for r in complete}
-    for m in ordered:
+    for m in ordered if best else ():
         if m == best:
             continue
         x = [rater_means[r][best] for r in complete]
@@ -477,7 +553,7 @@ def analyze(study: Study, rows: list[tuple], rater_kind: RaterKind = "auto",
         for t, p in zip(group, holm([t.p for t in group]), strict=True):
             t.p_holm = p
             t.mark = stars(p)
-            table[t.other].marks[col] = t.mark
+            table[t.other].marks[col] = f"{t.mark} {ABOVE}" if t.higher else t.mark
     # agreement (methods only)
     ms = [m for m in methods if m != GROUND_TRUTH]
     agreement: dict[str, dict[str, dict[str, float]]] = {"methods": {}, "panels": {},
@@ -509,8 +585,20 @@ def analyze(study: Study, rows: list[tuple], rater_kind: RaterKind = "auto",
         panels=study.num_panels, best=best, rows=[table[m] for m in ordered], tests=tests,
         agreement=agreement, ignored=ignored, excluded=excluded,
         excluded_answers=excluded_answers, case_variants=case_variants(raters),
-        units=str(study.dataset.get("units") or "unknown"),
+        units=str(study.dataset.get("units") or "unknown"), no_best=no_best,
+        unused_synthetic=unused, study_id=study.study_id, provenance=provenance(study),
     )  # fmt: skip
+
+
+def provenance(study: Study) -> dict[str, Any]:
+    """What made the study and its analysis: this trajpref's version, and the manifest build
+    record's ``trajpref_version``, ``torch_version`` and checkpoint ``hashes`` (None where a
+    study built before they were recorded has none)."""
+    build = study.build or {}
+    return {
+        "trajpref": __version__,
+        "build": {k: build.get(k) for k in ("trajpref_version", "torch_version", "hashes")},
+    }
 
 
 Columns = dict[str, tuple[np.ndarray, np.ndarray]]
@@ -575,13 +663,15 @@ def run_analysis(
         warnings.warn(f"{store.path}: {case_variants_text(result.case_variants)}", stacklevel=2)
     names, columns, marks, xlims = figure_data(result)
     label = "SYNTHETIC raters - not human data. " if result.synthetic else ""
+    reference = (f"; marks: Wilcoxon test against {result.best} ({ABOVE}: the row is higher)"
+                 if result.best else "; no best method named, no tests")  # fmt: skip
     # all three written to temporary files first, renamed only when every one is complete;
     # the figure's first: it creates a new --out folder (and removes it again on failure)
     with (atomic_path(paths["figure"]) as figure, private_output(paths["markdown"]) as markdown,
           private_output(paths["json"]) as js):  # fmt: skip
         plot_survey_summary(names, columns, marks, figure,
                             f"{label}{result.title} ({result.raters} raters, "
-                            f"{result.scenes} scenes)", xlims=xlims)  # fmt: skip
+                            f"{result.scenes} scenes{reference})", xlims=xlims)  # fmt: skip
         markdown.write_text(result.markdown(), encoding="utf-8")
         js.write_text(dumps_json(result.to_dict(), indent=2) + "\n")
     return result, paths

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,12 +14,16 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
+from trajpref import __version__
 from trajpref.data import ReadOptions, hold_out_scene, load_dataset
 from trajpref.data.registry import check_protocol
 from trajpref.data.text import DEFAULT_MAX_COORD
 from trajpref.device import resolve_device
-from trajpref.errors import ConfigError
+from trajpref.errors import ConfigError, TrajprefError
+from trajpref.io import read_checkpoint_header
+from trajpref.models import checkpoint as ckpt
 from trajpref.models.registry import BUILTIN, load_predictor
+from trajpref.models.timing import UNKNOWN_UNITS, model_timing
 from trajpref.score.scorer import TrajectoryScorer
 from trajpref.survey.manifest import GROUND_TRUTH, METHOD_RE, Study
 from trajpref.survey.study import (
@@ -89,6 +94,9 @@ class BuildConfig:
     scale); ``reference``: they are shown beside every panel and not rated."""
     title: str = "Which predicted paths look human?"
     """Shown at the top of the page."""
+    consent: str = ""
+    """A consent text (``--consent FILE``'s contents) that every rater agrees to before the
+    first picture; empty: none."""
     device: str = "auto"
     """auto, cpu or cuda."""
 
@@ -115,6 +123,9 @@ class BuildConfig:
         ):
             raise ConfigError(f"--frame-interval must be a number of seconds > 0, "
                               f"got {self.frame_interval}")  # fmt: skip
+        if not isinstance(self.consent, str):
+            raise ConfigError("the consent text must be a string")
+        self.consent = self.consent.strip()
         if self.ground_truth not in ("rated", "reference"):
             raise ConfigError("--ground-truth must be 'rated' or 'reference'")
         self.read_options()  # ConfigError for a bad delimiter, gap, bound or step
@@ -195,6 +206,75 @@ def select_scenes(
     return picked
 
 
+def _header(spec: str) -> dict | None:
+    """Checkpoint ``spec``'s header (a path or a published name), its weights unread (a legacy
+    ``.pt`` file is loaded without them); None for a built-in method or a file it cannot read
+    (loading the model says what is wrong)."""
+    if spec in BUILTIN:
+        return None
+    try:
+        path = ckpt.resolve_path(spec)
+        if path.suffix != ckpt.LEGACY_SUFFIX:
+            return read_checkpoint_header(path)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FutureWarning)
+            return {k: v for k, v in ckpt.load(path).items() if k != "state_dict"}
+    except (TrajprefError, OSError, KeyError, TypeError, ValueError, AttributeError):
+        return None
+
+
+def checkpoint_hashes(spec: str, scorer: bool = False) -> dict[str, str | None]:
+    """``weights_hash`` (the weights' content hash; a scorer's: its denoiser's) and
+    ``model_hash`` (``models.checkpoint.header_model_hash``: what it predicts with, as
+    ``evaluate --out`` records it; a scorer's: its denoiser and data scale) of checkpoint
+    ``spec``; both None for cv or a header without them."""
+    header = _header(spec)
+    out: dict[str, str | None] = {"weights_hash": None, "model_hash": None}
+    if header is None:
+        return out
+    try:
+        denoiser = header.get("kind") == "denoiser"
+        sampler = "full" if scorer or denoiser else "leapfrog"
+        out["model_hash"] = ckpt.header_model_hash(header, sampler)
+        den = header.get("denoiser_ref") or header.get("denoiser") or {}
+        out["weights_hash"] = header.get("hash") if denoiser or not scorer else den.get("hash")
+    except (TrajprefError, AttributeError):
+        pass
+    return out
+
+
+def recorded_units(specs: list[str]) -> dict[str, str]:
+    """spec -> the units its checkpoint recorded of its training data (``model_timing``), for
+    each checkpoint among ``specs`` that recorded known units."""
+    out = {}
+    for spec in dict.fromkeys(specs):
+        header = _header(spec)
+        try:
+            units = model_timing(header)["units"] if header else None
+        except (KeyError, TypeError, ValueError, AttributeError):
+            units = None
+        if units and units not in UNKNOWN_UNITS:
+            out[spec] = units
+    return out
+
+
+def units_warning(dataset: str, models: dict[str, str]) -> str:
+    """The warning for a study built on data of unknown units: what raters and the analysis
+    then miss, and the units the models (``recorded_units``: spec -> units) recorded."""
+    text = (
+        f"{dataset}: the data's units are unknown (no --units): the raters' pictures "
+        "show axes without a unit and the analysis gives ADE/FDE in unknown units"
+    )
+    found = sorted(set(models.values()))
+    if len(found) == 1:
+        names = ", ".join(models)
+        return f"{text}; the models recorded units {found[0]} ({names}): pass --units {found[0]}"
+    if found:
+        each = ", ".join(f"{k}: {v}" for k, v in models.items())
+        return f"{text}; the models recorded different units ({each}): pass --units UNITS"
+    return f"{text}; pass --units UNITS (m, px, ...)"
+
+
 def _scorer_path(cfg: BuildConfig) -> str:
     if cfg.scorer:
         return cfg.scorer
@@ -221,6 +301,9 @@ def build_study(cfg: BuildConfig, out: str | Path, progress: bool = True,
     ds = read_data(cfg)
     if on_data is not None:
         on_data(ds)
+    if ds.info.units in UNKNOWN_UNITS:
+        units = recorded_units([*cfg.models.values(), _scorer_path(cfg)])
+        warnings.warn(units_warning(ds.info.name, units), stacklevel=2)
     sizes = np.array([s.num_agents for s in ds.scenes])  # [B]
     picks = select_scenes(sizes, cfg.scenes, cfg.seed, cfg.strata, cfg.min_agents,
                           cfg.max_agents, cfg.min_gap)  # fmt: skip
@@ -248,11 +331,18 @@ def build_study(cfg: BuildConfig, out: str | Path, progress: bool = True,
                                 stratum))  # fmt: skip
     methods = ([GROUND_TRUTH] if cfg.ground_truth == "rated" else []) + list(cfg.models)
     record = dataclasses.asdict(cfg)
+    record.pop("consent")  # in the manifest's own ``consent``
     record["scorer"] = _scorer_path(cfg)
+    record["trajpref_version"] = __version__
+    record["torch_version"] = torch.__version__
+    record["hashes"] = {
+        "methods": {name: checkpoint_hashes(spec) for name, spec in cfg.models.items()},
+        "scorer": checkpoint_hashes(_scorer_path(cfg), scorer=True),
+    }
     return write_study(
         out, scenes, methods, seed=cfg.seed, title=cfg.title, ground_truth=cfg.ground_truth,
-        units=ds.info.units,
+        units=None if ds.info.units in UNKNOWN_UNITS else ds.info.units,  # axes: no unit
         dataset={"name": ds.info.name, "split": ds.info.split, "units": ds.info.units,
                  "frame_interval": ds.info.frame_interval, "scenes_in_split": len(ds)},
-        build=record,
+        build=record, consent=cfg.consent,
     )  # fmt: skip

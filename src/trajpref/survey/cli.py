@@ -8,6 +8,7 @@ import functools
 import json
 import shlex
 from collections.abc import Callable
+from pathlib import Path
 
 from trajpref.errors import ConfigError
 from trajpref.survey.analyze import run_analysis
@@ -56,6 +57,9 @@ def add_parser(
                    help="rated: the real futures are one more blinded panel (default); "
                    "reference: shown beside every panel, not rated")  # fmt: skip
     b.add_argument("--title", default="Which predicted paths look human?", help="page title")
+    b.add_argument("--consent", default=None, metavar="FILE", help="a UTF-8 text file: the "
+                   "consent text every rater reads and agrees to ('I agree') before the first "
+                   "picture; the agreement is recorded per rater (default: none)")  # fmt: skip
     b.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     b.add_argument("--out", required=True, help="the new study folder")
     b.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -138,6 +142,20 @@ def parse_models(items: list[str]) -> dict[str, str]:
     return out
 
 
+def read_consent(path: str | None) -> str:
+    """The text of ``--consent FILE`` (UTF-8, outer white space stripped); "" without it."""
+    if path is None:
+        return ""
+    try:
+        text = Path(path).read_text(encoding="utf-8").strip()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"--consent {path}: cannot read it as UTF-8 text "
+                          f"({getattr(exc, 'strerror', None) or exc})") from None  # fmt: skip
+    if not text:
+        raise ConfigError(f"--consent {path}: the file is empty")
+    return text
+
+
 def cmd_build(args, check_data_args: Callable[[argparse.Namespace], None],
               warn_if_trained_otherwise: Callable[..., None]) -> int:  # fmt: skip
     check_data_args(args)  # fills in --frame-interval and --units, checks the read options
@@ -150,7 +168,7 @@ def cmd_build(args, check_data_args: Callable[[argparse.Namespace], None],
         scorer=args.scorer, scenes=args.scenes, samples=args.samples, top=args.top,
         seed=args.seed, min_agents=args.min_agents, max_agents=args.max_agents,
         min_gap=args.min_gap, strata=args.strata, ground_truth=args.ground_truth,
-        title=args.title, device=args.device,
+        title=args.title, device=args.device, consent=read_consent(args.consent),
     )  # fmt: skip
 
     def warn(ds) -> None:  # as `evaluate` warns, for every checkpoint: methods and scorer
@@ -188,10 +206,12 @@ def cmd_export(args) -> int:
 
     done = export_csv(args.study, args.csv, args.db, args.raters, args.exclude_rater)
     label = " SYNTHETIC raters or study: not human data;" if done["synthetic"] else ""
-    print(f"wrote {done['answers']} answers of {done['raters']} {done['kind']} raters to "
-          f"{done['path']} (owner-only: rater ids are personal data);{label} columns: "
-          "rater, kind, ..., method, social, kinetics, human_score, ats, fts, ade, fde "
-          "(docs/survey.md)")  # fmt: skip
+    print(
+        f"wrote {done['answers']} answers of {done['raters']} raters ({done['kind']}) to "
+        f"{done['path']} (owner-only: rater ids are personal data);{label} columns: "
+        "rater, kind, ..., method, social, kinetics, human_score, ats, fts (empty for the "
+        "ground truth), ade, fde, ..., study_id, weights_hash, model_hash (docs/survey.md)"
+    )
     return 0
 
 

@@ -2,7 +2,9 @@
 
 One row per answer (long format), unblinded: the rater, the scene and panel as the rater saw
 them, the method behind the panel and what the key says about it (ATS, FTS, ADE, FDE in the
-data's units), the two ratings and their mean, and when the answer was given. The same raters
+data's units; the ground truth's ATS and FTS empty: defined as 0, not measured), the two
+ratings and their mean, when the answer was given, and the record of what built the study
+(study id, versions, the method's checkpoint hashes). The same raters
 as ``analyze`` (``--raters``, ``--exclude-rater``). Rater ids are personal data: the file is
 written owner-only (0600), atomically.
 """
@@ -16,18 +18,24 @@ from pathlib import Path
 from trajpref.errors import ConfigError
 from trajpref.io import check_output_file
 from trajpref.survey.analyze import RaterKind, case_variants_text, select_rows
-from trajpref.survey.manifest import DATABASE, load_study
+from trajpref.survey.manifest import DATABASE, GROUND_TRUTH, load_study
 from trajpref.survey.store import AnswerStore, case_variants, private_output
 
 COLUMNS = (
     "rater", "kind", "submitted_at", "scene", "panel", "position", "method", "social",
     "kinetics", "human_score", "ats", "fts", "ade", "fde", "units", "source", "agents",
-    "stratum", "revision", "created_at", "updated_at",
+    "stratum", "revision", "created_at", "updated_at", "consented_at", "study_id",
+    "weights_hash", "model_hash", "trajpref_version", "torch_version",
 )  # fmt: skip
 """The CSV's columns. ``position``: the picture's place in the order every rater sees (1 =
 first); ``human_score``: the mean of the two ratings; ``ade``/``fde`` in ``units``;
 ``created_at``/``updated_at``: the answer's first and last save (UTC); ``submitted_at``:
-when the rater submitted (empty if not)."""
+when the rater submitted (empty if not); ``ats``/``fts`` empty (NA) for the ground truth (0 by
+definition, not a measurement: an average over the column must not mix it in);
+``consented_at``: when the rater agreed to the study's consent text (empty if the study has
+none or for synthetic raters); ``study_id``: ``Study.study_id``; ``weights_hash``/``model_hash``:
+the method's checkpoint (empty for cv and the ground truth, or a study built before they were
+recorded); ``trajpref_version``/``torch_version``: what built the study."""
 
 
 def export_csv(folder: str | Path, path: str | Path, db: str | Path | None = None,
@@ -52,6 +60,9 @@ def export_csv(folder: str | Path, path: str | Path, db: str | Path | None = Non
     if case_variants(raters):
         warnings.warn(f"{store.path}: {case_variants_text(case_variants(raters))}", stacklevel=2)
     units = str(study.dataset.get("units") or "unknown")
+    build = study.build or {}
+    hashes = (build.get("hashes") or {}).get("methods") or {}
+    versions = [build.get("trajpref_version") or "", build.get("torch_version") or ""]
     where = {}
     position = 0
     for s in study.scenes:
@@ -63,11 +74,15 @@ def export_csv(folder: str | Path, path: str | Path, db: str | Path | None = Non
         out.writerow(COLUMNS)
         for _, _, r in chosen:
             pos, scene, key = where[(r["scene"], r["panel"])]
+            gt = key.method == GROUND_TRUTH
+            h = hashes.get(key.method) or {}
             out.writerow([
                 r["rater"], r["kind"], r["submitted_at"] or "", r["scene"], r["panel"], pos,
                 key.method, r["social"], r["kinetics"], (r["social"] + r["kinetics"]) / 2,
-                key.ats, key.fts, key.ade, key.fde, units, scene.source, scene.agents,
-                scene.stratum, r["revision"], r["created_at"], r["updated_at"],
+                "" if gt else key.ats, "" if gt else key.fts, key.ade, key.fde, units,
+                scene.source, scene.agents, scene.stratum, r["revision"], r["created_at"],
+                r["updated_at"], r.get("consented_at") or "", study.study_id,
+                h.get("weights_hash") or "", h.get("model_hash") or "", *versions,
             ])  # fmt: skip
     synthetic = study.synthetic or any(r[1] == "synthetic" for r in chosen)
     return {"path": path, "answers": len(chosen), "raters": len(raters), "kind": kind,

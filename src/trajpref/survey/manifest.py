@@ -53,8 +53,8 @@ IMAGE_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}\.png$")
 METHOD_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9 _.+-]{0,39}$")
 """Method names given to ``survey build``."""
 KEYS = {
-    "manifest": ("format", "title", "instructions", "created", "synthetic", "dataset", "build",
-                 "methods", "scenes", "key"),
+    "manifest": ("format", "title", "instructions", "consent", "created", "synthetic",
+                 "dataset", "build", "methods", "scenes", "key"),
     "scene": ("id", "reference", "panels"),
     "panel": ("id", "image"),
     "key scene": ("source", "index", "agents", "stratum", "panels"),
@@ -147,6 +147,15 @@ class Study:
     """True for a study of made-up scenes and scores (demos and tests)."""
     created: str = ""
     """When the study was built (UTC, ISO 8601)."""
+    consent: str = ""
+    """A consent text shown to every rater before the first picture, with an "I agree" step
+    that the answers database records per rater; empty: none (the manifest's optional
+    ``consent``)."""
+
+    @property
+    def consent_hash(self) -> str:
+        """A hash of the consent text: the database records which text a rater agreed to."""
+        return hashlib.sha256(self.consent.encode()).hexdigest()[:16]
 
     @property
     def images_dir(self) -> Path:
@@ -201,6 +210,7 @@ class Study:
         return {
             "title": self.title,
             "instructions": self.instructions,
+            "consent": self.consent,
             "criteria": [{"id": c, "label": lab, "help": h} for c, lab, h in CRITERIA],
             "scale": [RATING_MIN, RATING_MAX],
             "scenes": [
@@ -221,11 +231,13 @@ def _rounded(x: float) -> float:
 
 
 def manifest_dict(study: Study) -> dict[str, Any]:
-    """The JSON form of ``study`` (what ``manifest.json`` holds)."""
+    """The JSON form of ``study`` (what ``manifest.json`` holds; ``consent`` only when the study
+    has one)."""
     return {
         "format": FORMAT,
         "title": study.title,
         "instructions": study.instructions,
+        **({"consent": study.consent} if study.consent else {}),
         "created": study.created,
         "synthetic": study.synthetic,
         "dataset": study.dataset,
@@ -431,4 +443,5 @@ def load_study(folder: str | Path) -> Study:
         build=build,
         synthetic=bool(r.get(raw, "synthetic", bool, "manifest", optional=True)),
         created=r.get(raw, "created", str, "manifest", optional=True) or "",
+        consent=r.get(raw, "consent", str, "manifest", optional=True) or "",
     )

@@ -9,6 +9,8 @@ Routes::
     GET  /api/raters/{rater}                     a rater's answers so far (to resume)
     PUT  /api/raters/{rater}/answers/{scene}/{panel}   {"social": 1..5, "kinetics": 1..5}
     POST /api/raters/{rater}/submit              mark the answers final
+    POST /api/raters/{rater}/consent             agree to the study's consent text (a study
+                                                 with one refuses answers before: 403)
 
 Security: binds to 127.0.0.1 unless told otherwise, and then refuses requests whose Host
 header is not a loopback name (DNS rebinding); serves only the files named in the manifest
@@ -16,13 +18,17 @@ and the three static files (a fixed table: no path from a request ever reaches t
 system); reads at most ``max_body`` bytes of a body (413 beyond); takes JSON only
 (``Content-Type: application/json``, so a cross-site form cannot post answers); sends a
 strict Content-Security-Policy. Errors are JSON ``{"error": message}`` with a 4xx status.
+The access log shows ``/api/raters/<id>/...`` in place of the rater id (personal data:
+``RaterIdMask``).
 """
 
 from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import os
+import re
 import socket
 import subprocess
 import sys
@@ -60,6 +66,37 @@ CSP = (
     "connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'"
 )
 """Content-Security-Policy of every response."""
+
+
+RATER_PATH_RE = re.compile(r"(/api/raters/)[^/?#\s]*", re.IGNORECASE)
+"""The rater id in a request path (the API's ``/api/raters/{rater}...``)."""
+
+
+def mask_rater_ids(text: str) -> str:
+    """``text`` with every rater id of an API path replaced by ``<id>``
+    (``GET /api/raters/alice@example.org/submit`` -> ``GET /api/raters/<id>/submit``)."""
+    return RATER_PATH_RE.sub(r"\1<id>", text)
+
+
+class RaterIdMask(logging.Filter):
+    """A logging filter that masks rater ids (personal data: often a name or an e-mail
+    address) in the arguments and message of a record: ``serve`` puts it on uvicorn's access
+    log, which would otherwise print every request path."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if isinstance(record.args, tuple):
+            record.args = tuple(mask_rater_ids(a) if isinstance(a, str) else a
+                                for a in record.args)  # fmt: skip
+        if isinstance(record.msg, str):
+            record.msg = mask_rater_ids(record.msg)
+        return True
+
+
+def mask_access_log() -> None:
+    """Put ``RaterIdMask`` on uvicorn's access logger (once)."""
+    logger = logging.getLogger("uvicorn.access")
+    if not any(isinstance(f, RaterIdMask) for f in logger.filters):
+        logger.addFilter(RaterIdMask())
 
 
 def _static_bytes(name: str) -> bytes:
@@ -186,6 +223,7 @@ def create_app(study: Study, store: AnswerStore, max_body: int = MAX_BODY,
         return JSONResponse({"saved": True, **saved})
 
     submit = per_rater(store.submit)
+    consent = per_rater(store.consent)
 
     async def http_error(request: Request, exc: HTTPException) -> Response:
         return _error(exc.detail, exc.status_code)
@@ -199,6 +237,7 @@ def create_app(study: Study, store: AnswerStore, max_body: int = MAX_BODY,
             Route("/api/raters/{rater}", rater_info, methods=["GET"]),
             Route("/api/raters/{rater}/answers/{scene}/{panel}", answer, methods=["PUT"]),
             Route("/api/raters/{rater}/submit", submit, methods=["POST"]),
+            Route("/api/raters/{rater}/consent", consent, methods=["POST"]),
         ],
         exception_handlers={HTTPException: http_error},
     )
@@ -249,6 +288,7 @@ def serve(
             app = create_app(study, store, max_body, allowed)
             config = uvicorn.Config(app, log_level="warning" if quiet else "info",
                                     access_log=not quiet, server_header=False)  # fmt: skip
+            mask_access_log()  # after the Config: it sets uvicorn's loggers up
             note = "" if is_loopback(host) else " (not loopback: anyone who can reach it may rate)"
             print(f"serving {study.title!r}: {len(study.scenes)} scenes, {study.num_panels} "
                   f"panels at {url_of(sock)}{note}; answers in {store.path}; Ctrl-C to stop",

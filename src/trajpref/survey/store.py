@@ -8,6 +8,13 @@ Schema (``SCHEMA``)::
     answers(rater, scene, panel, social, kinetics, revision, created_at, updated_at,
             PRIMARY KEY (rater, scene, panel))
         social, kinetics: 1..5 (CHECK); revision: 1, +1 for each later change
+    consents(rater PRIMARY KEY, agreed_at, text_hash)
+        when a rater agreed to the study's consent text, and a hash of that text
+        (``Study.consent_hash``); a file without the table (written before it) gets it when
+        ``serve`` or ``simulate`` opens it
+
+A study with a consent text (``Study.consent``) takes a human rater's answers only once the
+rater has agreed to that text (``consent``); otherwise ``save`` refuses with 403.
 
 Rater ids are not case-sensitive: ``Alice`` and ``alice`` are one rater, stored as ``alice``
 (an older file's ``Alice`` keeps its spelling and is found under any case).
@@ -74,6 +81,11 @@ CREATE TABLE IF NOT EXISTS answers (
     updated_at TEXT NOT NULL,
     PRIMARY KEY (rater, scene, panel)
 );
+CREATE TABLE IF NOT EXISTS consents (
+    rater     TEXT PRIMARY KEY REFERENCES raters (rater),
+    agreed_at TEXT NOT NULL,
+    text_hash TEXT NOT NULL
+);
 """
 """The tables (``CREATE ... IF NOT EXISTS``: opening an existing file keeps it)."""
 TABLES = {
@@ -81,13 +93,15 @@ TABLES = {
     "raters": ("rater", "kind", "created_at", "submitted_at"),
     "answers": ("rater", "scene", "panel", "social", "kinetics", "revision", "created_at",
                 "updated_at"),
+    "consents": ("rater", "agreed_at", "text_hash"),
 }  # fmt: skip
 """The columns of each table of ``SCHEMA``, checked whenever a file is opened."""
 
 
 class AnswerError(TrajprefError, ValueError):
     """An answer the store refuses; ``status`` is the HTTP status the server answers with
-    (400 malformed, 404 unknown scene or panel, 409 conflict, 422 invalid value)."""
+    (400 malformed, 403 consent not given, 404 unknown scene or panel, 409 conflict, 422
+    invalid value)."""
 
     def __init__(self, message: str, status: int = 422):
         super().__init__(message)
@@ -404,6 +418,9 @@ class AnswerStore:
             row = self._rater_row(rater, kind, create=True)
             if row is not None and row[1] is not None:
                 raise AnswerError(f"rater {rater} has already submitted; answers are final", 409)
+            if kind == "human" and self.study.consent and self._agreed(rater) is None:
+                raise AnswerError(f"rater {rater} has not agreed to the study's consent text: "
+                                  "agree first (POST /api/raters/ID/consent)", 403)  # fmt: skip
             for scene, panel, social, kinetics in checked:
                 revision = self.db.execute(
                     """INSERT INTO answers (rater, scene, panel, social, kinetics, revision,
@@ -417,6 +434,40 @@ class AnswerStore:
                 ).fetchall()[0][0]
             answered = self._answered(rater)
         return {"revision": revision, "answered": answered, "total": self.total}
+
+    def _agreed(self, rater: str) -> str | None:
+        """When ``rater`` (as stored) agreed to this study's consent text (the same text:
+        ``Study.consent_hash``), or None. Call under the lock."""
+        if not self._has_table("consents"):
+            return None
+        row = self.db.execute("SELECT agreed_at FROM consents WHERE rater = ? AND text_hash = ?",
+                              (rater, self.study.consent_hash)).fetchone()  # fmt: skip
+        return row[0] if row else None
+
+    def _has_table(self, name: str) -> bool:
+        return self.db.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?",
+                               (name,)).fetchone() is not None  # fmt: skip
+
+    def consent(self, rater: str) -> dict[str, Any]:
+        """Record that a human ``rater`` agreed to the study's consent text, now (kept when
+        already agreed to the same text; renewed when the text has changed since). Returns
+        ``{"consented": True, "agreed_at"}``. 404 when the study has no consent text."""
+        rater = check_rater(rater)
+        if not self.study.consent:
+            raise AnswerError("this study has no consent text", 404)
+        with self._tx():
+            rater = self._stored_id(rater)
+            self._rater_row(rater, "human", create=True)
+            agreed = self._agreed(rater)
+            if agreed is None:
+                agreed = _now()
+                self.db.execute(
+                    """INSERT INTO consents (rater, agreed_at, text_hash) VALUES (?, ?, ?)
+                       ON CONFLICT (rater) DO UPDATE SET agreed_at = excluded.agreed_at,
+                           text_hash = excluded.text_hash""",
+                    (rater, agreed, self.study.consent_hash),
+                )
+        return {"consented": True, "agreed_at": agreed}
 
     def submit(self, rater: str, kind: str = "human") -> dict[str, Any]:
         """Mark a rater's answers final; 409 while panels are unanswered. Idempotent."""
@@ -441,8 +492,10 @@ class AnswerStore:
 
     def progress(self, rater: str) -> dict[str, Any]:
         """A rater's answers so far: ``{"rater", "answers": {scene: {panel: {social,
-        kinetics}}}, "answered", "total", "submitted"}`` (empty for an unknown rater);
-        ``rater`` is the id as stored (lower case, or an older file's spelling)."""
+        kinetics}}}, "answered", "total", "submitted", "consent_required", "consented"}``
+        (empty for an unknown rater); ``rater`` is the id as stored (lower case, or an older
+        file's spelling); ``consent_required``: the study has a consent text, ``consented``:
+        the rater agreed to it."""
         rater = check_rater(rater)
         with self._lock:
             rater = self._stored_id(rater)
@@ -451,6 +504,7 @@ class AnswerStore:
             rows = self.db.execute(
                 "SELECT scene, panel, social, kinetics FROM answers WHERE rater = ?", (rater,)
             ).fetchall()
+            agreed = self._agreed(rater) if self.study.consent else None
         answers: dict[str, dict[str, dict[str, int]]] = {}
         for scene, panel, social, kinetics in rows:
             if panel in self.panels.get(scene, ()):
@@ -462,13 +516,15 @@ class AnswerStore:
             "answered": sum(len(v) for v in answers.values()),
             "total": self.total,
             "submitted": bool(row and row[1]),
+            "consent_required": bool(self.study.consent),
+            "consented": agreed is not None,
         }
 
-    def _read(self, query: str) -> list[tuple]:
+    def _read(self, query: str, params: tuple = ()) -> list[tuple]:
         """``query``'s rows; an SQLite error (a file locked for too long) is a ConfigError."""
         try:
             with self._lock:
-                return self.db.execute(query).fetchall()
+                return self.db.execute(query, params).fetchall()
         except sqlite3.Error as exc:
             raise ConfigError(f"{self.path}: cannot read the answers ({exc})") from None
 
@@ -500,15 +556,20 @@ class AnswerStore:
     def records(self) -> list[dict[str, Any]]:
         """Every answer of this study (those :meth:`rows` gives) with its revision and time
         stamps: ``rater``, ``kind``, ``submitted_at``, ``scene``, ``panel``, ``social``,
-        ``kinetics``, ``revision``, ``created_at``, ``updated_at`` (``survey export``)."""
+        ``kinetics``, ``revision``, ``created_at``, ``updated_at``, ``consented_at`` (when the
+        rater agreed to this study's consent text; None if not, or without one) (``survey
+        export``)."""
         names = ("rater", "kind", "submitted_at", "scene", "panel", "social", "kinetics",
-                 "revision", "created_at", "updated_at")  # fmt: skip
-        rows = self._read(
-            """SELECT a.rater, r.kind, r.submitted_at, a.scene, a.panel, a.social, a.kinetics,
-                      a.revision, a.created_at, a.updated_at
-               FROM answers a JOIN raters r USING (rater)
-               ORDER BY a.rater, a.scene, a.panel"""
-        )
+                 "revision", "created_at", "updated_at", "consented_at")  # fmt: skip
+        with self._lock:
+            consents = self.study.consent and self._has_table("consents")
+        agreed = ("(SELECT c.agreed_at FROM consents c WHERE c.rater = a.rater AND "
+                  "c.text_hash = ?)" if consents else "NULL")  # fmt: skip
+        query = f"""SELECT a.rater, r.kind, r.submitted_at, a.scene, a.panel, a.social,
+                           a.kinetics, a.revision, a.created_at, a.updated_at, {agreed}
+                    FROM answers a JOIN raters r USING (rater)
+                    ORDER BY a.rater, a.scene, a.panel"""
+        rows = self._read(query, (self.study.consent_hash,) if consents else ())
         return [dict(zip(names, r, strict=True)) for r in rows
                 if r[4] in self.panels.get(r[3], ())]  # fmt: skip
 

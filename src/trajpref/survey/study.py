@@ -12,11 +12,12 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Literal
 
+import matplotlib as mpl
 import numpy as np
 
 from trajpref.errors import ConfigError
@@ -164,6 +165,22 @@ def scene_limits(history: np.ndarray, future: np.ndarray, panels: list[ShownSet]
     return (float(lo[0] - pad), float(hi[0] + pad), float(lo[1] - pad), float(hi[1] + pad))
 
 
+UNKNOWN_UNITS = ("", "unknown")
+"""Unit names that say nothing: the pictures then show no unit."""
+
+
+def _panel_image(history: np.ndarray, paths: np.ndarray, weights: np.ndarray, out: Path,
+                 limits: tuple[float, float, float, float], units: str,
+                 dashed: bool = False) -> None:  # fmt: skip
+    """``plot_panel``; for data of unknown units without the axis titles, so that no rater
+    reads "x [unknown]" (the tick values stay)."""
+    if units not in UNKNOWN_UNITS:
+        plot_panel(history, paths, weights, out, limits, units, dashed=dashed)
+        return
+    with mpl.rc_context({"axes.labelcolor": "none"}):  # its titles name a unit: not drawn
+        plot_panel(history, paths, weights, out, limits, "", dashed=dashed)
+
+
 def _check_out(out: Path) -> None:
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise ConfigError(f"{out}: already exists; a study folder is never overwritten "
@@ -189,12 +206,16 @@ def write_study(
     dataset: dict[str, Any] | None = None,
     build: dict[str, Any] | None = None,
     synthetic: bool = False,
+    consent: str = "",
 ) -> Study:
     """Shuffle, render and write a study folder; returns it as read back by ``load_study``.
 
     ``methods`` lists the panels of every scene (``GROUND_TRUTH`` among them when it is rated);
     each scene's panels are put in a random order (seeded) and named A, B, ... The folder
-    appears only once complete, owner-only (0700): the raters' answers go into it.
+    appears only once complete, owner-only (0700): the raters' answers go into it. The
+    build record gets the study's id (``Study.study_id``, which it does not enter). ``units``
+    unknown (``""``, ``unknown``): the pictures' axes name no unit. ``consent``: a consent
+    text every rater agrees to first (``Study.consent``).
     """
     out = Path(out)
     _check_out(out)
@@ -223,15 +244,15 @@ def write_study(
             for letter, method in zip(_letters(len(order)), order, strict=True):
                 s = sc.panels[method]
                 name = f"{sid}-{letter}.png"
-                plot_panel(sc.history, s.paths, s.weights, tmp / IMAGES / name, limits, units)
+                _panel_image(sc.history, s.paths, s.weights, tmp / IMAGES / name, limits, units)
                 key = PanelKey(method, s.ats, s.fts, s.ade, s.fde, s.max_ats, s.max_fts,
                                tuple(s.shown))  # fmt: skip
                 panels.append(Panel(letter, name, key))
             reference = None
             if ground_truth == "reference":
                 reference = f"{sid}-ref.png"
-                plot_panel(sc.history, sc.future[None], np.ones((1, sc.future.shape[0])),
-                           tmp / IMAGES / reference, limits, units, dashed=True)  # fmt: skip
+                _panel_image(sc.history, sc.future[None], np.ones((1, sc.future.shape[0])),
+                             tmp / IMAGES / reference, limits, units, dashed=True)  # fmt: skip
             entries.append(StudyScene(sid, tuple(panels), reference, sc.source, sc.index,
                                       int(sc.history.shape[0]), sc.stratum))  # fmt: skip
         study = Study(
@@ -244,7 +265,9 @@ def write_study(
             build=build or {},
             synthetic=synthetic,
             created=datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            consent=consent.strip(),
         )
+        study = replace(study, build={**study.build, "study_id": study.study_id})
         write_json(tmp / MANIFEST, manifest_dict(study))
         load_study(tmp)  # what was written must read back
         if out.exists():

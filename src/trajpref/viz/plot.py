@@ -243,13 +243,24 @@ def _draw_agent(ax, i: int, history: np.ndarray, future: np.ndarray | None, ball
                     color=c, fontweight="bold", zorder=7, path_effects=_halo(2.0))  # fmt: skip
 
 
-def _set_axes(ax, box: tuple[float, float, float, float], units: str, ylabel: bool = True):
+NO_UNITS = (None, "", "unknown")
+"""Units that name nothing (a folder read without ``--units``): the axes then say no unit."""
+
+
+def axis_label(axis: str, units: str | None) -> str:
+    """An axis title: ``x [m]``, or ``x`` alone where the units are unknown (``NO_UNITS``)
+    rather than ``x [unknown]``."""
+    return axis if units in NO_UNITS else f"{axis} [{units}]"
+
+
+def _set_axes(ax, box: tuple[float, float, float, float], units: str | None,
+              ylabel: bool = True):  # fmt: skip
     ax.set_xlim(box[0], box[1])
     ax.set_ylim(box[2], box[3])
     ax.set_aspect("equal", adjustable="box")
-    ax.set_xlabel(f"x [{units}]")
+    ax.set_xlabel(axis_label("x", units))
     if ylabel:
-        ax.set_ylabel(f"y [{units}]")
+        ax.set_ylabel(axis_label("y", units))
     ax.grid(alpha=0.3)
 
 
@@ -280,7 +291,7 @@ def plot_scene(
     future: np.ndarray,
     pred: np.ndarray | None,
     out: str | Path,
-    units: str = "m",
+    units: str | None = "m",
     title: str = "",
     agent_type: np.ndarray | None = None,
     *,
@@ -298,7 +309,8 @@ def plot_scene(
     run far out do not widen the axes, ``scene_limits``), ``all`` or (x0, x1, y0, y1).
     ``max_samples``: draw only each agent's first so many samples. ``width``: inches (default
     ``SCENE_WIDTH``; text is at its printed size, so 3.3 suits a paper's column); ``dpi``: a
-    PNG's pixels per inch (default ``DPI``). An empty ``title`` draws none.
+    PNG's pixels per inch (default ``DPI``). An empty ``title`` draws none. ``units`` None
+    (or ``""``, ``unknown``): the axes are titled without a unit (``axis_label``).
     """
     figure_format(out)
     _check_size(width, dpi)
@@ -360,7 +372,7 @@ def plot_scene_scored(
     pred: np.ndarray,
     scores: np.ndarray,
     out: str | Path,
-    units: str = "m",
+    units: str | None = "m",
     title: str = "",
     top: int = 2,
     *,
@@ -439,7 +451,7 @@ def plot_panel(
     weights: np.ndarray,
     out: str | Path,
     limits: tuple[float, float, float, float],
-    units: str = "m",
+    units: str | None = "m",
     dashed: bool = False,
 ) -> Path:
     """One panel of a blinded study, drawn as the predictions column of the paper's Fig. 2:
@@ -448,7 +460,8 @@ def plot_panel(
 
     history [P, T_h, 2], paths [R, P, T_f, 2] (best first), weights [R, P] in [0, 1];
     ``limits`` (x0, x1, y0, y1) are the same for every panel of a scene; ``dashed`` draws
-    the paths as the ground truth is drawn in Fig. 2 (the study's reference image). (Its
+    the paths as the ground truth is drawn in Fig. 2 (the study's reference image); ``units``
+    None (or ``""``, ``unknown``): the axes are titled ``x`` and ``y`` without a unit. (Its
     look is the study's: a study's panels keep it whatever the scene figures change.)
     """
     figure_format(out)
@@ -468,8 +481,8 @@ def plot_panel(
     ax.set_xlim(limits[0], limits[1])
     ax.set_ylim(limits[2], limits[3])
     ax.set_aspect("equal", adjustable="box")
-    ax.set_xlabel(f"x [{units}]")
-    ax.set_ylabel(f"y [{units}]")
+    ax.set_xlabel(axis_label("x", units))
+    ax.set_ylabel(axis_label("y", units))
     ax.grid(alpha=0.3)
     return _save(fig, out)
 

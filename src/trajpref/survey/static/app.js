@@ -1,7 +1,8 @@
 // The rating page of `trajpref survey serve`. Plain JavaScript, no libraries.
 // Every answer is sent to the server as soon as both questions of a picture are rated, and
 // the server is the only record: reloading the page, or entering the same rater id on
-// another day, resumes from what it holds.
+// another day, resumes from what it holds. A study with a consent text shows it after the rater
+// id and before the first picture; the server takes answers only once the rater agreed.
 "use strict";
 
 const RATER_KEY = "trajpref-survey-rater";
@@ -21,7 +22,7 @@ const state = {
 const keyOf = (item) => `${item.scene}/${item.panel}`;
 
 function show(view) {
-  for (const id of ["login", "rate", "done", "failure"]) $(id).hidden = id !== view;
+  for (const id of ["login", "consent", "rate", "done", "failure"]) $(id).hidden = id !== view;
   $("progress-box").hidden = view !== "rate";
   document.body.dataset.view = view;
 }
@@ -185,6 +186,10 @@ function save(item, body) {
     } catch (e) {
       setStatus(`not saved: ${e.message}`, true);
       state.pos = state.items.indexOf(item);
+      if (e.status === 403 && state.study.consent) {
+        showConsent(); // not (or no longer) agreed to the consent text
+        return;
+      }
     }
     render();
   });
@@ -210,6 +215,31 @@ async function startRater(rater) {
     show("done");
     return;
   }
+  if (progress.consent_required && !progress.consented) {
+    showConsent();
+    return;
+  }
+  beginRating(progress);
+}
+
+function showConsent() {
+  $("consent-error").textContent = "";
+  show("consent");
+  $("agree").focus();
+}
+
+async function agree() {
+  try {
+    await api("POST", `api/raters/${encodeURIComponent(state.rater)}/consent`);
+  } catch (e) {
+    $("consent-error").textContent = `not recorded: ${e.message}`;
+    return;
+  }
+  startRater(state.rater); // the server's record again: resumes where the rater is
+}
+
+function beginRating(progress) {
+  state.answers = {};
   for (const [scene, panels] of Object.entries(progress.answers)) {
     for (const [panel, ratings] of Object.entries(panels)) {
       state.answers[`${scene}/${panel}`] = ratings;
@@ -217,7 +247,7 @@ async function startRater(rater) {
   }
   show("rate");
   moveTo(firstOpen());
-  setStatus(answered() ? `welcome back, ${rater}` : `hello, ${rater}`);
+  setStatus(answered() ? `welcome back, ${state.rater}` : `hello, ${state.rater}`);
 }
 
 function setLoginError(text) {
@@ -278,6 +308,7 @@ async function main() {
   document.title = state.study.title;
   $("title").textContent = state.study.title;
   $("instructions").textContent = state.study.instructions;
+  $("consent-text").textContent = state.study.consent || "";
   state.study.scenes.forEach((scene, si) => {
     scene.panels.forEach((panel, pi) => {
       state.items.push({
@@ -299,6 +330,12 @@ async function main() {
   $("back").addEventListener("click", () => moveTo(state.pos - 1));
   $("next").addEventListener("click", () => moveTo(state.pos + 1));
   $("submit").addEventListener("click", submitAll);
+  $("agree").addEventListener("click", agree);
+  $("consent-back").addEventListener("click", () => {
+    localStorage.removeItem(RATER_KEY);
+    $("rater").value = "";
+    show("login");
+  });
   $("switch-rater").addEventListener("click", () => {
     localStorage.removeItem(RATER_KEY);
     $("rater").value = "";
