@@ -73,10 +73,6 @@ LIMITS = {
     "(`generator.reg_weight=0.02`) removed it on SDD too but cost 1.4 % validation minADE20, "
     "more than the 1 % its rule allowed (same file, 'SDD and eth: the sample-training term as "
     "a defect fix').",
-    "zara2/rlhf-res": "One of its 20 samples (index 14) is noise after the fine-tuning, with "
-    "jumps of up to 30 m in one step (its start, zara2's default generator of 2026-11-24, "
-    "weights hash 78f430a04523bf9a, since replaced and not today's `zara2/generator`, had "
-    "none): minADE20 / minFDE20 do not see it, figures and planners that use every sample do.",
     "zara1/generator": "The CPU default (160 generator epochs without denoising steps, dropout "
     "0.2; its best validation epoch is under Training above) is 0.04 m short of LED's own "
     "minFDE20 (0.18 / 0.26); the "

@@ -25,8 +25,9 @@ def test_the_reproduce_cost_is_the_invocation_logs():
 
 
 def test_the_readme_names_every_published_noise_sample():
-    """The cards of eth/generator, sdd/generator and zara2/rlhf-res state a noise sample;
-    the README's planning and selection advice (use every sample) must name them too."""
+    """The cards that state a noise sample (sdd/generator's since 2026-12-06; eth/generator's
+    and the retired zara2/rlhf-res's before) must be the ones the README's planning and
+    selection advice (use every sample) names, and no others."""
     text = _text()
     cards = {}
     for card in (ROOT / "src" / "trajpref" / "zoo").glob("*/*.md"):
@@ -76,3 +77,32 @@ def test_the_error_share_of_eths_fast_walkers_is_the_stored_breakdowns_range():
               for p in META.glob("speed_breakdown_eth*.json")]  # fmt: skip
     low, high = round(100 * min(shares)), round(100 * max(shares))
     assert f"carry {low}-{high} % of the error" in _text()
+
+
+SOCIAL_ROW = re.compile(r"\| (zara[12]) \| ([\w-]+) \| ([\d.]+) / ([\d.]+) / ([\d.]+) \| "
+                        r"([\d.]+) \| ([\d.]+) \| ([\d.]+) \|")  # fmt: skip
+
+
+def social_rows(text: str) -> dict[tuple[str, str], list[str]]:
+    """The README's scene-size table: (dataset, model) -> minFDE per bin <= 5 / 6-10 / 11-20,
+    Col-I, Col-II and ground truth %, as printed."""
+    return {(m[0], m[1]): list(m[2:]) for m in SOCIAL_ROW.findall(text)}
+
+
+def stored_social_rows() -> dict[tuple[str, str], list[str]]:
+    """The same cells from benchmarks/results/meta/social_<D>.json (benchmarks/social.py)."""
+    out = {}
+    for dataset in ("zara1", "zara2"):
+        run = json.loads((META / f"social_{dataset}.json").read_text())
+        for name, res in run["models"].items():
+            fde = [f"{res['bins'][b]['min_fde']:.3f}" for b in ("<=5", "6-10", "11-20")]
+            rates = [f"{res[k]:.2f}" for k in ("col_i_pct", "col_ii_pct", "col_gt_pct")]
+            out[(dataset, name)] = fde + rates
+    return out
+
+
+def test_the_scene_size_table_is_the_stored_social_runs():
+    """Every row of the README's "Social plausibility and scene size" table is a model of the
+    stored runs, with their numbers, and every stored model has its row."""
+    section = _text()[_text().index("### Social plausibility and scene size") :][:3000]
+    assert social_rows(section) == stored_social_rows()

@@ -1,7 +1,11 @@
 """benchmarks/zoo_index.py: what a model card says about where it was trained."""
 
+import json
+import re
+import subprocess
 from pathlib import Path
 
+import pytest
 from bench import load_benchmark
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -218,15 +222,73 @@ def test_robos_distance_to_the_papers_led_row_is_computed_from_its_row():
     assert "0.005 m above" in zoo.led_gap({"min_ade": 0.2, "min_fde": 0.355}, [0.22, 0.35])
 
 
-def test_a_fine_tune_from_a_replaced_start_names_that_start_not_todays_generator():
-    """zara2/rlhf-res started from the default of 2026-11-24; its card must not call today's
-    ``zara2/generator`` its start."""
+def test_a_fine_tune_from_a_replaced_start_names_that_start_not_todays_generator(monkeypatch):
+    """A published fine-tune whose start is no longer the dataset's default (its ``from`` hash
+    differs from today's generator's) gets a card whose command starts from that replaced
+    start, not from today's ``zara2/generator``, and whose row is the start's suffixed one."""
     zoo = load_benchmark("zoo_index")
-    from trajpref.models import zoo as published
+    today = ROOT / "models" / "zara2" / "generator.safetensors"
+    real = zoo.zoo.header
+    tuned = dict(real(today), meta={"method": "rlhf-res", "from": "0123456789abcdef",
+                                    "train_seconds": 180.0})  # fmt: skip
+    fake = today.parent / "rlhf-res.safetensors"  # never read: the header is the test's
+    monkeypatch.setattr(zoo.zoo, "header", lambda p: tuned if Path(p) == fake else real(p))
+    start = "runs/zara2-scene/generator.safetensors"  # the replaced start's kept row
+    tuned_file = "models/zara2/rlhf-res.safetensors"
+    rows = [{"dataset": "zara2", "method": m, "seed": 0, "split": "test", "protocol": "all",
+             "checkpoint": c, "machine": "publisher, 1 threads", "min_ade": 0.1,
+             "min_fde": f, "joint_min_ade": 0.3, "joint_min_fde": 0.4, "date": "2026-11-24"}
+            for m, c, f in (("rlhf-res", None, 0.21), ("pretrained-scene", start, 0.24),
+                            ("rlhf-res-scene", tuned_file, 0.25))]  # fmt: skip
+    entry = zoo.describe("zara2/rlhf-res", fake, rows)
+    commands = "\n".join(entry["train"]["commands"])
+    assert "weights hash 0123456789abcdef, since replaced" in commands
+    assert f"since replaced ({start})" in commands
+    assert "--from START.safetensors" in commands and "--from zara2/generator" not in commands
+    assert entry["test"]["method"] == "rlhf-res-scene" and entry["test"]["min_fde"] == 0.25
 
-    head = published.header(ROOT / "models" / "zara2" / "rlhf-res.safetensors")
-    limit = zoo.LIMITS["zara2/rlhf-res"]
-    assert head["meta"]["from"] in limit and "its start, `zara2/generator`" not in limit
+
+RETIRED = {"zara2/rlhf-res": "62cc5a7"}
+"""Published models that left the zoo -> a commit whose tree still holds their weights."""
+
+GIT_SHOW = re.compile(
+    r"git show ([0-9a-f]{7,40}):(src/trajpref/zoo/[a-z][\w-]*/[\w.-]+\.safetensors)"
+)
+"""A ``git show COMMIT:PATH`` of published weights (a placeholder such as ``D/`` or ``<name>``
+does not match)."""
+
+
+def _docs_text() -> str:
+    """README, docs/*.md, the model cards and zoo_index.py's limits on one line each (prose
+    wraps anywhere, a ``git show`` included)."""
+    files = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")),
+             *sorted((ROOT / "src" / "trajpref" / "zoo").glob("*/*.md")),
+             ROOT / "benchmarks" / "zoo_index.py"]  # fmt: skip
+    return " ".join(" ".join(f.read_text().split()) for f in files)
+
+
+def test_a_retired_model_has_left_the_zoo_and_the_readme_names_its_weights_in_git():
+    index = json.loads((ROOT / "src" / "trajpref" / "zoo" / "index.json").read_text())
+    names = {m["name"] for m in index["models"]}
+    zoo = load_benchmark("zoo_index")
+    readme = " ".join((ROOT / "README.md").read_text().split())
+    for name, commit in RETIRED.items():
+        dataset, stem = name.split("/")
+        assert name not in names and name not in zoo.LIMITS
+        assert not (ROOT / "src" / "trajpref" / "zoo" / dataset / f"{stem}.safetensors").exists()
+        assert not (ROOT / "src" / "trajpref" / "zoo" / dataset / f"{stem}.md").exists()
+        assert f"git show {commit}:src/trajpref/zoo/{dataset}/{stem}.safetensors" in readme
+
+
+def test_every_git_show_of_zoo_weights_in_the_docs_names_a_file_that_commit_holds():
+    if not (ROOT / ".git").exists():
+        pytest.skip("not a git checkout")
+    found = set(GIT_SHOW.findall(_docs_text()))
+    assert found >= {(c, f"src/trajpref/zoo/{n}.safetensors") for n, c in RETIRED.items()}
+    missing = [f"{c}:{p}" for c, p in sorted(found)
+               if subprocess.run(["git", "cat-file", "-e", f"{c}:{p}"], cwd=ROOT,
+                                 capture_output=True).returncode]  # fmt: skip
+    assert not missing, f"named in the docs but not in those commits: {missing}"
 
 
 def test_a_subset_full_sampler_cell_is_quoted_where_no_whole_split_row_exists(
