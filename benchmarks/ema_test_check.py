@@ -38,8 +38,8 @@ METRICS = ("min_ade", "min_fde", "joint_min_ade", "joint_min_fde")
 def match_settings(run_file: Path, published: Path) -> dict[str, Any]:
     """Give ``run_file`` the sampling settings of ``published`` (weights untouched); returns
     them."""
-    model = read_checkpoint_header(published)["config"]["model"]
-    values = {name: model[name] for name in ckpt.POST_HOC_SETTINGS}
+    model = ckpt.config_of(read_checkpoint_header(published)).model  # defaults filled in
+    values = {name: getattr(model, name) for name in ckpt.POST_HOC_SETTINGS}
     for name, value in values.items():
         ckpt.set_generator_setting(run_file, name, value, note=f"as {published.name} (published)")
     return values

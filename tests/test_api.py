@@ -108,7 +108,7 @@ H, S = _walk()
         (H[:, 1:], S, {}, r"history: expected \[P, 8, 2\] .*T_h = 8\), got \[2, 7, 2\]"),
         (H[..., :1], S, {}, r"history: expected \[P, 8, 2\].* got \[2, 8, 1\]"),
         (H[0], S, {}, r"history: expected \[P, 8, 2\].* got \[8, 2\]"),
-        (H[:0], S[:, :0], {}, r"history: the scene has no agents \(P = 0\)"),
+        (H[:0], S, {}, r"samples: expected \[K, 0, 12, 2\] \(samples, the history's 0 agents"),
         (H, S[:, :, :10], {}, r"samples: expected \[K, 2, 12, 2\] .*T_f = 12\), got \[4, 2, 10"),
         (H, S[:, :1], {}, r"samples: expected \[K, 2, 12, 2\] \(samples, the history's 2 agents"),
         (H, S[0], {}, r"got \[2, 12, 2\] \(one sample\? add a leading axis: samples\[None\]\)"),
@@ -130,6 +130,21 @@ def test_bad_input_is_a_data_error_with_a_clear_message(scorer, history, samples
                                                         message):  # fmt: skip
     with pytest.raises(DataError, match=message):
         rank_samples(scorer, history, samples, **kwargs)
+
+
+def test_an_empty_view_ranks_the_samples_as_they_came(scorer):
+    # no agent in view (history [0, 8, 2], samples [K, 0, 12, 2]): nothing tells the samples
+    # apart, so the order is 0..K-1 and every residual is 0 (a sum over no agents), and
+    # samples[order] stays a valid index; it used to be a DataError
+    order, residual = rank_samples(scorer, H[:0], S[:, :0])
+    assert isinstance(order, np.ndarray) and order.tolist() == [0, 1, 2, 3]
+    assert isinstance(residual, np.ndarray) and residual.tolist() == [0.0] * 4
+    order, residual = rank_samples(scorer, torch.as_tensor(H[:0]), S[:, :0], final=True)
+    assert isinstance(order, torch.Tensor) and order.tolist() == [0, 1, 2, 3]
+    assert residual.tolist() == [0.0] * 4
+    assert S[:, :0][order.numpy()].shape == (4, 0, 12, 2)
+    with pytest.raises(DataError, match=r"samples: no samples \(K = 0\)"):
+        rank_samples(scorer, H[:0], S[:0, :0])  # still no samples to rank
 
 
 def test_batch_entry_points_check_shapes(scorer, walks):
@@ -232,7 +247,8 @@ def test_context_neighbours_reach_a_model_that_reads_them(zara1, robo):
     part = near.copy()
     part[0, :3] = np.nan  # seen in the last 5 frames only: fewer than model.context_frames
     assert zara1.reads_context and zara1.context_frames == 8
-    np.testing.assert_array_equal(predict_scene(zara1, history, context=part), alone)
+    with pytest.warns(UserWarning, match=r"1 of 1 context row\(s\) ignored"):  # and says so
+        np.testing.assert_array_equal(predict_scene(zara1, history, context=part), alone)
     with pytest.raises(DataError, match=r"context: 1 value\(s\) not finite .*NaN marks an unseen"):
         predict_scene(zara1, history, context=np.where(near > 1e9, 0, near) + np.array(
             [[[np.inf, 0]] + [[0, 0]] * 7]))  # fmt: skip

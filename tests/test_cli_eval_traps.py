@@ -111,6 +111,10 @@ def test_the_units_warning_says_a_fold_model_was_trained_on_the_other_scenes(
 # the advice names a published model only where there is one
 
 
+SAID = ("--frame-interval", "0.4", "--units", "m")
+"""A folder's pace and units, as the fold models read theirs (else a warning asks for them)."""
+
+
 def _sgan_folder(root, test_files, splits=True):
     """A folder laid out like Social-GAN's: ``test/`` holds ``test_files`` (tiny straight
     walkers), ``train/`` and ``val/`` other scenes' ``*_train``/``*_val`` files; with
@@ -136,8 +140,9 @@ def test_a_folder_of_a_folds_sgan_files_is_that_fold(capsys, zara2_model, tmp_pa
                           f"--dataset {folder} holds zara1's Social-GAN test files "
                           "(crowds_zara01)")  # fmt: skip
     assert "its own fold is zara2" in err and "--model zara1/generator on that folder" in err
+    # the files' pace and units said (else they are asked for): the overlap's warning alone
     code, out, err = _run(capsys, *_base("evaluate", tmp_path, zara2_model, folder), "--json",
-                          "--allow-overlap")  # fmt: skip
+                          "--allow-overlap", *SAID)  # fmt: skip
     assert code == 0 and err.count("trajpref: warning:") == 1
     assert json.loads(out)["overlap"] == f"zara2 model on zara1 ({folder})"
 
@@ -161,11 +166,13 @@ def test_the_real_zara1_folder_given_as_a_path_is_the_zara1_fold(capsys, zara2_m
 
 def test_a_folder_of_its_own_folds_files_or_others_is_not_refused(capsys, zara2_model, tmp_path):
     own = _sgan_folder(tmp_path / "own", ["crowds_zara02.txt"])
-    code, out, err = _run(capsys, *_base("evaluate", tmp_path, zara2_model, own), "--json")
+    code, out, err = _run(capsys, *_base("evaluate", tmp_path, zara2_model, own), "--json",
+                          *SAID)  # fmt: skip
     assert (code, err) == (0, "") and json.loads(out)["overlap"] is None
     # uni_examples and crowds_zara03 are in every fold's training split, no fold's test
     other = _sgan_folder(tmp_path / "other", ["uni_examples.txt", "crowds_zara03.txt"])
-    code, out, err = _run(capsys, *_base("evaluate", tmp_path, zara2_model, other), "--json")
+    code, out, err = _run(capsys, *_base("evaluate", tmp_path, zara2_model, other), "--json",
+                          *SAID)  # fmt: skip
     assert (code, err) == (0, "") and json.loads(out)["overlap"] is None
 
 

@@ -78,8 +78,8 @@ def test_data_at_another_step_than_the_models_is_named_in_one_line(capsys, paced
                     ["plot", "--out", logged.parent / "p.png"]):  # fmt: skip
         code, _, err = _run(capsys, *command, *base)
         assert (code, err) == (0, warning), command
-    # read as the model was: silent
-    code, _, err = _run(capsys, "evaluate", *base, "--time-step", "4")
+    # read as the model was (its units too, else they are asked for): silent
+    code, _, err = _run(capsys, "evaluate", *base, "--time-step", "4", "--units", "m")
     assert (code, err) == (0, "")
     # in other units too
     code, _, err = _run(capsys, "evaluate", *base, "--time-step", "4", "--units", "ft")
@@ -102,7 +102,7 @@ def test_a_published_model_on_timestamped_files_gets_their_interval(capsys, logg
     assert stats["frame_interval"] == pytest.approx(0.4) and stats["interval_from"] == "timestamps"
     assert stats["mean_speed"] == pytest.approx(1.2, rel=1e-3)  # metres per second
     code, out, _ = _run(capsys, "data", "stats", "--dataset", logged, "--time-step", "4")
-    assert "frame_interval: 0.4 s (0.1 s between frames: the files' time column, in seconds; " \
+    assert "frame_interval: 0.4 s (0.1 s between frames: the step of the files' time column; " \
            "read every 4)" in out  # fmt: skip
     # TrajNet++ files written from them declare 2.5 fps, and read back without a warning
     pred, truth = tmp_path / "pred.ndjson", tmp_path / "gt.ndjson"

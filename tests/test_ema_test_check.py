@@ -26,15 +26,25 @@ def _generator(path, seed, **settings):
 def test_match_settings_copies_the_published_clamp_and_keeps_the_weights(tmp_path):
     mod = load_benchmark("ema_test_check")
     published, run = tmp_path / "published.safetensors", tmp_path / "run.safetensors"
-    _generator(published, 1, max_speed=0.32, spread_scale=0.9)
+    _generator(published, 1, max_speed=0.32, spread_scale=0.9, neighbour_radius=8.0)
     _generator(run, 2)
     weights = read_checkpoint_header(run)["hash"]
     got = mod.match_settings(run, published)
     assert got == {"stochastic_steps": False, "max_speed": 0.32, "spread_scale": 0.9,
-                   "max_log_sigma": None}  # fmt: skip
+                   "max_log_sigma": None, "neighbour_radius": 8.0}  # fmt: skip
     model = read_checkpoint_header(run)["config"]["model"]
     assert (model["max_speed"], model["spread_scale"]) == (0.32, 0.9)
+    assert model["neighbour_radius"] == 8.0  # the published file's radius, copied
     assert read_checkpoint_header(run)["hash"] == weights
+
+
+def test_match_settings_reads_a_file_published_before_the_radius(tmp_path):
+    mod = load_benchmark("ema_test_check")
+    run = tmp_path / "run.safetensors"
+    _generator(run, 2)
+    published = ckpt.resolve_path("zara1/generator")  # its header predates the setting
+    assert "neighbour_radius" not in read_checkpoint_header(published)["config"]["model"]
+    assert mod.match_settings(run, published)["neighbour_radius"] is None
 
 
 def test_change_is_raw_to_averaged_in_percent():

@@ -158,9 +158,11 @@ def window_seed(seed: int, index: int) -> int:
 
 
 def _with_generator(model: DiffusionPredictor, generator: Generator) -> DiffusionPredictor:
-    """A predictor sharing ``model``'s denoiser and schedule, with another generator."""
+    """A predictor sharing ``model``'s denoiser, schedule and sampling settings (its
+    ``neighbour_radius`` included), with another generator."""
     return DiffusionPredictor(model.denoiser, model.schedule, model.scale, generator, model.tau,
-                              model.sampler, model.stochastic)  # fmt: skip
+                              model.sampler, model.stochastic,
+                              neighbour_radius=model.neighbour_radius)  # fmt: skip
 
 
 def _check_model(model) -> None:
@@ -191,7 +193,8 @@ def adapt_generator(
     scorer = None
     if cfg.objective != "supervised":
         steps = score_timesteps(model.schedule.num_steps, cfg.score_every)
-        scorer = TrajectoryScorer(model.denoiser, model.schedule, model.scale, steps)
+        scorer = TrajectoryScorer(model.denoiser, model.schedule, model.scale, steps,
+                                  neighbour_radius=model.neighbour_radius)  # fmt: skip
     opt = torch.optim.Adam(chosen, lr=cfg.lr)
     for _ in range(cfg.steps):
         roll = view.rollout(context, rng, cond=cond)

@@ -33,7 +33,15 @@ from trajpref.config import (
     in_section,
     load_config,
 )
-from trajpref.data import PROTOCOLS, ReadOptions, hold_out_scene, load_dataset, mean_speed
+from trajpref.data import (
+    PROTOCOLS,
+    ReadOptions,
+    hold_out_scene,
+    load_dataset,
+    mean_speed,
+    speed_note,
+    speed_text,
+)
 from trajpref.data.loader import SceneLoader
 from trajpref.data.registry import (
     ETH_UCY,
@@ -67,7 +75,13 @@ from trajpref.metrics import SCENE_SIZE_EDGES, check_bin_edges, min_ade_fde
 from trajpref.models import checkpoint as ckpt
 from trajpref.models import zoo
 from trajpref.models.registry import load_predictor
-from trajpref.models.timing import model_timing, timing_problems, trained_otherwise
+from trajpref.models.timing import (
+    UNKNOWN_UNITS,
+    model_timing,
+    timing_problems,
+    trained_otherwise,
+    unstated_timing,
+)
 from trajpref.results import machine
 from trajpref.rl.presets import EQUAL_BUDGET_VALIDATIONS, EQUAL_BUDGET_WARMUP, finetune_config
 from trajpref.score import TrajectoryScorer, score_timesteps
@@ -103,9 +117,13 @@ def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> N
     p.add_argument("--split", default=split_default, choices=["train", "val", "test"],
                    help=f"which split to read (default {split_default})")  # fmt: skip
     p.add_argument("--data-root", default=None, help="data folder (default: $TRAJPREF_DATA)")
-    p.add_argument("--frame-interval", type=float, default=None,
-                   help="seconds between frames, for a folder dataset (default: the step of "
-                   "a frame column headed time or timestamp, read as seconds; TrajNet++ "
+    p.add_argument("--frame-interval", type=float, default=None, metavar="SECONDS",
+                   help="for a folder dataset: the seconds between consecutive rows of an "
+                   "agent (between consecutive distinct frame values of its files), not per "
+                   "frame number nor per video frame: 0.1 for 10 Hz tracks, 0.4 for "
+                   "ETH/UCY's frames numbered 10 apart; --time-step then reads every n-th "
+                   "(default: the step of a frame column headed time or timestamp, read as "
+                   "seconds, or time_ms or timestamp_ms, read as milliseconds; TrajNet++ "
                    "files: the fps their scenes declare; else 0.4, assumed)")  # fmt: skip
     p.add_argument("--units", default=None,
                    help="coordinate units, for a folder dataset (default unknown)")  # fmt: skip
@@ -167,6 +185,13 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
                    help="generators: cap each sample's log sigma at this (model units; "
                    "default: the file's model.max_log_sigma; docs/pretraining.md, 'A cap on "
                    "the samples' sigma')")  # fmt: skip
+    p.add_argument("--neighbour-radius", default=None, metavar="R|none",
+                   help="diffusion models and --scorer: agents whose last observed positions "
+                   "lie farther apart than R, in the data's units (metres, pixels: the "
+                   "model's), do not attend to each other, for scenes wider than the training "
+                   "scenes (about 16 m); none: every pair of a scene attends (default: the "
+                   "file's model.neighbour_radius, none for the published models; "
+                   "docs/pretraining.md, 'A neighbour radius')")  # fmt: skip
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     p.add_argument("--max-agents", type=int, default=MAX_AGENTS,
                    help="agents per batch of whole scenes (default 1024). Lower it to save "
@@ -421,8 +446,11 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--config", default=None, help="YAML config (default: built-in defaults)")
     tr.add_argument("--dataset", default=None, help="shortcut for --set data.dataset=NAME")
     tr.add_argument("--frame-interval", type=float, default=None, metavar="SECONDS",
-                    help="a folder dataset's seconds between frames (--set "
-                    "data.frame_interval; default: a time/timestamp column's step, TrajNet++ "
+                    help="a folder dataset's seconds between consecutive rows of an agent "
+                    "(consecutive distinct frame values of its files; not per frame number "
+                    "nor per video frame; --time-step then reads every n-th; --set "
+                    "data.frame_interval; default: the step of a time/timestamp column, in "
+                    "seconds, or of a time_ms/timestamp_ms column, in milliseconds, TrajNet++ "
                     "files' declared fps, else 0.4 assumed); the model records it")  # fmt: skip
     tr.add_argument("--units", default=None, help="a folder dataset's coordinate units (--set "
                     "data.units; default unknown); the model records them")  # fmt: skip
@@ -614,6 +642,31 @@ def _check_model_args(args) -> None:
         _check_checkpoint("--model", args.model)
     if getattr(args, "scorer", None):
         _check_checkpoint("--scorer", args.scorer)
+    given, _ = _neighbour_radius(args)  # ConfigError for a bad value
+    if given and args.model == "cv" and not getattr(args, "scorer", None):
+        raise ConfigError("--neighbour-radius applies to diffusion models and scorers: "
+                          "--model cv has no attention across agents (with --scorer it sets "
+                          "the scorer's)")  # fmt: skip
+
+
+def _neighbour_radius(args) -> tuple[bool, float | None]:
+    """``--neighbour-radius`` as given: ``(False, None)`` when absent (each file's own radius
+    applies), else ``(True, R)``, R a distance > 0 or None for ``none`` (every pair attends).
+    ConfigError for anything else."""
+    text = getattr(args, "neighbour_radius", None)
+    if text is None:
+        return False, None
+    if str(text).strip().lower() == "none":
+        return True, None
+    try:
+        radius = float(text)
+    except ValueError:
+        radius = math.nan
+    if not (math.isfinite(radius) and radius > 0):
+        raise ConfigError(f"--neighbour-radius takes a distance > 0 in the data's units (the "
+                          f"model's: metres, pixels) or none (every pair of a scene attends), "
+                          f"got {text!r}")  # fmt: skip
+    return True, radius
 
 
 def cmd_data_stats(args) -> int:
@@ -647,6 +700,10 @@ def cmd_data_stats(args) -> int:
         "mean_speed": speed,  # the dataset's units per second
         "source": ds.info.source,
     }
+    info = ds.info
+    note = speed_note(speed, info.units, info.frame_interval, info.interval_from, info.time_step)
+    if note is not None:  # no walking pace in metres: the interval (or the units) may be wrong
+        warnings.warn(f"{info.name}: {note}", stacklevel=2)
     if args.reverse_context:  # the same for the windows played backwards (data.reverse_context)
         out["context_agents_reversed"] = sum(
             0 if s.context_reverse is None else len(s.context_reverse) for s in ds.scenes
@@ -660,7 +717,7 @@ def cmd_data_stats(args) -> int:
                 value = ", ".join(f"{k} {v}" if isinstance(v, int) else f"{k} {v:.3g}"
                                   for k, v in value.items())  # fmt: skip
             elif key == "mean_speed":
-                value = f"{value:.4g} {ds.info.units}/s"
+                value = speed_text(value, ds.info.units)
             elif key == "frame_interval":
                 value = f"{value:g} s{_interval_note(ds.info)}"
             elif key in ("interval_from", "time_step"):
@@ -670,14 +727,15 @@ def cmd_data_stats(args) -> int:
 
 
 INTERVAL_NOTES = {"dataset": "", "given": "given", "declared": "declared by the TrajNet++ scenes",
-                  "timestamps": "the files' time column, in seconds",
+                  "timestamps": "the step of the files' time column",
                   "default": "assumed: none given (--frame-interval)"}  # fmt: skip
 """How ``data stats`` says where a frame interval comes from (``DatasetInfo.interval_from``)."""
 
 
 def _interval_note(info) -> str:
-    """`` (0.1 s between frames: the files' time column, in seconds; read every 4)`` after the
-    step ``data stats`` prints; empty for a built-in dataset read as recorded."""
+    """`` (0.1 s between frames: the step of the files' time column; read every 4)`` after
+    the step ``data stats`` prints (a time column's step is in seconds, a ``time_ms`` or
+    ``timestamp_ms`` one's divided by 1000); empty for a built-in dataset read as recorded."""
     source = INTERVAL_NOTES.get(info.interval_from, info.interval_from)
     if info.time_step == 1.0:
         return f" ({source})" if source else ""
@@ -702,6 +760,9 @@ def _predictor(args):
                        ("--max-log-sigma", "max_log_sigma")):  # fmt: skip
         if getattr(args, name, None) is not None:
             _set_generator(model, flag, **{name: getattr(args, name)})
+    given, radius = _neighbour_radius(args)
+    if given and hasattr(model, "neighbour_radius"):  # cv has none (its --scorer takes it)
+        model.neighbour_radius = radius
     return model, device
 
 
@@ -775,20 +836,111 @@ def _step_hint(info, model: dict) -> str:
     return reads
 
 
-def _warn_if_trained_otherwise(spec: str, ds) -> None:
+def _model_reading(model: dict) -> str:
+    """How the model read its training data (``model_timing``'s record), for the warning on
+    data that leave their interval or units unsaid: a built-in dataset's step and units, or
+    the flags that read a folder as the model read it (``--frame-interval 0.1 --time-step 4
+    --units m``)."""
+    step, every, units = model["step"], model["time_step"], model["units"]
+    units = None if units in UNKNOWN_UNITS else units
+    if model["interval_from"] == "dataset":
+        read = "" if every == 1 else f" ({model['trained_on']} read every {every:g})"
+        return f"the model's step is {step:g} s{read}" + (f", its units {units}" if units else "")
+    flags, notes = [], []
+    if model["known"] and step is not None:
+        frame = step / every  # seconds between the rows of its files
+        if model["interval_from"] == "given":
+            flags.append(f"--frame-interval {frame:g}")
+        elif model["interval_from"] == "timestamps":
+            notes.append(f"its files' time column gave {frame:g} s between rows")
+        elif model["interval_from"] == "declared":
+            notes.append(f"its TrajNet++ scenes declared {1 / frame:.4g} fps")
+        notes.insert(0, f"{step:g} s per step")
+    if every != 1:
+        flags.append(f"--time-step {every:g}")
+    if units:
+        flags.append(f"--units {units}")
+    detail = f" ({'; '.join(notes)})" if notes else ""
+    if not flags:
+        return f"the model's step is {step:g} s{detail}"
+    return f"the model read its data with {' '.join(flags)}{detail}"
+
+
+def _unstated_problem(info, model: dict, missing: list[str]) -> str:
+    """The phrase of ``_warn_if_trained_otherwise`` for data whose interval is only assumed
+    or whose units are unknown (``timing.unstated_timing``'s ``missing``), where the model
+    recorded its own: what the model read, and the flags that say this data's."""
+    said = []
+    if "interval" in missing:
+        frame = info.frame_interval / info.time_step  # as assumed: seconds between rows
+        said.append(f"frame interval is only assumed ({frame:g} s between rows, none given)")
+    if "units" in missing:
+        said.append("units are unknown" if not said else "its units are unknown")
+    flags = []
+    if "interval" in missing:
+        flags.append("--frame-interval (the seconds between an agent's consecutive rows)")
+    if "units" in missing:
+        flags.append("--units")
+    return (f"this data's {' and '.join(said)}, while {_model_reading(model)}: give this "
+            f"data's with {' and '.join(flags)}")  # fmt: skip
+
+
+def _flat_dataset(dataset: str) -> bool:
+    """Whether a folder dataset (or one TrajNet++ file) has no ``train/ val/ test/``
+    sub-folders, so that every split reads the same windows (as ``train`` tells, in
+    ``_warn_if_validation_reads_training``); False for a built-in name or what cannot be
+    read (reading it says why)."""
+    if dataset in NAMES:
+        return False
+    path = Path(dataset).expanduser()
+    try:
+        return path.is_file() or (path.is_dir() and not split_folders(path))
+    except (TrajprefError, OSError):
+        return False
+
+
+def _training_windows(spec: str, header: dict, info) -> str | None:
+    """One warning's text when this data (``info``) is the model's own training folder, read
+    whole because it has no split sub-folders: whatever ``--split`` says, its windows are those
+    the model trained on. None otherwise (a held-out scene read with ``--holdout-scene`` is
+    another source, and so not this case)."""
+    data = header["config"]["data"]
+    trained = data.get("dataset")
+    if not isinstance(trained, str) or not _same_path(trained, info.name):
+        return None
+    if not _same_path(info.source, info.name) or not _flat_dataset(trained):
+        return None
+    holdout = data.get("holdout_scene") or ""
+    held = (f" (all but its held-out scene {holdout}*, which --split val --holdout-scene "
+            f"{holdout} reads alone)" if holdout else "")  # fmt: skip
+    return (f"{spec} was trained on {trained}, which has no train/, val/ or test/ sub-folders: "
+            f"whatever --split says, this data is the windows it trained on{held}, so numbers "
+            "on it are training numbers, not a test (give the folder train/ val/ test/ "
+            "sub-folders and train on train/, or use files it did not train on)")  # fmt: skip
+
+
+def _warn_if_trained_otherwise(spec: str, ds) -> str | None:
     """One warning when the model was trained on data whose units or pace differ from this
     data's (as far as both are known): its predictions would be in the wrong units or at the
     wrong pace. The model's side: what its checkpoint recorded of its training data
     (``model_timing``: a built-in dataset's own, or a folder's interval, time step and units);
     this data's: ``ds.info`` (its step with the ``--time-step`` it was read with, and where
     its interval comes from). A model trained on a folder before that record is compared
-    only with the same folder read at another ``--time-step``."""
+    only with the same folder read at another ``--time-step``. Where nothing known differs
+    but this data's interval is only assumed or its units unknown while the model recorded
+    its own, the warning names the model's (for a folder model, the flags that read data as
+    it did) and the flags that give this data's.
+
+    A second warning when this data is the model's own training folder, read whole because
+    it has no split sub-folders (``_training_windows``); its short form is returned, for the
+    result to record (``evaluate``'s ``overlap``). None otherwise."""
     if spec == "cv":
-        return
+        return None
     try:
-        model = model_timing(read_checkpoint_header(ckpt.resolve_path(spec)))
-    except (TrajprefError, KeyError, TypeError, ValueError, AttributeError):
-        return  # not a checkpoint this check can read: loading it has said what it needed
+        header = _checkpoint_header(spec)  # a legacy .pt file too
+        model = model_timing(header)
+    except (TrajprefError, KeyError, TypeError, ValueError, AttributeError, OSError):
+        return None  # not a checkpoint this check can read: loading it has said what it needed
     info = ds.info
     step = info.frame_interval if info.frame_interval > 0 else None
     problems = timing_problems(model, step, info.units, lambda m: _step_hint(info, m))
@@ -800,9 +952,21 @@ def _warn_if_trained_otherwise(spec: str, ds) -> None:
             problems.append(f"this data is read every {info.time_step:g} {steps} of its "
                             f"files, the model's (the same folder) every {every:g} "
                             f"(--time-step {every:g} reads it at the model's step)")  # fmt: skip
+    if not problems:  # nothing known differs: what this data leaves unsaid, if the model says
+        missing = unstated_timing(model, info.interval_from == "default", info.units)
+        if missing:
+            problems.append(_unstated_problem(info, model, missing))
     if problems:
         named = dict(model, trained_on=_training_data(model["trained_on"]))
         warnings.warn(trained_otherwise(spec, named, problems), stacklevel=2)
+    try:
+        own = _training_windows(spec, header, info)
+    except (KeyError, TypeError, AttributeError):
+        return None
+    if own is None:
+        return None
+    warnings.warn(own, stacklevel=2)
+    return f"trained on these windows ({info.name} has no split sub-folders)"
 
 
 def _training_data(dataset: str) -> str:
@@ -817,7 +981,7 @@ def _checkpoint_header(spec: str) -> dict:
     """Checkpoint ``spec``'s header (a path or a published name), its weights left unread; a
     legacy ``.pt`` file is loaded whole, without its state dict (loading the model has warned
     of the format, so this does not warn again)."""
-    path = ckpt.resolve_path(spec)
+    path = Path(ckpt.resolve_path(spec))
     if path.suffix != ckpt.LEGACY_SUFFIX:
         return read_checkpoint_header(path)
     with warnings.catch_warnings():
@@ -919,14 +1083,22 @@ def _check_fold_overlap(args) -> str | None:
     return "; ".join(f"{fold} {role} on {scenes}{tail}" for role, _, fold in found)
 
 
-def _warn_model_and_scorer(args, ds) -> None:
+def _warn_model_and_scorer(args, ds) -> str | None:
     """``_warn_if_trained_otherwise`` for the command's model and, when it names another one,
     its ``--scorer`` (a scorer of other units or pace ranks on what it cannot read; as
-    ``survey build`` checks its scorer)."""
-    _warn_if_trained_otherwise(args.model, ds)
+    ``survey build`` checks its scorer). Returns what a result records of those trained on
+    this very data (``model trained on these windows (...)``), None when neither was."""
+    found = {"model": _warn_if_trained_otherwise(args.model, ds)}
     scorer = getattr(args, "scorer", None)
     if scorer and not (scorer == args.model or _same_path(scorer, args.model)):
-        _warn_if_trained_otherwise(scorer, ds)
+        found["scorer"] = _warn_if_trained_otherwise(scorer, ds)
+    notes = [f"{role} {note}" for role, note in found.items() if note]
+    return "; ".join(notes) or None
+
+
+def _joined(*notes: str | None) -> str | None:
+    """What a result records as ``overlap``: the notes given, joined; None when none."""
+    return "; ".join(n for n in notes if n) or None
 
 
 def _set_generator(model, flag: str, **setting) -> None:
@@ -942,10 +1114,16 @@ def _set_generator(model, flag: str, **setting) -> None:
 
 
 def _scorer(path: str, device, args=None, every: int = RANK_SCORE_EVERY):
-    """The scorer of checkpoint ``path``; with a command's ``args``, at its --score-every
-    (default ``every``), --score-from and --score-precision."""
+    """The scorer of checkpoint ``path``; with a command's ``args``, at its
+    --neighbour-radius (default: the file's) and, where the command has them (plot has not),
+    its --score-every (default ``every``), --score-from and --score-precision."""
     scorer = TrajectoryScorer.from_checkpoint(path, device)
     if args is None:
+        return scorer
+    given, radius = _neighbour_radius(args)
+    if given:
+        scorer.neighbour_radius = radius
+    if not hasattr(args, "score_every"):
         return scorer
     every = args.score_every if args.score_every is not None else every
     steps = score_timesteps(scorer.schedule.num_steps, every, args.score_from)
@@ -1025,13 +1203,16 @@ def _selecting(args, model, device, scores: bool = False):
 
 
 MODEL_SETTINGS = ("max_speed", "spread_scale", "max_log_sigma")
-"""The ``model`` settings that ``_predictor``'s options of the same names replace."""
+"""The generator's ``model`` settings that ``_predictor``'s options of the same names replace
+(``--neighbour-radius``, the predictor's own and ``None`` for ``none``, is handled beside
+them)."""
 
 
 def _model_fields(args) -> dict:
     """Who made a result, beside the model's path: ``model_hash`` (what predicted, as a results
     row records it: weights, denoiser, data scale and model settings, with this command's
-    --max-speed, --spread-scale, --max-log-sigma, --deterministic or --stochastic applied;
+    --max-speed, --spread-scale, --max-log-sigma, --neighbour-radius, --deterministic or
+    --stochastic applied;
     ``models.checkpoint.header_model_hash``), ``weights_hash`` (the weights' own content hash,
     which a fine-tuned model's ``start_hash`` names), and for a fine-tuned model
     ``finetune_method``, ``finetune_reward`` and ``start_hash`` (the header's ``meta.method``,
@@ -1044,6 +1225,9 @@ def _model_fields(args) -> dict:
     for name in MODEL_SETTINGS:
         if getattr(args, name, None) is not None:
             model[name] = getattr(args, name)
+    given, radius = _neighbour_radius(args)
+    if given and model.get("neighbour_radius") != radius:  # the file's own: its digest
+        model["neighbour_radius"] = radius
     if args.deterministic or args.stochastic:
         model["stochastic_steps"] = bool(args.stochastic)
     sampler = args.sampler or ("full" if header["kind"] == "denoiser" else "leapfrog")
@@ -1060,14 +1244,17 @@ def _sampling_fields(model) -> dict:
     """How the command's predictor samples, as its options left it: ``sampler`` (leapfrog or
     full; None for cv), ``stochastic_steps`` (ancestral noise in the denoising steps), and the
     generator's ``max_speed``, ``spread_scale`` and ``max_log_sigma`` in effect (the file's
-    unless an option replaced them; None where no generator samples: cv, the full sampler)."""
+    unless an option replaced them; None where no generator samples: cv, the full sampler),
+    and the predictor's ``neighbour_radius`` (either sampler; None: every pair attends, and
+    for cv)."""
     sampler = getattr(model, "sampler", None)
     generator = getattr(model, "generator", None) if sampler == "leapfrog" else None
     stochastic = getattr(model, "stochastic", None)
     return {"sampler": sampler,
             "stochastic_steps": None if stochastic is None else bool(stochastic),
             **{name: None if generator is None else getattr(generator.cfg, name)
-               for name in MODEL_SETTINGS}}  # fmt: skip
+               for name in MODEL_SETTINGS},
+            "neighbour_radius": getattr(model, "neighbour_radius", None)}  # fmt: skip
 
 
 def _command_line(args) -> str:
@@ -1101,9 +1288,23 @@ def _check_result_file(path: str) -> None:
                           f"suffix names the format), not {given}")  # fmt: skip
 
 
+def _data_fields(ds) -> dict:
+    """What a result records of the data's reading beside its name and split: ``units``,
+    ``frame_interval`` (seconds per window step, ``--time-step`` included), ``time_step``
+    and ``interval_from`` (where the interval comes from: ``default`` when only assumed)."""
+    info = ds.info
+    return {"units": info.units, "frame_interval": info.frame_interval,
+            "time_step": info.time_step, "interval_from": info.interval_from}  # fmt: skip
+
+
 def _write_result(path: str, out: dict) -> None:
     """Write ``evaluate``'s result as its suffix says: JSON, or CSV (a header and one row;
-    null and non-finite numbers as empty cells, nested results as dotted columns)."""
+    null and non-finite numbers as empty cells, nested results as dotted columns). A file
+    already there is replaced, and a note on stderr says so (one result per file)."""
+    if Path(path).exists():
+        print(f"trajpref: note: --out {path} existed and is replaced by this result (one "
+              "result per file: give each run its own --out to keep both)",
+              file=sys.stderr)  # fmt: skip
     if Path(path).suffix.lower() != ".csv":
         write_json(path, out)
         return
@@ -1134,7 +1335,8 @@ def _scorer_fields(args, scorer) -> dict:
     every = RANK_SCORE_EVERY if args.score_every is None else args.score_every
     return {"scorer": args.scorer, "scorer_score_every": every,
             "scorer_score_from": args.score_from, "scorer_score_steps": len(scorer.steps),
-            "scorer_score_precision": scorer.precision}  # fmt: skip
+            "scorer_score_precision": scorer.precision,
+            "scorer_neighbour_radius": scorer.neighbour_radius}  # fmt: skip
 
 
 SCORE_LINE = (("max_ats", "maxATS"), ("max_fts", "maxFTS"), ("mean_ats", "meanATS"))
@@ -1172,6 +1374,10 @@ def _print_collisions(out: dict) -> None:
     if out.get("col_radius") is None:
         print(f"  collisions off (units {out['units']}; pass --collision-radius in these units)")
         return
+    if not out["col_agents"]:  # the rates are NaN: no agent is in them
+        print(f"  Col-I n/a  Col-II n/a   ground truth n/a   (no agent has a neighbour; radius "
+              f"{out['col_radius']:g} {out['units']})")  # fmt: skip
+        return
     print(f"  Col-I {out['col_i_pct']:.2f} %  Col-II {out['col_ii_pct']:.2f} %   ground truth "
           f"{out['col_gt_pct']:.2f} %   (of {out['col_agents']} agents with a neighbour; "
           f"radius {out['col_radius']:g} {out['units']})")  # fmt: skip
@@ -1202,13 +1408,13 @@ def cmd_evaluate(args) -> int:
     scorer = _scorer(args.scorer, device, args) if args.scorer else None
     model, samples = _selecting(args, model, device, scores=scorer is not None)
     ds = _load(args)
-    _warn_model_and_scorer(args, ds)
+    overlap = _joined(overlap, _warn_model_and_scorer(args, ds))
     start = time.perf_counter()
     result = evaluate(
         model, ds, samples, args.seed, device, args.max_agents,
         progress=not args.no_progress, scorer=scorer,
         collision_radius="auto" if args.collision_radius is None else args.collision_radius,
-        bins=bins,
+        bins=bins, allow_overlap=True,  # _check_fold_overlap has refused or been allowed
     )  # fmt: skip
     seconds = time.perf_counter() - start
     out = {
@@ -1223,7 +1429,7 @@ def cmd_evaluate(args) -> int:
         **_selection_fields(args),
         **_scorer_fields(args, scorer),
         **{k: v for k, v in result.items() if k != "bins"},
-        "units": ds.info.units,
+        **_data_fields(ds),
         "seconds": round(seconds, 3),
         "overlap": overlap,
         **sampling,
@@ -1233,9 +1439,10 @@ def cmd_evaluate(args) -> int:
         out["bins"] = result["bins"]
     bad = [k for k, v in out.items() if isinstance(v, float) and not math.isfinite(v)]
     if bad:
-        where = "the JSON output holds null" if args.json or args.out else "printed as nan"
         collisions = {"col_i_pct", "col_ii_pct", "col_gt_pct"}
         why = " (no agent has a neighbour)" if set(bad) <= collisions else ""
+        shown = "printed as n/a" if set(bad) <= collisions else "printed as nan"
+        where = "the JSON output holds null" if args.json or args.out else shown
         warnings.warn(f"{', '.join(bad)} not finite{why}: {where}", stacklevel=1)
     if args.out:
         _write_result(args.out, out)
@@ -1276,7 +1483,8 @@ def _evaluate_in_context(args, overlap: str | None = None) -> int:
     model, device = _predictor(args)
     sampling = _sampling_fields(model)
     ds = _load(args)
-    _warn_if_trained_otherwise(args.model, ds)
+    own = _warn_if_trained_otherwise(args.model, ds)
+    overlap = _joined(overlap, own and f"model {own}")
     result = evaluate_in_context(model, ds, cfg, args.samples, args.seed, device=device,
                                  progress=not args.no_progress)  # fmt: skip
     out = {"dataset": ds.info.name, "split": ds.info.split, "protocol": ds.info.protocol,
@@ -1285,7 +1493,7 @@ def _evaluate_in_context(args, overlap: str | None = None) -> int:
            "in_context": args.in_context, "adapt_steps": cfg.steps, "adapt_lr": cfg.lr,
            "adapt_params": cfg.params, "adapt_trust": cfg.trust,
            "adapt_objective": cfg.objective, **result,
-           "units": ds.info.units, "overlap": overlap, **sampling,
+           **_data_fields(ds), "overlap": overlap, **sampling,
            **_run_fields(args, device)}  # fmt: skip
     if args.out:
         _write_result(args.out, out)
@@ -1336,7 +1544,7 @@ def cmd_predict(args) -> int:
         scorer = _scorer(args.scorer or args.model, device, args)
     model, samples = _selecting(args, model, device, scores=scorer is not None)
     ds = _load(args)
-    _warn_model_and_scorer(args, ds)
+    overlap = _joined(overlap, _warn_model_and_scorer(args, ds))
     arrays = predict_dataset(
         model, ds, samples, args.seed, device, args.max_agents,
         progress=not args.no_progress, scorer=scorer,
@@ -1371,7 +1579,8 @@ def _predict_meta(args, ds, samples: int, scorer, overlap, sampling: dict, devic
     """What made a ``predict`` .npz (its ``meta`` array, JSON): the data (dataset, split,
     protocol), the model and its hashes, K, the seed, the selection and ranking, the sampling
     settings, and where and how it ran (``_run_fields``)."""
-    rank = ({"rank_scorer": args.scorer or args.model, "rank_score_steps": len(scorer.steps)}
+    rank = ({"rank_scorer": args.scorer or args.model, "rank_score_steps": len(scorer.steps),
+             "rank_neighbour_radius": scorer.neighbour_radius}
             if scorer is not None else {})  # fmt: skip
     return {"dataset": ds.info.name, "split": ds.info.split, "protocol": ds.info.protocol,
             **({"holdout_scene": args.holdout_scene} if args.holdout_scene else {}),
@@ -1509,6 +1718,9 @@ def _plot_title(args, ds, scene, random: bool) -> str:
     for name in MODEL_SETTINGS:
         if getattr(args, name, None) is not None:
             settings.append(f"{name.replace('_', '-')} {getattr(args, name):g}")
+    given, radius = _neighbour_radius(args)
+    if given:
+        settings.append(f"neighbour-radius {'none' if radius is None else f'{radius:g}'}")
     scorer = f"; ranked by {args.scorer}" if args.scorer else ""
     return f"{where}\n{', '.join(settings)}{scorer}"
 
@@ -1547,7 +1759,8 @@ def cmd_plot(args) -> int:
     samples = pred.cpu().numpy()  # [K, P, T_f, 2]
     order = scores = None
     if args.scorer:
-        scores = _scorer(args.scorer, device).score(batch, pred).agent_ats.cpu().numpy()  # [K, P]
+        scorer = _scorer(args.scorer, device, args)  # at --neighbour-radius, if given
+        scores = scorer.score(batch, pred).agent_ats.cpu().numpy()  # [K, P]
         top = min(args.draw_samples or 2, args.samples)
         order = np.argsort(-scores, axis=0, kind="stable")[:top]  # [top, P] as drawn
         plot_scene_scored(scene.history, scene.future, samples, scores, args.out,
@@ -1643,12 +1856,7 @@ def _warn_if_validation_reads_training(data) -> None:
         return
     if data.dataset in NAMES or not _is_main_process():
         return
-    path = Path(data.dataset).expanduser()
-    try:
-        flat = path.is_file() or (path.is_dir() and not split_folders(path))
-    except TrajprefError:  # reading the data says what is wrong with the folder
-        return
-    if flat:
+    if _flat_dataset(data.dataset):  # what cannot be read: reading the data says why
         warnings.warn(f"{data.dataset} has no train/ and val/ sub-folders, so validation (and "
                       "the choice of the kept checkpoint) reads the training windows: give it "
                       "train/ and val/ sub-folders, or --set data.val_dataset=FOLDER, or --set "

@@ -396,7 +396,29 @@ class ModelConfig:
     a loose cap such as 3 keeps an outlier agent's samples from overflowing the loss
     (docs/pretraining.md, "(sh3)")."""
 
+    neighbour_radius: float | None = None
+    """A sampling setting: agents whose last observed positions are farther apart than this,
+    in the data's own units (metres or pixels: the units the model was trained on, not model
+    units), do not attend to each other in the encoders' attention across agents, the
+    generator's and the denoiser's alike (so the diffusion score too); each agent still
+    attends to itself. The distance is measured before the heading frame and the speed clamp
+    (``max_speed``) change the features. None: every pair of a scene, the published models'
+    behaviour. The published ETH/UCY models never saw two agents of a scene more than about
+    16 m apart, and agents far beyond that (a robot's tracker sees pedestrians 20-50 m away)
+    move every agent's futures; it may be set on published weights without retraining
+    (``model.neighbour_radius = 8.0`` in Python), and training does not apply it."""
+
     def __post_init__(self) -> None:
+        if self.neighbour_radius is not None and (
+            isinstance(self.neighbour_radius, bool)
+            or not isinstance(self.neighbour_radius, (int, float))
+            or not math.isfinite(self.neighbour_radius)
+            or not self.neighbour_radius > 0
+        ):
+            raise ConfigError(
+                f"ModelConfig.neighbour_radius must be null (every pair attends) or a finite "
+                f"distance > 0 in the data's units, got {self.neighbour_radius!r}"
+            )
         if self.max_log_sigma is not None and not math.isfinite(self.max_log_sigma):
             raise ConfigError(
                 f"ModelConfig.max_log_sigma must be a finite number or null, got "
@@ -497,6 +519,7 @@ GENERATOR_ONLY = (
     "max_speed",
     "spread_scale",
     "max_log_sigma",
+    "neighbour_radius",
     "future_rank",
     "mean_prior",
     "pair_distance",

@@ -11,6 +11,7 @@ import torch
 from tqdm.auto import tqdm
 
 from trajpref.data.loader import SceneLoader
+from trajpref.data.registry import ETH_UCY, NAMES, sgan_folds
 from trajpref.errors import ConfigError, TrajprefError
 from trajpref.metrics import (
     BinnedMetrics,
@@ -64,6 +65,56 @@ def check_inputs(model: object, dataset: object) -> None:
                             f"{type(dataset).__name__}{hint}")  # fmt: skip
 
 
+def data_folds(dataset: TrajectoryDataset) -> tuple[str, ...]:
+    """The ETH/UCY folds whose data ``dataset`` is: a fold's name (``dataset.info.name``), or
+    a folder holding Social-GAN's test files of folds (``registry.sgan_folds``); empty
+    otherwise."""
+    name = dataset.info.name
+    if name in ETH_UCY:
+        return (name,)
+    return () if name in NAMES else sgan_folds(name)
+
+
+def _trained_folds(model: object, scorer: object) -> list[tuple[str, str]]:
+    """``(role, fold)`` for the model and scorer (a selecting predictor's base and scorer
+    included) whose ``timing`` (``models.timing.attach_timing``: a loaded checkpoint's
+    record) says they were trained on an ETH/UCY fold."""
+    found = []
+    for role, obj in (("model", model), ("model", getattr(model, "base", None)),
+                      ("scorer", getattr(model, "scorer", None)), ("scorer", scorer)):  # fmt: skip
+        timing = getattr(obj, "timing", None)
+        fold = timing.get("trained_on") if isinstance(timing, dict) else None
+        if isinstance(fold, str) and fold in ETH_UCY and (role, fold) not in found:
+            found.append((role, fold))
+    return found
+
+
+def check_fold_overlap(model: object, dataset: TrajectoryDataset, scorer: object = None) -> None:
+    """ConfigError when the model (or scorer) was trained on an ETH/UCY fold other than the
+    data's (``data_folds``): Social-GAN's leave-one-out training files of one fold hold most
+    of the other folds' windows (84 % of the rows of zara1's test file are in the zara2
+    fold's training files), so such a model has seen this data, whatever the split. What the
+    CLI's ``evaluate`` refuses without ``--allow-overlap``; models without a record
+    (``timing`` None: cv, a model built in code) pass."""
+    folds = data_folds(dataset)
+    if not folds:
+        return
+    found = [(role, fold) for role, fold in _trained_folds(model, scorer)
+             if any(f != fold for f in folds)]  # fmt: skip
+    if not found:
+        return
+    where = dataset.info.name
+    own = " and ".join(folds)
+    if where not in ETH_UCY:
+        where = f"{where} (it holds {own}'s Social-GAN test files)"
+    trained = "; ".join(f"the {role} was trained on the {fold} fold, whose leave-one-out "
+                        f"training files (the other four scenes') hold most of {own}'s windows"
+                        for role, fold in found)  # fmt: skip
+    raise ConfigError(f"evaluate on {where}: {trained}, so this evaluates on data it trained "
+                      f"on: evaluate each fold with its own fold's models, or pass "
+                      "allow_overlap=True to evaluate it anyway")  # fmt: skip
+
+
 @torch.no_grad()
 def sampled_batches(
     model: Predictor, dataset: TrajectoryDataset, num_samples: int = 20, seed: int = 0,
@@ -100,6 +151,7 @@ def evaluate(
     scorer: TrajectoryScorer | None = None,
     collision_radius: float | None | Literal["auto"] = "auto",
     bins: tuple[int, ...] | None = None,
+    allow_overlap: bool = False,
 ) -> dict:  # fmt: skip
     """minADE_K / minFDE_K per agent and joint over a whole split; with a ``scorer``, also
     maxATS_K / maxFTS_K and the top-1 / top-5 recall of the ground-truth-free ranking.
@@ -113,8 +165,16 @@ def evaluate(
 
     ``model`` is a loaded predictor (``load_predictor(name)``), not a name: ``NotAPredictor``
     (a ``TypeError``) otherwise, before any work.
+
+    A model (or ``scorer``) whose checkpoint says it was trained on one ETH/UCY fold
+    (``model.timing["trained_on"]``), evaluated on another fold's data (a fold's name, or a
+    folder holding another fold's Social-GAN test files), is a ConfigError before any work
+    (``check_fold_overlap``: its leave-one-out training files hold most of that fold's
+    windows); ``allow_overlap=True`` evaluates it anyway, as the CLI's ``--allow-overlap``.
     """
     check_inputs(model, dataset)
+    if not allow_overlap:
+        check_fold_overlap(model, dataset, scorer)
     radius = resolve_collision_radius(collision_radius, dataset.info.units)
     if bins is not None:
         try:

@@ -107,8 +107,11 @@ class DatasetInfo:
     """Where ``frame_interval`` comes from (``INTERVAL_SOURCES``): ``dataset`` (a built-in
     dataset's own), ``given`` (by the caller: ``--frame-interval``, ``data.frame_interval``),
     ``declared`` (the fps of TrajNet++ scenes), ``timestamps`` (the step of text files whose
-    frame column is named as seconds, ``time`` or ``timestamp``) or ``default`` (none of these:
-    0.4 s assumed, so the seconds are a guess)."""
+    frame column is named as a time: in seconds, ``time``, ``timestamp`` and the like
+    (``data.text.SECONDS_COLUMNS``), or in milliseconds, ``time_ms`` or ``timestamp_ms``
+    (``data.text.MILLISECONDS_COLUMNS``, their step divided by 1000); ``frame_interval`` is in
+    seconds either way) or ``default`` (none of these: 0.4 s assumed, so the seconds are a
+    guess)."""
     time_step: float = 1.0
     """The ``--time-step`` the data was read with (``frame_interval`` already includes it)."""
     text_tracks: bool = False

@@ -74,13 +74,17 @@ def header_model_hash(header: dict[str, Any], sampler: Sampler = "leapfrog") -> 
     settings such as ``max_speed`` included). Two checkpoints with the same digest predict the
     same; a results row records it (``model_hash``) so that rows of different weights are
     never merged. ``sampler="full"``: the digest of what the full sampler runs, the denoiser
-    and the data scale alone (a generator file and its denoiser's file give the same one).
-    ``header`` is a checkpoint's metadata or payload (tensors are not read)."""
+    and the data scale alone (a generator file and its denoiser's file give the same one),
+    and the file's ``neighbour_radius`` where one is set (the full sampler's denoiser applies
+    it too). ``header`` is a checkpoint's metadata or payload (tensors are not read)."""
     den = header.get("denoiser_ref") or header.get("denoiser") or {}
     try:
         if sampler == "full":
             weights = header["hash"] if header["kind"] == "denoiser" else den.get("hash")
             parts = {"sampler": "full", "denoiser": weights, "scale": float(header["scale"])}
+            radius = (header["config"].get("model") or {}).get("neighbour_radius")
+            if radius is not None:  # a file without one keeps the digest it always had
+                parts["neighbour_radius"] = float(radius)
         else:
             parts = {"kind": header["kind"], "weights": header["hash"],
                      "denoiser": den.get("hash"), "scale": float(header["scale"]),
@@ -440,10 +444,12 @@ def move_weights(src: str | Path, dst: str | Path) -> list[Path]:
     return moved
 
 
-POST_HOC_SETTINGS = ("stochastic_steps", "max_speed", "spread_scale", "max_log_sigma")
+POST_HOC_SETTINGS = ("stochastic_steps", "max_speed", "spread_scale", "max_log_sigma",
+                     "neighbour_radius")  # fmt: skip
 """``model`` fields of a generator file that may change after training without retraining:
-how its tau steps sample, its input speed clamp, its samples' spread and the cap on their
-sigma (the weights are not touched)."""
+how its tau steps sample, its input speed clamp, its samples' spread, the cap on their
+sigma and the neighbour radius of its attention across agents (the weights are not
+touched). Each is part of the file's config, so of ``header_model_hash``."""
 
 
 def set_generator_setting(
@@ -553,9 +559,13 @@ def load_predictor(path: str | Path, *, sampler: Sampler | None = None, device: 
     ``sampler`` and ``device`` are keyword-only, as in ``registry.load_predictor``, so that the
     two functions cannot be called with their arguments in different orders. The predictor
     carries its training data's step and units (``models.timing.attach_timing``:
-    ``frame_interval``, ``units``, ``timing``).
+    ``frame_interval``, ``units``, ``timing``) and the file's ``model.neighbour_radius`` (a
+    generator file's own, or a bare denoiser's; training code, which builds its predictors
+    from payloads, never applies it).
     """
     from trajpref.models.timing import attach_timing
 
     payload = load(path)
-    return attach_timing(predictor_from_payload(payload, sampler).to(device).eval(), payload)
+    predictor = predictor_from_payload(payload, sampler).to(device).eval()
+    predictor.neighbour_radius = config_of(payload).model.neighbour_radius
+    return attach_timing(predictor, payload)

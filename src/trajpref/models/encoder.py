@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+import math
+import numbers
 from dataclasses import dataclass
 
 import torch
@@ -14,7 +16,7 @@ from trajpref.data.transforms import (
     observed_pace,
     to_model_frame,
 )
-from trajpref.errors import DataError
+from trajpref.errors import ConfigError, DataError
 from trajpref.models.layers import SocialAttention, mlp
 from trajpref.types import AGENT_PERSON, Batch
 
@@ -42,27 +44,61 @@ class SceneFeatures:
     """With context-only agents (``scene_features(..., context=True)``): the first
     ``targets`` rows are the batch's agents, the rows after them its context-only agents, and
     every per-agent field above has N + M rows. None: every row is one of the batch's agents."""
+    pairs: torch.Tensor | None = None
+    """[B, P(i), P(j)] True where agent i may attend to agent j under a neighbour radius
+    (``ModelConfig.neighbour_radius``): their last observed positions lie within it (a slot
+    always pairs with itself; padding is hidden by ``mask`` as well). Computed from the
+    untransformed positions, so ``rotate_features`` and ``scale_features`` carry it through
+    as it is. None: every pair of a scene (no radius)."""
 
 
 def scene_features(batch: Batch, scale: float, context: bool = False,
-                   context_frames: int | None = None) -> SceneFeatures:  # fmt: skip
+                   context_frames: int | None = None,
+                   radius: float | None = None) -> SceneFeatures:  # fmt: skip
     """Features in units of ``scale`` (the data scale stored with each model). With
     ``context`` the batch's context-only agents (``Batch.context``) seen in at least the last
     ``context_frames`` history frames (None: all of them; ``transforms.observed_context``)
     join their scenes after the batch's agents (``SceneFeatures.targets``); a batch without
-    any gives the same features as without ``context``."""
+    any gives the same features as without ``context``. ``radius`` (data units, as the
+    batch's coordinates; None: off) limits who attends to whom to the pairs within it
+    (``SceneFeatures.pairs``, ``ModelConfig.neighbour_radius``)."""
     if context and batch.num_context:
         frames = batch.history.shape[1] if context_frames is None else context_frames
         batch = observed_context(batch, frames)
     if context and batch.num_context:
-        return _features_with_context(batch, scale)
+        return _features_with_context(batch, scale, radius)
     rel = to_model_frame(batch.history, batch, scale)  # [N, T_h, 2]
     vel = backward_velocity(batch.history) / scale  # [N, T_h, 2]
     slot, mask = batch.padded_index()
     position = batch.origin / scale  # [N, 2]
     geom = _pair_geometry(position, vel[:, -1], batch.scene, slot, mask)  # [B, P, P, 4]
     return SceneFeatures(torch.cat([rel, vel], -1), geom, mask, batch.scene, slot,
-                         batch.agent_type, position)  # fmt: skip
+                         batch.agent_type, position,
+                         pairs=_within(geom, radius, scale))  # fmt: skip
+
+
+def check_neighbour_radius(value, name: str = "neighbour_radius") -> float | None:
+    """``value`` as a float distance > 0 (an int or a numpy number counts), or None (off);
+    ``ConfigError`` for anything else (a bool, a string, a tensor, NaN, inf, zero or less)."""
+    if value is None:
+        return None
+    number = isinstance(value, numbers.Real) and not isinstance(value, bool)  # numpy's count
+    radius = float(value) if number else math.nan
+    if not (math.isfinite(radius) and radius > 0):
+        raise ConfigError(f"{name} must be None (every pair of a scene attends) or a finite "
+                          f"distance > 0 in the data's units, got {value!r}")  # fmt: skip
+    return radius
+
+
+def _within(geom: torch.Tensor, radius: float | None, scale: float) -> torch.Tensor | None:
+    """[B, P(i), P(j)] True where j's last position lies within ``radius`` (data units) of
+    i's, from the pair geometry [B, P, P, 4] in model units (before any frame change); None
+    when ``radius`` is None. A slot is at distance 0 from itself, so it always pairs with
+    itself (padded slots included: no row of the attention is left empty)."""
+    if radius is None:
+        return None
+    limit = radius / scale  # model units
+    return geom[..., :2].square().sum(-1) <= limit * limit  # [B, P(i), P(j)]
 
 
 def _pair_geometry(position, velocity, scene, slot, mask) -> torch.Tensor:
@@ -74,7 +110,7 @@ def _pair_geometry(position, velocity, scene, slot, mask) -> torch.Tensor:
     return padded[:, None, :, :] - padded[:, :, None, :]  # [B, P(i), P(j), 4]: j relative to i
 
 
-def _features_with_context(batch: Batch, scale: float) -> SceneFeatures:
+def _features_with_context(batch: Batch, scale: float, radius: float | None) -> SceneFeatures:
     """``scene_features`` over the batch's N agents followed by its M context-only agents."""
     n, m, b = batch.num_agents, batch.num_context, batch.num_scenes
     hist = torch.cat([batch.history, batch.context], 0)  # [N + M, T_h, 2]
@@ -95,7 +131,7 @@ def _features_with_context(batch: Batch, scale: float) -> SceneFeatures:
     position = hist[:, -1] / scale  # [N + M, 2]
     geom = _pair_geometry(position, vel[:, -1], scene, slot, mask)  # [B, P, P, 4]
     return SceneFeatures(torch.cat([rel, vel], -1), geom, mask, scene, slot, types,
-                         position, targets=n)  # fmt: skip
+                         position, targets=n, pairs=_within(geom, radius, scale))  # fmt: skip
 
 
 class SocialEncoder(nn.Module):
@@ -150,8 +186,12 @@ class SocialEncoder(nn.Module):
         padded = h.new_zeros(b, p, h.shape[-1])  # [B, P, H]
         padded[f.scene, f.slot] = h
         geom = with_distance(f.geom) if self.pair_distance else f.geom  # [B, P, P, 4 or 6]
+        attend = f.mask  # [B, P(j)]: every agent of the scene, padding hidden
+        if f.pairs is not None and len(self.layers):  # a neighbour radius: [B, P(i), P(j)]
+            eye = torch.eye(p, dtype=torch.bool, device=f.mask.device)  # [P, P]
+            attend = (f.pairs & f.mask[:, None, :]) | eye  # a padded row keeps itself
         for layer in self.layers:
-            padded = layer(padded, geom, f.mask)
+            padded = layer(padded, geom, attend)
         return self.norm(padded[f.scene, f.slot])  # [N, H]
 
 

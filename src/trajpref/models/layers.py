@@ -54,7 +54,8 @@ class SocialAttention(nn.Module):
 
     Agent i attends to agent j (itself included) with logits q_i . (k_j + e_ij) and reads
     v_j + e_ij, where e_ij embeds j's position and velocity relative to i. Works on the padded
-    per-scene layout [B, P, H]; ``mask`` [B, P] hides padding, so no agent sees another scene.
+    per-scene layout [B, P, H]; ``mask`` [B, P] hides padding, so no agent sees another scene,
+    and a pair mask [B, P, P] (padding and a neighbour radius in one) hides j from i alone.
     With ``dropout`` > 0, the attention's and the feed-forward's residual updates are dropped
     during training (a transformer's residual dropout; no parameters, so the names stay).
     """
@@ -73,7 +74,9 @@ class SocialAttention(nn.Module):
         self.ff = mlp([hidden, 2 * hidden, hidden])
 
     def forward(self, h: torch.Tensor, geom: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-        """h [B, P, H], geom [B, P, P, F] (features of j relative to i), mask [B, P].
+        """h [B, P, H], geom [B, P, P, F] (features of j relative to i), mask [B, P] (True:
+        j is an agent; every agent attends to all of them) or [B, P(i), P(j)] (True: i
+        attends to j; each row needs a True, e.g. i itself, or its output is NaN).
 
         The edge embedding e_ij = W2 s_ij + b2, s_ij = SiLU(W1 g_ij + b1), is never formed:
         W2 is folded into the query for the logits (q_i . W2 s_ij = (W2^T q_i) . s_ij) and
@@ -96,7 +99,7 @@ class SocialAttention(nn.Module):
             + torch.einsum("bihc,bijc->bijh", u, s)  # q_i . W2 s_ij
             + (q * b2).sum(-1)[:, :, None]  # q_i . b2, [B, P(i), 1, nh]
         ) / d**0.5  # [B, P(i), P(j), nh]
-        logits = logits.masked_fill(~mask[:, None, :, None], float("-inf"))
+        logits = logits.masked_fill(~_pair_mask(mask)[..., None], float("-inf"))
         att = torch.softmax(logits, dim=2)  # over j
         read = torch.einsum("bijh,bijc->bihc", att, s)  # [B, P, nh, C]: sum_j a_ij s_ij
         out = (
@@ -106,6 +109,12 @@ class SocialAttention(nn.Module):
         )  # [B, P, nh, d]
         h = h + self.drop(self.out(out.reshape(b, p, hid)))
         return h + self.drop(self.ff(self.norm2(h)))
+
+
+def _pair_mask(mask: torch.Tensor) -> torch.Tensor:
+    """The attention's mask as [B, P(i) or 1, P(j)]: a per-slot mask [B, P] (True: an agent)
+    holds for every i; a pair mask [B, P, P] is itself."""
+    return mask[:, None, :] if mask.ndim == 2 else mask
 
 
 def direct_social_attention(layer: SocialAttention, h: torch.Tensor, geom: torch.Tensor,
@@ -121,7 +130,7 @@ def direct_social_attention(layer: SocialAttention, h: torch.Tensor, geom: torch
     k = (k[:, None] + e).view(b, p, p, nh, d)  # k_j + e_ij
     v = (v[:, None] + e).view(b, p, p, nh, d)  # v_j + e_ij
     logits = (q * k).sum(-1) / d**0.5  # [B, P(i), P(j), nh]
-    logits = logits.masked_fill(~mask[:, None, :, None], float("-inf"))
+    logits = logits.masked_fill(~_pair_mask(mask)[..., None], float("-inf"))
     att = torch.softmax(logits, dim=2)  # over j
     out = (att[..., None] * v).sum(2).reshape(b, p, hid)  # [B, P, H]
     h = h + layer.drop(layer.out(out))

@@ -22,7 +22,7 @@ from trajpref.diffusion.samplers import denoise, sample_full
 from trajpref.diffusion.schedule import DDPMSchedule
 from trajpref.errors import ConfigError, DataError
 from trajpref.models.denoiser import Denoiser, DenoiserShapes
-from trajpref.models.encoder import SceneFeatures, scene_features
+from trajpref.models.encoder import SceneFeatures, check_neighbour_radius, scene_features
 from trajpref.models.generator import Generator, GeneratorOutput
 from trajpref.types import Batch
 
@@ -123,7 +123,10 @@ class DiffusionPredictor(DenoiserShapes, nn.Module):
     """Samples futures with the leapfrog sampler (generator + tau denoising steps) or the full
     S-step sampler from noise, both with the same denoiser.
 
-    ``scale`` is the data scale: networks see coordinates divided by it.
+    ``scale`` is the data scale: networks see coordinates divided by it. ``neighbour_radius``
+    (data units; None: off): the attention across agents of both networks reads only the
+    pairs within it (``ModelConfig.neighbour_radius``; ``load_predictor`` takes it from the
+    checkpoint's config, and it may be set afterwards: ``model.neighbour_radius = 8.0``).
     """
 
     def __init__(
@@ -135,6 +138,7 @@ class DiffusionPredictor(DenoiserShapes, nn.Module):
         tau: int = 5,
         sampler: Sampler = "leapfrog",
         stochastic: bool = True,
+        neighbour_radius: float | None = None,
     ):
         super().__init__()
         if sampler not in SAMPLERS:
@@ -161,6 +165,19 @@ class DiffusionPredictor(DenoiserShapes, nn.Module):
         self.units: str | None = None
         """Units of the data the model was trained on (``m``, ``px``), from the checkpoint;
         None where unknown."""
+        self.neighbour_radius = neighbour_radius
+
+    @property
+    def neighbour_radius(self) -> float | None:
+        """Agents whose last observed positions are farther apart than this (data units: the
+        model's ``units``) do not attend to each other, in the generator's attention and the
+        denoiser's (``ModelConfig.neighbour_radius``); None: every pair of a scene, as
+        trained. Set it to a number > 0 or None; anything else is a ``ConfigError``."""
+        return self._neighbour_radius
+
+    @neighbour_radius.setter
+    def neighbour_radius(self, value: float | None) -> None:
+        self._neighbour_radius = check_neighbour_radius(value, "model.neighbour_radius")
 
     @property
     def agent_roles(self) -> int:
@@ -190,11 +207,13 @@ class DiffusionPredictor(DenoiserShapes, nn.Module):
         """Features and (on first use) the denoiser's context of a batch (no gradient into
         the denoiser). A generator built with ``ModelConfig.context_agents`` also sees the
         batch's context-only agents; the denoiser never does."""
-        plain = scene_features(batch, self.scale)
+        radius = self.neighbour_radius
+        plain = scene_features(batch, self.scale, radius=radius)
         if self.generator is None or not self.generator.cfg.context_agents or not batch.num_context:
             return Condition(plain, self.denoiser)
         frames = self.generator.cfg.context_frames or None  # 0: the whole history
-        features = scene_features(batch, self.scale, context=True, context_frames=frames)
+        features = scene_features(batch, self.scale, context=True, context_frames=frames,
+                                  radius=radius)  # fmt: skip
         return Condition(features, self.denoiser, plain)
 
     def denoise(
@@ -230,12 +249,7 @@ class DiffusionPredictor(DenoiserShapes, nn.Module):
         if self.generator is None:
             raise ConfigError("a leapfrog rollout needs a generator checkpoint")
         k = self.generator.samples if num_samples is None else num_samples
-        if k > self.generator.samples:
-            raise ConfigError(
-                f"this generator emits K = {self.generator.samples} samples; "
-                f"asked for {k} (for more, the full sampler: --sampler full, or "
-                "sampler='full' when loading in Python)"
-            )
+        self._check_generator_samples(k)
         cond = cond if cond is not None else self.condition(batch)
         out = self.generator(cond.features)
         initial = y_tau = out.initial_sample()[:k]  # [K, N, T_f, 2]
@@ -248,6 +262,20 @@ class DiffusionPredictor(DenoiserShapes, nn.Module):
             explore = explore_sign * explore_std * noise  # [K, N, T_f, 2]
             y_tau = initial + explore
         return Rollout(out, initial, y_tau, self.denoise(cond, y_tau, generator), explore)
+
+    def check_samples(self, k: int) -> None:
+        """``ConfigError`` when the leapfrog sampler is asked for more samples than its
+        generator emits (its fixed set of K); the full sampler draws any number."""
+        if self.sampler == "leapfrog" and self.generator is not None:
+            self._check_generator_samples(k)
+
+    def _check_generator_samples(self, k: int) -> None:
+        if k > self.generator.samples:
+            raise ConfigError(
+                f"this generator emits K = {self.generator.samples} samples; "
+                f"asked for {k} (for more, the full sampler: --sampler full, or "
+                "sampler='full' when loading in Python)"
+            )
 
     def sample_normalised(
         self, batch: Batch, num_samples: int, generator: torch.Generator | None = None

@@ -21,12 +21,15 @@ from trajpref.metrics import METRE_UNITS
 
 UNKNOWN_UNITS = ("", "unknown")
 """Unit names that say nothing (a folder read without ``--units``)."""
+PIXEL_UNITS = frozenset({"px", "pixel", "pixels", "pix"})
+"""The names of pixels (a model trained with ``--units px`` reads ``--units pixels`` data)."""
 
 
 def same_units(a: str, b: str) -> bool:
-    """Whether two unit names mean the same (``m``, ``metres``, ``Meters``; else literally)."""
+    """Whether two unit names mean the same (``m``, ``metres``, ``Meters``; ``px``,
+    ``pixels``; else literally)."""
     a, b = a.strip().lower(), b.strip().lower()
-    return a == b or (a in METRE_UNITS and b in METRE_UNITS)
+    return a == b or any(a in names and b in names for names in (METRE_UNITS, PIXEL_UNITS))
 
 
 def model_timing(header: dict) -> dict:
@@ -34,20 +37,23 @@ def model_timing(header: dict) -> dict:
     ``train.run.data_timing`` recorded in its meta, else a built-in dataset's own): the keys
     ``trained_on`` (its ``data.dataset``), ``step`` (seconds per window step; None for a model
     trained on a folder before the record, 2026-12-06), ``known`` (whether that step's frame
-    interval was given, declared or read from time stamps rather than assumed), ``time_step``
-    (its ``data.time_step``) and ``units``."""
+    interval was given, declared or read from time stamps rather than assumed),
+    ``interval_from`` (where that interval came from, ``DatasetInfo.interval_from``'s names;
+    None when nothing was recorded), ``time_step`` (its ``data.time_step``) and ``units``."""
     data = header["config"]["data"]
     read_every = float(data.get("time_step", 1.0))
-    out = {"trained_on": data["dataset"], "step": None, "known": False,
+    out = {"trained_on": data["dataset"], "step": None, "known": False, "interval_from": None,
            "time_step": read_every, "units": "unknown"}  # fmt: skip
     timing = (header.get("meta") or {}).get("data_timing")
     source = SPECS.get(data["dataset"])
     if isinstance(timing, dict):
-        out.update(step=float(timing["frame_interval"]),
-                   known=timing.get("interval_from") != "default",
+        origin = timing.get("interval_from")
+        out.update(step=float(timing["frame_interval"]), known=origin != "default",
+                   interval_from=None if origin is None else str(origin),
                    units=str(timing.get("units") or "unknown"))  # fmt: skip
     elif source is not None:
-        out.update(step=source.frame_interval * read_every, known=True, units=source.units)
+        out.update(step=source.frame_interval * read_every, known=True, interval_from="dataset",
+                   units=source.units)  # fmt: skip
     return out
 
 
@@ -83,6 +89,21 @@ def timing_problems(model: dict, step: float | None, units: str | None,
         problems.append(f"this data steps {step:g} s, the model's {model['step']:g} s "
                         f"({hint(model)})")  # fmt: skip
     return problems
+
+
+def unstated_timing(model: dict, step_assumed: bool, units: str | None) -> list[str]:
+    """What the data leaves unsaid that the model (``model_timing``'s record) recorded, the
+    case ``timing_problems`` cannot see (an assumed 0.4 s equals a 0.4 s model's step; unknown
+    units are never compared): ``"interval"`` when the data's frame interval is only assumed
+    (``step_assumed``: ``DatasetInfo.interval_from == "default"``) while the model's step is
+    known (given, declared, time stamps or a built-in dataset's), and ``"units"`` when the
+    data's ``units`` are unknown (None or ``UNKNOWN_UNITS``) while the model's are known."""
+    out = []
+    if step_assumed and model["known"] and model["step"] is not None:
+        out.append("interval")
+    if (units is None or units in UNKNOWN_UNITS) and model["units"] not in UNKNOWN_UNITS:
+        out.append("units")
+    return out
 
 
 def trained_otherwise(name: str, model: dict, problems: list[str]) -> str:

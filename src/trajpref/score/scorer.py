@@ -12,6 +12,8 @@ and needs no ground truth (Lemma 1). Eq. 7's mean of ratios is offered too, unde
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import warnings
 from dataclasses import dataclass
 from os import PathLike
@@ -31,7 +33,7 @@ from trajpref.errors import ConfigError, DataError
 from trajpref.metrics import ade_fde, scene_sum
 from trajpref.models import checkpoint
 from trajpref.models.denoiser import Denoiser, DenoiserShapes
-from trajpref.models.encoder import scene_features
+from trajpref.models.encoder import check_neighbour_radius, scene_features
 from trajpref.models.predictor import as_integer, check_coordinates
 from trajpref.models.timing import attach_timing, check_pace
 from trajpref.types import AGENT_BALL, AGENT_PERSON, Batch
@@ -39,7 +41,23 @@ from trajpref.types import AGENT_BALL, AGENT_PERSON, Batch
 NOISE_LAYOUT = "scene-slot"
 """How the residual's noise is assigned to agents: ``scene-slot`` (since 2026-12-05), by each
 agent's index within its own scene (``scene_slots``); before that, by its index in the batch.
-Stored evaluations key on it (benchmarks/reproduce.py), so a change of layout re-measures them."""
+Stored evaluations key on it (benchmarks/reproduce.py), so a change of layout re-measures them.
+Since 2026-12-06 each slot's draw is padded to a multiple of 16 values (``slot_noise``): the
+numbers of an even number of score steps (34, 12, 2: those stored evaluations use) are the
+same as before, while an odd number's (1 step) had depended on the batch's largest scene and
+now do not; the selection rows of 1 score step were measured again then."""
+
+
+def slot_noise(rows: int, shape: tuple[int, ...], generator: torch.Generator) -> torch.Tensor:
+    """[rows, *shape] standard normal draws, row r the same whatever ``rows`` is (a slot's
+    noise does not depend on how many slots the batch has). torch fills a draw of 16 values or
+    more in blocks of 16 and redraws the last block of a size that is not a multiple of 16, so
+    each row is drawn padded to a multiple of 16 values and cut: for a row of such a size (an
+    even number of score steps: 24 values a step) the numbers are those of one plain draw."""
+    size = math.prod(shape)
+    padded = -(-size // 16) * 16  # the row's values, rounded up to a multiple of 16
+    z = torch.randn((rows, padded), generator=generator)  # [rows, padded]
+    return z[:, :size].reshape(rows, *shape)
 
 
 def score_timesteps(num_steps: int = 100, every: int = 3, start: int = 0) -> list[int]:
@@ -102,6 +120,7 @@ class TrajectoryScorer(DenoiserShapes):
         shared_noise: bool = True,
         speed_ref: float | None = None,
         precision: str = "fp32",
+        neighbour_radius: float | None = None,
     ):
         """``speed_ref`` (data units per step; None: off): score a scene that moves faster
         than this as if it were slowed down to it (scene, history and samples scaled together
@@ -109,7 +128,10 @@ class TrajectoryScorer(DenoiserShapes):
         the samples that keep the scene's own pace as typical (docs/selection.md).
         ``precision``: ``fp32``, or ``bf16`` (the denoiser's passes of ``residual`` under
         bfloat16 autocast, the residuals summed in fp32: about 3x faster on a CPU with
-        bfloat16 instructions; docs/selection.md, "Scoring in bfloat16")."""
+        bfloat16 instructions; docs/selection.md, "Scoring in bfloat16").
+        ``neighbour_radius`` (data units; None: off): the denoiser's attention across agents
+        reads only the pairs within it (``ModelConfig.neighbour_radius``), measured before
+        ``speed_ref`` scales a scene."""
         self.denoiser = denoiser.eval()
         self.schedule = schedule
         self.scale = float(scale)
@@ -131,16 +153,33 @@ class TrajectoryScorer(DenoiserShapes):
         """Seconds per step of the data the denoiser was trained on; None where unknown."""
         self.units: str | None = None
         """Units of the data the denoiser was trained on (``m``, ``px``); None where unknown."""
+        self.neighbour_radius = neighbour_radius
+
+    @property
+    def neighbour_radius(self) -> float | None:
+        """Agents whose last observed positions are farther apart than this (data units) do
+        not attend to each other in the denoiser's encoder (``ModelConfig.neighbour_radius``;
+        ``from_checkpoint`` takes it from the file's config); None: every pair of a scene.
+        Set it to a number > 0 or None; anything else is a ``ConfigError``."""
+        return self._neighbour_radius
+
+    @neighbour_radius.setter
+    def neighbour_radius(self, value: float | None) -> None:
+        self._neighbour_radius = check_neighbour_radius(value, "scorer.neighbour_radius")
 
     @classmethod
     def from_checkpoint(cls, path, device="cpu", **kwargs) -> TrajectoryScorer:
         """From a denoiser checkpoint, or the denoiser embedded in a generator checkpoint; it
-        carries the checkpoint's training step and units (``frame_interval``, ``units``)."""
+        carries the checkpoint's training step and units (``frame_interval``, ``units``), and
+        its ``model.neighbour_radius`` (a generator file's own, as the predictor loaded from it
+        uses) unless ``neighbour_radius`` is passed."""
         device = resolve_device(device)  # "auto" as the CLI reads it; a missing GPU in one line
         header = checkpoint.load(path)
         payload = checkpoint.denoiser_of(header)
         denoiser, cfg = checkpoint.build_denoiser(payload)
         schedule = DDPMSchedule.from_config(cfg.diffusion)
+        if "neighbour_radius" not in kwargs:
+            kwargs["neighbour_radius"] = checkpoint.config_of(header).model.neighbour_radius
         scorer = cls(denoiser.to(device), schedule.to(device), payload["scale"], **kwargs)
         return attach_timing(scorer, header)
 
@@ -152,7 +191,7 @@ class TrajectoryScorer(DenoiserShapes):
             return self
         other = TrajectoryScorer(self.denoiser, self.schedule, self.scale, list(steps),
                                  self.seed, self.shared_noise, self.speed_ref,
-                                 precision)  # fmt: skip
+                                 precision, self.neighbour_radius)  # fmt: skip
         other.timing, other.frame_interval, other.units = (self.timing, self.frame_interval,
                                                            self.units)  # fmt: skip
         return other
@@ -182,13 +221,19 @@ class TrajectoryScorer(DenoiserShapes):
         same alone (``rank_samples``) as among other scenes (``evaluate``, ``--keep``).
         """
         self.check_shapes(batch, futures)
+        radius = self.neighbour_radius
+        # [B, P, P] who attends to whom, from the scene as given (before speed_ref scales it)
+        pairs = None if radius is None else scene_features(batch, self.scale, radius=radius).pairs
         if self.speed_ref is not None:
             mats = speed_normaliser(batch, self.speed_ref)  # [B, 2, 2]
             futures = transform_positions(futures, batch, mats)  # [M, N, T_f, 2]
             batch = transform_scenes(batch, mats)
         low = torch.autocast(self.device.type, torch.bfloat16, enabled=self.precision == "bf16")
         with low:
-            context = self.denoiser.context(scene_features(batch, self.scale))  # [N, H]
+            features = scene_features(batch, self.scale)
+            if pairs is not None:
+                features = dataclasses.replace(features, pairs=pairs)
+            context = self.denoiser.context(features)  # [N, H]
             y = to_model_frame(futures, batch, self.scale)  # [M, N, T_f, 2]
             return self.residual_normalised(context, y, scene_slots(batch.scene)).float()
 
@@ -211,8 +256,8 @@ class TrajectoryScorer(DenoiserShapes):
         # or in the batch without slots), not on the batch's size or other scenes
         slots = torch.arange(n) if slots is None else slots.cpu()  # [N]
         rows = int(slots.max()) + 1 if n else 0
-        shape = (rows, len(self.steps), 1 if self.shared_noise else m, t_f, 2)
-        z = torch.randn(shape, generator=gen)[slots]  # [N, S', 1|M, T_f, 2]
+        shape = (len(self.steps), 1 if self.shared_noise else m, t_f, 2)  # one slot's draw
+        z = slot_noise(rows, shape, gen)[slots]  # [N, S', 1|M, T_f, 2]
         z = z.permute(1, 2, 0, 3, 4).to(y)  # [S', 1|M, N, T_f, 2]
         d = y.new_zeros(m, n, t_f)
         # one step at a time: the denoiser's conditioning on (step, agent) is then computed
@@ -362,13 +407,18 @@ def rank_samples(
     ``from_checkpoint``: ``scorer.with_steps([0])`` is 10-25x cheaper). The order depends
     on the scorer's ``seed`` and on the order the agents are listed in (docs/score.md).
     Wrong shapes, non-numbers, non-finite values and coordinates too large for float32 raise
-    ``DataError``.
+    ``DataError``. A scene without agents (history [0, T_h, 2], samples [K, 0, T_f, 2]: an
+    empty view) has nothing to tell the samples apart: order ``0..K-1`` and residuals 0.
     """
     batch, futs = scene_batch(scorer, history, samples, agent_type, frame_interval=frame_interval,
-                              units=units)  # fmt: skip
-    d = scorer.residual(batch, futs)  # [K, P, T_f]
-    total = (d[..., -1] if final else d.sum(-1)).sum(-1)  # [K]
-    order = total.argsort()  # [K]
+                              units=units, allow_empty=True)  # fmt: skip
+    if batch.num_agents == 0:  # an empty view: every sample alike, a residual summed over none
+        total = futs.new_zeros(futs.shape[0])  # [K]
+        order = torch.arange(futs.shape[0], device=futs.device)  # [K] as they came
+    else:
+        d = scorer.residual(batch, futs)  # [K, P, T_f]
+        total = (d[..., -1] if final else d.sum(-1)).sum(-1)  # [K]
+        order = total.argsort()  # [K]
     if isinstance(history, torch.Tensor) or isinstance(samples, torch.Tensor):
         return order, total
     return order.cpu().numpy(), total.cpu().numpy()
@@ -388,6 +438,16 @@ def predict_scene(model, history: ArrayLike, num_samples: int = 20,
     ``model`` is what ``models.registry.load_predictor`` returns (a published name, a
     checkpoint or ``cv``). ``agent_type`` [P]: 0 person (the default), 1 ball. ``seed`` seeds
     the sampling (the published generators draw no noise: every seed gives the same).
+    ``num_samples`` below a generator's fixed set (``model.generator.samples``: 20 for the
+    published ones, trained best-of-20) takes the first of its set, an arbitrary subset, with
+    a ``UserWarning``: to keep a few, predict all 20 and choose with
+    ``score.selection.select_for_scene``. A scene without agents (history [0, T_h, 2], an
+    empty view) gives [K, 0, T_f, 2] without running the model.
+
+    Agents far apart: the published models never saw two agents of a scene more than about
+    16 m apart, and a scene holding agents much farther apart moves every agent's futures;
+    ``model.neighbour_radius = 8.0`` (data units; ``ModelConfig.neighbour_radius``) keeps
+    each agent's attention to the agents within it.
 
     ``frame_interval`` (seconds between the history's positions) and ``units``, when given,
     are compared with the model's, with a ``UserWarning`` where they differ (the CLI's
@@ -405,8 +465,10 @@ def predict_scene(model, history: ArrayLike, num_samples: int = 20,
     where they were not seen; read only by a model with ``model.reads_context`` (the
     published zara1, zara2, univ and eth generators), and only those seen in the last
     ``model.context_frames`` frames without a break (all 8 for the published ones): others
-    are ignored. Every target in ``history`` needs all T_h positions (docs/score.md, "Python:
-    the planning calls").
+    are ignored, with a ``UserWarning`` naming how many (so with the published models a
+    neighbour seen over part of the history changes nothing unless its missing frames are
+    filled in, e.g. its first seen position held). Every target in ``history`` needs all
+    T_h positions (docs/score.md, "Python: the planning calls").
 
     A numpy array (or anything ``np.asarray`` reads) gives a numpy array back, a tensor a
     tensor on the model's device. Wrong shapes, non-numbers, non-finite values and
@@ -427,8 +489,9 @@ def predict_scenes(model, histories, num_samples: int = 20, agent_types=None, se
     generator) each scene's futures equal ``predict_scene``'s for it alone, to float32
     rounding (about 1e-5 m); a model that draws noise draws it across the batch, so the
     numbers differ from the loop's (with the same spread). Each result is a tensor when its
-    history was one, else a numpy array. The checks and the warnings are
-    ``predict_scene``'s, naming ``histories[b]``."""
+    history was one, else a numpy array. A scene without agents gets [K, 0, T_f, 2] and
+    leaves the others as they are. The checks and the warnings are ``predict_scene``'s,
+    naming ``histories[b]``."""
     if isinstance(histories, (np.ndarray, torch.Tensor)) and histories.ndim == 3:
         raise DataError("histories: expected a list of scenes' histories [P, T_h, 2]; got "
                         f"one array {list(histories.shape)}: predict_scene takes one "
@@ -487,6 +550,7 @@ def _predict(model, histories: list, num_samples, agent_types: list, seed, frame
         raise ConfigError(f"num_samples must be an integer >= 1, got {num_samples!r}")
     if not histories:
         raise DataError("histories: no scenes to predict")
+    _warn_fixed_set(model, count)
     device = getattr(model, "device", torch.device("cpu"))
     t_h = getattr(model, "t_hist", None)  # None: any length (the constant-velocity baseline)
     t_f = getattr(model, "t_fut", 12)
@@ -495,8 +559,6 @@ def _predict(model, histories: list, num_samples, agent_types: list, seed, frame
     for i, (history, agent_type, context) in enumerate(given):
         name = "history" if single else f"histories[{i}]"
         hist = _float_tensor(name, history, device)  # [P, T_h, 2]
-        if hist.ndim == 3 and hist.shape[0] == 0:
-            raise DataError(f"{name}: the scene has no agents (P = 0)")
         if hist.ndim != 3 or hist.shape[2] != 2 or hist.shape[1] != (t_h or hist.shape[1]):
             want = (
                 f"[P, {t_h}, 2] (agents, observed steps, x/y; this model's T_h = {t_h})"
@@ -524,33 +586,81 @@ def _predict(model, histories: list, num_samples, agent_types: list, seed, frame
         warnings.warn("this model reads no context-only neighbours (model.reads_context is "
                       "False): the context changes nothing; a neighbour seen over the whole "
                       "history can be listed as an agent instead", stacklevel=3)  # fmt: skip
-    batch = _join(scenes, t_f)
-    pred = model.predict(batch, count, torch.Generator().manual_seed(seed))  # [K, N, T_f, 2]
+    elif getattr(model, "reads_context", False):
+        _warn_unread_context(model, [c for h, _, c in scenes if len(h)])
+    present = [scene for scene in scenes if len(scene[0])]  # a scene without agents: no pass
+    pred = None
+    if present:
+        batch = _join(present, t_f)
+        pred = model.predict(batch, count, torch.Generator().manual_seed(seed))  # [K, N, T_f, 2]
+    elif callable(getattr(model, "check_samples", None)):  # predict's refusal, without a pass
+        model.check_samples(count)  # more than a generator's fixed set
     out, start = [], 0
     for history, (hist, _, _) in zip(histories, scenes, strict=True):
-        part = pred[:, start : start + hist.shape[0]]  # [K, P_b, T_f, 2]
+        if pred is None:  # no agent in any scene: K empty futures each
+            part = hist.new_zeros(count, 0, t_f, 2)  # [K, 0, T_f, 2]
+        else:
+            part = pred[:, start : start + hist.shape[0]]  # [K, P_b, T_f, 2], P_b may be 0
         start += hist.shape[0]
         out.append(part if isinstance(history, torch.Tensor) else part.cpu().numpy())
     return out
 
 
+def _warn_fixed_set(model, count: int) -> None:
+    """A warning when ``count`` samples are asked of a leapfrog generator that emits a fixed
+    set of more (trained best-of-K): it takes the first of its set (the CLI's ``--samples``
+    warning, in Python's words)."""
+    generator = getattr(model, "generator", None)
+    if getattr(model, "sampler", None) != "leapfrog" or generator is None:
+        return
+    fixed = int(generator.samples)
+    if count < fixed:
+        warnings.warn(f"this model emits a set of K = {fixed} samples (trained best-of-"
+                      f"{fixed}), and num_samples={count} takes its first {count}, an "
+                      f"arbitrary subset: to keep {count} chosen from all {fixed}, predict "
+                      f"all {fixed} and keep {count} with trajpref.score.selection."
+                      f"select_for_scene (chosen_selection(name, keep={count}) gives the "
+                      "published models' score-guided setting; docs/selection.md), or load "
+                      "it with sampler='full' for independent draws", stacklevel=4)  # fmt: skip
+
+
+def _warn_unread_context(model, contexts: list) -> None:
+    """A warning naming how many context rows [C_b, T_h, 2] a context-reading model ignores:
+    those not seen in each of its last ``model.context_frames`` frames (a NaN among them)."""
+    frames = int(model.context_frames)
+    rows = [c for c in contexts if c is not None and len(c)]
+    if not rows:
+        return
+    seen = torch.cat(rows)[:, -frames:].isfinite().all(-1).all(-1)  # [C] seen in the last N
+    ignored, total = int((~seen).sum()), len(seen)
+    if ignored:
+        warnings.warn(f"{ignored} of {total} context row(s) ignored: this model reads a "
+                      f"context-only neighbour only if it was seen in each of the last "
+                      f"{frames} frames (model.context_frames), and these were seen in fewer "
+                      "(a NaN among them); fill in their missing frames (e.g. the first seen "
+                      "position held) for the model to read them", stacklevel=4)  # fmt: skip
+
+
 def scene_batch(scorer: TrajectoryScorer, history: ArrayLike, samples: ArrayLike,
                 agent_type: ArrayLike | None = None, *, frame_interval: float | None = None,
-                units: str | None = None) -> tuple[Batch, torch.Tensor]:  # fmt: skip
+                units: str | None = None,
+                allow_empty: bool = False) -> tuple[Batch, torch.Tensor]:  # fmt: skip
     """One scene's history [P, T_h, 2] and samples [K, P, T_f, 2] (arrays or tensors, the
     scorer's units and lengths) as a one-scene Batch with an unknown (NaN) future, and the
     samples as a float32 tensor on the scorer's device. DataError for wrong shapes,
     non-finite values and coordinates too large for float32 (``predict_scene``'s check,
     ``models.predictor.check_coordinates``); ConfigError for something other than a scorer;
     a warning where ``frame_interval`` or ``units`` differ from the scorer's (``rank_samples``
-    documents the conventions)."""
+    documents the conventions). A scene without agents (P = 0) is a DataError, unless
+    ``allow_empty``: then its (empty) Batch comes back, which the caller must not run the
+    networks on (``rank_samples`` answers it without them)."""
     _check_scorer(scorer)
     check_pace(scorer, frame_interval, units, name="this scorer", stacklevel=4)
     device = scorer.device
     hist = _float_tensor("history", history, device)  # [P, T_h, 2]
     futs = _float_tensor("samples", samples, device)  # [K, P, T_f, 2]
     t_h, t_f = scorer.t_hist, scorer.t_fut
-    if hist.ndim == 3 and hist.shape[0] == 0:
+    if hist.ndim == 3 and hist.shape[0] == 0 and not allow_empty:
         raise DataError("history: the scene has no agents (P = 0): nothing to rank")
     if futs.ndim == 4 and futs.shape[0] == 0:
         raise DataError("samples: no samples (K = 0): nothing to rank")

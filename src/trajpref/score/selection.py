@@ -18,16 +18,19 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import typing
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Literal
 
 import torch
 
 from trajpref.config import check_choices
 from trajpref.data import transforms
-from trajpref.errors import ConfigError
+from trajpref.errors import ConfigError, TrajprefError
 from trajpref.metrics import scene_sum
+from trajpref.models import zoo
 from trajpref.models.predictor import as_integer
 from trajpref.score.scorer import TrajectoryScorer, scene_batch, score_timesteps
 from trajpref.types import Batch
@@ -181,18 +184,67 @@ scorer's training split's observed pace in model units per step (metres per step
 rows (rounded to 4 digits; their meta files record it, and a test checks both)."""
 
 
-def chosen_selection(model: str, keep: int = 5, cheap: bool = False,
+CHOSEN_SAMPLES = 20
+"""K, the samples each generator of ``CHOSEN`` emits (its ``model.samples``; a test checks
+the files): what ``chosen_selection``'s ``keep`` is chosen from."""
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve()
+    except (OSError, RuntimeError):
+        return False
+
+
+def published_name(model: str | os.PathLike) -> str:
+    """The published name of ``model``: a name as given (``zara1/generator``), or the name of
+    the published model a checkpoint path is: the zoo's own file (``.../zoo/zara1/
+    generator.safetensors``, or ``models/zara1/generator.safetensors`` in the repository) or
+    a copy of it (the same weights hash in the same ``DATASET/NAME.safetensors`` layout).
+    Anything else is returned as given."""
+    text = str(model)
+    path = Path(text).expanduser()
+    if zoo.is_name(text) or not path.is_file():
+        return text
+    published = zoo.published()
+    for name, file in published.items():
+        if _same_file(path, file):
+            return name
+    name = f"{path.parent.name}/{path.stem}"
+    if name in published:
+        try:
+            same = zoo.header(path).get("hash") == zoo.header(published[name]).get("hash")
+        except (TrajprefError, OSError, ValueError, AttributeError):
+            same = False
+        if same:
+            return name
+    return text
+
+
+def chosen_selection(model: str | os.PathLike, keep: int = 5, cheap: bool = False,
                      per: Literal["agent", "scene"] = "agent") -> SelectionConfig:  # fmt: skip
     """The ``SelectionConfig`` chosen for the published generator ``model`` (``CHOSEN``), for
     ``select_for_scene`` with its dataset's scorer, keeping ``keep``: the chosen setting at 34
-    score steps, or with ``cheap`` its cheap setting (1 or 2 score steps). ConfigError for a
-    model without chosen settings (the list names those with them)."""
-    entry = CHOSEN.get(model)
+    score steps, or with ``cheap`` its cheap setting (1 or 2 score steps). ``model`` is a
+    published name or the path of a published model's file (``published_name``). ConfigError
+    for a model without chosen settings (the list names those with them), and for a ``keep``
+    that is not an integer in 1..K (``CHOSEN_SAMPLES``, the samples the generator emits)."""
+    name = published_name(model)
+    entry = CHOSEN.get(name)
     if entry is None or (cheap and "cheap" not in entry):
         have = sorted(CHOSEN) if not cheap else sorted(k for k, v in CHOSEN.items() if "cheap" in v)
         what = "cheap " if cheap else ""
-        raise ConfigError(f"no chosen {what}selection setting for {model!r}; published "
-                          f"generators with one: {', '.join(have)}")  # fmt: skip
+        hint = ""
+        path = Path(str(model))
+        guess = f"{path.parent.name}/{path.stem}"
+        if entry is None and not path.is_file() and path.suffix and guess in CHOSEN:
+            hint = f" (no such file here; the published model is named {guess})"
+        raise ConfigError(f"no chosen {what}selection setting for {str(model)!r}{hint}; "
+                          f"published generators with one: {', '.join(have)}")  # fmt: skip
+    if isinstance(keep, bool) or not isinstance(keep, int) or not 1 <= keep <= CHOSEN_SAMPLES:
+        raise ConfigError(f"chosen_selection keep: how many of the K = {CHOSEN_SAMPLES} "
+                          f"samples {name} emits to keep, an integer in 1..{CHOSEN_SAMPLES}, "
+                          f"got {keep!r}")  # fmt: skip
     settings = {**entry["chosen"], **(entry["cheap"] if cheap else {})}
     return SelectionConfig(keep=keep, per=per, **settings)
 
@@ -464,11 +516,18 @@ def select_for_scene(scorer: TrajectoryScorer, history, samples, cfg: SelectionC
     numpy when neither input is a tensor, else a tensor. Take the futures with
     ``samples[idx, np.arange(P)]``. ``chosen_selection`` gives each published model's chosen
     ``cfg``. ``frame_interval`` and ``units``: as ``rank_samples``. The checks are
-    ``rank_samples``' (``scene_batch``)."""
+    ``rank_samples``' (``scene_batch``). A scene without agents (history [0, T_h, 2], samples
+    [K, 0, T_f, 2]: an empty view) gives idx [K', 0] (``cfg.keep`` still at most K) without
+    running the scorer."""
     batch, pred = scene_batch(scorer, history, samples, agent_type, frame_interval=frame_interval,
-                              units=units)  # pred [K, P, T_f, 2]  # fmt: skip
-    generator = torch.Generator().manual_seed(cfg.seed)
-    idx = select_with_scorer(pred, cfg, batch, scorer, generator)  # [K', P]
+                              units=units, allow_empty=True)  # pred [K, P, T_f, 2]  # fmt: skip
+    if batch.num_agents == 0:  # an empty view: K' rows of no agent's indices
+        if cfg.keep > pred.shape[0]:
+            raise ConfigError(f"cannot keep {cfg.keep} of {pred.shape[0]} samples")
+        idx = torch.empty(cfg.keep, 0, dtype=torch.int64, device=pred.device)  # [K', 0]
+    else:
+        generator = torch.Generator().manual_seed(cfg.seed)
+        idx = select_with_scorer(pred, cfg, batch, scorer, generator)  # [K', P]
     if isinstance(history, torch.Tensor) or isinstance(samples, torch.Tensor):
         return idx
     return idx.cpu().numpy()
