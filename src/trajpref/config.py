@@ -406,7 +406,7 @@ class ModelConfig:
     behaviour. The published ETH/UCY models never saw two agents of a scene more than about
     16 m apart, and agents far beyond that (a robot's tracker sees pedestrians 20-50 m away)
     move every agent's futures; it may be set on published weights without retraining
-    (``model.neighbour_radius = 8.0`` in Python), and training does not apply it."""
+    (``model.neighbour_radius = 12.0`` in Python), and training does not apply it."""
 
     def __post_init__(self) -> None:
         if self.neighbour_radius is not None and (

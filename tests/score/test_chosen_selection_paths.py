@@ -60,3 +60,12 @@ def test_every_chosen_generator_emits_the_k_that_keep_is_checked_against():
         if name in zoo.published():
             samples = zoo.header(zoo.resolve(name))["config"]["model"]["samples"]
             assert samples == selection.CHOSEN_SAMPLES
+
+
+def test_keep_from_a_planners_arrays_counts_as_an_integer():
+    import numpy as np
+
+    from trajpref.score.selection import chosen_selection
+
+    assert chosen_selection("zara1/generator", keep=np.int64(3)).keep == 3
+    assert type(chosen_selection("zara1/generator", keep=np.int64(3)).keep) is int

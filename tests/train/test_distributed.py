@@ -124,15 +124,16 @@ def test_cleanup_frees_garbage_in_cycles_before_leaving_the_group(monkeypatch):
     class Wrapper:  # stands in for a DDP module caught in a cycle
         pass
 
-    held = Wrapper()
-    held.self = held  # a cycle: freed by the collector only
-    alive = weakref.ref(held)
-    del held
     seen = []
     monkeypatch.setattr(dist, "is_initialized", lambda: True)
     monkeypatch.setattr(dist, "destroy_process_group", lambda: seen.append(alive() is None))
-    gc.disable()  # no automatic collection in between: only cleanup's counts
+    gc.disable()  # no automatic collection from here on: only cleanup's counts
     try:
+        held = Wrapper()
+        held.self = held  # a cycle: freed by the collector only
+        alive = weakref.ref(held)
+        del held
+        assert alive() is not None
         distributed.cleanup(DistInfo(rank=0, world_size=2))
     finally:
         gc.enable()

@@ -126,7 +126,7 @@ class DiffusionPredictor(DenoiserShapes, nn.Module):
     ``scale`` is the data scale: networks see coordinates divided by it. ``neighbour_radius``
     (data units; None: off): the attention across agents of both networks reads only the
     pairs within it (``ModelConfig.neighbour_radius``; ``load_predictor`` takes it from the
-    checkpoint's config, and it may be set afterwards: ``model.neighbour_radius = 8.0``).
+    checkpoint's config, and it may be set afterwards: ``model.neighbour_radius = 12.0``).
     """
 
     def __init__(

@@ -42,10 +42,12 @@ NOISE_LAYOUT = "scene-slot"
 """How the residual's noise is assigned to agents: ``scene-slot`` (since 2026-12-05), by each
 agent's index within its own scene (``scene_slots``); before that, by its index in the batch.
 Stored evaluations key on it (benchmarks/reproduce.py), so a change of layout re-measures them.
-Since 2026-12-06 each slot's draw is padded to a multiple of 16 values (``slot_noise``): the
-numbers of an even number of score steps (34, 12, 2: those stored evaluations use) are the
-same as before, while an odd number's (1 step) had depended on the batch's largest scene and
-now do not; the selection rows of 1 score step were measured again then."""
+Since 2026-12-06 each slot's draw is padded to a multiple of 16 values (``slot_noise``): for
+the published models' 12 future steps (24 values a step) the numbers of an even number of
+score steps (34, 12, 2: those stored evaluations use) are the same as before, while an odd
+number's (1, 5, 17, ...) had depended on the batch's largest scene and now do not; the
+selection rows of 1 score step were measured again then (validation records of odd step
+counts under ``benchmarks/results/meta`` were not)."""
 
 
 def slot_noise(rows: int, shape: tuple[int, ...], generator: torch.Generator) -> torch.Tensor:
@@ -446,7 +448,7 @@ def predict_scene(model, history: ArrayLike, num_samples: int = 20,
 
     Agents far apart: the published models never saw two agents of a scene more than about
     16 m apart, and a scene holding agents much farther apart moves every agent's futures;
-    ``model.neighbour_radius = 8.0`` (data units; ``ModelConfig.neighbour_radius``) keeps
+    ``model.neighbour_radius = 12.0`` (data units; ``ModelConfig.neighbour_radius``) keeps
     each agent's attention to the agents within it.
 
     ``frame_interval`` (seconds between the history's positions) and ``units``, when given,

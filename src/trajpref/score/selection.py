@@ -241,12 +241,13 @@ def chosen_selection(model: str | os.PathLike, keep: int = 5, cheap: bool = Fals
             hint = f" (no such file here; the published model is named {guess})"
         raise ConfigError(f"no chosen {what}selection setting for {str(model)!r}{hint}; "
                           f"published generators with one: {', '.join(have)}")  # fmt: skip
-    if isinstance(keep, bool) or not isinstance(keep, int) or not 1 <= keep <= CHOSEN_SAMPLES:
+    count = as_integer(keep)  # np.int64(5) from a planner's arrays counts as 5
+    if count is None or not 1 <= count <= CHOSEN_SAMPLES:
         raise ConfigError(f"chosen_selection keep: how many of the K = {CHOSEN_SAMPLES} "
                           f"samples {name} emits to keep, an integer in 1..{CHOSEN_SAMPLES}, "
                           f"got {keep!r}")  # fmt: skip
     settings = {**entry["chosen"], **(entry["cheap"] if cheap else {})}
-    return SelectionConfig(keep=keep, per=per, **settings)
+    return SelectionConfig(keep=count, per=per, **settings)
 
 
 def _pairwise(x: torch.Tensor, centers: torch.Tensor) -> torch.Tensor:
