@@ -209,6 +209,14 @@ def test_the_consent_step_comes_before_the_first_picture_and_keeps_line_breaks(
         text = d.find_element(By.ID, "consent-text")
         assert text.value_of_css_property("white-space") == "pre-line"
         assert "I agree to take part.\n" in text.text and "kept for a year" in text.text
+        # a page that shows another text than the server's (edited since it was loaded):
+        # refused (409), and the page fetches the server's text to be read again
+        d.execute_script("state.study.consent_hash = '0123456789abcdef';")
+        d.find_element(By.ID, "agree").click()
+        wait.until(lambda _: "please read it again" in d.find_element(By.ID, "consent-error").text)
+        assert d.find_element(By.TAG_NAME, "body").get_attribute("data-view") == "consent"
+        with sqlite3.connect(synthetic_study / "answers.sqlite") as db:
+            assert db.execute("SELECT count(*) FROM consents").fetchone()[0] == 0
         d.find_element(By.ID, "agree").click()
         until("rate")
         d.find_element(By.CSS_SELECTOR, 'button.rate[data-criterion="social"][data-value="4"]'
@@ -220,6 +228,8 @@ def test_the_consent_step_comes_before_the_first_picture_and_keeps_line_breaks(
         d.refresh()  # agreed once: not asked again
         until("rate")
     with sqlite3.connect(synthetic_study / "answers.sqlite") as db:
-        consents = db.execute("SELECT rater, agreed_at IS NOT NULL FROM consents").fetchall()
+        consents = db.execute("SELECT rater, agreed_at IS NOT NULL, text_hash "
+                              "FROM consents").fetchall()  # fmt: skip
         answers = db.execute("SELECT rater, social, kinetics FROM answers").fetchall()
-    assert consents == [("judge-2", 1)] and answers == [("judge-2", 4, 2)]
+    text_hash = load_study(synthetic_study).consent_hash  # the text the page showed
+    assert consents == [("judge-2", 1, text_hash)] and answers == [("judge-2", 4, 2)]

@@ -284,13 +284,29 @@ def test_a_study_without_consent_writes_no_key_and_needs_no_agreement(tmp_path):
         store.close()
 
 
+def _agree(client, rater: str, text_hash: str):
+    """What the page's *I agree* sends."""
+    return client.post(f"/api/raters/{rater}/consent", json={"agree": True,
+                                                             "text_hash": text_hash})  # fmt: skip
+
+
+def _consents(db: Path) -> list[tuple]:
+    import sqlite3
+
+    with sqlite3.connect(db) as con:
+        return con.execute("SELECT rater, text_hash, agreed_at FROM consents "
+                           "ORDER BY agreed_at").fetchall()  # fmt: skip
+
+
 def test_answers_are_refused_until_the_rater_agreed_and_the_agreement_is_recorded(tmp_path):
     study = _write(tmp_path / "study", consent=CONSENT)
     assert load_study(tmp_path / "study").consent == CONSENT
     assert study.public()["consent"] == CONSENT
+    first = study.consent_hash
     store = AnswerStore(tmp_path / "study" / DATABASE, study)
     try:
         with TestClient(create_app(study, store)) as c:
+            assert c.get("/api/study").json()["consent_hash"] == first  # what the page sends
             put = "/api/raters/Alice/answers/s01/A"
             r = c.put(put, json={"social": 3, "kinetics": 4})
             assert (
@@ -298,10 +314,10 @@ def test_answers_are_refused_until_the_rater_agreed_and_the_agreement_is_recorde
                 and "has not agreed to the study's consent text" in (r.json()["error"])
             )
             assert c.get("/api/raters/alice").json()["consented"] is False
-            r = c.post("/api/raters/ALICE/consent")
+            r = _agree(c, "ALICE", first)
             assert r.status_code == 200 and r.json()["consented"] is True
             agreed = r.json()["agreed_at"]
-            assert c.post("/api/raters/alice/consent").json()["agreed_at"] == agreed  # kept
+            assert _agree(c, "alice", first).json()["agreed_at"] == agreed  # kept
             progress = c.get("/api/raters/alice").json()
             assert progress["consent_required"] and progress["consented"]
             assert c.put(put, json={"social": 3, "kinetics": 4}).status_code == 200
@@ -310,17 +326,149 @@ def test_answers_are_refused_until_the_rater_agreed_and_the_agreement_is_recorde
         assert records == {"alice": agreed, "synthetic-01": None}
     finally:
         store.close()
-    # a changed consent text must be agreed to again
+    # a changed consent text must be agreed to again; the first agreement stays recorded
     manifest = json.loads((tmp_path / "study" / MANIFEST).read_text())
     manifest["consent"] = CONSENT + "\n\nAnd a new paragraph."
     (tmp_path / "study" / MANIFEST).write_text(json.dumps(manifest))
-    store = AnswerStore(tmp_path / "study" / DATABASE, load_study(tmp_path / "study"))
+    study = load_study(tmp_path / "study")
+    store = AnswerStore(tmp_path / "study" / DATABASE, study)
     try:
         with pytest.raises(AnswerError, match="has not agreed") as err:
             store.save("alice", "s01", "B", {"social": 3, "kinetics": 4})
         assert err.value.status == 403 and not store.progress("alice")["consented"]
+        with TestClient(create_app(study, store)) as c:
+            put = "/api/raters/alice/answers/s01/B"
+            assert c.put(put, json={"social": 3, "kinetics": 4}).status_code == 403
+            r = _agree(c, "alice", first)  # a page that still shows the old text
+            assert r.status_code == 409 and "consent text has changed" in r.json()["error"]
+            assert c.put(put, json={"social": 3, "kinetics": 4}).status_code == 403
+            r = _agree(c, "alice", study.consent_hash)
+            assert r.status_code == 200 and r.json()["agreed_at"] != agreed
+            assert c.put(put, json={"social": 3, "kinetics": 4}).status_code == 200
+        assert _consents(tmp_path / "study" / DATABASE) == [
+            ("alice", first, agreed),  # the audit trail: the older text's agreement is kept
+            ("alice", study.consent_hash, r.json()["agreed_at"]),
+        ]
+        assert {r["rater"]: r["consented_at"] for r in store.records()}["alice"] == (
+            r.json()["agreed_at"])  # fmt: skip
     finally:
         store.close()
+
+
+def test_a_cross_site_form_post_cannot_record_an_agreement(tmp_path):
+    """A page elsewhere can make the browser send an HTML form (urlencoded, or text/plain)
+    to the server, not a JSON request: consent takes JSON only, like answers."""
+    study = _write(tmp_path / "study", consent=CONSENT)
+    store = AnswerStore(tmp_path / "study" / DATABASE, study)
+    try:
+        with TestClient(create_app(study, store)) as c:
+            for ctype, body in [
+                ("application/x-www-form-urlencoded", f"agree=true&text_hash={study.consent_hash}"),
+                ("text/plain", json.dumps({"agree": True, "text_hash": study.consent_hash})),
+                ("multipart/form-data; boundary=x", "--x--"),
+            ]:
+                headers = {"Content-Type": ctype, "Origin": "http://evil.example"}
+                r = c.post("/api/raters/bob/consent", content=body.encode(), headers=headers)
+                assert r.status_code == 415 and "JSON" in r.json()["error"], ctype
+            r = c.post("/api/raters/bob/consent")  # no body at all
+            assert r.status_code == 415
+            assert c.get("/api/raters/bob").json()["consented"] is False
+        assert _consents(tmp_path / "study" / DATABASE) == []
+    finally:
+        store.close()
+
+
+@pytest.mark.parametrize(
+    ("body", "status", "message"),
+    [
+        ({"agree": True, "text_hash": "0123456789abcdef"}, 409, "consent text has changed"),
+        ({"agree": True, "text_hash": ""}, 409, "consent text has changed"),
+        ({"agree": False, "text_hash": "HASH"}, 422, "agree"),
+        ({"agree": 1, "text_hash": "HASH"}, 422, "agree"),
+        ({"agree": True}, 422, "text_hash"),
+        ({"agree": True, "text_hash": 7}, 422, "text_hash"),
+        ({"agree": True, "text_hash": "HASH", "extra": 1}, 422, "extra"),
+        ([True, "HASH"], 422, "JSON object"),
+    ],
+)
+def test_an_agreement_to_another_text_or_a_malformed_one_records_nothing(
+    tmp_path, body, status, message
+):
+    study = _write(tmp_path / "study", consent=CONSENT)
+    body = json.loads(json.dumps(body).replace("HASH", study.consent_hash))
+    store = AnswerStore(tmp_path / "study" / DATABASE, study)
+    try:
+        with TestClient(create_app(study, store)) as c:
+            r = c.post("/api/raters/bob/consent", json=body)
+            assert r.status_code == status and message in r.json()["error"]
+            assert c.get("/api/raters/bob").json()["consented"] is False
+            assert c.put("/api/raters/bob/answers/s01/A",
+                         json={"social": 3, "kinetics": 4}).status_code == 403  # fmt: skip
+        assert _consents(tmp_path / "study" / DATABASE) == []
+    finally:
+        store.close()
+
+
+def test_a_study_without_consent_text_refuses_an_agreement(tmp_path):
+    study = _write(tmp_path / "study")
+    store = AnswerStore(tmp_path / "study" / DATABASE, study)
+    try:
+        with TestClient(create_app(study, store)) as c:
+            assert c.get("/api/study").json()["consent_hash"] is None
+            r = _agree(c, "bob", study.consent_hash)
+            assert r.status_code == 404 and "no consent text" in r.json()["error"]
+    finally:
+        store.close()
+
+
+def _old_consents_table(db: Path, rows: list[tuple]) -> None:
+    """Make ``db``'s consents table as the code of e1862a9 wrote it (rater PRIMARY KEY)."""
+    import sqlite3
+
+    with sqlite3.connect(db) as con:
+        con.execute("DROP TABLE consents")
+        con.execute("CREATE TABLE consents (rater TEXT PRIMARY KEY REFERENCES raters (rater), "
+                    "agreed_at TEXT NOT NULL, text_hash TEXT NOT NULL)")  # fmt: skip
+        con.executemany("INSERT INTO consents VALUES (?, ?, ?)", rows)
+
+
+def test_a_database_with_the_first_consents_table_is_migrated_keeping_its_agreements(tmp_path):
+    import sqlite3
+
+    study = _write(tmp_path / "study", consent=CONSENT)
+    db = tmp_path / "study" / DATABASE
+    AnswerStore(db, study).close()
+    with sqlite3.connect(db) as con:  # the raters, for the foreign key
+        made = "2000-01-01T07:59:00.000+00:00"
+        con.executemany("INSERT INTO raters VALUES (?, 'human', ?, NULL)",
+                        [(r, made) for r in ("alice", "bob")])  # fmt: skip
+    old = [("alice", "2000-01-01T08:00:00.000+00:00", study.consent_hash),
+           ("bob", "2000-01-01T08:01:00.000+00:00", "an-older-text")]  # fmt: skip
+    _old_consents_table(db, old)
+    store = AnswerStore(db, study, readonly=True)  # analyze: read as it is, nothing written
+    try:
+        assert store.progress("alice")["consented"] and not store.progress("bob")["consented"]
+    finally:
+        store.close()
+    with sqlite3.connect(db) as con:
+        pk = [r[1] for r in con.execute("PRAGMA table_info(consents)") if r[5]]
+    assert pk == ["rater"]
+    store = AnswerStore(db, study)  # serve: migrated to one row per (rater, text)
+    try:
+        assert store.progress("alice")["consented"]
+        assert store.consent("bob", study.consent_hash)["consented"]  # was a UNIQUE error
+        store.save("bob", "s01", "A", {"social": 3, "kinetics": 4})
+    finally:
+        store.close()
+    with sqlite3.connect(db) as con:
+        pk = sorted(r[1] for r in con.execute("PRAGMA table_info(consents)") if r[5])
+        rows = con.execute("SELECT rater, agreed_at, text_hash FROM consents "
+                           "ORDER BY rater, agreed_at").fetchall()  # fmt: skip
+    assert pk == ["rater", "text_hash"]
+    assert rows[:2] == old and rows[2][0] == "bob" and rows[2][2] == study.consent_hash
+    AnswerStore(db, study).close()  # opening it again changes nothing
+    with sqlite3.connect(db) as con:
+        assert con.execute("SELECT count(*) FROM consents").fetchone()[0] == 3
 
 
 def test_the_page_keeps_the_line_breaks_of_the_instructions_and_the_consent():

@@ -5,18 +5,22 @@ Routes::
     GET  /                                       the page (static/index.html)
     GET  /static/{app.js,style.css}              its script and style (package data)
     GET  /images/{name}.png                      a panel image named in the manifest
-    GET  /api/study                              the public study: scenes, panels, criteria
+    GET  /api/study                              the public study: scenes, panels, criteria,
+                                                 the consent text and its ``consent_hash``
     GET  /api/raters/{rater}                     a rater's answers so far (to resume)
     PUT  /api/raters/{rater}/answers/{scene}/{panel}   {"social": 1..5, "kinetics": 1..5}
     POST /api/raters/{rater}/submit              mark the answers final
-    POST /api/raters/{rater}/consent             agree to the study's consent text (a study
-                                                 with one refuses answers before: 403)
+    POST /api/raters/{rater}/consent             {"agree": true, "text_hash": consent_hash}:
+                                                 agree to the study's consent text (a study
+                                                 with one refuses answers before: 403; a
+                                                 hash of another text: 409)
 
 Security: binds to 127.0.0.1 unless told otherwise, and then refuses requests whose Host
 header is not a loopback name (DNS rebinding); serves only the files named in the manifest
 and the three static files (a fixed table: no path from a request ever reaches the file
 system); reads at most ``max_body`` bytes of a body (413 beyond); takes JSON only
-(``Content-Type: application/json``, so a cross-site form cannot post answers); sends a
+(``Content-Type: application/json``, so a cross-site form cannot post answers or an
+agreement to the consent text); sends a
 strict Content-Security-Policy. Errors are JSON ``{"error": message}`` with a 4xx status.
 The access log shows ``/api/raters/<id>/...`` in place of the rater id (personal data:
 ``RaterIdMask``).
@@ -50,7 +54,7 @@ from starlette.routing import Route
 
 from trajpref.errors import ConfigError
 from trajpref.survey.manifest import DATABASE, Study, load_study
-from trajpref.survey.store import AnswerError, AnswerStore, check_rater
+from trajpref.survey.store import AnswerError, AnswerStore, check_agreement, check_rater
 
 MAX_BODY = 4096
 """Default limit of a request body in bytes (an answer is about 30)."""
@@ -150,7 +154,7 @@ async def _read_json(request: Request, limit: int) -> Any:
     """The body as JSON, at most ``limit`` bytes; AnswerError (400/413/415) otherwise."""
     ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
     if ctype != "application/json":
-        raise AnswerError("send the answer as JSON (Content-Type: application/json)", 415)
+        raise AnswerError("send the body as JSON (Content-Type: application/json)", 415)
     length = request.headers.get("content-length")
     if length is not None and (not length.isdigit() or int(length) > limit):
         raise AnswerError(f"the body is limited to {limit} bytes", 413)
@@ -171,7 +175,7 @@ def create_app(study: Study, store: AnswerStore, max_body: int = MAX_BODY,
     the Host check on."""
     if max_body < 64:
         raise ConfigError("--max-body must be >= 64 bytes")
-    public = study.public()
+    public = {**study.public(), "consent_hash": study.consent_hash if study.consent else None}
     images = study.image_files()  # the only files served from the study folder
     static = {name: (_static_bytes(name), kind) for name, kind in STATIC.items()}
     index = _static_bytes("index.html")
@@ -223,7 +227,17 @@ def create_app(study: Study, store: AnswerStore, max_body: int = MAX_BODY,
         return JSONResponse({"saved": True, **saved})
 
     submit = per_rater(store.submit)
-    consent = per_rater(store.consent)
+
+    async def consent(request: Request) -> Response:
+        """The rater's agreement: JSON only (a cross-site form cannot send it), naming the
+        text the page showed."""
+        try:
+            rater = check_rater(request.path_params["rater"])
+            text_hash = check_agreement(await _read_json(request, max_body))
+            agreed = await run_in_threadpool(store.consent, rater, text_hash)
+        except AnswerError as exc:
+            return _error(str(exc), exc.status)
+        return JSONResponse(agreed)
 
     async def http_error(request: Request, exc: HTTPException) -> Response:
         return _error(exc.detail, exc.status_code)

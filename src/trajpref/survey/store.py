@@ -8,13 +8,16 @@ Schema (``SCHEMA``)::
     answers(rater, scene, panel, social, kinetics, revision, created_at, updated_at,
             PRIMARY KEY (rater, scene, panel))
         social, kinetics: 1..5 (CHECK); revision: 1, +1 for each later change
-    consents(rater PRIMARY KEY, agreed_at, text_hash)
+    consents(rater, agreed_at, text_hash, PRIMARY KEY (rater, text_hash))
         when a rater agreed to the study's consent text, and a hash of that text
-        (``Study.consent_hash``); a file without the table (written before it) gets it when
-        ``serve`` or ``simulate`` opens it
+        (``Study.consent_hash``): one row per text agreed to, so that an agreement to an
+        earlier text stays recorded (an audit trail); a file without the table (written
+        before it) gets it when ``serve`` or ``simulate`` opens it, and a table of the first
+        form (``rater PRIMARY KEY``, 2026-12-06 morning) is migrated to this one, rows kept
 
 A study with a consent text (``Study.consent``) takes a human rater's answers only once the
-rater has agreed to that text (``consent``); otherwise ``save`` refuses with 403.
+rater has agreed to that very text (``consent``, given the text's hash); otherwise ``save``
+refuses with 403.
 
 Rater ids are not case-sensitive: ``Alice`` and ``alice`` are one rater, stored as ``alice``
 (an older file's ``Alice`` keeps its spelling and is found under any case).
@@ -59,6 +62,13 @@ FILE_MODE = 0o600
 KINDS = ("human", "synthetic")
 """Who gave an answer."""
 
+CONSENTS_TABLE = """CREATE TABLE IF NOT EXISTS consents (
+    rater     TEXT NOT NULL REFERENCES raters (rater),
+    agreed_at TEXT NOT NULL,
+    text_hash TEXT NOT NULL,
+    PRIMARY KEY (rater, text_hash)
+);"""
+"""One row per (rater, consent text agreed to): a new text adds a row, never overwrites."""
 SCHEMA = f"""
 CREATE TABLE IF NOT EXISTS meta (
     key   TEXT PRIMARY KEY,
@@ -81,11 +91,7 @@ CREATE TABLE IF NOT EXISTS answers (
     updated_at TEXT NOT NULL,
     PRIMARY KEY (rater, scene, panel)
 );
-CREATE TABLE IF NOT EXISTS consents (
-    rater     TEXT PRIMARY KEY REFERENCES raters (rater),
-    agreed_at TEXT NOT NULL,
-    text_hash TEXT NOT NULL
-);
+{CONSENTS_TABLE}
 """
 """The tables (``CREATE ... IF NOT EXISTS``: opening an existing file keeps it)."""
 TABLES = {
@@ -193,6 +199,23 @@ def check_ratings(ratings: Any) -> tuple[int, int]:
     return out[0], out[1]
 
 
+def check_agreement(body: Any) -> str:
+    """``{"agree": true, "text_hash": "..."}`` (the body of ``POST .../consent``, nothing
+    else) -> the hash of the consent text the page showed."""
+    if not isinstance(body, dict):
+        raise AnswerError('the body must be a JSON object {"agree": true, "text_hash": ...}',
+                          422)  # fmt: skip
+    extra = sorted(set(body) - {"agree", "text_hash"})
+    if extra:
+        raise AnswerError(f"agreement: unknown fields {extra}", 422)
+    if body.get("agree") is not True:
+        raise AnswerError('agreement: "agree" must be true', 422)
+    if not isinstance(body.get("text_hash"), str):
+        raise AnswerError('agreement: "text_hash" must be the hash of the consent text shown '
+                          "(the study's consent_hash)", 422)  # fmt: skip
+    return body["text_hash"]
+
+
 class AnswerStore:
     """The answers of one study. Thread-safe (one connection behind a lock: SQLite writes
     one transaction at a time anyway); several processes may share the file.
@@ -241,6 +264,7 @@ class AnswerStore:
                     raise ConfigError(f"{self.path}: SQLite could not use WAL mode here ({mode})")
                 self.db.execute("PRAGMA synchronous=FULL")
                 self.db.execute("PRAGMA foreign_keys=ON")
+                self._migrate_consents()
                 self.db.executescript(SCHEMA)
                 self._check_tables(new_file_ok=False)
             self._check_values()
@@ -276,6 +300,31 @@ class AnswerStore:
                     f"{', '.join(lacking)} (it has {', '.join(have)}; the schema is in "
                     "docs/survey.md)"
                 )
+
+    def _migrate_consents(self) -> None:
+        """A ``consents`` table of the first form (``rater PRIMARY KEY``: one agreement per
+        rater, overwritten when the text changed) becomes one of ``CONSENTS_TABLE`` (one row
+        per rater and text), its rows kept; in one transaction, so that a file is either
+        migrated or not. Any other table (of this form, or made elsewhere) is left alone."""
+        if self._consents_key() != ["rater"]:
+            return  # checked first: no write lock for a file that needs nothing
+        self.db.execute("BEGIN IMMEDIATE")
+        try:
+            if self._consents_key() == ["rater"]:  # not migrated meanwhile by another process
+                self.db.execute("ALTER TABLE consents RENAME TO consents_first")
+                self.db.execute(CONSENTS_TABLE)
+                self.db.execute("INSERT INTO consents (rater, agreed_at, text_hash) SELECT "
+                                "rater, agreed_at, text_hash FROM consents_first")  # fmt: skip
+                self.db.execute("DROP TABLE consents_first")
+        except BaseException:
+            self.db.execute("ROLLBACK")
+            raise
+        self.db.execute("COMMIT")
+
+    def _consents_key(self) -> list[str]:
+        """The primary key columns of the ``consents`` table, in order ([] without one)."""
+        rows = self.db.execute("PRAGMA table_info(consents)").fetchall()
+        return [r[1] for r in sorted(rows, key=lambda r: r[5]) if r[5]]
 
     def _check_values(self) -> None:
         """Ratings are integers in 1..5, kinds ``human`` or ``synthetic``, and no answer or
@@ -448,25 +497,27 @@ class AnswerStore:
         return self.db.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?",
                                (name,)).fetchone() is not None  # fmt: skip
 
-    def consent(self, rater: str) -> dict[str, Any]:
-        """Record that a human ``rater`` agreed to the study's consent text, now (kept when
-        already agreed to the same text; renewed when the text has changed since). Returns
-        ``{"consented": True, "agreed_at"}``. 404 when the study has no consent text."""
+    def consent(self, rater: str, text_hash: str) -> dict[str, Any]:
+        """Record that a human ``rater`` agreed, now, to the consent text whose hash the page
+        showed (``text_hash``): kept when already agreed to this text; a new row when the
+        rater agreed to an earlier text, which stays recorded. Returns ``{"consented": True,
+        "agreed_at"}``. 404 when the study has no consent text; 409 (nothing written) when
+        ``text_hash`` is not the current text's (``Study.consent_hash``): the page showed
+        another text, so the record could not name the text the rater read."""
         rater = check_rater(rater)
         if not self.study.consent:
             raise AnswerError("this study has no consent text", 404)
+        if text_hash != self.study.consent_hash:
+            raise AnswerError("the consent text has changed since the page was loaded: reload "
+                              "the page and read it again", 409)  # fmt: skip
         with self._tx():
             rater = self._stored_id(rater)
             self._rater_row(rater, "human", create=True)
             agreed = self._agreed(rater)
-            if agreed is None:
+            if agreed is None:  # no row for (rater, this text): the insert adds one
                 agreed = _now()
-                self.db.execute(
-                    """INSERT INTO consents (rater, agreed_at, text_hash) VALUES (?, ?, ?)
-                       ON CONFLICT (rater) DO UPDATE SET agreed_at = excluded.agreed_at,
-                           text_hash = excluded.text_hash""",
-                    (rater, agreed, self.study.consent_hash),
-                )
+                self.db.execute("INSERT INTO consents (rater, agreed_at, text_hash) "
+                                "VALUES (?, ?, ?)", (rater, agreed, text_hash))  # fmt: skip
         return {"consented": True, "agreed_at": agreed}
 
     def submit(self, rater: str, kind: str = "human") -> dict[str, Any]:

@@ -229,13 +229,30 @@ function showConsent() {
 }
 
 async function agree() {
+  // JSON naming the text shown (its hash): the server records which text the rater agreed to
+  // and refuses a hash of another text (409), e.g. one edited since this page was loaded.
+  const body = { agree: true, text_hash: state.study.consent_hash };
   try {
-    await api("POST", `api/raters/${encodeURIComponent(state.rater)}/consent`);
+    await api("POST", `api/raters/${encodeURIComponent(state.rater)}/consent`, body);
   } catch (e) {
     $("consent-error").textContent = `not recorded: ${e.message}`;
+    if (e.status === 409) await reloadConsent();
     return;
   }
   startRater(state.rater); // the server's record again: resumes where the rater is
+}
+
+async function reloadConsent() {
+  // The server holds another consent text than the one shown: show that one to be read.
+  try {
+    const study = await api("GET", "api/study");
+    state.study.consent = study.consent;
+    state.study.consent_hash = study.consent_hash;
+    $("consent-text").textContent = study.consent || "";
+    $("consent-error").textContent = "The consent text has changed: please read it again.";
+  } catch (e) {
+    // keep the message of the refused agreement
+  }
 }
 
 function beginRating(progress) {
