@@ -306,3 +306,18 @@ def test_a_subset_full_sampler_cell_is_quoted_where_no_whole_split_row_exists(
     assert "0.296 / 0.527" in text and "5,998 of its 24,334" in text
     assert "docs/reproduce.md" in text and "2026-12-05" in text
     assert zoo.subset_note("hotel") == ""
+
+
+def test_a_limit_that_sends_to_a_generator_in_git_says_to_copy_its_denoiser_beside_it():
+    """A published generator names its denoiser instead of embedding it, so the file from
+    `git show` alone fails to load ("it needs denoiser.safetensors (hash ...) beside it"):
+    a card that sends users to one says to copy the denoiser beside it."""
+    zoo = load_benchmark("zoo_index")
+    shows = 0
+    for text in zoo.LIMITS.values():
+        found = re.findall(r"git show ([0-9a-f]{7,40}):src/trajpref/zoo/([a-z][\w-]*)/"
+                           r"generator\.safetensors", text)  # fmt: skip
+        for commit, dataset in found:
+            shows += 1
+            assert f"src/trajpref/zoo/{dataset}/denoiser.safetensors" in text, (commit, dataset)
+    assert shows >= 2  # robo's and robo-mix's generators without roles

@@ -15,6 +15,7 @@ from trajpref.data.registry import (
 )
 from trajpref.data.stats import mean_speed, speed_note, speed_text
 from trajpref.data.text import GapWarning, ReadOptions
+from trajpref.data.tracker import TrackHistory, tracks_to_history
 from trajpref.data.trajnet import FrameRateWarning, write_trajnet, write_trajnet_truth
 
 __all__ = [
@@ -24,6 +25,7 @@ __all__ = [
     "PROTOCOLS",
     "GapWarning",
     "ReadOptions",
+    "TrackHistory",
     "add_paced_copy",
     "apply_protocol",
     "hold_out_scene",
@@ -34,6 +36,7 @@ __all__ = [
     "speed_note",
     "speed_text",
     "split_validation_in_time",
+    "tracks_to_history",
     "with_paced_copy",
     "write_trajnet",
     "write_trajnet_truth",

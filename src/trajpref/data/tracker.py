@@ -1,0 +1,215 @@
+"""A tracker's output (timestamped positions per agent) -> the models' input at "now".
+
+``tracks_to_history`` is meant for a planner's loop: each cycle, pass the tracker's recent rows
+(any order, any rate, short or gappy tracks) and the present time; it returns the history
+[P, T_h, 2] of the agents seen over the whole window, at the model's step and ending at now,
+and the partly seen agents as ``context`` [C, T_h, 2] (NaN where unseen), ready for
+``score.scorer.predict_scene(model, res.history, 20, context=res.context,
+frame_interval=step)``. Pure numpy.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Hashable, Sequence
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from trajpref.errors import ConfigError, DataError
+
+EPS_STEPS = 1e-3
+"""Times within this share of ``step`` of each other count as equal (float rounding of frame
+times such as ``now - 3 * 0.4``): 0.4 ms at a 0.4 s step."""
+
+
+class TrackHistory(NamedTuple):
+    """What ``tracks_to_history`` returns (agents in ascending id order in every list)."""
+
+    history: np.ndarray
+    """[P, T_h, 2] float64: the agents with a position at every frame, oldest frame first."""
+    context: np.ndarray
+    """[C, T_h, 2] float64: the agents with a position at ``now`` but not at every frame; NaN at
+    the frames they have none (before their first observation, inside a gap longer than
+    ``max_gap``). A model reads a row only if it is finite in the last
+    ``model.context_frames`` frames (all 8 for the published generators)."""
+    ids: list
+    """[P]: the input agent id of each ``history`` row."""
+    context_ids: list
+    """[C]: the input agent id of each ``context`` row."""
+    left_out_ids: list
+    """Agents observed at or before ``now`` that have no position at ``now`` (last seen more than
+    ``hold`` seconds before it): gone from view, or occluded; in no array."""
+    frame_times: np.ndarray
+    """[T_h] float64: the time of each frame, ``now - (T_h - 1 - i) * step``."""
+
+
+def tracks_to_history(times: Any, ids: Sequence[Hashable] | np.ndarray, xy: Any, now: float,
+                      step: float, t_hist: int = 8, max_gap: float | None = None,
+                      hold: float = 0.0) -> TrackHistory:  # fmt: skip
+    """Resample a tracker's rows to the models' history at ``step`` seconds, ending at ``now``.
+
+    ``times`` [R] seconds (any origin, e.g. Unix time; float64: float32 cannot hold Unix
+    seconds), ``ids`` [R] agent ids (ints, strings or other ids that sort among themselves),
+    ``xy`` [R, 2] positions in the model's units; rows in any order. ``now``: the present time,
+    in the same clock. ``step``: ``model.frame_interval`` (0.4 s for the ETH/UCY and sdd
+    models, 0.5 robo, 0.48 nba); ``t_hist``: ``model.t_hist`` (8 for the published models).
+
+    Rules:
+
+    - Frame i (i = 0 .. T_h - 1) is at ``now - (T_h - 1 - i) * step`` (``frame_times``).
+    - An agent's position at a frame is linearly interpolated between its own two observations
+      around it (an observation at the frame's time is used as it is). It is never
+      extrapolated: frames before the agent's first observation are NaN.
+    - Observations more than ``max_gap`` seconds apart (default ``2 * step``) are not bridged:
+      the frames between them are NaN.
+    - Rows after ``now`` are not read (a log can be replayed by moving ``now``).
+    - The frame at ``now`` takes the agent's observation at ``now``, or, when its last one is
+      at most ``hold`` seconds earlier (default 0: none), that last position, held (for a
+      tracker whose agents carry their own timestamps a few ms apart within one cycle). An
+      agent with no position at ``now`` is left out of both arrays: ``left_out_ids`` lists it
+      (no model reads a neighbour that is unseen at the last frame).
+    - An agent with a position at every frame is a ``history`` row; one with a position at
+      ``now`` but NaN at some earlier frame (a track that started inside the window, or a gap)
+      is a ``context`` row.
+    - Rows, ``ids`` and ``context_ids`` are in ascending id order, so an agent keeps its place
+      from one cycle to the next whatever order the tracker lists it in (the score's ranking
+      depends on the agent order, docs/score.md).
+    - The same (id, time) twice with the same position counts once; with different positions
+      it is a ``DataError``.
+
+    No rows (an empty view) give empty arrays ([0, T_h, 2]). Wrong shapes, non-finite times
+    or positions, conflicting duplicate rows, ids that do not sort, or a ``now`` before every
+    observation raise ``DataError``; ``step``, ``t_hist``, ``max_gap`` or ``hold`` out of range
+    raise ``ConfigError``.
+    """
+    step, max_gap, hold = _check_settings(step, t_hist, max_gap, hold)
+    t, agent, pos = _check_rows(times, ids, xy)
+    now = _finite_number("now", now, DataError)
+    if len(t) and now < t.min() - EPS_STEPS * step:
+        raise DataError(f"now ({now!r}) is before every observation (the first is at "
+                        f"{float(t.min())!r}): pass the present time in the tracker's "
+                        "clock")  # fmt: skip
+    frames = now - (t_hist - 1 - np.arange(t_hist)) * step  # [T_h], oldest first
+    eps = EPS_STEPS * step
+    groups: dict[Hashable, list[int]] = {}
+    for row, key in enumerate(agent):
+        groups.setdefault(key, []).append(row)
+    try:
+        order = sorted(groups)
+    except TypeError:
+        kinds = sorted({type(k).__name__ for k in groups})
+        raise DataError(f"ids: agent ids must sort among themselves (ints, strings), got "
+                        f"{', '.join(kinds)}: map them to ints first") from None  # fmt: skip
+    full, part, full_ids, part_ids, left_out = [], [], [], [], []
+    for key in order:
+        rows = np.asarray(groups[key])
+        rows = rows[t[rows] <= now + eps]  # rows after now are not read
+        if not len(rows):
+            continue  # first seen after now: not there yet
+        track = _agent_track(key, t[rows], pos[rows], frames, max_gap, hold, eps)  # [T_h, 2]
+        seen = np.isfinite(track).all(-1)  # [T_h]
+        if not seen[-1]:
+            left_out.append(key)
+        elif seen.all():
+            full.append(track)
+            full_ids.append(key)
+        else:
+            part.append(track)
+            part_ids.append(key)
+    return TrackHistory(history=_stack(full, t_hist), context=_stack(part, t_hist), ids=full_ids,
+                        context_ids=part_ids, left_out_ids=left_out,
+                        frame_times=frames)  # fmt: skip
+
+
+def _agent_track(key, t: np.ndarray, p: np.ndarray, frames: np.ndarray, max_gap: float,
+                 hold: float, eps: float) -> np.ndarray:  # fmt: skip
+    """One agent's positions [T_h, 2] at ``frames`` from its rows (times t [n], positions
+    p [n, 2], all at or before now), NaN where the rules of ``tracks_to_history`` give none."""
+    sort = np.argsort(t, kind="stable")
+    t, p = t[sort], p[sort]
+    same = np.flatnonzero(np.diff(t) == 0)  # duplicate times: row j equals row j + 1
+    if len(same):
+        clash = same[(p[same] != p[same + 1]).any(-1)]
+        if len(clash):
+            j = int(clash[0])
+            raise DataError(f"ids/times: agent {key!r} has two rows at time {float(t[j])!r} "
+                            f"with different positions {p[j].tolist()} and "
+                            f"{p[j + 1].tolist()}")  # fmt: skip
+        keep = np.ones(len(t), dtype=bool)
+        keep[same + 1] = False
+        t, p = t[keep], p[keep]
+    at = np.clip(frames, t[0], t[-1])  # [T_h] inside the observed span (after it: p[-1])
+    track = np.stack([np.interp(at, t, p[:, 0]), np.interp(at, t, p[:, 1])], -1)  # [T_h, 2]
+    inside = (frames >= t[0] - eps) & (frames <= t[-1] + eps)  # [T_h]
+    if len(t) > 1:
+        right = np.clip(np.searchsorted(t, at, side="left"), 1, len(t) - 1)  # [T_h] obs >= at
+        on_obs = (np.abs(t[right] - at) <= eps) | (np.abs(t[right - 1] - at) <= eps)  # [T_h]
+        bridged = on_obs | (t[right] - t[right - 1] <= max_gap + eps)  # [T_h]
+        inside &= bridged
+    held = (frames > t[-1] + eps) & (frames <= t[-1] + hold + eps)  # [T_h] p[-1] (clipped)
+    track[~(inside | held)] = np.nan
+    return track
+
+
+def _stack(tracks: list[np.ndarray], t_hist: int) -> np.ndarray:
+    """[n, T_h, 2] from n tracks [T_h, 2]; [0, T_h, 2] when there are none."""
+    return np.stack(tracks) if tracks else np.zeros((0, t_hist, 2))
+
+
+def _finite_number(name: str, value, error: type[Exception]) -> float:
+    """``value`` as a finite float, else ``error`` naming ``name``."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise error(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(number):
+        raise error(f"{name} must be finite, got {value!r}")
+    return number
+
+
+def _check_settings(step, t_hist, max_gap, hold) -> tuple[float, float, float]:
+    """The checked ``step``, ``max_gap`` (its default filled in) and ``hold``."""
+    step = _finite_number("step", step, ConfigError)
+    if step <= 0:
+        raise ConfigError(f"step must be > 0 seconds (model.frame_interval), got {step!r}")
+    if isinstance(t_hist, bool) or not isinstance(t_hist, (int, np.integer)) or t_hist < 1:
+        raise ConfigError(f"t_hist must be an integer >= 1 (model.t_hist), got {t_hist!r}")
+    max_gap = 2.0 * step if max_gap is None else _finite_number("max_gap", max_gap, ConfigError)
+    if max_gap <= 0:
+        raise ConfigError(f"max_gap must be > 0 seconds (or None: 2 * step), got {max_gap!r}")
+    hold = _finite_number("hold", hold, ConfigError)
+    if hold < 0:
+        raise ConfigError(f"hold must be >= 0 seconds, got {hold!r}")
+    return step, max_gap, hold
+
+
+def _check_rows(times, ids, xy) -> tuple[np.ndarray, list, np.ndarray]:
+    """times [R] float64, ids as a list of R plain Python values, xy [R, 2] float64."""
+    try:
+        t = np.asarray(times, dtype=np.float64)
+        pos = np.asarray(xy, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise DataError(f"times and xy must be numbers ({exc})") from None
+    if t.ndim != 1:
+        raise DataError(f"times: expected [R] (one time per row), got {list(t.shape)}")
+    if pos.shape != (len(t), 2):
+        raise DataError(f"xy: expected [R, 2] with R = {len(t)} (the rows of times), got "
+                        f"{list(pos.shape)}")  # fmt: skip
+    agent = ids.tolist() if isinstance(ids, np.ndarray) else list(ids)  # numpy -> Python ids
+    if len(agent) != len(t):
+        raise DataError(f"ids: expected one id per row ({len(t)}), got {len(agent)}")
+    bad = np.flatnonzero(~np.isfinite(t))
+    if len(bad):
+        raise DataError(f"times: row {int(bad[0])} is not finite ({t[bad[0]]!r}); "
+                        f"{len(bad)} such row(s)")  # fmt: skip
+    bad = np.flatnonzero(~np.isfinite(pos).all(-1))
+    if len(bad):
+        raise DataError(f"xy: row {int(bad[0])} is not finite ({pos[bad[0]].tolist()}); "
+                        f"{len(bad)} such row(s): leave an unseen agent's rows out")  # fmt: skip
+    try:
+        for key in agent:
+            hash(key)
+    except TypeError:
+        raise DataError(f"ids: agent ids must be hashable, got {type(key).__name__}") from None
+    return t, agent, pos

@@ -1,0 +1,161 @@
+"""A tracker's rows -> the models' history at "now" (walkthrough 63-A, finding 8):
+``data.tracks_to_history`` resamples per-agent timestamps and positions to the model's step,
+splits fully seen agents (history) from partly seen ones (context, NaN where unseen), and
+never extrapolates."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from trajpref.data import TrackHistory, tracks_to_history
+from trajpref.errors import ConfigError, DataError
+
+T0 = 1_700_000_000.0  # Unix seconds: the frame times must survive a large clock origin
+
+
+def _walk(agent, start: float, stop: float, y: float, rate: float = 10.0, speed: float = 1.3):
+    """Rows (times, ids, xy) of one agent walking +x at ``speed`` m/s from x = 0 at t = 0, seen
+    at ``rate`` Hz from ``start`` to ``stop`` seconds (inclusive) after T0."""
+    k = np.arange(round(start * rate), round(stop * rate) + 1)
+    t = k / rate  # [n] seconds after T0
+    xy = np.stack([speed * t, np.full_like(t, y)], -1)  # [n, 2]
+    return T0 + t, [agent] * len(t), xy
+
+
+def _rows(*walks):
+    """Concatenated rows of several ``_walk``s."""
+    times = np.concatenate([w[0] for w in walks])
+    ids = [i for w in walks for i in w[1]]
+    xy = np.concatenate([w[2] for w in walks])
+    return times, ids, xy
+
+
+FRAMES = np.array([0.2, 0.6, 1.0, 1.4, 1.8, 2.2, 2.6, 3.0])  # now = 3.0 s, step 0.4 s
+
+
+def test_a_10hz_straight_walk_resampled_at_04s_gives_its_exact_positions():
+    res = tracks_to_history(*_walk(5, 0.0, 3.0, y=2.0), now=T0 + 3.0, step=0.4)
+    assert isinstance(res, TrackHistory)
+    assert res.history.shape == (1, 8, 2) and res.context.shape == (0, 8, 2)
+    assert res.ids == [5] and res.context_ids == [] and res.left_out_ids == []
+    want = np.stack([1.3 * FRAMES, np.full(8, 2.0)], -1)  # 0.26, 0.78, ..., 3.90 m
+    np.testing.assert_allclose(res.history[0], want, atol=1e-6)
+    np.testing.assert_allclose(res.frame_times - T0, FRAMES, atol=1e-6)
+
+
+def test_positions_between_observations_are_interpolated_linearly_per_agent():
+    # 1 Hz, x = 0, 1, 4, 9 at t = 0, 1, 2, 3; frames at 1.8, 2.2, 2.6, 3.0
+    times, xy = np.array([0.0, 1.0, 2.0, 3.0]), np.array([[0, 0], [1, 0], [4, 0], [9, 1]])
+    res = tracks_to_history(times, [1] * 4, xy, now=3.0, step=0.4, t_hist=4, max_gap=1.0)
+    # 1 + 0.8 * 3 = 3.4; 4 + 0.2 * 5 = 5.0; 4 + 0.6 * 5 = 7.0; 9 (y: 0.2, 0.6 of the way to 1)
+    want = [[3.4, 0.0], [5.0, 0.2], [7.0, 0.6], [9.0, 1.0]]
+    np.testing.assert_allclose(res.history[0], want, atol=1e-9)
+
+
+def test_a_track_starting_mid_window_is_context_with_leading_nans():
+    rows = _rows(_walk(1, 0.0, 3.0, y=0.0), _walk(2, 1.9, 3.0, y=3.0))
+    res = tracks_to_history(*rows, now=T0 + 3.0, step=0.4)
+    assert res.ids == [1] and res.context_ids == [2]
+    assert res.context.shape == (1, 8, 2)
+    assert np.isnan(res.context[0, :5]).all()  # frames at 0.2 .. 1.8 s: before t = 1.9
+    want = np.stack([1.3 * FRAMES[5:], np.full(3, 3.0)], -1)  # 2.2, 2.6, 3.0 s
+    np.testing.assert_allclose(res.context[0, 5:], want, atol=1e-6)
+
+
+def test_a_gap_longer_than_max_gap_is_not_bridged_and_a_shorter_one_is():
+    gap = _rows(_walk(1, 0.0, 1.0, y=0.0), _walk(1, 2.1, 3.0, y=0.0))  # unseen 1.0 -> 2.1 s
+    res = tracks_to_history(*gap, now=T0 + 3.0, step=0.4)  # default max_gap 0.8 s
+    assert res.ids == [] and res.context_ids == [1]
+    seen = np.isfinite(res.context[0]).all(-1)
+    assert seen.tolist() == [True, True, True, False, False, True, True, True]  # 1.4, 1.8 NaN
+    bridged = tracks_to_history(*gap, now=T0 + 3.0, step=0.4, max_gap=1.2)
+    assert bridged.ids == [1]
+    np.testing.assert_allclose(bridged.history[0, :, 0], 1.3 * FRAMES, atol=1e-6)
+    short = _rows(_walk(1, 0.0, 1.2, y=0.0), _walk(1, 1.7, 3.0, y=0.0))  # 0.5 s <= 0.8 s
+    assert tracks_to_history(*short, now=T0 + 3.0, step=0.4).ids == [1]
+
+
+def test_unsorted_rows_give_the_same_result_and_ids_come_back_in_ascending_order():
+    rows = _rows(_walk(7, 0.0, 3.0, y=0.0), _walk(3, 0.0, 3.0, y=2.0), _walk(5, 1.0, 3.0, y=4.0))
+    res = tracks_to_history(*rows, now=T0 + 3.0, step=0.4)
+    perm = np.random.default_rng(0).permutation(len(rows[0]))
+    times, ids, xy = rows[0][perm], np.asarray(rows[1])[perm], rows[2][perm]
+    shuffled = tracks_to_history(times, ids, xy, now=T0 + 3.0, step=0.4)
+    assert res.ids == shuffled.ids == [3, 7] and res.context_ids == shuffled.context_ids == [5]
+    assert all(type(i) is int for i in shuffled.ids)  # numpy ids come back as Python values
+    np.testing.assert_array_equal(res.history, shuffled.history)
+    np.testing.assert_array_equal(res.context, shuffled.context)
+    np.testing.assert_allclose(res.history[:, 0, 1], [2.0, 0.0])  # rows follow the ids
+    named = _rows(_walk("bob", 0.0, 3.0, y=0.0), _walk("amy", 0.0, 3.0, y=1.0))
+    assert tracks_to_history(*named, now=T0 + 3.0, step=0.4).ids == ["amy", "bob"]
+
+
+def test_agents_unseen_at_now_are_left_out_unless_held_and_later_rows_are_not_read():
+    rows = _rows(_walk(1, 0.0, 3.0, y=0.0), _walk(2, 0.0, 2.5, y=2.0), _walk(3, 3.5, 4.0, y=0))
+    res = tracks_to_history(*rows, now=T0 + 3.0, step=0.4)
+    assert res.ids == [1] and res.context_ids == [] and res.left_out_ids == [2]  # 3: not yet
+    held = tracks_to_history(*rows, now=T0 + 3.0, step=0.4, hold=0.5)
+    assert held.ids == [1, 2]
+    np.testing.assert_allclose(held.history[1, -2:], [[1.3 * 2.5, 2.0]] * 2)  # 2.6, 3.0 held
+    # replaying the log at now = 2.0 s reads only the rows up to 2.0 s
+    past = tracks_to_history(*rows, now=T0 + 2.0, step=0.4)
+    assert past.ids == [] and past.context_ids == [1, 2]  # frames from -0.8 s: leading NaNs
+    np.testing.assert_allclose(past.context[0, -1], [1.3 * 2.0, 0.0], atol=1e-6)
+
+
+def test_duplicate_rows_count_once_and_conflicting_ones_are_refused():
+    times, ids, xy = _walk(1, 0.0, 3.0, y=0.0)
+    dup = tracks_to_history(np.r_[times, times[5]], ids + [1], np.r_[xy, xy[5:6]],
+                            now=T0 + 3.0, step=0.4)  # fmt: skip
+    np.testing.assert_allclose(dup.history[0, :, 0], 1.3 * FRAMES, atol=1e-6)
+    with pytest.raises(DataError, match=r"agent 1 has two rows at time .* different positions"):
+        tracks_to_history(np.r_[times, times[5]], ids + [1], np.r_[xy, xy[5:6] + 1.0],
+                          now=T0 + 3.0, step=0.4)  # fmt: skip
+
+
+def test_an_empty_view_gives_empty_arrays():
+    res = tracks_to_history(np.zeros(0), [], np.zeros((0, 2)), now=10.0, step=0.4)
+    assert res.history.shape == (0, 8, 2) and res.context.shape == (0, 8, 2)
+    assert res.ids == res.context_ids == res.left_out_ids == []
+
+
+@pytest.mark.parametrize(
+    ("change", "error", "match"),
+    [
+        ({"times": np.zeros((3, 1))}, DataError, r"times: expected \[R\]"),
+        ({"xy": np.zeros((3, 3))}, DataError, r"xy: expected \[R, 2\] with R = 3"),
+        ({"ids": [1, 1]}, DataError, r"ids: expected one id per row \(3\), got 2"),
+        ({"times": [0.0, np.nan, 0.2]}, DataError, r"times: row 1 is not finite"),
+        ({"xy": [[0, 0], [0, np.inf], [0, 0]]}, DataError, r"xy: row 1 is not finite"),
+        ({"ids": [1, "a", 2]}, DataError, r"agent ids must sort among themselves"),
+        ({"now": -1.0}, DataError, r"now \(-1.0\) is before every observation"),
+        ({"now": float("nan")}, DataError, r"now must be finite"),
+        ({"step": 0.0}, ConfigError, r"step must be > 0 seconds"),
+        ({"step": -0.4}, ConfigError, r"step must be > 0 seconds"),
+        ({"t_hist": 0}, ConfigError, r"t_hist must be an integer >= 1"),
+        ({"max_gap": 0.0}, ConfigError, r"max_gap must be > 0 seconds"),
+        ({"hold": -0.1}, ConfigError, r"hold must be >= 0 seconds"),
+    ],
+)
+def test_bad_input_is_a_clear_error(change, error, match):
+    args = {"times": [0.0, 0.1, 0.2], "ids": [1, 1, 1], "xy": np.zeros((3, 2)), "now": 0.2,
+            "step": 0.1}  # fmt: skip
+    args.update(change)
+    with pytest.raises(error, match=match):
+        tracks_to_history(**args)
+
+
+def test_its_output_runs_through_predict_scene_with_context():
+    from trajpref.models.registry import load_predictor
+    from trajpref.score import predict_scene
+
+    model = load_predictor("zara1/generator", device="cpu")
+    rows = _rows(_walk(1, 0.0, 3.0, y=0.0), _walk(2, 0.0, 3.0, y=1.5), _walk(3, 1.9, 3.0, y=4.0))
+    res = tracks_to_history(*rows, now=T0 + 3.0, step=model.frame_interval, t_hist=model.t_hist)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        futures = predict_scene(model, res.history, 20, context=res.context, frame_interval=0.4)
+    assert futures.shape == (20, 2, 12, 2) and np.isfinite(futures).all()
+    # the partly seen agent is counted as a context row the model does not read
+    assert any("1 of 1 context row(s) ignored" in str(w.message) for w in caught)
