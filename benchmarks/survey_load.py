@@ -70,7 +70,9 @@ def rater_session(
                 ratings = {"social": rng.randint(1, 5), "kinetics": rng.randint(1, 5)}
                 call("PUT", f"/api/raters/{rater}/answers/{s}/{p}", ratings)
                 sent[(s, p)].append(ratings)
-        out["submitted"] = call("POST", f"/api/raters/{rater}/submit").get("submitted", False)
+        out["submitted"] = call("POST", f"/api/raters/{rater}/submit", {"submit": True}).get(
+            "submitted", False
+        )
     except Exception as exc:  # a failed connection is a failed check, reported below
         out["error"] = f"{type(exc).__name__}: {exc}"
     finally:

@@ -13,6 +13,8 @@ from trajpref.survey.manifest import load_study
 from trajpref.survey.server import LOOPBACK_NAMES, create_app, serve_subprocess
 
 PUT = "/api/raters/r1/answers/s01/A"
+SUBMIT = {"submit": True}
+"""The body of ``POST .../submit`` (what the page sends)."""
 
 
 @pytest.fixture
@@ -134,7 +136,7 @@ def test_only_the_studys_images_and_the_page_are_served(client, path):
 def test_wrong_methods_and_submissions_get_4xx(client):
     assert client.get(PUT).status_code == 405
     assert client.post("/api/study").status_code == 405
-    r = client.post("/api/raters/r1/submit")
+    r = client.post("/api/raters/r1/submit", json=SUBMIT)
     assert r.status_code == 409 and "9 of 9" in r.json()["error"]
 
 
@@ -143,9 +145,74 @@ def test_a_full_study_can_be_submitted(client, store):
         for p in scene["panels"]:
             path = f"/api/raters/judge.7/answers/{scene['id']}/{p['id']}"
             assert client.put(path, json={"social": 3, "kinetics": 4}).status_code == 200
-    assert client.post("/api/raters/judge.7/submit").json()["submitted"]
+    assert client.post("/api/raters/judge.7/submit", json=SUBMIT).json()["submitted"]
     r = client.put("/api/raters/judge.7/answers/s01/A", json={"social": 1, "kinetics": 1})
     assert r.status_code == 409 and _count(store) == 9
+
+
+def _answer_all(client, rater: str) -> None:
+    for scene in client.get("/api/study").json()["scenes"]:
+        for p in scene["panels"]:
+            path = f"/api/raters/{rater}/answers/{scene['id']}/{p['id']}"
+            assert client.put(path, json={"social": 3, "kinetics": 4}).status_code == 200
+
+
+def test_a_cross_site_form_post_cannot_submit(client, store):
+    """A page elsewhere can make the browser post an HTML form (urlencoded, multipart or
+    text/plain), never a JSON request: submit takes JSON only, so such a post leaves a rater
+    whose panels are all answered unsubmitted, free to revise."""
+    _answer_all(client, "bob")
+    for ctype, body in [
+        ("application/x-www-form-urlencoded", "submit=true"),
+        ("text/plain", '{"submit": true}'),
+        ("multipart/form-data; boundary=x", "--x--"),
+    ]:
+        r = client.post("/api/raters/bob/submit", content=body.encode(),
+                        headers={"Content-Type": ctype})  # fmt: skip
+        assert r.status_code == 415 and "JSON" in r.json()["error"], ctype
+    assert client.post("/api/raters/bob/submit").status_code == 415  # no body at all
+    assert client.get("/api/raters/bob").json()["submitted"] is False
+    r = client.put("/api/raters/bob/answers/s01/A", json={"social": 1, "kinetics": 1})
+    assert r.status_code == 200 and r.json()["revision"] == 2
+
+
+@pytest.mark.parametrize("body", [{}, {"submit": False}, {"submit": 1}, {"submit": "true"},
+                                  {"submit": True, "extra": 1}, [True], True, None])  # fmt: skip
+def test_submit_needs_the_body_submit_true(client, body):
+    _answer_all(client, "bob")
+    r = client.post("/api/raters/bob/submit", content=json.dumps(body).encode(),
+                    headers={"Content-Type": "application/json"})  # fmt: skip
+    assert r.status_code == 422 and "submit" in r.json()["error"]
+    assert client.get("/api/raters/bob").json()["submitted"] is False
+
+
+@pytest.mark.parametrize(
+    "origin, status",
+    [
+        ("http://evil.example", 403),
+        ("null", 403),
+        ("http://testserver.evil.example", 403),
+        ("http://testserver:8080", 403),
+        ("http://testserver", 200),
+        (None, 200),  # no Origin header (curl, scripts): allowed
+    ],
+)
+def test_a_change_from_another_origin_is_refused(client, store, origin, status):
+    """PUT answers, POST consent and POST submit from a page of another origin get 403 and
+    change nothing (the TestClient's own origin is http://testserver)."""
+    headers = {} if origin is None else {"Origin": origin}
+    for scene in client.get("/api/study").json()["scenes"]:
+        for p in scene["panels"]:
+            path = f"/api/raters/bob/answers/{scene['id']}/{p['id']}"
+            r = client.put(path, json={"social": 3, "kinetics": 4}, headers=headers)
+            assert r.status_code == status
+    r = client.post("/api/raters/bob/submit", json=SUBMIT, headers=headers)
+    assert r.status_code == status
+    if status == 403:
+        assert "origin" in r.json()["error"] and _count(store) == 0
+        assert client.get("/api/raters/bob").json()["submitted"] is False
+    else:
+        assert r.json()["submitted"] and _count(store) == 9
 
 
 def test_the_host_check_refuses_foreign_names_on_loopback(store):

@@ -9,7 +9,8 @@ Routes::
                                                  the consent text and its ``consent_hash``
     GET  /api/raters/{rater}                     a rater's answers so far (to resume)
     PUT  /api/raters/{rater}/answers/{scene}/{panel}   {"social": 1..5, "kinetics": 1..5}
-    POST /api/raters/{rater}/submit              mark the answers final
+    POST /api/raters/{rater}/submit              {"submit": true}: mark the answers final
+                                                 (every panel answered, else 409)
     POST /api/raters/{rater}/consent             {"agree": true, "text_hash": consent_hash}:
                                                  agree to the study's consent text (a study
                                                  with one refuses answers before: 403; a
@@ -19,8 +20,9 @@ Security: binds to 127.0.0.1 unless told otherwise, and then refuses requests wh
 header is not a loopback name (DNS rebinding); serves only the files named in the manifest
 and the three static files (a fixed table: no path from a request ever reaches the file
 system); reads at most ``max_body`` bytes of a body (413 beyond); takes JSON only
-(``Content-Type: application/json``, so a cross-site form cannot post answers or an
-agreement to the consent text); sends a
+(``Content-Type: application/json``, so a cross-site form cannot post answers, an agreement
+to the consent text or a submission: 415); refuses a change (PUT answers, POST consent or
+submit) whose ``Origin`` header names another host than its ``Host`` header (403); sends a
 strict Content-Security-Policy. Errors are JSON ``{"error": message}`` with a 4xx status.
 The access log shows ``/api/raters/<id>/...`` in place of the rater id (personal data:
 ``RaterIdMask``).
@@ -169,6 +171,27 @@ async def _read_json(request: Request, limit: int) -> Any:
         raise AnswerError("the body is not valid JSON", 400) from None
 
 
+def _check_origin(request: Request) -> None:
+    """AnswerError 403 for a request whose ``Origin`` header (a browser sends it with every
+    PUT and POST) is there and names another host (and port) than the ``Host`` header: a
+    request made by a page of another site. No ``Origin`` (curl, scripts) passes."""
+    origin = request.headers.get("origin")
+    if origin is None:
+        return
+    host = request.headers.get("host", "").lower()
+    _, sep, netloc = origin.lower().partition("://")
+    if not sep or not host or netloc != host:
+        raise AnswerError(f"request from another origin ({origin!r:.60}) refused", 403)
+
+
+def check_submission(body: Any) -> None:
+    """``{"submit": true}`` (the body of ``POST .../submit``, nothing else); AnswerError 422
+    otherwise."""
+    if not isinstance(body, dict) or set(body) != {"submit"} or body["submit"] is not True:
+        raise AnswerError('the body of a submission must be the JSON object {"submit": true}',
+                          422)  # fmt: skip
+
+
 def create_app(study: Study, store: AnswerStore, max_body: int = MAX_BODY,
                allowed_hosts: tuple[str, ...] | None = None) -> Starlette:  # fmt: skip
     """The web application of one study. ``allowed_hosts`` (e.g. ``LOOPBACK_NAMES``) turns
@@ -220,20 +243,34 @@ def create_app(study: Study, store: AnswerStore, max_body: int = MAX_BODY,
             check_rater(p["rater"])
             store.check_panel(p["scene"], p["panel"])
             ratings = await _read_json(request, max_body)
+            _check_origin(request)
             saved = await run_in_threadpool(store.save, p["rater"], p["scene"], p["panel"],
                                             ratings)  # fmt: skip
         except AnswerError as exc:
             return _error(str(exc), exc.status)
         return JSONResponse({"saved": True, **saved})
 
-    submit = per_rater(store.submit)
+    async def submit(request: Request) -> Response:
+        """Mark the rater's answers final: JSON ``{"submit": true}`` only (a cross-site form
+        cannot send it)."""
+        try:
+            rater = check_rater(request.path_params["rater"])
+            body = await _read_json(request, max_body)
+            _check_origin(request)
+            check_submission(body)
+            done = await run_in_threadpool(store.submit, rater)
+        except AnswerError as exc:
+            return _error(str(exc), exc.status)
+        return JSONResponse(done)
 
     async def consent(request: Request) -> Response:
         """The rater's agreement: JSON only (a cross-site form cannot send it), naming the
         text the page showed."""
         try:
             rater = check_rater(request.path_params["rater"])
-            text_hash = check_agreement(await _read_json(request, max_body))
+            body = await _read_json(request, max_body)
+            _check_origin(request)
+            text_hash = check_agreement(body)
             agreed = await run_in_threadpool(store.consent, rater, text_hash)
         except AnswerError as exc:
             return _error(str(exc), exc.status)

@@ -281,7 +281,7 @@ function setLoginError(text) {
 async function submitAll() {
   await state.saving;
   try {
-    await api("POST", `api/raters/${encodeURIComponent(state.rater)}/submit`);
+    await api("POST", `api/raters/${encodeURIComponent(state.rater)}/submit`, { submit: true });
   } catch (e) {
     setStatus(`not submitted: ${e.message}`, true);
     return;
