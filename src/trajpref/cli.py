@@ -78,6 +78,8 @@ from trajpref.models.registry import load_predictor
 from trajpref.models.timing import (
     UNKNOWN_UNITS,
     model_timing,
+    pace_problem,
+    same_units,
     timing_problems,
     trained_otherwise,
     unstated_timing,
@@ -1096,6 +1098,23 @@ def _warn_model_and_scorer(args, ds) -> str | None:
     return "; ".join(notes) or None
 
 
+def _warn_observed_pace(args, model, scorer, ds) -> None:
+    """One warning per run when the data's observed pace is far above the model's training
+    (``timing.pace_problem``: the median observed step of the split's agents above
+    ``timing.PACE_LIMIT`` model units; data in other units, e.g. centimetres for a metre
+    model, which the generator's speed clamp hides and the score does not), for the model,
+    else for its ``scorer`` (the constant-velocity baseline reads any units)."""
+    history = np.concatenate([s.history for s in ds.scenes]) if len(ds) else None  # [N, T_h, 2]
+    if history is None:
+        return
+    base = getattr(model, "base", model)  # a SelectingPredictor's generator
+    for obj, name in ((base, args.model), (scorer, getattr(args, "scorer", None))):
+        problem = None if obj is None else pace_problem(obj, history, name or "the scorer")
+        if problem is not None:
+            warnings.warn(problem, stacklevel=2)
+            return
+
+
 def _joined(*notes: str | None) -> str | None:
     """What a result records as ``overlap``: the notes given, joined; None when none."""
     return "; ".join(n for n in notes if n) or None
@@ -1409,6 +1428,7 @@ def cmd_evaluate(args) -> int:
     model, samples = _selecting(args, model, device, scores=scorer is not None)
     ds = _load(args)
     overlap = _joined(overlap, _warn_model_and_scorer(args, ds))
+    _warn_observed_pace(args, model, scorer, ds)
     start = time.perf_counter()
     result = evaluate(
         model, ds, samples, args.seed, device, args.max_agents,
@@ -1484,6 +1504,7 @@ def _evaluate_in_context(args, overlap: str | None = None) -> int:
     sampling = _sampling_fields(model)
     ds = _load(args)
     own = _warn_if_trained_otherwise(args.model, ds)
+    _warn_observed_pace(args, model, None, ds)
     overlap = _joined(overlap, own and f"model {own}")
     result = evaluate_in_context(model, ds, cfg, args.samples, args.seed, device=device,
                                  progress=not args.no_progress)  # fmt: skip
@@ -1545,17 +1566,24 @@ def cmd_predict(args) -> int:
     model, samples = _selecting(args, model, device, scores=scorer is not None)
     ds = _load(args)
     overlap = _joined(overlap, _warn_model_and_scorer(args, ds))
+    _warn_observed_pace(args, model, scorer, ds)
     arrays = predict_dataset(
         model, ds, samples, args.seed, device, args.max_agents,
         progress=not args.no_progress, scorer=scorer,
     )  # fmt: skip
+    ids = _source_agent_ids(ds, len(arrays["scene"]))  # [N] or None
     if trajnet:
+        _warn_trajnet_units(ds)
         interval = ds.info.frame_interval
-        write_trajnet(args.out, arrays["history"], arrays["pred"], arrays["scene"], interval)
+        write_trajnet(args.out, arrays["history"], arrays["pred"], arrays["scene"], interval,
+                      agent_id=ids)  # fmt: skip
         if args.truth is not None:
             write_trajnet_truth(args.truth, arrays["history"], arrays["future"], arrays["scene"],
-                                interval)  # fmt: skip
+                                interval, agent_id=ids)  # fmt: skip
     else:
+        arrays["split"] = np.array(ds.info.split)  # 0-d: scene_id names the file, not its split
+        if ids is not None:
+            arrays["agent_id"] = ids
         meta = _predict_meta(args, ds, samples, scorer, overlap, sampling, device)
         with atomic_path(args.out) as tmp:
             with open(tmp, "wb") as fh:  # meta: a 0-d string, read without pickle
@@ -1573,6 +1601,41 @@ def cmd_predict(args) -> int:
         else f"wrote {args.out}: pred {tuple(arrays['pred'].shape)} [K, N, T_f, 2]"
     )
     return 0
+
+
+def _source_agent_ids(ds, agents: int) -> np.ndarray | None:
+    """[N] each predicted agent's id in the source data, in ``predict_dataset``'s order (the
+    scenes in dataset order, each scene's agents in its order), from the scenes' ``agent_id``
+    [P] where every scene carries one; None otherwise. Integers as int64, other numbers as
+    float64, anything else as strings."""
+    parts = [getattr(s, "agent_id", None) for s in ds.scenes]
+    if not parts or any(p is None for p in parts):
+        return None
+    ids = np.concatenate([np.asarray(p).reshape(-1) for p in parts])  # [N]
+    if len(ids) != agents:
+        return None
+    if ids.dtype.kind in "iu":
+        return ids.astype(np.int64)
+    if ids.dtype.kind == "f":
+        finite = np.isfinite(ids).all()
+        whole = finite and (ids == np.round(ids)).all() and (np.abs(ids) < 2**53).all()
+        return ids.astype(np.int64) if whole else ids.astype(np.float64)
+    return ids.astype(str)  # exact ids beyond 2**53 (object ints) and names alike
+
+
+def _warn_trajnet_units(ds) -> None:
+    """A warning when ``predict --format trajnet`` writes data in other units than metres
+    (units given and not metres: pixels, centimetres): TrajNet++'s tools assume metres (its
+    collision radius is 0.1 m). Unknown units (a folder read without ``--units``) pass."""
+    units = ds.info.units
+    if units in UNKNOWN_UNITS or same_units(units, "m"):
+        return
+    warnings.warn(
+        f"--format trajnet writes this data's coordinates as they are, in {units}; "
+        "TrajNet++'s tools assume metres (its collision metrics use a 0.1 m radius): "
+        "convert them to metres for its evaluator",
+        stacklevel=2,
+    )
 
 
 def _predict_meta(args, ds, samples: int, scorer, overlap, sampling: dict, device) -> dict:
@@ -1751,6 +1814,8 @@ def cmd_plot(args) -> int:
     _warn_fixed_sampling(args, model)
     ds = _load(args)
     _warn_model_and_scorer(args, ds)
+    scorer = _scorer(args.scorer, device, args) if args.scorer else None  # --neighbour-radius
+    _warn_observed_pace(args, model, scorer, ds)
     args.scene = _scene_index(args, ds)
     scene = ds[args.scene]
     batch, pred, random = _plot_samples(model, ds, args, device)  # pred [K, P, T_f, 2]
@@ -1758,8 +1823,7 @@ def cmd_plot(args) -> int:
     style = {"limits": args.limits, "width": args.width, "dpi": args.dpi}
     samples = pred.cpu().numpy()  # [K, P, T_f, 2]
     order = scores = None
-    if args.scorer:
-        scorer = _scorer(args.scorer, device, args)  # at --neighbour-radius, if given
+    if scorer is not None:
         scores = scorer.score(batch, pred).agent_ats.cpu().numpy()  # [K, P]
         top = min(args.draw_samples or 2, args.samples)
         order = np.argsort(-scores, axis=0, kind="stable")[:top]  # [top, P] as drawn

@@ -260,14 +260,44 @@ def _coords(xy: np.ndarray, decimals: int | None) -> np.ndarray:
     return np.round(xy.astype(np.float64), decimals).astype(str)
 
 
-def _track_lines(frames, agents, xy, decimals, k: int | None = None) -> list[str]:
-    """One ``track`` line per row; predictions (``k``) carry their scene id (= the agent)."""
+def _track_lines(frames, agents, xy, decimals, k: int | None = None,
+                 scenes=None) -> list[str]:  # fmt: skip
+    """One ``track`` line per row; predictions (``k``) carry their TrajNet++ scene id
+    (``scenes`` [R]: the predicted agent's index)."""
     text = _coords(xy, decimals)  # [R, 2]
     extra = "" if k is None else f', "prediction_number": {k}, "scene_id": '
+    ids = agents.tolist() if scenes is None else scenes.tolist()
     out = []
-    for f, p, (x, y) in zip(frames.tolist(), agents.tolist(), text.tolist(), strict=True):
-        tail = "" if k is None else f"{extra}{p}"
+    rows = zip(frames.tolist(), agents.tolist(), text.tolist(), ids, strict=True)
+    for f, p, (x, y), i in rows:
+        tail = "" if k is None else f"{extra}{i}"
         out.append(f'{{"track": {{"f": {f}, "p": {p}, "x": {x}, "y": {y}{tail}}}}}\n')
+    return out
+
+
+def trajnet_agent_ids(agent_id, scene) -> np.ndarray:
+    """[N] int64 TrajNet++ agent ids (``"p"``) from the source data's ids ``agent_id`` [N]
+    (numbers as read, or None) for agents numbered by ``scene`` [N]: the source ids where
+    each is an integer (TrajNet++'s ids are integers) and no two agents of one scene share
+    one; else the agents' indices 0..N-1 (the ids of an export without source ids)."""
+    scene = np.asarray(scene)
+    n = len(scene)
+    if agent_id is None:
+        return np.arange(n)
+    ids = np.asarray(agent_id)
+    if ids.shape != (n,):
+        raise DataError(f"agent_id must be [N={n}], got {ids.shape}")
+    try:
+        values = [int(v) for v in ids.tolist()]
+        exact = all(v == x for v, x in zip(values, ids.tolist(), strict=True))
+    except (TypeError, ValueError, OverflowError):  # strings, NaN, infinities
+        return np.arange(n)
+    if not exact or any(abs(v) >= 2**63 for v in values):
+        return np.arange(n)
+    out = np.array(values, dtype=np.int64)  # [N]
+    pairs = np.stack([scene.astype(np.int64), out], axis=1)  # [N, 2] (scene, id)
+    if len(np.unique(pairs, axis=0)) != n:  # an id twice in one scene: rows would merge
+        return np.arange(n)
     return out
 
 
@@ -278,6 +308,7 @@ def write_trajnet(
     scene,
     frame_interval: float = 0.4,
     decimals: int | None = None,
+    agent_id=None,
 ) -> int:
     """Write sampled futures as a TrajNet++ prediction file; return the number of TrajNet++
     scenes written (one per agent).
@@ -285,7 +316,8 @@ def write_trajnet(
     ``history`` [N, T_h, 2], ``pred`` [K, N, T_f, 2] and ``scene`` [N] (scene index per agent:
     0, 1, ... non-decreasing) are the arrays ``trajpref predict`` saves (numpy or torch).
     TrajNet++ scores one primary agent per scene, so every agent gets its own TrajNet++ scene
-    (scene id = agent id = its index n) spanning the frames of its scene: scene b holds frames
+    (scene id = its index n; agent id the same, or its ``agent_id``) spanning the frames of
+    its scene: scene b holds frames
     ``b * (T_h + T_f)`` onwards, one apart, with ``fps = 1 / frame_interval``. The file holds the
     scene rows, the observed rows and, for each agent and sample k, its predicted rows with
     ``"prediction_number": k`` and ``"scene_id"``; ``write_trajnet_truth`` writes the matching
@@ -294,6 +326,12 @@ def write_trajnet(
 
     TrajNet++'s evaluator reads predictions 0, 1 and 2 for its Top-3 metrics whenever there is
     more than one, so K must be 1 or at least 3.
+
+    ``agent_id`` [N] (optional): each agent's id in the source data; where they are integers,
+    unique within each scene (``trajnet_agent_ids``), they are the rows' agent ids ``"p"``
+    (scene ids stay 0..N-1, one per agent), so that predictions map back to the source's
+    agents; otherwise, and without them, ``"p"`` is the agent's index n. TrajNet++'s tools
+    assume metres (its collision radius is 0.1 m): the coordinates are written as given.
     """
     history, pred, scene, _ = _check_arrays(history, pred, scene, None)
     if pred.shape[0] == 2:
@@ -301,7 +339,8 @@ def write_trajnet(
             "TrajNet++'s evaluator needs 1 or at least 3 predictions per agent (its Top-3 "
             "reads predictions 0, 1 and 2); got K=2"
         )
-    return _write(path, history, scene, frame_interval, decimals, pred=pred)
+    agents = trajnet_agent_ids(agent_id, scene)  # [N]
+    return _write(path, history, scene, frame_interval, decimals, pred=pred, agents=agents)
 
 
 def write_trajnet_truth(
@@ -311,34 +350,40 @@ def write_trajnet_truth(
     scene,
     frame_interval: float = 0.4,
     decimals: int | None = None,
+    agent_id=None,
 ) -> int:
     """Write the ground truth that matches ``write_trajnet``'s file (same scene, agent and
     frame numbers; observed and true future rows): the file TrajNet++'s evaluator compares a
-    prediction file with. ``future`` is [N, T_f, 2]; the rest as in ``write_trajnet``."""
+    prediction file with. ``future`` is [N, T_f, 2]; the rest as in ``write_trajnet`` (give
+    both the same ``agent_id``)."""
     fut = np.asarray(future, dtype=np.float32)
     history, _, scene, future = _check_arrays(history, fut[None], scene, fut)
-    return _write(path, history, scene, frame_interval, decimals, future=future)
+    agents = trajnet_agent_ids(agent_id, scene)  # [N]
+    return _write(path, history, scene, frame_interval, decimals, future=future, agents=agents)
 
 
-def _write(path, history, scene, frame_interval, decimals, pred=None, future=None) -> int:
+def _write(path, history, scene, frame_interval, decimals, pred=None, future=None,
+           agents=None) -> int:  # fmt: skip
     if not (math.isfinite(frame_interval) and frame_interval > 0):
         raise ConfigError(f"frame_interval must be > 0 seconds, got {frame_interval}")
     n, t_hist = history.shape[:2]
     t_fut = pred.shape[2] if pred is not None else future.shape[1]
     t_total = t_hist + t_fut
-    agents = np.arange(n)  # [N] TrajNet++ agent id = scene id = index
+    if agents is None:
+        agents = np.arange(n)  # [N] TrajNet++ agent id = index
     first = scene * t_total  # [N] first frame of each agent's scene
     fps = 1.0 / frame_interval
     lines = [
-        f'{{"scene": {{"id": {a}, "p": {a}, "s": {f}, "e": {f + t_total - 1}, '
+        f'{{"scene": {{"id": {i}, "p": {a}, "s": {f}, "e": {f + t_total - 1}, '
         f'"fps": {fps:g}, "tag": [0, []]}}}}\n'
-        for a, f in zip(agents.tolist(), first.tolist(), strict=True)
+        for i, (a, f) in enumerate(zip(agents.tolist(), first.tolist(), strict=True))
     ]
     obs_frames = first[:, None] + np.arange(t_hist)  # [N, T_h]
     fut_frames = (first[:, None] + t_hist + np.arange(t_fut)).ravel()  # [N * T_f]
     lines += _track_lines(obs_frames.ravel(), np.repeat(agents, t_hist),
                           history.reshape(-1, 2), decimals)  # fmt: skip
     per_agent = np.repeat(agents, t_fut)  # [N * T_f]
+    per_scene = np.repeat(np.arange(n), t_fut)  # [N * T_f] TrajNet++ scene id = agent index
     with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
         fh.writelines(lines)
         if future is not None:
@@ -346,6 +391,8 @@ def _write(path, history, scene, frame_interval, decimals, pred=None, future=Non
         else:
             for k in range(pred.shape[0]):
                 fh.writelines(
-                    _track_lines(fut_frames, per_agent, pred[k].reshape(-1, 2), decimals, k)
+                    _track_lines(
+                        fut_frames, per_agent, pred[k].reshape(-1, 2), decimals, k, per_scene
+                    )
                 )
     return n

@@ -15,7 +15,10 @@ import warnings
 from collections.abc import Callable
 from typing import Any
 
+import torch
+
 from trajpref.data.registry import SPECS
+from trajpref.data.transforms import observed_pace
 from trajpref.errors import ConfigError
 from trajpref.metrics import METRE_UNITS
 
@@ -144,3 +147,82 @@ def check_pace(
     problems = timing_problems(known, frame_interval, units, _resample_hint)
     if problems:
         warnings.warn(trained_otherwise(name, timing, problems), stacklevel=stacklevel)
+
+
+PACE_REFERENCE = 0.582
+"""The fastest of the training splits' 99th percentiles of the observed step (model units per
+step, first to last observed position, ``data.transforms.observed_pace``): NBA's 0.582; the
+others 0.28 (robo-sim) to 0.529 (SDD) (docs/pretraining.md, "An input speed clamp")."""
+PACE_LIMIT = 5.0
+"""``check_observed_pace`` warns when the ``PACE_QUANTILE`` of the observed steps of the agents
+handed over at once exceeds this many model units per step: about 8.6 times
+``PACE_REFERENCE`` (zara1, data scale 1.47 m: 7.4 m per 0.4 s step, 18 m/s). Positions in
+centimetres given to a metre model move 100 times their metre pace (a walker 15-50 model
+units per step). No scene of the published ETH/UCY and SDD training and test splits nor of
+robo's and nba's test splits reaches 2.4 (SDD's fastest training scene; 0.73 on the ETH/UCY
+ones, 0.58 on nba's), each read with its own model's scale (2026-12-06)."""
+PACE_QUANTILE = 0.9
+"""The quantile over agents that ``check_observed_pace`` compares with ``PACE_LIMIT``: the
+90th percentile, not the median, as most agents of many scenes stand (the median of hotel's
+test split in centimetres stays below the limit; its 90th percentile is above it in 60 % of
+its scenes), and not the largest, so that one mistracked agent
+among many is not taken for the data's units."""
+
+
+def pace_quantile(history: Any, scale: float, q: float = PACE_QUANTILE) -> tuple[float, int] | None:
+    """The ``q`` quantile over agents (linear interpolation) of the observed step
+    (``data.transforms.observed_pace``: first to last observed position per step, divided by
+    ``scale``) of ``history`` [N, T_h, 2] (numpy or torch; agents with a non-finite position
+    are left out), and the number of agents it was taken over; None when no agent has two
+    finite observed steps."""
+    if isinstance(history, torch.Tensor):
+        hist = history.detach().to("cpu", torch.float64)  # [N, T_h, 2]
+    else:
+        hist = torch.as_tensor(history, dtype=torch.float64)  # [N, T_h, 2]
+    if hist.ndim != 3 or hist.shape[1] < 2 or hist.shape[0] == 0:
+        return None
+    pace = observed_pace(hist, scale)  # [N] model units per step
+    pace = pace[pace.isfinite()]  # [N'] agents seen at every step
+    if not len(pace):
+        return None
+    return float(pace.quantile(q)), len(pace)
+
+
+def pace_problem(obj: Any, history: Any, name: str = "this model") -> str | None:
+    """The warning text when the ``PACE_QUANTILE`` of the observed steps of ``history``
+    [N, T_h, 2] (positions in the data's units: every agent that one call or one run hands to
+    ``obj``) exceeds ``PACE_LIMIT`` model units per step, the units of ``obj`` (a predictor or
+    scorer: positions divided by its data scale ``obj.scale``; one without a scale, the
+    constant-velocity baseline, reads any units); None otherwise. The model's units are
+    ``obj.units`` where known."""
+    scale = getattr(obj, "scale", None)
+    if isinstance(scale, bool) or not isinstance(scale, numbers.Real) or not scale > 0:
+        return None
+    found = pace_quantile(history, float(scale))
+    if found is None or not found[0] > PACE_LIMIT:
+        return None
+    pace, agents = found
+    units = getattr(obj, "units", None) or "unknown"
+    factor = pace / PACE_REFERENCE
+    where = (f"the {PACE_QUANTILE:.0%} quantile of the observed step of {agents} agents is"
+             if agents > 1 else "the one agent's observed step is")  # fmt: skip
+    return (f"{name} is given agents about {factor:.0f} times faster than it was trained on: "
+            f"{where} {pace:.3g} model units ({pace * scale:.3g} data units / the model's data "
+            f"scale {scale:g}), where the 99th percentile of any "
+            f"published model's training data is at most {PACE_REFERENCE} (warned above "
+            f"{PACE_LIMIT:g}). The data "
+            f"looks like it is in other units than the model's ({units}; centimetres given to "
+            "a metre model move 100 times as far) or at another pace: its predictions, and the "
+            "score's ranking of them, would mean nothing. Convert the positions to the model's "
+            "units and step")  # fmt: skip
+
+
+def check_observed_pace(obj: Any, history: Any, name: str = "this model",
+                        stacklevel: int = 3) -> bool:  # fmt: skip
+    """Warn (``UserWarning``, once) with ``pace_problem``'s text when the observed pace of
+    ``history`` [N, T_h, 2] is far above ``obj``'s training (``PACE_LIMIT``); returns whether
+    it warned."""
+    problem = pace_problem(obj, history, name)
+    if problem is not None:
+        warnings.warn(problem, stacklevel=stacklevel)
+    return problem is not None

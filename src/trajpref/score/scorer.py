@@ -35,7 +35,7 @@ from trajpref.models import checkpoint
 from trajpref.models.denoiser import Denoiser, DenoiserShapes
 from trajpref.models.encoder import check_neighbour_radius, scene_features
 from trajpref.models.predictor import as_integer, check_coordinates
-from trajpref.models.timing import attach_timing, check_pace
+from trajpref.models.timing import attach_timing, check_observed_pace, check_pace
 from trajpref.types import AGENT_BALL, AGENT_PERSON, Batch
 
 NOISE_LAYOUT = "scene-slot"
@@ -400,7 +400,8 @@ def rank_samples(
     person (the default), 1 ball. ``final``: rank by the last step only (FTS order) instead of
     all steps (ATS order). ``frame_interval`` (seconds between the positions) and ``units``,
     when given, are compared with the scorer's, with a warning where they differ (as
-    ``predict_scene``).
+    ``predict_scene``); so is the observed pace (``models.timing.check_observed_pace``: data in
+    centimetres for a metre scorer ranks nonsense).
 
     Returns ``(order [K] int64, residual [K] float32)``: sample indices best first, and each
     sample's residual summed over agents and steps (lower is more human-like). Both are numpy
@@ -454,7 +455,9 @@ def predict_scene(model, history: ArrayLike, num_samples: int = 20,
     ``frame_interval`` (seconds between the history's positions) and ``units``, when given,
     are compared with the model's, with a ``UserWarning`` where they differ (the CLI's
     check): a model trained on 0.5 s steps reads 0.4 s tracks as slower agents, and its 12
-    steps then span 6 s, not 4.8.
+    steps then span 6 s, not 4.8. Positions in other units than the model's (centimetres for
+    metres) get a ``UserWarning`` too, once per call, when the scene's agents move far faster
+    than its training data (``models.timing.check_observed_pace``).
 
     Agent order: a model with agent roles (``model.agent_roles`` > 0: robo/generator and
     robo-mix/generator, 3 roles) reads each agent's place in ``history`` as its role, so the
@@ -592,7 +595,8 @@ def _predict(model, histories: list, num_samples, agent_types: list, seed, frame
         _warn_unread_context(model, [c for h, _, c in scenes if len(h)])
     present = [scene for scene in scenes if len(scene[0])]  # a scene without agents: no pass
     pred = None
-    if present:
+    if present:  # one warning per call: cm for m (the speed clamp would hide it)
+        check_observed_pace(model, torch.cat([h for h, _, _ in present]), stacklevel=4)
         batch = _join(present, t_f)
         pred = model.predict(batch, count, torch.Generator().manual_seed(seed))  # [K, N, T_f, 2]
     elif callable(getattr(model, "check_samples", None)):  # predict's refusal, without a pass
@@ -679,6 +683,8 @@ def scene_batch(scorer: TrajectoryScorer, history: ArrayLike, samples: ArrayLike
             f"future steps, x/y; this scorer's T_f = {t_f}), got {list(futs.shape)}{hint}"
         )
     check_coordinates(hist)  # map coordinates rank differently in float32: predict's rule
+    if p:  # cm given to a metre scorer scrambles its ranking without an error
+        check_observed_pace(scorer, hist, name="this scorer", stacklevel=4)
     types = _agent_types(agent_type, p, device)
     return _join([(hist, types, None)], t_f), futs
 
