@@ -25,19 +25,20 @@ def test_the_reproduce_cost_is_the_invocation_logs():
 
 
 def test_the_readme_names_every_published_noise_sample():
-    """The cards that state a noise sample (sdd/generator's since 2026-12-06; eth/generator's
-    and the retired zara2/rlhf-res's before) must be the ones the README's planning and
-    selection advice (use every sample) names, and no others."""
-    text = _text()
+    """The cards that state a noise sample must be the ones the README's planning advice names
+    as having one today (none since 2026-12-06, when sdd/generator was retrained like
+    eth/generator, and zara2/rlhf-res was retired): with none, the README says so."""
+    text = " ".join(_text().split())  # line breaks as spaces
     cards = {}
     for card in (ROOT / "src" / "trajpref" / "zoo").glob("*/*.md"):
         found = re.search(r"One of its 20 samples \(index (\d+)\)", card.read_text())
         if found:
             cards[f"{card.parent.name}/{card.stem}"] = int(found.group(1))
-    assert cards, "no card states a noise sample"
-    stated = dict(re.findall(r"`([\w-]+/[\w-]+)` \(sample (\d+)\)", text))
+    if not cards:
+        assert "No published generator draws a noise sample" in text
+        return
+    stated = dict(re.findall(r"`([\w-]+/[\w-]+)` \(sample (\d+)\) is noise", text))
     assert {k: int(v) for k, v in stated.items()} == cards
-    assert text.count("noise sample") >= 2  # the Python API section and the selection section
 
 
 def test_the_in_context_claim_states_its_rows_date_and_windows():

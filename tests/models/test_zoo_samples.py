@@ -26,10 +26,11 @@ INDEX = Path(trajpref.__file__).parent / "zoo" / "index.json"
 GENERATORS = [(r["name"], r["dataset"]) for r in json.loads(INDEX.read_text())["models"]
               if r["kind"] == "generator"]  # fmt: skip
 
-BROKEN = {"sdd/generator": 14}
+BROKEN: dict[str, int] = {}
 """Published generators known to have one noise sample (by index), stated in their model
 cards: checked to still have it there, so a fixed one fails here until it leaves this list
-(and a retired one, e.g. ``zara2/rlhf-res`` on 2026-12-06, fails the test below)."""
+(and a retired one, e.g. ``zara2/rlhf-res`` on 2026-12-06, fails the test below). Empty since
+2026-12-06, when ``sdd/generator`` was retrained with every sample trained (its sample 14)."""
 
 
 def test_every_known_noise_sample_is_of_a_published_generator():
