@@ -247,7 +247,7 @@ def test_context_neighbours_reach_a_model_that_reads_them(zara1, robo):
     part = near.copy()
     part[0, :3] = np.nan  # seen in the last 5 frames only: fewer than model.context_frames
     assert zara1.reads_context and zara1.context_frames == 8
-    with pytest.warns(UserWarning, match=r"1 of 1 context row\(s\) ignored"):  # and says so
+    with pytest.warns(UserWarning, match=r"context rows ignored"):  # and says so
         np.testing.assert_array_equal(predict_scene(zara1, history, context=part), alone)
     with pytest.raises(DataError, match=r"context: 1 value\(s\) not finite .*NaN marks an unseen"):
         predict_scene(zara1, history, context=np.where(near > 1e9, 0, near) + np.array(

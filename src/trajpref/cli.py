@@ -1100,7 +1100,7 @@ def _warn_model_and_scorer(args, ds) -> str | None:
 
 def _warn_observed_pace(args, model, scorer, ds) -> None:
     """One warning per run when the data's observed pace is far above the model's training
-    (``timing.pace_problem``: the median observed step of the split's agents above
+    (``timing.pace_problem``: the 90th percentile of the observed step of the split's agents above
     ``timing.PACE_LIMIT`` model units; data in other units, e.g. centimetres for a metre
     model, which the generator's speed clamp hides and the score does not), for the model,
     else for its ``scorer`` (the constant-velocity baseline reads any units)."""

@@ -215,6 +215,22 @@ def test_a_change_from_another_origin_is_refused(client, store, origin, status):
         assert r.json()["submitted"] and _count(store) == 9
 
 
+def test_a_host_that_names_the_default_port_matches_an_origin_without_it(client, store):
+    """A reverse proxy may pass Host: name:443 (or :80) where the browser's Origin leaves the
+    default port out: the same origin, not refused."""
+    for origin, host in (("https://study.example", "study.example:443"),
+                         ("http://study.example", "study.example:80")):  # fmt: skip
+        r = client.put(PUT, json={"social": 2, "kinetics": 2},
+                       headers={"Origin": origin, "Host": host})  # fmt: skip
+        assert r.status_code == 200, r.json()
+    r = client.put(
+        PUT,
+        json={"social": 2, "kinetics": 2},
+        headers={"Origin": "https://study.example", "Host": "study.example:80"},
+    )
+    assert r.status_code == 403
+
+
 def test_the_host_check_refuses_foreign_names_on_loopback(store):
     app = create_app(load_study(store.study.folder), store, allowed_hosts=LOOPBACK_NAMES)
     with TestClient(app, base_url="http://127.0.0.1:8000") as c:

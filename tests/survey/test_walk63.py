@@ -540,3 +540,23 @@ def test_select_rows_error_without_other_raters_has_no_hint():
     with pytest.raises(ConfigError) as err:
         analyze(study, rows, exclude=["r1"])
     assert str(err.value) == "no answers from human raters left after --exclude-rater r1"
+
+
+def test_a_json_agreement_from_another_origin_is_refused_and_records_nothing(tmp_path):
+    """Even as JSON (a page elsewhere could send it after a CORS preflight it then ignores),
+    an agreement whose Origin is not the server's own is refused (403) and not stored."""
+    study = _write(tmp_path / "study", consent=CONSENT)
+    store = AnswerStore(tmp_path / "study" / DATABASE, study)
+    try:
+        with TestClient(create_app(study, store)) as c:
+            body = {"agree": True, "text_hash": study.consent_hash}
+            r = c.post("/api/raters/alice/consent", json=body,
+                       headers={"Origin": "http://evil.example"})  # fmt: skip
+            assert r.status_code == 403 and "origin" in r.json()["error"]
+            assert not c.get("/api/raters/alice").json().get("consented")
+            r = c.post("/api/raters/alice/consent", json=body,
+                       headers={"Origin": "http://testserver"})  # fmt: skip
+            assert r.status_code == 200
+    finally:
+        store.close()
+    assert [row[0] for row in _consents(tmp_path / "study" / DATABASE)] == ["alice"]

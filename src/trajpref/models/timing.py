@@ -201,20 +201,17 @@ def pace_problem(obj: Any, history: Any, name: str = "this model") -> str | None
     found = pace_quantile(history, float(scale))
     if found is None or not found[0] > PACE_LIMIT:
         return None
-    pace, agents = found
     units = getattr(obj, "units", None) or "unknown"
-    factor = pace / PACE_REFERENCE
-    where = (f"the {PACE_QUANTILE:.0%} quantile of the observed step of {agents} agents is"
-             if agents > 1 else "the one agent's observed step is")  # fmt: skip
-    return (f"{name} is given agents about {factor:.0f} times faster than it was trained on: "
-            f"{where} {pace:.3g} model units ({pace * scale:.3g} data units / the model's data "
-            f"scale {scale:g}), where the 99th percentile of any "
-            f"published model's training data is at most {PACE_REFERENCE} (warned above "
-            f"{PACE_LIMIT:g}). The data "
-            f"looks like it is in other units than the model's ({units}; centimetres given to "
-            "a metre model move 100 times as far) or at another pace: its predictions, and the "
-            "score's ranking of them, would mean nothing. Convert the positions to the model's "
-            "units and step")  # fmt: skip
+    # the same text at every call (no per-scene numbers), so a planner's loop is warned once
+    return (f"{name} is given agents much faster than it was trained on: the "
+            f"{PACE_QUANTILE:.0%} quantile of their observed step is above {PACE_LIMIT:g} "
+            f"model units (positions / the model's data scale {scale:g}), where the 99th "
+            f"percentile of any published model's training data is at most {PACE_REFERENCE}. "
+            f"The data looks like it is in other units than the model's ({units}; centimetres "
+            "given to a metre model move 100 times as far) or at another pace: its "
+            "predictions, and the score's ranking of them, would mean nothing. Convert the "
+            "positions to the model's units and step (trajpref.models.timing.pace_quantile "
+            "gives the number)")  # fmt: skip
 
 
 def check_observed_pace(obj: Any, history: Any, name: str = "this model",

@@ -470,7 +470,9 @@ def predict_scene(model, history: ArrayLike, num_samples: int = 20,
     where they were not seen; read only by a model with ``model.reads_context`` (the
     published zara1, zara2, univ and eth generators), and only those seen in the last
     ``model.context_frames`` frames without a break (all 8 for the published ones): others
-    are ignored, with a ``UserWarning`` naming how many (so with the published models a
+    are ignored, with a ``UserWarning`` (one text, shown once per call site; so with the
+    published models, whose rule is all 8 frames, every context row of
+    ``trajpref.data.tracks_to_history`` is ignored, and a
     neighbour seen over part of the history changes nothing unless its missing frames are
     filled in, e.g. its first seen position held). Every target in ``history`` needs all
     T_h positions (docs/score.md, "Python: the planning calls").
@@ -631,16 +633,17 @@ def _warn_fixed_set(model, count: int) -> None:
 
 
 def _warn_unread_context(model, contexts: list) -> None:
-    """A warning naming how many context rows [C_b, T_h, 2] a context-reading model ignores:
-    those not seen in each of its last ``model.context_frames`` frames (a NaN among them)."""
+    """A warning when a context-reading model ignores some of the context rows [C_b, T_h, 2]:
+    those not seen in each of its last ``model.context_frames`` frames (a NaN among them).
+    Its text is the same at every call (Python then shows it once per place in the code)."""
     frames = int(model.context_frames)
     rows = [c for c in contexts if c is not None and len(c)]
     if not rows:
         return
     seen = torch.cat(rows)[:, -frames:].isfinite().all(-1).all(-1)  # [C] seen in the last N
-    ignored, total = int((~seen).sum()), len(seen)
-    if ignored:
-        warnings.warn(f"{ignored} of {total} context row(s) ignored: this model reads a "
+    ignored = int((~seen).sum())
+    if ignored:  # the same text every call, so a planner's loop is warned once
+        warnings.warn("context rows ignored: this model reads a "
                       f"context-only neighbour only if it was seen in each of the last "
                       f"{frames} frames (model.context_frames), and these were seen in fewer "
                       "(a NaN among them); fill in their missing frames (e.g. the first seen "

@@ -179,9 +179,16 @@ def _check_origin(request: Request) -> None:
     if origin is None:
         return
     host = request.headers.get("host", "").lower()
-    _, sep, netloc = origin.lower().partition("://")
+    scheme, sep, netloc = origin.lower().partition("://")
+    default = DEFAULT_PORTS.get(scheme)  # a proxy may name it in Host, a browser never in Origin
+    if default and host.endswith(default):
+        host = host[: -len(default)]
     if not sep or not host or netloc != host:
         raise AnswerError(f"request from another origin ({origin!r:.60}) refused", 403)
+
+
+DEFAULT_PORTS = {"http": ":80", "https": ":443"}
+"""The port a ``Host`` header may name that an ``Origin`` of that scheme leaves out."""
 
 
 def check_submission(body: Any) -> None:
