@@ -21,9 +21,7 @@ benchmarks/results/meta/neighbour_radius.json (with machine, command and date).
 from __future__ import annotations
 
 import argparse
-import json
 import warnings
-from datetime import date
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +30,7 @@ import torch
 from trajpref.data import load_dataset
 from trajpref.evaluation import evaluate
 from trajpref.models.registry import load_predictor
-from trajpref.results import command_line, machine
+from trajpref.results import write_meta
 from trajpref.score import predict_scene
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -140,13 +138,10 @@ def main(argv: list[str] | None = None) -> dict:
     for c in crowds:
         print(f"P={c['agents']} in {c['side_m']:g} x {c['side_m']:g} m: whole {c['whole']:.2f}, "
               f"alone {c['alone']:.2f}, radius {chosen}: {c['radius']:.2f}")  # fmt: skip
-    record = {"validation": val, "radii": args.radii, "tolerance": args.tolerance,
-              "chosen": chosen, "distances": args.distances, "far_walkers": walkers,
-              "crowds": crowds, "machine": machine(), "command": command_line(),
-              "date": date.today().isoformat()}  # fmt: skip
     out = Path(args.out_dir) / "neighbour_radius.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(record, indent=1) + "\n")
+    record = write_meta(out, validation=val, radii=args.radii, tolerance=args.tolerance,
+                        chosen=chosen, distances=args.distances, far_walkers=walkers,
+                        crowds=crowds)  # fmt: skip
     print(f"wrote {out}")
     return record
 

@@ -17,10 +17,8 @@ and date), which ``benchmarks/update_readme.py`` turns into the README's cost ta
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import time
-from datetime import date
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +26,7 @@ import torch
 
 from trajpref.data import load_dataset
 from trajpref.models.registry import load_predictor
-from trajpref.results import command_line, machine
+from trajpref.results import write_meta
 from trajpref.score import predict_scene, rank_samples
 from trajpref.score.scorer import TrajectoryScorer
 from trajpref.score.selection import SelectionConfig, chosen_selection, select_for_scene
@@ -101,13 +99,9 @@ def main(argv: list[str] | None = None) -> dict:
         ms = median_ms(timed_calls(model, scorer, history, args.dataset), args.calls)
         rows.append({"agents": p, **ms})
         print(f"P={p}: " + "  ".join(f"{k} {v:.1f}" for k, v in ms.items()), flush=True)
-    record = {"dataset": args.dataset, "split": "val", "samples": 20, "keep": 5,
-              "calls": args.calls, "threads": torch.get_num_threads(), "rows": rows,
-              "machine": machine(), "command": command_line(),
-              "date": date.today().isoformat()}  # fmt: skip
     out = Path(args.out_dir) / f"planner_latency_{args.dataset}.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(record, indent=1) + "\n")
+    record = write_meta(out, dataset=args.dataset, split="val", samples=20, keep=5,
+                        calls=args.calls, rows=rows)  # fmt: skip
     print(f"wrote {out}")
     return record
 

@@ -108,6 +108,15 @@ from trajpref.types import collate
 from trajpref.viz import plot
 from trajpref.viz.plot import FORMATS, check_limits, plot_scene, plot_scene_scored
 
+FRAME_INTERVAL_HELP = (
+    "seconds between consecutive rows of an agent (between consecutive distinct frame values "
+    "of its files), not per frame number nor per video frame: 0.1 for 10 Hz tracks, 0.4 for "
+    "ETH/UCY's frames numbered 10 apart; --time-step then reads every n-th (default: the step "
+    "of a frame column headed time or timestamp, read as seconds, or time_ms or timestamp_ms, "
+    "read as milliseconds; TrajNet++ files: the fps their scenes declare; else 0.4, assumed)"
+)
+"""What ``--frame-interval`` means, in the help of the data options and of ``train``."""
+
 
 def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> None:
     p.add_argument(
@@ -119,14 +128,13 @@ def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> N
     p.add_argument("--split", default=split_default, choices=["train", "val", "test"],
                    help=f"which split to read (default {split_default})")  # fmt: skip
     p.add_argument("--data-root", default=None, help="data folder (default: $TRAJPREF_DATA)")
-    p.add_argument("--frame-interval", type=float, default=None, metavar="SECONDS",
-                   help="for a folder dataset: the seconds between consecutive rows of an "
-                   "agent (between consecutive distinct frame values of its files), not per "
-                   "frame number nor per video frame: 0.1 for 10 Hz tracks, 0.4 for "
-                   "ETH/UCY's frames numbered 10 apart; --time-step then reads every n-th "
-                   "(default: the step of a frame column headed time or timestamp, read as "
-                   "seconds, or time_ms or timestamp_ms, read as milliseconds; TrajNet++ "
-                   "files: the fps their scenes declare; else 0.4, assumed)")  # fmt: skip
+    p.add_argument(
+        "--frame-interval",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help=f"for a folder dataset: {FRAME_INTERVAL_HELP}",
+    )
     p.add_argument("--units", default=None,
                    help="coordinate units, for a folder dataset (default unknown)")  # fmt: skip
     p.add_argument("--delimiter", default=None, help="text columns separated by: comma, "
@@ -448,12 +456,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--config", default=None, help="YAML config (default: built-in defaults)")
     tr.add_argument("--dataset", default=None, help="shortcut for --set data.dataset=NAME")
     tr.add_argument("--frame-interval", type=float, default=None, metavar="SECONDS",
-                    help="a folder dataset's seconds between consecutive rows of an agent "
-                    "(consecutive distinct frame values of its files; not per frame number "
-                    "nor per video frame; --time-step then reads every n-th; --set "
-                    "data.frame_interval; default: the step of a time/timestamp column, in "
-                    "seconds, or of a time_ms/timestamp_ms column, in milliseconds, TrajNet++ "
-                    "files' declared fps, else 0.4 assumed); the model records it")  # fmt: skip
+                    help=f"a folder dataset's {FRAME_INTERVAL_HELP}; --set "
+                    "data.frame_interval; the model records it")  # fmt: skip
     tr.add_argument("--units", default=None, help="a folder dataset's coordinate units (--set "
                     "data.units; default unknown); the model records them")  # fmt: skip
     tr.add_argument("--time-step", type=float, default=None, metavar="F",

@@ -152,6 +152,13 @@ def drop_agents_at_random(
                    scene=batch.scene[idx], agent_type=batch.agent_type[idx])  # fmt: skip
 
 
+def seen_run(context: torch.Tensor) -> torch.Tensor:
+    """[M] how many frames each row of ``context`` [M, T_h, 2] (NaN where not seen) was seen
+    in without a break up to its last frame: what ``observed_context`` keeps a row by."""
+    seen = torch.isfinite(context).all(-1)  # [M, T_h]
+    return seen.flip(1).to(torch.int64).cumprod(1).sum(1)  # [M]
+
+
 def observed_context(batch: Batch, min_frames: int) -> Batch:
     """The batch with only the context-only agents seen in at least the last ``min_frames``
     history frames without a break, their earlier frames (not seen, or seen before the break)
@@ -163,9 +170,7 @@ def observed_context(batch: Batch, min_frames: int) -> Batch:
     t_h = batch.context.shape[1]
     if not 1 <= min_frames <= t_h:
         raise ValueError(f"min_frames must lie in 1..{t_h}, got {min_frames}")
-    seen = torch.isfinite(batch.context).all(-1)  # [M, T_h]
-    # length of the run of seen frames that ends at the last one
-    run = seen.flip(1).to(torch.int64).cumprod(1).sum(1)  # [M]
+    run = seen_run(batch.context)  # [M]
     keep = (run >= min_frames).nonzero()[:, 0]  # [M']
     batch = _context_subset(batch, keep)
     if batch.context is None or min_frames == t_h:

@@ -22,6 +22,7 @@ import numpy as np
 import torch
 
 from trajpref.data.transforms import (
+    seen_run,
     speed_normaliser,
     to_model_frame,
     transform_positions,
@@ -640,8 +641,7 @@ def _warn_unread_context(model, contexts: list) -> None:
     rows = [c for c in contexts if c is not None and len(c)]
     if not rows:
         return
-    seen = torch.cat(rows)[:, -frames:].isfinite().all(-1).all(-1)  # [C] seen in the last N
-    ignored = int((~seen).sum())
+    ignored = int((seen_run(torch.cat(rows)) < frames).sum())  # observed_context's rule
     if ignored:  # the same text every call, so a planner's loop is warned once
         warnings.warn("context rows ignored: this model reads a "
                       f"context-only neighbour only if it was seen in each of the last "
