@@ -65,3 +65,37 @@ def test_bad_context_gives_a_clear_error():
     with pytest.raises(DataError, match="go together"):
         type(batch)(batch.history, batch.future, batch.scene, batch.agent_type, 1,
                     context=torch.zeros(1, 8, 2))  # fmt: skip
+
+
+def test_agent_ids_are_checked_against_the_agents():
+    import dataclasses
+
+    import numpy as np
+
+    from trajpref.errors import DataError
+
+    scene = make_scene(3)
+    assert scene.agent_id is None  # a source without ids (.npz splits, simulations)
+    kept = dataclasses.replace(scene, agent_id=[17, 42, 9])  # a list is taken as an array
+    assert isinstance(kept.agent_id, np.ndarray) and kept.agent_id.tolist() == [17, 42, 9]
+    names = dataclasses.replace(scene, agent_id=np.array(["a", "b", "18446744073709551617"]))
+    assert names.agent_id.dtype.kind == "U"
+    for bad, shape in (([17, 42], r"\[2\]"), (np.zeros((3, 1)), r"\[3, 1\]"), (5, r"\[\]")):
+        with pytest.raises(DataError, match=r"agent_id must be \[P\] with P = 3 .* got " + shape):
+            dataclasses.replace(scene, agent_id=bad)
+    with pytest.raises(DataError, match="agent_id must hold numbers or strings, got bool"):
+        dataclasses.replace(scene, agent_id=np.array([True, False, True]))
+
+
+def test_collate_leaves_the_agent_ids_out_of_the_batch():
+    import dataclasses
+
+    import torch
+
+    from trajpref.types import collate
+
+    plain = collate([make_scene(2), make_scene(1, seed=1)])
+    with_ids = collate([dataclasses.replace(make_scene(2), agent_id=[5, 3]),
+                        dataclasses.replace(make_scene(1, seed=1), agent_id=[7])])  # fmt: skip
+    for name in ("history", "future", "scene", "agent_type"):
+        assert torch.equal(getattr(plain, name), getattr(with_ids, name))

@@ -1575,7 +1575,7 @@ def cmd_predict(args) -> int:
         model, ds, samples, args.seed, device, args.max_agents,
         progress=not args.no_progress, scorer=scorer,
     )  # fmt: skip
-    ids = _source_agent_ids(ds, len(arrays["scene"]))  # [N] or None
+    ids = arrays.get("agent_id")  # [N] the source data's ids, or None
     if trajnet:
         _warn_trajnet_units(ds)
         interval = ds.info.frame_interval
@@ -1586,8 +1586,6 @@ def cmd_predict(args) -> int:
                                 interval, agent_id=ids)  # fmt: skip
     else:
         arrays["split"] = np.array(ds.info.split)  # 0-d: scene_id names the file, not its split
-        if ids is not None:
-            arrays["agent_id"] = ids
         meta = _predict_meta(args, ds, samples, scorer, overlap, sampling, device)
         with atomic_path(args.out) as tmp:
             with open(tmp, "wb") as fh:  # meta: a 0-d string, read without pickle
@@ -1605,26 +1603,6 @@ def cmd_predict(args) -> int:
         else f"wrote {args.out}: pred {tuple(arrays['pred'].shape)} [K, N, T_f, 2]"
     )
     return 0
-
-
-def _source_agent_ids(ds, agents: int) -> np.ndarray | None:
-    """[N] each predicted agent's id in the source data, in ``predict_dataset``'s order (the
-    scenes in dataset order, each scene's agents in its order), from the scenes' ``agent_id``
-    [P] where every scene carries one; None otherwise. Integers as int64, other numbers as
-    float64, anything else as strings."""
-    parts = [getattr(s, "agent_id", None) for s in ds.scenes]
-    if not parts or any(p is None for p in parts):
-        return None
-    ids = np.concatenate([np.asarray(p).reshape(-1) for p in parts])  # [N]
-    if len(ids) != agents:
-        return None
-    if ids.dtype.kind in "iu":
-        return ids.astype(np.int64)
-    if ids.dtype.kind == "f":
-        finite = np.isfinite(ids).all()
-        whole = finite and (ids == np.round(ids)).all() and (np.abs(ids) < 2**53).all()
-        return ids.astype(np.int64) if whole else ids.astype(np.float64)
-    return ids.astype(str)  # exact ids beyond 2**53 (object ints) and names alike
 
 
 def _warn_trajnet_units(ds) -> None:

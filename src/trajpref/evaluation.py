@@ -229,6 +229,8 @@ def predict_dataset(
     ranking, and ``order`` [K, B] (original indices) and ``residual`` [K, B] are added. A
     selecting model (``SelectingPredictor``) adds ``kept`` [K, N]: each kept sample's index
     among the samples it drew, in ``pred``'s order (after the ranking, when there is one).
+    Where every scene carries its agents' ids in the source data (``Scene.agent_id``: text
+    track files and TrajNet++ files do), ``agent_id`` [N] is added (``source_agent_ids``).
     """
     check_inputs(model, dataset)
     parts: dict[str, list[np.ndarray]] = {k: [] for k in ("history", "future", "pred", "scene")}
@@ -258,7 +260,40 @@ def predict_dataset(
         if key in out:
             out[key] = out[key].T  # [K, B]
     out["scene_id"] = np.array([s.scene_id for s in dataset.scenes], dtype=str)  # [B]
+    ids = source_agent_ids(dataset, len(out["scene"]))  # [N] or None
+    if ids is not None:
+        out["agent_id"] = ids
     return out
+
+
+def source_agent_ids(dataset: TrajectoryDataset, agents: int) -> np.ndarray | None:
+    """[N] each predicted agent's id in the source data, in ``predict_dataset``'s order (the
+    scenes in dataset order, each scene's agents in its order), from the scenes' ``agent_id``
+    [P] where every scene carries one; None otherwise. Integers as int64, other numbers as
+    float64; where some scene's ids are strings (names, or the exact text of ids that int64
+    or float64 cannot hold), every id as its text (``_id_text``)."""
+    parts = [s.agent_id for s in dataset.scenes]
+    if not parts or any(p is None for p in parts):
+        return None
+    arrays = [np.asarray(p).reshape(-1) for p in parts]  # [P_b] each
+    if sum(len(a) for a in arrays) != agents:
+        return None
+    if any(a.dtype.kind not in "iuf" for a in arrays):  # names or exact text in some file
+        return np.concatenate([_id_text(a) for a in arrays])  # [N] every id as its text
+    ids = np.concatenate(arrays)  # [N]
+    if ids.dtype.kind in "iu":
+        return ids.astype(np.int64)
+    finite = np.isfinite(ids).all()
+    whole = finite and (ids == np.round(ids)).all() and (np.abs(ids) < 2**53).all()
+    return ids.astype(np.int64) if whole else ids.astype(np.float64)
+
+
+def _id_text(ids: np.ndarray) -> np.ndarray:
+    """[P] ids as exact text: integers as digits, floats as their shortest text without an
+    exponent (``17``, ``2.5``, not ``17.0``), strings as they are."""
+    if ids.dtype.kind == "f":
+        return np.array([np.format_float_positional(v, trim="-") for v in ids.tolist()], str)
+    return ids.astype(str)
 
 
 @torch.no_grad()

@@ -48,6 +48,12 @@ class Scene:
     T_h frames but not in all of its frames, their positions over those T_h frames in reverse
     order (NaN where not seen); None where the data gives none. Training only: a reversed
     scene's history is the window's end, so these are its neighbours."""
+    agent_id: np.ndarray | None = None
+    """[P] each target agent's id in its source file, in the order of ``history``'s agents
+    (int64 where they are whole numbers, else float64 or str, e.g. the exact text of an id
+    float64 cannot hold); None where the source has none, e.g. ``.npz`` splits and
+    simulations. Metadata only: no model reads it and ``collate`` does not pack it;
+    ``trajpref predict`` saves it (the .npz's ``agent_id``, docs/data_format.md)."""
 
     def __post_init__(self) -> None:
         if self.history.ndim != 3 or self.history.shape[-1] != 2:
@@ -71,11 +77,25 @@ class Scene:
         ):
             shape = self.context_reverse.shape
             raise DataError(f"{self.scene_id}: context_reverse must be [C', T_h, 2], got {shape}")
+        if self.agent_id is not None:
+            self.agent_id = _checked_ids(self.agent_id, self.history.shape[0], self.scene_id)
 
     @property
     def num_agents(self) -> int:
         """P, the scene's agents (targets; context-only agents not counted)."""
         return int(self.history.shape[0])
+
+
+def _checked_ids(agent_id, agents: int, scene_id: str) -> np.ndarray:
+    """``agent_id`` as a [P] array of numbers or strings (``Scene.agent_id``), else
+    ``DataError``."""
+    ids = np.asarray(agent_id)
+    if ids.shape != (agents,):
+        raise DataError(f"{scene_id}: agent_id must be [P] with P = {agents} (one id per agent "
+                        f"of history, in its order), got {list(ids.shape)}")  # fmt: skip
+    if ids.dtype.kind not in "iufUSO":
+        raise DataError(f"{scene_id}: agent_id must hold numbers or strings, got {ids.dtype}")
+    return ids
 
 
 INTERVAL_SOURCES = ("dataset", "given", "declared", "timestamps", "default")

@@ -91,7 +91,9 @@ def test_predict_flags_trajnet_pixels_and_saves_the_split(tmp_path, capsys):
     npz = tmp_path / "p.npz"
     assert main([str(a) for a in [*argv[:9], "--out", npz, "--no-progress"]]) == 0
     with np.load(npz) as saved:
-        assert str(saved["split"]) == "test" and "agent_id" not in saved  # no ids kept (yet)
+        assert str(saved["split"]) == "test"
+        # the reader keeps the file's ids (Scene.agent_id): 11, 22, 33 in every window
+        np.testing.assert_array_equal(saved["agent_id"], [11, 22, 33] * (len(saved["scene"]) // 3))
 
 
 def test_predict_saves_source_ids_the_scenes_carry(tmp_path, capsys, monkeypatch):

@@ -6,7 +6,8 @@ Windowing (the standard of Social-GAN, Trajectron++, AgentFormer and LED): per f
 sorted unique frame numbers; a window is ``T_h + T_f`` consecutive entries of that list,
 starting at every ``stride``-th entry; an agent belongs to a window when it has a row in all
 of its frames; every window with at least one such agent is a scene. Scenes come in the order
-of their first frame, and a scene's agents in the order of their ids.
+of their first frame, and a scene's agents in the order of their ids, which each scene keeps
+(``Scene.agent_id``, exact: ``source_ids``).
 
 Memory: rows are parsed by numpy's C parser, sorted by (agent, frame), and each track's
 windows are read off runs of consecutive frame indices, so the reader holds O(rows + windows)
@@ -555,6 +556,20 @@ def _exact_column(path: Path, layout: _Layout, column: int, rows: int, what: str
         raise DataError(f"{one} (column {column + 1}) is not a number", path) from None
 
 
+def source_ids(agents: np.ndarray) -> np.ndarray:
+    """[A] a file's agent ids (``Tracks.agents``) as ``Scene.agent_id`` holds them, exact:
+    int64 where every id is a whole number that int64 holds, else float64 for ids that float64
+    reads exactly (below ``EXACT_ID_LIMIT``: ``2.5``), else each id's exact text
+    (``_exact_text``: ``9007199254740993.5``, or an integer beyond int64)."""
+    if agents.dtype != object:  # float64, every id below 2**53
+        whole = bool((agents == np.round(agents)).all())
+        return agents.astype(np.int64) if whole else agents.astype(np.float64)
+    values = agents.tolist()
+    if all(isinstance(v, int) and -(2**63) <= v < 2**63 for v in values):
+        return np.array(values, dtype=np.int64)
+    return np.array([_exact_text(v) for v in values], dtype=str)
+
+
 def _id_label(value) -> str:
     """An agent id as text, exact: ``1``, ``-1``, ``2.5``, ``9007199254740993``."""
     if isinstance(value, (float, np.floating)):
@@ -756,6 +771,7 @@ def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int |
             seen = (a_idx[rows] == a_idx[first]) & (f_idx[rows] - f_idx[first] == offsets)
             future[c : c + _CHUNK][~seen[:, t_hist:]] = np.nan  # seen: [C, T]
     kind = tracks.agent_type[a_idx[start_row]]  # [W]
+    ids = source_ids(tracks.agents)[a_idx[start_row]]  # [W] each agent-window's source id
     name = tracks.path.name
     labels = frame_labels(frames[firsts], tracks.frame_noise, tracks.frame_origin) if n_w else []
     for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
@@ -767,6 +783,7 @@ def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int |
                 scene_id=f"{name}@frame={labels[i]}",
                 context=context[i],
                 context_reverse=context_reverse[i],
+                agent_id=ids[a:b],
             )
         )
     return out

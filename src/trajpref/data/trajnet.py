@@ -30,6 +30,7 @@ from trajpref.data.text import (
     check_file,
     file_lines,
     open_data_file,
+    source_ids,
 )
 from trajpref.errors import ConfigError, DataError
 from trajpref.io import atomic_path
@@ -48,7 +49,7 @@ class TrajnetScenes:
 
     scenes: list[Scene]
     """One scene per TrajNet++ scene: the primary agent first, then every agent with a row in
-    all of its T_h + T_f frames, by id."""
+    all of its T_h + T_f frames, by id (``Scene.agent_id``: their ``"p"`` ids)."""
     fps: set[float] = field(default_factory=set)
     """The ``fps`` values the scene rows declare."""
 
@@ -216,6 +217,7 @@ def read_trajnet(
                 xy[:, t_hist:],
                 np.zeros(len(agents), np.int64),
                 f"{path.name}#{sid}",
+                agent_id=source_ids(np.array(agents, dtype=object)),  # [P] exact "p" ids
             )  # fmt: skip
         )
     if gaps:
