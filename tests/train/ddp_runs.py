@@ -9,7 +9,9 @@ with one process's, each a few steps on the tiny synthetic walks, in ``out``:
 - ``shape``: one epoch of a stage whose loss is a statistic of the batch alone (no random
   draw, no weight moves it), so that the logged training loss can be compared exactly;
 - ``control``: two fine-tuning steps of the control (its critic gets no gradient), from the
-  generator ``start``; each rank saves its weights.
+  generator ``start``; each rank saves its weights;
+- ``gen_full`` and ``gen_stop``: the generator stage with dropout (on ``start``'s denoiser),
+  uninterrupted, and stopped after its first epoch then resumed.
 """
 
 import dataclasses
@@ -32,6 +34,7 @@ from trajpref.train.stages import (  # noqa: E402
     Stage,
     build_denoiser_stage,
     build_finetune_stage,
+    build_generator_stage,
 )
 from trajpref.types import Batch, TrajectoryDataset  # noqa: E402
 
@@ -94,6 +97,22 @@ def main(folder: str, out: str, start: str, steps_per_epoch: int) -> None:
     fit(control, train, ft.data, ft.finetune, out_dir / "control", device, ft.seed,
         dist_info=info, progress=False, max_steps=2)  # fmt: skip
     torch.save(control.trainable.state_dict(), out_dir / "control" / f"rank{info.rank}.pt")
+    barrier(info)
+
+    # dropout draws from torch's own generator, each rank's own (their batches differ)
+    gen_cfg = load_config(None, [*TINY_OVERRIDES, f"data.dataset={folder}",
+                                 "model.generator_dropout=0.2"])  # fmt: skip
+    denoiser_payload = ckpt.load(start)["denoiser"]
+
+    def generator(where: str, **kw) -> None:
+        stage = build_generator_stage(gen_cfg, denoiser_payload, val, device)
+        fit(stage, train, gen_cfg.data, gen_cfg.generator, out_dir / where, device,
+            gen_cfg.seed, dist_info=info, progress=False, **kw)  # fmt: skip
+        barrier(info)
+
+    generator("gen_full")
+    generator("gen_stop", max_steps=steps_per_epoch)
+    generator("gen_stop", resume=str(out_dir / "gen_stop" / "generator_last.pt"))
     barrier(info)  # both ranks done before gloo is torn down (distributed.cleanup)
     cleanup(info)
 

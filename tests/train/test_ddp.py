@@ -166,6 +166,20 @@ def test_a_two_process_resume_ends_where_the_uninterrupted_run_does(runs):
         assert torch.equal(stop["trainable"][key], value), key
 
 
+def test_a_two_process_generator_with_dropout_resumes_where_the_uninterrupted_run_ends(runs):
+    """Dropout draws from torch's own generator: each rank's is saved and restored (how far
+    one has run may differ between the ranks: on a GPU it counts the elements drawn), so that
+    the resumed run ends bit for bit where the uninterrupted one does."""
+    full = _last(runs["two"] / "gen_full", "generator")
+    stop = _last(runs["two"] / "gen_stop", "generator")
+    assert stop["step"] == full["step"] == 2 * runs["steps"]
+    for key, value in full["trainable"].items():
+        assert torch.equal(stop["trainable"][key], value), key
+    assert [sorted(own) for own in stop["rank_generators"]] == [
+        ["aug_gen", "noise_gen", "torch_rng"]
+    ] * 2
+
+
 def test_a_resume_on_another_process_count_continues_the_same_schedule(runs, capsys):
     """A state written on one process resumed on two, and one written on two resumed on one,
     end at the uninterrupted run's step and learning rate (the schedule does not depend on

@@ -1,6 +1,7 @@
 """train/loop.py's learning-rate schedule: a linear warm-up, then a cosine decay from lr to
-``final_lr * lr``."""
+``final_lr * lr``; a line when the warm-up lasts the whole run."""
 
+import dataclasses
 import math
 
 import pytest
@@ -8,7 +9,7 @@ import torch
 
 from trajpref.config import OptimConfig
 from trajpref.errors import ConfigError
-from trajpref.train.loop import _lr_lambda, make_optimizer
+from trajpref.train.loop import _lr_lambda, make_optimizer, warmup_note
 
 
 def test_the_default_schedule_is_the_published_one_warm_up_then_cosine_to_a_tenth():
@@ -90,3 +91,33 @@ def test_the_fused_optimiser_steps_like_the_default_up_to_float_rounding():
     for a, b, s in zip(out[False], out[True], start, strict=True):
         assert not torch.equal(a, s)  # the weights moved: 20 steps of 1e-2
         torch.testing.assert_close(a, b, rtol=0, atol=1e-6)
+
+
+def test_a_warm_up_as_long_as_the_run_is_named_with_its_numbers_and_remedy():
+    # a shipped config's 200 warm-up steps on a small dataset: 3 steps an epoch x 60 epochs
+    note = warmup_note("denoiser", OptimConfig(warmup_steps=200, lr=1e-3), total=180)
+    assert note is not None
+    assert "denoiser.warmup_steps=200" in note and "all of this run's 180 optimiser" in note
+    assert "never reaches denoiser.lr=0.001" in note and "0.0009" in note  # 180 / 200 of it
+    assert "--set denoiser.warmup_steps=N (e.g. N=18" in note
+    # fine-tuning's default warm-up, 20 of its 36 steps, ends inside the run: no line
+    assert warmup_note("finetune", OptimConfig(warmup_steps=20, lr=3e-4), total=36) is None
+    assert warmup_note("denoiser", OptimConfig(warmup_steps=100), total=100) is not None
+    assert warmup_note("denoiser", OptimConfig(warmup_steps=4), total=104) is None
+    assert warmup_note("denoiser", OptimConfig(warmup_steps=50), total=100) is None  # half
+    assert warmup_note("denoiser", OptimConfig(warmup_steps=0), total=0) is None
+
+
+def test_a_run_inside_its_warm_up_says_so_once_and_a_normal_run_says_nothing(
+    tmp_path, tiny_cfg, capsys
+):
+    from trajpref.train.run import train_stage
+
+    warm = dataclasses.replace(tiny_cfg.denoiser, warmup_steps=200)
+    long = dataclasses.replace(tiny_cfg, denoiser=warm)
+    train_stage("diffusion", long, tmp_path / "long", device="cpu", progress=False)
+    out = capsys.readouterr().out
+    assert out.count("[denoiser] the warm-up (denoiser.warmup_steps=200)") == 1
+    assert "--set denoiser.warmup_steps=N" in out
+    train_stage("diffusion", tiny_cfg, tmp_path / "short", device="cpu", progress=False)
+    assert "warm-up" not in capsys.readouterr().out

@@ -216,6 +216,57 @@ def test_resume_continues_to_the_same_result(tmp_path, cfg):
         torch.testing.assert_close(last_stop["trainable"][key], value)
 
 
+def _dropout_generator_run(tmp_path, folder, trained, name, **kw):
+    """The tiny generator stage with dropout (every shipped config has it), in ``name``."""
+    cfg = load_config(None, [*TINY_OVERRIDES, f"data.dataset={folder}",
+                             "model.generator_dropout=0.2"])  # fmt: skip
+    train_stage("generator", cfg, tmp_path / name, device="cpu", progress=False,
+                denoiser=str(trained / "denoiser.safetensors"), **kw)  # fmt: skip
+    return cfg, tmp_path / name / "generator_last.pt"
+
+
+def test_a_generator_with_dropout_resumes_to_the_same_result(tmp_path, folder, trained):
+    """Dropout draws from torch's global generator: the resume state keeps it, so that a
+    resumed run draws the masks an uninterrupted one would (it replayed them from the seed)."""
+    cfg, full = _dropout_generator_run(tmp_path, folder, trained, "full")
+    _, stop = _dropout_generator_run(tmp_path, folder, trained, "stop", max_steps=_steps(cfg))
+    assert torch.load(stop, weights_only=True)["epoch"] == 0
+    _dropout_generator_run(tmp_path, folder, trained, "stop", resume=str(stop))
+    last_full = torch.load(full, weights_only=True)
+    last_stop = torch.load(stop, weights_only=True)
+    assert last_full["step"] == last_stop["step"] == cfg.generator.epochs * _steps(cfg)
+    for key, value in last_full["trainable"].items():
+        assert torch.equal(last_stop["trainable"][key], value), key
+
+
+def test_a_resume_state_without_torchs_generator_says_the_resume_is_not_exact(
+    tmp_path, folder, trained, cfg, capsys
+):
+    """A state written before torch's own generator was kept still resumes, with a line that
+    says the dropout masks will not be an uninterrupted run's; a denoiser (no dropout) says
+    nothing."""
+    _, stop = _dropout_generator_run(tmp_path, folder, trained, "old", max_steps=_steps(cfg))
+    state = torch.load(stop, weights_only=True)
+    for own in state["rank_generators"]:
+        own.pop("torch_rng", None)
+    torch.save(state, stop)
+    capsys.readouterr()
+    _dropout_generator_run(tmp_path, folder, trained, "old", resume=str(stop))
+    out = capsys.readouterr().out
+    assert "will not end bit for bit" in out and "dropout masks" in out
+    assert torch.load(stop, weights_only=True)["step"] == cfg.generator.epochs * _steps(cfg)
+    den = tmp_path / "den"
+    train_stage("diffusion", cfg, den, device="cpu", progress=False, max_steps=_steps(cfg))
+    state = torch.load(den / "denoiser_last.pt", weights_only=True)
+    for own in state["rank_generators"]:
+        own.pop("torch_rng", None)
+    torch.save(state, den / "denoiser_last.pt")
+    capsys.readouterr()
+    train_stage("diffusion", cfg, den, device="cpu", progress=False,
+                resume=str(den / "denoiser_last.pt"))  # fmt: skip
+    assert "bit for bit" not in capsys.readouterr().out
+
+
 def test_a_resumed_run_follows_its_configs_fused_setting_not_its_states(tmp_path, cfg):
     # AdamW's state dict carries its "fused" flag; resuming with another setting must not
     # silently keep the old implementation while the run's config says otherwise

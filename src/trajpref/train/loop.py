@@ -9,6 +9,7 @@ augmentation, optimisation, DDP, progress bars, metric logs, best checkpoint, re
 from __future__ import annotations
 
 import contextlib
+import functools
 import itertools
 import json
 import math
@@ -150,6 +151,24 @@ def _lr_lambda(
     return f
 
 
+def warmup_note(name: str, cfg: OptimConfig, total: int) -> str | None:
+    """A line for a stage ``name`` whose linear warm-up lasts as long as its ``total``
+    optimiser steps or longer (a config written for a larger dataset, run on a small one:
+    ``warmup_steps`` 200 at 3 steps an epoch), so that the learning rate never reaches its
+    peak and never decays, with the numbers and the setting that shortens it; None for any
+    other (a warm-up that ends before the run does, fine-tuning's default 20 of 36 steps among
+    them, is a schedule of its own). The schedule itself is left as the config says."""
+    warm = cfg.warmup_steps
+    if warm < total or total <= 0:
+        return None
+    tenth = max(1, total // 10)
+    return (f"[{name}] the warm-up ({name}.warmup_steps={warm}) lasts all of this run's "
+            f"{total} optimiser steps: the learning rate never reaches {name}.lr={cfg.lr:g} "
+            f"(it climbs to about {cfg.lr * total / warm:.2g}) and never decays; a shorter "
+            f"warm-up: --set {name}.warmup_steps=N (e.g. N={tenth}, a tenth of the "
+            "steps)")  # fmt: skip
+
+
 def _budget_share(seconds: float, cfg: OptimConfig, dist_info: DistInfo,
                   device: torch.device) -> float:  # fmt: skip
     """The share of ``cfg.max_minutes`` that ``seconds`` of the budget clock are (the largest
@@ -175,7 +194,8 @@ def save_resume_state(path: Path, state: dict[str, Any]) -> None:
 RESUME_KEYS = ("stage", "trainable", "optimizer", "scheduler", "noise_gen", "aug_gen", "epoch",
                "step", "best", "elapsed")  # fmt: skip
 """What every resume state holds (``spent``, and each rank's random generators with the
-process count, ``rank_generators`` and ``world_size``, were added later and may be missing)."""
+process count, ``rank_generators`` and ``world_size``, were added later and may be missing, as
+may torch's own generators in each rank's entry, ``torch_generators``)."""
 
 
 def load_resume_state(path: str | Path, stage: str | None = None) -> dict[str, Any]:
@@ -234,14 +254,54 @@ def check_resume_matches(state: dict[str, Any], module: nn.Module, path: str | P
 
 
 def _rank_generators(state: dict[str, Any], rank: int) -> dict[str, torch.Tensor] | None:
-    """The states of rank ``rank``'s random generators (``noise_gen``, ``aug_gen``) in a
-    resume state: its own (``rank_generators``, one entry per rank of the run that wrote it),
-    or None for a rank that run did not have. A state written before each rank's were kept
-    holds rank 0's alone."""
+    """The states of rank ``rank``'s random generators (``noise_gen``, ``aug_gen``, and
+    torch's own, ``torch_generators``) in a resume state: its own (``rank_generators``, one
+    entry per rank of the run that wrote it), or None for a rank that run did not have. A
+    state written before each rank's were kept holds rank 0's alone (and no torch's), one
+    written before torch's were kept holds no ``torch_rng``."""
     per_rank = state.get("rank_generators")
     if per_rank is None:
         per_rank = [{"noise_gen": state["noise_gen"], "aug_gen": state["aug_gen"]}]
     return per_rank[rank] if rank < len(per_rank) else None
+
+
+def torch_generators(device: torch.device) -> dict[str, torch.Generator]:
+    """torch's own random generators, which a step draws from where it passes none (dropout's
+    masks): the CPU's (``torch_rng``) and, on a GPU, that GPU's (``cuda_rng``; CUDA is never
+    touched on another device). The stage builder seeds them (``torch.manual_seed``); the
+    resume state keeps each rank's, so that a resumed run does not draw its masks again from
+    the seed."""
+    generators = {"torch_rng": torch.default_generator}
+    if device.type == "cuda":
+        torch.cuda.init()  # no-op once the stage's weights are on the GPU
+        index = device.index if device.index is not None else torch.cuda.current_device()
+        generators["cuda_rng"] = torch.cuda.default_generators[index]
+    return generators
+
+
+def _draws_dropout(module: nn.Module) -> bool:
+    """Whether ``module`` in training mode drops anything out (from torch's own generator)."""
+    module.train()
+    return any(isinstance(m, nn.Dropout) and m.p > 0 and m.training for m in module.modules())
+
+
+def _restore_torch_generators(own: dict[str, torch.Tensor], device: torch.device,
+                              stage: Stage, main: bool) -> None:  # fmt: skip
+    """Set torch's own generators (``torch_generators``) to a resume state's rank entry
+    ``own``: right before the first step, so that nothing the loop sets up draws after it.
+    Where the state lacks one (written before they were kept, or the CPU's state resumed on
+    a GPU) and the stage drops out, says that the masks will not be an uninterrupted run's."""
+    generators = torch_generators(device)
+    for name, generator in generators.items():
+        if name in own:
+            generator.set_state(own[name])
+    missing = [name for name in generators if name not in own]
+    if missing and main and _draws_dropout(stage.objective):
+        tqdm.write(f"[{stage.name}] the resume state holds no {' or '.join(missing)} "
+                   "(torch's own random generator, which dropout draws from; it was written "
+                   "by an earlier trajpref, or on another device): the resumed run draws "
+                   "its dropout masks again from the seed, so it will not end bit for bit "
+                   "where an uninterrupted run would")  # fmt: skip
 
 
 def _summed(agents: int, sums: dict[str, float],
@@ -295,11 +355,58 @@ def precision_autocast(device: torch.device, precision: str) -> torch.autocast:
     return torch.autocast(device.type, dtype=torch.bfloat16, enabled=precision == "bf16")
 
 
+_swallowed: list[BaseException] = []
+"""KeyboardInterrupts that Python ignored during ``fit`` because they were raised in a
+finalizer (``keeps_interrupts``), until ``_stop_if_interrupted`` raises one again."""
+
+
+def keeps_interrupts(function: Callable[..., Any]) -> Callable[..., Any]:
+    """``function`` stopped by every Ctrl-C. Python prints a KeyboardInterrupt raised while
+    an object's finalizer runs (a progress bar's ``tqdm.__del__``, as the bar is freed in the
+    training thread) as "Exception ignored in ..." and drops it: the run trained on to its end
+    and exited with status 0 (1 Ctrl-C in 9, sent as an epoch ended). Closing the bars does
+    not prevent it (their finalizer still runs). While ``function`` runs, Python's hook for
+    such exceptions (``sys.unraisablehook``) keeps them instead (any other goes to the hook
+    it replaced), and ``_stop_if_interrupted`` raises one again: at the loop's next step,
+    after its epoch's state is saved, or when ``function`` returns."""
+
+    @functools.wraps(function)
+    def kept(*args: Any, **kwargs: Any) -> Any:
+        previous = sys.unraisablehook
+
+        def hook(unraisable: Any) -> None:
+            if unraisable.exc_type is not None and issubclass(unraisable.exc_type,
+                                                              KeyboardInterrupt):  # fmt: skip
+                _swallowed.append(unraisable.exc_value)
+            else:
+                previous(unraisable)
+
+        _swallowed.clear()
+        sys.unraisablehook = hook
+        try:
+            result = function(*args, **kwargs)
+            _stop_if_interrupted()  # one ignored after the loop's last look
+            return result
+        finally:
+            sys.unraisablehook = previous
+            _swallowed.clear()
+
+    return kept
+
+
+def _stop_if_interrupted() -> None:
+    """Raise the KeyboardInterrupt that a finalizer swallowed, if one did (``keeps_interrupts``)."""
+    if _swallowed:
+        _swallowed.clear()
+        raise KeyboardInterrupt
+
+
 def _averaged(average: WeightAverage | None):
     """The averaged weights swapped into their module for a block, or nothing without one."""
     return average.swapped_in() if average is not None else contextlib.nullcontext()
 
 
+@keeps_interrupts
 def fit(
     stage: Stage,
     train: TrajectoryDataset,
@@ -338,7 +445,9 @@ def fit(
     (``train.distributed.RankBatches``): the same steps, learning rates and batches as on one
     process, other random draws. The log's ``train_*`` values and ``samples_per_second`` are
     the whole batches', summed over the ranks; each rank's random generators are saved, and a
-    resume restores each rank's own.
+    resume restores each rank's own: the loop's noise and augmentation generators and torch's
+    own (``torch_generators``, which dropout draws from), so that a resumed run ends bit for
+    bit where an uninterrupted one does.
     """
     dist_info = dist_info or DistInfo()
     out_dir = Path(out_dir)
@@ -372,6 +481,7 @@ def fit(
     validated_at = 0.0  # ``spent`` at the last validation (for ``eval_every_minutes``)
     start_val: dict[str, float] | None = None  # the start's validation (``validate_start``)
     trained_on = machine()  # recorded with every checkpoint (the zoo cards name it)
+    resume_torch: dict[str, torch.Tensor] | None = None  # this rank's, from the resume state
     if resume is not None:
         state = resume if isinstance(resume, dict) else load_resume_state(resume, stage.name)
         where = "(state)" if isinstance(resume, dict) else resume
@@ -385,6 +495,7 @@ def fit(
         if own is not None:  # a rank the state's run did not have keeps its seeded start
             noise_gen.set_state(own["noise_gen"])
             aug_gen.set_state(own["aug_gen"])
+            resume_torch = own  # torch's own generators: set right before the first step
         start_epoch, step, best = state["epoch"] + 1, state["step"], state["best"]
         best_raw = state.get("best_raw", best_raw)
         elapsed = state["elapsed"]
@@ -434,6 +545,11 @@ def fit(
             f"val_{k}={v:.4g}" for k, v in start_val.items()))  # fmt: skip
     rate = None  # agent-windows per second of the last epoch run here
     nonfinite = 0
+    note = warmup_note(stage.name, optim_cfg, total)
+    if note is not None and main and step < optim_cfg.warmup_steps:  # once, while it lasts
+        tqdm.write(note)
+    if resume_torch is not None:
+        _restore_torch_generators(resume_torch, device, stage, main)
     for epoch in range(start_epoch, optim_cfg.epochs):
         t0, c0 = time.perf_counter(), clock()
         loader.set_epoch(epoch)
@@ -445,66 +561,68 @@ def fit(
             desc = f"{stage.name} epoch {epoch + 1} ({optim_cfg.max_minutes:g} min budget)"
         else:
             desc = f"{stage.name} epoch {epoch + 1}/{optim_cfg.epochs}"
-        bar = tqdm(itertools.islice(loader, steps_per_epoch), total=steps_per_epoch,
-                   desc=desc, unit="batch", disable=not show, leave=False)  # fmt: skip
-        for batch, mine, whole in bar:
-            if not stage.context:
-                batch = batch.without_context()
-            batch = augment(batch, aug_gen, rotate=data_cfg.rotate, flip=data_cfg.flip,
-                            scale_range=data_cfg.scale_range,
-                            reverse=data_cfg.reverse,
-                            history_noise=data_cfg.history_noise,
-                            drop_agents=data_cfg.drop_agents,
-                            reverse_context=data_cfg.reverse_context).to(device)  # fmt: skip
-            collected = () if stage.collect is None else (stage.collect(batch, noise_gen),)
-            for _ in range(stage.updates):
-                if stage.on_progress is not None:
-                    stage.on_progress(max(step / total, min(1.0, budget["share"])))
-                with precision_autocast(device, optim_cfg.precision):  # validation stays fp32
-                    loss, logs = objective(batch, noise_gen, *collected)
-                loss = loss.float()  # autocast may hand back a bfloat16 scalar
-                # DDP averages the ranks' gradients: weighted by their shares of the batch's
-                # agents, the average is the gradient of the whole batch's (per-agent) loss
-                weighted = loss
-                if dist_info.enabled:
-                    weighted = loss * (dist_info.world_size * mine / whole)
-                finite = torch.isfinite(loss.detach()).to(torch.int32)
-                if dist_info.enabled:  # every rank skips together, or DDP's all-reduce would hang
-                    torch.distributed.all_reduce(finite, op=torch.distributed.ReduceOp.MIN)
-                if not bool(finite):
-                    # skip the update rather than poison the weights; give up if it persists
-                    nonfinite += 1
-                    tqdm.write(f"[{stage.name}] non-finite loss at step {step + 1}; update skipped")
-                    if nonfinite > max(3, steps_per_epoch // 10):
-                        raise TrajprefError(
-                            f"{stage.name}: {nonfinite} non-finite losses; {stage.nonfinite_hint}"
-                        )
-                    continue
-                optimizer.zero_grad(set_to_none=True)
-                weighted.backward()
-                grad_norm = torch.nn.utils.clip_grad_norm_(params, optim_cfg.grad_clip)
-                optimizer.step()
-                budget["share"] = _budget_share(spent + clock() - c0, optim_cfg, dist_info,
-                                                device)  # fmt: skip
-                sched.step()
-                if average is not None:
-                    average.update()
-                step += 1
-                logs = {"loss": float(loss.detach()), "grad_norm": float(grad_norm), **logs}
-                for key, value in logs.items():
-                    sums[key] = sums.get(key, 0.0) + value * mine
-                agents += mine
-                post = {"loss": f"{logs['loss']:.4f}"}
-                if optim_cfg.max_minutes is not None:  # the share of the budget spent
-                    used = (spent + clock() - c0) / (60 * optim_cfg.max_minutes)
-                    post["budget"] = f"{min(1.0, used):.0%}"
-                bar.set_postfix(post)
-                stop = _should_stop(step, max_steps, spent + clock() - c0,
-                                    optim_cfg.max_minutes, dist_info, device)  # fmt: skip
+        # closed here, not by its finalizer: see keeps_interrupts
+        with tqdm(itertools.islice(loader, steps_per_epoch), total=steps_per_epoch, desc=desc,
+                  unit="batch", disable=not show, leave=False) as bar:  # fmt: skip
+            for batch, mine, whole in bar:
+                _stop_if_interrupted()  # a Ctrl-C that a finalizer swallowed
+                if not stage.context:
+                    batch = batch.without_context()
+                batch = augment(batch, aug_gen, rotate=data_cfg.rotate, flip=data_cfg.flip,
+                                scale_range=data_cfg.scale_range,
+                                reverse=data_cfg.reverse,
+                                history_noise=data_cfg.history_noise,
+                                drop_agents=data_cfg.drop_agents,
+                                reverse_context=data_cfg.reverse_context).to(device)  # fmt: skip
+                collected = () if stage.collect is None else (stage.collect(batch, noise_gen),)
+                for _ in range(stage.updates):
+                    if stage.on_progress is not None:
+                        stage.on_progress(max(step / total, min(1.0, budget["share"])))
+                    with precision_autocast(device, optim_cfg.precision):  # validation stays fp32
+                        loss, logs = objective(batch, noise_gen, *collected)
+                    loss = loss.float()  # autocast may hand back a bfloat16 scalar
+                    # DDP averages the ranks' gradients: weighted by their shares of the batch's
+                    # agents, the average is the gradient of the whole batch's (per-agent) loss
+                    weighted = loss
+                    if dist_info.enabled:
+                        weighted = loss * (dist_info.world_size * mine / whole)
+                    finite = torch.isfinite(loss.detach()).to(torch.int32)
+                    if dist_info.enabled:  # every rank skips together, or DDP's all-reduce hangs
+                        torch.distributed.all_reduce(finite, op=torch.distributed.ReduceOp.MIN)
+                    if not bool(finite):
+                        # skip the update rather than poison the weights; give up if it persists
+                        nonfinite += 1
+                        tqdm.write(f"[{stage.name}] non-finite loss at step {step + 1}; "
+                                   "update skipped")  # fmt: skip
+                        if nonfinite > max(3, steps_per_epoch // 10):
+                            raise TrajprefError(f"{stage.name}: {nonfinite} non-finite losses; "
+                                                f"{stage.nonfinite_hint}")  # fmt: skip
+                        continue
+                    optimizer.zero_grad(set_to_none=True)
+                    weighted.backward()
+                    grad_norm = torch.nn.utils.clip_grad_norm_(params, optim_cfg.grad_clip)
+                    optimizer.step()
+                    budget["share"] = _budget_share(spent + clock() - c0, optim_cfg, dist_info,
+                                                    device)  # fmt: skip
+                    sched.step()
+                    if average is not None:
+                        average.update()
+                    step += 1
+                    logs = {"loss": float(loss.detach()), "grad_norm": float(grad_norm), **logs}
+                    for key, value in logs.items():
+                        sums[key] = sums.get(key, 0.0) + value * mine
+                    agents += mine
+                    post = {"loss": f"{logs['loss']:.4f}"}
+                    if optim_cfg.max_minutes is not None:  # the share of the budget spent
+                        used = (spent + clock() - c0) / (60 * optim_cfg.max_minutes)
+                        post["budget"] = f"{min(1.0, used):.0%}"
+                    bar.set_postfix(post)
+                    stop = _should_stop(step, max_steps, spent + clock() - c0,
+                                        optim_cfg.max_minutes, dist_info, device)  # fmt: skip
+                    if stop:
+                        break
                 if stop:
                     break
-            if stop:
-                break
         elapsed += time.perf_counter() - t0
         spent += clock() - c0
         epoch_seconds = time.perf_counter() - t0
@@ -558,7 +676,8 @@ def fit(
             # 4 decimals: at 0.01 s a small validation pass on a fast host was logged as 0
             record["val_seconds"] = round(time.perf_counter() - v0, 4)
         # every rank's random generators (a collective): each resumes its own draws
-        generators = gather_generators({"noise_gen": noise_gen, "aug_gen": aug_gen}, dist_info)
+        generators = gather_generators({"noise_gen": noise_gen, "aug_gen": aug_gen,
+                                        **torch_generators(device)}, dist_info)  # fmt: skip
         if main:
             log.write(record)
             save_resume_state(out_dir / f"{stage.name}_last.pt", {
@@ -577,6 +696,7 @@ def fit(
             summary = {k: (float(f"{v:.4g}") if isinstance(v, float) else v)
                        for k, v in record.items()}  # fmt: skip
             tqdm.write(f"[{stage.name}] " + " ".join(f"{k}={v}" for k, v in summary.items()))
+        _stop_if_interrupted()  # after the epoch's state is saved: a resume continues it
         if stop:
             break
     budget_reached = (optim_cfg.max_minutes is not None and step < total

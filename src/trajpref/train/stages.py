@@ -149,11 +149,13 @@ def build_denoiser_stage(
         gen = torch.Generator().manual_seed(12345)
         total, agents = 0.0, 0
         loader = SceneLoader(val_set, max_agents=cfg.data.max_agents)
-        for batch in tqdm(loader, desc="denoiser validation", unit="batch", disable=not progress,
-                          leave=False):  # fmt: skip
-            loss, _ = objective(batch.to(device), gen)
-            total += float(loss) * batch.num_agents
-            agents += batch.num_agents
+        # closed here, not by its finalizer, where a Ctrl-C is lost (train.loop.keeps_interrupts)
+        with tqdm(loader, desc="denoiser validation", unit="batch", disable=not progress,
+                  leave=False) as bar:  # fmt: skip
+            for batch in bar:
+                loss, _ = objective(batch.to(device), gen)
+                total += float(loss) * batch.num_agents
+                agents += batch.num_agents
         return {"denoise_loss": total / agents, "score": total / agents}
 
     def payload(meta: dict[str, Any]) -> dict[str, Any]:
