@@ -24,7 +24,7 @@ from trajpref.metrics import (
     size_bin,
 )
 from trajpref.models.baseline import ConstantVelocity
-from trajpref.types import collate
+from trajpref.types import AGENT_BALL, AGENT_PERSON, DatasetInfo, Scene, TrajectoryDataset, collate
 
 
 def _path(*points) -> torch.Tensor:
@@ -300,3 +300,57 @@ def test_bad_bins_or_radius_give_one_line_errors(capsys, walks, bad):
     code, out, err = _run(capsys, "evaluate", "--dataset", walks, "--no-progress", *bad)
     assert code == 2 and out == ""
     assert err.startswith("trajpref: error: ") and len(err.strip().splitlines()) == 1
+
+
+# ----------------------------------------------------------------------------- the ball
+
+
+def _ball_case() -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Scene 0: a player with the ball on top of it and a far player; scene 1: two players on
+    top of each other. Ground truth and every sample follow the same paths."""
+    walk = [[0.0, 0.0], [1.0, 0.0]]  # [T, 2]
+    far = [[5.0, 5.0], [6.0, 5.0]]
+    future = torch.tensor([walk, walk, far, walk, walk])  # [N = 5, T, 2]
+    pred = future.expand(2, -1, -1, -1).clone()  # [K = 2, N, T, 2] every sample exact
+    scene = torch.tensor([0, 0, 0, 1, 1])
+    agent_type = torch.tensor([AGENT_PERSON, AGENT_BALL, AGENT_PERSON, AGENT_PERSON,
+                               AGENT_PERSON])  # fmt: skip
+    return pred, future, scene, agent_type
+
+
+def test_the_ball_is_no_collider_but_two_players_are():
+    pred, future, scene, agent_type = _ball_case()
+    flags = collision_flags(pred, future, scene, bodies=agent_type != AGENT_BALL)
+    for key in ("col_i", "col_ii", "col_gt"):  # the ball-holder does not collide; players do
+        assert getattr(flags, key).tolist() == [False, False, False, True, True], key
+    assert flags.has_neighbour.tolist() == [True, False, True, True, True]  # the ball: no rate
+    untyped = collision_flags(pred, future, scene)  # without the mask the ball is a body
+    assert untyped.col_gt.tolist() == [True, True, False, True, True]
+    acc = CollisionAccumulator()
+    acc.update(pred, future, scene, agent_type != AGENT_BALL)
+    out = acc.compute()
+    assert out["col_agents"] == 4 and out["col_gt_pct"] == pytest.approx(50.0)
+    with pytest.raises(ValueError, match="bodies must be"):
+        collision_flags(pred, future, scene, bodies=agent_type[:3] != AGENT_BALL)
+
+
+def test_a_ball_alone_with_one_player_leaves_no_agent_with_a_neighbour():
+    future = torch.zeros(2, 3, 2)  # [N, T, 2] the ball in the player's hands
+    flags = collision_flags(
+        future[None], future, torch.tensor([0, 0]), bodies=torch.tensor([False, True])
+    )  # the ball, the player
+    assert not flags.has_neighbour.any() and not flags.col_gt.any()
+
+
+def test_evaluate_does_not_count_the_ball_as_a_collider():
+    pred, future, scene, agent_type = _ball_case()
+    hist = future[:, :1].expand(-1, 8, -1).numpy()  # [N, 8, 2] standing still
+    scenes = [Scene(hist[a:b], future[a:b].numpy(), agent_type[a:b].numpy(), f"s{a}")
+              for a, b in ((0, 3), (3, 5))]  # fmt: skip
+    info = DatasetInfo("ball", "test", "m", 0.12, t_fut=2)
+    res = evaluate(ConstantVelocity(), TrajectoryDataset(scenes, info), 1, progress=False)
+    assert res["col_agents"] == 4  # the 4 players
+    assert res["col_gt_pct"] == pytest.approx(50.0)  # scene 1's two players, not the ball-holder
+    binned = BinnedMetrics(collision_radius=0.1)
+    binned.update(pred, future, scene, 2, bodies=agent_type != AGENT_BALL)
+    assert binned.compute()["<=5"]["col_gt_pct"] == pytest.approx(50.0)

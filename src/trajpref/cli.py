@@ -56,6 +56,7 @@ from trajpref.data.trajnet import write_trajnet, write_trajnet_truth
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, TrajprefError
 from trajpref.evaluation import (
+    AGENT_SETS,
     evaluate,
     predict_dataset,
     resolve_collision_radius,
@@ -104,7 +105,7 @@ from trajpref.train.run import (
     last_state_path,
     train_stage,
 )
-from trajpref.types import collate
+from trajpref.types import AGENT_BALL, collate
 from trajpref.viz import plot
 from trajpref.viz.plot import FORMATS, check_limits, plot_scene, plot_scene_scored
 
@@ -213,6 +214,14 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
 
 
+def _add_max_scenes_arg(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument("--max-scenes", type=int, default=None, metavar="N",
+                   help=f"{what} only N scenes of the split, evenly spaced over it (its first "
+                   "and last scene and N-2 between, in order), for a quick look: the output "
+                   "records max_scenes and the split's scene count (split_scenes), and its "
+                   "numbers are a subset's, not the split's (default: every scene)")  # fmt: skip
+
+
 def _add_scorer_arg(p: argparse.ArgumentParser, what: str) -> None:
     p.add_argument("--scorer", default=None, help=f"a denoiser (or generator) checkpoint: {what}")
 
@@ -316,6 +325,14 @@ def build_parser() -> argparse.ArgumentParser:
                     "prints) or .csv (a header and one row, nested results such as --bins' "
                     "as dotted columns); with what made it (model settings, version, date, "
                     "machine, command)")  # fmt: skip
+    ev.add_argument("--agents", default="all", choices=list(AGENT_SETS),
+                    help="which agents every metric averages over: all (default: every "
+                    "predicted agent, NBA's ball included, as the published numbers) or "
+                    "persons (agent_type 0 only: NBA's players, as SocialVAE scores its NBA "
+                    "split; the ball stays in each scene as a neighbour the model reads; "
+                    "joint metrics over each scene's persons, collisions among them); the "
+                    "result records agent_set")  # fmt: skip
+    _add_max_scenes_arg(ev, "evaluate")
     ev.add_argument("--allow-overlap", action="store_true",
                     help="evaluate an ETH/UCY fold's model (or scorer) on another fold "
                     "anyway: its leave-one-out training files hold most of that fold's "
@@ -386,6 +403,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --format trajnet: also write the matching ground-truth file",
     )
     pr.add_argument("--json", action="store_true", help="print a JSON summary")
+    _add_max_scenes_arg(pr, "predict")
     pr.add_argument(
         "--rank",
         action="store_true",
@@ -637,6 +655,8 @@ def _check_model_args(args) -> None:
         args.seed = 0 if args.seed is None else args.seed
     if args.samples < 1:
         raise ConfigError("--samples must be >= 1")
+    if getattr(args, "max_scenes", None) is not None and args.max_scenes < 1:
+        raise ConfigError(f"--max-scenes must be >= 1, got {args.max_scenes}")
     if args.max_agents < 1:
         raise ConfigError("--max-agents must be >= 1")
     keep = getattr(args, "keep", None)
@@ -1382,10 +1402,26 @@ def _parse_bins(text: str | None) -> tuple[int, ...] | None:
     return edges
 
 
-def _protocol_tag(ds, holdout: str | None = None) -> str:
+def _scene_subset(args, ds):
+    """``--max-scenes``: N scenes of the split, evenly spaced (``evenly_spaced``), and what
+    the output records of it (``max_scenes``, ``split_scenes``: the split's count); a note on
+    stderr when it is fewer than the split's, so the numbers are not taken for the split's."""
+    total = len(ds)
+    fields = {"max_scenes": args.max_scenes, "split_scenes": total}
+    if args.max_scenes is None or args.max_scenes >= total:
+        return ds, fields
+    ds = ds.evenly_spaced(args.max_scenes)
+    print(f"trajpref: note: --max-scenes {args.max_scenes}: {len(ds)} of the split's {total} "
+          "scenes, evenly spaced; the numbers are this subset's, not the split's",
+          file=sys.stderr)  # fmt: skip
+    return ds, fields
+
+
+def _protocol_tag(ds, holdout: str | None = None, agents: str = "all") -> str:
     """`` (protocol all)`` after the split in evaluate's header, whichever the protocol (a
-    pasted log says which windows counted), and the held-out scene when there is one."""
-    tag = f" (protocol {ds.info.protocol})"
+    pasted log says which windows counted), with ``, persons only`` under ``--agents
+    persons``, and the held-out scene when there is one."""
+    tag = f" (protocol {ds.info.protocol}{', persons only' if agents == 'persons' else ''})"
     return tag + (f" (held-out scene {holdout}*)" if holdout else "")
 
 
@@ -1433,18 +1469,22 @@ def cmd_evaluate(args) -> int:
     ds = _load(args)
     overlap = _joined(overlap, _warn_model_and_scorer(args, ds))
     _warn_observed_pace(args, model, scorer, ds)
+    ds, subset = _scene_subset(args, ds)
     start = time.perf_counter()
     result = evaluate(
         model, ds, samples, args.seed, device, args.max_agents,
         progress=not args.no_progress, scorer=scorer,
         collision_radius="auto" if args.collision_radius is None else args.collision_radius,
         bins=bins, allow_overlap=True,  # _check_fold_overlap has refused or been allowed
+        agents=args.agents,
     )  # fmt: skip
     seconds = time.perf_counter() - start
     out = {
         "dataset": ds.info.name,
         "split": ds.info.split,
         "protocol": ds.info.protocol,
+        "agent_set": args.agents,
+        **subset,
         **({"holdout_scene": args.holdout_scene} if args.holdout_scene else {}),
         "model": args.model,
         **_model_fields(args),
@@ -1474,9 +1514,11 @@ def cmd_evaluate(args) -> int:
         print(dumps_json(out))
     else:
         print(
-            f"{ds.info.name}/{ds.info.split}{_protocol_tag(ds, args.holdout_scene)}  "
-            f"model={args.model}{'' if args.sampler is None else f' ({args.sampler} sampler)'}"
-            f"  K={samples}  ({out['agents']} agents, {out['scenes']} scenes, "
+            f"{ds.info.name}/{ds.info.split}{_protocol_tag(ds, args.holdout_scene, args.agents)}"
+            f"  model={args.model}"
+            f"{'' if args.sampler is None else f' ({args.sampler} sampler)'}"
+            f"  K={samples}  ({out['agents']} {'persons' if args.agents == 'persons' else 'agents'}"
+            f", {out['scenes']} scenes, "
             f"units {ds.info.units})"
             + ("" if args.keep is None else f", kept by {args.select} of {args.samples}")
         )
@@ -1500,6 +1542,9 @@ def _evaluate_in_context(args, overlap: str | None = None) -> int:
     ``_check_fold_overlap`` allowed."""
     if args.keep is not None or args.scorer or args.bins is not None:
         raise ConfigError("--in-context does not combine with --keep, --scorer or --bins")
+    if args.agents != "all" or args.max_scenes is not None:  # its context is the split's
+        raise ConfigError("--in-context does not combine with --agents persons or "
+                          "--max-scenes (it adapts on the split's other windows)")  # fmt: skip
     _warn_unread(args, _selection_config(args), scores=False)
     cfg = AdaptConfig(ctx_frames=args.in_context, steps=args.adapt_steps, lr=args.adapt_lr,
                       params=args.adapt_params, trust=args.adapt_trust,
@@ -1571,6 +1616,7 @@ def cmd_predict(args) -> int:
     ds = _load(args)
     overlap = _joined(overlap, _warn_model_and_scorer(args, ds))
     _warn_observed_pace(args, model, scorer, ds)
+    ds, subset = _scene_subset(args, ds)
     arrays = predict_dataset(
         model, ds, samples, args.seed, device, args.max_agents,
         progress=not args.no_progress, scorer=scorer,
@@ -1586,7 +1632,7 @@ def cmd_predict(args) -> int:
                                 interval, agent_id=ids)  # fmt: skip
     else:
         arrays["split"] = np.array(ds.info.split)  # 0-d: scene_id names the file, not its split
-        meta = _predict_meta(args, ds, samples, scorer, overlap, sampling, device)
+        meta = _predict_meta(args, ds, samples, scorer, overlap, sampling, device) | subset
         with atomic_path(args.out) as tmp:
             with open(tmp, "wb") as fh:  # meta: a 0-d string, read without pickle
                 np.savez_compressed(fh, **arrays, meta=np.array(dumps_json(meta)))
@@ -1594,6 +1640,7 @@ def cmd_predict(args) -> int:
         "out": args.out,
         "agents": int(arrays["future"].shape[0]),
         "scenes": len(ds),
+        **subset,
         "samples": samples,
         "pred_shape": list(arrays["pred"].shape),
     }
@@ -1781,7 +1828,8 @@ def _print_scene_metrics(args, scene, pred: torch.Tensor, units: str, order=None
           f"minFDE_{k} {fde.mean():.4f} {units} (the mean of its {len(ade)} agents; "
           f"every sample counts)")  # fmt: skip
     for i in range(len(ade)):
-        line = f"  agent {i}: minADE {ade[i]:.4f}  minFDE {fde[i]:.4f}"
+        ball = " (the ball)" if int(scene.agent_type[i]) == AGENT_BALL else ""  # drawn as a star
+        line = f"  agent {i}{ball}: minADE {ade[i]:.4f}  minFDE {fde[i]:.4f}"
         if scores is not None:
             shown = ", ".join(f"{scores[j, i]:.3f}" for j in order[:, i])
             line += f"  ATS of the drawn: {shown}"

@@ -12,7 +12,7 @@ from tqdm.auto import tqdm
 
 from trajpref.data.loader import SceneLoader
 from trajpref.data.registry import ETH_UCY, NAMES, sgan_folds
-from trajpref.errors import ConfigError, TrajprefError
+from trajpref.errors import ConfigError, DataError, TrajprefError
 from trajpref.metrics import (
     BinnedMetrics,
     CollisionAccumulator,
@@ -22,12 +22,18 @@ from trajpref.metrics import (
     collision_flags,
     default_collision_radius,
 )
-from trajpref.score.scorer import ScoreAccumulator, TrajectoryScorer
+from trajpref.score.scorer import ScoreAccumulator, ScoreResult, TrajectoryScorer, score_result
 from trajpref.score.selection import gather
-from trajpref.types import Batch, TrajectoryDataset, collate
+from trajpref.types import AGENT_BALL, AGENT_PERSON, Batch, TrajectoryDataset, collate
 
 COLLISION_KEYS = ("col_i_pct", "col_ii_pct", "col_gt_pct", "col_agents", "col_radius")
 """The collision keys of ``evaluate``'s result (None when the collision metrics are off)."""
+
+AGENT_SETS = ("all", "persons")
+"""Which agents ``evaluate``'s metrics average over (its ``agents``; the CLI's ``--agents``):
+``all`` (every predicted agent, NBA's ball included: the published numbers), or ``persons``
+(``agent_type`` ``AGENT_PERSON`` only: NBA's players, as SocialVAE scores its NBA split; the
+ball stays in each scene as a neighbour the model reads, and leaves every metric)."""
 
 
 class Predictor(Protocol):
@@ -144,6 +150,34 @@ def resolve_collision_radius(radius: float | None | Literal["auto"], units: str)
     return radius
 
 
+def bodies(batch: Batch) -> torch.Tensor:
+    """[N] bool: the agents of a batch that can collide (``metrics.collision_flags``): every
+    one but NBA's ball (``AGENT_BALL``), which a player holds without colliding with it."""
+    return batch.agent_type != AGENT_BALL
+
+
+def persons_only(batch: Batch, pred: torch.Tensor, result: ScoreResult | None = None
+                 ) -> tuple[Batch, torch.Tensor, ScoreResult | None]:  # fmt: skip
+    """The persons (``agent_type == AGENT_PERSON``) of a batch and their samples pred
+    [K, N, T_f, 2] -> (batch of N' persons, pred [K, N', T_f, 2], ``result`` over them): what
+    ``evaluate(agents="persons")`` computes its metrics on, after the model (and the scorer,
+    ``result``: ``TrajectoryScorer.score`` of the whole batch) read every agent. Scenes
+    without a person are left out and the others numbered 0..B'-1 in order; context-only
+    agents are left out (no metric reads them). N' and B' may be 0."""
+    keep = batch.agent_type == AGENT_PERSON  # [N]
+    scene = batch.scene[keep]  # [N'] the persons' scenes, old numbers
+    present = torch.bincount(scene, minlength=batch.num_scenes) > 0  # [B]
+    renumber = torch.cumsum(present, 0) - 1  # [B] each kept scene's new index
+    ids = [i for i, p in zip(batch.scene_ids, present.tolist(), strict=False) if p]
+    view = Batch(history=batch.history[keep], future=batch.future[keep], scene=renumber[scene],
+                 agent_type=batch.agent_type[keep], num_scenes=int(present.sum()),
+                 scene_ids=ids)  # fmt: skip
+    if result is not None:
+        result = score_result(result.d_pred[:, keep], result.d_gt[keep], view.scene,
+                              view.num_scenes)  # fmt: skip
+    return view, pred[:, keep], result
+
+
 @torch.no_grad()
 def evaluate(
     model: Predictor, dataset: TrajectoryDataset, num_samples: int = 20, seed: int = 0,
@@ -152,6 +186,7 @@ def evaluate(
     collision_radius: float | None | Literal["auto"] = "auto",
     bins: tuple[int, ...] | None = None,
     allow_overlap: bool = False,
+    agents: Literal["all", "persons"] = "all",
 ) -> dict:  # fmt: skip
     """minADE_K / minFDE_K per agent and joint over a whole split; with a ``scorer``, also
     maxATS_K / maxFTS_K and the top-1 / top-5 recall of the ground-truth-free ranking.
@@ -163,6 +198,15 @@ def evaluate(
     bins, e.g. ``metrics.SCENE_SIZE_EDGES``), ``out["bins"]`` maps each bin's label to the same
     metrics over its scenes (maxATS / maxFTS / meanATS with a scorer).
 
+    ``agents="persons"`` computes every metric over the agents of ``agent_type``
+    ``AGENT_PERSON`` only (NBA's players: SocialVAE's protocol; ``AGENT_SETS``): the model and
+    the scorer still read the whole scene, the ball as a neighbour, but per-agent metrics
+    average over the persons, joint metrics over each scene's persons (scenes without one left
+    out), collisions are counted among the persons, and scene-size bins count persons. The
+    result then holds ``agent_set: "persons"`` (absent for ``all``, the result as before), so
+    that it is never taken for the all-agents number; a split without a person is a
+    ``DataError``.
+
     ``model`` is a loaded predictor (``load_predictor(name)``), not a name: ``NotAPredictor``
     (a ``TypeError``) otherwise, before any work.
 
@@ -173,6 +217,12 @@ def evaluate(
     windows); ``allow_overlap=True`` evaluates it anyway, as the CLI's ``--allow-overlap``.
     """
     check_inputs(model, dataset)
+    if agents not in AGENT_SETS:
+        raise ConfigError(f"agents must be one of {', '.join(AGENT_SETS)}, got {agents!r}")
+    persons = agents == "persons"
+    if persons and not any((s.agent_type == AGENT_PERSON).any() for s in dataset.scenes):
+        raise DataError(f"agents='persons': {dataset.info.name}/{dataset.info.split} has no "
+                        f"agent of agent_type {AGENT_PERSON} (person) to evaluate")  # fmt: skip
     if not allow_overlap:
         check_fold_overlap(model, dataset, scorer)
     radius = resolve_collision_radius(collision_radius, dataset.info.units)
@@ -187,12 +237,17 @@ def evaluate(
     score_acc = ScoreAccumulator() if scorer is not None else None
     for batch, pred in sampled_batches(model, dataset, num_samples, seed, device, max_agents,
                                        progress, f"evaluate {dataset.info.name}"):  # fmt: skip
+        res = scorer.score(batch, pred) if scorer is not None else None  # every agent read
+        if persons:  # the metrics below over the persons alone
+            batch, pred, res = persons_only(batch, pred, res)  # pred [K, N', T_f, 2]
+            if batch.num_agents == 0:  # no person in these scenes
+                continue
         acc.update(pred, batch.future, batch.scene, batch.num_scenes)
         flags = None
         if col_acc is not None:
-            flags = collision_flags(pred, batch.future, batch.scene, radius)
+            flags = collision_flags(pred, batch.future, batch.scene, radius,
+                                    bodies=bodies(batch))  # fmt: skip
             col_acc.add(flags)
-        res = scorer.score(batch, pred) if scorer is not None else None
         if score_acc is not None:
             score_acc.update(scorer, batch, pred, result=res)
         if bin_acc is not None:
@@ -210,6 +265,8 @@ def evaluate(
         out.update(score_acc.compute())
     if bin_acc is not None:
         out["bins"] = bin_acc.compute()
+    if persons:
+        out["agent_set"] = agents
     return out
 
 

@@ -4,8 +4,9 @@ Per-agent metrics (minADE_K, minFDE_K) pick the best of K for each agent separat
 and FDE pick their own best; this is how the paper's tables and LED count. Joint (scene-level)
 metrics pick one sample k per scene for all its agents.
 
-Collision rates (Col-I, Col-II) follow TrajNet++'s test, on each agent's best sample; bins
-split every metric by the number of agents in a scene (docs/social.md).
+Collision rates (Col-I, Col-II) follow TrajNet++'s test, on each agent's best sample, between
+the agents that have a body (``bodies``: the caller leaves out NBA's ball); bins split every
+metric by the number of agents in a scene (docs/social.md).
 
 Shapes: pred [K, N, T_f, 2], future [N, T_f, 2], scene [N] (scene index per agent, 0..B-1).
 """
@@ -204,27 +205,39 @@ class CollisionFlags:
     """The agent's ground truth collides with a neighbour's ground truth (the data's own rate,
     a floor for Col-II: tracks annotated closer than 2 radii)."""
     has_neighbour: torch.Tensor
-    """The agent's scene has at least one other agent (the rates' denominator)."""
+    """The agent is not the ball and its scene has at least one other agent that is not the
+    ball (the rates' denominator)."""
 
 
 def collision_flags(
     pred: torch.Tensor, future: torch.Tensor, scene: torch.Tensor,
     radius: float = COLLISION_RADIUS, parts: int = COLLISION_PARTS,
+    bodies: torch.Tensor | None = None,
 ) -> CollisionFlags:  # fmt: skip
     """Col-I, Col-II and the ground truth's own collisions of every agent.
 
-    Reads nothing but the samples pred [K, N, T_f, 2], the ground truth future [N, T_f, 2] and
-    scene [N] (which agents are neighbours: those of the same scene). Agent i's best sample
-    k_i (``best_sample``, by ADE) is tested against each neighbour j's sample k_i (Col-I) and
+    Reads nothing but the samples pred [K, N, T_f, 2], the ground truth future [N, T_f, 2],
+    scene [N] (which agents are neighbours: those of the same scene) and, when given,
+    bodies [N] bool (the agents that can collide; None: all). Agent i's best sample k_i
+    (``best_sample``, by ADE) is tested against each neighbour j's sample k_i (Col-I) and
     against j's ground truth (Col-II), with ``collides``. An agent alone in its scene has no
-    neighbour and never collides.
+    neighbour and never collides. An agent without a body (NBA's ball: ``evaluation.bodies``)
+    is neither tested nor a neighbour (a player holding the ball does not collide with it),
+    and it is out of the denominator (``has_neighbour`` False).
     """
     _check(pred, future)
-    if scene.shape != (pred.shape[1],):
-        raise ValueError(f"scene must be [N] = [{pred.shape[1]}], got {tuple(scene.shape)}")
     n = pred.shape[1]
+    if scene.shape != (n,):
+        raise ValueError(f"scene must be [N] = [{n}], got {tuple(scene.shape)}")
+    if bodies is not None and bodies.shape != (n,):
+        raise ValueError(f"bodies must be [N] = [{n}], got {tuple(bodies.shape)}")
+    body = torch.ones(n, dtype=torch.bool, device=pred.device)  # [N] agents that can collide
+    if bodies is not None:
+        body = bodies.to(device=pred.device, dtype=torch.bool)  # [N]
     k_best = best_sample(pred, future)  # [N]
     pi, pj = neighbour_pairs(scene)  # [P], [P]
+    keep = body[pi] & body[pj]  # [P] pairs of two bodies
+    pi, pj = pi[keep], pj[keep]  # [P'']
     hits = {key: torch.zeros(n, dtype=torch.long, device=pred.device) for key in
             ("col_i", "col_ii", "col_gt")}  # fmt: skip
     for lo in range(0, len(pi), _PAIR_CHUNK):
@@ -237,15 +250,17 @@ def collision_flags(
         }
         for key, hit in tests.items():
             hits[key].index_add_(0, i, hit.long())
-    sizes = torch.bincount(scene)  # [max scene + 1]
-    return CollisionFlags(**{k: v > 0 for k, v in hits.items()}, has_neighbour=sizes[scene] > 1)
+    sizes = torch.bincount(scene, weights=body.to(torch.float64))  # [max scene + 1] bodies
+    return CollisionFlags(**{k: v > 0 for k, v in hits.items()},
+                          has_neighbour=body & (sizes[scene] > 1))  # fmt: skip
 
 
 class CollisionAccumulator:
     """Running Col-I / Col-II / ground-truth collision rates over batches.
 
     Rates are percentages of the agents that have at least one neighbour (agents alone in
-    their scene are left out of numerator and denominator; ``col_agents`` counts the rest).
+    their scene, and agents without a body, are left out of numerator and denominator;
+    ``col_agents`` counts the rest).
     """
 
     def __init__(self, radius: float = COLLISION_RADIUS, parts: int = COLLISION_PARTS) -> None:
@@ -255,8 +270,9 @@ class CollisionAccumulator:
         self.counts = {"col_i": 0, "col_ii": 0, "col_gt": 0}
         self.agents = 0
 
-    def update(self, pred: torch.Tensor, future: torch.Tensor, scene: torch.Tensor) -> None:
-        self.add(collision_flags(pred, future, scene, self.radius, self.parts))
+    def update(self, pred: torch.Tensor, future: torch.Tensor, scene: torch.Tensor,
+               bodies: torch.Tensor | None = None) -> None:  # fmt: skip
+        self.add(collision_flags(pred, future, scene, self.radius, self.parts, bodies))
 
     def add(self, flags: CollisionFlags, mask: torch.Tensor | None = None) -> None:
         """Count ``flags`` (optionally only the agents where ``mask`` [N] is True)."""
@@ -330,14 +346,16 @@ class BinnedMetrics:
     def update(
         self, pred: torch.Tensor, future: torch.Tensor, scene: torch.Tensor, num_scenes: int,
         scene_values: dict[str, torch.Tensor] | None = None, flags: CollisionFlags | None = None,
+        bodies: torch.Tensor | None = None,
     ) -> None:  # fmt: skip
         """One batch. ``scene_values``: name -> [B] per-scene numbers to average per bin;
-        ``flags``: this batch's ``collision_flags`` when already computed."""
+        ``flags``: this batch's ``collision_flags`` when already computed; ``bodies`` [N] bool:
+        read by ``collision_flags`` when it computes them (the agents that can collide)."""
         _check(pred, future)
         which = size_bin(torch.bincount(scene, minlength=num_scenes), self.edges)  # [B]
         if self.collisions is not None and flags is None:
             radius, parts = self.collisions[0].radius, self.collisions[0].parts
-            flags = collision_flags(pred, future, scene, radius, parts)
+            flags = collision_flags(pred, future, scene, radius, parts, bodies)
         for b in which.unique().tolist():
             in_bin = which == b  # [B]
             agents = in_bin[scene]  # [N]

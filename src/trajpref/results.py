@@ -420,9 +420,9 @@ PEER_HEADERS = {
 """Header of a column whose key alone would mislead: the two NBA splits do not compare."""
 OUR_DATASET = {"nba": None, "nba-rebound": "nba"}
 """The dataset whose rows fill our cells of a column (default: the column's own name): our
-NBA data is SocialVAE's rebound split (8 observed + 12 predicted steps at 0.48 s, 10 players
-and the ball, every one an agent of the metrics), never LED's 10 + 20 split the peers report,
-so it has its own column."""
+NBA data is SocialVAE's rebound split (8 observed + 12 predicted steps at 0.12 s: 0.96 s
+observed, 1.44 s predicted; 10 players and the ball, every one an agent of the metrics), never
+LED's 10 + 20 split at 0.2 s (2 s + 4 s) the peers report, so it has its own column."""
 SECONDARY_MARK = "§"
 """Marks a peer's cell whose number is quoted second-hand (``secondary`` in peers.json): as
 printed by another paper than the method's own."""
@@ -480,10 +480,15 @@ def peers_notes(peers: dict[str, Any]) -> str:
         "Our `avg` is the unweighted mean of the five fold means (each fold counts once, "
         "whatever its number of agent-windows), shown only when all five folds have a row; a "
         "peer's `avg` is as its source printed it.",
-        "NBA: the peers' column is LED's 10 + 20 split (10 observed + 20 predicted frames); "
-        "ours is SocialVAE's rebound split (8 + 12 steps at 0.48 s) in its own column, and its "
-        "minADE / minFDE average over all 11 agents of a window, the ball included: the two "
-        "columns do not compare.",
+        "NBA: the peers' column is LED's 10 + 20 split (10 observed + 20 predicted frames at "
+        "0.2 s: 2 s observed, 4 s predicted); ours is SocialVAE's rebound split (8 + 12 steps "
+        "at 0.12 s: 0.96 s observed, 1.44 s predicted) in its own column: the two columns do "
+        "not compare. Both count the ball as one of 11 agents (LED and MART, whose loader is "
+        "LED's, average over all 11 too; SocialVAE, the source of our split, scores the 10 "
+        "players only), so the differences are the split (other games and windows), the "
+        "history and horizon lengths and their steps, and the feet conversion: LED and MART "
+        "divide feet by 94/28 (0.298 m per ft), we multiply by 0.3048, so our distances are "
+        "2.3 % larger for the same positions.",
         f"{SECONDARY_MARK} marks a number quoted second-hand, as printed in another paper than "
         f"the method's own (named in the `source` of `benchmarks/peers.json`); check it "
         f"against the method's own paper before citing it.",

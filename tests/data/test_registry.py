@@ -1,5 +1,6 @@
 import dataclasses
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +18,13 @@ from trajpref.data import (
     split_validation_in_time,
     with_paced_copy,
 )
-from trajpref.data.registry import ETH_UCY, FEET_TO_METRES, apply_protocol, robo_episodes
+from trajpref.data.registry import (
+    ETH_UCY,
+    FEET_TO_METRES,
+    SPECS,
+    apply_protocol,
+    robo_episodes,
+)
 from trajpref.errors import ConfigError, DataError, TrajprefError
 from trajpref.types import DatasetInfo, Scene, TrajectoryDataset
 
@@ -130,6 +137,32 @@ def test_univ_has_crowded_scenes(data_root):
     assert max(sizes) >= 50
 
 
+NBA_CLOCK = re.compile(r"_(\d+\.\d+)_(\d+\.\d+)\.txt$")
+"""The end of an NBA rebound file's name: the game clock (seconds left in the quarter) at its
+first and last row, e.g. ``LAL_ATL_0021500286_1_365.53_363.05.txt``."""
+
+
+@pytest.mark.realdata
+def test_nba_frame_interval_is_the_files_own_game_clock(data_root):
+    # each file's name gives the game clock at its first and last row: the clock time per row
+    # step is the data's step (0.12 s: the frame column counts hundredths of a second, rows
+    # every 3rd SportVU moment at 25 Hz), not 12 frames at 25 Hz (0.48 s)
+    step = SPECS["nba"].frame_interval
+    for split in ("train", "test"):
+        files = sorted((data_root / "nba" / "rebound" / split).glob("*.txt"))[::97]  # [~39, ~10]
+        assert len(files) >= 9, split
+        for path in files:
+            start, end = map(float, NBA_CLOCK.search(path.name).groups())
+            frames = np.unique(np.loadtxt(path, usecols=0))  # [rows]
+            assert set(np.diff(frames)) == {12.0}, path.name
+            per_step = (start - end) / (len(frames) - 1)  # game-clock seconds per row step
+            assert per_step == pytest.approx(step, rel=0.05), path.name
+            assert (frames[-1] - frames[0]) / 100 == pytest.approx(start - end, rel=0.05)
+    nba = load_dataset("nba", "test", data_root)
+    assert nba.info.frame_interval == step
+    assert 1.5 < mean_speed(nba) < 2.5  # m/s, players and ball (about 1.81; 0.45 at 0.48 s)
+
+
 @pytest.mark.realdata
 def test_sdd_nba_robo(data_root):
     sdd = load_dataset("sdd", "test", data_root)
@@ -141,7 +174,7 @@ def test_sdd_nba_robo(data_root):
     nba = load_dataset("nba", "val", data_root)
     assert all(s.num_agents == 11 for s in nba.scenes)
     assert all((s.agent_type == 1).sum() == 1 for s in nba.scenes)
-    assert nba.info.units == "m" and nba.info.frame_interval == pytest.approx(0.48)
+    assert nba.info.units == "m" and nba.info.frame_interval == pytest.approx(0.12)
     # court is 94 x 50 feet; after conversion every position lies within ~ 29 x 15 m
     xy = np.concatenate([s.history for s in nba.scenes[:200]])
     assert xy[..., 0].max() < 110 * FEET_TO_METRES

@@ -77,7 +77,7 @@ class SourceSpec:
 SPECS = {
     **{name: SourceSpec("m", 0.4) for name in ETH_UCY},
     "sdd": SourceSpec("px", 0.4),
-    "nba": SourceSpec("m", 0.48),
+    "nba": SourceSpec("m", 0.12),
     "robo": SourceSpec("m", 0.5),
     "robo-sim": SourceSpec("m", 0.5),
     "robo-mix": SourceSpec("m", 0.5),
@@ -426,7 +426,12 @@ def _user_folder(
     folder = splits.get(split, path)
     if splits and split not in splits:
         present = [f.name for f in splits.values()]
-        raise DataError(f"no {split}/ sub-folder (found {', '.join(present)})", path)
+        remedy = ""
+        if split == "val":  # what a run validates on; data.holdout_scene reads val/ too
+            remedy = ("; add a val/ sub-folder (a few of the recordings moved out of "
+                      "train/), or --set data.val_dataset=FOLDER (a folder of validation "
+                      "track files)")  # fmt: skip
+        raise DataError(f"no {split}/ sub-folder (found {', '.join(present)}){remedy}", path)
     has_text = bool(text.matching_files(folder, USER_TEXT))
     if text.matching_files(folder, ("*.ndjson",)):
         if has_text:

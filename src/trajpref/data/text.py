@@ -43,7 +43,12 @@ DELIMITERS = {",": ",", ";": ";", "|": "|", "\t": "\t", "tab": "\t", "comma": ",
               "semicolon": ";", "whitespace": "whitespace"}  # fmt: skip
 """Accepted ``delimiter`` values and what they mean (``whitespace``: runs of spaces or tabs)."""
 
-_TYPE_NAMES = {"PLAYER": AGENT_PERSON, "PERSON": AGENT_PERSON, "BALL": AGENT_BALL}
+TYPE_NAMES = {"PLAYER": AGENT_PERSON, "PERSON": AGENT_PERSON, "BALL": AGENT_BALL}
+"""The names a 5th column of agent types may hold (any case), and the ``agent_type`` each
+becomes. A file whose first data row has a 5th field among them is read with that column (the
+NBA files; any folder's files alike); any other 5th column is refused."""
+_TYPE_LIST = "BALL, PLAYER or PERSON"
+"""``TYPE_NAMES`` as the messages name them."""
 _TYPED = np.dtype([("frame", "f8"), ("agent", "f8"), ("x", "f8"), ("y", "f8"), ("kind", "U16")])
 _CHUNK = 1 << 16
 """Windows gathered per step when the window arrays are filled."""
@@ -147,6 +152,9 @@ class _Layout:
     """1-based number of a header line to skip (None: no header)."""
     frame_name: str | None = None
     """The header's name of the first (frame) column, lower case."""
+    typed: bool = False
+    """Whether the first data row has a 5th field naming an agent type (``TYPE_NAMES``): the
+    file is then read with its column of agent types, as the NBA files are."""
 
 
 def _sep_name(delimiter: str | None) -> str:
@@ -269,7 +277,9 @@ def _check_header(tokens: list[str], path: Path, line: int) -> None:
 
 
 def _layout(path: Path, options: ReadOptions) -> _Layout:
-    """Sniff the delimiter and a header from the first line that holds data."""
+    """Sniff the delimiter and a header from the first line that holds data, and whether the
+    first data row (after a header, if any) has a 5th column of agent types."""
+    header: _Layout | None = None
     try:
         with open(path, "rb") as fh:
             for lineno, raw in enumerate(file_lines(fh), start=1):
@@ -280,6 +290,9 @@ def _layout(path: Path, options: ReadOptions) -> _Layout:
                 content = line.split("#", 1)[0]
                 if not content.strip():
                     continue
+                if header is not None:  # the first data row after the header
+                    return _Layout(header.delimiter, header.header_line, header.frame_name,
+                                   _names_type(content, header.delimiter))  # fmt: skip
                 delimiter = options.delimiter
                 if delimiter is None:
                     delimiter = "," if "," in content else ";" if ";" in content else None
@@ -290,11 +303,21 @@ def _layout(path: Path, options: ReadOptions) -> _Layout:
                 if is_header:
                     _check_header(tokens, path, lineno)
                     name = tokens[0].strip("\"'").lower() if tokens else None
-                    return _Layout(delimiter, lineno, name)
-                return _Layout(delimiter, None)
+                    header = _Layout(delimiter, lineno, name)
+                    continue
+                return _Layout(delimiter, None, typed=_names_type(content, delimiter))
     except OSError as exc:
         raise DataError(f"cannot read file ({exc.strerror or exc})", path) from None
+    if header is not None:  # a header and no data: the parser says the file is empty
+        return header
     return _Layout(None if options.delimiter == "whitespace" else options.delimiter, None)
+
+
+def _names_type(content: str, delimiter: str | None) -> bool:
+    """Whether a data line has exactly 5 fields, the 5th an agent type's name (``TYPE_NAMES``,
+    any case)."""
+    fields = _split(content.rstrip("\r\n"), delimiter)
+    return len(fields) == 5 and fields[4].upper() in TYPE_NAMES
 
 
 def _parse_fast(path: Path, layout: _Layout, with_type: bool):
@@ -362,7 +385,7 @@ def _parse_slow(path: Path, layout: _Layout, with_type: bool):
     """Line-by-line parser: the reference for what is accepted, and the source of the
     line-numbered error messages. Returns ``(values [R, 4], kinds [R] | None, lines [R])``."""
     n_cols = 5 if with_type else 4
-    expect = "frame agent x y BALL|PLAYER" if with_type else "frame agent x y"
+    expect = "frame agent x y BALL|PLAYER|PERSON" if with_type else "frame agent x y"
     delimiter = layout.delimiter
     values = array("d")
     kinds: list[str] = []
@@ -399,10 +422,17 @@ def _column_hint(content: str, delimiter: str | None, found: int, n_cols: int) -
         return f"; the line holds {held}: pass --delimiter {_sep_name(sep)}"
     if found > n_cols and n_cols == 4:
         other = "column" if found == 5 else f"{found - n_cols} columns"
-        nba = "; a 5th column of agent types is read for the NBA data only" if found == 5 else ""
+        fifth = _split(content.rstrip("\r\n"), delimiter)[4] if found == 5 else ""
+        types = ""
+        if fifth.upper() in TYPE_NAMES:  # types, but the first data row has none
+            types = ("; a 5th column of agent types is read when the first data row has one: "
+                     "give every row its type")  # fmt: skip
+        elif found == 5:
+            types = (f"; a 5th column is read only as agent types, {_TYPE_LIST} (any case), "
+                     f"not {fifth!r}")  # fmt: skip
         return (f"; only frame agent x y are read, the first 4 columns, by position, not by "
                 f"header name: drop the other {other} (keep frame agent x y, in that order)"
-                f"{nba}")  # fmt: skip
+                f"{types}")  # fmt: skip
     if found == 1 and delimiter is not None:
         return "; is the file whitespace-separated? pass --delimiter whitespace"
     return ""
@@ -428,7 +458,8 @@ def read_tracks(
     scale: float = 1.0,
     units: str = "unknown",
 ) -> Tracks:
-    """Read ``frame agent x y`` rows (plus a ``BALL|PLAYER`` column when ``with_type``).
+    """Read ``frame agent x y`` rows, plus a column of agent types (``TYPE_NAMES``) when
+    ``with_type`` or when the file's first data row has one (``_Layout.typed``).
 
     ``scale`` multiplies coordinates (e.g. feet to metres); ``units`` names the units after
     scaling, for messages. Raises ``DataError`` naming the file and line for: a wrong number of
@@ -440,6 +471,7 @@ def read_tracks(
     options = options or ReadOptions()
     check_file(path)
     layout = _layout(path, options)
+    with_type = with_type or layout.typed  # a 5th column of agent types, in any file
     parsed = _parse_fast(path, layout, with_type)
     lines = None
     if parsed is None:
@@ -650,10 +682,11 @@ def _kind_flags(kinds: np.ndarray, path: Path, line_of) -> np.ndarray:
     names, inverse = np.unique(kinds, return_inverse=True)  # [U], [R]
     flags = np.empty(len(names), np.int64)  # [U]
     for i, name in enumerate(names):
-        flag = _TYPE_NAMES.get(str(name).upper())
+        flag = TYPE_NAMES.get(str(name).upper())
         if flag is None:
             (line,) = line_of([int(np.argmax(inverse == i))])
-            raise DataError(f"unknown agent type {str(name)!r} (BALL or PLAYER)", path, line)
+            raise DataError(f"unknown agent type {str(name)!r} ({_TYPE_LIST}, any case)", path,
+                            line)  # fmt: skip
         flags[i] = flag
     return flags[inverse]
 

@@ -53,7 +53,7 @@ def tracks_to_history(times: Any, ids: Sequence[Hashable] | np.ndarray, xy: Any,
     seconds), ``ids`` [R] agent ids (ints, strings or other ids that sort among themselves),
     ``xy`` [R, 2] positions in the model's units; rows in any order. ``now``: the present time,
     in the same clock. ``step``: ``model.frame_interval`` (0.4 s for the ETH/UCY and sdd
-    models, 0.5 robo, 0.48 nba); ``t_hist``: ``model.t_hist`` (8 for the published models).
+    models, 0.5 robo, 0.12 nba); ``t_hist``: ``model.t_hist`` (8 for the published models).
 
     Rules:
 

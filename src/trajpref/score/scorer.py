@@ -106,6 +106,30 @@ class ScoreResult:
         return relative_score(self.d_pred.sum(-1), self.d_gt.sum(-1))
 
 
+def score_result(d_pred: torch.Tensor, d_gt: torch.Tensor, scene: torch.Tensor,
+                 num_scenes: int) -> ScoreResult:  # fmt: skip
+    """The scores of residuals d_pred [K, N, T_f] and d_gt [N, T_f] of the agents of
+    ``num_scenes`` scenes (``scene`` [N], each scene's index, every scene with an agent):
+    what ``TrajectoryScorer.score`` returns, and the same over a subset of the agents (the
+    persons of ``evaluation.evaluate(agents="persons")``)."""
+    r = relative_score(d_pred, d_gt)  # [K, N, T_f]
+    b = num_scenes
+    sum_p = scene_sum(d_pred.sum(-1), scene, b)  # [K, B]
+    sum_g = scene_sum(d_gt.sum(-1), scene, b)  # [B]
+    fin_p = scene_sum(d_pred[..., -1], scene, b)  # [K, B]
+    fin_g = scene_sum(d_gt[..., -1], scene, b)  # [B]
+    sizes = torch.bincount(scene, minlength=b).to(r.dtype)  # [B]
+    return ScoreResult(
+        d_pred=d_pred,
+        d_gt=d_gt,
+        r=r,
+        ats=relative_score(sum_p, sum_g),
+        fts=relative_score(fin_p, fin_g),
+        ats_mean_of_ratios=scene_sum(r.mean(-1), scene, b) / sizes,
+        fts_mean_of_ratios=scene_sum(r[..., -1], scene, b) / sizes,
+    )
+
+
 PRECISIONS = ("fp32", "bf16")
 """Arithmetic of the scorer's denoiser passes (``TrajectoryScorer.precision``)."""
 
@@ -287,23 +311,7 @@ class TrajectoryScorer(DenoiserShapes):
         self.check_shapes(batch, pred)
         k = pred.shape[0]
         d = self.residual(batch, torch.cat([pred, batch.future[None]], 0))  # [K+1, N, T_f]
-        d_pred, d_gt = d[:k], d[k]
-        r = relative_score(d_pred, d_gt)
-        b = batch.num_scenes
-        sum_p = scene_sum(d_pred.sum(-1), batch.scene, b)  # [K, B]
-        sum_g = scene_sum(d_gt.sum(-1), batch.scene, b)  # [B]
-        fin_p = scene_sum(d_pred[..., -1], batch.scene, b)  # [K, B]
-        fin_g = scene_sum(d_gt[..., -1], batch.scene, b)  # [B]
-        sizes = batch.scene_sizes().to(r.dtype)  # [B]
-        return ScoreResult(
-            d_pred=d_pred,
-            d_gt=d_gt,
-            r=r,
-            ats=relative_score(sum_p, sum_g),
-            fts=relative_score(fin_p, fin_g),
-            ats_mean_of_ratios=scene_sum(r.mean(-1), batch.scene, b) / sizes,
-            fts_mean_of_ratios=scene_sum(r[..., -1], batch.scene, b) / sizes,
-        )
+        return score_result(d[:k], d[k], batch.scene, batch.num_scenes)
 
     @torch.no_grad()
     def scene_residual(self, batch: Batch, pred: torch.Tensor, final: bool = False):
@@ -373,6 +381,39 @@ def _agent_types(value, p: int, device: torch.device, name: str = "agent_type") 
     return types.to(device=device, dtype=torch.int64)
 
 
+TYPED_DATASETS = frozenset({"nba"})
+"""Built-in datasets whose reader flags each agent's type (the ball ``AGENT_BALL``, players
+``AGENT_PERSON``): a model trained on one reads the flags (its encoder's ``type_embed``), so
+its futures and scores change with them (``reads_agent_types``)."""
+
+
+def reads_agent_types(obj) -> bool:
+    """Whether ``obj`` (a predictor or scorer carrying ``models.timing.attach_timing``'s
+    record) was trained on data whose agents were flagged by type (``TYPED_DATASETS``: nba's
+    ball is ``agent_type`` 1): such a model given no ``agent_type`` takes every agent as a
+    person, the ball included. False for models without a record (built in code, ``cv``)."""
+    timing = getattr(obj, "timing", None)
+    return isinstance(timing, dict) and timing.get("trained_on") in TYPED_DATASETS
+
+
+def warn_untyped(obj, call: str, stacklevel: int) -> None:
+    """A ``UserWarning`` that ``call`` (``predict_scene``, ``predict_scenes``,
+    ``rank_samples``, ``select_for_scene``) got no agent types for a model or scorer trained
+    with typed agents (``reads_agent_types``). Its text is the same at every call, so Python
+    shows it once per call site."""
+    scenes = call == "predict_scenes"
+    model = call.startswith("predict")
+    how = ("agent_types=[one [P] integer array per scene]" if scenes
+           else "agent_type=[P] integers")  # fmt: skip
+    warnings.warn(f"{call}: no {'agent_types' if scenes else 'agent_type'} given, so every "
+                  f"agent is taken as a person (agent_type {AGENT_PERSON}), a ball included; "
+                  f"this {'model' if model else 'scorer'} was trained on "
+                  f"{obj.timing['trained_on']} with the ball flagged (agent_type {AGENT_BALL}) "
+                  f"and its {'futures' if model else 'scores'} change with the flags: pass "
+                  f"{how}, {AGENT_BALL} for the ball, {AGENT_PERSON} for a player",
+                  stacklevel=stacklevel)  # fmt: skip
+
+
 def scene_slots(scene: torch.Tensor) -> torch.Tensor:
     """Each agent's index within its scene, [N] int64, from the batch's non-decreasing scene
     index [N] (``Batch.scene``): 0, 1, ... for the first scene's agents, 0, 1, ... again for
@@ -398,11 +439,13 @@ def rank_samples(
     with T_h and T_f the scorer's (``scorer.t_hist``, ``scorer.t_fut``: 8 and 12 for the
     published models), one position every ``scorer.frame_interval`` seconds. Each may be a
     numpy array (what ``trajpref predict`` exports) or a torch tensor. ``agent_type`` [P]: 0
-    person (the default), 1 ball. ``final``: rank by the last step only (FTS order) instead of
-    all steps (ATS order). ``frame_interval`` (seconds between the positions) and ``units``,
-    when given, are compared with the scorer's, with a warning where they differ (as
-    ``predict_scene``); so is the observed pace (``models.timing.check_observed_pace``: data in
-    centimetres for a metre scorer ranks nonsense).
+    person (the default), 1 ball; a scorer trained with the ball flagged (``reads_agent_types``:
+    nba/denoiser) given none scores the ball as a player, with a ``UserWarning``. ``final``:
+    rank by the last step only (FTS order) instead of all steps (ATS order).
+    ``frame_interval`` (seconds between the positions) and ``units``, when given, are compared
+    with the scorer's, with a warning where they differ (as ``predict_scene``); so is the
+    observed pace (``models.timing.check_observed_pace``: data in centimetres for a metre
+    scorer ranks nonsense).
 
     Returns ``(order [K] int64, residual [K] float32)``: sample indices best first, and each
     sample's residual summed over agents and steps (lower is more human-like). Both are numpy
@@ -416,6 +459,8 @@ def rank_samples(
     """
     batch, futs = scene_batch(scorer, history, samples, agent_type, frame_interval=frame_interval,
                               units=units, allow_empty=True)  # fmt: skip
+    if agent_type is None and batch.num_agents and reads_agent_types(scorer):
+        warn_untyped(scorer, "rank_samples", stacklevel=3)  # the ball would rank as a player
     if batch.num_agents == 0:  # an empty view: every sample alike, a residual summed over none
         total = futs.new_zeros(futs.shape[0])  # [K]
         order = torch.arange(futs.shape[0], device=futs.device)  # [K] as they came
@@ -436,11 +481,13 @@ def predict_scene(model, history: ArrayLike, num_samples: int = 20,
     ``rank_samples``): history [P, T_h, 2] absolute positions -> [K, P, T_f, 2] absolute
     future positions, in the model's units (``model.units``: metres for the published
     ETH/UCY and Robo models, pixels for sdd) and at its step (``model.frame_interval``
-    seconds between positions: 0.4 for ETH/UCY and sdd, 0.5 for robo and robo-mix, 0.48 for
+    seconds between positions: 0.4 for ETH/UCY and sdd, 0.5 for robo and robo-mix, 0.12 for
     nba), histories and futures alike.
 
     ``model`` is what ``models.registry.load_predictor`` returns (a published name, a
-    checkpoint or ``cv``). ``agent_type`` [P]: 0 person (the default), 1 ball. ``seed`` seeds
+    checkpoint or ``cv``). ``agent_type`` [P]: 0 person (the default), 1 ball; a model trained
+    with the ball flagged (``reads_agent_types``: nba/generator) given none takes the ball for a
+    player, with a ``UserWarning`` (once per call site). ``seed`` seeds
     the sampling (the published generators draw no noise: every seed gives the same).
     ``num_samples`` below a generator's fixed set (``model.generator.samples``: 20 for the
     published ones, trained best-of-20) takes the first of its set, an arbitrary subset, with
@@ -589,6 +636,9 @@ def _predict(model, histories: list, num_samples, agent_types: list, seed, frame
                             f"{scenes[0][0].shape[1]}: the scenes of one call need the same "
                             "number")  # fmt: skip
         scenes.append((hist, types, ctx))
+    untyped = any(t is None and len(h) for t, (h, _, _) in zip(agent_types, scenes, strict=True))
+    if untyped and reads_agent_types(model):  # the ball would be read as a player
+        warn_untyped(model, "predict_scene" if single else "predict_scenes", stacklevel=4)
     if any(c is not None and len(c) for _, _, c in scenes) and not getattr(
             model, "reads_context", False):  # fmt: skip
         warnings.warn("this model reads no context-only neighbours (model.reads_context is "

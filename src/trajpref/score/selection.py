@@ -32,7 +32,13 @@ from trajpref.errors import ConfigError, TrajprefError
 from trajpref.metrics import scene_sum
 from trajpref.models import zoo
 from trajpref.models.predictor import as_integer
-from trajpref.score.scorer import TrajectoryScorer, scene_batch, score_timesteps
+from trajpref.score.scorer import (
+    TrajectoryScorer,
+    reads_agent_types,
+    scene_batch,
+    score_timesteps,
+    warn_untyped,
+)
 from trajpref.types import Batch
 
 Method = Literal["first", "random", "kmeans", "fps", "facility", "medoids", "top",
@@ -516,12 +522,16 @@ def select_for_scene(scorer: TrajectoryScorer, history, samples, cfg: SelectionC
     indices per agent in selection order (with ``cfg.per="scene"`` the P columns are equal):
     numpy when neither input is a tensor, else a tensor. Take the futures with
     ``samples[idx, np.arange(P)]``. ``chosen_selection`` gives each published model's chosen
-    ``cfg``. ``frame_interval`` and ``units``: as ``rank_samples``. The checks are
+    ``cfg``. ``agent_type``, ``frame_interval`` and ``units``: as ``rank_samples`` (a
+    selection that reads the score of a scorer trained with the ball flagged, given no
+    ``agent_type``, warns). The checks are
     ``rank_samples``' (``scene_batch``). A scene without agents (history [0, T_h, 2], samples
     [K, 0, T_f, 2]: an empty view) gives idx [K', 0] (``cfg.keep`` still at most K) without
     running the scorer."""
     batch, pred = scene_batch(scorer, history, samples, agent_type, frame_interval=frame_interval,
                               units=units, allow_empty=True)  # pred [K, P, T_f, 2]  # fmt: skip
+    if agent_type is None and batch.num_agents and cfg.uses_score and reads_agent_types(scorer):
+        warn_untyped(scorer, "select_for_scene", stacklevel=3)  # the ball scored as a player
     if batch.num_agents == 0:  # an empty view: K' rows of no agent's indices
         if cfg.keep > pred.shape[0]:
             raise ConfigError(f"cannot keep {cfg.keep} of {pred.shape[0]} samples")
