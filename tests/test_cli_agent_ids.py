@@ -81,3 +81,29 @@ def test_python_predict_dataset_returns_the_same_ids(tmp_path):
     assert arrays["agent_id"].tolist() == IDS
     cam = arrays["scene"] < 6
     np.testing.assert_array_equal(arrays["history"][cam, 0, 1], arrays["agent_id"][cam])
+
+
+def test_ids_from_2_53_on_beside_a_fraction_stay_apart(tmp_path):
+    """One file's integer ids from 2**53 on, another's 2.5: float64 would round 2**53 + 1 into
+    2**53, so the ids are kept as their exact text."""
+    from trajpref.data import load_dataset
+    from trajpref.evaluation import predict_dataset
+    from trajpref.models.registry import load_predictor
+
+    rows = [(f * 10, a, 0.3 * f, float(k)) for f in range(20)
+            for k, a in enumerate((2**53, 2**53 + 1))]  # fmt: skip
+    write_tracks(tmp_path / "d" / "test" / "a.txt", rows)
+    write_tracks(
+        tmp_path / "d" / "test" / "b.txt", [(f * 10, 2.5, 0.3 * f, 0.0) for f in range(20)]
+    )
+    ds = load_dataset(str(tmp_path / "d"), "test")
+    ids = predict_dataset(load_predictor("cv"), ds, 1, progress=False)["agent_id"]
+    assert ids.tolist() == [str(2**53), str(2**53 + 1), "2.5"]
+    rows = [(f * 10, a, 0.3 * f, float(k)) for f in range(20) for k, a in enumerate((7, 8))]
+    write_tracks(tmp_path / "e" / "test" / "a.txt", rows)  # small ids beside 2.5: numbers
+    write_tracks(
+        tmp_path / "e" / "test" / "b.txt", [(f * 10, 2.5, 0.3 * f, 0.0) for f in range(20)]
+    )
+    ds = load_dataset(str(tmp_path / "e"), "test")
+    ids = predict_dataset(load_predictor("cv"), ds, 1, progress=False)["agent_id"]
+    assert ids.dtype == np.float64 and ids.tolist() == [7.0, 8.0, 2.5]

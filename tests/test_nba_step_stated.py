@@ -30,3 +30,21 @@ def test_the_nba_model_cards_state_the_registrys_step():
     rows = [row for row in index["models"] if row["dataset"] == "nba"]
     assert rows and all(row["data"]["frame_interval"] == SPECS["nba"].frame_interval
                         for row in rows)  # fmt: skip
+
+
+def test_a_checkpoint_that_recorded_nbas_old_step_takes_the_registrys():
+    """Checkpoints trained between the step record (a022274) and the correction recorded
+    nba's 0.48 s; a built-in dataset's step is the registry's fact, so they load at 0.12 s
+    and are not told to resample the right data to the wrong step."""
+    from types import SimpleNamespace
+
+    from trajpref.data.registry import SPECS
+    from trajpref.models.timing import attach_timing
+
+    header = {"config": {"data": {"dataset": "nba", "time_step": 1.0}},
+              "meta": {"data_timing": {"frame_interval": 0.48, "interval_from": "dataset",
+                                       "time_step": 1.0, "units": "m"}}}  # fmt: skip
+    model = attach_timing(SimpleNamespace(), header)
+    assert model.frame_interval == SPECS["nba"].frame_interval == 0.12
+    header["meta"]["data_timing"].update(interval_from="given", frame_interval=0.3)
+    assert attach_timing(SimpleNamespace(), header).frame_interval == 0.3  # a folder's own

@@ -85,17 +85,3 @@ def test_agent_ids_are_checked_against_the_agents():
             dataclasses.replace(scene, agent_id=bad)
     with pytest.raises(DataError, match="agent_id must hold numbers or strings, got bool"):
         dataclasses.replace(scene, agent_id=np.array([True, False, True]))
-
-
-def test_collate_leaves_the_agent_ids_out_of_the_batch():
-    import dataclasses
-
-    import torch
-
-    from trajpref.types import collate
-
-    plain = collate([make_scene(2), make_scene(1, seed=1)])
-    with_ids = collate([dataclasses.replace(make_scene(2), agent_id=[5, 3]),
-                        dataclasses.replace(make_scene(1, seed=1), agent_id=[7])])  # fmt: skip
-    for name in ("history", "future", "scene", "agent_type"):
-        assert torch.equal(getattr(plain, name), getattr(with_ids, name))

@@ -326,23 +326,26 @@ def predict_dataset(
 def source_agent_ids(dataset: TrajectoryDataset, agents: int) -> np.ndarray | None:
     """[N] each predicted agent's id in the source data, in ``predict_dataset``'s order (the
     scenes in dataset order, each scene's agents in its order), from the scenes' ``agent_id``
-    [P] where every scene carries one; None otherwise. Integers as int64, other numbers as
-    float64; where some scene's ids are strings (names, or the exact text of ids that int64
-    or float64 cannot hold), every id as its text (``_id_text``)."""
+    [P] where every scene carries one; None otherwise. Exact whatever the files mix: int64
+    where every id is an integer, float64 where every id is a number float64 holds exactly
+    (integers below 2**53 beside fractions such as 2.5), else every id as its text
+    (``_id_text``: names, ids beyond int64, or integers from 2**53 on beside fractions, which
+    float64 would round into each other)."""
     parts = [s.agent_id for s in dataset.scenes]
     if not parts or any(p is None for p in parts):
         return None
     arrays = [np.asarray(p).reshape(-1) for p in parts]  # [P_b] each
     if sum(len(a) for a in arrays) != agents:
         return None
-    if any(a.dtype.kind not in "iuf" for a in arrays):  # names or exact text in some file
-        return np.concatenate([_id_text(a) for a in arrays])  # [N] every id as its text
-    ids = np.concatenate(arrays)  # [N]
-    if ids.dtype.kind in "iu":
-        return ids.astype(np.int64)
-    finite = np.isfinite(ids).all()
-    whole = finite and (ids == np.round(ids)).all() and (np.abs(ids) < 2**53).all()
-    return ids.astype(np.int64) if whole else ids.astype(np.float64)
+    kinds = {a.dtype.kind for a in arrays}
+    if kinds <= set("iu"):
+        return np.concatenate(arrays).astype(np.int64)  # [N]
+    if kinds <= set("iuf") and all(
+            a.dtype.kind == "f" or (np.abs(a) < 2**53).all() for a in arrays):  # fmt: skip
+        ids = np.concatenate([a.astype(np.float64) for a in arrays])  # [N] every one exact
+        whole = np.isfinite(ids).all() and (ids == np.round(ids)).all()
+        return ids.astype(np.int64) if whole else ids
+    return np.concatenate([_id_text(a) for a in arrays])  # [N] every id as its text
 
 
 def _id_text(ids: np.ndarray) -> np.ndarray:

@@ -250,7 +250,7 @@ def collision_flags(
         }
         for key, hit in tests.items():
             hits[key].index_add_(0, i, hit.long())
-    sizes = torch.bincount(scene, weights=body.to(torch.float64))  # [max scene + 1] bodies
+    sizes = torch.bincount(scene[body], minlength=int(scene.max()) + 1 if n else 0)  # bodies
     return CollisionFlags(**{k: v > 0 for k, v in hits.items()},
                           has_neighbour=body & (sizes[scene] > 1))  # fmt: skip
 

@@ -33,7 +33,7 @@ def scene(walks):
 
 def _as_nba(monkeypatch, obj) -> None:
     """``obj`` as if its checkpoint said it trained on nba (the ball flagged)."""
-    monkeypatch.setattr(obj, "timing", {**obj.timing, "trained_on": "nba"})
+    monkeypatch.setattr(obj, "timing", {**obj.timing, "trained_on": "nba", "agent_types": [0, 1]})
 
 
 def _calls(model, scorer, history, types=None):
@@ -99,3 +99,34 @@ def test_the_published_models_say_whether_they_read_types():
     types[0] = 1
     assert not [m for m in _messages(lambda: predict_scene(nba, history, 20, types))
                 if UNTYPED in m]  # fmt: skip
+
+
+def test_the_recorded_training_flags_decide_whether_a_model_reads_types():
+    """A checkpoint records the flags its training windows held (``agent_types``, since
+    2026-12-06): a folder with a BALL column counts, whatever its name; without the record,
+    the dataset decides (nba)."""
+    from types import SimpleNamespace
+
+    from trajpref.models.timing import attach_timing
+
+    def timing(dataset, types):
+        meta = {} if types is None else {"data_timing": {
+            "frame_interval": 0.12, "interval_from": "given", "time_step": 1.0, "units": "m",
+            "agent_types": types}}  # fmt: skip
+        header = {"config": {"data": {"dataset": dataset, "time_step": 1.0}}, "meta": meta}
+        return attach_timing(SimpleNamespace(), header)
+
+    assert reads_agent_types(timing("/data/court", [0, 1]))
+    assert not reads_agent_types(timing("/data/walks", [0]))
+    assert reads_agent_types(timing("nba", None)) and not reads_agent_types(timing("zara1", None))
+
+
+def test_training_records_the_agent_type_flags_it_saw(walks):
+    from trajpref.train.run import data_timing
+    from trajpref.types import TrajectoryDataset
+
+    train = load_dataset(str(walks), "train")
+    assert data_timing(train)["agent_types"] == [0]
+    scenes = [train.scenes[0]]
+    scenes[0].agent_type[0] = 1  # a ball in the first scene
+    assert data_timing(TrajectoryDataset(scenes, train.info))["agent_types"] == [0, 1]

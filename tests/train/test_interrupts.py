@@ -92,3 +92,31 @@ def test_other_exceptions_in_finalizers_still_reach_the_previous_hook(monkeypatc
     hook = sys.unraisablehook
     Raises(OSError("after"))
     assert seen == [ValueError, OSError] and sys.unraisablehook is hook
+
+
+def test_a_stop_between_an_epochs_log_row_and_its_state_logs_that_epoch_once(
+        tmp_path, tiny_cfg, monkeypatch):  # fmt: skip
+    """A Ctrl-C after the epoch's log row but before its resume state is saved: the resumed
+    run runs that epoch again, and its log holds each epoch once."""
+    import dataclasses
+
+    from trajpref.train.loop import read_metrics
+
+    cfg = dataclasses.replace(tiny_cfg, denoiser=dataclasses.replace(tiny_cfg.denoiser,
+                                                                     epochs=3))  # fmt: skip
+    real, calls = loop.save_resume_state, []
+
+    def stopped_once(path, state):
+        calls.append(state["epoch"])
+        if state["epoch"] == 1 and calls.count(1) == 1:
+            raise KeyboardInterrupt  # as the second epoch's state is written
+        real(path, state)
+
+    monkeypatch.setattr(loop, "save_resume_state", stopped_once)
+    out = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt):
+        train_stage("diffusion", cfg, out, device="cpu", progress=False)
+    assert [r["epoch"] for r in read_metrics(out, "denoiser")] == [1, 2]  # 2's state unsaved
+    train_stage("diffusion", cfg, out, device="cpu", progress=False,
+                resume=str(out / "denoiser_last.pt"))  # fmt: skip
+    assert [r["epoch"] for r in read_metrics(out, "denoiser")] == [1, 2, 3]

@@ -326,7 +326,8 @@ def test_a_checkpoint_records_the_pace_and_units_it_trained_at(tiny_cfg, tmp_pat
     train_stage("diffusion", cfg, tmp_path, device="cpu", progress=False, max_steps=1)
     meta = ckpt.load(tmp_path / "denoiser.safetensors")["meta"]
     assert meta["data_timing"] == {"frame_interval": pytest.approx(0.05), "interval_from": "given",
-                                   "time_step": 0.5, "units": "m"}  # fmt: skip
+                                   "time_step": 0.5, "units": "m",
+                                   "agent_types": [0]}  # fmt: skip
 
 
 def test_finetune_refuses_a_config_resolved_from_another_start(tiny_run, tmp_path):

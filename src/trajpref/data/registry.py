@@ -429,8 +429,9 @@ def _user_folder(
         remedy = ""
         if split == "val":  # what a run validates on; data.holdout_scene reads val/ too
             remedy = ("; add a val/ sub-folder (a few of the recordings moved out of "
-                      "train/), or --set data.val_dataset=FOLDER (a folder of validation "
-                      "track files)")  # fmt: skip
+                      "train/), or, to train or fine-tune, --set data.val_dataset=FOLDER (a "
+                      "folder of validation track files); to evaluate, predict or plot "
+                      "validation files, give their folder as --dataset")  # fmt: skip
         raise DataError(f"no {split}/ sub-folder (found {', '.join(present)}){remedy}", path)
     has_text = bool(text.matching_files(folder, USER_TEXT))
     if text.matching_files(folder, ("*.ndjson",)):

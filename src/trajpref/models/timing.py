@@ -42,18 +42,25 @@ def model_timing(header: dict) -> dict:
     trained on a folder before the record, 2026-12-06), ``known`` (whether that step's frame
     interval was given, declared or read from time stamps rather than assumed),
     ``interval_from`` (where that interval came from, ``DatasetInfo.interval_from``'s names;
-    None when nothing was recorded), ``time_step`` (its ``data.time_step``) and ``units``."""
+    None when nothing was recorded; a built-in dataset's step is the registry's, whatever the
+    record says), ``time_step`` (its ``data.time_step``), ``units`` and ``agent_types`` (the
+    agent-type flags its training windows held, None where not recorded: before 2026-12-06)."""
     data = header["config"]["data"]
     read_every = float(data.get("time_step", 1.0))
     out = {"trained_on": data["dataset"], "step": None, "known": False, "interval_from": None,
-           "time_step": read_every, "units": "unknown"}  # fmt: skip
+           "time_step": read_every, "units": "unknown", "agent_types": None}  # fmt: skip
     timing = (header.get("meta") or {}).get("data_timing")
     source = SPECS.get(data["dataset"])
     if isinstance(timing, dict):
         origin = timing.get("interval_from")
         out.update(step=float(timing["frame_interval"]), known=origin != "default",
                    interval_from=None if origin is None else str(origin),
-                   units=str(timing.get("units") or "unknown"))  # fmt: skip
+                   units=str(timing.get("units") or "unknown"),
+                   agent_types=timing.get("agent_types"))  # fmt: skip
+        if origin == "dataset" and source is not None:  # a built-in dataset's step is the
+            # registry's fact, not the record's copy of it (nba's 0.48 s, recorded until its
+            # correction to 0.12 s on 2026-12-06, docs/data.md)
+            out["step"] = source.frame_interval * read_every
     elif source is not None:
         out.update(step=source.frame_interval * read_every, known=True, interval_from="dataset",
                    units=source.units)  # fmt: skip

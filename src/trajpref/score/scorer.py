@@ -389,11 +389,18 @@ its futures and scores change with them (``reads_agent_types``)."""
 
 def reads_agent_types(obj) -> bool:
     """Whether ``obj`` (a predictor or scorer carrying ``models.timing.attach_timing``'s
-    record) was trained on data whose agents were flagged by type (``TYPED_DATASETS``: nba's
-    ball is ``agent_type`` 1): such a model given no ``agent_type`` takes every agent as a
-    person, the ball included. False for models without a record (built in code, ``cv``)."""
+    record) was trained on data whose agents were flagged by type (nba's ball is
+    ``agent_type`` 1): such a model given no ``agent_type`` takes every agent as a person, the
+    ball included. Read from the flags its checkpoint recorded (``agent_types``, since
+    2026-12-06: a folder with a BALL column counts), else from the dataset
+    (``TYPED_DATASETS``); False for models without a record (built in code, ``cv``)."""
     timing = getattr(obj, "timing", None)
-    return isinstance(timing, dict) and timing.get("trained_on") in TYPED_DATASETS
+    if not isinstance(timing, dict):
+        return False
+    types = timing.get("agent_types")
+    if types is not None:
+        return any(int(t) != AGENT_PERSON for t in types)
+    return timing.get("trained_on") in TYPED_DATASETS
 
 
 def warn_untyped(obj, call: str, stacklevel: int) -> None:

@@ -72,16 +72,21 @@ def set_aside(out_dir: str | Path, stage: str, names: tuple[str, ...] = RUN_FILE
 class MetricLog:
     """Per-epoch metrics to ``metrics.jsonl`` (and TensorBoard when it is installed)."""
 
-    def __init__(self, out_dir: Path, stage: str, enabled: bool, fresh: bool = True):
+    def __init__(self, out_dir: Path, stage: str, enabled: bool, fresh: bool = True,
+                 through: int | None = None):  # fmt: skip
         """``fresh``: a run that starts from its first epoch moves an earlier run's log in
         the same folder aside (``<stage>_metrics.replaced-<k>.jsonl``, ``set_aside``), so
-        that the log holds this run's epochs only; a resumed run appends to its own."""
+        that the log holds this run's epochs only; a resumed run appends to its own, after
+        dropping its rows of epochs past ``through`` (the resume state's last epoch: a run
+        stopped between an epoch's log row and its state's save runs that epoch again)."""
         self.enabled = enabled
         self.path = out_dir / f"{stage}_metrics.jsonl"
         self.stage = stage
         self.tb = None
         if enabled and fresh:
             set_aside(out_dir, stage, ("metrics.jsonl",))
+        if enabled and not fresh and through is not None and self.path.is_file():
+            self._drop_after(through)
         if enabled:
             try:
                 from torch.utils.tensorboard import SummaryWriter
@@ -89,6 +94,16 @@ class MetricLog:
                 self.tb = SummaryWriter(str(out_dir / "tensorboard" / stage))
             except ImportError:
                 self.tb = None
+
+    def _drop_after(self, through: int) -> None:
+        """Rewrite the log without its rows of epochs after ``through`` (blank lines and
+        rows without an epoch kept)."""
+        lines = self.path.read_text().splitlines(keepends=True)
+        kept = [line for line in lines
+                if not line.strip() or json.loads(line).get("epoch", 0) <= through]  # fmt: skip
+        if len(kept) < len(lines):
+            with atomic_path(self.path) as tmp:
+                Path(tmp).write_text("".join(kept))
 
     def write(self, record: dict[str, Any]) -> None:
         if not self.enabled:
@@ -281,8 +296,7 @@ def torch_generators(device: torch.device) -> dict[str, torch.Generator]:
 
 def _draws_dropout(module: nn.Module) -> bool:
     """Whether ``module`` in training mode drops anything out (from torch's own generator)."""
-    module.train()
-    return any(isinstance(m, nn.Dropout) and m.p > 0 and m.training for m in module.modules())
+    return any(isinstance(m, nn.Dropout) and m.p > 0 for m in module.modules())
 
 
 def _restore_torch_generators(own: dict[str, torch.Tensor], device: torch.device,
@@ -531,7 +545,8 @@ def fit(
                        "process without a scene repeats one at zero weight (the training is "
                        "the same, that process's time is lost)")  # fmt: skip
 
-    log = MetricLog(out_dir, stage.name, main, fresh=resume is None)
+    log = MetricLog(out_dir, stage.name, main, fresh=resume is None,
+                    through=None if resume is None else start_epoch)  # fmt: skip
     show = progress and main  # bars: the epoch's steps, each validation pass
     if stage.validate_start and resume is None and main:
         v0 = time.perf_counter()

@@ -120,10 +120,15 @@ def data_timing(train: TrajectoryDataset) -> dict[str, Any]:
     ``data_timing``): ``frame_interval``, the seconds between a window's steps (the files'
     interval times ``time_step``), ``interval_from`` (``DatasetInfo.interval_from``: whether
     those seconds are known or the 0.4 s default assumed), ``time_step`` and ``units``.
-    ``evaluate``, ``predict`` and ``plot`` compare it with the data they are given."""
+    ``evaluate``, ``predict`` and ``plot`` compare it with the data they are given. Also
+    ``agent_types``: the sorted agent-type flags the training windows hold (``[0]`` persons
+    only, ``[0, 1]`` with NBA's ball or a folder's BALL column), so that a model that learned
+    from flags can say so when it is given none (``score.scorer.reads_agent_types``)."""
     info = train.info
+    types = sorted({int(t) for s in train.scenes for t in np.unique(s.agent_type)})
     return {"frame_interval": info.frame_interval, "interval_from": info.interval_from,
-            "time_step": info.time_step, "units": info.units}  # fmt: skip
+            "time_step": info.time_step, "units": info.units,
+            "agent_types": types}  # fmt: skip
 
 
 def data_digest(data: dict[str, dict[str, str]]) -> str:
