@@ -65,7 +65,7 @@ def test_a_model_trained_on_a_folder_records_its_pace_and_units(paced_run, logge
     # the interval comes from the timestamps (0.1 s), times the time step
     assert header["meta"]["data_timing"] == {"frame_interval": pytest.approx(0.4),
                                              "interval_from": "timestamps", "time_step": 4.0,
-                                             "units": "m"}  # fmt: skip
+                                             "units": "m", "agent_types": [0]}  # fmt: skip
 
 
 def test_data_at_another_step_than_the_models_is_named_in_one_line(capsys, paced_run, logged):

@@ -49,6 +49,7 @@ from trajpref.data.registry import (
     SGAN_TEST_FILES,
     SPECS,
     check_protocol_for,
+    resolve_data_root,
     sgan_folds,
     split_folders,
 )
@@ -945,7 +946,7 @@ def _training_windows(spec: str, header: dict, info) -> str | None:
             "sub-folders and train on train/, or use files it did not train on)")  # fmt: skip
 
 
-def _warn_if_trained_otherwise(spec: str, ds) -> str | None:
+def _warn_if_trained_otherwise(spec: str, ds, root: str | None = None) -> str | None:
     """One warning when the model was trained on data whose units or pace differ from this
     data's (as far as both are known): its predictions would be in the wrong units or at the
     wrong pace. The model's side: what its checkpoint recorded of its training data
@@ -958,8 +959,10 @@ def _warn_if_trained_otherwise(spec: str, ds) -> str | None:
     it did) and the flags that give this data's.
 
     A second warning when this data is the model's own training folder, read whole because
-    it has no split sub-folders (``_training_windows``); its short form is returned, for the
-    result to record (``evaluate``'s ``overlap``). None otherwise."""
+    it has no split sub-folders (``_training_windows``), or a split it trained or chose its
+    epoch on (``_own_split``; ``root``: the data root, for a fold's split folder given as a
+    path); its short form is returned, for the result to record (``evaluate``'s
+    ``overlap``). None otherwise."""
     if spec == "cv":
         return None
     try:
@@ -987,12 +990,50 @@ def _warn_if_trained_otherwise(spec: str, ds) -> str | None:
         warnings.warn(trained_otherwise(spec, named, problems), stacklevel=2)
     try:
         own = _training_windows(spec, header, info)
+        split = None if own is not None else _own_split(header["config"]["data"], info, root)
     except (KeyError, TypeError, AttributeError):
         return None
-    if own is None:
+    if own is not None:
+        warnings.warn(own, stacklevel=2)
+        return f"trained on these windows ({info.name} has no split sub-folders)"
+    if split is None:
         return None
-    warnings.warn(own, stacklevel=2)
-    return f"trained on these windows ({info.name} has no split sub-folders)"
+    trained = header["config"]["data"]["dataset"]
+    role = "trained on" if split == "train" else "chose its epoch on"
+    kind = "training" if split == "train" else "validation"
+    warnings.warn(f"{spec} {role} these windows: {info.source} is the {split} split of "
+                  f"{trained}, its {kind} data, so numbers on it are {kind} numbers, not a "
+                  "test (evaluate on the test split, or on files it did not train on)",
+                  stacklevel=2)  # fmt: skip
+    return f"{role} these windows ({split} split of {trained})"
+
+
+def _own_split(data: dict, info, root: str | None) -> str | None:
+    """``train`` or ``val`` when this data (``info``) is a split the model trained on or chose
+    its epoch on, read from the same folder (``info.source``): the training dataset's own
+    split by name (``--dataset zara1 --split train``), its split folder given as a path
+    (``eth_ucy/zara1/train``, under the data root ``root`` or ``$TRAJPREF_DATA``), or a split
+    sub-folder of the folder it trained on. None otherwise, and for data the model trained on
+    in another way (``val_dataset``, a held-out scene) that this does not follow."""
+    trained = data.get("dataset")
+    if not isinstance(trained, str) or data.get("holdout_scene"):
+        return None
+    folders: dict[str, Path] = {}
+    if trained in ETH_UCY:
+        with contextlib.suppress(TrajprefError, OSError):
+            base = resolve_data_root(root) / "eth_ucy" / trained
+            folders = {split: base / split for split in ("train", "val")}
+    elif trained not in NAMES:
+        with contextlib.suppress(TrajprefError, OSError):
+            folders = split_folders(Path(trained).expanduser())
+    if trained in NAMES and info.name == trained and info.split in ("train", "val"):
+        return info.split  # a built-in dataset's own split, whatever folder it was read from
+    if data.get("val_dataset"):
+        folders.pop("val", None)  # it validated on another folder
+    for split in ("train", "val"):
+        if split in folders and _same_path(str(folders[split]), str(info.source)):
+            return split
+    return None
 
 
 def _training_data(dataset: str) -> str:
@@ -1114,10 +1155,11 @@ def _warn_model_and_scorer(args, ds) -> str | None:
     its ``--scorer`` (a scorer of other units or pace ranks on what it cannot read; as
     ``survey build`` checks its scorer). Returns what a result records of those trained on
     this very data (``model trained on these windows (...)``), None when neither was."""
-    found = {"model": _warn_if_trained_otherwise(args.model, ds)}
+    root = getattr(args, "data_root", None)
+    found = {"model": _warn_if_trained_otherwise(args.model, ds, root)}
     scorer = getattr(args, "scorer", None)
     if scorer and not (scorer == args.model or _same_path(scorer, args.model)):
-        found["scorer"] = _warn_if_trained_otherwise(scorer, ds)
+        found["scorer"] = _warn_if_trained_otherwise(scorer, ds, root)
     notes = [f"{role} {note}" for role, note in found.items() if note]
     return "; ".join(notes) or None
 
@@ -1552,7 +1594,7 @@ def _evaluate_in_context(args, overlap: str | None = None) -> int:
     model, device = _predictor(args)
     sampling = _sampling_fields(model)
     ds = _load(args)
-    own = _warn_if_trained_otherwise(args.model, ds)
+    own = _warn_if_trained_otherwise(args.model, ds, getattr(args, "data_root", None))
     _warn_observed_pace(args, model, None, ds)
     overlap = _joined(overlap, own and f"model {own}")
     result = evaluate_in_context(model, ds, cfg, args.samples, args.seed, device=device,

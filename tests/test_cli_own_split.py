@@ -1,0 +1,41 @@
+"""``evaluate`` on a split its model trained on (or chose its epoch on) says so and records it:
+by name (``--split train``) or as the split's folder given as a path. The test split is
+silent."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import pytest
+
+from trajpref.cli import main
+
+
+def _evaluate(capsys, *argv):
+    """(the result's ``overlap``, the warning lines about these windows)"""
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        code = main([str(a) for a in ["evaluate", *argv, "--json", "--no-progress",
+                                      "--device", "cpu", "--samples", "2"]])  # fmt: skip
+    out, err = capsys.readouterr()
+    assert code == 0
+    notes = [line for line in err.splitlines() if "these windows" in line]
+    return json.loads(out)["overlap"], notes
+
+
+@pytest.mark.parametrize("split, role", [("train", "trained on"), ("val", "chose its epoch on")])
+def test_a_split_the_model_trained_on_is_named_by_split_and_by_path(tiny_run, walks, capsys,
+                                                                    split, role):  # fmt: skip
+    gen = tiny_run / "generator.safetensors"
+    overlap, notes = _evaluate(capsys, "--dataset", walks, "--split", split, "--model", gen)
+    assert overlap == f"model {role} these windows ({split} split of {walks})"
+    assert len(notes) == 1 and f"is the {split} split of {walks}" in notes[0]
+    overlap, notes = _evaluate(capsys, "--dataset", walks / split, "--model", gen)  # its folder
+    assert overlap == f"model {role} these windows ({split} split of {walks})"
+
+
+def test_the_test_split_is_not_flagged(tiny_run, walks, capsys):
+    overlap, notes = _evaluate(capsys, "--dataset", walks, "--split", "test", "--model",
+                               tiny_run / "generator.safetensors")  # fmt: skip
+    assert overlap is None and notes == []
