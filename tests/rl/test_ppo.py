@@ -78,9 +78,12 @@ def test_policy_loss_matches_a_plain_loop():
     adv = torch.randn(4, 3, 12, generator=g, dtype=torch.float64)
     loss, clip_frac, approx_kl = ppo.policy_loss(logp, logp_ref, adv, 0.2)
     assert loss.item() == pytest.approx(_loop_policy_loss(logp, logp_ref, adv, 0.2))
-    ratio = (logp - logp_ref).exp()
-    assert clip_frac.item() == pytest.approx(((ratio - 1).abs() > 0.2).double().mean().item())
-    assert approx_kl.item() >= 0
+    pairs = list(zip(logp.flatten().tolist(), logp_ref.flatten().tolist(), strict=True))
+    clipped = sum(not 0.8 <= math.exp(lp - lr) <= 1.2 for lp, lr in pairs)
+    assert clip_frac.item() == pytest.approx(clipped / len(pairs)) and 0 < clipped < len(pairs)
+    # k3 of the log-ratio log rho = logp - logp_ref: E[rho - 1 - log rho]
+    k3 = sum(math.exp(lp - lr) - 1 - (lp - lr) for lp, lr in pairs) / len(pairs)
+    assert approx_kl.item() == pytest.approx(k3) and k3 > 0
 
 
 def test_value_loss_matches_a_plain_loop():

@@ -336,6 +336,39 @@ def test_a_tiny_finetune_logs_the_reward_records_its_name_and_resumes_only_regis
     assert len(reward.calls) == 2
 
 
+def test_a_registered_reward_sees_the_datasets_own_coordinates(capsys, tiny_run, walks,
+                                                                tmp_path):  # fmt: skip
+    """The start's augmentation asked for (rotation, mirror, jitter, scaling): a registered
+    reward is still given each scene as the dataset has it (its histories are the dataset's
+    own, not rotated or mirrored ones), and its run says why it trains without augmentation.
+    The built-in ``sda`` keeps the augmentation asked for."""
+    start = tiny_run / "generator.safetensors"
+    aug = ["data.rotate=true", "data.flip=true", "data.history_noise=0.05",
+           "data.scale_min=0.8", "data.scale_max=1.2"]  # fmt: skip
+    reward = Recorder()
+    with registered_reward("slow", reward):
+        cfg = finetune_config(str(start), "rlhf", overrides=[
+            "finetune.reward=slow", "finetune.epochs=1", "finetune.steps_per_epoch=3",
+            "finetune.eval_max_scenes=2", *aug])  # fmt: skip
+        assert cfg.data.rotate and cfg.data.flip  # asked for; the run turns them off
+        finetune(cfg, start, tmp_path / "slow", device="cpu", progress=False)
+    train = load_dataset(str(walks), "train")
+    own = torch.cat([torch.as_tensor(s.history).float() for s in train.scenes])  # [A, T_h, 2]
+    assert len(reward.calls) == 3
+    for call in reward.calls:
+        seen = call["batch"].history  # [N, T_h, 2]
+        gap = (seen[:, None] - own[None]).abs().amax((-2, -1)).min(1).values  # [N]
+        assert float(gap.max()) < 1e-5, gap  # each agent's history is one of the dataset's
+    saved = load_config(tmp_path / "slow" / "finetune_config.yaml", [])
+    assert not (saved.data.rotate or saved.data.flip or saved.data.history_noise)
+    assert "trains without augmentation (data.rotate, data.flip" in capsys.readouterr().err
+    sda = finetune_config(str(start), "rlhf", overrides=["finetune.reward=sda", *TINY, *aug])
+    finetune(sda, start, tmp_path / "sda", device="cpu", progress=False)
+    assert "without augmentation" not in capsys.readouterr().err
+    saved = load_config(tmp_path / "sda" / "finetune_config.yaml", [])
+    assert saved.data.rotate and saved.data.flip
+
+
 # --- the documented example ---
 
 

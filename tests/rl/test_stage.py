@@ -84,6 +84,10 @@ def _mean_reward(stage, scenes) -> float:
 
 @pytest.mark.parametrize("baseline", ["critic", "antithetic"])
 def test_tiny_finetune_raises_the_mean_reward(tiny_run, walks, tmp_path, baseline):
+    """A smoke test of the whole run, not of the gradient: with random advantages in place of
+    the real ones its critic variant still passed in 3 of 6 draws. The wiring it cannot
+    catch (per-scene whitening, the twin's -A, the value clip's centre) is checked by hand in
+    test_objective.py."""
     start_path = tiny_run / "generator.safetensors"
     start = ckpt.load(start_path)
     train = load_dataset(str(walks), "train")
@@ -171,6 +175,37 @@ def test_ppo_epochs_move_the_ratio_away_from_one_and_clip(tiny_run, walks):
     assert seen[0] == (0.0, 0.0)  # the rollout policy itself
     assert any(kl > 0 for kl, _ in seen[1:])
     assert any(frac > 0 for _, frac in seen[1:])
+
+
+@pytest.mark.parametrize("precision", ["fp32", "bf16"])
+def test_the_loops_first_ppo_epoch_sees_ratio_one_in_every_precision(
+    tiny_run, walks, tmp_path, monkeypatch, precision
+):
+    """The loop collects the rollout in the update's precision: in bf16 too, the first update
+    epoch on each rollout compares the policy with itself (ratio exactly 1, nothing clipped);
+    collected in fp32 and updated under bf16 autocast, rounding alone clipped a third."""
+    from trajpref.rl.objective import RLObjective
+
+    seen = []  # (rollout, approx-KL, clip fraction) per update; the rollouts kept alive
+    update = RLObjective.update
+
+    def recording(self, batch, memo, generator=None):
+        loss, logs = update(self, batch, memo, generator)
+        seen.append((memo, logs["approx_kl"], logs["clip_fraction"]))
+        return loss, logs
+
+    monkeypatch.setattr(RLObjective, "update", recording)
+    start_path = tiny_run / "generator.safetensors"
+    cfg = _cfg(ckpt.load(start_path), "finetune.ppo_epochs=2", "finetune.epochs=1",
+               "finetune.steps_per_epoch=2", "finetune.eval_max_scenes=2",
+               "finetune.ratio_against=rollout", "finetune.likelihood=sample",
+               "finetune.explore_std=0.05", "finetune.clip=0.05",
+               f"finetune.precision={precision}")  # fmt: skip
+    finetune(cfg, start_path, tmp_path, device="cpu", progress=False)
+    memos = [memo for memo, _, _ in seen]
+    assert len(seen) == 4 and memos[0] is memos[1] and memos[2] is memos[3]
+    assert memos[0] is not memos[2]  # two rollouts, two update epochs on each
+    assert [(kl, frac) for _, kl, frac in seen[::2]] == [(0.0, 0.0)] * 2
 
 
 def test_clean_l_reg_ignores_the_exploration(tiny_run, walks):

@@ -108,10 +108,14 @@ def antithetic_advantage(reward_plus: torch.Tensor, reward_minus: torch.Tensor):
 
 
 def policy_loss(logp: torch.Tensor, logp_ref: torch.Tensor, adv: torch.Tensor, clip: float):
-    """Eq. 15: -E[min(rho A, clip(rho, 1 - eps, 1 + eps) A)], rho = p_theta / p_0.
+    """Eq. 15: -E[min(rho A, clip(rho, 1 - eps, 1 + eps) A)], rho = p_theta / p_0, with
+    ``logp_ref`` the ratio's denominator (the reference G_0 as printed, or the rollout policy).
 
-    Returns ``(loss, clip_fraction, approx_kl)``; approx_kl is E[(rho - 1) - log rho]
-    (Schulman's k3 estimator of KL(p_0 || p_theta) under the sampled actions).
+    Returns ``(loss, clip_fraction, approx_kl)``; approx_kl is E[(rho - 1) - log rho] over the
+    actions (Schulman's k3). The actions are drawn from the rollout policy p_old, so it
+    estimates KL(p_old || p_theta) only when the denominator is p_old
+    (``ratio_against=rollout``); against the reference it estimates no KL, and only says how
+    far rho is from 1 on these actions (``kl_to_reference`` in the log is the KL to G_0).
     """
     # bounded before exp: a peaked Gaussian can give log-ratios of hundreds, whose exp
     # overflows to inf and then to NaN (inf * 0); beyond +-20 the ratio is clipped anyway

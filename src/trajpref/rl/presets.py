@@ -3,6 +3,7 @@ resolution of a fine-tuning run's config from its starting checkpoint."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -21,7 +22,7 @@ from trajpref.config import (
 )
 from trajpref.errors import ConfigError
 from trajpref.models import checkpoint
-from trajpref.rl.rewards import SCORE_REWARDS, check_reward
+from trajpref.rl.rewards import BUILTIN_REWARDS, SCORE_REWARDS, check_reward
 
 PAPER_WEIGHTS = {"rlhf": (1.0, 5.0), "rlhf-res": (0.3, 1.5)}
 """(policy, value) weights of Eq. 17 (alpha_p, alpha_v) and Eq. 20 (beta_p, beta_v)."""
@@ -127,9 +128,37 @@ preset's own values are not refused). Every other RL_ONLY key is read by both RL
 conditional keys, as ``sda`` reads none but its own: its own settings are its closure's."""
 
 
+NO_AUGMENTATION = {"rotate": False, "flip": False, "reverse": False, "reverse_context": False,
+                   "scale_min": 1.0, "scale_max": 1.0, "history_noise": 0.0,
+                   "drop_agents": 0.0}  # fmt: skip
+"""``DataConfig`` values that leave every training scene as the dataset has it."""
+
+
+def own_reward_data(cfg: ExperimentConfig) -> tuple[ExperimentConfig, str | None]:
+    """-> (the config a fine-tuning run trains with, a one-line note or None). A registered
+    reward (``rl.rewards.register_reward``; not ``score``, ``set`` or ``sda``) is promised
+    the dataset's own coordinates: its run trains without data augmentation (no rotation,
+    mirror, time reversal, scaling, jitter or dropped agents, whatever the start trained
+    with), so that a map-, goal- or direction-based reward is not handed a rotated or
+    mirrored scene. Other runs are returned as they are."""
+    ft = cfg.finetune
+    if ft.method == "control" or ft.reward in BUILTIN_REWARDS:
+        return cfg, None
+    changed = [k for k, v in NO_AUGMENTATION.items() if getattr(cfg.data, k) != v]
+    if not changed:
+        return cfg, None
+    data = dataclasses.replace(cfg.data, **NO_AUGMENTATION)
+    off = ", ".join(f"data.{k}" for k in changed)
+    note = (f"[finetune] reward {ft.reward!r} is a registered reward, given the data's own "
+            f"coordinates: this run trains without augmentation ({off} off)")  # fmt: skip
+    return dataclasses.replace(cfg, data=data), note
+
+
 EQUAL_BUDGET_WARMUP = 4
-"""The equal-budget protocol's warm-up steps, the same for every method (the default 20 would
-leave the RL methods, which fit ~16-30 steps in 4 CPU minutes, below the full rate)."""
+"""The equal-budget protocol's warm-up steps, the same for every method. Chosen when the RL
+methods fitted ~16-30 steps in 4 CPU minutes (the default 20 would have left them below the
+full rate); the kept eth runs fit many more (runs/eth-rlhf-s0 152 steps, eth-rlhf-res-s0 145,
+the control eth-control-s0 1,594), so there it is a small share of every run."""
 
 EQUAL_BUDGET_VALIDATIONS = 4
 """The equal-budget protocol validates after every budget / this many CPU minutes (4 minutes:

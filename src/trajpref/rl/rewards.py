@@ -81,8 +81,9 @@ def register_reward(name: str, fn: HandcraftedReward, *, replace: bool = False) 
     (``rlhf`` or ``rlhf-res``) then trains on it, in this process.
 
     ``fn(batch, futures, cfg)`` gets the batch with its future hidden (NaN: it cannot read the
-    ground truth), futures [M, N, T_f, 2] in absolute coordinates (the data's units) and the
-    run's ``FinetuneConfig``, and returns the per-step reward [M, N, T_f], higher is better,
+    ground truth), futures [M, N, T_f, 2] in absolute coordinates (the data's units and frame:
+    its run trains without augmentation, ``rl.presets.own_reward_data``) and the run's
+    ``FinetuneConfig``, and returns the per-step reward [M, N, T_f], higher is better,
     finite; ``finetune.reward_clip`` clips it as it clips ``sda``. Its own settings, if any,
     are its own (a closure, a ``functools.partial``): the config has none for it.
 

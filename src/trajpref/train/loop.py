@@ -589,7 +589,10 @@ def fit(
                                 history_noise=data_cfg.history_noise,
                                 drop_agents=data_cfg.drop_agents,
                                 reverse_context=data_cfg.reverse_context).to(device)  # fmt: skip
-                collected = () if stage.collect is None else (stage.collect(batch, noise_gen),)
+                collected = ()
+                if stage.collect is not None:  # in the update's precision: PPO's first ratio
+                    with precision_autocast(device, optim_cfg.precision):  # is then exactly 1
+                        collected = (stage.collect(batch, noise_gen),)
                 for _ in range(stage.updates):
                     if stage.on_progress is not None:
                         stage.on_progress(max(step / total, min(1.0, budget["share"])))

@@ -27,6 +27,7 @@ from trajpref.errors import ConfigError
 from trajpref.io import atomic_path, check_output_dir, write_json
 from trajpref.models import checkpoint as ckpt
 from trajpref.results import command_line, machine
+from trajpref.rl.presets import own_reward_data
 from trajpref.train.distributed import (
     DistInfo,
     barrier,
@@ -619,6 +620,9 @@ def finetune(
     if payload["kind"] != "generator":
         raise ConfigError(f"{start}: fine-tuning starts from a generator checkpoint")
     check_config_of_start(cfg, payload, start)
+    cfg, note = own_reward_data(cfg)  # a registered reward sees unaugmented scenes
+    if note is not None and os.environ.get("RANK", "0") == "0":
+        print(note, file=sys.stderr)
 
     def build(train, val, dev):
         return build_finetune_stage(cfg, payload, val, dev), cfg.finetune
