@@ -26,6 +26,7 @@ from trajpref.data.registry import SPECS
 from trajpref.io import dotted
 from trajpref.models import checkpoint as ckpt
 from trajpref.models import zoo
+from trajpref.models.timing import PACE_LIMIT
 from trajpref.results import START_SUFFIXES, read_rows
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -42,7 +43,9 @@ DATA = {
     "robo-mix": "Trained on `robo-sim` plus 15 of the 19 recordings of the official Robo val "
     "split (repeated to a third of the training scenes), chosen on the other 4 recordings, "
     "tested on the paper's official Robo test set (docs/data.md, robo-mix)",
-    "sdd": "Stanford Drone Dataset, TrajNet split (as LED and MoFlow use it): trained on its "
+    "sdd": "Stanford Drone Dataset, TrajNet split (MART's `sdd_{train,test}.pkl` windows; "
+    "MoFlow reads files of that name, probably the same windows, under another protocol; "
+    "LED's SDD number is second-hand: docs/data.md, 'SDD and its peers'): trained on its "
     "train split minus 10 % of the scenes held out for validation, tested on its test split",
     "nba": "NBA rebound tracking (SocialVAE's split, 8 + 12 frames at 0.12 s: 0.96 s observed, "
     "1.44 s predicted; metres): trained on its train files minus 10 % held out for validation, "
@@ -150,6 +153,63 @@ def trained_config(config: dict[str, Any], changes: list[dict[str, Any]]) -> dic
     return out
 
 
+SETTING_FLAGS = {
+    "max_speed": "--max-speed",
+    "spread_scale": "--spread-scale",
+    "max_log_sigma": "--max-log-sigma",
+    "neighbour_radius": "--neighbour-radius",
+}
+"""The sampling option of each of ``checkpoint.POST_HOC_SETTINGS`` (``stochastic_steps``:
+``--stochastic`` or ``--deterministic``)."""
+
+
+def setting_flag(name: str, value: Any) -> str:
+    """The ``trajpref evaluate|predict|plot`` option that samples with ``model.<name>`` at
+    ``value`` (None: ``none``, which --max-log-sigma and --neighbour-radius take)."""
+    if name == "stochastic_steps":
+        return "--stochastic" if value else "--deterministic"
+    return f"{SETTING_FLAGS[name]} {'none' if value is None else value}"
+
+
+def after_training(
+    published: dict[str, Any], trained: dict[str, Any], changes: list[dict[str, Any]], rebuilt: str
+) -> dict[str, Any] | None:
+    """The sampling settings (``checkpoint.POST_HOC_SETTINGS``) a published generator took
+    after training: each whose value in the file (``published``, its config) differs from the
+    one its training command gives (``trained``, ``trained_config``), with that value, the
+    option that samples with it, and its logged notes; and the call that writes them all into
+    the rebuilt file ``rebuilt`` (a path). None when there is none."""
+    settings = []
+    for name in ckpt.POST_HOC_SETTINGS:
+        value, before = published["model"].get(name), trained["model"].get(name)
+        if value == before:
+            continue
+        notes = "; ".join(change_note(c) for c in changes if name in c)
+        settings.append({"setting": name, "value": value, "trained": before,
+                         "flag": setting_flag(name, value), "notes": notes})  # fmt: skip
+    if not settings:
+        return None
+    calls = "; ".join(f"s({rebuilt!r}, {s['setting']!r}, {s['value']!r}, 'as published')"
+                      for s in settings)  # fmt: skip
+    write = (
+        f'python -c "from trajpref.models.checkpoint import set_generator_setting as s; {calls}"'
+    )
+    return {"settings": settings, "write": write}
+
+
+def _after_training_lines(after: dict[str, Any] | None) -> list[str]:
+    """The card's lines after its training commands: the sampling settings written into the
+    published file after training, each with its option, and the call that writes them in."""
+    if not after:
+        return []
+    lines = ["# set after training, same weights (in the published file; sample the rebuilt "
+             "file with these options, or write them in with the line below):"]  # fmt: skip
+    for s in after["settings"]:
+        lines.append(f"#   model.{s['setting']} = {_scalar(s['value'])} (trained with "
+                     f"{_scalar(s['trained'])}): {s['flag']} ({s['notes']})")  # fmt: skip
+    return [*lines, after["write"]]
+
+
 def change_note(change: dict[str, Any]) -> str:
     """A logged settings change's note, with its date in front when the file recorded one
     (``checkpoint.set_generator_setting`` stamps it since 2026-11-27) and the note lacks it."""
@@ -246,6 +306,7 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
         "frame_interval": spec.frame_interval if spec else None,
         "t_hist": cfg["model"]["t_hist"],
         "t_fut": cfg["model"]["t_fut"],
+        "scale": head.get("scale"),
     }
     variant = stem.split("-", 1)[1] if "-" in stem else None
     changes = meta.get("changes") or []
@@ -269,6 +330,7 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
                                 is not None else {}),
                              "ema_epochs": meta.get("ema_epochs"),
                              "changes": changes}  # fmt: skip
+        published = cfg  # the file's own sampling settings
         cfg = trained_config(cfg, changes)  # the training command reproduces the run
         ref = head.get("denoiser_ref") or {}
         entry["denoiser"] = f"{dataset}/{Path(ref['path']).stem}" if ref else None
@@ -292,6 +354,7 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
             train_cmd.append(f"trajpref finetune --method {meta['method']} --from {start} "
                              f"--out runs/{dataset}-{stem}")  # fmt: skip
             minutes = {"finetune": round(meta["train_seconds"] / 60, 1)}
+            rebuilt = f"runs/{dataset}-{stem}/finetune{ckpt.SUFFIX}"
         else:
             entry["method"] = "pretrained" + (f"-{variant}" if variant else "")
             row = by_file.get((name, entry["method"]))
@@ -300,6 +363,7 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
             machine_from = "training" if machine else "test row"
             machine = machine or (row or {}).get("machine")
             out = f"runs/{dataset}" + (f"-{variant}" if variant else "")
+            rebuilt = f"{out}/generator{ckpt.SUFFIX}"
             den = ""
             if variant and entry["denoiser"] == f"{dataset}/denoiser":
                 den = f" --denoiser {dataset}/denoiser"
@@ -332,6 +396,7 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
                       for k in ckpt.POST_HOC_SETTINGS if k in c),
                 ]  # fmt: skip
                 entry["weights_of"] = base
+                rebuilt = None  # its lines above name the settings already
             seconds = (run.get("stage_seconds") or {}).get("generator") or meta.get("train_seconds")
             minutes = {"generator": round(seconds / 60, 1) if seconds else None}
     else:
@@ -355,11 +420,13 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
         "validation": meta.get("val"),
         "commands": train_cmd,
     }
+    if kind == "generator" and rebuilt:
+        entry["train"]["after_training"] = after_training(published, cfg, changes, rebuilt)
     entry["test"] = _test_row(row) if row else None
     full_row = any(r["method"] == "full-sampler" and r["dataset"] == dataset
                    and r.get("split") == "test" for r in rows)  # fmt: skip
     entry["limits"] = [LIMITS[k] for k in (dataset, name, kind) if k in LIMITS]
-    entry["limits"] += generated_limits(name, kind, entry["test"], full_row)
+    entry["limits"] += generated_limits(name, kind, entry["test"], full_row, head.get("scale"))
     entry["card"] = f"{dataset}/{stem}.md"
     return entry
 
@@ -474,6 +541,33 @@ def led_gap(row: dict[str, Any], led: list[float]) -> str:
     )
 
 
+PIXEL_WALKTHROUGH = {
+    "sdd": "SDD's pixels per metre differ between its scenes, and its scenes are small "
+    "groups (1.45 agents per test scene). In one walkthrough (2026-12-06, synthetic scenes, "
+    "not a benchmark; docs/data.md, 'SDD in pixels'): lone walkers at 3x SDD's scale (e.g. "
+    "4K video) got minFDE20 90.5 px against constant velocity's 48.4; a 6-agent scene spread over "
+    "about 1,300 px got 30.9 px without a neighbour radius and 11.1 px with "
+    "`--neighbour-radius` 100-200; on SDD's val split 300 px cost +0.16 % minFDE20.",
+}
+"""A pixel dataset's measured cost of another pixel scale and of wide scenes, quoted by
+``pixel_scale_note`` (hand-written: the walkthrough's numbers, docs/data.md)."""
+
+
+def pixel_scale_note(dataset: str, scale: float | None) -> str:
+    """A pixel dataset's limit: its models expect its pixel scale (image resolution and
+    flying height), since positions are divided by a fixed data scale ``scale``, and the pace
+    warning fires only above ``PACE_LIMIT`` model units per step; "" for other units."""
+    spec = SPECS.get(dataset)
+    if spec is None or spec.units != "px" or not scale:
+        return ""
+    return (f"It expects {dataset.upper()}'s pixel scale: positions are divided by a fixed "
+            f"{scale:.3f} px per model unit, so video at another resolution or flying height "
+            f"must be scaled to it first (and the predictions back). Nothing warns unless the "
+            f"agents step more than about {PACE_LIMIT * scale:.0f} px per step ({PACE_LIMIT:g} "
+            "model units, the pace warning). Radii (`--neighbour-radius`, `--collision-radius`) "
+            "are in pixels. " + PIXEL_WALKTHROUGH.get(dataset, "")).strip()  # fmt: skip
+
+
 def subset_note(dataset: str) -> str:
     """Where a dataset has no full-sampler row over its whole test split, the cell that
     ``benchmarks/reproduce.py`` measured on evenly spaced test agents (docs/reproduce.md's ‡
@@ -493,13 +587,16 @@ def subset_note(dataset: str) -> str:
 
 
 def generated_limits(name: str, kind: str, test: dict[str, Any] | None,
-                     full_row: bool) -> list[str]:  # fmt: skip
-    """The card limits computed from the repository's files: the distance to the paper's LED
+                     full_row: bool, scale: float | None = None) -> list[str]:  # fmt: skip
+    """The card limits computed from the repository's files: a pixel dataset's scale
+    (``pixel_scale_note``, from the header's ``scale``), the distance to the paper's LED
     row (``LED_GAP``), the subset full-sampler cell of a dataset without a whole-split
     full-sampler row (``full_row``: whether it has one), and a denoiser's cost as a
     predictor."""
     dataset = name.split("/")[0]
     out = []
+    if scale_note := pixel_scale_note(dataset, scale):
+        out.append(scale_note)
     if name in LED_GAP and test:
         paper = json.loads((ROOT / "benchmarks" / "paper_tables.json").read_text())
         out.append(led_gap(test, paper["tables"]["table1"]["rows"][LED_GAP[name]]["LED"]))
@@ -587,6 +684,12 @@ def _sampling_lines(sampling: dict[str, Any] | None) -> list[str]:
         elif "max_speed" in change:
             text += (f" Speed clamp set to {change['max_speed']:.3f} after training, same "
                      f"weights ({notes}).")  # fmt: skip
+        for name in ("spread_scale", "max_log_sigma", "neighbour_radius"):
+            if name in change:
+                value = change[name]
+                shown = "null" if value is None else f"{value:g}"
+                text += (f" `model.{name}` set to {shown} after training, same weights "
+                         f"({notes}).")  # fmt: skip
     return [text, ""]
 
 
@@ -628,6 +731,16 @@ def _training_line(e: dict[str, Any]) -> str:
     return text
 
 
+def _scale_sentence(data: dict[str, Any]) -> str:
+    """On a pixel dataset's card: the data scale that positions are divided by (the header's
+    ``scale``), in which the model-unit options are given."""
+    if data.get("units") != "px" or not data.get("scale"):
+        return ""
+    return (f" The model divides positions by its data scale, {data['scale']:.3f} px per model "
+            "unit (the header's `scale`); `--max-speed` and `--trust-speed` are in model units "
+            "per step.")  # fmt: skip
+
+
 def card(e: dict[str, Any]) -> str:
     """A short Markdown model card."""
     d, t, test = e["data"], e["train"], e["test"]
@@ -647,7 +760,7 @@ def card(e: dict[str, Any]) -> str:
         "## Data",
         "",
         f"{d['description']}. {d['t_hist']} observed -> {d['t_fut']} predicted steps, "
-        f"{d['frame_interval']} s apart, {units}.",
+        f"{d['frame_interval']} s apart, {units}." + _scale_sentence(d),
         "",
         "## Training",
         "",
@@ -656,6 +769,7 @@ def card(e: dict[str, Any]) -> str:
         "",
         "```bash",
         *t["commands"],
+        *_after_training_lines(t.get("after_training")),
         "```",
         "",
         "## Test row",

@@ -160,6 +160,32 @@ def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> N
                    "trained with data.holdout_scene=PREFIX (docs/data.md)")  # fmt: skip
 
 
+NO_CAP = "none"
+"""``--max-log-sigma none`` as parsed: no cap on the samples' sigma (``_model_setting`` gives
+None), told apart from the option's absence (None: the file's own cap)."""
+
+
+def _cap_or_none(text: str) -> float | str:
+    """``--max-log-sigma``'s value: a number, or ``none`` (any case) for no cap (``NO_CAP``)."""
+    if text.strip().lower() == NO_CAP:
+        return NO_CAP
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"takes a number (model units) or none (no cap), "
+                                         f"got {text!r}") from None  # fmt: skip
+
+
+def _model_setting(args, name: str) -> tuple[bool, object]:
+    """A generator option of ``MODEL_SETTINGS`` as given: ``(False, None)`` when absent (the
+    file's own value applies), else ``(True, value)``; ``--max-log-sigma none`` is ``(True,
+    None)``, no cap."""
+    value = getattr(args, name, None)
+    if value is None:
+        return False, None
+    return True, None if value == NO_CAP else value
+
+
 def _add_model_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", default="cv", help="'cv' (constant velocity), a published model "
                    "(DATASET/NAME, see `trajpref models`) or a checkpoint path")  # fmt: skip
@@ -193,15 +219,16 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
                    help="generators: multiply the spread of the K initial samples about their "
                    "mean by this (1: as trained; default: the file's model.spread_scale; "
                    "docs/pretraining.md, 'The samples' spread at prediction time')")  # fmt: skip
-    p.add_argument("--max-log-sigma", type=float, default=None,
-                   help="generators: cap each sample's log sigma at this (model units; "
-                   "default: the file's model.max_log_sigma; docs/pretraining.md, 'A cap on "
-                   "the samples' sigma')")  # fmt: skip
+    p.add_argument("--max-log-sigma", type=_cap_or_none, default=None, metavar="C|none",
+                   help="generators: cap each sample's log sigma at this (model units); none: "
+                   "no cap (default: the file's model.max_log_sigma, 1 for sdd/generator; "
+                   "docs/pretraining.md, 'A cap on the samples' sigma')")  # fmt: skip
     p.add_argument("--neighbour-radius", default=None, metavar="R|none",
                    help="diffusion models and --scorer: agents whose last observed positions "
-                   "lie farther apart than R, in the data's units (metres, pixels: the "
-                   "model's), do not attend to each other, for scenes wider than the training "
-                   "scenes (about 16 m); none: every pair of a scene attends (default: the "
+                   "lie farther apart than R do not attend to each other, for scenes wider "
+                   "than the training scenes; R is in the data's units: metres for ETH/UCY "
+                   "(their training scenes span about 16 m), pixels for sdd (docs/data.md, "
+                   "'SDD in pixels'); none: every pair of a scene attends (default: the "
                    "file's model.neighbour_radius, none for the published models; "
                    "docs/pretraining.md, 'A neighbour radius')")  # fmt: skip
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
@@ -785,8 +812,9 @@ def _predictor(args):
         model.stochastic = bool(args.stochastic)
     for flag, name in (("--max-speed", "max_speed"), ("--spread-scale", "spread_scale"),
                        ("--max-log-sigma", "max_log_sigma")):  # fmt: skip
-        if getattr(args, name, None) is not None:
-            _set_generator(model, flag, **{name: getattr(args, name)})
+        given, value = _model_setting(args, name)
+        if given:
+            _set_generator(model, flag, **{name: value})
     given, radius = _neighbour_radius(args)
     if given and hasattr(model, "neighbour_radius"):  # cv has none (its --scorer takes it)
         model.neighbour_radius = radius
@@ -1308,8 +1336,9 @@ def _model_fields(args) -> dict:
     header = {**header, "config": {**header["config"], "model": dict(header["config"]["model"])}}
     model = header["config"]["model"]
     for name in MODEL_SETTINGS:
-        if getattr(args, name, None) is not None:
-            model[name] = getattr(args, name)
+        given, value = _model_setting(args, name)
+        if given:
+            model[name] = value
     given, radius = _neighbour_radius(args)
     if given and model.get("neighbour_radius") != radius:  # the file's own: its digest
         model["neighbour_radius"] = radius
@@ -1850,8 +1879,9 @@ def _plot_title(args, ds, scene, random: bool) -> str:
     if args.stochastic or args.deterministic:
         settings.append("stochastic" if args.stochastic else "deterministic")
     for name in MODEL_SETTINGS:
-        if getattr(args, name, None) is not None:
-            settings.append(f"{name.replace('_', '-')} {getattr(args, name):g}")
+        given, value = _model_setting(args, name)
+        if given:
+            settings.append(f"{name.replace('_', '-')} {'none' if value is None else f'{value:g}'}")
     given, radius = _neighbour_radius(args)
     if given:
         settings.append(f"neighbour-radius {'none' if radius is None else f'{radius:g}'}")
