@@ -247,16 +247,29 @@ NO_UNITS = (None, "", "unknown")
 """Units that name nothing (a folder read without ``--units``): the axes then say no unit."""
 
 
+IMAGE_UNITS = ("px", "pixel", "pixels", "pix")
+"""Units of image coordinates (sdd): their y axis points down the image, so figures draw it
+downwards too (``y_down``), as the video frame shows the scene."""
+
+
+def y_down(units: str | None) -> bool:
+    """Whether ``units`` are image coordinates (``IMAGE_UNITS``, any case), drawn y down."""
+    return isinstance(units, str) and units.strip().lower() in IMAGE_UNITS
+
+
 def axis_label(axis: str, units: str | None) -> str:
     """An axis title: ``x [m]``, or ``x`` alone where the units are unknown (``NO_UNITS``)
-    rather than ``x [unknown]``."""
-    return axis if units in NO_UNITS else f"{axis} [{units}]"
+    rather than ``x [unknown]``; image coordinates' y says it points down."""
+    if units in NO_UNITS:
+        return axis
+    down = ", down" if axis == "y" and y_down(units) else ""
+    return f"{axis} [{units}{down}]"
 
 
 def _set_axes(ax, box: tuple[float, float, float, float], units: str | None,
               ylabel: bool = True):  # fmt: skip
     ax.set_xlim(box[0], box[1])
-    ax.set_ylim(box[2], box[3])
+    ax.set_ylim(*((box[3], box[2]) if y_down(units) else (box[2], box[3])))  # image rows down
     ax.set_aspect("equal", adjustable="box")
     ax.set_xlabel(axis_label("x", units))
     if ylabel:
@@ -479,7 +492,7 @@ def plot_panel(
         ax.plot(history[i, :, 0], history[i, :, 1], color=c, lw=2.2, marker="o", ms=3)
         ax.plot(*history[i, -1], marker="o", color=c, ms=7, mec="black", mew=0.6)
     ax.set_xlim(limits[0], limits[1])
-    ax.set_ylim(limits[2], limits[3])
+    ax.set_ylim(*((limits[3], limits[2]) if y_down(units) else (limits[2], limits[3])))
     ax.set_aspect("equal", adjustable="box")
     ax.set_xlabel(axis_label("x", units))
     ax.set_ylabel(axis_label("y", units))
