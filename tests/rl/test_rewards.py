@@ -341,7 +341,8 @@ def test_a_registered_reward_sees_the_datasets_own_coordinates(capsys, tiny_run,
     """The start's augmentation asked for (rotation, mirror, jitter, scaling): a registered
     reward is still given each scene as the dataset has it (its histories are the dataset's
     own, not rotated or mirrored ones), and its run says why it trains without augmentation.
-    The built-in ``sda`` keeps the augmentation asked for."""
+    The built-in ``sda`` keeps rotation and mirror, and trains without scaled scenes (its
+    thresholds are distances)."""
     start = tiny_run / "generator.safetensors"
     aug = ["data.rotate=true", "data.flip=true", "data.history_noise=0.05",
            "data.scale_min=0.8", "data.scale_max=1.2"]  # fmt: skip
@@ -364,9 +365,12 @@ def test_a_registered_reward_sees_the_datasets_own_coordinates(capsys, tiny_run,
     assert "trains without augmentation (data.rotate, data.flip" in capsys.readouterr().err
     sda = finetune_config(str(start), "rlhf", overrides=["finetune.reward=sda", *TINY, *aug])
     finetune(sda, start, tmp_path / "sda", device="cpu", progress=False)
-    assert "without augmentation" not in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "without augmentation" not in err
+    assert "thresholds are distances" in err and "(data.scale_min, data.scale_max off)" in err
     saved = load_config(tmp_path / "sda" / "finetune_config.yaml", [])
-    assert saved.data.rotate and saved.data.flip
+    assert saved.data.rotate and saved.data.flip  # distances unchanged: kept
+    assert (saved.data.scale_min, saved.data.scale_max) == (1.0, 1.0)  # stretched them: off
 
 
 # --- the documented example ---

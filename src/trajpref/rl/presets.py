@@ -133,6 +133,11 @@ NO_AUGMENTATION = {"rotate": False, "flip": False, "reverse": False, "reverse_co
                    "drop_agents": 0.0}  # fmt: skip
 """``DataConfig`` values that leave every training scene as the dataset has it."""
 
+NO_SCALING = {"scale_min": 1.0, "scale_max": 1.0}
+"""``DataConfig`` values that leave every training scene at the dataset's scale: ``sda``'s
+radius, drift and tolerance are distances, which a scaled scene would stretch (rotation and
+mirroring leave distances alone)."""
+
 
 def own_reward_data(cfg: ExperimentConfig) -> tuple[ExperimentConfig, str | None]:
     """-> (the config a fine-tuning run trains with, a one-line note or None). A registered
@@ -140,17 +145,24 @@ def own_reward_data(cfg: ExperimentConfig) -> tuple[ExperimentConfig, str | None
     the dataset's own coordinates: its run trains without data augmentation (no rotation,
     mirror, time reversal, scaling, jitter or dropped agents, whatever the start trained
     with), so that a map-, goal- or direction-based reward is not handed a rotated or
-    mirrored scene. Other runs are returned as they are."""
+    mirrored scene. ``sda`` trains without scaled scenes (``NO_SCALING``): its thresholds are
+    distances. Other runs are returned as they are."""
     ft = cfg.finetune
-    if ft.method == "control" or ft.reward in BUILTIN_REWARDS:
+    if ft.method == "control" or ft.reward in SCORE_REWARDS:
         return cfg, None
-    changed = [k for k, v in NO_AUGMENTATION.items() if getattr(cfg.data, k) != v]
+    if ft.reward in BUILTIN_REWARDS:  # sda: distances against fixed thresholds
+        fixed, why, what = (NO_SCALING, "its thresholds are distances in the data's units",
+                            "scaled scenes")  # fmt: skip
+    else:
+        fixed, why, what = (NO_AUGMENTATION, "a registered reward, given the data's own "
+                            "coordinates", "augmentation")  # fmt: skip
+    changed = [k for k, v in fixed.items() if getattr(cfg.data, k) != v]
     if not changed:
         return cfg, None
-    data = dataclasses.replace(cfg.data, **NO_AUGMENTATION)
+    data = dataclasses.replace(cfg.data, **fixed)
     off = ", ".join(f"data.{k}" for k in changed)
-    note = (f"[finetune] reward {ft.reward!r} is a registered reward, given the data's own "
-            f"coordinates: this run trains without augmentation ({off} off)")  # fmt: skip
+    note = (f"[finetune] reward {ft.reward!r} is {why}: this run trains without {what} "
+            f"({off} off)")  # fmt: skip
     return dataclasses.replace(cfg, data=data), note
 
 
