@@ -1,6 +1,8 @@
 """Keeping K' of the K = 20 samples, with and without the diffusion score (no training).
 
-    # choose the settings on a validation split (prints a table; writes nothing to results/)
+    # choose the settings on a validation split (prints a table; no results rows: its record
+    # goes to results/meta/select_<D>_val[_<tag>].json, which a rerun with the same --tag
+    # replaces, so give a new study its own --tag)
     python benchmarks/selection.py --dataset zara1 --split val --data-root ../shared/data
     # then the chosen settings, once, on the test split (rows: results/select_<D>.json)
     python benchmarks/selection.py --dataset zara1 --split test --drop 0.5 \
@@ -38,6 +40,7 @@ from trajpref.models import checkpoint as ckpt
 from trajpref.results import command_line, machine, make_row, upsert_rows
 from trajpref.score.scorer import PRECISIONS, TrajectoryScorer, score_timesteps
 from trajpref.score.selection import (
+    DROPPING,
     METHODS,
     WEIGHTED,
     SelectionConfig,
@@ -56,7 +59,7 @@ def settings(args) -> list[SelectionConfig]:
     out = []
     methods = args.methods or METHODS
     for method, keep, per in itertools.product(methods, args.keep, ("agent", "scene")):
-        drops = args.drop if method.startswith("score-") else [0.0]
+        drops = args.drop if method in DROPPING else [0.0]
         temps = args.temperature if method in WEIGHTED else [1.0]
         for drop, temp in itertools.product(drops, temps):
             bandwidth = args.free_bandwidth if method == "facility" else args.bandwidth
@@ -73,7 +76,7 @@ FACILITY_BANDWIDTH = 0.5
 
 
 def name_of(cfg: SelectionConfig) -> str:
-    drop = f"-d{round(cfg.drop * 100):02d}" if cfg.method.startswith("score-") else ""
+    drop = f"-d{round(cfg.drop * 100):02d}" if cfg.method in DROPPING else ""
     temp = f"-t{cfg.temperature:g}" if cfg.method in WEIGHTED else ""
     if cfg.method == "score-facility" and cfg.bandwidth != FACILITY_BANDWIDTH:
         temp += f"-b{cfg.bandwidth:g}"

@@ -51,3 +51,22 @@ def test_the_radius_help_names_the_units_of_each_kind_of_data(capsys):
     assert code == 0
     radius = out.split("--neighbour-radius R|none", 2)[2].split("--device", 1)[0]
     assert "metres for ETH/UCY" in radius and "pixels for sdd" in radius
+
+
+def test_an_option_equal_to_the_files_own_setting_keeps_its_digest():
+    """--max-log-sigma none on a file without a cap samples exactly as the file does, so the
+    result names the file's own model_hash; hotel/generator's config predates the key, and
+    the option had added it, naming another digest for the same predictions."""
+    from trajpref.cli import _model_fields, build_parser
+
+    header = ckpt.read_checkpoint_header(ckpt.resolve_path("hotel/generator"))
+    assert "max_log_sigma" not in header["config"]["model"]  # written before the key existed
+
+    def digest(*extra):
+        args = build_parser().parse_args(
+            ["evaluate", "--dataset", "hotel", "--model", "hotel/generator", *extra]
+        )
+        return _model_fields(args)["model_hash"]
+
+    assert digest("--max-log-sigma", "none") == digest()
+    assert digest("--max-log-sigma", "1") != digest()  # a cap that is not the file's

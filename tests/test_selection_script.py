@@ -165,3 +165,20 @@ def test_a_scorers_gate_reads_its_training_windows_with_their_paced_copy(tmp_pat
     assert both.num_agents == plain.num_agents + paced.num_agents > plain.num_agents
     data["extra_time_step"] = 0.0  # a scorer trained at one pace: its split as read
     assert sel.scorer_training_split("den.safetensors", None).num_agents == plain.num_agents
+
+
+def test_which_methods_sweep_the_drop_follows_dropping_not_their_names(monkeypatch):
+    """A method drops the worst-scored first when it is in ``DROPPING``, whatever its name
+    (``score.selection``: a name's prefix means nothing): the sweep and the row names follow
+    that list; they had followed the ``score-`` prefix."""
+    import argparse
+
+    sel = load_benchmark("selection")
+    monkeypatch.setattr(sel, "DROPPING", ("facility",))  # as if facility dropped first
+    args = argparse.Namespace(methods=["facility", "score-kmeans"], keep=[5], drop=[0.2, 0.5],
+                              temperature=[2.0], free_bandwidth=None, bandwidth=1.0,
+                              final=False)  # fmt: skip
+    drops = {(c.method, c.drop) for c in sel.settings(args)}
+    assert drops == {("facility", 0.2), ("facility", 0.5), ("score-kmeans", 0.0)}
+    named = {sel.name_of(c) for c in sel.settings(args)}
+    assert "select-facility-d20" in named and "select-score-kmeans" in named

@@ -61,3 +61,13 @@ def test_sdd_cards_give_the_pixel_scale_and_no_unsourced_peer_split(monkeypatch)
         assert "58.998 px per model unit" in text and "about 295 px per step" in text
         assert "SDD and its peers" in text
     assert "px per model unit" not in zoo.card(_entry(zoo, "zara1/generator", monkeypatch))
+
+
+def test_every_setting_that_may_change_after_training_has_a_flag_for_the_cards():
+    """A setting added to ``checkpoint.POST_HOC_SETTINGS`` (docs/architecture.md, "Adding a
+    config field") needs its command-line flag in ``SETTING_FLAGS``, or writing the cards
+    fails with a bare KeyError (a contributor's walkthrough, 2026-12-06)."""
+    zoo = load_benchmark("zoo_index")
+    flagged = {"stochastic_steps", *zoo.SETTING_FLAGS}  # --stochastic / --deterministic
+    missing = sorted(set(ckpt.POST_HOC_SETTINGS) - flagged)
+    assert not missing, f"add the flag of {missing} to benchmarks/zoo_index.py's SETTING_FLAGS"

@@ -1337,7 +1337,7 @@ def _model_fields(args) -> dict:
     model = header["config"]["model"]
     for name in MODEL_SETTINGS:
         given, value = _model_setting(args, name)
-        if given:
+        if given and model.get(name) != value:  # the file's own value: the file's digest
             model[name] = value
     given, radius = _neighbour_radius(args)
     if given and model.get("neighbour_radius") != radius:  # the file's own: its digest
