@@ -63,7 +63,7 @@ def test_a_ball_with_a_huge_error_changes_no_persons_metric():
 
 
 def test_bad_agent_sets_and_splits_without_a_person_are_refused():
-    with pytest.raises(ConfigError, match="agents must be one of all, persons, got 'players'"):
+    with pytest.raises(ConfigError, match="one of all, persons, primary, got 'players'"):
         evaluate(Offset(1.0), DATA, 2, progress=False, agents="players")
     with pytest.raises(DataError, match=r"toy/test has no agent of agent_type 0 \(person\)"):
         evaluate(Offset(1.0), _dataset(_scene([AGENT_BALL], "c")), 2, progress=False,

@@ -355,11 +355,14 @@ def build_parser() -> argparse.ArgumentParser:
                     "machine, command)")  # fmt: skip
     ev.add_argument("--agents", default="all", choices=list(AGENT_SETS),
                     help="which agents every metric averages over: all (default: every "
-                    "predicted agent, NBA's ball included, as the published numbers) or "
+                    "predicted agent, NBA's ball included, as the published numbers), "
                     "persons (agent_type 0 only: NBA's players, as SocialVAE scores its NBA "
                     "split; the ball stays in each scene as a neighbour the model reads; "
-                    "joint metrics over each scene's persons, collisions among them); the "
-                    "result records agent_set")  # fmt: skip
+                    "joint metrics over each scene's persons, collisions among them) or "
+                    "primary (TrajNet++ .ndjson data only: each scene's primary pedestrian, "
+                    "the one agent per scene TrajNet++'s evaluator scores; the model still "
+                    "reads the whole scene, and Col-I/Col-II test the primary against all its "
+                    "neighbours); the result records agent_set")  # fmt: skip
     _add_max_scenes_arg(ev, "evaluate")
     ev.add_argument("--allow-overlap", action="store_true",
                     help="evaluate an ETH/UCY fold's model (or scorer) on another fold "
@@ -421,8 +424,9 @@ def build_parser() -> argparse.ArgumentParser:
         default="npz",
         help="npz: every array, and meta: a JSON string of what made them (model, hashes, "
         "dataset, split, protocol, seed, K, version, command; default); trajnet: a TrajNet++ "
-        "prediction file that trajnetplusplustools' evaluator reads (one TrajNet++ scene "
-        "per agent; docs/data_format.md)",
+        "prediction file that trajnetplusplustools' evaluator reads: for TrajNet++ input, "
+        "its own scenes, ids and frames (a folder of .ndjson files as a folder); for other "
+        "data, one TrajNet++ scene per agent (docs/data_format.md)",
     )
     pr.add_argument(
         "--truth",
@@ -436,7 +440,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--rank",
         action="store_true",
         help="order each scene's samples best first by the diffusion score (no "
-        "ground truth used); saves `order` and `residual` [K, B] too",
+        "ground truth used); saves `order` and `residual` [K, B] too (npz only: --format "
+        "trajnet writes the samples in that order, so that its prediction 0, TrajNet++'s "
+        "Top-1, is the score's top-1; without --rank it is an arbitrary sample)",
     )
     _add_scorer_arg(pr, "the denoiser that ranks (default: the model's own)")
     _add_selection_args(pr, "--rank")
@@ -1488,11 +1494,19 @@ def _scene_subset(args, ds):
     return ds, fields
 
 
+AGENT_SET_TAGS = {"all": "", "persons": ", persons only", "primary": ", primary agents only"}
+"""What evaluate's header adds to the protocol for each ``--agents`` set."""
+
+AGENT_SET_NOUNS = {"all": "agents", "persons": "persons", "primary": "primary agents"}
+"""What evaluate's header calls the agents it counted, for each ``--agents`` set."""
+
+
 def _protocol_tag(ds, holdout: str | None = None, agents: str = "all") -> str:
     """`` (protocol all)`` after the split in evaluate's header, whichever the protocol (a
     pasted log says which windows counted), with ``, persons only`` under ``--agents
-    persons``, and the held-out scene when there is one."""
-    tag = f" (protocol {ds.info.protocol}{', persons only' if agents == 'persons' else ''})"
+    persons`` (``, primary agents only`` under ``primary``), and the held-out scene when
+    there is one."""
+    tag = f" (protocol {ds.info.protocol}{AGENT_SET_TAGS[agents]})"
     return tag + (f" (held-out scene {holdout}*)" if holdout else "")
 
 
@@ -1588,7 +1602,7 @@ def cmd_evaluate(args) -> int:
             f"{ds.info.name}/{ds.info.split}{_protocol_tag(ds, args.holdout_scene, args.agents)}"
             f"  model={args.model}"
             f"{'' if args.sampler is None else f' ({args.sampler} sampler)'}"
-            f"  K={samples}  ({out['agents']} {'persons' if args.agents == 'persons' else 'agents'}"
+            f"  K={samples}  ({out['agents']} {AGENT_SET_NOUNS[args.agents]}"
             f", {out['scenes']} scenes, "
             f"units {ds.info.units})"
             + ("" if args.keep is None else f", kept by {args.select} of {args.samples}")
@@ -1614,8 +1628,8 @@ def _evaluate_in_context(args, overlap: str | None = None) -> int:
     if args.keep is not None or args.scorer or args.bins is not None:
         raise ConfigError("--in-context does not combine with --keep, --scorer or --bins")
     if args.agents != "all" or args.max_scenes is not None:  # its context is the split's
-        raise ConfigError("--in-context does not combine with --agents persons or "
-                          "--max-scenes (it adapts on the split's other windows)")  # fmt: skip
+        raise ConfigError("--in-context does not combine with --agents persons or primary, "
+                          "or --max-scenes (it adapts on the split's other windows)")  # fmt: skip
     _warn_unread(args, _selection_config(args), scores=False)
     cfg = AdaptConfig(ctx_frames=args.in_context, steps=args.adapt_steps, lr=args.adapt_lr,
                       params=args.adapt_params, trust=args.adapt_trust,
@@ -1664,6 +1678,25 @@ def _evaluate_in_context(args, overlap: str | None = None) -> int:
     return 0
 
 
+def _check_trajnet_predict(args) -> None:
+    """``predict --format trajnet``'s own checks, before any model or data is read: K (--keep
+    where given, else --samples) must be 1 or at least 3, since TrajNet++'s evaluator reads
+    predictions 0, 1 and 2 (its Top-3) whenever there are several; with --rank, a note on
+    stderr that prediction 0, its Top-1, is then the diffusion score's top-1 (the samples are
+    written best first) and that the order and residual arrays are npz's only. Without
+    --rank, prediction 0 is an arbitrary sample (--rank's help says so)."""
+    flag, k = ("--samples", args.samples) if args.keep is None else ("--keep", args.keep)
+    if k == 2:
+        raise ConfigError(f"--format trajnet: TrajNet++'s evaluator needs 1 or at least 3 "
+                          f"predictions per agent (its Top-3 reads predictions 0, 1 and 2); "
+                          f"{flag} 2 would write 2: pass {flag} 1 or {flag} 3 or more")  # fmt: skip
+    if args.rank:
+        print("trajpref: note: --format trajnet --rank writes each scene's samples best first "
+              "by the diffusion score, so prediction_number 0 (TrajNet++'s Top-1) is its top-1; "
+              "the order and residual arrays are not written in this format (--format npz "
+              "saves them)", file=sys.stderr)  # fmt: skip
+
+
 def cmd_predict(args) -> int:
     _check_model_args(args)
     trajnet = args.format == "trajnet"
@@ -1672,8 +1705,8 @@ def cmd_predict(args) -> int:
         if not trajnet:
             raise ConfigError("--truth needs --format trajnet")
         check_output_file(args.truth, ".ndjson")
-    if trajnet and args.rank:
-        raise ConfigError("--rank saves order/residual arrays: use --format npz")
+    if trajnet:
+        _check_trajnet_predict(args)
     overlap = _check_fold_overlap(args)  # a warning
     model, device = _predictor(args)
     _warn_fixed_sampling(args, model)
@@ -1694,13 +1727,20 @@ def cmd_predict(args) -> int:
     )  # fmt: skip
     ids = arrays.get("agent_id")  # [N] the source data's ids, or None
     if trajnet:
+        from trajpref.data.trajnet import from_trajnet, write_trajnet_scenes
+
         _warn_trajnet_units(ds)
         interval = ds.info.frame_interval
-        write_trajnet(args.out, arrays["history"], arrays["pred"], arrays["scene"], interval,
-                      agent_id=ids)  # fmt: skip
-        if args.truth is not None:
-            write_trajnet_truth(args.truth, arrays["history"], arrays["future"], arrays["scene"],
-                                interval, agent_id=ids)  # fmt: skip
+        if from_trajnet(ds.scenes):  # TrajNet++ files: their scenes, ids and frames (a folder
+            # of files: one file each, in a folder named as --out without its suffix)
+            args.out = str(write_trajnet_scenes(args.out, ds.scenes, arrays["pred"],
+                                                arrays["scene"], truth=args.truth))  # fmt: skip
+        else:
+            write_trajnet(args.out, arrays["history"], arrays["pred"], arrays["scene"],
+                          interval, agent_id=ids)  # fmt: skip
+            if args.truth is not None:
+                write_trajnet_truth(args.truth, arrays["history"], arrays["future"],
+                                    arrays["scene"], interval, agent_id=ids)  # fmt: skip
     else:
         arrays["split"] = np.array(ds.info.split)  # 0-d: scene_id names the file, not its split
         meta = _predict_meta(args, ds, samples, scorer, overlap, sampling, device) | subset

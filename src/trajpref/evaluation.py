@@ -12,10 +12,12 @@ from tqdm.auto import tqdm
 
 from trajpref.data.loader import SceneLoader
 from trajpref.data.registry import ETH_UCY, NAMES, sgan_folds
+from trajpref.data.trajnet import from_trajnet
 from trajpref.errors import ConfigError, DataError, TrajprefError
 from trajpref.metrics import (
     BinnedMetrics,
     CollisionAccumulator,
+    CollisionFlags,
     MetricAccumulator,
     check_bin_edges,
     check_collision_radius,
@@ -29,11 +31,13 @@ from trajpref.types import AGENT_BALL, AGENT_PERSON, Batch, TrajectoryDataset, c
 COLLISION_KEYS = ("col_i_pct", "col_ii_pct", "col_gt_pct", "col_agents", "col_radius")
 """The collision keys of ``evaluate``'s result (None when the collision metrics are off)."""
 
-AGENT_SETS = ("all", "persons")
+AGENT_SETS = ("all", "persons", "primary")
 """Which agents ``evaluate``'s metrics average over (its ``agents``; the CLI's ``--agents``):
-``all`` (every predicted agent, NBA's ball included: the published numbers), or ``persons``
+``all`` (every predicted agent, NBA's ball included: the published numbers), ``persons``
 (``agent_type`` ``AGENT_PERSON`` only: NBA's players, as SocialVAE scores its NBA split; the
-ball stays in each scene as a neighbour the model reads, and leaves every metric)."""
+ball stays in each scene as a neighbour the model reads, and leaves every metric), or
+``primary`` (each scene's first agent only: TrajNet++'s primary pedestrian, as its evaluator
+scores; TrajNet++ scenes only, ``trajnet_scenes``)."""
 
 
 class Predictor(Protocol):
@@ -156,16 +160,16 @@ def bodies(batch: Batch) -> torch.Tensor:
     return batch.agent_type != AGENT_BALL
 
 
-def persons_only(batch: Batch, pred: torch.Tensor, result: ScoreResult | None = None
-                 ) -> tuple[Batch, torch.Tensor, ScoreResult | None]:  # fmt: skip
-    """The persons (``agent_type == AGENT_PERSON``) of a batch and their samples pred
-    [K, N, T_f, 2] -> (batch of N' persons, pred [K, N', T_f, 2], ``result`` over them): what
-    ``evaluate(agents="persons")`` computes its metrics on, after the model (and the scorer,
-    ``result``: ``TrajectoryScorer.score`` of the whole batch) read every agent. Scenes
-    without a person are left out and the others numbered 0..B'-1 in order; context-only
-    agents are left out (no metric reads them). N' and B' may be 0."""
-    keep = batch.agent_type == AGENT_PERSON  # [N]
-    scene = batch.scene[keep]  # [N'] the persons' scenes, old numbers
+def select_agents(batch: Batch, pred: torch.Tensor, keep: torch.Tensor,
+                  result: ScoreResult | None = None
+                  ) -> tuple[Batch, torch.Tensor, ScoreResult | None]:  # fmt: skip
+    """The agents of a batch where ``keep`` [N] bool is True, and their samples pred
+    [K, N, T_f, 2] -> (batch of N' agents, pred [K, N', T_f, 2], ``result`` over them): what
+    ``evaluate(agents="persons" | "primary")`` computes its metrics on, after the model (and
+    the scorer, ``result``: ``TrajectoryScorer.score`` of the whole batch) read every agent.
+    Scenes without a kept agent are left out and the others numbered 0..B'-1 in order;
+    context-only agents are left out (no metric reads them). N' and B' may be 0."""
+    scene = batch.scene[keep]  # [N'] the kept agents' scenes, old numbers
     present = torch.bincount(scene, minlength=batch.num_scenes) > 0  # [B]
     renumber = torch.cumsum(present, 0) - 1  # [B] each kept scene's new index
     ids = [i for i, p in zip(batch.scene_ids, present.tolist(), strict=False) if p]
@@ -178,6 +182,38 @@ def persons_only(batch: Batch, pred: torch.Tensor, result: ScoreResult | None = 
     return view, pred[:, keep], result
 
 
+def persons_only(batch: Batch, pred: torch.Tensor, result: ScoreResult | None = None
+                 ) -> tuple[Batch, torch.Tensor, ScoreResult | None]:  # fmt: skip
+    """``select_agents`` of the persons (``agent_type == AGENT_PERSON``): what
+    ``evaluate(agents="persons")`` computes its metrics on."""
+    return select_agents(batch, pred, batch.agent_type == AGENT_PERSON, result)
+
+
+def first_agents(batch: Batch) -> torch.Tensor:
+    """[N] bool: each scene's first agent in the batch (whose scenes are whole, their agents
+    in the scene's order): TrajNet++'s primary pedestrian for its scenes, which
+    ``data.trajnet.read_trajnet`` lists first."""
+    first = torch.ones_like(batch.scene, dtype=torch.bool)  # [N]
+    first[1:] = batch.scene[1:] != batch.scene[:-1]
+    return first
+
+
+def trajnet_scenes(dataset: TrajectoryDataset) -> bool:
+    """Whether every scene of ``dataset`` was read from a TrajNet++ ``.ndjson`` file
+    (``data.trajnet.from_trajnet``: the reader records each scene's source row, frames and
+    ids), so that each scene's first agent is its primary pedestrian."""
+    return from_trajnet(dataset.scenes)
+
+
+def _agent_mask(batch: Batch, agents: str) -> torch.Tensor | None:
+    """[N] bool: the agents ``evaluate(agents=...)`` scores (None: all of them)."""
+    if agents == "persons":
+        return batch.agent_type == AGENT_PERSON
+    if agents == "primary":
+        return first_agents(batch)
+    return None
+
+
 @torch.no_grad()
 def evaluate(
     model: Predictor, dataset: TrajectoryDataset, num_samples: int = 20, seed: int = 0,
@@ -186,7 +222,7 @@ def evaluate(
     collision_radius: float | None | Literal["auto"] = "auto",
     bins: tuple[int, ...] | None = None,
     allow_overlap: bool = False,
-    agents: Literal["all", "persons"] = "all",
+    agents: Literal["all", "persons", "primary"] = "all",
 ) -> dict:  # fmt: skip
     """minADE_K / minFDE_K per agent and joint over a whole split; with a ``scorer``, also
     maxATS_K / maxFTS_K and the top-1 / top-5 recall of the ground-truth-free ranking.
@@ -207,6 +243,15 @@ def evaluate(
     that it is never taken for the all-agents number; a split without a person is a
     ``DataError``.
 
+    ``agents="primary"`` computes every metric over each scene's first agent only: TrajNet++'s
+    primary pedestrian, the one agent per scene its evaluator scores (the model and the
+    scorer still read the whole scene). Each scene then counts once, so joint metrics equal
+    the per-agent ones; Col-I / Col-II test the primary's sample against every neighbour of
+    its scene (their samples, their ground truth), over the primaries with a neighbour. The
+    result holds ``agent_set: "primary"``. Only for TrajNet++ scenes (``trajnet_scenes``):
+    elsewhere the first agent is merely the smallest id, so other data are a ``ConfigError``,
+    as are ``bins`` (every scene would have one agent).
+
     ``model`` is a loaded predictor (``load_predictor(name)``), not a name: ``NotAPredictor``
     (a ``TypeError``) otherwise, before any work.
 
@@ -220,6 +265,17 @@ def evaluate(
     if agents not in AGENT_SETS:
         raise ConfigError(f"agents must be one of {', '.join(AGENT_SETS)}, got {agents!r}")
     persons = agents == "persons"
+    if agents == "primary":
+        if not trajnet_scenes(dataset):
+            raise ConfigError(f"agents='primary' scores each scene's primary pedestrian, which "
+                              f"only TrajNet++ scenes (.ndjson files) name; "
+                              f"{dataset.info.name}/{dataset.info.split} is not TrajNet++ data, "
+                              "so its first agent per scene would be an arbitrary one: use "
+                              "agents='all' or 'persons' (--agents all|persons)")  # fmt: skip
+        if bins is not None:
+            raise ConfigError("agents='primary' does not combine with bins (--bins): every "
+                              "scene has one primary, so every scene would fall in the first "
+                              "bin")  # fmt: skip
     if persons and not any((s.agent_type == AGENT_PERSON).any() for s in dataset.scenes):
         raise DataError(f"agents='persons': {dataset.info.name}/{dataset.info.split} has no "
                         f"agent of agent_type {AGENT_PERSON} (person) to evaluate")  # fmt: skip
@@ -238,15 +294,22 @@ def evaluate(
     for batch, pred in sampled_batches(model, dataset, num_samples, seed, device, max_agents,
                                        progress, f"evaluate {dataset.info.name}"):  # fmt: skip
         res = scorer.score(batch, pred) if scorer is not None else None  # every agent read
-        if persons:  # the metrics below over the persons alone
-            batch, pred, res = persons_only(batch, pred, res)  # pred [K, N', T_f, 2]
-            if batch.num_agents == 0:  # no person in these scenes
-                continue
-        acc.update(pred, batch.future, batch.scene, batch.num_scenes)
         flags = None
-        if col_acc is not None:
+        if col_acc is not None and agents == "primary":  # against every neighbour
             flags = collision_flags(pred, batch.future, batch.scene, radius,
                                     bodies=bodies(batch))  # fmt: skip
+        keep = _agent_mask(batch, agents)  # [N] or None
+        if keep is not None:  # the metrics below over the kept agents alone
+            batch, pred, res = select_agents(batch, pred, keep, res)  # pred [K, N', T_f, 2]
+            if flags is not None:  # each kept agent's flags, [N'] each
+                flags = CollisionFlags(**{k: v[keep] for k, v in vars(flags).items()})
+            if batch.num_agents == 0:  # no such agent in these scenes
+                continue
+        acc.update(pred, batch.future, batch.scene, batch.num_scenes)
+        if col_acc is not None:
+            if flags is None:  # among the agents kept
+                flags = collision_flags(pred, batch.future, batch.scene, radius,
+                                        bodies=bodies(batch))  # fmt: skip
             col_acc.add(flags)
         if score_acc is not None:
             score_acc.update(scorer, batch, pred, result=res)
@@ -265,7 +328,7 @@ def evaluate(
         out.update(score_acc.compute())
     if bin_acc is not None:
         out["bins"] = bin_acc.compute()
-    if persons:
+    if agents != "all":
         out["agent_set"] = agents
     return out
 

@@ -54,6 +54,16 @@ class Scene:
     float64 cannot hold); None where the source has none, e.g. ``.npz`` splits and
     simulations. Metadata only: no model reads it and ``collate`` does not pack it;
     ``trajpref predict`` saves it (the .npz's ``agent_id``, docs/data_format.md)."""
+    frames: np.ndarray | None = None
+    """[T_h + T_f] the window's frame numbers in its source file (int64, or Python ints in an
+    object array beyond int64); None where the reader does not keep them (text track files,
+    ``.npz`` splits, simulations). Set by the TrajNet++ reader: ``predict --format trajnet``
+    writes the predictions at the source's own future frames. Metadata only, like
+    ``agent_id``."""
+    source_row: str | None = None
+    """The line of the source file that defines this window, as it is there (a TrajNet++
+    ``{"scene": {...}}`` row: id, primary, start, end, fps, tag); None for other data.
+    ``predict --format trajnet`` writes it unchanged. Metadata only."""
 
     def __post_init__(self) -> None:
         if self.history.ndim != 3 or self.history.shape[-1] != 2:
@@ -79,6 +89,11 @@ class Scene:
             raise DataError(f"{self.scene_id}: context_reverse must be [C', T_h, 2], got {shape}")
         if self.agent_id is not None:
             self.agent_id = _checked_ids(self.agent_id, self.history.shape[0], self.scene_id)
+        t_total = self.history.shape[1] + self.future.shape[1]
+        if self.frames is not None and np.shape(self.frames) != (t_total,):
+            shape = list(np.shape(self.frames))
+            raise DataError(f"{self.scene_id}: frames must be [T_h + T_f] = [{t_total}], got "
+                            f"{shape}")  # fmt: skip
 
     @property
     def num_agents(self) -> int:

@@ -49,7 +49,9 @@ class TrajnetScenes:
 
     scenes: list[Scene]
     """One scene per TrajNet++ scene: the primary agent first, then every agent with a row in
-    all of its T_h + T_f frames, by id (``Scene.agent_id``: their ``"p"`` ids)."""
+    all of its T_h + T_f frames, by id (``Scene.agent_id``: their ``"p"`` ids); the others
+    seen at its last observed frame as ``Scene.context``; its frames and scene row as
+    ``Scene.frames`` and ``Scene.source_row``."""
     fps: set[float] = field(default_factory=set)
     """The ``fps`` values the scene rows declare."""
 
@@ -116,9 +118,9 @@ def read_trajnet(
     path = Path(path)
     check_file(path)
     t_total = t_hist + t_fut
-    # frame -> agent -> (x, y); scene rows as (line, id, primary, start, end)
+    # frame -> agent -> (x, y); scene rows as (line, id, primary, start, end, text)
     rows: dict[int, dict[int, tuple[float, float]]] = defaultdict(dict)
-    scene_rows: list[tuple[int, int, int, int, int]] = []
+    scene_rows: list[tuple[int, int, int, int, int, str]] = []
     seen_ids: set[int] = set()
     fps: set[float] = set()
     with open_data_file(path) as fh:
@@ -180,7 +182,7 @@ def read_trajnet(
                 if rate <= 0:
                     raise DataError(f"scene 'fps' must be > 0, got {rate}", path, line)
                 fps.add(float(rate))
-            scene_rows.append((line, sid, p, s, e))
+            scene_rows.append((line, sid, p, s, e, text.strip()))
     if not scene_rows:
         raise DataError('no {"scene": ...} rows', path)
     frames = sorted(rows)  # [F] every frame of the file
@@ -194,7 +196,7 @@ def read_trajnet(
     step = min(jumps, key=lambda j: (-jumps[j], j)) if jumps else 1
     gaps: list[int] = []  # scene ids whose window spans a frame its primary agent misses
     scenes = []
-    for line, sid, p, s, e in scene_rows:
+    for line, sid, p, s, e, row in scene_rows:
         own = [f for f in frames_of.get(p, ()) if s <= f <= e]
         if len(own) < t_total:
             raise DataError(
@@ -211,13 +213,17 @@ def read_trajnet(
             others &= rows[f].keys()
         agents = [p, *sorted(others - {p})]
         xy = np.array([[rows[f][a] for f in window] for a in agents], np.float32)  # [P, T, 2]
+        big = any(not -(2**63) <= f < 2**63 for f in (window[0], window[-1]))
         scenes.append(
             Scene(
                 xy[:, :t_hist],
                 xy[:, t_hist:],
                 np.zeros(len(agents), np.int64),
                 f"{path.name}#{sid}",
+                context=_context(rows, window[:t_hist], set(agents)),
                 agent_id=source_ids(np.array(agents, dtype=object)),  # [P] exact "p" ids
+                frames=np.array(window, dtype=object if big else np.int64),  # [T]
+                source_row=row,
             )  # fmt: skip
         )
     if gaps:
@@ -229,6 +235,23 @@ def read_trajnet(
             stacklevel=2,
         )
     return TrajnetScenes(scenes, fps)
+
+
+def _context(
+    rows: dict[int, dict[int, tuple[float, float]]], observed: list[int], targets: set[int]
+) -> np.ndarray:
+    """[C, T_h, 2] the window's context-only agents (``Scene.context``, the rule the text
+    reader's windows follow): the other agents with a row at its last observed frame
+    (``observed[-1]``), not ``targets`` (those in all of its frames), by id, their positions at
+    the ``observed`` frames, NaN where they have no row."""
+    others = sorted(a for a in rows[observed[-1]] if a not in targets)
+    out = np.full((len(others), len(observed), 2), np.nan, np.float32)  # [C, T_h, 2]
+    for c, agent in enumerate(others):
+        for t, f in enumerate(observed):
+            xy = rows[f].get(agent)
+            if xy is not None:
+                out[c, t] = xy
+    return out
 
 
 def _check_arrays(history, pred, scene, future) -> tuple[np.ndarray, ...]:
@@ -278,10 +301,12 @@ def _track_lines(frames, agents, xy, decimals, k: int | None = None,
 
 
 def trajnet_agent_ids(agent_id, scene) -> np.ndarray:
-    """[N] int64 TrajNet++ agent ids (``"p"``) from the source data's ids ``agent_id`` [N]
-    (numbers as read, or None) for agents numbered by ``scene`` [N]: the source ids where
-    each is an integer (TrajNet++'s ids are integers) and no two agents of one scene share
-    one; else the agents' indices 0..N-1 (the ids of an export without source ids)."""
+    """[N] TrajNet++ agent ids (``"p"``) from the source data's ids ``agent_id`` [N] (numbers
+    as read, the exact text of an integer beyond int64, or None) for agents numbered by
+    ``scene`` [N]: the source ids where each is an integer (TrajNet++'s ids are integers) and
+    no two agents of one scene share one, int64, or exact Python ints in an object array when
+    one does not fit int64 (JSON and TrajNet++'s Reader take integers of any size); else the
+    agents' indices 0..N-1 (the ids of an export without source ids)."""
     scene = np.asarray(scene)
     n = len(scene)
     if agent_id is None:
@@ -289,18 +314,28 @@ def trajnet_agent_ids(agent_id, scene) -> np.ndarray:
     ids = np.asarray(agent_id)
     if ids.shape != (n,):
         raise DataError(f"agent_id must be [N={n}], got {ids.shape}")
-    try:
-        values = [int(v) for v in ids.tolist()]
-        exact = all(v == x for v, x in zip(values, ids.tolist(), strict=True))
-    except (TypeError, ValueError, OverflowError):  # strings, NaN, infinities
+    values = [_integer_id(v) for v in ids.tolist()]
+    if any(v is None for v in values):  # names, fractions, NaN
         return np.arange(n)
-    if not exact or any(abs(v) >= 2**63 for v in values):
+    if len(set(zip(scene.tolist(), values, strict=True))) != n:  # an id twice in one scene
         return np.arange(n)
-    out = np.array(values, dtype=np.int64)  # [N]
-    pairs = np.stack([scene.astype(np.int64), out], axis=1)  # [N, 2] (scene, id)
-    if len(np.unique(pairs, axis=0)) != n:  # an id twice in one scene: rows would merge
-        return np.arange(n)
-    return out
+    if all(-(2**63) <= v < 2**63 for v in values):
+        return np.array(values, dtype=np.int64)  # [N]
+    return np.array(values, dtype=object)  # [N] exact Python ints
+
+
+def _integer_id(value) -> int | None:
+    """An agent id as an exact int: ints, whole floats and the text of an integer
+    (``Scene.agent_id`` holds ids beyond int64 as their text); None for anything else."""
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, int):
+        return value
+    if isinstance(value, float):
+        return int(value) if math.isfinite(value) and value == int(value) else None
+    if isinstance(value, str) and value.strip().lstrip("+-").isdigit():
+        return int(value)
+    return None
 
 
 def write_trajnet(
@@ -398,3 +433,119 @@ def _write(path, history, scene, frame_interval, decimals, pred=None, future=Non
                     )
                 )
     return n
+
+
+def from_trajnet(scenes: list[Scene]) -> bool:
+    """Whether every one of ``scenes`` was read from a TrajNet++ file (``read_trajnet``: its
+    ``source_row``, ``frames`` and ``agent_id`` are set), so that ``write_trajnet_scenes`` can
+    write predictions that match the source files."""
+    return bool(scenes) and all(
+        s.source_row is not None and s.frames is not None and s.agent_id is not None for s in scenes
+    )
+
+
+def write_trajnet_scenes(
+    out: str | Path,
+    scenes: list[Scene],
+    pred,
+    scene,
+    truth: str | Path | None = None,
+    decimals: int | None = None,
+) -> Path:
+    """Write predictions for windows read from TrajNet++ files (``from_trajnet``) as the
+    official evaluator scores them against those files: per source scene, its scene row
+    unchanged (id, primary, start, end, fps, tag), the observed rows of its agents, and for
+    each sample k and each agent of the scene (the primary first) the predicted rows at the
+    source's own future frames (``Scene.frames``), with ``"prediction_number": k`` and the
+    source scene's ``"scene_id"``: a neighbour's predictions are written once per scene it is
+    predicted in, each carrying that scene's id, as TrajNet++'s evaluator reads a scene's
+    neighbour predictions (its Col-I). Returns what was written: ``out`` when the scenes come
+    from one source file; from several, a folder named as ``out`` without its suffix holding
+    one file per source file, named as it (``pred.ndjson`` -> ``pred/a.ndjson``,
+    ``pred/b.ndjson``), the layout the evaluator pairs with its ground-truth folder (TrajNet++
+    numbers scenes per file, so one file could not hold them all).
+
+    ``pred`` [K, N, T_f, 2] and ``scene`` [N] (each agent's index into ``scenes``,
+    non-decreasing) are ``predict_dataset``'s; each scene's rows are all its agents in its
+    order, or its primary agent alone. ``truth`` (optional, a path laid out as ``out``): the
+    matching ground truth, the same scene rows and every agent's rows over its window (8
+    observed frames, not TrajNet++'s 9: the window's first frame is the scene's second).
+    ``decimals`` as in ``write_trajnet``; K must be 1 or at least 3."""
+    pred = np.asarray(pred, dtype=np.float32)
+    scene = np.asarray(scene)
+    if not from_trajnet(scenes):
+        raise DataError("write_trajnet_scenes needs scenes read from TrajNet++ files (their "
+                        "source_row, frames and agent_id set): use write_trajnet")  # fmt: skip
+    if pred.ndim != 4 or pred.shape[-1] != 2 or scene.shape != pred.shape[1:2]:
+        raise DataError(f"pred must be [K, N, T_f, 2] with scene [N], got {pred.shape} and "
+                        f"{scene.shape}")  # fmt: skip
+    if pred.shape[0] == 2:
+        raise ConfigError(
+            "TrajNet++'s evaluator needs 1 or at least 3 predictions per agent (its Top-3 "
+            "reads predictions 0, 1 and 2); got K=2"
+        )
+    if not np.isfinite(pred).all():
+        raise DataError("pred holds NaN or infinite values")
+    starts = np.searchsorted(scene, np.arange(len(scenes) + 1))  # [B + 1] each scene's rows
+    if (np.diff(scene) < 0).any() or starts[-1] != len(scene):
+        raise DataError(f"scene must index the {len(scenes)} scenes in non-decreasing order")
+    rows_of = []
+    for b, s in enumerate(scenes):
+        count = int(starts[b + 1] - starts[b])
+        if count not in (s.num_agents, 1) or s.future.shape[1] != pred.shape[2]:
+            raise DataError(f"{s.scene_id}: pred holds {count} agents of {pred.shape[2]} "
+                            f"frames for this scene of {s.num_agents} agents of "
+                            f"{s.future.shape[1]}: every agent or the primary alone")  # fmt: skip
+        rows_of.append(np.arange(starts[b], starts[b + 1]))
+    groups: dict[str, list[int]] = defaultdict(list)  # source file -> its scenes, in order
+    for b, s in enumerate(scenes):
+        groups[s.scene_id.rsplit("#", 1)[0]].append(b)
+    out = Path(out)
+    folder = out.with_suffix("") if len(groups) > 1 else None
+    for name, members in groups.items():
+        target = out if folder is None else folder / name
+        if folder is not None:
+            folder.mkdir(parents=True, exist_ok=True)
+        _write_source(target, [scenes[b] for b in members], pred, [rows_of[b] for b in members],
+                      decimals)  # fmt: skip
+        if truth is not None:
+            gt = Path(truth) if folder is None else Path(truth).with_suffix("") / name
+            gt.parent.mkdir(parents=True, exist_ok=True)
+            _write_source(gt, [scenes[b] for b in members], None,
+                          [rows_of[b] for b in members], decimals)  # fmt: skip
+    return out if folder is None else folder
+
+
+def _write_source(path: Path, scenes: list[Scene], pred: np.ndarray | None,
+                  rows_of: list[np.ndarray], decimals: int | None) -> None:  # fmt: skip
+    """One file of ``write_trajnet_scenes``: the scenes' rows, their agents' observed rows (and
+    true future rows without ``pred``), then the predictions of ``pred`` [K, N, T_f, 2] (agent
+    rows ``rows_of[b]`` of scene b)."""
+    known: dict[tuple[int, int], tuple[str, str]] = {}  # (frame, agent) -> (x, y), first wins
+    predicted = []
+    for s, rows in zip(scenes, rows_of, strict=True):
+        t_hist = s.history.shape[1]
+        frames = s.frames.tolist()  # [T] Python ints, exact
+        ids = [int(a) for a in s.agent_id.tolist()]  # [P] "p", exact (text beyond int64)
+        xy = np.concatenate([s.history, s.future], axis=1)  # [P, T, 2]
+        shown = xy[:, :t_hist] if pred is not None else xy  # [P, T_h or T, 2]
+        text = _coords(shown, decimals).tolist()
+        for a, agent in enumerate(ids):
+            for t, f in enumerate(frames[: len(text[a])]):
+                known.setdefault((f, agent), tuple(text[a][t]))
+        if pred is None:
+            continue
+        sid = int(s.scene_id.rsplit("#", 1)[1])
+        guess = _coords(pred[:, rows], decimals).tolist()  # [K, P', T_f, 2] as text
+        for k, per_agent in enumerate(guess):
+            for agent, track in zip(ids, per_agent, strict=False):  # P' <= P: primary first
+                for f, (x, y) in zip(frames[t_hist:], track, strict=True):
+                    predicted.append(
+                        f'{{"track": {{"f": {f}, "p": {agent}, "x": {x}, "y": {y}, '
+                        f'"prediction_number": {k}, "scene_id": {sid}}}}}\n'
+                    )
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
+        fh.writelines(s.source_row + "\n" for s in scenes)
+        fh.writelines(f'{{"track": {{"f": {f}, "p": {a}, "x": {x}, "y": {y}}}}}\n'
+                      for (f, a), (x, y) in sorted(known.items()))  # fmt: skip
+        fh.writelines(predicted)
