@@ -1,15 +1,17 @@
 """``evaluate`` on a split its model trained on (or chose its epoch on) says so and records it:
 by name (``--split train``) or as the split's folder given as a path. The test split is
-silent."""
+silent. With ``data.val_dataset`` the model chose its epoch on another folder: its val
+split by name is then not flagged, as by path."""
 
 from __future__ import annotations
 
 import json
 import warnings
+from types import SimpleNamespace
 
 import pytest
 
-from trajpref.cli import main
+from trajpref.cli import _own_split, main
 
 
 def _evaluate(capsys, *argv):
@@ -39,3 +41,23 @@ def test_the_test_split_is_not_flagged(tiny_run, walks, capsys):
     overlap, notes = _evaluate(capsys, "--dataset", walks, "--split", "test", "--model",
                                tiny_run / "generator.safetensors")  # fmt: skip
     assert overlap is None and notes == []
+
+
+def _info(name: str, split: str, source: str) -> SimpleNamespace:
+    return SimpleNamespace(name=name, split=split, source=source)
+
+
+def test_val_by_name_is_not_own_when_the_model_validated_elsewhere(tmp_path):
+    root = tmp_path / "data"
+    val = root / "eth_ucy" / "zara1" / "val"
+    val.mkdir(parents=True)
+    (root / "eth_ucy" / "zara1" / "train").mkdir()
+    elsewhere = {"dataset": "zara1", "val_dataset": str(tmp_path / "elsewhere")}
+    by_name = _info("zara1", "val", str(val))
+    by_path = _info(str(val), "test", str(val))
+    assert _own_split(elsewhere, by_name, str(root)) is None
+    assert _own_split(elsewhere, by_path, str(root)) is None  # the path agrees
+    # its own val split, and the training split either way, are still named
+    assert _own_split({"dataset": "zara1"}, by_name, str(root)) == "val"
+    assert _own_split(elsewhere, _info("zara1", "train", str(val.parent / "train")),
+                      str(root)) == "train"  # fmt: skip

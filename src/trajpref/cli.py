@@ -425,8 +425,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="npz: every array, and meta: a JSON string of what made them (model, hashes, "
         "dataset, split, protocol, seed, K, version, command; default); trajnet: a TrajNet++ "
         "prediction file that trajnetplusplustools' evaluator reads: for TrajNet++ input, "
-        "its own scenes, ids and frames (a folder of .ndjson files as a folder); for other "
-        "data, one TrajNet++ scene per agent (docs/data_format.md)",
+        "its own scenes, ids and frames (one .ndjson file given as --dataset: one file; a "
+        "folder: a folder named as --out without its suffix, one file per source file that "
+        "has chosen scenes, even for one file or with --max-scenes); for other data, one "
+        "TrajNet++ scene per agent (docs/data_format.md)",
     )
     pr.add_argument(
         "--truth",
@@ -1060,10 +1062,13 @@ def _own_split(data: dict, info, root: str | None) -> str | None:
     elif trained not in NAMES:
         with contextlib.suppress(TrajprefError, OSError):
             folders = split_folders(Path(trained).expanduser())
+    validated_elsewhere = bool(data.get("val_dataset"))  # it chose its epoch on another folder
     if trained in NAMES and info.name == trained and info.split in ("train", "val"):
+        if info.split == "val" and validated_elsewhere:
+            return None
         return info.split  # a built-in dataset's own split, whatever folder it was read from
-    if data.get("val_dataset"):
-        folders.pop("val", None)  # it validated on another folder
+    if validated_elsewhere:
+        folders.pop("val", None)
     for split in ("train", "val"):
         if split in folders and _same_path(str(folders[split]), str(info.source)):
             return split
@@ -1678,18 +1683,99 @@ def _evaluate_in_context(args, overlap: str | None = None) -> int:
     return 0
 
 
+def _trajnet_sources(args) -> tuple[list[Path], list[Path], bool]:
+    """What ``predict --format trajnet`` reads, found before any model or data is read (the
+    rule of ``registry._user_folder``, without reading a file): the TrajNet++ ``.ndjson``
+    files, the folders read as data (a folder given as --dataset and the split sub-folder read
+    from it; both splits' with --holdout-scene), and whether the input is a folder of
+    TrajNet++ files (written as a folder, ``trajnet.write_trajnet_scenes``; a single
+    ``.ndjson`` file given as --dataset is written as one file). No files for a built-in
+    dataset or a text folder; nothing at all where the input cannot be read (loading it
+    later says why)."""
+    from trajpref.data import text as data_text
+
+    if args.dataset in NAMES:
+        return [], [], False
+    path = Path(args.dataset).expanduser()
+    try:
+        if path.suffix.lower() == ".ndjson" and path.is_file():
+            return [path], [], False
+        if not path.is_dir():
+            return [], [], False
+        splits = split_folders(path)
+        names = ("train", "val") if args.holdout_scene else (args.split,)
+        folders = [*(splits[n] for n in names if n in splits), path]  # the nearest first
+        files = [f for folder in folders
+                 if data_text.matching_files(folder, ("*.ndjson",))
+                 for f in data_text.track_files(folder, "*.ndjson")]  # fmt: skip
+    except (TrajprefError, OSError):
+        return [], [], False
+    return files, folders, bool(files)
+
+
+def _resolved(path: Path) -> Path:
+    with contextlib.suppress(OSError, RuntimeError):
+        return path.expanduser().resolve()
+    return path.expanduser().absolute()
+
+
+def _within(inner: Path, outer: Path) -> bool:
+    """Whether ``inner`` is ``outer`` or lies under it (both resolved)."""
+    return inner == outer or outer in inner.parents
+
+
+def _check_trajnet_targets(args) -> None:
+    """``predict --format trajnet``'s output paths, checked before any model or data is read:
+    every file and folder the prediction and ``--truth`` will be (for TrajNet++ input,
+    ``trajnet.trajnet_output_paths``) can be written, none is a source file, a folder read as
+    data (any folder input, ``_trajnet_sources``) or inside one (writing there replaced the
+    user's files, or changed what the folder reads as), and ``--out`` and ``--truth`` are
+    apart (neither the same path nor one inside the
+    other: the second written replaced the first)."""
+    from trajpref.data.trajnet import trajnet_output_base, trajnet_output_paths
+
+    files, folders, folder = _trajnet_sources(args)
+    args._trajnet_folder = folder  # the layout, from the input alone
+    outputs = [("--out", args.out)] + ([("--truth", args.truth)] if args.truth else [])
+    bases = {}
+    for flag, given in outputs:
+        base = trajnet_output_base(given, folder)
+        bases[flag] = _resolved(base)
+        if folder:
+            check_output_dir(base, flag)
+            for target in trajnet_output_paths(given, [f.name for f in files], True).values():
+                check_output_file(target, ".ndjson", flag)
+        for source in files:
+            if _resolved(source) == bases[flag] or (
+                base.exists() and source.exists() and os.path.samefile(source, base)
+            ):
+                raise ConfigError(f"{flag} {given}: writes {base}, the source file "
+                                  f"{source} itself: write the predictions elsewhere")  # fmt: skip
+        for source in folders:
+            if _within(bases[flag], _resolved(source)):
+                what = "the source folder" if bases[flag] == _resolved(source) else (
+                    "inside the source folder")  # fmt: skip
+                raise ConfigError(f"{flag} {given}: writes {base}, {what} {source} (it would "
+                                  "replace or add to the data read): write the predictions "
+                                  "outside it")  # fmt: skip
+    if len(bases) == 2:
+        out, truth = bases["--out"], bases["--truth"]
+        if _within(out, truth) or _within(truth, out):
+            raise ConfigError(f"--out {args.out} and --truth {args.truth} write "
+                              f"{trajnet_output_base(args.out, folder)} and "
+                              f"{trajnet_output_base(args.truth, folder)}: the same path or one "
+                              "inside the other, so the second would replace the first: give "
+                              "them apart")  # fmt: skip
+
+
 def _check_trajnet_predict(args) -> None:
-    """``predict --format trajnet``'s own checks, before any model or data is read: K (--keep
-    where given, else --samples) must be 1 or at least 3, since TrajNet++'s evaluator reads
-    predictions 0, 1 and 2 (its Top-3) whenever there are several; with --rank, a note on
-    stderr that prediction 0, its Top-1, is then the diffusion score's top-1 (the samples are
-    written best first) and that the order and residual arrays are npz's only. Without
-    --rank, prediction 0 is an arbitrary sample (--rank's help says so)."""
-    flag, k = ("--samples", args.samples) if args.keep is None else ("--keep", args.keep)
-    if k == 2:
-        raise ConfigError(f"--format trajnet: TrajNet++'s evaluator needs 1 or at least 3 "
-                          f"predictions per agent (its Top-3 reads predictions 0, 1 and 2); "
-                          f"{flag} 2 would write 2: pass {flag} 1 or {flag} 3 or more")  # fmt: skip
+    """``predict --format trajnet``'s own checks, before any model or data is read: its output
+    paths (``_check_trajnet_targets``); with --rank, a note on stderr that prediction 0, its
+    Top-1, is then the diffusion score's top-1 (the samples are written best first) and that
+    the order and residual arrays are npz's only. Without --rank, prediction 0 is an arbitrary
+    sample (--rank's help says so). Any K is written: TrajNet++'s evaluator reads Top-3 only
+    with more than two predictions, so K = 1 or 2 gets Top-1 alone."""
+    _check_trajnet_targets(args)
     if args.rank:
         print("trajpref: note: --format trajnet --rank writes each scene's samples best first "
               "by the diffusion score, so prediction_number 0 (TrajNet++'s Top-1) is its top-1; "
@@ -1732,9 +1818,10 @@ def cmd_predict(args) -> int:
         _warn_trajnet_units(ds)
         interval = ds.info.frame_interval
         if from_trajnet(ds.scenes):  # TrajNet++ files: their scenes, ids and frames (a folder
-            # of files: one file each, in a folder named as --out without its suffix)
+            # given: one file each, in a folder named as --out without its suffix)
             args.out = str(write_trajnet_scenes(args.out, ds.scenes, arrays["pred"],
-                                                arrays["scene"], truth=args.truth))  # fmt: skip
+                                                arrays["scene"], truth=args.truth,
+                                                folder=args._trajnet_folder))  # fmt: skip
         else:
             write_trajnet(args.out, arrays["history"], arrays["pred"], arrays["scene"],
                           interval, agent_id=ids)  # fmt: skip

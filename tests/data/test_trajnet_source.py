@@ -5,6 +5,8 @@ size written exactly."""
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import json
 
 import numpy as np
@@ -13,6 +15,7 @@ import trajnetplusplustools as tnt
 from trajpref.cli import main
 from trajpref.data import load_dataset
 from trajpref.data.trajnet import read_trajnet, trajnet_agent_ids, write_trajnet
+from trajpref.train.run import data_fingerprint
 
 FRAMES = list(range(1000, 1310, 10))  # 31 frames, step 10
 
@@ -58,20 +61,29 @@ def test_partial_neighbours_are_context_as_the_text_reader_keeps_them(tmp_path):
 
 
 def _official_loop(gt_path, sub_path, k: int):
-    """The scoring loop of trajnetplusplusbaselines' evaluator/trajnet_evaluator.py: scenes
-    paired in order, a scene's predictions are the rows carrying its id, and the primary's
-    predicted frames must be the truth's last 12 ("frame numbers are not consistent")."""
+    """The scoring loop of trajnetplusplusbaselines' evaluator/trajnet_evaluator.py as of its
+    HEAD (99a6e9d, after PR #27; read, not run): scenes paired in order, a scene's predictions
+    are the rows carrying its id, the primary's predicted frames must be the truth's last 12
+    ("frame numbers are not consistent"), the truth's neighbours are the tracks first seen
+    before the primary's first future frame (its ``drop_post_obs``), and Col-I is turned off
+    for the whole file (-1) when in any scene the predicted neighbours are not that many ("The
+    model does not predict all neighbours in the scene"). Returns each scene's predicted
+    neighbour rows (prediction 0), its Top-k ADE, and whether Col-I stays on."""
     gt = tnt.Reader(str(gt_path), scene_type="paths")
     sub = tnt.Reader(str(sub_path), scene_type="paths")
-    neighbours, top = [], []
+    neighbours, top, col1 = [], [], True
     for (sid, truth), (_, paths) in zip(gt.scenes(), sub.scenes(), strict=True):
         primary = [t for t in paths[0] if t.scene_id == sid]
         first = [t for t in primary if t.prediction_number == 0]
         assert [t.frame for t in truth[0]][-12:] == [t.frame for t in first], sid
-        neighbours.append(sum(1 for p in paths[1:] for t in p if t.scene_id == sid
+        predicted = [p for p in paths[1:] if any(t.scene_id == sid for t in p)]
+        neighbours.append(sum(1 for p in predicted for t in p if t.scene_id == sid
                               and t.prediction_number == 0))  # fmt: skip
+        end = truth[0][9].frame  # the first future frame of TrajNet++'s 9 + 12
+        kept = [path for path in truth[1:] if path[0].frame < end]  # drop_post_obs
+        col1 = col1 and len(kept) == len(predicted)
         top.append(tnt.metrics.topk(primary, truth[0], n_predictions=12, k_samples=k)[0])
-    return neighbours, top
+    return neighbours, top, col1
 
 
 def test_predictions_are_scored_against_the_source_file(tmp_path, capsys):
@@ -89,10 +101,14 @@ def test_predictions_are_scored_against_the_source_file(tmp_path, capsys):
                                                           (2, 3), (2, 5), (2, 7)}  # fmt: skip
     assert sorted({r["f"] for r in guesses if r["scene_id"] == 1}) == FRAMES[9:21]
     assert {r["prediction_number"] for r in guesses} == {0, 1, 2}
-    # the official loop against the user's own file: every scene has neighbour predictions
-    neighbours, top = _official_loop(tmp_path / "a.ndjson", pred, 3)
-    assert neighbours == [2 * 12, 3 * 12]  # agent 5 is in all of scene 2
-    assert _official_loop(truth, pred, 3)[1] == top  # the truth written scores alike
+    # the official loop against the user's own file: every scene has neighbour predictions,
+    # but its Col-I is off: scene 1's truth counts 4 neighbours (5 and 9 are partial, seen
+    # before the future), we predict the 2 in all 20 frames (docs/social.md)
+    neighbours, top, col1 = _official_loop(tmp_path / "a.ndjson", pred, 3)
+    assert neighbours == [2 * 12, 3 * 12] and not col1  # agent 5 is in all of scene 2
+    # against the truth written with it the Top-k scores are the same, and Col-I stays on here
+    # (it holds the predicted agents alone; overlapping scenes can still add neighbours)
+    assert _official_loop(truth, pred, 3)[1:] == (top, True)
     assert json.loads(truth.read_text().splitlines()[0]) == {"scene": SCENES[0]}
 
 
@@ -130,3 +146,131 @@ def test_ids_beyond_int64_are_written_exactly(tmp_path):
     assert main(argv) == 0
     written = [json.loads(line)["track"] for line in out.read_text().splitlines()[1:]]
     assert {r["p"] for r in written if "prediction_number" in r} == {big, 7}
+
+
+def _digests(folder) -> dict[str, str]:
+    return {p.name: hashlib.md5(p.read_bytes()).hexdigest() for p in sorted(folder.iterdir())}
+
+
+def _predict(*flags) -> int:
+    return main(["predict", "--model", "cv", "--samples", "1", "--no-progress", "--format",
+                 "trajnet", *map(str, flags)])  # fmt: skip
+
+
+def test_outputs_that_would_replace_or_join_the_source_are_refused(tmp_path, capsys):
+    root = tmp_path / "tn"  # root/test/{a,b}.ndjson, root/train/a.ndjson
+    for split, names in (("test", "ab"), ("train", "a")):
+        (root / split).mkdir(parents=True)
+        for name in names:
+            _write(root / split / f"{name}.ndjson")
+    flat = tmp_path / "data"  # a folder without split sub-folders
+    flat.mkdir()
+    _write(flat / "a.ndjson")
+    before = {folder: _digests(folder) for folder in (root / "test", flat)}
+    refused = [
+        # the output folder (--out without its suffix) is the source folder
+        (["--dataset", root, "--split", "test", "--out", root / "test.ndjson"], "source folder"),
+        (["--dataset", flat, "--out", tmp_path / "data.ndjson"], "the source folder"),
+        (["--dataset", flat, "--out", flat / "p.ndjson"], "inside the source folder"),
+        # one source file given: the file itself
+        (["--dataset", flat / "a.ndjson", "--out", flat / "a.ndjson"], "source file"),
+        (
+            [
+                "--dataset",
+                flat / "a.ndjson",
+                "--out",
+                tmp_path / "p.ndjson",
+                "--truth",
+                flat / "a.ndjson",
+            ],
+            "source file",
+        ),  # fmt: skip
+        # --out and --truth the same, or (as folders) one the other's
+        (
+            [
+                "--dataset",
+                flat / "a.ndjson",
+                "--out",
+                tmp_path / "p.ndjson",
+                "--truth",
+                tmp_path / "p.ndjson",
+            ],
+            "the same path",
+        ),  # fmt: skip
+        (
+            [
+                "--dataset",
+                flat,
+                "--out",
+                tmp_path / "x" / "p.ndjson",
+                "--truth",
+                tmp_path / "x" / "p.NDJSON",
+            ],
+            "the same path",
+        ),  # fmt: skip
+        (
+            [
+                "--dataset",
+                flat,
+                "--out",
+                tmp_path / "x" / "p.ndjson",
+                "--truth",
+                tmp_path / "x" / "p" / "g.ndjson",
+            ],
+            "one inside the other",
+        ),  # fmt: skip
+    ]
+    for flags, message in refused:
+        assert _predict(*flags) == 2, flags
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1, (flags, err)
+    (tmp_path / "q").write_text("not a folder")  # the output folder's name, taken by a file
+    assert _predict("--dataset", flat, "--out", tmp_path / "q.ndjson") == 2
+    assert "exists and is not a folder" in capsys.readouterr().err
+    assert {folder: _digests(folder) for folder in (root / "test", flat)} == before
+    assert not (tmp_path / "p.ndjson").exists() and not (tmp_path / "x").exists()
+
+
+def test_the_layout_follows_the_input_not_the_scenes_chosen(tmp_path, capsys):
+    one = tmp_path / "one"  # a folder of one file: a folder
+    one.mkdir()
+    _write(one / "a.ndjson")
+    assert _predict("--dataset", one, "--out", tmp_path / "p1.ndjson") == 0
+    assert sorted(p.name for p in (tmp_path / "p1").iterdir()) == ["a.ndjson"]
+    two = tmp_path / "two"  # two files, one scene chosen: a folder, of that scene's file
+    two.mkdir()
+    _write(two / "a.ndjson")
+    _write(two / "b.ndjson")
+    assert _predict("--dataset", two, "--max-scenes", "1", "--out", tmp_path / "p2.ndjson",
+                    "--truth", tmp_path / "g2.ndjson") == 0  # fmt: skip
+    assert len(list((tmp_path / "p2").iterdir())) == len(list((tmp_path / "g2").iterdir())) == 1
+    # one file given: one file
+    assert _predict("--dataset", one / "a.ndjson", "--out", tmp_path / "p3.ndjson") == 0
+    assert (tmp_path / "p3.ndjson").is_file() and not (tmp_path / "p3").exists()
+    assert not (tmp_path / "p1.ndjson").exists() and not (tmp_path / "p2.ndjson").exists()
+
+
+def test_two_predictions_are_written_the_evaluator_reads_top_1(tmp_path, capsys):
+    _write(tmp_path / "a.ndjson")
+    pred = tmp_path / "p.ndjson"
+    assert main(["predict", "--dataset", str(tmp_path / "a.ndjson"), "--model", "cv",
+                 "--samples", "2", "--no-progress", "--format", "trajnet", "--out",
+                 str(pred)]) == 0  # fmt: skip
+    rows = [json.loads(line).get("track", {}) for line in pred.read_text().splitlines()]
+    assert {r["prediction_number"] for r in rows if "prediction_number" in r} == {0, 1}
+    assert len(_official_loop(tmp_path / "a.ndjson", pred, 1)[1]) == 2  # both scenes scored
+
+
+def test_windows_without_context_keep_their_fingerprint(tmp_path):
+    # every agent in every frame: no context, so the data fingerprint is that of windows
+    # read without context (as before the reader kept partial neighbours): a run resumes
+    full = [(f, p, 0.1 * i + p, 0.2 * p) for i, f in enumerate(FRAMES) for p in (7, 3, 12)]
+    _write(tmp_path / "full.ndjson", tracks=sorted(full))
+    ds = load_dataset(str(tmp_path / "full.ndjson"), "test")
+    assert [s.context for s in ds.scenes] == [None, None]
+    bare = dataclasses.replace(ds, scenes=[dataclasses.replace(s, context=None)
+                                           for s in ds.scenes])  # fmt: skip
+    assert data_fingerprint(ds, ds) == data_fingerprint(bare, bare)
+    # with partial neighbours the context is there (test_partial_neighbours_are_context_...)
+    _write(tmp_path / "a.ndjson")
+    assert read_trajnet(tmp_path / "a.ndjson").scenes[0].context.shape == (2, 8, 2)

@@ -50,7 +50,8 @@ class TrajnetScenes:
     scenes: list[Scene]
     """One scene per TrajNet++ scene: the primary agent first, then every agent with a row in
     all of its T_h + T_f frames, by id (``Scene.agent_id``: their ``"p"`` ids); the others
-    seen at its last observed frame as ``Scene.context``; its frames and scene row as
+    seen at its last observed frame as ``Scene.context`` (None when there are none); its
+    frames and scene row as
     ``Scene.frames`` and ``Scene.source_row``."""
     fps: set[float] = field(default_factory=set)
     """The ``fps`` values the scene rows declare."""
@@ -239,12 +240,17 @@ def read_trajnet(
 
 def _context(
     rows: dict[int, dict[int, tuple[float, float]]], observed: list[int], targets: set[int]
-) -> np.ndarray:
+) -> np.ndarray | None:
     """[C, T_h, 2] the window's context-only agents (``Scene.context``, the rule the text
     reader's windows follow): the other agents with a row at its last observed frame
     (``observed[-1]``), not ``targets`` (those in all of its frames), by id, their positions at
-    the ``observed`` frames, NaN where they have no row."""
+    the ``observed`` frames, NaN where they have no row. None when there are none: batches
+    read None and an empty array alike (``types.collate``), and a window without context
+    keeps the data fingerprint it had before context was read (``train.run.data_fingerprint``:
+    a run begun then resumes)."""
     others = sorted(a for a in rows[observed[-1]] if a not in targets)
+    if not others:
+        return None
     out = np.full((len(others), len(observed), 2), np.nan, np.float32)  # [C, T_h, 2]
     for c, agent in enumerate(others):
         for t, f in enumerate(observed):
@@ -361,8 +367,8 @@ def write_trajnet(
     ground truth. Coordinates are written as the shortest text that reads back as the same
     float32 value, or rounded to ``decimals`` (TrajNet++'s own files use 2).
 
-    TrajNet++'s evaluator reads predictions 0, 1 and 2 for its Top-3 metrics whenever there is
-    more than one, so K must be 1 or at least 3.
+    TrajNet++'s evaluator reads predictions 0, 1 and 2 for its Top-3 metrics only when there
+    are more than two: with K = 1 or 2 it reports Top-1 alone.
 
     ``agent_id`` [N] (optional): each agent's id in the source data; where they are integers,
     unique within each scene (``trajnet_agent_ids``), they are the rows' agent ids ``"p"``
@@ -371,11 +377,6 @@ def write_trajnet(
     assume metres (its collision radius is 0.1 m): the coordinates are written as given.
     """
     history, pred, scene, _ = _check_arrays(history, pred, scene, None)
-    if pred.shape[0] == 2:
-        raise ConfigError(
-            "TrajNet++'s evaluator needs 1 or at least 3 predictions per agent (its Top-3 "
-            "reads predictions 0, 1 and 2); got K=2"
-        )
     agents = trajnet_agent_ids(agent_id, scene)  # [N]
     return _write(path, history, scene, frame_interval, decimals, pred=pred, agents=agents)
 
@@ -444,6 +445,29 @@ def from_trajnet(scenes: list[Scene]) -> bool:
     )
 
 
+def trajnet_output_paths(out: str | Path, names: list[str], folder: bool) -> dict[str, Path]:
+    """Where ``write_trajnet_scenes`` writes the predictions (or truth) of each source file of
+    ``names`` (file names, ``a.ndjson``): with ``folder`` False, ``out`` itself (one source
+    file only); with ``folder`` True, ``<out without its suffix>/<name>`` (``pred.ndjson`` ->
+    ``pred/a.ndjson``). Pure: nothing is read or written, so that ``predict`` can check every
+    target before any compute."""
+    out = Path(out)
+    if not folder:
+        if len(set(names)) > 1:
+            raise DataError(f"scenes from {len(set(names))} source files need one output file "
+                            "each: write them as a folder (folder=True)")  # fmt: skip
+        return dict.fromkeys(names, out)
+    base = trajnet_output_base(out, True)
+    return {name: base / name for name in names}
+
+
+def trajnet_output_base(out: str | Path, folder: bool) -> Path:
+    """What ``write_trajnet_scenes`` writes at ``out``: the file ``out``, or with ``folder``
+    the folder named as ``out`` without its suffix (``pred.ndjson`` -> ``pred``)."""
+    out = Path(out)
+    return out.with_suffix("") if folder else out
+
+
 def write_trajnet_scenes(
     out: str | Path,
     scenes: list[Scene],
@@ -451,6 +475,7 @@ def write_trajnet_scenes(
     scene,
     truth: str | Path | None = None,
     decimals: int | None = None,
+    folder: bool = False,
 ) -> Path:
     """Write predictions for windows read from TrajNet++ files (``from_trajnet``) as the
     official evaluator scores them against those files: per source scene, its scene row
@@ -459,18 +484,21 @@ def write_trajnet_scenes(
     source's own future frames (``Scene.frames``), with ``"prediction_number": k`` and the
     source scene's ``"scene_id"``: a neighbour's predictions are written once per scene it is
     predicted in, each carrying that scene's id, as TrajNet++'s evaluator reads a scene's
-    neighbour predictions (its Col-I). Returns what was written: ``out`` when the scenes come
-    from one source file; from several, a folder named as ``out`` without its suffix holding
-    one file per source file, named as it (``pred.ndjson`` -> ``pred/a.ndjson``,
-    ``pred/b.ndjson``), the layout the evaluator pairs with its ground-truth folder (TrajNet++
-    numbers scenes per file, so one file could not hold them all).
+    neighbour predictions (its Col-I). Returns what was written: the file ``out`` (the scenes
+    must then come from one source file), or with ``folder`` a folder named as ``out`` without
+    its suffix holding one file per source file of the scenes, named as it (``pred.ndjson`` ->
+    ``pred/a.ndjson``, ``pred/b.ndjson``: ``trajnet_output_paths``), the layout the evaluator
+    pairs with its ground-truth folder (TrajNet++ numbers scenes per file, so one file could
+    not hold them all). ``predict`` writes a folder when its input was a folder, whatever the
+    number of files the scenes come from.
 
     ``pred`` [K, N, T_f, 2] and ``scene`` [N] (each agent's index into ``scenes``,
     non-decreasing) are ``predict_dataset``'s; each scene's rows are all its agents in its
     order, or its primary agent alone. ``truth`` (optional, a path laid out as ``out``): the
     matching ground truth, the same scene rows and every agent's rows over its window (8
     observed frames, not TrajNet++'s 9: the window's first frame is the scene's second).
-    ``decimals`` as in ``write_trajnet``; K must be 1 or at least 3."""
+    ``decimals`` as in ``write_trajnet``. Nothing here checks that the targets are not source
+    files: ``predict`` does that before any compute."""
     pred = np.asarray(pred, dtype=np.float32)
     scene = np.asarray(scene)
     if not from_trajnet(scenes):
@@ -479,11 +507,6 @@ def write_trajnet_scenes(
     if pred.ndim != 4 or pred.shape[-1] != 2 or scene.shape != pred.shape[1:2]:
         raise DataError(f"pred must be [K, N, T_f, 2] with scene [N], got {pred.shape} and "
                         f"{scene.shape}")  # fmt: skip
-    if pred.shape[0] == 2:
-        raise ConfigError(
-            "TrajNet++'s evaluator needs 1 or at least 3 predictions per agent (its Top-3 "
-            "reads predictions 0, 1 and 2); got K=2"
-        )
     if not np.isfinite(pred).all():
         raise DataError("pred holds NaN or infinite values")
     starts = np.searchsorted(scene, np.arange(len(scenes) + 1))  # [B + 1] each scene's rows
@@ -500,20 +523,15 @@ def write_trajnet_scenes(
     groups: dict[str, list[int]] = defaultdict(list)  # source file -> its scenes, in order
     for b, s in enumerate(scenes):
         groups[s.scene_id.rsplit("#", 1)[0]].append(b)
-    out = Path(out)
-    folder = out.with_suffix("") if len(groups) > 1 else None
+    targets = trajnet_output_paths(out, list(groups), folder)
+    truths = trajnet_output_paths(truth, list(groups), folder) if truth is not None else {}
     for name, members in groups.items():
-        target = out if folder is None else folder / name
-        if folder is not None:
-            folder.mkdir(parents=True, exist_ok=True)
-        _write_source(target, [scenes[b] for b in members], pred, [rows_of[b] for b in members],
-                      decimals)  # fmt: skip
+        chosen = [scenes[b] for b in members]
+        rows = [rows_of[b] for b in members]
+        _write_source(targets[name], chosen, pred, rows, decimals)
         if truth is not None:
-            gt = Path(truth) if folder is None else Path(truth).with_suffix("") / name
-            gt.parent.mkdir(parents=True, exist_ok=True)
-            _write_source(gt, [scenes[b] for b in members], None,
-                          [rows_of[b] for b in members], decimals)  # fmt: skip
-    return out if folder is None else folder
+            _write_source(truths[name], chosen, None, rows, decimals)
+    return trajnet_output_base(out, folder)
 
 
 def _write_source(path: Path, scenes: list[Scene], pred: np.ndarray | None,
