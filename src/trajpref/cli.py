@@ -7,6 +7,7 @@ import argparse
 import contextlib
 import csv
 import dataclasses
+import itertools
 import json
 import math
 import os
@@ -48,6 +49,7 @@ from trajpref.data.registry import (
     NAMES,
     SGAN_TEST_FILES,
     SPECS,
+    SPLITS,
     check_protocol_for,
     resolve_data_root,
     sgan_folds,
@@ -1205,19 +1207,19 @@ def _warn_model_and_scorer(args, ds) -> str | None:
 
 def _warn_untyped_data(args, model, scorer, ds) -> None:
     """One warning when the model (or its scorer) learned from agent-type flags (NBA's ball,
-    ``score.scorer.reads_agent_types``) and this data flag none (a folder without a type
-    column: every agent, a ball included, is read as a person; a walkthrough measured minFDE
-    0.256 -> 0.319 m on NBA scenes read that way). Data with a flagged agent, or models
-    trained without flags, say nothing."""
+    ``score.scorer.reads_agent_types``) and this data flag no ball (a folder without a type
+    column, or players only: every agent is read as a person; a walkthrough measured minFDE
+    0.256 -> 0.319 m on NBA scenes whose ball was read that way). Data with a flagged agent,
+    or models trained without flags, say nothing."""
     if any(bool((s.agent_type != AGENT_PERSON).any()) for s in ds.scenes):
         return
     base = getattr(model, "base", model)  # a SelectingPredictor's generator
     for obj, name in ((base, args.model), (scorer, getattr(args, "scorer", None))):
         if obj is not None and reads_agent_types(obj):
             warnings.warn(f"{name or 'the scorer'} was trained with agent types (the ball "
-                          f"flagged {AGENT_BALL}), and this data flag none: every agent, a "
-                          "ball included, is read as a person; a 5th column of BALL / PLAYER "
-                          "gives the types (docs/data_format.md)", stacklevel=2)  # fmt: skip
+                          f"flagged {AGENT_BALL}), and this data flag no ball: every agent is "
+                          "read as a person; if a ball is among them, a 5th column of BALL / "
+                          "PLAYER flags it (docs/data_format.md)", stacklevel=2)  # fmt: skip
             return
 
 
@@ -1724,13 +1726,16 @@ def _trajnet_sources(args) -> tuple[list[Path], list[Path], bool]:
             return [], [], False
         splits = split_folders(path)
         names = ("train", "val") if args.holdout_scene else (args.split,)
-        folders = [*(splits[n] for n in names if n in splits), path]  # the nearest first
-        files = [f for folder in folders
+        read = [splits[n] for n in names if n in splits] if splits else [path]
+        files = [f for folder in read
                  if data_text.matching_files(folder, ("*.ndjson",))
                  for f in data_text.track_files(folder, "*.ndjson")]  # fmt: skip
     except (TrajprefError, OSError):
         return [], [], False
-    return files, folders, bool(files)
+    # with split sub-folders, the root's other files are not read: the split folders (any
+    # of the three, also one not there yet, which an output would create) are what to guard
+    guarded = [*splits.values(), *(path / n for n in SPLITS if n not in splits)]
+    return files, guarded if splits else [path], bool(files)
 
 
 def _resolved(path: Path) -> Path:
@@ -1765,12 +1770,10 @@ def _check_trajnet_targets(args) -> None:
             check_output_dir(base, flag)
             for target in trajnet_output_paths(given, [f.name for f in files], True).values():
                 check_output_file(target, ".ndjson", flag)
-        for source in files:
-            if _resolved(source) == bases[flag] or (
-                base.exists() and source.exists() and os.path.samefile(source, base)
-            ):
-                raise ConfigError(f"{flag} {given}: writes {base}, the source file "
-                                  f"{source} itself: write the predictions elsewhere")  # fmt: skip
+        data = Path(args.dataset).expanduser()
+        if data.is_dir() and bases[flag] == _resolved(data):  # the data folder itself
+            raise ConfigError(f"{flag} {given}: writes {base}, the source folder {args.dataset} "
+                              "itself: write the predictions elsewhere")  # fmt: skip
         for source in folders:
             if _within(bases[flag], _resolved(source)):
                 what = "the source folder" if bases[flag] == _resolved(source) else (
@@ -1778,6 +1781,15 @@ def _check_trajnet_targets(args) -> None:
                 raise ConfigError(f"{flag} {given}: writes {base}, {what} {source} (it would "
                                   "replace or add to the data read): write the predictions "
                                   "outside it")  # fmt: skip
+        targets = [base]  # every file written, each compared with every source file
+        if folder:
+            targets += trajnet_output_paths(given, [f.name for f in files], True).values()
+        for source, target in itertools.product(files, targets):
+            if _resolved(source) == _resolved(target) or (
+                target.exists() and source.exists() and os.path.samefile(source, target)
+            ):  # a symlinked source file is its target's file too
+                raise ConfigError(f"{flag} {given}: writes {target}, the source file "
+                                  f"{source} itself: write the predictions elsewhere")  # fmt: skip
     if len(bases) == 2:
         out, truth = bases["--out"], bases["--truth"]
         if _within(out, truth) or _within(truth, out):

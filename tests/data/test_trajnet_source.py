@@ -274,3 +274,31 @@ def test_windows_without_context_keep_their_fingerprint(tmp_path):
     # with partial neighbours the context is there (test_partial_neighbours_are_context_...)
     _write(tmp_path / "a.ndjson")
     assert read_trajnet(tmp_path / "a.ndjson").scenes[0].context.shape == (2, 8, 2)
+
+
+def test_a_source_file_linked_from_the_output_folder_is_not_overwritten(tmp_path, capsys):
+    """A data folder's file that is a link to a file of the output folder: writing the output
+    folder's file would replace the source's data (a review's case, 2026-12-06)."""
+    real = tmp_path / "real"
+    real.mkdir()
+    _write(real / "a.ndjson")
+    data = tmp_path / "data3"
+    data.mkdir()
+    (data / "a.ndjson").symlink_to(real / "a.ndjson")
+    before = _digests(real)
+    assert _predict("--dataset", data, "--out", tmp_path / "real.ndjson") == 2
+    assert "the source file" in capsys.readouterr().err
+    assert _digests(real) == before
+
+
+def test_an_output_beside_the_split_folders_is_allowed_one_in_them_refused(tmp_path, capsys):
+    """With split sub-folders, only those are read: an output in the data folder beside them
+    is fine (it was refused), one in any split folder, read or not, is not."""
+    root = tmp_path / "tn"
+    (root / "test").mkdir(parents=True)
+    _write(root / "test" / "a.ndjson")
+    assert _predict("--dataset", root, "--split", "test", "--out", root / "preds.ndjson") == 0
+    capsys.readouterr()
+    for out in (root / "test" / "p.ndjson", root / "train.ndjson", root / "val" / "p.ndjson"):
+        assert _predict("--dataset", root, "--split", "test", "--out", out) == 2, out
+        assert "source folder" in capsys.readouterr().err
