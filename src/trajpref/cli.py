@@ -1768,8 +1768,17 @@ def _check_trajnet_targets(args) -> None:
         bases[flag] = _resolved(base)
         if folder:
             check_output_dir(base, flag)
-            for target in trajnet_output_paths(given, [f.name for f in files], True).values():
+            written = trajnet_output_paths(given, [f.name for f in files], True)
+            for target in written.values():
                 check_output_file(target, ".ndjson", flag)
+            others = sorted(p.name for p in base.glob("*.ndjson")
+                            if base.is_dir() and p.name not in written)  # fmt: skip
+            if others:  # the evaluator pairs files by name: a stale one would be scored too
+                raise ConfigError(f"{flag} {given}: the folder {base} holds .ndjson files this "
+                                  f"run does not write ({', '.join(others[:3])}"
+                                  f"{', ...' if len(others) > 3 else ''}; an earlier run's?), "
+                                  "which an evaluator reading the folder would score too: "
+                                  "write to a new folder or remove them")  # fmt: skip
         data = Path(args.dataset).expanduser()
         if data.is_dir() and bases[flag] == _resolved(data):  # the data folder itself
             raise ConfigError(f"{flag} {given}: writes {base}, the source folder {args.dataset} "

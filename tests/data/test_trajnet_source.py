@@ -302,3 +302,17 @@ def test_an_output_beside_the_split_folders_is_allowed_one_in_them_refused(tmp_p
     for out in (root / "test" / "p.ndjson", root / "train.ndjson", root / "val" / "p.ndjson"):
         assert _predict("--dataset", root, "--split", "test", "--out", out) == 2, out
         assert "source folder" in capsys.readouterr().err
+
+
+def test_an_output_folder_holding_other_files_is_refused(tmp_path, capsys):
+    """The evaluator pairs a folder's files by name: a file an earlier run left there would be
+    scored beside this run's. Rewriting this run's own files is fine."""
+    data = tmp_path / "data"
+    data.mkdir()
+    _write(data / "a.ndjson")
+    assert _predict("--dataset", data, "--out", tmp_path / "p.ndjson") == 0
+    assert _predict("--dataset", data, "--out", tmp_path / "p.ndjson") == 0  # its own again
+    (tmp_path / "p" / "old.ndjson").write_text("")
+    capsys.readouterr()
+    assert _predict("--dataset", data, "--out", tmp_path / "p.ndjson") == 2
+    assert "holds .ndjson files this run does not write (old.ndjson" in capsys.readouterr().err
