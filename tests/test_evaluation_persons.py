@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from trajpref.errors import ConfigError, DataError
-from trajpref.evaluation import evaluate, persons_only
+from trajpref.evaluation import _agent_mask, evaluate, select_agents
 from trajpref.score.scorer import ScoreResult, relative_score
 from trajpref.types import AGENT_BALL, AGENT_PERSON, DatasetInfo, Scene, TrajectoryDataset, collate
 
@@ -76,7 +76,7 @@ def test_the_scores_are_recomputed_over_the_persons():
     d_pred, d_gt = torch.rand(4, 7, 12, generator=gen), torch.rand(7, 12, generator=gen) + 0.5
     full = ScoreResult(d_pred, d_gt, relative_score(d_pred, d_gt), *([None] * 4))
     pred = torch.zeros(4, 7, 12, 2)
-    view, vpred, res = persons_only(batch, pred, full)
+    view, vpred, res = select_agents(batch, pred, _agent_mask(batch, "persons"), full)
     assert view.num_scenes == 2 and view.scene.tolist() == [0, 0, 1, 1, 1]
     assert view.scene_ids == ["a", "b"] and vpred.shape == (4, 5, 12, 2)
     mine = [[1, 2], [3, 4, 5]]  # the persons of scenes a and b in the batch

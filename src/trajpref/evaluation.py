@@ -182,13 +182,6 @@ def select_agents(batch: Batch, pred: torch.Tensor, keep: torch.Tensor,
     return view, pred[:, keep], result
 
 
-def persons_only(batch: Batch, pred: torch.Tensor, result: ScoreResult | None = None
-                 ) -> tuple[Batch, torch.Tensor, ScoreResult | None]:  # fmt: skip
-    """``select_agents`` of the persons (``agent_type == AGENT_PERSON``): what
-    ``evaluate(agents="persons")`` computes its metrics on."""
-    return select_agents(batch, pred, batch.agent_type == AGENT_PERSON, result)
-
-
 def first_agents(batch: Batch) -> torch.Tensor:
     """[N] bool: each scene's first agent in the batch (whose scenes are whole, their agents
     in the scene's order): TrajNet++'s primary pedestrian for its scenes, which

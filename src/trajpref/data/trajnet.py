@@ -538,32 +538,33 @@ def _write_source(path: Path, scenes: list[Scene], pred: np.ndarray | None,
                   rows_of: list[np.ndarray], decimals: int | None) -> None:  # fmt: skip
     """One file of ``write_trajnet_scenes``: the scenes' rows, their agents' observed rows (and
     true future rows without ``pred``), then the predictions of ``pred`` [K, N, T_f, 2] (agent
-    rows ``rows_of[b]`` of scene b)."""
-    known: dict[tuple[int, int], tuple[str, str]] = {}  # (frame, agent) -> (x, y), first wins
-    predicted = []
+    rows ``rows_of[b]`` of scene b), every track row by ``_track_lines``."""
+    first: dict[tuple[int, int], np.ndarray] = {}  # (frame, agent) -> [2] position, first wins
+    predicted: list[str] = []
     for s, rows in zip(scenes, rows_of, strict=True):
         t_hist = s.history.shape[1]
         frames = s.frames.tolist()  # [T] Python ints, exact
         ids = [int(a) for a in s.agent_id.tolist()]  # [P] "p", exact (text beyond int64)
         xy = np.concatenate([s.history, s.future], axis=1)  # [P, T, 2]
         shown = xy[:, :t_hist] if pred is not None else xy  # [P, T_h or T, 2]
-        text = _coords(shown, decimals).tolist()
         for a, agent in enumerate(ids):
-            for t, f in enumerate(frames[: len(text[a])]):
-                known.setdefault((f, agent), tuple(text[a][t]))
+            for t, f in enumerate(frames[: shown.shape[1]]):
+                first.setdefault((f, agent), shown[a, t])
         if pred is None:
             continue
         sid = int(s.scene_id.rsplit("#", 1)[1])
-        guess = _coords(pred[:, rows], decimals).tolist()  # [K, P', T_f, 2] as text
-        for k, per_agent in enumerate(guess):
-            for agent, track in zip(ids, per_agent, strict=False):  # P' <= P: primary first
-                for f, (x, y) in zip(frames[t_hist:], track, strict=True):
-                    predicted.append(
-                        f'{{"track": {{"f": {f}, "p": {agent}, "x": {x}, "y": {y}, '
-                        f'"prediction_number": {k}, "scene_id": {sid}}}}}\n'
-                    )
+        future = np.array(frames[t_hist:], dtype=object)  # [T_f]
+        agents = np.repeat(np.array(ids[: len(rows)], dtype=object), len(future))  # [P' * T_f]
+        per_row = np.full(len(agents), sid, dtype=object)  # [P' * T_f] the scene's id
+        for k in range(pred.shape[0]):  # P' <= P agents of the scene: the primary first
+            xy_k = pred[k, rows].reshape(-1, 2)  # [P' * T_f, 2]
+            predicted += _track_lines(np.tile(future, len(rows)), agents, xy_k, decimals, k,
+                                      per_row)  # fmt: skip
+    keys = sorted(first)
     with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
         fh.writelines(s.source_row + "\n" for s in scenes)
-        fh.writelines(f'{{"track": {{"f": {f}, "p": {a}, "x": {x}, "y": {y}}}}}\n'
-                      for (f, a), (x, y) in sorted(known.items()))  # fmt: skip
+        if keys:
+            fh.writelines(_track_lines(np.array([f for f, _ in keys], dtype=object),
+                                       np.array([a for _, a in keys], dtype=object),
+                                       np.stack([first[k] for k in keys]), decimals))  # fmt: skip
         fh.writelines(predicted)
