@@ -104,13 +104,21 @@ def main(folder: str, out: str, start: str, steps_per_epoch: int) -> None:
                                  "model.generator_dropout=0.2"])  # fmt: skip
     denoiser_payload = ckpt.load(start)["denoiser"]
 
-    def generator(where: str, **kw) -> None:
+    def generator(where: str, first_masks: bool = False, **kw) -> None:
         stage = build_generator_stage(gen_cfg, denoiser_payload, val, device)
+        states = []  # torch's generator when the first dropout of a training step draws
+        if first_masks:
+            drop = next(m for m in stage.objective.modules() if isinstance(m, torch.nn.Dropout))
+            drop.register_forward_pre_hook(
+                lambda module, _: states.append(torch.get_rng_state()) if module.training else None
+            )
         fit(stage, train, gen_cfg.data, gen_cfg.generator, out_dir / where, device,
             gen_cfg.seed, dist_info=info, progress=False, **kw)  # fmt: skip
+        if first_masks:
+            torch.save(states[0], out_dir / where / f"first_mask_rng_rank{info.rank}.pt")
         barrier(info)
 
-    generator("gen_full")
+    generator("gen_full", first_masks=True)
     generator("gen_stop", max_steps=steps_per_epoch)
     generator("gen_stop", resume=str(out_dir / "gen_stop" / "generator_last.pt"))
     barrier(info)  # both ranks done before gloo is torn down (distributed.cleanup)

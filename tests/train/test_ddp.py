@@ -180,6 +180,16 @@ def test_a_two_process_generator_with_dropout_resumes_where_the_uninterrupted_ru
     ] * 2
 
 
+def test_each_rank_draws_its_own_dropout_masks(runs):
+    """The stage builder seeds every rank alike (the same starting weights); the loop then
+    seeds torch's generator of each rank after the first by its rank, so that the ranks'
+    first dropout masks are not drawn from one stream (they were, before 2026-12-06)."""
+    folder = runs["two"] / "gen_full"
+    r0 = torch.load(folder / "first_mask_rng_rank0.pt", weights_only=True)
+    r1 = torch.load(folder / "first_mask_rng_rank1.pt", weights_only=True)
+    assert not torch.equal(r0, r1)
+
+
 def test_a_resume_on_another_process_count_continues_the_same_schedule(runs, capsys):
     """A state written on one process resumed on two, and one written on two resumed on one,
     end at the uninterrupted run's step and learning rate (the schedule does not depend on

@@ -294,6 +294,18 @@ def torch_generators(device: torch.device) -> dict[str, torch.Generator]:
     return generators
 
 
+def seed_rank_generators(seed: int, rank: int, device: torch.device) -> None:
+    """Seed torch's own generators (``torch_generators``) of rank ``rank`` > 0 from ``seed``
+    and the rank, after the stage is built: the builder seeds every rank alike
+    (``torch.manual_seed(seed)``, so that the ranks start from the same weights), and dropout
+    would then draw every rank's masks from one stream. Rank 0 (and a one-process run) keeps
+    the builder's seed, so its draws are unchanged."""
+    if rank == 0:
+        return
+    for generator in torch_generators(device).values():
+        generator.manual_seed(seed * 1000 + 900 + rank)  # the loop's own: + rank, + 500 + rank
+
+
 def _draws_dropout(module: nn.Module) -> bool:
     """Whether ``module`` in training mode drops anything out (from torch's own generator)."""
     return any(isinstance(m, nn.Dropout) and m.p > 0 for m in module.modules())
@@ -565,6 +577,8 @@ def fit(
         tqdm.write(note)
     if resume_torch is not None:
         _restore_torch_generators(resume_torch, device, stage, main)
+    else:  # a rank after the first draws its own dropout masks (rank 0: the builder's seed)
+        seed_rank_generators(seed, dist_info.rank, device)
     for epoch in range(start_epoch, optim_cfg.epochs):
         t0, c0 = time.perf_counter(), clock()
         loader.set_epoch(epoch)
