@@ -31,6 +31,7 @@ import torch
 from tqdm.auto import tqdm
 
 from trajpref.config import GeneratorTrainConfig
+from trajpref.data.trajnet import require_future
 from trajpref.data.transforms import to_model_frame
 from trajpref.errors import ConfigError, DataError
 from trajpref.metrics import MetricAccumulator
@@ -293,6 +294,7 @@ def evaluate_in_context(
     model (same draws' seed) and of the adapted copies (None when no window has context; with
     ``cfg.steps`` 0 the two are the same predictions, and equal). ``progress``: progress bars
     over the windows (the adapted pass, then the unadapted one on the windows with context)."""
+    require_future(dataset, "evaluate_in_context")  # TrajNet++ test files: NaN metrics otherwise
     cfg = cfg or AdaptConfig()
     name = dataset.info.name
     res = adapt_and_predict(model, dataset, cfg, num_samples, seed, indices, device,

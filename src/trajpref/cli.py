@@ -55,7 +55,7 @@ from trajpref.data.registry import (
     sgan_folds,
     split_folders,
 )
-from trajpref.data.trajnet import write_trajnet, write_trajnet_truth
+from trajpref.data.trajnet import require_future, write_trajnet, write_trajnet_truth
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, TrajprefError
 from trajpref.evaluation import (
@@ -667,6 +667,21 @@ def _interval_given(args) -> bool:
 
 
 def _load(args):
+    """The split the data options name. Every command but ``predict`` without ``--truth``
+    reads each window's future (scores against it, writes it, or its speed): for them,
+    observation-only scenes (TrajNet++ test files, their future hidden) are a ``DataError``
+    naming the file (``trajnet.require_future``)."""
+    ds = _load_split(args)
+    if args.command == "predict":
+        if args.truth is not None:
+            require_future(ds, "predict --truth")
+    else:
+        sub = getattr(args, "data_command", None)  # data stats
+        require_future(ds, f"{args.command} {sub}" if sub else args.command)
+    return ds
+
+
+def _load_split(args):
     def split(name: str):
         return load_dataset(
             args.dataset,
@@ -1834,6 +1849,9 @@ def cmd_predict(args) -> int:
         check_output_file(args.truth, ".ndjson")
     if trajnet:
         _check_trajnet_predict(args)
+    # --truth writes each window's future: observation-only data (TrajNet++ test files) is
+    # refused before any model is read, so the data is read first then
+    ds = None if args.truth is None else _load(args)
     overlap = _check_fold_overlap(args)  # a warning
     model, device = _predictor(args)
     _warn_fixed_sampling(args, model)
@@ -1844,7 +1862,8 @@ def cmd_predict(args) -> int:
             raise TrajprefError("--rank with --model cv needs --scorer CHECKPOINT")
         scorer = _scorer(args.scorer or args.model, device, args)
     model, samples = _selecting(args, model, device, scores=scorer is not None)
-    ds = _load(args)
+    if ds is None:  # observation-only scenes too: their future is NaN (docs/data_format.md)
+        ds = _load(args)
     overlap = _joined(overlap, _warn_model_and_scorer(args, ds))
     _warn_observed_pace(args, model, scorer, ds)
     _warn_untyped_data(args, model, scorer, ds)

@@ -12,7 +12,7 @@ from tqdm.auto import tqdm
 
 from trajpref.data.loader import SceneLoader
 from trajpref.data.registry import ETH_UCY, NAMES, sgan_folds
-from trajpref.data.trajnet import from_trajnet
+from trajpref.data.trajnet import from_trajnet, require_future
 from trajpref.errors import ConfigError, DataError, TrajprefError
 from trajpref.metrics import (
     BinnedMetrics,
@@ -255,6 +255,7 @@ def evaluate(
     windows); ``allow_overlap=True`` evaluates it anyway, as the CLI's ``--allow-overlap``.
     """
     check_inputs(model, dataset)
+    require_future(dataset, "evaluate")  # TrajNet++ test files: NaN metrics otherwise
     if agents not in AGENT_SETS:
         raise ConfigError(f"agents must be one of {', '.join(AGENT_SETS)}, got {agents!r}")
     persons = agents == "persons"

@@ -30,7 +30,9 @@ class Scene:
     history: np.ndarray
     """[P, T_h, 2] observed positions."""
     future: np.ndarray
-    """[P, T_f, 2] ground-truth future positions."""
+    """[P, T_f, 2] ground-truth future positions; NaN where the data hides them (the
+    observation-only scenes of TrajNet++ test files, ``data.trajnet.read_trajnet``: predict
+    only)."""
     agent_type: np.ndarray
     """[P] int64 agent-type flags (AGENT_PERSON or AGENT_BALL)."""
     scene_id: str

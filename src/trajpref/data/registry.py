@@ -332,6 +332,11 @@ def run_splits(
     options = dataclasses.replace(options, partial_future=data.partial_future,
                                   reverse_context=data.reverse_context)  # fmt: skip
     train = load_dataset(data.dataset, "train", root, options=options, **described)
+    # TrajNet++ test files hide the future: no loss or validation could be computed on them
+    # (training's partial-future targets are NaN where unseen by design, so not checked then)
+    trajnet.require_future(val, "training (its validation split)")
+    if not data.partial_future:
+        trajnet.require_future(train, "training")
     if data.holdout_scene:
         train, val = hold_out_scene(train, val, data.holdout_scene)
     if data.val_cut:

@@ -13,6 +13,7 @@ are every agent with rows in those frames. Rows with a ``prediction_number`` are
 
 from __future__ import annotations
 
+import bisect
 import json
 import math
 import warnings
@@ -43,6 +44,12 @@ class FrameRateWarning(UserWarning):
     columns of text files do not give one interval (``registry.text_interval``)."""
 
 
+class ObservedOnlyWarning(UserWarning):
+    """A TrajNet++ file holds both complete scenes and observation-only ones (their primary
+    agent's observed frames alone, the future hidden: ``read_trajnet``). TrajNet++'s test files
+    can (overlapping scenes show a scene's whole future); a complete file cut short can too."""
+
+
 @dataclass
 class TrajnetScenes:
     """What one ``.ndjson`` file holds, as windows."""
@@ -52,9 +59,12 @@ class TrajnetScenes:
     all of its T_h + T_f frames, by id (``Scene.agent_id``: their ``"p"`` ids); the others
     seen at its last observed frame as ``Scene.context`` (None when there are none); its
     frames and scene row as
-    ``Scene.frames`` and ``Scene.source_row``."""
+    ``Scene.frames`` and ``Scene.source_row``. An observation-only scene (a test file's) has
+    its future NaN and its future frames computed (``read_trajnet``)."""
     fps: set[float] = field(default_factory=set)
     """The ``fps`` values the scene rows declare."""
+    observed_only: int = 0
+    """How many of ``scenes`` are observation-only (``Scene.future`` NaN)."""
 
 
 def _number(value, what: str, path: Path, line: int, integer: bool = False):
@@ -115,6 +125,21 @@ def read_trajnet(
     JSON object of one ``scene`` or ``track``, a missing or non-numeric field, NaN, a coordinate
     beyond ``max_coord`` (in ``units``), a repeated (frame, agent) row or scene id, and a scene
     whose primary agent has fewer frames than a window needs.
+
+    Observation-only scenes (TrajNet++'s test files: the scene row spans 9 + 12 frames, the
+    tracks stop after the 9 observed) are read too: a scene whose primary agent has fewer than
+    ``t_hist + t_fut`` frames in ``[s, e]`` but a row at every frame from ``s`` to
+    ``e - t_fut * step`` (the file's step), at least ``t_hist`` of them, and none in the
+    ``t_fut`` frames after them. Its window is its last ``t_hist`` observed frames and the
+    ``t_fut`` future frames, computed (``Scene.frames``, where predictions are written); its
+    targets the primary agent and every agent with a row in all ``t_hist`` observed frames,
+    its context as a complete scene's, its ``future`` NaN [P, T_f, 2]. A future row at a frame
+    that another scene of the file shows as observed is not counted: TrajNet++'s test files
+    keep every row at such a frame, so overlapping scenes put rows in each other's hidden
+    future (its baselines drop them, ``evaluator/write_utils.preprocess_test``). A scene whose
+    primary agent has some of its future frames otherwise is a ``DataError`` naming the frames
+    missing. Scenes with ``t_hist + t_fut`` frames or more read as before, so a file can hold
+    both kinds: then an ``ObservedOnlyWarning`` says how many scenes are observation-only.
     """
     path = Path(path)
     check_file(path)
@@ -196,24 +221,32 @@ def read_trajnet(
     jumps = Counter(b - a for a, b in zip(frames, frames[1:], strict=False))
     step = min(jumps, key=lambda j: (-jumps[j], j)) if jumps else 1
     gaps: list[int] = []  # scene ids whose window spans a frame its primary agent misses
+    hidden: list[int] = []  # scene ids read as observation-only
+    shown = None  # the frames some scene shows as observed (_shown_frames), when first needed
     scenes = []
     for line, sid, p, s, e, row in scene_rows:
         own = [f for f in frames_of.get(p, ()) if s <= f <= e]
-        if len(own) < t_total:
-            raise DataError(
-                f"scene {sid}: its primary agent {p} has {len(own)} frames in {s}..{e}; a "
-                f"window needs {t_total}",
-                path,
-                line,
-            )
-        window = own[-t_total:]
-        if any(b - a != step for a, b in zip(window, window[1:], strict=False)):
-            gaps.append(sid)
-        others = set(rows[window[0]])
-        for f in window[1:]:
+        complete = len(own) >= t_total
+        if complete:  # as always
+            window = own[-t_total:]
+            if any(b - a != step for a, b in zip(window, window[1:], strict=False)):
+                gaps.append(sid)
+            present = window  # the frames every target has a row in
+        else:
+            if shown is None:
+                shown = _shown_frames(scene_rows, t_fut, step)
+            observed = _observed_frames(own, sid, p, s, e, t_hist, t_fut, step, shown,
+                                        (path, line))  # fmt: skip
+            present = observed[-t_hist:]
+            window = present + [present[-1] + step * (i + 1) for i in range(t_fut)]
+            hidden.append(sid)
+        others = set(rows[present[0]])
+        for f in present[1:]:
             others &= rows[f].keys()
         agents = [p, *sorted(others - {p})]
-        xy = np.array([[rows[f][a] for f in window] for a in agents], np.float32)  # [P, T, 2]
+        xy = np.array([[rows[f][a] for f in present] for a in agents], np.float32)  # [P, T', 2]
+        if not complete:  # observation-only: the future is unknown
+            xy = np.concatenate([xy, np.full((len(agents), t_fut, 2), np.nan, np.float32)], 1)
         big = any(not -(2**63) <= f < 2**63 for f in (window[0], window[-1]))
         scenes.append(
             Scene(
@@ -227,6 +260,16 @@ def read_trajnet(
                 source_row=row,
             )  # fmt: skip
         )
+    if hidden and len(hidden) < len(scenes):
+        warnings.warn(
+            f"{path}: {len(hidden)} of its {len(scenes)} scenes (the first: {hidden[0]}) hold "
+            f"their primary agent's observed frames alone and are read as observation-only "
+            f"(future unknown: predict writes them, evaluate refuses them); the other "
+            f"{len(scenes) - len(hidden)} hold a complete window. A TrajNet++ test file with "
+            "overlapping scenes can hold both; a complete file cut short can too",
+            ObservedOnlyWarning,
+            stacklevel=2,
+        )
     if gaps:
         warnings.warn(
             f"{path}: {len(gaps)} scene(s) (the first: {gaps[0]}) have windows whose primary "
@@ -235,7 +278,91 @@ def read_trajnet(
             GapWarning,
             stacklevel=2,
         )
-    return TrajnetScenes(scenes, fps)
+    return TrajnetScenes(scenes, fps, len(hidden))
+
+
+def _shown_frames(scene_rows: list, t_fut: int, step: int) -> tuple[list[int], list[int]]:
+    """Where the file's scenes show observed frames, ``[s, e - t_fut * step]`` each, as sorted
+    starts and the running maximum of their ends (``_is_shown`` looks a frame up in them)."""
+    spans = sorted((s, e - t_fut * step) for _, _, _, s, e, _ in scene_rows)
+    starts, ends, last = [], [], None
+    for a, b in spans:
+        last = b if last is None else max(last, b)
+        starts.append(a)
+        ends.append(last)
+    return starts, ends
+
+
+def _is_shown(frame: int, shown: tuple[list[int], list[int]]) -> bool:
+    """Whether ``frame`` lies in some scene's observed frames (``_shown_frames``)."""
+    starts, ends = shown
+    i = bisect.bisect_right(starts, frame) - 1
+    return i >= 0 and ends[i] >= frame
+
+
+def _observed_frames(own: list[int], sid: int, p: int, s: int, e: int, t_hist: int, t_fut: int,
+                     step: int, shown, where: tuple[Path, int]) -> list[int]:  # fmt: skip
+    """The observed frames ``s .. e - t_fut * step`` of an observation-only scene whose
+    primary agent has the rows ``own`` in ``[s, e]`` (fewer than a complete window needs), else
+    ``DataError`` saying what is missing (``read_trajnet``). ``where``: the file and line."""
+    t_total = t_hist + t_fut
+    last = e - t_fut * step  # the last observed frame of a test scene
+    expected = range(s, last + 1, step)
+    if last < s or (last - s) % step or len(expected) < t_hist:
+        raise DataError(f"scene {sid}: its primary agent {p} has {len(own)} frames in {s}..{e}; "
+                        f"a window needs {t_total}", *where)  # fmt: skip
+    have = set(own)
+    missing = [f for f in expected if f not in have]
+    if missing:
+        raise DataError(f"scene {sid}: its primary agent {p} has {len(own)} frames in {s}..{e}; "
+                        f"a window needs {t_total}, and an observation-only scene a row at every "
+                        f"frame {s}..{last} (step {step}): {_frames_text(missing)} missing",
+                        *where)  # fmt: skip
+    after = [f for f in own if f > last]
+    unshown = [f for f in after if not _is_shown(f, shown)]
+    if unshown:  # some of the future, at frames no scene shows as observed: a file cut short?
+        future = range(last + step, e + 1, step)
+        lost = [f for f in future if f not in have]
+        raise DataError(f"scene {sid}: its primary agent {p} has {len(after)} of its {t_fut} "
+                        f"future frames {last + step}..{e} (step {step}; "
+                        f"{_frames_text(lost) or 'the others'} missing): a scene needs all "
+                        f"{t_total} frames, or its observed frames {s}..{last} alone (a "
+                        "TrajNet++ test file)", *where)  # fmt: skip
+    return list(expected)
+
+
+def _frames_text(frames: list[int]) -> str:
+    """``frame 120`` or ``frames 120, 130, 140 and 2 more``."""
+    if not frames:
+        return ""
+    head = ", ".join(str(f) for f in frames[:3])
+    more = f" and {len(frames) - 3} more" if len(frames) > 3 else ""
+    return f"frame{'s' if len(frames) > 1 else ''} {head}{more}"
+
+
+def observed_only(scenes: list[Scene]) -> list[Scene]:
+    """The scenes of ``scenes`` whose future is unknown (NaN anywhere in ``Scene.future``): the
+    observation-only scenes of TrajNet++ test files (``read_trajnet``)."""
+    return [s for s in scenes if not np.isfinite(s.future).all()]
+
+
+def require_future(dataset, what: str) -> None:
+    """``DataError`` naming the first source file when ``dataset`` (a ``TrajectoryDataset``)
+    holds observation-only scenes (``observed_only``), for ``what`` (a command, or what it
+    does), which reads each window's future: scoring against it, or its speed, would be NaN."""
+    hidden = observed_only(dataset.scenes)
+    if not hidden:
+        return
+    files = list(dict.fromkeys(s.scene_id.rsplit("#", 1)[0] for s in hidden))
+    source = Path(dataset.info.source)
+    where = source / files[0] if source.is_dir() else source
+    others = f" (and {len(files) - 1} other file(s))" if len(files) > 1 else ""
+    raise DataError(f"{what} reads each window's future, and {len(hidden)} of the "
+                    f"{len(dataset.scenes)} scenes{others} hold the observed frames alone (the "
+                    f"first: {hidden[0].scene_id}): the future is hidden, as in TrajNet++'s test "
+                    "files. predict writes predictions for them (--format trajnet, without "
+                    "--truth); score those with TrajNet++'s evaluator against the files holding "
+                    "the future (test_private)", where)  # fmt: skip
 
 
 def _context(
@@ -490,7 +617,9 @@ def write_trajnet_scenes(
     ``pred/a.ndjson``, ``pred/b.ndjson``: ``trajnet_output_paths``), the layout the evaluator
     pairs with its ground-truth folder (TrajNet++ numbers scenes per file, so one file could
     not hold them all). ``predict`` writes a folder when its input was a folder, whatever the
-    number of files the scenes come from.
+    number of files the scenes come from. Observation-only scenes (``Scene.future`` NaN: a test
+    file's) are written the same way, their predictions at their hidden frames; ``truth`` then
+    is a ``DataError`` (there is none to write).
 
     ``pred`` [K, N, T_f, 2] and ``scene`` [N] (each agent's index into ``scenes``,
     non-decreasing) are ``predict_dataset``'s; each scene's rows are all its agents in its
@@ -509,6 +638,11 @@ def write_trajnet_scenes(
                         f"{scene.shape}")  # fmt: skip
     if not np.isfinite(pred).all():
         raise DataError("pred holds NaN or infinite values")
+    hidden = observed_only(scenes) if truth is not None else []
+    if hidden:
+        raise DataError(f"truth: {len(hidden)} scene(s) (the first: {hidden[0].scene_id}) hold "
+                        "the observed frames alone (the future is hidden): there is no truth to "
+                        "write")  # fmt: skip
     starts = np.searchsorted(scene, np.arange(len(scenes) + 1))  # [B + 1] each scene's rows
     if (np.diff(scene) < 0).any() or starts[-1] != len(scene):
         raise DataError(f"scene must index the {len(scenes)} scenes in non-decreasing order")
