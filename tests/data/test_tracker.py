@@ -159,3 +159,49 @@ def test_its_output_runs_through_predict_scene_with_context():
     assert futures.shape == (20, 2, 12, 2) and np.isfinite(futures).all()
     # the partly seen agent is counted as a context row the model does not read
     assert any("context rows ignored" in str(w.message) for w in caught)
+
+
+def _jittered(cycles: int = 40, agents: int = 5, spread: float = 0.008, seed: int = 0):
+    """Rows of ``agents`` walkers seen by a 10 Hz tracker that stamps each detection on its
+    own, 1 ms to ``spread`` seconds into its cycle (walkthrough 65, robot finding 2)."""
+    rng = np.random.default_rng(seed)
+    k = np.repeat(np.arange(cycles), agents)  # [R] cycle of each row
+    a = np.tile(np.arange(agents), cycles)  # [R]
+    times = T0 + k * 0.1 + rng.uniform(0.001, spread, len(k))  # off the 0.4 ms tolerance
+    xy = np.stack([a + 1.0 * (times - T0), 0.5 * a], -1)  # [R, 2]
+    return times, a, xy
+
+
+def _left_out_warnings(record) -> list[str]:
+    from trajpref.data.tracker import LeftOutWarning
+
+    return [str(w.message) for w in record if issubclass(w.category, LeftOutWarning)]
+
+
+def test_agents_with_per_detection_stamps_are_not_dropped_without_a_word():
+    times, ids, xy = _jittered()
+    latest = float(times.max())  # now: the latest stamp; the others a few ms before it
+    nominal = T0 + 3.9  # now: the last cycle's nominal time; its stamps a few ms after it
+    for now, dropped in ((latest, 4), (nominal, 5)):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            res = tracks_to_history(times, ids, xy, now=now, step=0.4)
+        assert len(res.left_out_ids) == dropped
+        (text,) = _left_out_warnings(caught)  # one per call
+        assert f"{dropped} agent(s) seen in the tracker's current cycle" in text
+        assert "hold=" in text and caught[0].filename == __file__  # the user's line
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            held = tracks_to_history(times, ids, xy, now=now, step=0.4, hold=0.1)
+        assert held.ids == [0, 1, 2, 3, 4] and not _left_out_warnings(caught)
+
+
+def test_input_on_the_time_grid_and_agents_long_gone_give_no_warning():
+    rows = _rows(_walk(1, 0.0, 3.0, y=0.0), _walk(2, 0.0, 2.5, y=2.0), _walk(3, 3.5, 4.0, y=0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = tracks_to_history(*rows, now=T0 + 3.0, step=0.4)  # agent 2 gone 0.5 s ago
+        assert res.left_out_ids == [2]
+        tracks_to_history(*_rows(_walk(1, 0.0, 3.0, y=0.0), _walk(2, 0.0, 2.9, y=2.0)),
+                          now=T0 + 3.0, step=0.4)  # agent 2 gone one 10 Hz cycle ago  # fmt: skip
+        assert tracks_to_history(*_jittered(), now=T0 + 3.9, step=0.4, hold=0.1).left_out_ids == []

@@ -15,7 +15,7 @@ from trajpref.data.registry import (
 )
 from trajpref.data.stats import mean_speed, speed_note, speed_text
 from trajpref.data.text import GapWarning, ReadOptions
-from trajpref.data.tracker import TrackHistory, tracks_to_history
+from trajpref.data.tracker import LeftOutWarning, TrackHistory, tracks_to_history
 from trajpref.data.trajnet import FrameRateWarning, write_trajnet, write_trajnet_truth
 
 __all__ = [
@@ -24,6 +24,7 @@ __all__ = [
     "NAMES",
     "PROTOCOLS",
     "GapWarning",
+    "LeftOutWarning",
     "ReadOptions",
     "TrackHistory",
     "add_paced_copy",

@@ -642,7 +642,27 @@ def _checked_xy(values, scale, max_coord, units, path, line_of) -> tuple[np.ndar
 
 PRECISION_SHARE = 0.01
 """The largest float32 rounding of a position, as a share of the file's median step, that a
-file may carry (``_check_precision``)."""
+file may carry (``_check_precision``), or of the step a model's check compares with
+(``float32_precision_loss``'s ``floor``)."""
+PRECISION_STEP_FLOOR = 0.1
+"""The least step (model units: positions / the model's data scale) that the check of the
+histories handed to a model (``models.predictor.check_coordinates``) compares the float32
+rounding with, whatever the median step of the scene: a slow walker's step (0.15 m per 0.4 s
+at zara1's scale of 1.47 m, 0.37 m/s; 5.9 px at sdd's 59 px), below a typical scene's median
+moving step (0.29, 0.26 and 0.22 model units, the median over zara1's, eth's and sdd's test
+scenes), so that walkers are judged by their own steps as before. Without it, a crowd
+that stands still with millimetre tracker jitter made the bar microscopic: three people
+standing with 2 mm of jitter 2 km from a map frame's origin were refused (rounding 0.12 mm,
+4 % of their 3.4 mm median step) while the same frame with walkers was accepted, so a
+planner's map frame raised or not with the crowd's motion. With it, the rounding may reach
+``PRECISION_SHARE`` of 0.1, 0.001 model units (1.5 mm at zara1's scale): coordinates up to
+0.001 / 2**-24 = 16,777 model units from the origin (24.7 km at zara1's scale) whatever moves,
+while UTM eastings (5e5 m: 3 cm of rounding) are refused whether the crowd walks or stands.
+That much rounding is below a tracker's noise: 60 of zara1's test scenes moved 24 km out
+moved zara1's generator futures (same seed) by a median 2.0 cm (largest 0.44 m) from those at
+the origin, less than 0.7 mm of Gaussian noise on their histories does (3.1 cm; 0.21 m);
+2 km out, by 1.3 mm (2.4 cm) (2026-12, walkthrough 65).
+The text reader, which knows no model, keeps the median step alone (``_check_precision``)."""
 
 
 def _check_precision(
@@ -664,17 +684,26 @@ def _check_precision(
         )
 
 
-def float32_precision_loss(largest: float, rounding: float, steps: np.ndarray) -> str | None:
+def float32_precision_loss(largest: float, rounding: float, steps: np.ndarray,
+                           floor: float = 0.0) -> str | None:  # fmt: skip
     """What is wrong when coordinates as large as ``largest``, rounded by up to ``rounding``
-    in float32, lose more than ``PRECISION_SHARE`` of the median of ``steps`` (the moving
-    ones); None when nothing moves or the rounding stays within it. The text reader's rule,
-    which ``models.predictor.check_histories`` applies to histories handed in from Python."""
-    steps = steps[steps > 0]
-    if not len(steps) or rounding <= PRECISION_SHARE * float(np.median(steps)):
+    in float32, lose more than ``PRECISION_SHARE`` of the step compared with: the median of
+    ``steps`` (the moving ones), or ``floor`` where that is larger (a model's check passes
+    ``PRECISION_STEP_FLOOR`` model units in data units; the text reader none); None when the
+    rounding stays within it, or when nothing moves and there is no floor. The text reader's
+    rule, which ``models.predictor.check_coordinates`` applies to histories handed in from
+    Python."""
+    moving = steps[steps > 0]
+    median = float(np.median(moving)) if len(moving) else 0.0
+    step = max(median, float(floor))
+    if step <= 0 or rounding <= PRECISION_SHARE * step:
         return None
-    median = float(np.median(steps))
-    return (f"coordinates as large as {largest:.6g} lose up to {rounding:.3g} to float32 "
-            f"rounding, {rounding / median:.0%} of a median step ({median:.3g})")  # fmt: skip
+    head = f"coordinates as large as {largest:.6g} lose up to {rounding:.3g} to float32 rounding"
+    if step == median:
+        return f"{head}, {rounding / median:.0%} of a median step ({median:.3g})"
+    moves = f"their median step {median:.3g}" if len(moving) else "nothing moves"
+    return (f"{head}, {rounding / step:.0%} of a step of {step:.3g} (the least step this check "
+            f"compares with; {moves})")  # fmt: skip
 
 
 def _kind_flags(kinds: np.ndarray, path: Path, line_of) -> np.ndarray:

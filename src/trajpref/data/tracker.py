@@ -11,6 +11,7 @@ frame_interval=step)``. Pure numpy.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Hashable, Sequence
 from typing import Any, NamedTuple
 
@@ -21,6 +22,12 @@ from trajpref.errors import ConfigError, DataError
 EPS_STEPS = 1e-3
 """Times within this share of ``step`` of each other count as equal (float rounding of frame
 times such as ``now - 3 * 0.4``): 0.4 ms at a 0.4 s step."""
+
+
+class LeftOutWarning(UserWarning):
+    """``tracks_to_history`` left out agents that the tracker saw in its current cycle: their
+    detections are stamped a little before ``now`` (per-detection timestamps a few ms apart
+    within one cycle) or after it (a nominal cycle time as ``now``); ``hold=`` keeps them."""
 
 
 class TrackHistory(NamedTuple):
@@ -39,7 +46,8 @@ class TrackHistory(NamedTuple):
     """[C]: the input agent id of each ``context`` row."""
     left_out_ids: list
     """Agents observed at or before ``now`` that have no position at ``now`` (last seen more than
-    ``hold`` seconds before it): gone from view, or occluded; in no array."""
+    ``hold`` seconds before it): gone from view, or occluded; in no array (a ``LeftOutWarning``
+    where some were seen in the tracker's current cycle: ``tracks_to_history``)."""
     frame_times: np.ndarray
     """[T_h] float64: the time of each frame, ``now - (T_h - 1 - i) * step``."""
 
@@ -68,7 +76,12 @@ def tracks_to_history(times: Any, ids: Sequence[Hashable] | np.ndarray, xy: Any,
       at most ``hold`` seconds earlier (default 0: none), that last position, held (for a
       tracker whose agents carry their own timestamps a few ms apart within one cycle). An
       agent with no position at ``now`` is left out of both arrays: ``left_out_ids`` lists it
-      (no model reads a neighbour that is unseen at the last frame).
+      (no model reads a neighbour that is unseen at the last frame). Where some of them have
+      an observation within half their own observation interval of ``now`` (before or after
+      it: seen in the tracker's current cycle, not gone), one ``LeftOutWarning`` per call
+      names how many and the remedy, ``hold=`` about one tracker cycle (0.1 s at 10 Hz); an
+      agent that left the view a cycle or more ago is left out without a word, and so is
+      every agent of input on one time grid with ``now`` on it.
     - An agent with a position at every frame is a ``history`` row; one with a position at
       ``now`` but NaN at some earlier frame (a track that started inside the window, or a gap)
       is a ``context`` row.
@@ -102,24 +115,43 @@ def tracks_to_history(times: Any, ids: Sequence[Hashable] | np.ndarray, xy: Any,
         raise DataError(f"ids: agent ids must sort among themselves (ints, strings), got "
                         f"{', '.join(kinds)}: map them to ints first") from None  # fmt: skip
     full, part, full_ids, part_ids, left_out = [], [], [], [], []
+    current = 0  # left-out agents that the tracker saw in its current cycle
     for key in order:
-        rows = np.asarray(groups[key])
-        rows = rows[t[rows] <= now + eps]  # rows after now are not read
+        every = np.asarray(groups[key])
+        rows = every[t[every] <= now + eps]  # rows after now are not read
         if not len(rows):
             continue  # first seen after now: not there yet
         track = _agent_track(key, t[rows], pos[rows], frames, max_gap, hold, eps)  # [T_h, 2]
         seen = np.isfinite(track).all(-1)  # [T_h]
         if not seen[-1]:
             left_out.append(key)
+            current += _seen_this_cycle(t[every], now, step, eps)
         elif seen.all():
             full.append(track)
             full_ids.append(key)
         else:
             part.append(track)
             part_ids.append(key)
+    if current:
+        warnings.warn(f"tracks_to_history: {current} agent(s) seen in the tracker's current "
+                      "cycle (within half their observation interval of now) have no position "
+                      "at now and are left out (left_out_ids): their detections are stamped a "
+                      "little before now, or after it. Pass hold= about one tracker cycle "
+                      "(hold=0.1 at 10 Hz) to hold their last position at now",
+                      LeftOutWarning, stacklevel=2)  # fmt: skip
     return TrackHistory(history=_stack(full, t_hist), context=_stack(part, t_hist), ids=full_ids,
                         context_ids=part_ids, left_out_ids=left_out,
                         frame_times=frames)  # fmt: skip
+
+
+def _seen_this_cycle(t: np.ndarray, now: float, step: float, eps: float) -> bool:
+    """Whether an agent observed at times ``t`` [n] (all its rows, after ``now`` too) has an
+    observation within half its own observation interval of ``now`` (the median gap between
+    its distinct times; ``step`` for an agent seen once): seen in the tracker's current
+    cycle, not gone from view a cycle or more ago."""
+    gaps = np.diff(np.unique(t))  # [m] > 0
+    interval = float(np.median(gaps)) if len(gaps) else step
+    return bool((np.abs(t - now) <= interval / 2 + eps).any())
 
 
 def _agent_track(key, t: np.ndarray, p: np.ndarray, frames: np.ndarray, max_gap: float,

@@ -16,7 +16,7 @@ from typing import Literal
 import torch
 from torch import nn
 
-from trajpref.data.text import float32_precision_loss
+from trajpref.data.text import PRECISION_STEP_FLOOR, float32_precision_loss
 from trajpref.data.transforms import from_model_frame
 from trajpref.diffusion.samplers import denoise, sample_full
 from trajpref.diffusion.schedule import DDPMSchedule
@@ -83,9 +83,9 @@ def as_integer(value) -> int | None:
         return None
 
 
-def check_histories(history: torch.Tensor, t_hist: int) -> None:
+def check_histories(history: torch.Tensor, t_hist: int, scale: float | None = None) -> None:
     """``DataError`` unless ``history`` is [N, T_h, 2] with this ``t_hist``, finite, and in
-    coordinates float32 can hold (``check_coordinates``)."""
+    coordinates float32 can hold for a model of data scale ``scale`` (``check_coordinates``)."""
     if history.ndim != 3 or tuple(history.shape[1:]) != (t_hist, 2):
         raise DataError(f"history: expected [N, {t_hist}, 2] (agents, observed steps, x/y; this "
                         f"model's T_h = {t_hist}), got {list(history.shape)}")  # fmt: skip
@@ -97,14 +97,18 @@ def check_histories(history: torch.Tensor, t_hist: int) -> None:
             f"{first}; every target needs all {t_hist} observed positions (an agent seen for "
             "only part of the history can be a neighbour: Scene.context)"
         )
-    check_coordinates(history)
+    check_coordinates(history, scale)
 
 
-def check_coordinates(history: torch.Tensor) -> None:
+def check_coordinates(history: torch.Tensor, scale: float | None = None) -> None:
     """``DataError`` unless the finite histories [N, T_h, 2] are in coordinates whose float32
-    rounding stays within a small share of a median step (the text reader's rule,
+    rounding stays within a small share of a step (the text reader's rule,
     ``data.text.float32_precision_loss``; map coordinates such as UTM eastings are not within
-    it: subtract an origin first). The one check of the prediction (``predict``) and of the
+    it: subtract an origin first). With the model's data ``scale`` (data units per model
+    unit), the step compared with is the median moving step or ``PRECISION_STEP_FLOOR`` model
+    units, whichever is larger, so that a crowd standing with tracker jitter is judged as one
+    walking is (up to 16,777 model units from the origin, 24.7 km at zara1's scale); without
+    it, the median moving step alone. The one check of the prediction (``predict``) and of the
     one-scene scoring calls (``score.scene_batch``: ``rank_samples``, ``select_for_scene``),
     with one advice."""
     if history.numel() == 0:
@@ -112,7 +116,8 @@ def check_coordinates(history: torch.Tensor) -> None:
     steps = (history[:, 1:] - history[:, :-1]).norm(dim=-1).flatten()  # [N * (T_h - 1)]
     largest = float(history.abs().max())
     rounding = float(torch.finfo(torch.float32).eps) * largest / 2  # half a float32 spacing
-    problem = float32_precision_loss(largest, rounding, steps.cpu().numpy())
+    floor = 0.0 if scale is None else PRECISION_STEP_FLOOR * float(scale)  # data units
+    problem = float32_precision_loss(largest, rounding, steps.cpu().numpy(), floor)
     if problem is not None:
         raise DataError(f"history: {problem}: subtract an origin from x and y (from the history "
                         "and any samples alike) before predicting or ranking, and add it back "
@@ -299,6 +304,6 @@ class DiffusionPredictor(DenoiserShapes, nn.Module):
         if count is None or count < 1:
             raise ConfigError(f"num_samples must be an integer >= 1, got {num_samples!r}")
         num_samples = count
-        check_histories(batch.history, self.denoiser.cfg.t_hist)
+        check_histories(batch.history, self.denoiser.cfg.t_hist, self.scale)
         y = self.sample_normalised(batch, num_samples, generator)  # [K, N, T_f, 2]
         return from_model_frame(y, batch, self.scale)

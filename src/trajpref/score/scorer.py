@@ -36,7 +36,12 @@ from trajpref.models import checkpoint
 from trajpref.models.denoiser import Denoiser, DenoiserShapes
 from trajpref.models.encoder import check_neighbour_radius, scene_features
 from trajpref.models.predictor import as_integer, check_coordinates
-from trajpref.models.timing import attach_timing, check_observed_pace, check_pace
+from trajpref.models.timing import (
+    attach_timing,
+    check_observed_jumps,
+    check_observed_pace,
+    check_pace,
+)
 from trajpref.types import AGENT_BALL, AGENT_PERSON, Batch
 
 NOISE_LAYOUT = "scene-slot"
@@ -656,7 +661,10 @@ def _predict(model, histories: list, num_samples, agent_types: list, seed, frame
     present = [scene for scene in scenes if len(scene[0])]  # a scene without agents: no pass
     pred = None
     if present:  # one warning per call: cm for m (the speed clamp would hide it)
-        check_observed_pace(model, torch.cat([h for h, _, _ in present]), stacklevel=4)
+        joined = torch.cat([h for h, _, _ in present])  # [N, T_h, 2]
+        if not check_observed_pace(model, joined, stacklevel=4):  # one cause, one warning
+            check_observed_jumps(model, joined, stacklevel=4,  # an id switch: a wide fan
+                                 agent_type=torch.cat([t for _, t, _ in present]))  # fmt: skip
         batch = _join(present, t_f)
         pred = model.predict(batch, count, torch.Generator().manual_seed(seed))  # [K, N, T_f, 2]
     elif callable(getattr(model, "check_samples", None)):  # predict's refusal, without a pass
@@ -742,10 +750,13 @@ def scene_batch(scorer: TrajectoryScorer, history: ArrayLike, samples: ArrayLike
             f"samples: expected [K, {p}, {t_f}, 2] (samples, the history's {p} agents, "
             f"future steps, x/y; this scorer's T_f = {t_f}), got {list(futs.shape)}{hint}"
         )
-    check_coordinates(hist)  # map coordinates rank differently in float32: predict's rule
-    if p:  # cm given to a metre scorer scrambles its ranking without an error
-        check_observed_pace(scorer, hist, name="this scorer", stacklevel=4)
+    # map coordinates rank differently in float32: predict's rule, at the scorer's scale
+    check_coordinates(hist, scorer.scale)
     types = _agent_types(agent_type, p, device)
+    if p and not check_observed_pace(scorer, hist, name="this scorer", stacklevel=4):
+        # cm given to a metre scorer scrambles its ranking without an error; else one agent's
+        # jump (a tracker id switch)
+        check_observed_jumps(scorer, hist, name="this scorer", stacklevel=4, agent_type=types)
     return _join([(hist, types, None)], t_f), futs
 
 
