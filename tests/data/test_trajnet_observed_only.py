@@ -216,3 +216,23 @@ def test_the_library_refuses_to_score_or_train_on_hidden_futures(tmp_path):
         evaluate_in_context(None, data)
     with pytest.raises(DataError, match=r"training \(its validation split\) reads"):
         run_splits(DataConfig(dataset=str(tmp_path)))
+
+
+@pytest.mark.parametrize("third", [1110, 1130])
+def test_a_test_scene_whose_future_other_scenes_fill_but_for_a_frame_is_observation_only(
+    tmp_path, third
+):
+    """Scenes at 1030 and ``third`` show 11 of scene 1's 12 hidden frames as observed (all but
+    1200, or all but 1120), so its primary has 20 rows in its span: still a test scene, read at
+    its own frames, not a window shifted off them (silently, or across the gap with a
+    GapWarning)."""
+    scenes = [SCENES[0], SCENES[1], {"id": 3, "p": 3, "s": third, "e": third + 200, "fps": 2.5}]
+    _write(tmp_path / "a.ndjson", scenes)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no GapWarning, and every scene observation-only
+        read = read_trajnet(tmp_path / "a.ndjson")
+    assert read.observed_only == 3
+    one = read.scenes[0]
+    np.testing.assert_array_equal(one.frames, FRAMES[1:21])
+    np.testing.assert_array_equal(one.history[0, :, 0], 0.5 * np.arange(1, 9))
+    assert np.isnan(one.future).all()

@@ -139,7 +139,10 @@ def read_trajnet(
     future (its baselines drop them, ``evaluator/write_utils.preprocess_test``). A scene whose
     primary agent has some of its future frames otherwise is a ``DataError`` naming the frames
     missing. Scenes with ``t_hist + t_fut`` frames or more read as before, so a file can hold
-    both kinds: then an ``ObservedOnlyWarning`` says how many scenes are observation-only.
+    both kinds: then an ``ObservedOnlyWarning`` says how many scenes are observation-only;
+    in such a file, one whose last ``t_hist + t_fut`` frames skip a frame or stop before ``e``
+    (leaked rows filling all but a frame or two of its hidden future) is read as a test scene
+    when it is one, not as a window shifted off its frames.
     """
     path = Path(path)
     check_file(path)
@@ -224,19 +227,34 @@ def read_trajnet(
     hidden: list[int] = []  # scene ids read as observation-only
     shown = None  # the frames some scene shows as observed (_shown_frames), when first needed
     scenes = []
-    for line, sid, p, s, e, row in scene_rows:
-        own = [f for f in frames_of.get(p, ()) if s <= f <= e]
+    owns = [[f for f in frames_of.get(p, ()) if s <= f <= e] for _, _, p, s, e, _ in scene_rows]
+    test_file = any(len(own) < t_total for own in owns)  # some scene hides its future
+    for (line, sid, p, s, e, row), own in zip(scene_rows, owns, strict=True):
         complete = len(own) >= t_total
+        observed = None
         if complete:  # as always
             window = own[-t_total:]
-            if any(b - a != step for a, b in zip(window, window[1:], strict=False)):
+            gap = any(b - a != step for a, b in zip(window, window[1:], strict=False))
+            if test_file and (gap or window[-1] != e):
+                # in a test file, a scene whose hidden future other scenes' rows fill all but
+                # a frame or two of is observation-only, not a window shifted off its frames
+                if shown is None:
+                    shown = _shown_frames(scene_rows, t_fut, step)
+                try:
+                    observed = _observed_frames(own, sid, p, s, e, t_hist, t_fut, step, shown,
+                                                (path, line))  # fmt: skip
+                    complete = False
+                except DataError:
+                    pass
+            if complete and gap:
                 gaps.append(sid)
             present = window  # the frames every target has a row in
-        else:
+        if not complete:
             if shown is None:
                 shown = _shown_frames(scene_rows, t_fut, step)
-            observed = _observed_frames(own, sid, p, s, e, t_hist, t_fut, step, shown,
-                                        (path, line))  # fmt: skip
+            if observed is None:
+                observed = _observed_frames(own, sid, p, s, e, t_hist, t_fut, step, shown,
+                                            (path, line))  # fmt: skip
             present = observed[-t_hist:]
             window = present + [present[-1] + step * (i + 1) for i in range(t_fut)]
             hidden.append(sid)
