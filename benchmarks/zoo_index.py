@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from trajpref.config import GENERATOR_ONLY, load_config, to_dict
+from trajpref.config import GENERATOR_ONLY, load_config, resolve_config, to_dict
 from trajpref.data.registry import SPECS
 from trajpref.io import dotted
 from trajpref.models import checkpoint as ckpt
@@ -122,6 +122,23 @@ computed from its test row: the name -> the paper's dataset."""
 STAGE_SECTIONS = {"denoiser": ("data", "model", "diffusion", "denoiser"),
                   "generator": ("data", "model", "diffusion", "generator")}  # fmt: skip
 """Config sections that shape each kind's training (the others are not its settings)."""
+
+
+def config_option(dataset: str) -> str:
+    """The ``--config`` of a card's training command: the shipped config by its name
+    (``--config zara1``), which an installed package finds as the repository finds
+    ``configs/zara1.yaml`` (the same file: ``configs/`` links to the package's)."""
+    if resolve_config(dataset).resolve() != (ROOT / "configs" / f"{dataset}.yaml").resolve():
+        raise SystemExit(f"--config {dataset} is not configs/{dataset}.yaml")
+    return f"--config {dataset}"
+
+
+SOURCE_NOTE = ("The `benchmarks/` scripts and results, the `docs/` pages and the `git show` "
+               "commands this card cites are in the source repository (a checkout of "
+               "trajpref), not in the installed package; its `trajpref` commands work in "
+               "either.")  # fmt: skip
+"""The card's line that places what it cites, for a reader of ``trajpref models NAME`` in an
+installed package."""
 
 
 def overrides(dataset: str, kind: str, config: dict[str, Any]) -> list[str]:
@@ -371,7 +388,7 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
             sets = "".join(f" --set {s}" for s in overrides(dataset, kind, cfg))
             seed = f" --seed {cfg['seed']}" if cfg.get("seed") else ""  # the run's own seed
             threads = "" if gpu else thread_prefix(machine)
-            train_cmd = [f"{threads}trajpref train generator --config configs/{dataset}.yaml "
+            train_cmd = [f"{threads}trajpref train generator {config_option(dataset)} "
                          f"--out {out}{den}{seed}{sets}{gpu}"]  # fmt: skip
             if not den:  # trained with its own denoiser, in the same run folder
                 # the denoiser's own settings: a data flag adopted for the generator stage only
@@ -491,7 +508,7 @@ def denoiser_command(dataset: str, out: str, cfg: dict[str, Any], machine: str |
     repeats its run exactly only at the same count)."""
     sets = "".join(f" --set {s}" for s in overrides(dataset, "denoiser", cfg))
     return (
-        f"{thread_prefix(machine)}trajpref train diffusion --config configs/{dataset}.yaml "
+        f"{thread_prefix(machine)}trajpref train diffusion {config_option(dataset)} "
         f"--out {out}{sets}"
     )
 
@@ -756,6 +773,8 @@ def card(e: dict[str, Any]) -> str:
         "```bash",
         f"trajpref evaluate --dataset {e['dataset']} --model {e['name']}",
         "```",
+        "",
+        SOURCE_NOTE,
         "",
         "## Data",
         "",

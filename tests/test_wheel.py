@@ -60,6 +60,8 @@ def test_the_wheel_holds_the_zoo_and_stays_small(wheel):
         assert f"trajpref/zoo/{name}.safetensors" in names, name
         assert f"trajpref/zoo/{name}.md" in names, name
     assert "trajpref/zoo/index.json" in names
+    assert "trajpref/py.typed" in names  # PEP 561: its type hints are for type checkers
+    assert "trajpref/__main__.py" in names  # python -m trajpref
     from trajpref.config import builtin_configs
 
     for name in builtin_configs():  # --config NAME works from an installed wheel

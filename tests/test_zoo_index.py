@@ -321,3 +321,28 @@ def test_a_limit_that_sends_to_a_generator_in_git_says_to_copy_its_denoiser_besi
             shows += 1
             assert f"src/trajpref/zoo/{dataset}/denoiser.safetensors" in text, (commit, dataset)
     assert shows >= 2  # robo's and robo-mix's generators without roles
+
+
+def test_cards_train_with_the_shipped_configs_name_and_place_what_they_cite(monkeypatch):
+    """`trajpref models zara1/generator` in an installed package printed `--config
+    configs/zara1.yaml`, a path only a checkout has; `--config zara1` finds the shipped config
+    anywhere, and in the repository it is the same file. The `benchmarks/` scripts and results
+    a card cites are in the source repository, and the card says so (2026-12-06 walkthrough
+    of a wheel install)."""
+    from trajpref.config import resolve_config
+    from trajpref.models import zoo as zoo_mod
+
+    zoo = load_benchmark("zoo_index")
+    monkeypatch.setattr(zoo, "_meta", lambda dataset, variant: {})
+    for dataset in ("zara1", "robo-mix"):
+        shipped = resolve_config(dataset).resolve()
+        assert shipped == (ROOT / "configs" / f"{dataset}.yaml").resolve()
+    for name, path in zoo_mod.published().items():
+        text = zoo.card(zoo.describe(name, path, []))
+        commands = [line for line in text.splitlines() if "trajpref train " in line]
+        assert commands, name
+        for line in commands:
+            assert f"--config {name.split('/')[0]} " in line and "configs/" not in line, line
+        assert "are in the source repository" in text, name
+        stored = path.with_suffix(".md").read_text()  # the cards the package ships
+        assert "--config configs/" not in stored and "are in the source repository" in stored

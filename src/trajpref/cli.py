@@ -81,6 +81,7 @@ from trajpref.models import zoo
 from trajpref.models.registry import load_predictor
 from trajpref.models.timing import (
     UNKNOWN_UNITS,
+    jump_problem,
     model_timing,
     pace_problem,
     same_units,
@@ -92,7 +93,13 @@ from trajpref.results import machine
 from trajpref.rl.presets import EQUAL_BUDGET_VALIDATIONS, EQUAL_BUDGET_WARMUP, finetune_config
 from trajpref.score import TrajectoryScorer, score_timesteps
 from trajpref.score.scorer import PRECISIONS, reads_agent_types
-from trajpref.score.selection import METHODS, SelectingPredictor, SelectionConfig
+from trajpref.score.selection import (
+    CHOSEN_SAMPLES,
+    METHODS,
+    SelectingPredictor,
+    SelectionConfig,
+    chosen_selection,
+)
 from trajpref.survey.cli import add_parser as add_survey_parser
 from trajpref.train import compare
 from trajpref.train.distributed import (
@@ -264,30 +271,64 @@ RANK_SCORE_EVERY = 3
 steps of 100, ``TrajectoryScorer``'s own (``--keep`` selects at ``SelectionConfig``'s)."""
 
 
+CHOSEN_KINDS = ("full", "cheap")
+"""``--chosen``'s values: the chosen setting at 34 score steps (``--chosen`` alone) or its
+cheap one (``--chosen cheap``)."""
+CHOSEN_SETS = ("--select", "--drop", "--bandwidth", "--select-temperature", "--trust-speed",
+               "--score-every", "--score-from")  # fmt: skip
+"""The options whose settings ``--chosen`` takes from ``chosen_selection`` (giving one beside
+it is a ConfigError; ``--select-per`` and ``--score-precision`` stay the user's)."""
+
+
+class _Given(argparse.Action):
+    """An option stored as argparse stores it, and also noted as given on the command line
+    (``args._given``, by its first option string) even where its value is the default:
+    ``--chosen`` refuses the selection options it sets."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, values)
+        vars(namespace).setdefault("_given", set()).add(self.option_strings[0])
+
+
+def _given(args) -> set[str]:
+    """The ``_Given`` options given on the command line (their first option strings)."""
+    return getattr(args, "_given", set())
+
+
 def _add_selection_args(p: argparse.ArgumentParser, scorer: str) -> None:
     """The options of ``--keep``'s selection and of the score's steps; ``scorer``: the other
-    option that scores (``--rank`` or ``--scorer``), which the score's options apply to too."""
+    option that scores (``--rank`` or ``--scorer``), which the score's options apply to too.
+    The options that ``--chosen`` sets are ``_Given`` (it refuses them)."""
     p.add_argument("--keep", type=int, default=None, metavar="K'",
                    help="keep K' of the --samples futures (default: keep all)")  # fmt: skip
-    p.add_argument("--select", default="score-facility", choices=METHODS,
+    p.add_argument("--chosen", nargs="?", const="full", default=None, choices=CHOSEN_KINDS,
+                   metavar="cheap",
+                   help="with --keep and a published generator that has one (zara1/, eth/, "
+                   "robo/, robo-mix/generator, eth/generator-pace): select with the setting "
+                   "chosen for it on validation, scored by its own denoiser "
+                   "(trajpref.score.selection.chosen_selection; docs/selection.md) instead of "
+                   "the options' defaults; --chosen cheap: its cheap setting (1 or 2 score "
+                   "steps). It sets --select, --drop, --bandwidth, --select-temperature, "
+                   "--trust-speed, --score-every and --score-from")  # fmt: skip
+    p.add_argument("--select", default="score-facility", choices=METHODS, action=_Given,
                    help="how to keep them (default score-facility: drop the worst-scored, "
                    "then cover the endpoints weighted by the score; docs/selection.md); "
                    "score-* and top use --scorer or the model's own denoiser")  # fmt: skip
-    p.add_argument("--drop", type=float, default=0.3,
+    p.add_argument("--drop", type=float, default=0.3, action=_Given,
                    help="score-* selections: the fraction dropped first (0.3)")  # fmt: skip
-    p.add_argument("--bandwidth", type=float, default=0.5,
+    p.add_argument("--bandwidth", type=float, default=0.5, action=_Given,
                    help="facility selections: the similarity's bandwidth, as a multiple of "
                    "each item's median squared sample distance (0.5)")  # fmt: skip
-    p.add_argument("--select-temperature", type=float, default=2.0,
+    p.add_argument("--select-temperature", type=float, default=2.0, action=_Given,
                    help="score-facility and score-medoids: sample weights "
                    "exp(-z / T), z the standardised residual (2)")  # fmt: skip
     p.add_argument("--select-per", default="agent", choices=["agent", "scene"],
                    help="per agent, or one set of indices per scene (joint metrics)")  # fmt: skip
-    p.add_argument("--score-every", type=int, default=None, metavar="E",
+    p.add_argument("--score-every", type=int, default=None, metavar="E", action=_Given,
                    help="the score's steps: every E of the S, for --keep's score selections "
                    f"(default {SelectionConfig.score_every}) and for {scorer} (default "
                    f"{RANK_SCORE_EVERY}: the paper's 34 of 100)")  # fmt: skip
-    p.add_argument("--score-from", type=int, default=0,
+    p.add_argument("--score-from", type=int, default=0, action=_Given,
                    help="the score's first step (0, the lowest noise level; a later one "
                    "keeps only the noisier steps, docs/selection.md), for --keep's score "
                    f"selections and {scorer}")  # fmt: skip
@@ -295,7 +336,7 @@ def _add_selection_args(p: argparse.ArgumentParser, scorer: str) -> None:
                    help="arithmetic of the score's passes, for --keep's score selections and "
                    f"{scorer} (default fp32; bf16: about 3x faster on a CPU with bfloat16 "
                    "instructions; docs/selection.md)")  # fmt: skip
-    p.add_argument("--trust-speed", type=float, default=0.0, metavar="V",
+    p.add_argument("--trust-speed", type=float, default=0.0, metavar="V", action=_Given,
                    help="score-* selections: agents observed faster than V (the scorer's "
                    "model units per step, as --max-speed) are selected without the score, "
                    "which never saw their pace (0: off; docs/selection.md)")  # fmt: skip
@@ -509,7 +550,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "the denoiser of Eq. 2, the diffusion score's model; generator: the "
                     "leapfrog generator trained through a frozen denoiser "
                     "(--denoiser)")  # fmt: skip
-    tr.add_argument("--config", default=None, help="YAML config (default: built-in defaults)")
+    tr.add_argument("--config", default=None, help="YAML config, or a shipped config's name "
+                    "(e.g. zara1; `trajpref config show --config zara1` prints it); default: "
+                    "the built-in defaults")  # fmt: skip
     tr.add_argument("--dataset", default=None, help="shortcut for --set data.dataset=NAME")
     tr.add_argument("--frame-interval", type=float, default=None, metavar="SECONDS",
                     help=f"a folder dataset's {FRAME_INTERVAL_HELP}; --set "
@@ -575,9 +618,10 @@ def build_parser() -> argparse.ArgumentParser:
         f"{EQUAL_BUDGET_VALIDATIONS} of it, warm up {EQUAL_BUDGET_WARMUP} steps, no epoch "
         "limit. Run each method on one thread (OMP_NUM_THREADS=1), as the table's runs",
     )
-    ft.add_argument("--config", default=None, help="YAML whose 'finetune' section applies "
-                    "(its other sections are not read: data and model come from the "
-                    "checkpoint; --set data.dataset=FOLDER fine-tunes on other data)")  # fmt: skip
+    ft.add_argument("--config", default=None, help="YAML, or a shipped config's name (e.g. "
+                    "zara1), whose 'finetune' section applies (its other sections are not "
+                    "read: data and model come from the checkpoint; --set "
+                    "data.dataset=FOLDER fine-tunes on other data)")  # fmt: skip
     _add_run_args(
         ft,
         "finetune.lr=5e-5",
@@ -589,8 +633,8 @@ def build_parser() -> argparse.ArgumentParser:
     cf = sub.add_parser("config", help="the training config's keys, values and meanings")
     cf_sub = cf.add_subparsers(dest="config_command", required=True, metavar="COMMAND")
     show = cf_sub.add_parser("show", help="print every config key with its value and docstring")
-    show.add_argument("--config", default=None, help="YAML config to resolve (default: the "
-                      "built-in defaults)")  # fmt: skip
+    show.add_argument("--config", default=None, help="YAML config to resolve, or a shipped "
+                      "config's name (e.g. zara1); default: the built-in defaults")  # fmt: skip
     show.add_argument("--set", dest="overrides", action="append", default=[],
                       metavar="KEY=VALUE", help="override a value, as train and finetune "
                       "take it (repeatable)")  # fmt: skip
@@ -721,6 +765,7 @@ def _check_model_args(args) -> None:
         _check_checkpoint("--model", args.model)
     if getattr(args, "scorer", None):
         _check_checkpoint("--scorer", args.scorer)
+    _check_chosen(args)
     given, _ = _neighbour_radius(args)  # ConfigError for a bad value
     if given and args.model == "cv" and not getattr(args, "scorer", None):
         raise ConfigError("--neighbour-radius applies to diffusion models and scorers: "
@@ -1243,13 +1288,24 @@ def _warn_observed_pace(args, model, scorer, ds) -> None:
     (``timing.pace_problem``: the 90th percentile of the observed step of the split's agents above
     ``timing.PACE_LIMIT`` model units; data in other units, e.g. centimetres for a metre
     model, which the generator's speed clamp hides and the score does not), for the model,
-    else for its ``scorer`` (the constant-velocity baseline reads any units)."""
+    else for its ``scorer`` (the constant-velocity baseline reads any units); else one when an
+    agent jumps more than ``timing.JUMP_LIMIT`` model units in one observed step
+    (``timing.jump_problem``: a tracker id switch; balls are not checked)."""
     history = np.concatenate([s.history for s in ds.scenes]) if len(ds) else None  # [N, T_h, 2]
     if history is None:
         return
     base = getattr(model, "base", model)  # a SelectingPredictor's generator
-    for obj, name in ((base, args.model), (scorer, getattr(args, "scorer", None))):
-        problem = None if obj is None else pace_problem(obj, history, name or "the scorer")
+    models = [(o, n or "the scorer") for o, n in ((base, args.model),
+              (scorer, getattr(args, "scorer", None))) if o is not None]  # fmt: skip
+    for obj, name in models:
+        problem = pace_problem(obj, history, name)
+        if problem is not None:
+            warnings.warn(problem, stacklevel=2)
+            return
+    # else one agent's jump (a tracker id switch), which the 90 % quantile does not see
+    types = np.concatenate([s.agent_type for s in ds.scenes])  # [N]
+    for obj, name in models:
+        problem = jump_problem(obj, history, name, types)
         if problem is not None:
             warnings.warn(problem, stacklevel=2)
             return
@@ -1298,8 +1354,57 @@ SELECTION_ONLY = ("method", "per", "drop", "trust_speed", "bandwidth", "temperat
 """The selection's own settings (the score's steps serve --rank and --scorer too)."""
 
 
+def _denoiser_hash(header: dict) -> str | None:
+    """The weights hash of the denoiser a checkpoint header scores with: its own for a
+    denoiser, the one a generator names or embeds."""
+    if header.get("kind") == "denoiser":
+        return header.get("hash")
+    return (header.get("denoiser_ref") or header.get("denoiser") or {}).get("hash")
+
+
+def _check_chosen(args) -> None:
+    """``--chosen`` (before any model or data is read): it needs --keep, the K = 20 samples
+    the setting was chosen from, none of the options it sets, a model with a chosen setting
+    (``chosen_selection``'s ConfigError otherwise) and no --scorer other than the model's own
+    denoiser, which the setting was chosen with."""
+    chosen = getattr(args, "chosen", None)
+    if chosen is None:
+        return
+    flag = "--chosen" + (" cheap" if chosen == "cheap" else "")
+    if args.keep is None:
+        raise ConfigError(f"{flag} needs --keep K' (how many of the {CHOSEN_SAMPLES} samples "
+                          "to keep)")  # fmt: skip
+    given = [f for f in CHOSEN_SETS if f in _given(args)]
+    if given:
+        raise ConfigError(f"{flag} sets {', '.join(given)} (the setting chosen for "
+                          f"{args.model}): leave {'it' if len(given) == 1 else 'them'} out, or "
+                          f"leave out --chosen to set the selection yourself")  # fmt: skip
+    if args.samples != CHOSEN_SAMPLES:
+        raise ConfigError(f"{flag}: the setting was chosen keeping K' of the K = "
+                          f"{CHOSEN_SAMPLES} samples a published generator emits; give "
+                          f"--samples {CHOSEN_SAMPLES} (the default), not "
+                          f"{args.samples}")  # fmt: skip
+    try:
+        chosen_selection(args.model, args.keep, chosen == "cheap", per=args.select_per)
+    except ConfigError as err:
+        raise ConfigError(f"{flag}: {err}") from None
+    if args.scorer is not None:
+        own, other = (_denoiser_hash(_checkpoint_header(s)) for s in (args.model, args.scorer))
+        if own != other:
+            raise ConfigError(f"{flag}: the setting was chosen with {args.model}'s own "
+                              f"denoiser as the scorer, and --scorer {args.scorer} is another "
+                              "one: leave --scorer out (or --chosen, and set the selection "
+                              "yourself)")  # fmt: skip
+
+
 def _selection_config(args) -> SelectionConfig:
-    """--keep's selection as the options give it (score steps at the selection's default)."""
+    """--keep's selection as the options give it (score steps at the selection's default),
+    or with --chosen the setting chosen for the model (``chosen_selection``) at the run's
+    seed."""
+    chosen = getattr(args, "chosen", None)
+    if chosen is not None and args.keep is not None:
+        cfg = chosen_selection(args.model, args.keep, chosen == "cheap", per=args.select_per)
+        return dataclasses.replace(cfg, seed=args.seed)
     return SelectionConfig(keep=args.keep or 1, method=args.select, drop=args.drop,
                            per=args.select_per, seed=args.seed, bandwidth=args.bandwidth,
                            temperature=args.select_temperature, trust_speed=args.trust_speed,
@@ -1340,6 +1445,14 @@ def _warn_unread(args, cfg: SelectionConfig, scores: bool) -> None:
                       "nothing", stacklevel=3)  # fmt: skip
 
 
+def _kept_by(args) -> str:
+    """How evaluate's summary line names --keep's selection: its method, and ``chosen`` or
+    ``chosen cheap`` with --chosen."""
+    chosen = getattr(args, "chosen", None)
+    tag = {None: "", "full": " (chosen)", "cheap": " (chosen cheap)"}[chosen]
+    return f"{_selection_config(args).method}{tag}"
+
+
 def _score_option(args) -> str:
     """The command's option that scores beside --keep: --rank (predict) or --scorer."""
     return "--rank" if args.command == "predict" else "--scorer"
@@ -1356,7 +1469,7 @@ def _selecting(args, model, device, scores: bool = False):
     scorer = None
     if cfg.uses_score:
         if args.scorer is None and args.model == "cv":
-            raise ConfigError(f"--select {args.select} with --model cv needs --scorer")
+            raise ConfigError(f"--select {cfg.method} with --model cv needs --scorer")
         scorer = _scorer(args.scorer or args.model, device, args, cfg.score_every)
     return SelectingPredictor(model, cfg, args.samples, scorer), args.keep
 
@@ -1478,14 +1591,18 @@ def _write_result(path: str, out: dict) -> None:
 
 
 def _selection_fields(args) -> dict:
+    """What a result records of --keep's selection: the settings it ran with (with --chosen,
+    the chosen ones, and ``chosen``: ``full`` or ``cheap``)."""
     if args.keep is None:
         return {}
-    every = SelectionConfig.score_every if args.score_every is None else args.score_every
-    return {"candidates": args.samples, "select": args.select, "select_per": args.select_per,
-            "drop": args.drop, "bandwidth": args.bandwidth,
-            "select_temperature": args.select_temperature, "trust_speed": args.trust_speed,
-            "score_every": every, "score_from": args.score_from,
-            "score_precision": args.score_precision or "fp32"}  # fmt: skip
+    cfg = _selection_config(args)
+    chosen = getattr(args, "chosen", None)
+    return {"candidates": args.samples, "select": cfg.method, "select_per": cfg.per,
+            "drop": cfg.drop, "bandwidth": cfg.bandwidth,
+            "select_temperature": cfg.temperature, "trust_speed": cfg.trust_speed,
+            "score_every": cfg.score_every, "score_from": cfg.score_from,
+            "score_precision": args.score_precision or "fp32",
+            **({"chosen": chosen} if chosen else {})}  # fmt: skip
 
 
 def _scorer_fields(args, scorer) -> dict:
@@ -1646,7 +1763,7 @@ def cmd_evaluate(args) -> int:
             f"  K={samples}  ({out['agents']} {AGENT_SET_NOUNS[args.agents]}"
             f", {out['scenes']} scenes, "
             f"units {ds.info.units})"
-            + ("" if args.keep is None else f", kept by {args.select} of {args.samples}")
+            + ("" if args.keep is None else f", kept by {_kept_by(args)} of {args.samples}")
         )
         print(
             f"  minADE {out['min_ade']:.4f}  minFDE {out['min_fde']:.4f}   "
@@ -2136,6 +2253,8 @@ def _is_main_process() -> bool:
 
 def cmd_train(args) -> int:
     check_output_dir(args.out)
+    if args.denoiser is not None:
+        _check_checkpoint("--denoiser", args.denoiser)
     overrides = list(args.overrides)
     if args.dataset is not None:
         overrides.append(f"data.dataset={args.dataset}")
@@ -2194,13 +2313,9 @@ def _check_checkpoint(flag: str, spec: str) -> None:
     """A checkpoint option's value that is no file but the repository path of a published
     model (``models/zara1/generator.safetensors`` outside the repository): a ConfigError that
     names the published name, which works in any folder."""
-    path = Path(spec)
-    if path.exists() or zoo.is_name(spec) or path.with_suffix(ckpt.SUFFIX).is_file():
-        return
-    name = f"{path.parent.name}/{path.stem}"
-    if path.suffix in (ckpt.SUFFIX, ckpt.LEGACY_SUFFIX) and name in zoo.published():
-        raise ConfigError(f"{flag} {spec}: no such checkpoint here; the published model is "
-                          f"named {name} ({flag} {name} works in any folder)")  # fmt: skip
+    message = zoo.not_here_message(spec, flag)  # the rule the Python API's errors use too
+    if message is not None:
+        raise ConfigError(message)
 
 
 def _warn_if_validation_reads_training(data) -> None:

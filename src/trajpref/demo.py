@@ -124,6 +124,9 @@ def main(argv: list[str] | None = None) -> int:
     except TrajprefError as exc:
         print(f"trajpref demo: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # Ctrl-C: one line and 130, as `trajpref train` (cli.main)
+        print("trajpref demo: interrupted (run it again to start over)", file=sys.stderr)
+        return 130
     return 0
 
 

@@ -225,8 +225,8 @@ def resolve_path(path: str | Path) -> Path:
         if new.is_file():
             warnings.warn(f"{path} is now {new}", FutureWarning, stacklevel=3)
             return new
-    if not path.is_file():
-        raise TrajprefError(f"{path}: no such checkpoint")
+    if not path.is_file():  # a published model's repository path names it, as the CLI does
+        raise TrajprefError(zoo.not_here_message(spec) or f"{path}: no such checkpoint")
     return path
 
 

@@ -43,10 +43,9 @@ def load_predictor(
             found = [str(p) for p in found if p.is_file()]
             hint = f": pass {' or '.join(found)}" if found else ""
             raise TrajprefError(f"{spec}: a folder, not a checkpoint file{hint}") from None
-        stem = spec[: -len(checkpoint.SUFFIX)] if spec.endswith(checkpoint.SUFFIX) else ""
-        if stem and zoo.is_name(stem) and stem in zoo.published():
-            raise TrajprefError(f"{spec}: no such file; the published model is named {stem} "
-                                "(without the suffix)") from None  # fmt: skip
+        message = zoo.not_here_message(spec)  # models/zara1/generator.safetensors elsewhere
+        if message is not None:
+            raise TrajprefError(message) from None
         raise TrajprefError(
             f"{spec}: no such model (use 'cv', a published name such as zara1/generator "
             "(`trajpref models` lists them) or a checkpoint file)"

@@ -36,6 +36,32 @@ def is_name(spec: str | Path) -> bool:
     return bool(_NAME.match(text)) and not text.endswith((SUFFIX, ".pt"))
 
 
+def named_by_path(spec: str | Path) -> str | None:
+    """The published model that ``spec``, a checkpoint path that is no file here, names by its
+    place: ``models/zara1/generator.safetensors`` (the repository's path, given outside the
+    repository) or ``zara1/generator.safetensors`` (a name with a suffix) name
+    ``zara1/generator``; None for a file that exists, a name, a legacy ``.pt`` path whose
+    ``.safetensors`` file exists, or a path that names no published model."""
+    path = Path(spec)
+    if path.exists() or is_name(spec) or path.with_suffix(SUFFIX).is_file():
+        return None
+    name = f"{path.parent.name}/{path.stem}"
+    return name if path.suffix in (SUFFIX, ".pt") and name in published() else None
+
+
+def not_here_message(spec: str | Path, flag: str | None = None) -> str | None:
+    """The one-line error for a checkpoint path that is no file here but names a published
+    model (``named_by_path``): it names the published name, which works in any folder; None
+    when ``spec`` names none. ``flag``: the command-line option it was given to
+    (``--model``), which the message repeats."""
+    name = named_by_path(spec)
+    if name is None:
+        return None
+    given, use = (f"{flag} {spec}", f"{flag} {name}") if flag else (str(spec), name)
+    return (f"{given}: no such checkpoint here; the published model is named {name} ({use} "
+            "works in any folder)")  # fmt: skip
+
+
 def published(root: Path | None = None) -> dict[str, Path]:
     """Every published checkpoint, ``{"DATASET/NAME": file}``, sorted by name."""
     root = ZOO_DIR if root is None else root

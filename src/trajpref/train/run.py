@@ -565,8 +565,8 @@ def train_stage(
             raise ConfigError(
                 f"{path}: the generator trains through a denoiser and there is none in "
                 f"{out_dir}: train it there first (trajpref train diffusion ... --out "
-                f"{out_dir}) or pass --denoiser FILE (e.g. a published one: "
-                "models/zara1/denoiser.safetensors)"
+                f"{out_dir}) or pass --denoiser FILE (or a published denoiser's name, e.g. "
+                "zara1/denoiser: `trajpref models` lists them)"
             )
         payload = ckpt.load(path)
         if payload["kind"] != "denoiser":
