@@ -7,7 +7,7 @@ import pytest
 
 from trajpref.errors import ConfigError
 from trajpref.survey.manifest import DATABASE, load_study
-from trajpref.survey.store import SCHEMA, AnswerError, AnswerStore
+from trajpref.survey.store import SCHEMA, AnswerError, AnswerStore, StoreError
 
 OK = {"social": 4, "kinetics": 2}
 
@@ -348,8 +348,8 @@ def test_read_only_opening_writes_nothing_and_claims_nothing(synthetic_study, tm
     before = {p.name: p.read_bytes() for p in folder.iterdir()}
     store = AnswerStore(bare, study, readonly=True)
     assert store.rows() == [] and store.ignored()["answers"] == 0
-    with pytest.raises(sqlite3.OperationalError, match="readonly"):
-        store.save("r1", "s01", "A", OK)
+    with pytest.raises(StoreError, match="attempt to write a readonly database"):
+        store.save("r1", "s01", "A", OK)  # SQLite itself refuses
     store.close()
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
     writer = AnswerStore(bare, study)  # serve / simulate claim it

@@ -104,7 +104,7 @@ class BuildConfig:
         if not self.models:
             raise ConfigError("--models: give at least one NAME=MODEL")
         for name in self.models:
-            if name == GROUND_TRUTH or not METHOD_RE.match(name):
+            if name == GROUND_TRUTH or not METHOD_RE.fullmatch(name):
                 raise ConfigError(
                     f"--models: bad method name {name!r} (letters, digits and ' _.+-', at "
                     f"most 40; {GROUND_TRUTH!r} is reserved)"

@@ -47,7 +47,8 @@ def add_parser(
     b.add_argument("--scenes", type=int, default=12, help="scenes in the study (default 12)")
     b.add_argument("--samples", type=int, default=20, help="K, samples per agent (default 20)")
     b.add_argument("--top", type=int, default=2, help="futures shown per agent (default 2)")
-    b.add_argument("--seed", type=int, default=0, help="seed of the draw, sampling, shuffling")
+    b.add_argument("--seed", type=int, default=0,
+                   help="seed of the draw, sampling, shuffling (default 0)")  # fmt: skip
     b.add_argument("--min-agents", type=int, default=1, help="smallest scene (default 1)")
     b.add_argument("--max-agents", type=int, default=8, help="largest scene (default 8)")
     b.add_argument("--min-gap", type=int, default=20, help="picked scenes are this many "
@@ -56,7 +57,8 @@ def add_parser(
     b.add_argument("--ground-truth", default="rated", choices=["rated", "reference"],
                    help="rated: the real futures are one more blinded panel (default); "
                    "reference: shown beside every panel, not rated")  # fmt: skip
-    b.add_argument("--title", default="Which predicted paths look human?", help="page title")
+    b.add_argument("--title", default="Which predicted paths look human?",
+                   help="page title (default %(default)r)")  # fmt: skip
     b.add_argument("--consent", default=None, metavar="FILE", help="a UTF-8 text file: the "
                    "consent text every rater reads and agrees to ('I agree') before the first "
                    "picture; the agreement is recorded per rater (default: none)")  # fmt: skip

@@ -46,12 +46,13 @@ CRITERIA = (
 RATING_MIN, RATING_MAX = 1, 5
 """The five-point Likert scale."""
 
-ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,31}$")
+ID_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,31}")
 """Scene ids and panel letters."""
-IMAGE_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}\.png$")
+IMAGE_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}\.png")
 """Image file names: a plain name in ``images/``, never a path."""
-METHOD_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9 _.+-]{0,39}$")
-"""Method names given to ``survey build``."""
+METHOD_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9 _.+-]{0,39}")
+"""Method names given to ``survey build``. These patterns are checked with ``fullmatch``
+(``re.match`` with ``$`` would let a trailing newline through)."""
 KEYS = {
     "manifest": ("format", "title", "instructions", "consent", "created", "synthetic",
                  "dataset", "build", "methods", "scenes", "key"),
@@ -326,7 +327,7 @@ class _Reader:
         return float(value)
 
     def ident(self, value: Any, where: str, pattern: re.Pattern[str] = ID_RE) -> str:
-        if not isinstance(value, str) or not pattern.match(value):
+        if not isinstance(value, str) or not pattern.fullmatch(value):
             raise self.fail(where, f"not a valid name: {value!r:.40}")
         return value
 

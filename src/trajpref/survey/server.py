@@ -23,9 +23,15 @@ system); reads at most ``max_body`` bytes of a body (413 beyond); takes JSON onl
 (``Content-Type: application/json``, so a cross-site form cannot post answers, an agreement
 to the consent text or a submission: 415); refuses a change (PUT answers, POST consent or
 submit) whose ``Origin`` header names another host than its ``Host`` header (403); sends a
-strict Content-Security-Policy. Errors are JSON ``{"error": message}`` with a 4xx status.
-The access log shows ``/api/raters/<id>/...`` in place of the rater id (personal data:
-``RaterIdMask``).
+strict Content-Security-Policy. Errors are JSON ``{"error": message}`` with a 4xx status,
+or 503 when the database failed (``StoreError``: a disk error, the study folder deleted while
+serving), which is also logged in one line. The access log shows ``/api/raters/<id>/...`` in
+place of the rater id (personal data: ``RaterIdMask``).
+
+Stopping: Ctrl-C (SIGINT) and SIGTERM alike let the requests in progress finish, then close
+the answers database in uvicorn's shutdown (the app's lifespan), so that the file alone holds
+every answer (``AnswerStore.close``) even though uvicorn re-raises a SIGTERM once it has shut
+down, which ends the process before ``serve`` could close anything itself.
 """
 
 from __future__ import annotations
@@ -36,11 +42,12 @@ import logging
 import os
 import re
 import socket
+import sqlite3
 import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import AsyncIterator, Iterator
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -56,7 +63,13 @@ from starlette.routing import Route
 
 from trajpref.errors import ConfigError
 from trajpref.survey.manifest import DATABASE, Study, load_study
-from trajpref.survey.store import AnswerError, AnswerStore, check_agreement, check_rater
+from trajpref.survey.store import (
+    AnswerError,
+    AnswerStore,
+    StoreError,
+    check_agreement,
+    check_rater,
+)
 
 MAX_BODY = 4096
 """Default limit of a request body in bytes (an answer is about 30)."""
@@ -72,6 +85,8 @@ CSP = (
     "connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'"
 )
 """Content-Security-Policy of every response."""
+LOG = logging.getLogger("uvicorn.error")
+"""Where a failed write is logged (uvicorn's own log: on stderr, also with ``--quiet``)."""
 
 
 RATER_PATH_RE = re.compile(r"(/api/raters/)[^/?#\s]*", re.IGNORECASE)
@@ -152,6 +167,14 @@ def _error(message: str, status: int) -> JSONResponse:
     return JSONResponse({"error": message}, status_code=status)
 
 
+def _refused(exc: AnswerError) -> JSONResponse:
+    """The JSON error of an ``AnswerError``; a ``StoreError`` (the database failed: 503) is
+    also logged, in one line that names the database and not the rater."""
+    if isinstance(exc, StoreError):
+        LOG.error(exc.log)
+    return _error(str(exc), exc.status)
+
+
 async def _read_json(request: Request, limit: int) -> Any:
     """The body as JSON, at most ``limit`` bytes; AnswerError (400/413/415) otherwise."""
     ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
@@ -200,15 +223,26 @@ def check_submission(body: Any) -> None:
 
 
 def create_app(study: Study, store: AnswerStore, max_body: int = MAX_BODY,
-               allowed_hosts: tuple[str, ...] | None = None) -> Starlette:  # fmt: skip
+               allowed_hosts: tuple[str, ...] | None = None,
+               close_store: bool = False) -> Starlette:  # fmt: skip
     """The web application of one study. ``allowed_hosts`` (e.g. ``LOOPBACK_NAMES``) turns
-    the Host check on."""
+    the Host check on. ``close_store``: the app's lifespan closes ``store`` when the server
+    shuts down (``serve``: after SIGTERM as after Ctrl-C)."""
     if max_body < 64:
         raise ConfigError("--max-body must be >= 64 bytes")
     public = {**study.public(), "consent_hash": study.consent_hash if study.consent else None}
     images = study.image_files()  # the only files served from the study folder
     static = {name: (_static_bytes(name), kind) for name, kind in STATIC.items()}
     index = _static_bytes("index.html")
+
+    async def _in_thread(failed: str, action, *args) -> Any:
+        """``action(*args)`` in the thread pool; an SQLite error that the store did not turn
+        into a ``StoreError`` becomes one (``failed``: "the answer was not saved"), so that
+        the rater gets JSON, never a plain-text 500."""
+        try:
+            return await run_in_threadpool(action, *args)
+        except sqlite3.Error as exc:
+            raise StoreError(f"{failed}: {exc}", f"{store.path}: {failed}: {exc}") from exc
 
     async def page(request: Request) -> Response:
         return Response(index, media_type="text/html; charset=utf-8",
@@ -230,19 +264,19 @@ def create_app(study: Study, store: AnswerStore, max_body: int = MAX_BODY,
     async def study_info(request: Request) -> Response:
         return JSONResponse(public)
 
-    def per_rater(action):
+    def per_rater(action, failed: str):
         """An endpoint that runs ``action(rater)`` on the store for a checked rater id."""
 
         async def endpoint(request: Request) -> Response:
             try:
                 rater = check_rater(request.path_params["rater"])
-                return JSONResponse(await run_in_threadpool(action, rater))
+                return JSONResponse(await _in_thread(failed, action, rater))
             except AnswerError as exc:
-                return _error(str(exc), exc.status)
+                return _refused(exc)
 
         return endpoint
 
-    rater_info = per_rater(store.progress)
+    rater_info = per_rater(store.progress, "the answers could not be read")
 
     async def answer(request: Request) -> Response:
         p = request.path_params
@@ -251,10 +285,10 @@ def create_app(study: Study, store: AnswerStore, max_body: int = MAX_BODY,
             store.check_panel(p["scene"], p["panel"])
             ratings = await _read_json(request, max_body)
             _check_origin(request)
-            saved = await run_in_threadpool(store.save, p["rater"], p["scene"], p["panel"],
-                                            ratings)  # fmt: skip
+            saved = await _in_thread("the answer was not saved", store.save, p["rater"],
+                                     p["scene"], p["panel"], ratings)  # fmt: skip
         except AnswerError as exc:
-            return _error(str(exc), exc.status)
+            return _refused(exc)
         return JSONResponse({"saved": True, **saved})
 
     async def submit(request: Request) -> Response:
@@ -265,9 +299,9 @@ def create_app(study: Study, store: AnswerStore, max_body: int = MAX_BODY,
             body = await _read_json(request, max_body)
             _check_origin(request)
             check_submission(body)
-            done = await run_in_threadpool(store.submit, rater)
+            done = await _in_thread("the submission was not saved", store.submit, rater)
         except AnswerError as exc:
-            return _error(str(exc), exc.status)
+            return _refused(exc)
         return JSONResponse(done)
 
     async def consent(request: Request) -> Response:
@@ -278,13 +312,20 @@ def create_app(study: Study, store: AnswerStore, max_body: int = MAX_BODY,
             body = await _read_json(request, max_body)
             _check_origin(request)
             text_hash = check_agreement(body)
-            agreed = await run_in_threadpool(store.consent, rater, text_hash)
+            agreed = await _in_thread("the agreement was not saved", store.consent, rater,
+                                      text_hash)  # fmt: skip
         except AnswerError as exc:
-            return _error(str(exc), exc.status)
+            return _refused(exc)
         return JSONResponse(agreed)
 
     async def http_error(request: Request, exc: HTTPException) -> Response:
         return _error(exc.detail, exc.status_code)
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: Starlette) -> AsyncIterator[None]:
+        yield
+        if close_store:  # the requests in progress have finished: uvicorn waited for them
+            await run_in_threadpool(store.close)
 
     app = Starlette(
         routes=[
@@ -298,6 +339,7 @@ def create_app(study: Study, store: AnswerStore, max_body: int = MAX_BODY,
             Route("/api/raters/{rater}/consent", consent, methods=["POST"]),
         ],
         exception_handlers={HTTPException: http_error},
+        lifespan=lifespan,
     )
     return _Guard(app, allowed_hosts)  # type: ignore[return-value]
 
@@ -343,17 +385,18 @@ def serve(
         store = AnswerStore(db or study.folder / DATABASE, study)
         try:
             allowed = (*LOOPBACK_NAMES, host) if is_loopback(host) else None
-            app = create_app(study, store, max_body, allowed)
+            app = create_app(study, store, max_body, allowed, close_store=True)
             config = uvicorn.Config(app, log_level="warning" if quiet else "info",
                                     access_log=not quiet, server_header=False)  # fmt: skip
             mask_access_log()  # after the Config: it sets uvicorn's loggers up
             note = "" if is_loopback(host) else " (not loopback: anyone who can reach it may rate)"
             print(f"serving {study.title!r}: {len(study.scenes)} scenes, {study.num_panels} "
-                  f"panels at {url_of(sock)}{note}; answers in {store.path}; Ctrl-C to stop",
+                  f"panels at {url_of(sock)}{note}; answers in {store.path}; Ctrl-C (or "
+                  "SIGTERM) to stop",
                   flush=True)  # fmt: skip
             uvicorn.Server(config).run(sockets=[sock])
         finally:
-            store.close()
+            store.close()  # closed already after a clean shutdown; not after a second Ctrl-C
     finally:
         sock.close()
 

@@ -49,7 +49,7 @@ class SimulateConfig:
             raise ConfigError("--raters must be >= 1")
         if self.bias_sd < 0 or self.noise_sd < 0:
             raise ConfigError("the spreads must be >= 0")
-        if not RATER_RE.match(f"{self.prefix}-01"):
+        if not RATER_RE.fullmatch(f"{self.prefix}-01"):
             raise ConfigError(f"--prefix {self.prefix!r}: letters, digits or '_.@-'")
 
 

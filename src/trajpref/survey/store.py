@@ -1,4 +1,5 @@
-"""The answers database: one SQLite file in WAL mode, one row per (rater, scene, panel).
+"""The answers database: one SQLite file (in WAL mode while a writer has it open), one row
+per (rater, scene, panel).
 
 Schema (``SCHEMA``)::
 
@@ -30,7 +31,14 @@ row, never adds one.
 A file made elsewhere (answers collected on paper and imported) is checked when it is opened:
 the tables have the columns of ``SCHEMA``, every rating is an integer in 1..5, every kind is
 ``human`` or ``synthetic``, no answer or rater appears twice, and the file belongs to this
-study. ``analyze`` opens the file read-only (``readonly=True``): it never writes into it.
+study. ``analyze`` opens the file read-only (``readonly=True``): it never writes into it,
+and it reads a study in a read-only folder too (see ``AnswerStore._open_readonly``).
+
+A writer (``serve``, ``simulate``) that closes the file cleanly merges the write-ahead log into
+it and leaves it in rollback-journal mode: one self-contained file, which a copy, a backup or
+a reader in a read-only folder sees whole; the next writer switches it back to WAL. A write
+that fails (a full disk, an unwritable ``-wal``, the file deleted or replaced while open) is a
+``StoreError`` (503), its transaction rolled back.
 
 The answers are personal data: a new file is created owner-only (0600; SQLite gives its
 ``-wal`` and ``-shm`` files the same mode), and opening one that other users can read warns.
@@ -40,9 +48,11 @@ from __future__ import annotations
 
 import contextlib
 import difflib
+import errno
 import os
 import re
 import sqlite3
+import tempfile
 import threading
 import warnings
 from collections.abc import Iterator
@@ -54,9 +64,10 @@ from trajpref.errors import ConfigError, TrajprefError
 from trajpref.io import atomic_path
 from trajpref.survey.manifest import CRITERIA, RATING_MAX, RATING_MIN, Study
 
-RATER_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.@-]{0,63}$")
+RATER_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.@-]{0,63}")
 """Rater ids: what a person types (letters, digits, ``_ . @ -``, at most 64); not
-case-sensitive (``check_rater`` gives the lower-case form)."""
+case-sensitive (``check_rater`` gives the lower-case form). Checked with ``fullmatch``
+(the whole string: ``re.match`` with ``$`` would let a trailing newline through)."""
 FILE_MODE = 0o600
 """The mode of a new answers database (and of SQLite's -wal and -shm beside it): owner only."""
 KINDS = ("human", "synthetic")
@@ -114,6 +125,36 @@ class AnswerError(TrajprefError, ValueError):
         self.status = status
 
 
+class StoreError(AnswerError):
+    """The database could not take or give an answer (a disk error, a file locked for too
+    long, the study folder deleted while serving): status 503. ``str()`` is for the rater (no
+    path); ``log`` is the line for the researcher's log (with the database's path)."""
+
+    def __init__(self, message: str, log: str):
+        super().__init__(message, 503)
+        self.log = log
+
+
+GONE = ("the study folder is gone (deleted, moved or replaced while the server ran); tell "
+        "the study's researcher")  # fmt: skip
+"""What a rater is told when the answers database is no longer where it was opened."""
+
+
+def _cannot_open(exc: sqlite3.Error) -> bool:
+    """SQLite's SQLITE_CANTOPEN (e.g. a -shm it may not create in a read-only folder)."""
+    name = getattr(exc, "sqlite_errorname", None)  # Python >= 3.11
+    return name == "SQLITE_CANTOPEN" if name else str(exc) == "unable to open database file"
+
+
+def _identity(path: Path) -> tuple[int, int] | None:
+    """The file's (device, inode), or None when there is no file at ``path``."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino
+
+
 def _now() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
 
@@ -127,7 +168,7 @@ def check_rater(rater: Any) -> str:
     """A valid rater id in its canonical, lower-case form (``Alice`` -> ``alice``): ids are
     not case-sensitive, so that a person who types their id once with a capital and once
     without is one rater, not two."""
-    if not isinstance(rater, str) or not RATER_RE.match(rater):
+    if not isinstance(rater, str) or not RATER_RE.fullmatch(rater):
         raise AnswerError("rater id: 1-64 ASCII letters (A-Z, a-z), digits or '_.@-', starting "
                           "with a letter or digit", 422)  # fmt: skip
     return rater.lower()  # ASCII only (RATER_RE): the same as SQLite's lower()
@@ -151,12 +192,46 @@ def _create_private(path: Path) -> None:
     except FileExistsError:
         return  # made meanwhile by another process (or a link): checked like any file
     except OSError as exc:
+        if exc.errno in READ_ONLY_ERRNOS:
+            raise ConfigError(_read_only_folder(path, exc)) from None
         raise ConfigError(f"{path}: cannot create the answers database "
                           f"({exc.strerror or exc})") from None  # fmt: skip
     try:
         os.fchmod(fd, FILE_MODE)  # whatever the umask took away (e.g. 0277 -> 0400)
     finally:
         os.close(fd)
+
+
+READ_ONLY_ERRNOS = (errno.EACCES, errno.EPERM, errno.EROFS)
+"""What creating or opening a file for writing fails with in a read-only place."""
+
+
+def _read_only_folder(path: Path, exc: OSError) -> str:
+    return (f"{path}: cannot write the answers database: the folder {path.parent} is read-only "
+            f"({exc.strerror or exc}); `serve` and `simulate` write the database and SQLite's "
+            "-wal and -shm files there: make the folder writable, or give --db a file in a "
+            "writable folder (`analyze` and `export` read a read-only folder)")  # fmt: skip
+
+
+def _why_unwritable(path: Path) -> str | None:
+    """Why a writer cannot write ``path`` (its folder or the file read-only), or None. Tries:
+    creates (and removes) a temporary file in the folder, opens the file for writing (without
+    writing); for the error message of a failed open only (``os.access`` is no help to root,
+    whom ``chattr +i`` or a read-only mount still stops)."""
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".trajpref-write-test-", dir=path.parent)
+    except OSError as exc:
+        return _read_only_folder(path, exc) if exc.errno in READ_ONLY_ERRNOS else None
+    os.close(fd)
+    os.unlink(probe)
+    try:
+        os.close(os.open(path, os.O_RDWR))
+    except OSError as exc:
+        if exc.errno in READ_ONLY_ERRNOS:
+            return (f"{path}: cannot write the answers database: the file is read-only "
+                    f"({exc.strerror or exc}); make it writable (e.g. `chmod 600 "
+                    f"{path}`)")  # fmt: skip
+    return None
 
 
 def private_output(path: str | Path) -> contextlib.AbstractContextManager[Path]:
@@ -240,16 +315,16 @@ class AnswerStore:
             raise ConfigError(f"{self.path}: cannot create the answers database: there is no "
                               f"folder {self.path.parent}")  # fmt: skip
         self._lock = threading.Lock()
+        self._closed = False
         if not readonly:
             if self.path.exists():
                 _warn_if_shared(self.path)
             else:
                 _create_private(self.path)
+        self._identity = _identity(self.path)  # a write checks that the file is still there
         try:
-            if readonly:  # a URI, so that SQLite itself refuses any write
-                self.db = sqlite3.connect(f"{self.path.resolve().as_uri()}?mode=ro", uri=True,
-                                          timeout=30, isolation_level=None,
-                                          check_same_thread=False)  # fmt: skip
+            if readonly:
+                self.db = self._open_readonly()
             else:
                 self.db = sqlite3.connect(self.path, timeout=30, isolation_level=None,
                                           check_same_thread=False)  # fmt: skip
@@ -257,7 +332,11 @@ class AnswerStore:
             raise ConfigError(f"{self.path}: cannot open the answers database ({exc})") from None
         try:
             self.db.execute("PRAGMA busy_timeout=30000")
-            self._check_tables(new_file_ok=not readonly)  # before anything is written into it
+            # an existing file is checked whole before anything (even its journal mode) changes
+            self._check_tables(new_file_ok=not readonly)
+            if self._has_table("answers"):
+                self._check_values()
+                self._check_study()
             if not readonly:
                 mode = self.db.execute("PRAGMA journal_mode=WAL").fetchone()[0]
                 if mode.lower() != "wal":
@@ -267,14 +346,52 @@ class AnswerStore:
                 self._migrate_consents()
                 self.db.executescript(SCHEMA)
                 self._check_tables(new_file_ok=False)
-            self._check_values()
-            self._check_study()
+                self._check_study(claim=True)
         except sqlite3.Error as exc:
             self.db.close()
-            raise ConfigError(f"{self.path}: not a usable answers database ({exc})") from None
+            why = None if readonly else _why_unwritable(self.path)
+            raise ConfigError(why or f"{self.path}: not a usable answers database ({exc})"
+                              ) from None  # fmt: skip
         except BaseException:
             self.db.close()
             raise
+
+    def _connect(self, query: str) -> sqlite3.Connection:
+        """A connection to the file's URI with ``query`` (a URI, so that SQLite itself refuses
+        any write), tried with one read."""
+        db = sqlite3.connect(f"{self.path.resolve().as_uri()}?{query}", uri=True, timeout=30,
+                             isolation_level=None, check_same_thread=False)  # fmt: skip
+        try:
+            db.execute("SELECT count(*) FROM sqlite_master").fetchone()
+        except BaseException:
+            db.close()
+            raise
+        return db
+
+    def _open_readonly(self) -> sqlite3.Connection:
+        """``mode=ro``; in a read-only folder, where SQLite cannot create the ``-shm`` that
+        reading a WAL-mode file needs, the file as it is (``immutable=1``), but only when no
+        ``-wal`` with content and no ``-journal`` is beside it. That is safe: a writer keeps a
+        ``-wal`` (WAL mode) or needs to create a ``-journal`` (rollback mode) beside the file
+        while it writes, which nobody can in that folder, so nothing changes the file while it
+        is read. Answers still in a ``-wal`` (a killed server) cannot be read without the
+        ``-shm``: a ConfigError that says how to read them."""
+        try:
+            return self._connect("mode=ro")
+        except sqlite3.OperationalError as exc:
+            if not _cannot_open(exc) or not self.path.is_file():
+                raise
+        wal = Path(f"{self.path}-wal")
+        if (wal.exists() and wal.stat().st_size > 0) or Path(f"{self.path}-journal").exists():
+            log = wal.name if wal.exists() else f"{self.path.name}-journal"
+            raise ConfigError(
+                f"{self.path}: cannot be read in place: the folder {self.path.parent} is "
+                f"read-only and the latest answers are still in {log} (the server was killed, "
+                f"or is writing elsewhere), which SQLite reads only with an {self.path.name}-shm "
+                "it may create beside it: copy the study folder (all the answers.sqlite* files "
+                "together) somewhere writable and read the copy, or make the folder writable"
+            )
+        return self._connect("mode=ro&immutable=1")
 
     def _check_tables(self, new_file_ok: bool) -> None:
         """The tables ``answers`` and ``raters`` (and ``meta`` when present) exist with the
@@ -366,23 +483,24 @@ class AnswerStore:
         rows = self.db.execute(query).fetchall()
         return len(rows), (rows[0] if rows else None)
 
-    def _check_study(self) -> None:
-        """The file's ``meta.study_id`` is this study's; a file without one is claimed for
-        this study, unless read-only. A file written before the id covered the data and the
-        scores holds the structure-only ``Study.legacy_study_id``: it is accepted when that
-        matches, with a warning that it cannot tell this study from one of the same
+    def _check_study(self, claim: bool = False) -> None:
+        """The file's ``meta.study_id`` is this study's. ``claim`` (a writer, once the schema
+        is written): a file without one is claimed for this study. A file written before the
+        id covered the data and the scores holds the structure-only
+        ``Study.legacy_study_id``: it is accepted when that matches, with a warning (when
+        checked, not again when claimed) that it cannot tell this study from one of the same
         structure (it is not rewritten: it may be another such study's)."""
         query = "SELECT value FROM meta WHERE key = 'study_id'"
-        if self.readonly:
-            has_meta = self.db.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND "
-                                       "name = 'meta'").fetchone()  # fmt: skip
-            row = self.db.execute(query).fetchone() if has_meta else None
-        else:
+        if claim:
             with self._tx():
                 row = self.db.execute(query).fetchone()
                 if row is None:
                     self.db.execute("INSERT INTO meta VALUES ('study_id', ?)",
                                     (self.study.study_id,))  # fmt: skip
+            if row is not None and row[0] == self.study.legacy_study_id:
+                return  # checked (and warned of) before
+        else:
+            row = self.db.execute(query).fetchone() if self._has_table("meta") else None
         if row is None or row[0] == self.study.study_id:
             return
         if row[0] != self.study.legacy_study_id:
@@ -394,19 +512,56 @@ class AnswerStore:
                       "data or models", stacklevel=3)  # fmt: skip
 
     @contextlib.contextmanager
-    def _tx(self) -> Iterator[None]:
-        """One IMMEDIATE transaction under the lock: committed on success, else rolled back."""
+    def _tx(self, what: str | None = None) -> Iterator[None]:
+        """One IMMEDIATE transaction under the lock: committed on success, else rolled back
+        (also when the COMMIT itself fails: a transaction left open would refuse every later
+        one). ``what`` (``"the answer"``): a write for a rater, done only while the file is
+        still the one opened (``StoreError`` otherwise), and any SQLite error is a
+        ``StoreError`` ("the answer was not saved: disk I/O error")."""
         with self._lock:
-            self.db.execute("BEGIN IMMEDIATE")
+            if what is not None:
+                self._check_present(f"{what} was not saved")
             try:
-                yield
-            except BaseException:
-                self.db.execute("ROLLBACK")
-                raise
-            self.db.execute("COMMIT")
+                self.db.execute("BEGIN IMMEDIATE")
+                try:
+                    yield
+                    self.db.execute("COMMIT")
+                except BaseException:
+                    if self.db.in_transaction:
+                        with contextlib.suppress(sqlite3.Error):
+                            self.db.execute("ROLLBACK")
+                    raise
+            except sqlite3.Error as exc:
+                if what is None:
+                    raise
+                message = f"{what} was not saved: {exc}"
+                raise StoreError(message, f"{self.path}: {message}") from exc
+
+    def _check_present(self, failed: str) -> None:
+        """``StoreError`` (``failed``: "the answer was not saved") when the file at ``path``
+        is gone or another one (the study folder deleted, moved or replaced while the server
+        runs): SQLite would go on writing into the open, unlinked file, and every answer would
+        be lost."""
+        if self._identity is None or _identity(self.path) != self._identity:
+            raise StoreError(f"{failed}: {GONE}",
+                             f"{self.path}: the answers database is gone (its folder was "
+                             f"deleted, moved or replaced while serving): {failed}; stop the "
+                             "server, put the study folder back and serve it again")  # fmt: skip
 
     def close(self) -> None:
+        """Close the file (again: nothing). A writer first merges the write-ahead log into the
+        file and leaves it in rollback-journal mode (``journal_mode=DELETE``), so that the file
+        alone holds every answer and a reader needs no ``-shm`` (a read-only folder); when
+        another connection has the file open, it stays in WAL mode (the last one to close
+        merges the log)."""
         with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            if not self.readonly and _identity(self.path) == self._identity:
+                with contextlib.suppress(sqlite3.Error):
+                    self.db.execute("PRAGMA busy_timeout=0")  # another connection: no wait
+                    self.db.execute("PRAGMA journal_mode=DELETE").fetchall()
             self.db.close()
 
     # ---- writes -------------------------------------------------------------------------
@@ -462,7 +617,7 @@ class AnswerStore:
             checked.append((scene, panel, *check_ratings(ratings)))
         now = _now()
         revision = 0
-        with self._tx():
+        with self._tx("the answer" if len(checked) == 1 else "the answers"):
             rater = self._stored_id(rater)
             row = self._rater_row(rater, kind, create=True)
             if row is not None and row[1] is not None:
@@ -510,7 +665,7 @@ class AnswerStore:
         if text_hash != self.study.consent_hash:
             raise AnswerError("the consent text has changed since the page was loaded: reload "
                               "the page and read it again", 409)  # fmt: skip
-        with self._tx():
+        with self._tx("the agreement"):
             rater = self._stored_id(rater)
             self._rater_row(rater, "human", create=True)
             agreed = self._agreed(rater)
@@ -523,7 +678,7 @@ class AnswerStore:
     def submit(self, rater: str, kind: str = "human") -> dict[str, Any]:
         """Mark a rater's answers final; 409 while panels are unanswered. Idempotent."""
         rater = check_rater(rater)
-        with self._tx():
+        with self._tx("the submission"):
             rater = self._stored_id(rater)
             row = self._rater_row(rater, kind, create=False)
             answered = self._answered(rater) if row is not None else 0
@@ -548,14 +703,20 @@ class AnswerStore:
         file's spelling); ``consent_required``: the study has a consent text, ``consented``:
         the rater agreed to it."""
         rater = check_rater(rater)
+        failed = "the answers could not be read"
         with self._lock:
-            rater = self._stored_id(rater)
-            row = self.db.execute("SELECT kind, submitted_at FROM raters WHERE rater = ?",
-                                  (rater,)).fetchone()  # fmt: skip
-            rows = self.db.execute(
-                "SELECT scene, panel, social, kinetics FROM answers WHERE rater = ?", (rater,)
-            ).fetchall()
-            agreed = self._agreed(rater) if self.study.consent else None
+            if not self.readonly:
+                self._check_present(failed)
+            try:
+                rater = self._stored_id(rater)
+                row = self.db.execute("SELECT kind, submitted_at FROM raters WHERE rater = ?",
+                                      (rater,)).fetchone()  # fmt: skip
+                rows = self.db.execute(
+                    "SELECT scene, panel, social, kinetics FROM answers WHERE rater = ?", (rater,)
+                ).fetchall()
+                agreed = self._agreed(rater) if self.study.consent else None
+            except sqlite3.Error as exc:
+                raise StoreError(f"{failed}: {exc}", f"{self.path}: {failed}: {exc}") from exc
         answers: dict[str, dict[str, dict[str, int]]] = {}
         for scene, panel, social, kinetics in rows:
             if panel in self.panels.get(scene, ()):

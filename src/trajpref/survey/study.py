@@ -222,7 +222,7 @@ def write_study(
     if not scenes:
         raise ConfigError("a study needs at least one scene")
     for m in methods:
-        if m != GROUND_TRUTH and not METHOD_RE.match(m):
+        if m != GROUND_TRUTH and not METHOD_RE.fullmatch(m):
             raise ConfigError(f"method name {m!r}: use letters, digits, ' _.+-' (at most 40)")
     if len(set(methods)) != len(methods):
         raise ConfigError("method names must be unique")

@@ -3,6 +3,9 @@
 // the server is the only record: reloading the page, or entering the same rater id on
 // another day, resumes from what it holds. A study with a consent text shows it after the rater
 // id and before the first picture; the server takes answers only once the rater agreed.
+// The browser remembers its last rater id (localStorage) and resumes that rater's session on
+// the next visit; on a shared machine the next person may not be that rater, so a resumed
+// session says whose it is, with a "Not you? Start as a new rater" control.
 "use strict";
 
 const RATER_KEY = "trajpref-survey-rater";
@@ -12,6 +15,7 @@ const state = {
   study: null, // the public study from /api/study
   items: [], // every panel in order: {scene, panel, image, reference, sceneNo, panelNo}
   rater: null,
+  resumed: false, // the rater came from this browser's memory, not typed in this visit
   pos: 0, // index into items
   answers: {}, // "scene/panel" -> {social, kinetics}: what the server holds
   draft: {}, // "scene/panel" -> {social?, kinetics?}: ratings not yet sent
@@ -24,7 +28,21 @@ const keyOf = (item) => `${item.scene}/${item.panel}`;
 function show(view) {
   for (const id of ["login", "consent", "rate", "done", "failure"]) $(id).hidden = id !== view;
   $("progress-box").hidden = view !== "rate";
+  // whose session this browser resumed, with the way out: shown until the rater is changed
+  const note = state.resumed && !!state.rater && view !== "login" && view !== "failure";
+  $("resume-note").hidden = !note;
+  $("resume-rater").textContent = note ? state.rater : "";
   document.body.dataset.view = view;
+}
+
+function newRater() {
+  // forget the remembered rater: the login form, empty, for the person at the keyboard
+  localStorage.removeItem(RATER_KEY);
+  state.rater = null;
+  state.resumed = false;
+  $("rater").value = "";
+  show("login");
+  $("rater").focus();
 }
 
 function fail(message) {
@@ -196,8 +214,9 @@ function save(item, body) {
   return state.saving;
 }
 
-async function startRater(rater) {
+async function startRater(rater, resumed = false) {
   state.rater = rater;
+  state.resumed = resumed;
   state.answers = {};
   state.draft = {};
   let progress;
@@ -205,6 +224,7 @@ async function startRater(rater) {
     progress = await api("GET", `api/raters/${encodeURIComponent(rater)}`);
   } catch (e) {
     localStorage.removeItem(RATER_KEY);
+    state.resumed = false;
     show("login");
     $("rater").value = rater;
     setLoginError(e.message);
@@ -239,7 +259,7 @@ async function agree() {
     if (e.status === 409) await reloadConsent();
     return;
   }
-  startRater(state.rater); // the server's record again: resumes where the rater is
+  startRater(state.rater, state.resumed); // the server's record again: resumes where the rater is
 }
 
 async function reloadConsent() {
@@ -348,20 +368,13 @@ async function main() {
   $("next").addEventListener("click", () => moveTo(state.pos + 1));
   $("submit").addEventListener("click", submitAll);
   $("agree").addEventListener("click", agree);
-  $("consent-back").addEventListener("click", () => {
-    localStorage.removeItem(RATER_KEY);
-    $("rater").value = "";
-    show("login");
-  });
-  $("switch-rater").addEventListener("click", () => {
-    localStorage.removeItem(RATER_KEY);
-    $("rater").value = "";
-    show("login");
-  });
+  $("consent-back").addEventListener("click", newRater);
+  $("switch-rater").addEventListener("click", newRater);
+  $("not-me").addEventListener("click", newRater);
   document.addEventListener("keydown", onKey);
   const saved = localStorage.getItem(RATER_KEY);
   if (saved) {
-    startRater(saved);
+    startRater(saved, true); // remembered by this browser: the page says whose session it is
   } else {
     show("login");
     $("rater").focus();
