@@ -25,8 +25,9 @@ def _walkers(root, jump: float):
 @pytest.mark.parametrize(("jump", "warned"), [(20.0, True), (0.0, False)])
 def test_an_agent_jumping_in_its_history_is_warned_of_once(tmp_path, capsys, jump, warned):
     data = _walkers(tmp_path / "d", jump)
+    out = str(tmp_path / "p.npz")
     argv = ["predict", "--dataset", str(data), "--model", "zara1/generator", "--units", "m",
-            "--frame-interval", "0.4", "--no-progress", "--out", str(tmp_path / "p.npz")]  # fmt: skip
+            "--frame-interval", "0.4", "--no-progress", "--out", out]  # fmt: skip
     assert main(argv) == 0
     err = capsys.readouterr().err
     assert err.count("jumps more than 5 model units") == (1 if warned else 0)
