@@ -74,6 +74,10 @@ def test_the_rule_leaves_files_names_and_other_paths_alone(monkeypatch, tmp_path
     assert zoo.not_here_message("zara1/generator") is None  # a name, not a path
     assert zoo.not_here_message("models/zara9/generator.safetensors") is None  # no such model
     assert zoo.not_here_message("models/zara1/generator.txt") is None  # not a checkpoint
+    # a run's own output folder, not yet written, is not the zoo's place
+    assert zoo.not_here_message("/home/me/runs/zara1/generator.safetensors") is None
+    assert zoo.not_here_message("runs/zara1/generator.safetensors") is None
+    assert zoo.not_here_message("/somewhere/src/trajpref/zoo/zara1/generator.safetensors")
     (tmp_path / "zara1").mkdir()
     (tmp_path / "zara1" / "generator.safetensors").write_bytes(b"")
     assert zoo.not_here_message("zara1/generator.safetensors") is None  # a file here

@@ -182,6 +182,32 @@ def test_answers_still_in_the_wal_of_a_read_only_folder_are_one_clear_error(synt
     assert "not a usable answers database" not in message
 
 
+def test_a_live_servers_files_beside_the_database_are_not_read_as_immutable(
+    synthetic_study, monkeypatch
+):
+    """A server run by another user keeps its -wal (empty after a checkpoint) and its -shm,
+    which this reader may not open, so ``mode=ro`` cannot open the file: reading it as
+    immutable could then show a state the server is changing, so the reader refuses with the
+    same clear error (the other user is played by a ``mode=ro`` that cannot open, as
+    SQLite's own error)."""
+    _simulated(synthetic_study)
+    db = synthetic_study / DATABASE
+    Path(f"{db}-wal").write_bytes(b"")  # what a live writer's checkpointed -wal looks like
+    Path(f"{db}-shm").write_bytes(b"\0" * 32768)
+    connect = AnswerStore._connect
+
+    def other_users_shm(self, query):
+        if query == "mode=ro":
+            raise sqlite3.OperationalError("unable to open database file")
+        return connect(self, query)
+
+    monkeypatch.setattr(AnswerStore, "_connect", other_users_shm)
+    with pytest.raises(ConfigError) as err:
+        AnswerStore(db, load_study(synthetic_study), readonly=True)
+    assert "answers.sqlite-wal and answers.sqlite-shm" in str(err.value)
+    assert "stop the server" in str(err.value)
+
+
 @pytest.mark.parametrize("existing", [True, False])
 def test_serve_in_a_read_only_folder_says_the_folder_is_read_only(synthetic_study, existing):
     db = synthetic_study / DATABASE

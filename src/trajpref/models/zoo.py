@@ -41,9 +41,12 @@ def named_by_path(spec: str | Path) -> str | None:
     place: ``models/zara1/generator.safetensors`` (the repository's path, given outside the
     repository) or ``zara1/generator.safetensors`` (a name with a suffix) name
     ``zara1/generator``; None for a file that exists, a name, a legacy ``.pt`` path whose
-    ``.safetensors`` file exists, or a path that names no published model."""
+    ``.safetensors`` file exists, a path that names no published model, and one in another
+    folder (``runs/zara1/generator.safetensors``: a run's own output, not the zoo's)."""
     path = Path(spec)
     if path.exists() or is_name(spec) or path.with_suffix(SUFFIX).is_file():
+        return None
+    if len(path.parts) != 2 and path.parent.parent.name not in ("models", "zoo"):
         return None
     name = f"{path.parent.name}/{path.stem}"
     return name if path.suffix in (SUFFIX, ".pt") and name in published() else None

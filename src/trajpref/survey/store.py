@@ -369,27 +369,28 @@ class AnswerStore:
         return db
 
     def _open_readonly(self) -> sqlite3.Connection:
-        """``mode=ro``; in a read-only folder, where SQLite cannot create the ``-shm`` that
-        reading a WAL-mode file needs, the file as it is (``immutable=1``), but only when no
-        ``-wal`` with content and no ``-journal`` is beside it. That is safe: a writer keeps a
-        ``-wal`` (WAL mode) or needs to create a ``-journal`` (rollback mode) beside the file
-        while it writes, which nobody can in that folder, so nothing changes the file while it
-        is read. Answers still in a ``-wal`` (a killed server) cannot be read without the
-        ``-shm``: a ConfigError that says how to read them."""
+        """``mode=ro``; in a folder this process cannot write, where SQLite cannot create the
+        ``-shm`` that reading a WAL-mode file needs, the file as it is (``immutable=1``), but
+        only when no ``-wal``, ``-shm`` or ``-journal`` is beside it: a clean stop removes
+        them, and a writer needs one of them while it writes (a server run by another user,
+        or through another mount, keeps its ``-wal`` and ``-shm`` open), so nothing changes
+        the file while it is read. Otherwise (a server writing, or killed with its answers
+        still in the ``-wal``): a ConfigError that says how to read them."""
         try:
             return self._connect("mode=ro")
         except sqlite3.OperationalError as exc:
             if not _cannot_open(exc) or not self.path.is_file():
                 raise
-        wal = Path(f"{self.path}-wal")
-        if (wal.exists() and wal.stat().st_size > 0) or Path(f"{self.path}-journal").exists():
-            log = wal.name if wal.exists() else f"{self.path.name}-journal"
+        beside = [Path(f"{self.path}-{end}") for end in ("wal", "shm", "journal")]
+        present = [p.name for p in beside if p.exists()]
+        if present:
             raise ConfigError(
                 f"{self.path}: cannot be read in place: the folder {self.path.parent} is "
-                f"read-only and the latest answers are still in {log} (the server was killed, "
-                f"or is writing elsewhere), which SQLite reads only with an {self.path.name}-shm "
-                "it may create beside it: copy the study folder (all the answers.sqlite* files "
-                "together) somewhere writable and read the copy, or make the folder writable"
+                f"read-only here and {' and '.join(present)} beside it say that a server is "
+                "writing it or was killed with answers not yet in the file, which SQLite reads "
+                f"only with an {self.path.name}-shm it may create: stop the server, or copy the "
+                "study folder (all the answers.sqlite* files together) somewhere writable and "
+                "read the copy, or make the folder writable"
             )
         return self._connect("mode=ro&immutable=1")
 

@@ -575,10 +575,11 @@ def fit(
     note = warmup_note(stage.name, optim_cfg, total)
     if note is not None and main and step < optim_cfg.warmup_steps:  # once, while it lasts
         tqdm.write(note)
+    # a rank after the first draws its own dropout masks (rank 0: the builder's seed); a
+    # resume state's own generators then replace those it holds (an old state may hold none)
+    seed_rank_generators(seed, dist_info.rank, device)
     if resume_torch is not None:
         _restore_torch_generators(resume_torch, device, stage, main)
-    else:  # a rank after the first draws its own dropout masks (rank 0: the builder's seed)
-        seed_rank_generators(seed, dist_info.rank, device)
     for epoch in range(start_epoch, optim_cfg.epochs):
         t0, c0 = time.perf_counter(), clock()
         loader.set_epoch(epoch)
