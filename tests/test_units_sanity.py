@@ -1,6 +1,6 @@
 """Data in other units than the model's (centimetres given to a metre model): the generator's
 speed clamp hides it and the score's ranking does not, so every entry point warns when the
-observed pace is far above the model's training (``models.timing.check_observed_pace``)."""
+observed pace is far above the model's training (``models.timing.check_observed_steps``)."""
 
 from __future__ import annotations
 

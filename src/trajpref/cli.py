@@ -81,9 +81,8 @@ from trajpref.models import zoo
 from trajpref.models.registry import load_predictor
 from trajpref.models.timing import (
     UNKNOWN_UNITS,
-    jump_problem,
     model_timing,
-    pace_problem,
+    observed_problem,
     same_units,
     timing_problems,
     trained_otherwise,
@@ -1284,28 +1283,20 @@ def _warn_untyped_data(args, model, scorer, ds) -> None:
 
 
 def _warn_observed_pace(args, model, scorer, ds) -> None:
-    """One warning per run when the data's observed pace is far above the model's training
-    (``timing.pace_problem``: the 90th percentile of the observed step of the split's agents above
-    ``timing.PACE_LIMIT`` model units; data in other units, e.g. centimetres for a metre
-    model, which the generator's speed clamp hides and the score does not), for the model,
-    else for its ``scorer`` (the constant-velocity baseline reads any units); else one when an
-    agent jumps more than ``timing.JUMP_LIMIT`` model units in one observed step
-    (``timing.jump_problem``: a tracker id switch; balls are not checked)."""
+    """One warning per run, for the model, else for its ``scorer`` (the constant-velocity
+    baseline reads any units), when the split's observed steps are far from the model's
+    training (``timing.observed_problem``): the 90th percentile of its agents' pace above
+    ``timing.PACE_LIMIT`` model units (data in other units, e.g. centimetres for a metre
+    model, which the generator's speed clamp hides and the score does not), else one agent
+    jumping more than ``timing.JUMP_LIMIT`` in one step (a tracker id switch)."""
     history = np.concatenate([s.history for s in ds.scenes]) if len(ds) else None  # [N, T_h, 2]
     if history is None:
         return
     base = getattr(model, "base", model)  # a SelectingPredictor's generator
-    models = [(o, n or "the scorer") for o, n in ((base, args.model),
-              (scorer, getattr(args, "scorer", None))) if o is not None]  # fmt: skip
-    for obj, name in models:
-        problem = pace_problem(obj, history, name)
-        if problem is not None:
-            warnings.warn(problem, stacklevel=2)
-            return
-    # else one agent's jump (a tracker id switch), which the 90 % quantile does not see
     types = np.concatenate([s.agent_type for s in ds.scenes])  # [N]
-    for obj, name in models:
-        problem = jump_problem(obj, history, name, types)
+    for obj, name in ((base, args.model), (scorer, getattr(args, "scorer", None))):
+        problem = None if obj is None else observed_problem(obj, history, name or "the scorer",
+                                                            types)  # fmt: skip
         if problem is not None:
             warnings.warn(problem, stacklevel=2)
             return

@@ -162,15 +162,15 @@ PACE_REFERENCE = 0.582
 step, first to last observed position, ``data.transforms.observed_pace``): NBA's 0.582; the
 others 0.28 (robo-sim) to 0.529 (SDD) (docs/pretraining.md, "An input speed clamp")."""
 PACE_LIMIT = 5.0
-"""``check_observed_pace`` warns when the ``PACE_QUANTILE`` of the observed steps of the agents
-handed over at once exceeds this many model units per step: about 8.6 times
+"""``pace_problem`` (``check_observed_steps``) warns when the ``PACE_QUANTILE`` of the observed
+steps of the agents handed over at once exceeds this many model units per step: about 8.6 times
 ``PACE_REFERENCE`` (zara1, data scale 1.47 m: 7.4 m per 0.4 s step, 18 m/s). Positions in
 centimetres given to a metre model move 100 times their metre pace (a walker 15-50 model
 units per step). No scene of the published ETH/UCY and SDD training and test splits nor of
 robo's and nba's test splits reaches 2.4 (SDD's fastest training scene; 0.73 on the ETH/UCY
 ones, 0.58 on nba's), each read with its own model's scale (2026-12-06)."""
 PACE_QUANTILE = 0.9
-"""The quantile over agents that ``check_observed_pace`` compares with ``PACE_LIMIT``: the
+"""The quantile over agents that ``pace_problem`` compares with ``PACE_LIMIT``: the
 90th percentile, not the median, as most agents of many scenes stand (the median of hotel's
 test split in centimetres stays below the limit; its 90th percentile is above it in 60 % of
 its scenes), and not the largest, so that one mistracked agent
@@ -222,20 +222,9 @@ def pace_problem(obj: Any, history: Any, name: str = "this model") -> str | None
             "gives the number)")  # fmt: skip
 
 
-def check_observed_pace(obj: Any, history: Any, name: str = "this model",
-                        stacklevel: int = 3) -> bool:  # fmt: skip
-    """Warn (``UserWarning``, once) with ``pace_problem``'s text when the observed pace of
-    ``history`` [N, T_h, 2] is far above ``obj``'s training (``PACE_LIMIT``); returns whether
-    it warned."""
-    problem = pace_problem(obj, history, name)
-    if problem is not None:
-        warnings.warn(problem, stacklevel=stacklevel)
-    return problem is not None
-
-
 JUMP_LIMIT = PACE_LIMIT
-"""``check_observed_jumps`` warns when one agent's single observed step (between two
-consecutive history positions) exceeds this many model units (positions / the model's data
+"""``jump_problem`` (``check_observed_steps``) warns when one agent's single observed step
+(between two consecutive history positions) exceeds this many model units (positions / the model's data
 scale): 7.4 m in one 0.4 s step at zara1's scale of 1.47 m, where a tracker id switch (two
 people under one id) or a long gap bridged as one step jumps the position, and the model
 fans its futures out over tens of metres (a 10 m jump, 6.8 model units, spread zara1's
@@ -292,13 +281,21 @@ def jump_problem(obj: Any, history: Any, name: str = "this model",
             "and how many")  # fmt: skip
 
 
-def check_observed_jumps(obj: Any, history: Any, name: str = "this model",
+def observed_problem(obj: Any, history: Any, name: str = "this model",
+                     agent_type: Any = None) -> str | None:  # fmt: skip
+    """What is wrong with the observed steps of ``history`` [N, T_h, 2] for ``obj`` (a
+    predictor or scorer), one cause and one text: the pace of all its agents far above the
+    model's training (``pace_problem``: data in other units), else one agent's jump
+    (``jump_problem``: a tracker id switch; balls in ``agent_type`` [N] not checked); None
+    when neither. Data in other units moves every agent far, so the pace comes first."""
+    return pace_problem(obj, history, name) or jump_problem(obj, history, name, agent_type)
+
+
+def check_observed_steps(obj: Any, history: Any, name: str = "this model",
                          stacklevel: int = 3, agent_type: Any = None) -> bool:  # fmt: skip
-    """Warn (``UserWarning``, once) with ``jump_problem``'s text when an agent of ``history``
-    [N, T_h, 2] takes an implausibly large single observed step for ``obj`` (``JUMP_LIMIT``);
-    returns whether it warned. The callers skip it where ``check_observed_pace`` warned
-    already: data in other units moves every agent far, one cause for both."""
-    problem = jump_problem(obj, history, name, agent_type)
+    """Warn (``UserWarning``, once) with ``observed_problem``'s text; returns whether it
+    warned. The same text at every call, so that a planner's loop is warned once."""
+    problem = observed_problem(obj, history, name, agent_type)
     if problem is not None:
         warnings.warn(problem, stacklevel=stacklevel)
     return problem is not None

@@ -38,8 +38,7 @@ from trajpref.models.encoder import check_neighbour_radius, scene_features
 from trajpref.models.predictor import as_integer, check_coordinates
 from trajpref.models.timing import (
     attach_timing,
-    check_observed_jumps,
-    check_observed_pace,
+    check_observed_steps,
     check_pace,
 )
 from trajpref.types import AGENT_BALL, AGENT_PERSON, Batch
@@ -456,7 +455,7 @@ def rank_samples(
     rank by the last step only (FTS order) instead of all steps (ATS order).
     ``frame_interval`` (seconds between the positions) and ``units``, when given, are compared
     with the scorer's, with a warning where they differ (as ``predict_scene``); so is the
-    observed pace (``models.timing.check_observed_pace``: data in centimetres for a metre
+    observed pace (``models.timing.check_observed_steps``: data in centimetres for a metre
     scorer ranks nonsense).
 
     Returns ``(order [K] int64, residual [K] float32)``: sample indices best first, and each
@@ -517,7 +516,7 @@ def predict_scene(model, history: ArrayLike, num_samples: int = 20,
     check): a model trained on 0.5 s steps reads 0.4 s tracks as slower agents, and its 12
     steps then span 6 s, not 4.8. Positions in other units than the model's (centimetres for
     metres) get a ``UserWarning`` too, once per call, when the scene's agents move far faster
-    than its training data (``models.timing.check_observed_pace``).
+    than its training data (``models.timing.check_observed_steps``).
 
     Agent order: a model with agent roles (``model.agent_roles`` > 0: robo/generator and
     robo-mix/generator, 3 roles) reads each agent's place in ``history`` as its role, so the
@@ -662,9 +661,8 @@ def _predict(model, histories: list, num_samples, agent_types: list, seed, frame
     pred = None
     if present:  # one warning per call: cm for m (the speed clamp would hide it)
         joined = torch.cat([h for h, _, _ in present])  # [N, T_h, 2]
-        if not check_observed_pace(model, joined, stacklevel=4):  # one cause, one warning
-            check_observed_jumps(model, joined, stacklevel=4,  # an id switch: a wide fan
-                                 agent_type=torch.cat([t for _, t, _ in present]))  # fmt: skip
+        check_observed_steps(model, joined, stacklevel=4,  # other units, or an id switch
+                             agent_type=torch.cat([t for _, t, _ in present]))  # fmt: skip
         batch = _join(present, t_f)
         pred = model.predict(batch, count, torch.Generator().manual_seed(seed))  # [K, N, T_f, 2]
     elif callable(getattr(model, "check_samples", None)):  # predict's refusal, without a pass
@@ -753,10 +751,8 @@ def scene_batch(scorer: TrajectoryScorer, history: ArrayLike, samples: ArrayLike
     # map coordinates rank differently in float32: predict's rule, at the scorer's scale
     check_coordinates(hist, scorer.scale)
     types = _agent_types(agent_type, p, device)
-    if p and not check_observed_pace(scorer, hist, name="this scorer", stacklevel=4):
-        # cm given to a metre scorer scrambles its ranking without an error; else one agent's
-        # jump (a tracker id switch)
-        check_observed_jumps(scorer, hist, name="this scorer", stacklevel=4, agent_type=types)
+    if p:  # cm given to a metre scorer scrambles its ranking without an error; or an id switch
+        check_observed_steps(scorer, hist, name="this scorer", stacklevel=4, agent_type=types)
     return _join([(hist, types, None)], t_f), futs
 
 
