@@ -92,7 +92,7 @@ EVAL = ["evaluate", "--dataset", "{walks}", "--model", "zara1/generator", "--no-
      r"--chosen sets --drop \(the setting chosen for zara1/generator\): leave it out"),
     (["--keep", "3", "--chosen", "--select", "fps", "--bandwidth", "1", "--select-temperature",
       "2", "--trust-speed", "0.1", "--score-every", "3", "--score-from", "0"],
-     r"--chosen sets --select, --bandwidth, --select-temperature, --trust-speed, "
+     r"--chosen sets --select, --trust-speed, --bandwidth, --select-temperature, "
      r"--score-every, --score-from \(.*\): leave them out"),
     (["--keep", "3", "--chosen", "--samples", "10"], r"--chosen: .*give --samples 20"),
     (["--keep", "3", "--chosen", "--scorer", "eth/denoiser"],

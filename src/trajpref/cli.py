@@ -273,8 +273,12 @@ steps of 100, ``TrajectoryScorer``'s own (``--keep`` selects at ``SelectionConfi
 CHOSEN_KINDS = ("full", "cheap")
 """``--chosen``'s values: the chosen setting at 34 score steps (``--chosen`` alone) or its
 cheap one (``--chosen cheap``)."""
-CHOSEN_SETS = ("--select", "--drop", "--bandwidth", "--select-temperature", "--trust-speed",
-               "--score-every", "--score-from")  # fmt: skip
+SELECTION_FLAGS = {"method": "--select", "per": "--select-per", "drop": "--drop",
+                   "trust_speed": "--trust-speed", "bandwidth": "--bandwidth",
+                   "temperature": "--select-temperature", "score_every": "--score-every",
+                   "score_from": "--score-from"}  # fmt: skip
+"""``SelectionConfig`` fields and the options that set them."""
+CHOSEN_SETS = tuple(flag for field, flag in SELECTION_FLAGS.items() if field != "per")
 """The options whose settings ``--chosen`` takes from ``chosen_selection`` (giving one beside
 it is a ConfigError; ``--select-per`` and ``--score-precision`` stay the user's)."""
 
@@ -1336,11 +1340,6 @@ def _scorer(path: str, device, args=None, every: int = RANK_SCORE_EVERY):
     return scorer.with_steps(steps, args.score_precision or "fp32")
 
 
-SELECTION_FLAGS = {"method": "--select", "per": "--select-per", "drop": "--drop",
-                   "trust_speed": "--trust-speed", "bandwidth": "--bandwidth",
-                   "temperature": "--select-temperature", "score_every": "--score-every",
-                   "score_from": "--score-from"}  # fmt: skip
-"""``SelectionConfig`` fields and the options that set them."""
 SELECTION_ONLY = ("method", "per", "drop", "trust_speed", "bandwidth", "temperature")
 """The selection's own settings (the score's steps serve --rank and --scorer too)."""
 
