@@ -223,18 +223,17 @@ def pace_problem(obj: Any, history: Any, name: str = "this model") -> str | None
 
 
 JUMP_LIMIT = PACE_LIMIT
-"""``jump_problem`` (``check_observed_steps``) warns when one agent's single observed step
-(between two consecutive history positions) exceeds this many model units (positions / the model's data
+"""``jump_problem`` (``check_observed_steps``) warns when one agent's single observed step (between
+two consecutive history positions) exceeds this many model units (positions / the model's data
 scale): 7.4 m in one 0.4 s step at zara1's scale of 1.47 m, where a tracker id switch (two
-people under one id) or a long gap bridged as one step jumps the position, and the model
-fans its futures out over tens of metres (a 10 m jump, 6.8 model units, spread zara1's
-generator's final positions of that agent over 35 m, against 5 m without it). The largest
-single step of any target agent of the published test splits, each read with its own
-model's scale (2026-12, walkthrough 65): zara1 0.68 (1.0 m), eth 1.02 (1.55 m), sdd 2.46
-(145 px), hotel 0.52, univ 0.50, zara2 0.60, robo 0.58, nba's players 0.62; nba's ball
-steps up to 8.5 and is not checked (``AGENT_BALL``). The training splits of zara1's and
-eth's folds stay below 1.06; sdd's holds one 14.9 (881 px, ``train.npz#3491``): a mistracked
-window of the kind this warns of."""
+people under one id) or a long gap bridged as one step jumps the position, and the model fans
+its futures out over tens of metres (a 10 m jump, 6.8 model units, spread zara1's generator's
+final positions of that agent over 35 m, against 5 m without it). The largest single step of any
+target agent of the published test splits, each read with its own model's scale (2026-12,
+walkthrough 65): zara1 0.68 (1.0 m), eth 1.02 (1.55 m), sdd 2.46 (145 px), hotel 0.52, univ
+0.50, zara2 0.60, robo 0.58, nba's players 0.62; nba's ball steps up to 8.5 and is not checked
+(``AGENT_BALL``). The training splits of zara1's and eth's folds stay below 1.06; sdd's holds
+one 14.9 (881 px, ``train.npz#3491``): a mistracked window of the kind this warns of."""
 
 
 def observed_jumps(history: Any, scale: float, agent_type: Any = None) -> torch.Tensor:
