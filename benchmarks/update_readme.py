@@ -1,11 +1,17 @@
-"""Regenerate the README's results table from benchmarks/results/*.json.
+"""Regenerate the README's generated tables (results, selection, peers, cost, planner) from
+benchmarks/results/*.json and the records beside them.
 
-python benchmarks/update_readme.py
+python benchmarks/update_readme.py            # rewrite README.md's generated blocks
+python benchmarks/update_readme.py --check    # exit 1 if README.md would change (writes nothing)
 """
 
 from __future__ import annotations
 
+import argparse
+import difflib
 import json
+import sys
+import tempfile
 from pathlib import Path
 
 from trajpref.results import (
@@ -39,7 +45,49 @@ def _latest_equal_budget(row: dict, current: set[tuple[str, str]]) -> bool:
     return base in EQUAL_BUDGET and had and not newer
 
 
-def main() -> None:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        description="Regenerate the README's generated tables (between its <!-- name:start --> "
+        "and <!-- name:end --> markers) from benchmarks/results/*.json, benchmarks/peers.json, "
+        "benchmarks/selection_chosen.json and benchmarks/results/meta/; prints each table. "
+        "Without options it rewrites README.md.",
+    )
+    parser.add_argument("--check", action="store_true",
+                        help="write nothing; exit 1 (printing the difference) when the README "
+                        "would change, 0 when it is up to date")  # fmt: skip
+    parser.add_argument("--readme", type=Path, default=ROOT / "README.md",
+                        help="the README to update or check (default: the repository's "
+                        "README.md)")  # fmt: skip
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Rewrite the README's generated blocks (0), or with ``--check`` compare them with what
+    the records give, writing nothing: 0 when they match, 1 otherwise."""
+    args = parse_args(argv)
+    readme = args.readme
+    if not args.check:
+        regenerate(readme)
+        return 0
+    before = readme.read_text()
+    with tempfile.TemporaryDirectory() as tmp:
+        copy = Path(tmp) / readme.name
+        copy.write_text(before)
+        regenerate(copy, show=False)
+        after = copy.read_text()
+    if after == before:
+        print(f"{readme} is up to date")
+        return 0
+    diff = difflib.unified_diff(before.splitlines(), after.splitlines(), f"{readme} (now)",
+                                f"{readme} (regenerated)", lineterm="", n=0)  # fmt: skip
+    sys.stdout.writelines(line + "\n" for line in diff)
+    print(f"{readme} would change: run python benchmarks/update_readme.py to rewrite it")
+    return 1
+
+
+def regenerate(readme: Path, show: bool = True) -> None:
+    """Replace the generated blocks of ``readme``; ``show``: print each table."""
+    out = print if show else (lambda *_: None)
     every = read_rows(ROOT / "benchmarks" / "results")
     # the README keeps the methods users run (also from the longer published generators,
     # ``control-long``); fine-tuning ablations (tagged runs) are listed in docs/rlhf_results*.md.
@@ -69,8 +117,8 @@ def main() -> None:
         f"[docs/rlhf.md](docs/rlhf.md); measured "
         f"{', '.join(dates)} on {'; '.join(machines)}). Units: metres, except SDD in pixels._"
     )
-    update_readme(ROOT / "README.md", "results", table + note)
-    print(table)
+    update_readme(readme, "results", table + note)
+    out(table)
     if selected:
         chosen_file = ROOT / "benchmarks" / "selection_chosen.json"
         chosen = json.loads(chosen_file.read_text()) if chosen_file.exists() else None
@@ -88,8 +136,8 @@ def main() -> None:
             "the mean over the seeds' runs, some of which shared the machine with training; "
             "the cost bar is measured alone by `benchmarks/selection_cost.py`._"
         )
-        update_readme(ROOT / "README.md", "selection", table + note)
-        print(table)
+        update_readme(readme, "selection", table + note)
+        out(table)
     peers = json.loads((ROOT / "benchmarks" / "peers.json").read_text())
     table = peers_table(peers, every, methods=("pretrained", "pretrained-long"))
     note = (
@@ -103,18 +151,18 @@ def main() -> None:
         "superseded on validation; their weights are in the git history; robo's is 60 epochs, "
         f"the ETH/UCY folds' 160). {peers_notes(peers)}_"
     )
-    update_readme(ROOT / "README.md", "peers", table + note)
-    print(table)
+    update_readme(readme, "peers", table + note)
+    out(table)
     table = accuracy_table(rows, protocol="sgan")
-    update_readme(ROOT / "README.md", "results-sgan", table)
-    print(table)
+    update_readme(readme, "results-sgan", table)
+    out(table)
     speed = speed_table(ROOT / "benchmarks" / "results" / "meta")
-    update_readme(ROOT / "README.md", "speed", speed)
-    print(speed)
+    update_readme(readme, "speed", speed)
+    out(speed)
     planner = planner_table(ROOT / "benchmarks" / "results" / "meta" / "planner_latency_zara1.json")
     if planner is not None:
-        update_readme(ROOT / "README.md", "planner", planner)
-        print(planner)
+        update_readme(readme, "planner", planner)
+        out(planner)
 
 
 PLANNER_COLUMNS = (
@@ -300,4 +348,4 @@ def _older(estimates: dict, run: dict) -> str:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -95,3 +95,37 @@ def test_the_score_column_says_which_run_measured_it(tmp_path):
     assert note.startswith("_Score K=20:")
     assert "zara1: `python benchmarks/score.py --dataset <D>" in note
     assert "2026-12-06, host X, 2 threads (100 test scenes, 2 threads)" in note
+
+
+def _run(*args):
+    import subprocess
+    import sys
+
+    script = ROOT / "benchmarks" / "update_readme.py"
+    return subprocess.run([sys.executable, str(script), *args], capture_output=True, text=True,
+                          timeout=120)  # fmt: skip
+
+
+def test_help_describes_the_script_and_writes_nothing():
+    """``--help`` ran the script, rewriting README.md."""
+    before = (ROOT / "README.md").stat().st_mtime_ns
+    done = _run("--help")
+    assert done.returncode == 0, done.stderr
+    assert "--check" in done.stdout and "Regenerate the README's generated tables" in done.stdout
+    assert (ROOT / "README.md").stat().st_mtime_ns == before
+
+
+def test_check_says_whether_the_readme_would_change_and_writes_nothing(tmp_path):
+    readme = tmp_path / "README.md"
+    readme.write_text((ROOT / "README.md").read_text())
+    assert _module().main(["--readme", str(readme)]) == 0  # rewritten: now up to date
+    current = readme.read_text()
+    assert _module().main(["--check", "--readme", str(readme)]) == 0
+    stale = current.replace("<!-- results-sgan:start -->\n",
+                            "<!-- results-sgan:start -->\nan old line\n", 1)  # fmt: skip
+    assert stale != current
+    readme.write_text(stale)
+    done = _run("--check", "--readme", str(readme))
+    assert done.returncode == 1
+    assert "-an old line" in done.stdout and "would change" in done.stdout
+    assert readme.read_text() == stale  # nothing written

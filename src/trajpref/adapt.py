@@ -33,6 +33,7 @@ from tqdm.auto import tqdm
 from trajpref.config import GeneratorTrainConfig
 from trajpref.data.trajnet import require_future
 from trajpref.data.transforms import to_model_frame
+from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, DataError
 from trajpref.metrics import MetricAccumulator
 from trajpref.models.generator import Generator
@@ -248,10 +249,11 @@ def adapt_and_predict(
     context are predicted by ``model`` unchanged. Window i's draws come from
     ``torch.Generator().manual_seed(window_seed(seed, i))``, so a window's prediction does not
     depend on which other windows are predicted. ``progress``: a progress bar over the
-    windows (a string: its label)."""
+    windows (a string: its label). ``device``: None, the model's; else as
+    ``trajpref.device.resolve_device`` takes it (``auto``, ``cpu``, ``cuda[:i]``)."""
     cfg = cfg or AdaptConfig()
     _check_model(model)
-    device = model.device if device is None else torch.device(device)
+    device = model.device if device is None else resolve_device(device)
     ctx = context_windows(dataset, cfg)
     indices = list(range(len(dataset))) if indices is None else list(indices)
     for i in indices:

@@ -13,6 +13,7 @@ from tqdm.auto import tqdm
 from trajpref.data.loader import SceneLoader
 from trajpref.data.registry import ETH_UCY, NAMES, sgan_folds
 from trajpref.data.trajnet import from_trajnet, require_future
+from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, DataError, TrajprefError
 from trajpref.metrics import (
     BinnedMetrics,
@@ -41,8 +42,11 @@ scores; TrajNet++ scenes only, ``trajnet_scenes``)."""
 
 
 class Predictor(Protocol):
-    """Anything that samples futures: ``predict(batch, K, generator) -> [K, N, T_f, 2]``
-    in absolute coordinates."""
+    """Anything that samples futures: ``predict(batch, K, generator)`` returns a floating-point
+    torch tensor [K, N, T_f, 2] of absolute positions (the data's coordinates, not offsets),
+    exactly K samples of every agent of the batch, finite, on the batch's device, its random
+    draws taken from ``generator`` (a seeded CPU ``torch.Generator``) so that a seed repeats
+    them. The evaluation pass checks each batch's output (``check_prediction``)."""
 
     name: str
 
@@ -54,6 +58,80 @@ class Predictor(Protocol):
 class NotAPredictor(TrajprefError, TypeError):
     """What the evaluation loop was handed is not a loaded predictor or dataset (a model's
     name, a dataset's name)."""
+
+
+class PredictionError(DataError):
+    """A predictor's ``predict`` returned something the evaluation cannot score: not a torch
+    tensor, not floating point, not [K, N, T_f, 2] for the batch and the K asked, on another
+    device than the batch's, or holding NaN / infinite values (``check_prediction``)."""
+
+
+class NonFinitePrediction(PredictionError):
+    """A predictor returned NaN or infinite positions (``check_prediction``): a model that
+    diverged, not a wrong interface; training's validation scores it as never the best."""
+
+
+def check_prediction(model: object, pred: object, batch: Batch, num_samples: int) -> None:
+    """``PredictionError`` (a ``DataError``) naming the predictor's class unless ``pred``,
+    what ``model.predict(batch, num_samples, generator)`` returned, is a floating-point torch
+    tensor of shape exactly [num_samples, N, T_f, 2] (N and T_f the batch's, ``batch.future``
+    [N, T_f, 2]), on the batch's device, and finite. What the one evaluation pass
+    (``sampled_batches``) checks of every batch, before a metric reads it."""
+    who = f"{type(model).__name__}.predict"
+    n, t_f = batch.num_agents, int(batch.future.shape[1])
+    want = (num_samples, n, t_f, 2)
+    spec = f"[K, N, T_f, 2] = {list(want)}"
+    if isinstance(pred, np.ndarray):
+        raise PredictionError(f"{who} returned a numpy array; predictors return a torch tensor "
+                              f"{spec} on the batch's device: convert it with "
+                              "torch.from_numpy(pred).to(batch.history)")  # fmt: skip
+    if not isinstance(pred, torch.Tensor):
+        raise PredictionError(f"{who} returned {type(pred).__name__}, not a torch tensor "
+                              f"{spec}")  # fmt: skip
+    if not pred.is_floating_point():
+        raise PredictionError(f"{who} returned a tensor of dtype "
+                              f"{str(pred.dtype).removeprefix('torch.')}: positions must be "
+                              "floating point (pred.float(), or build them from batch.history, "
+                              "float32)")  # fmt: skip
+    shape = tuple(pred.shape)
+    if shape != want:
+        raise PredictionError(f"{who} returned shape {list(shape)} for a batch of N = {n} "
+                              f"agents, T_f = {t_f} future steps and K = {num_samples} samples "
+                              f"asked: it must be {spec}{_shape_hint(shape, want)}")  # fmt: skip
+    if pred.device != batch.history.device:
+        raise PredictionError(f"{who} returned a tensor on {pred.device}, the batch is on "
+                              f"{batch.history.device}: return it on the batch's device "
+                              "(.to(batch.history.device))")  # fmt: skip
+    bad = ~torch.isfinite(pred)  # [K, N, T_f, 2]
+    if bool(bad.any()):
+        agents = bad.flatten(2).any(-1)  # [K, N]
+        k, a = (int(i) for i in agents.nonzero()[0])
+        scene = int(batch.scene[a])
+        sid = batch.scene_ids[scene] if scene < len(batch.scene_ids) else f"#{scene}"
+        found = (("NaN", torch.isnan(pred)), ("infinite", torch.isinf(pred)))
+        kinds = " and ".join(word for word, where in found if bool(where.any()))
+        raise NonFinitePrediction(f"{who} returned {kinds} values ({int(agents.sum())} of "
+                              f"{agents.numel()} agent-samples; the first: sample {k} of agent "
+                              f"{a} in this batch, of scene {sid}): every predicted position "
+                              "must be finite")  # fmt: skip
+
+
+def _shape_hint(shape: tuple, want: tuple) -> str:
+    """What a wrong prediction shape most likely is, for ``check_prediction``'s message."""
+    k, n, t_f, _ = want
+    if len(shape) == 4 and shape[1:] == want[1:]:
+        return (f"; it gave {shape[0]} samples where evaluate asked for K = {k} "
+                "(evaluate's num_samples; the metrics are minADE_K / minFDE_K over exactly "
+                "these K)")  # fmt: skip
+    if len(shape) == 4 and shape == (n, k, t_f, 2):
+        return "; it looks like [N, K, T_f, 2]: put the samples first, pred.transpose(0, 1)"
+    if shape == want[1:]:
+        return "; the sample axis is missing: stack the K samples along a first axis"
+    if len(shape) == 4 and shape[:2] == want[:2] and shape[3] == 2:
+        return f"; it gave {shape[2]} future steps where the batch's future has {t_f}"
+    if len(shape) == 4 and shape[:3] == want[:3]:
+        return f"; its last axis holds {shape[3]} coordinates where positions are (x, y)"
+    return ""
 
 
 def check_inputs(model: object, dataset: object) -> None:
@@ -132,13 +210,19 @@ def sampled_batches(
     desc: str = "sample",
 ) -> Iterator[tuple[Batch, torch.Tensor]]:  # fmt: skip
     """The one pass over a split: ``(batch, pred [K, N, T_f, 2])`` for every batch of whole
-    scenes, in dataset order, with one seeded CPU generator for the whole pass."""
+    scenes, in dataset order, with one seeded CPU generator for the whole pass. ``device`` as
+    ``trajpref.device.resolve_device`` takes it (``auto``: CUDA when available, else the CPU;
+    a device this machine lacks is a ``ConfigError``). Each batch's prediction is checked
+    (``check_prediction``: K = ``num_samples`` samples of every agent, finite, ...)."""
     check_inputs(model, dataset)
+    device = resolve_device(device)
     gen = torch.Generator().manual_seed(seed)  # CPU: draws are identical on every device
     loader = SceneLoader(dataset, max_agents=max_agents, shuffle=False)
     for batch in tqdm(loader, desc=desc, unit="batch", disable=not progress, leave=False):
         batch = batch.to(device)
-        yield batch, model.predict(batch, num_samples, gen)
+        pred = model.predict(batch, num_samples, gen)
+        check_prediction(model, pred, batch, num_samples)
+        yield batch, pred
 
 
 def resolve_collision_radius(radius: float | None | Literal["auto"], units: str) -> float | None:
@@ -246,7 +330,12 @@ def evaluate(
     as are ``bins`` (every scene would have one agent).
 
     ``model`` is a loaded predictor (``load_predictor(name)``), not a name: ``NotAPredictor``
-    (a ``TypeError``) otherwise, before any work.
+    (a ``TypeError``) otherwise, before any work. What its ``predict`` returns for each batch
+    is checked (``check_prediction``): a floating-point tensor [K, N, T_f, 2] with K =
+    ``num_samples`` exactly, on the batch's device, finite; else a ``PredictionError`` (a
+    ``DataError``) naming the predictor's class. ``device``: where the batches go, as
+    ``trajpref.device.resolve_device`` takes it (``auto``, ``cpu``, ``cuda[:i]``; a device
+    this machine lacks is a ``ConfigError`` before any work).
 
     A model (or ``scorer``) whose checkpoint says it was trained on one ETH/UCY fold
     (``model.timing["trained_on"]``), evaluated on another fold's data (a fold's name, or a
@@ -255,6 +344,7 @@ def evaluate(
     windows); ``allow_overlap=True`` evaluates it anyway, as the CLI's ``--allow-overlap``.
     """
     check_inputs(model, dataset)
+    device = resolve_device(device)  # before any work
     require_future(dataset, "evaluate")  # TrajNet++ test files: NaN metrics otherwise
     if agents not in AGENT_SETS:
         raise ConfigError(f"agents must be one of {', '.join(AGENT_SETS)}, got {agents!r}")
@@ -347,6 +437,7 @@ def predict_dataset(
     track files and TrajNet++ files do), ``agent_id`` [N] is added (``source_agent_ids``).
     """
     check_inputs(model, dataset)
+    device = resolve_device(device)  # before any work
     parts: dict[str, list[np.ndarray]] = {k: [] for k in ("history", "future", "pred", "scene")}
     parts["agent_type"] = []
     offset = 0

@@ -58,7 +58,7 @@ def test_unknown_names_and_roots(tmp_path, monkeypatch):
     with pytest.raises(TrajprefError, match="unknown split"):
         load_dataset("zara1", "dev", tmp_path)
     monkeypatch.delenv("TRAJPREF_DATA", raising=False)
-    with pytest.raises(TrajprefError, match="--data-root or set TRAJPREF_DATA"):
+    with pytest.raises(TrajprefError, match=r"--data-root, or root= in Python.* TRAJPREF_DATA"):
         resolve_data_root(None)
     with pytest.raises(DataError, match="no such folder"):
         load_dataset("zara1", "test", tmp_path)  # root exists, eth_ucy/ does not

@@ -236,3 +236,19 @@ def test_a_test_scene_whose_future_other_scenes_fill_but_for_a_frame_is_observat
     np.testing.assert_array_equal(one.frames, FRAMES[1:21])
     np.testing.assert_array_equal(one.history[0, :, 0], 0.5 * np.arange(1, 9))
     assert np.isnan(one.future).all()
+
+
+def test_a_test_scene_whose_whole_future_leaked_is_read_as_a_test_scene(tmp_path):
+    """Scenes at 1030 and 1120 show every frame of scene 1's hidden future (1090..1200) as
+    observed, so its primary has all 21 rows: in a test file it is still read as a test scene,
+    its targets the agents of its observed frames (it read as a complete window, whose targets
+    had to be seen in the leaked future too)."""
+    scenes = [SCENES[0], SCENES[1], {"id": 3, "p": 3, "s": 1120, "e": 1320, "fps": 2.5}]
+    _write(tmp_path / "a.ndjson", scenes)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # one kind: every scene a test scene
+        read = read_trajnet(tmp_path / "a.ndjson")
+    assert read.observed_only == 3
+    one = read.scenes[0]
+    np.testing.assert_array_equal(one.frames, FRAMES[1:21])
+    assert one.agent_id.tolist() == [7, 3, 12] and np.isnan(one.future).all()

@@ -905,3 +905,22 @@ def test_validation_shows_a_bar_and_a_budgeted_stage_the_share_of_its_budget(
                     denoiser=str(trained / "denoiser.safetensors"))  # fmt: skip
         err = capsys.readouterr().err
         assert ("evaluate " in err) is progress and ("generator epoch 1/1" in err) is progress
+
+
+def test_a_validation_whose_samples_diverge_scores_inf_and_the_run_goes_on(folder, capsys):
+    """The evaluation refuses NaN predictions (``evaluation.NonFinitePrediction``); training's
+    validation turns that into a score never kept (a diverged epoch), as it was before the
+    check, rather than stopping the run."""
+    from torch import nn
+
+    from trajpref.train.stages import _leapfrog_validation
+
+    class Diverged(nn.Module):
+        def predict(self, batch, num_samples, generator=None):
+            t_f = batch.future.shape[1]
+            return torch.full((num_samples, batch.num_agents, t_f, 2), float("nan"))
+
+    val = load_dataset(str(folder), "val")
+    res = _leapfrog_validation(Diverged(), val, 3, 256, torch.device("cpu"))()
+    assert res["score"] == float("inf") and res["min_ade"] != res["min_ade"]  # NaN
+    assert "scored as never the best" in capsys.readouterr().out

@@ -106,7 +106,10 @@ def resolve_data_root(root: str | Path | None = None) -> Path:
     """The data root: the argument, else ``$TRAJPREF_DATA``. Raises if neither is usable."""
     value = root if root is not None else os.environ.get("TRAJPREF_DATA")
     if not value:
-        raise TrajprefError("no data root: pass --data-root or set TRAJPREF_DATA")
+        raise TrajprefError(
+            "no data root: give it (the CLI's --data-root, or root= in Python, "
+            "e.g. load_dataset(name, split, root=...)) or set TRAJPREF_DATA"
+        )
     path = Path(value).expanduser()
     if not path.is_dir():
         raise DataError("data root is not a folder", path)
@@ -332,17 +335,17 @@ def run_splits(
     options = dataclasses.replace(options, partial_future=data.partial_future,
                                   reverse_context=data.reverse_context)  # fmt: skip
     train = load_dataset(data.dataset, "train", root, options=options, **described)
-    # TrajNet++ test files hide the future: no loss or validation could be computed on them
-    # (training's partial-future targets are NaN where unseen by design, so not checked then)
-    trajnet.require_future(val, "training (its validation split)")
-    if not data.partial_future:
-        trajnet.require_future(train, "training")
     if data.holdout_scene:
         train, val = hold_out_scene(train, val, data.holdout_scene)
     if data.val_cut:
         train, val = split_validation_in_time(train, val, data.val_cut, data.val_cut_to_train)
     if data.extra_time_step:
         train = add_paced_copy(train, data.extra_time_step, root, options, data.holdout_scene)
+    # TrajNet++ test files hide the future: no loss or validation could be computed on them
+    # (training's partial-future targets are NaN where unseen by design, so not checked then)
+    trajnet.require_future(val, "training (its validation split)")
+    if not data.partial_future:
+        trajnet.require_future(train, "training")
     return train, val
 
 

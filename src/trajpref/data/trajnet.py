@@ -139,10 +139,11 @@ def read_trajnet(
     future (its baselines drop them, ``evaluator/write_utils.preprocess_test``). A scene whose
     primary agent has some of its future frames otherwise is a ``DataError`` naming the frames
     missing. Scenes with ``t_hist + t_fut`` frames or more read as before, so a file can hold
-    both kinds: then an ``ObservedOnlyWarning`` says how many scenes are observation-only;
-    in such a file, one whose last ``t_hist + t_fut`` frames skip a frame or stop before ``e``
-    (leaked rows filling all but a frame or two of its hidden future) is read as a test scene
-    when it is one, not as a window shifted off its frames.
+    both kinds: then an ``ObservedOnlyWarning`` says how many scenes are observation-only.
+    In such a file every scene that is a test scene by these rules is read as one, whatever
+    other scenes' rows leaked into its hidden future (all of it, or all but a frame, which read
+    otherwise as a complete window or one shifted off its frames); its targets are then the
+    agents of its observed frames, as in every test scene.
     """
     path = Path(path)
     check_file(path)
@@ -225,36 +226,26 @@ def read_trajnet(
     step = min(jumps, key=lambda j: (-jumps[j], j)) if jumps else 1
     gaps: list[int] = []  # scene ids whose window spans a frame its primary agent misses
     hidden: list[int] = []  # scene ids read as observation-only
-    shown = None  # the frames some scene shows as observed (_shown_frames), when first needed
     scenes = []
     owns = [[f for f in frames_of.get(p, ()) if s <= f <= e] for _, _, p, s, e, _ in scene_rows]
     test_file = any(len(own) < t_total for own in owns)  # some scene hides its future
+    # the frames some scene shows as observed: a test file's rows in other scenes' futures
+    shown = _shown_frames(scene_rows, t_fut, step) if test_file else None
     for (line, sid, p, s, e, row), own in zip(scene_rows, owns, strict=True):
-        complete = len(own) >= t_total
-        observed = None
-        if complete:  # as always
-            window = own[-t_total:]
-            gap = any(b - a != step for a, b in zip(window, window[1:], strict=False))
-            if test_file and (gap or window[-1] != e):
-                # in a test file, a scene whose hidden future other scenes' rows fill all but
-                # a frame or two of is observation-only, not a window shifted off its frames
-                if shown is None:
-                    shown = _shown_frames(scene_rows, t_fut, step)
-                try:
-                    observed = _observed_frames(own, sid, p, s, e, t_hist, t_fut, step, shown,
-                                                (path, line))  # fmt: skip
-                    complete = False
-                except DataError:
-                    pass
-            if complete and gap:
-                gaps.append(sid)
-            present = window  # the frames every target has a row in
-        if not complete:
-            if shown is None:
-                shown = _shown_frames(scene_rows, t_fut, step)
-            if observed is None:
+        observed = None  # a test scene's observed frames
+        if test_file:  # every scene that is a test scene is read as one, whatever leaked
+            try:
                 observed = _observed_frames(own, sid, p, s, e, t_hist, t_fut, step, shown,
                                             (path, line))  # fmt: skip
+            except DataError:
+                if len(own) < t_total:
+                    raise
+        if observed is None:  # a complete window, as always
+            window = own[-t_total:]
+            if any(b - a != step for a, b in zip(window, window[1:], strict=False)):
+                gaps.append(sid)
+            present = window  # the frames every target has a row in
+        else:
             present = observed[-t_hist:]
             window = present + [present[-1] + step * (i + 1) for i in range(t_fut)]
             hidden.append(sid)
@@ -263,7 +254,7 @@ def read_trajnet(
             others &= rows[f].keys()
         agents = [p, *sorted(others - {p})]
         xy = np.array([[rows[f][a] for f in present] for a in agents], np.float32)  # [P, T', 2]
-        if not complete:  # observation-only: the future is unknown
+        if observed is not None:  # observation-only: the future is unknown
             xy = np.concatenate([xy, np.full((len(agents), t_fut, 2), np.nan, np.float32)], 1)
         big = any(not -(2**63) <= f < 2**63 for f in (window[0], window[-1]))
         scenes.append(
@@ -366,21 +357,79 @@ def observed_only(scenes: list[Scene]) -> list[Scene]:
 
 def require_future(dataset, what: str) -> None:
     """``DataError`` naming the first source file when ``dataset`` (a ``TrajectoryDataset``)
-    holds observation-only scenes (``observed_only``), for ``what`` (a command, or what it
-    does), which reads each window's future: scoring against it, or its speed, would be NaN."""
-    hidden = observed_only(dataset.scenes)
-    if not hidden:
+    holds scenes whose future is not known at every frame (``observed_only``), for ``what`` (a
+    command, or what it does), which reads each window's future: scoring against it, or its
+    speed, would be NaN. Two cases, each with its own message: scenes whose future is NaN
+    throughout (hidden, as in TrajNet++'s test files: predict them), and scenes where some
+    agent lacks positions at some future frames (a scene built by hand: the library's readers
+    keep such an agent as a context-only neighbour, ``Scene.context``, docs/data.md)."""
+    unknown = observed_only(dataset.scenes)
+    if not unknown:
         return
-    files = list(dict.fromkeys(s.scene_id.rsplit("#", 1)[0] for s in hidden))
-    source = Path(dataset.info.source)
-    where = source / files[0] if source.is_dir() else source
+    hidden = [s for s in unknown if not np.isfinite(s.future).any()]
+    partial = [s for s in unknown if np.isfinite(s.future).any()]
+    named = hidden or partial
+    files = list(dict.fromkeys(scene_file(s.scene_id) for s in named))
+    where = _source_file(getattr(dataset.info, "source", ""), files[0])
     others = f" (and {len(files) - 1} other file(s))" if len(files) > 1 else ""
-    raise DataError(f"{what} reads each window's future, and {len(hidden)} of the "
-                    f"{len(dataset.scenes)} scenes{others} hold the observed frames alone (the "
-                    f"first: {hidden[0].scene_id}): the future is hidden, as in TrajNet++'s test "
-                    "files. predict writes predictions for them (--format trajnet, without "
-                    "--truth); score those with TrajNet++'s evaluator against the files holding "
-                    "the future (test_private)", where)  # fmt: skip
+    total = len(dataset.scenes)
+    if hidden:
+        also = ""
+        if partial:
+            also = (f" ({len(partial)} other scene(s) lack part of their future, the first: "
+                    f"{partial[0].scene_id})")  # fmt: skip
+        raise DataError(f"{what} reads each window's future, and {len(hidden)} of the {total} "
+                        f"scenes{others} hold the observed frames alone (the first: "
+                        f"{hidden[0].scene_id}): the future is hidden, as in TrajNet++'s test "
+                        "files. predict writes predictions for them (--format trajnet, without "
+                        "--truth); score those with TrajNet++'s evaluator against the files "
+                        f"holding the future (test_private){also}", where)  # fmt: skip
+    first = partial[0]
+    lacking = ~np.isfinite(first.future).all(-1)  # [P, T_f] True where a position is missing
+    agent = int(np.flatnonzero(lacking.any(-1))[0])
+    steps = np.flatnonzero(lacking[agent]) + 1  # 1-based future steps
+    raise DataError(f"{what} reads each window's future, and {len(partial)} of the {total} "
+                    f"scenes{others} have an agent without a position at some future frames "
+                    f"(the first: {first.scene_id}, its agent {agent} of {first.num_agents}, "
+                    f"NaN at future step{'s' if len(steps) > 1 else ''} {_steps_text(steps)} "
+                    f"of {first.future.shape[1]}): an agent is predicted and scored only when "
+                    "seen at every frame of its window. The library's readers keep an agent "
+                    "unseen for part of a window as a context-only neighbour of its scene "
+                    "(Scene.context [C, T_h, 2]: its observed positions, NaN where unseen; "
+                    "docs/data.md): move such agents there, or leave them out", where)  # fmt: skip
+
+
+def scene_file(scene_id: str) -> str:
+    """The source file a scene id names: ``crowds_zara01.txt@frame=120`` (text track files)
+    -> ``crowds_zara01.txt``, ``a.ndjson#3`` (TrajNet++ and ``.npz`` files) -> ``a.ndjson``;
+    an id of neither form as it is."""
+    for sep in ("@frame=", "#"):
+        if sep in scene_id:
+            return scene_id.rsplit(sep, 1)[0]
+    return scene_id
+
+
+def _source_file(source: str, name: str) -> Path | None:
+    """The path of the file ``name`` in a dataset's ``source``: the source itself when it is
+    a file, the file in a source folder (at any depth), else the folder; None without a
+    source."""
+    if not source:
+        return None
+    folder = Path(source)
+    if not folder.is_dir():
+        return folder
+    if (folder / name).is_file():
+        return folder / name
+    return next((f for f in sorted(folder.rglob(name)) if f.is_file()), folder)
+
+
+def _steps_text(steps: np.ndarray) -> str:
+    """``9..12`` for consecutive steps, else the first few: ``2, 5, 7 and 3 more``."""
+    values = [int(v) for v in steps]
+    if len(values) > 1 and values[-1] - values[0] == len(values) - 1:
+        return f"{values[0]}..{values[-1]}"
+    head = ", ".join(str(v) for v in values[:4])
+    return head + (f" and {len(values) - 4} more" if len(values) > 4 else "")
 
 
 def _context(

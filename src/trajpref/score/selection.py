@@ -17,6 +17,7 @@ the code; an unknown name is an error). Adding one: docs/selection.md, "Adding a
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import math
 import os
 import typing
@@ -102,7 +103,9 @@ class SelectionConfig:
     standardised over the item's K samples."""
     seed: int = 0
     """Seed of the ``random`` method's own generator (it never draws from the sampler's, so
-    every method sees the same candidates)."""
+    every method sees the same candidates). In ``SelectingPredictor.predict`` given a
+    generator, the draws come from a generator seeded with this and that generator's state
+    (``derived_generator``), so the caller's seed decides them too."""
     trust_speed: float = 0.0
     """Score methods only: an agent observed faster than this (the scorer's model units per
     observed step, first to last observed position, as ``model.max_speed`` measures it) is
@@ -544,6 +547,15 @@ def select_for_scene(scorer: TrajectoryScorer, history, samples, cfg: SelectionC
     return idx.cpu().numpy()
 
 
+def derived_generator(generator: torch.Generator, seed: int) -> torch.Generator:
+    """A new CPU generator seeded from ``generator``'s current state and ``seed``, without
+    drawing from ``generator``: the same state and seed give the same draws, and the
+    sampler's stream (what later batches draw from it) is left as it was."""
+    state = generator.get_state().cpu().numpy().tobytes()
+    digest = hashlib.blake2b(state + f"|{seed}".encode(), digest_size=8).digest()
+    return torch.Generator().manual_seed(int.from_bytes(digest, "little") >> 1)
+
+
 def gather(pred: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
     """pred [K, N, ...] at idx [K', N] -> [K', N, ...]."""
     shape = (*idx.shape, *pred.shape[2:])
@@ -567,24 +579,37 @@ class SelectingPredictor:
         self.scorer = scorer
         self.name = f"{getattr(base, 'name', 'model')}+{cfg.method}{cfg.keep}"
         self.generator = torch.Generator().manual_seed(cfg.seed)
+        """The ``random`` method's draws when ``predict`` is given no generator (and
+        ``select``'s default): seeded once, so they go on from call to call."""
         self.last_kept: torch.Tensor | None = None
         """[K', N] the indices, among the K samples drawn, of those the last ``predict`` kept
         (``trajpref predict --keep`` saves them as ``kept``)."""
 
     @torch.no_grad()
-    def select(self, batch: Batch, pred: torch.Tensor) -> torch.Tensor:
-        """Indices [K', N] of the samples pred [K, N, T_f, 2] to keep."""
-        return select_with_scorer(pred, self.cfg, batch, self.scorer, self.generator)
+    def select(self, batch: Batch, pred: torch.Tensor,
+               generator: torch.Generator | None = None) -> torch.Tensor:  # fmt: skip
+        """Indices [K', N] of the samples pred [K, N, T_f, 2] to keep; ``generator``: the
+        ``random`` method's draws (None: the object's own, ``self.generator``)."""
+        draws = self.generator if generator is None else generator
+        return select_with_scorer(pred, self.cfg, batch, self.scorer, draws)
 
     @torch.no_grad()
     def predict(self, batch: Batch, num_samples: int | None = None,
                 generator: torch.Generator | None = None) -> torch.Tensor:  # fmt: skip
         """[K', N, T_f, 2]: K (``candidates``) samples drawn from the base predictor, and the
         K' (``cfg.keep``) of them the selection keeps, in its order; their indices among the
-        K are left in ``last_kept``."""
+        K are left in ``last_kept``. The ``random`` method draws from a generator seeded with
+        ``cfg.seed`` and ``generator``'s state after the base's draws (``derived_generator``:
+        ``generator`` itself is not drawn from, so every method sees the same candidates), so
+        that the same seed repeats a whole pass (``evaluate(seed=...)``), whether the object
+        is new or reused; without a ``generator``, from the object's own
+        (``self.generator``)."""
         if num_samples is not None and num_samples != self.cfg.keep:
             raise ConfigError(f"this selector keeps {self.cfg.keep} samples, asked for "
                               f"{num_samples}")  # fmt: skip
         pred = self.base.predict(batch, self.candidates, generator)  # [K, N, T_f, 2]
-        self.last_kept = self.select(batch, pred)  # [K', N]
+        draws = None  # the object's own generator
+        if generator is not None and self.cfg.method == "random":  # the others draw nothing
+            draws = derived_generator(generator, self.cfg.seed)
+        self.last_kept = self.select(batch, pred, draws)  # [K', N]
         return gather(pred, self.last_kept)

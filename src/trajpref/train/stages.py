@@ -5,6 +5,7 @@ for the one training loop (``train.loop.fit``); validation runs the one evaluati
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -18,7 +19,7 @@ from trajpref.data.loader import SceneLoader
 from trajpref.data.transforms import to_model_frame
 from trajpref.diffusion.schedule import DDPMSchedule
 from trajpref.errors import ConfigError
-from trajpref.evaluation import evaluate
+from trajpref.evaluation import NonFinitePrediction, evaluate
 from trajpref.models import checkpoint as ckpt
 from trajpref.models.critic import Critic
 from trajpref.models.denoiser import Denoiser
@@ -99,6 +100,9 @@ def _leapfrog_validation(predictor: DiffusionPredictor, val: TrajectoryDataset, 
         try:
             res = evaluate(predictor, val, samples, seed=0, device=device, max_agents=max_agents,
                            progress=progress, scorer=scorer)  # fmt: skip
+        except NonFinitePrediction as err:  # a diverged epoch: never kept, the run goes on
+            tqdm.write(f"[validation] {err}: scored as never the best")
+            return dict.fromkeys(keys, math.nan) | {"score": math.inf}
         finally:
             for module, mode in modes:
                 module.training = mode
