@@ -260,11 +260,12 @@ def test_the_dataset_fields_docstring_names_every_built_in_dataset():
 def test_partial_future_targets_and_a_held_out_scene_are_refused_together():
     """The held-out scene's validation windows come from the training read; with partial
     futures some of its agents have NaN where unseen, and validation would be NaN (a review
-    of 2026-12-06 found 741 of 909 such windows on zara1 held out at students)."""
+    of 2026-12-06 found 741 of 909 such windows on zara1 held out at students). Refused when a
+    run reads its splits, not in DataConfig, so that a checkpoint holding both still loads."""
     from trajpref.config import DataConfig
+    from trajpref.data.registry import run_splits
     from trajpref.errors import ConfigError
 
-    with pytest.raises(ConfigError, match="partial_future and holdout_scene exclude each other"):
-        DataConfig(dataset="zara1", partial_future=4, holdout_scene="students")
-    DataConfig(dataset="zara1", partial_future=4)  # either alone is fine
-    DataConfig(dataset="zara1", holdout_scene="students")
+    both = DataConfig(dataset="zara1", partial_future=4, holdout_scene="students")  # loads
+    with pytest.raises(ConfigError, match="partial_future and data.holdout_scene exclude"):
+        run_splits(both, root="/nonexistent")  # before any file is read

@@ -159,11 +159,6 @@ class DataConfig:
         if self.val_cut and self.holdout_scene:
             raise ConfigError("DataConfig.val_cut and holdout_scene exclude each other: the "
                               "held-out scene is the validation split")  # fmt: skip
-        if self.partial_future and self.holdout_scene:
-            raise ConfigError("DataConfig.partial_future and holdout_scene exclude each other: "
-                              "the held-out scene's validation windows would come from the "
-                              "training read, whose partial-future agents have no whole future "
-                              "to validate on")  # fmt: skip
         _positive(self, "max_agents", "scale_min", "scale_max", "max_coord", "time_step")
         interval = self.frame_interval
         number = isinstance(interval, (int, float)) and not isinstance(interval, bool)

@@ -81,3 +81,25 @@ def test_without_a_generator_the_object_keeps_its_own_stream():
     fresh.predict(batch, 2)
     assert torch.equal(first, fresh.last_kept)  # seeded with cfg.seed at construction
     assert not torch.equal(first, sel.last_kept)  # and going on from call to call, as before
+
+
+class Still(ConstantVelocity):
+    """Twenty copies of constant velocity: draws nothing from the generator it is given, as
+    the published generators do, so that generator's state never moves between batches."""
+
+    def predict(self, batch, num_samples=1, generator=None):
+        return super().predict(batch, 1, None).expand(num_samples, -1, -1, -1).clone()
+
+
+def test_batches_whose_sampler_draws_nothing_get_their_own_random_picks():
+    """With a base that leaves the generator's state as it was, the picks of batches of the
+    same size were the same indices in every batch (a review of 2026-12-06: eth/generator kept
+    [5, 19, 13, 6, 16] for all six one-agent batches); the batch's histories tell them apart,
+    and a pass still repeats at one seed."""
+    one_agent = TrajectoryDataset([make_scene(1, seed=i) for i in range(6)],
+                                  DatasetInfo("toy", "test", "m", 0.4))  # fmt: skip
+    sel = SelectingPredictor(Still(), SelectionConfig(keep=3, method="random"), candidates=20)
+    kept = predict_dataset(sel, one_agent, 3, seed=0, max_agents=1, progress=False)["kept"]
+    assert len({tuple(kept[:, i].tolist()) for i in range(6)}) > 1  # [3, 6]: not one set
+    again = predict_dataset(sel, one_agent, 3, seed=0, max_agents=1, progress=False)["kept"]
+    assert (kept == again).all()

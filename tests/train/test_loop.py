@@ -121,3 +121,22 @@ def test_a_run_inside_its_warm_up_says_so_once_and_a_normal_run_says_nothing(
     assert "--set denoiser.warmup_steps=N" in out
     train_stage("diffusion", tiny_cfg, tmp_path / "short", device="cpu", progress=False)
     assert "warm-up" not in capsys.readouterr().out
+
+
+def test_each_rank_after_the_first_seeds_its_own_dropout_stream():
+    """Rank 0 keeps the builder's seed (a one-process run unchanged); ranks 1, 2 each get
+    another stream, from the seed and the rank."""
+    from trajpref.train.loop import seed_rank_generators
+
+    def state_after(rank: int) -> torch.Tensor:
+        torch.manual_seed(7)  # the stage builder's seed
+        seed_rank_generators(7, rank, torch.device("cpu"))
+        return torch.default_generator.get_state()
+
+    torch.manual_seed(7)
+    built = torch.default_generator.get_state()
+    states = [state_after(rank) for rank in range(3)]
+    assert torch.equal(states[0], built)
+    assert not torch.equal(states[1], built) and not torch.equal(states[2], built)
+    assert not torch.equal(states[1], states[2])
+    assert torch.equal(state_after(1), states[1])

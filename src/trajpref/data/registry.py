@@ -326,6 +326,11 @@ def run_splits(
     copy) alone.
     The training loop reads its data this way, and so does anything that must see the windows a
     checkpoint trained on (``models.checkpoint.config_of(...).data``)."""
+    if data.partial_future and data.holdout_scene:  # here, not in DataConfig: checkpoints load
+        raise ConfigError("data.partial_future and data.holdout_scene exclude each other: the "
+                          "held-out scene's validation windows would come from the training "
+                          "read, whose partial-future agents have no whole future to validate "
+                          "on")  # fmt: skip
     options = text.ReadOptions(data.delimiter, data.max_gap, data.max_coord, data.time_step)
     # a folder's frame interval and units (built-in datasets know their own)
     described = {"frame_interval": data.frame_interval, "units": data.units or "unknown"}

@@ -138,12 +138,12 @@ def read_trajnet(
     keep every row at such a frame, so overlapping scenes put rows in each other's hidden
     future (its baselines drop them, ``evaluator/write_utils.preprocess_test``). A scene whose
     primary agent has some of its future frames otherwise is a ``DataError`` naming the frames
-    missing. Scenes with ``t_hist + t_fut`` frames or more read as before, so a file can hold
-    both kinds: then an ``ObservedOnlyWarning`` says how many scenes are observation-only.
-    In such a file every scene that is a test scene by these rules is read as one, whatever
-    other scenes' rows leaked into its hidden future (all of it, or all but a frame, which read
-    otherwise as a complete window or one shifted off its frames); its targets are then the
-    agents of its observed frames, as in every test scene.
+    missing. A file with at least one such scene is a test file: every scene of it that is a
+    test scene by these rules is read as one, whatever other scenes' rows leaked into its
+    hidden future (all of it, or all but a frame, which read otherwise as a complete window or
+    one shifted off its frames), its targets the agents of its observed frames; its other
+    scenes read as complete windows, and an ``ObservedOnlyWarning`` then says how many scenes
+    are observation-only. A file without such a scene reads as before.
     """
     path = Path(path)
     check_file(path)

@@ -547,11 +547,16 @@ def select_for_scene(scorer: TrajectoryScorer, history, samples, cfg: SelectionC
     return idx.cpu().numpy()
 
 
-def derived_generator(generator: torch.Generator, seed: int) -> torch.Generator:
-    """A new CPU generator seeded from ``generator``'s current state and ``seed``, without
-    drawing from ``generator``: the same state and seed give the same draws, and the
-    sampler's stream (what later batches draw from it) is left as it was."""
+def derived_generator(generator: torch.Generator, seed: int,
+                      content: torch.Tensor | None = None) -> torch.Generator:  # fmt: skip
+    """A new CPU generator seeded from ``generator``'s current state, ``seed`` and ``content``
+    (a tensor, e.g. a batch's histories), without drawing from ``generator``: the same state,
+    seed and content give the same draws, and the sampler's stream (what later batches draw
+    from it) is left as it was. ``content`` tells batches apart where the sampler draws
+    nothing from ``generator`` (the published generators), whose state then never moves."""
     state = generator.get_state().cpu().numpy().tobytes()
+    if content is not None:
+        state += content.detach().to("cpu", torch.float32).contiguous().numpy().tobytes()
     digest = hashlib.blake2b(state + f"|{seed}".encode(), digest_size=8).digest()
     return torch.Generator().manual_seed(int.from_bytes(digest, "little") >> 1)
 
@@ -599,7 +604,8 @@ class SelectingPredictor:
         """[K', N, T_f, 2]: K (``candidates``) samples drawn from the base predictor, and the
         K' (``cfg.keep``) of them the selection keeps, in its order; their indices among the
         K are left in ``last_kept``. The ``random`` method draws from a generator seeded with
-        ``cfg.seed`` and ``generator``'s state after the base's draws (``derived_generator``:
+        ``cfg.seed``, the batch's histories and ``generator``'s state after the base's draws
+        (``derived_generator``:
         ``generator`` itself is not drawn from, so every method sees the same candidates), so
         that the same seed repeats a whole pass (``evaluate(seed=...)``), whether the object
         is new or reused; without a ``generator``, from the object's own
@@ -610,6 +616,6 @@ class SelectingPredictor:
         pred = self.base.predict(batch, self.candidates, generator)  # [K, N, T_f, 2]
         draws = None  # the object's own generator
         if generator is not None and self.cfg.method == "random":  # the others draw nothing
-            draws = derived_generator(generator, self.cfg.seed)
+            draws = derived_generator(generator, self.cfg.seed, batch.history)
         self.last_kept = self.select(batch, pred, draws)  # [K', N]
         return gather(pred, self.last_kept)
