@@ -38,8 +38,9 @@ DATA = {
         f"train files, chosen on `{d}`'s val split, tested on `{d}`'s test split"
         for d in ("eth", "hotel", "univ", "zara1", "zara2")
     },
-    "robo": "Trained and chosen on `robo-sim` (our simulator of the paper's Robo scenario; no "
-    "public Robo training split exists), tested on the paper's official Robo test set",
+    "robo": "Trained on `robo-sim` (our simulator of the paper's Robo scenario; no public "
+    "Robo training split exists), its epoch chosen on the official Robo val split (real "
+    "robots), tested on the paper's official Robo test set",
     "robo-mix": "Trained on `robo-sim` plus 15 of the 19 recordings of the official Robo val "
     "split (repeated to a third of the training scenes), chosen on the other 4 recordings, "
     "tested on the paper's official Robo test set (docs/data.md, robo-mix)",

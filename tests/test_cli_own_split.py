@@ -61,3 +61,24 @@ def test_val_by_name_is_not_own_when_the_model_validated_elsewhere(tmp_path):
     assert _own_split({"dataset": "zara1"}, by_name, str(root)) == "val"
     assert _own_split(elsewhere, _info("zara1", "train", str(val.parent / "train")),
                       str(root)) == "train"  # fmt: skip
+
+
+@pytest.mark.parametrize(("model", "dataset", "split", "said"), [
+    ("robo/generator", "robo", "val", "chose its epoch on these windows: this is robo's val"),
+    ("robo-mix/generator", "robo", "val", "trained on these windows: this is robo's val"),
+    ("robo/generator", "robo-mix", "train", "robo-mix's train split holds robo-sim's train"),
+    ("robo-mix/generator", "robo", "test", None),
+    ("robo/generator", "robo-sim", "val", None),  # it chose its epoch on Robo's val, not this
+])  # fmt: skip
+def test_a_built_in_split_that_holds_what_the_model_saw_is_flagged(
+    data_root, capsys, model, dataset, split, said
+):
+    """robo/generator chose its epoch on the official Robo val split (its val_dataset), and
+    robo-mix is made of robo-sim and that split: evaluating them there was silent (a Robo
+    walkthrough of 2026-12-06 got 0.2958 and 0.2697 with "overlap": null)."""
+    overlap, notes = _evaluate(capsys, "--dataset", dataset, "--split", split, "--model", model,
+                               "--max-scenes", "4", "--data-root", data_root)  # fmt: skip
+    if said is None:
+        assert overlap is None
+    else:
+        assert overlap is not None and any(said in n for n in notes), notes

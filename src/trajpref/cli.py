@@ -54,6 +54,7 @@ from trajpref.data.registry import (
     resolve_data_root,
     sgan_folds,
     split_folders,
+    split_sources,
 )
 from trajpref.data.trajnet import require_future, write_trajnet, write_trajnet_truth
 from trajpref.device import resolve_device
@@ -1097,6 +1098,18 @@ def _warn_if_trained_otherwise(spec: str, ds, root: str | None = None) -> str | 
     if own is not None:
         warnings.warn(own, stacklevel=2)
         return f"trained on these windows ({info.name} has no split sub-folders)"
+    shared = None if split is not None else _shared_split(header["config"]["data"], info)
+    if shared is not None:
+        split, (name, part) = shared
+        role = "trained on" if split == "train" else "chose its epoch on"
+        kind = "training" if split == "train" else "validation"
+        what = f"{info.name}'s {info.split} split holds {name}'s {part} split"
+        if (name, part) == (info.name, info.split):
+            what = f"this is {name}'s {part} split"
+        warnings.warn(f"{spec} {role} these windows: {what}, its {kind} data, so numbers "
+                      f"on it are {kind} numbers, not a test (evaluate on the test split)",
+                      stacklevel=2)  # fmt: skip
+        return f"{role} these windows ({name}'s {part} split)"
     if split is None:
         return None
     trained = header["config"]["data"]["dataset"]
@@ -1137,6 +1150,28 @@ def _own_split(data: dict, info, root: str | None) -> str | None:
     for split in ("train", "val"):
         if split in folders and _same_path(str(folders[split]), str(info.source)):
             return split
+    return None
+
+
+def _shared_split(data: dict, info) -> tuple[str, tuple[str, str]] | None:
+    """``("train" | "val", (dataset, split))`` when built-in data (``info``: a name of
+    ``NAMES``) holds windows of a built-in split the model trained on (its ``dataset``'s
+    training split) or chose its epoch on (its ``val_dataset``'s, else its ``dataset``'s,
+    validation split), across names (``registry.split_sources``: robo-mix is made of robo-sim
+    and the official Robo val split; robo/generator chose its epoch on Robo's val split);
+    None otherwise. ``_own_split`` has named the same-name cases first."""
+    trained, chosen = data.get("dataset"), data.get("val_dataset") or data.get("dataset")
+    if info.name not in NAMES or not all(isinstance(d, str) and d in NAMES
+                                         for d in (trained, chosen)):  # fmt: skip
+        return None
+    if data.get("holdout_scene"):
+        return None
+    here = split_sources(info.name, info.split)
+    for kind, seen in (("train", split_sources(trained, "train")),
+                       ("val", split_sources(chosen, "val"))):  # fmt: skip
+        common = sorted(here & seen)
+        if common:
+            return kind, common[0]
     return None
 
 

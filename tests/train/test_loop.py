@@ -140,3 +140,14 @@ def test_each_rank_after_the_first_seeds_its_own_dropout_stream():
     assert not torch.equal(states[1], built) and not torch.equal(states[2], built)
     assert not torch.equal(states[1], states[2])
     assert torch.equal(state_after(1), states[1])
+
+
+@pytest.mark.parametrize(("minutes", "text"), [(12.4, "12 min"), (210, "3.5 h"),
+                                               (1.2e6, "833 days")])  # fmt: skip
+def test_the_budget_message_says_how_long_training_every_step_would_take(minutes, text):
+    """The stop line's advice to train every step names its cost: under --equal-budget the
+    schedule is a cap of 100,000 epochs (1.2 million steps), not a plan (a Robo walkthrough
+    of 2026-12-06 was told to run it without a word of its length)."""
+    from trajpref.train.loop import _duration
+
+    assert _duration(minutes) == text

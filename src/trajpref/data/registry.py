@@ -316,6 +316,19 @@ def split_validation_in_time(
     return train, TrajectoryDataset(late, val_info)
 
 
+def split_sources(name: str, split: str) -> frozenset[tuple[str, str]]:
+    """The built-in (dataset, split) pairs whose windows the built-in ``name``'s ``split``
+    holds: itself, but for robo-mix, whose training split is robo-sim's plus most of the
+    official Robo val split's episodes, its validation split the rest of them, and its test
+    split Robo's (``_robo_mix``). What a model trained or validated on, beside what it is
+    evaluated on, tells an overlap across names (``cli._shared_split``)."""
+    if name == "robo-mix":
+        mix = {"train": {("robo-sim", "train"), ("robo", "val")}, "val": {("robo", "val")},
+               "test": {("robo", "test")}}  # fmt: skip
+        return frozenset(mix.get(split, {(name, split)}))
+    return frozenset({(name, split)})
+
+
 def run_splits(
     data: DataConfig, root: str | Path | None = None
 ) -> tuple[TrajectoryDataset, TrajectoryDataset]:

@@ -294,6 +294,15 @@ def torch_generators(device: torch.device) -> dict[str, torch.Generator]:
     return generators
 
 
+def _duration(minutes: float) -> str:
+    """``12 min``, ``3.5 h`` or ``41 days``: a rough duration for a message."""
+    if minutes < 90:
+        return f"{minutes:.0f} min"
+    if minutes < 48 * 60:
+        return f"{minutes / 60:.1f} h"
+    return f"{minutes / 1440:,.0f} days"
+
+
 def seed_rank_generators(seed: int, rank: int, device: torch.device) -> None:
     """Seed torch's own generators (``torch_generators``) of rank ``rank`` > 0 from ``seed``
     and the rank, after the stage is built: the builder seeds every rank alike
@@ -738,9 +747,11 @@ def fit(
         how = ("annealed to it (budget_schedule)" if optim_cfg.budget_schedule
                else "cut mid-schedule (budget_schedule is off)")  # fmt: skip
         unset = f"--set {stage.name}.max_minutes=null --set {stage.name}.budget_schedule=false"
+        more = spent / max(1, step) * (total - step) / 60  # minutes at this pace
         tqdm.write(f"[{stage.name}] the time budget of {optim_cfg.max_minutes:g} min "
                    f"({optim_cfg.budget_clock} clock) ended the stage after {step} of its "
-                   f"{total} steps, {how}; to train every step: {unset}")  # fmt: skip
+                   f"{total} steps, {how}; to train every step (about {_duration(more)} more "
+                   f"at this pace): {unset}")  # fmt: skip
     if start_val is not None and "epoch" in best and main:
         tqdm.write(f"[{stage.name}] kept epoch {best['epoch']} against its start (epoch 0, the "
                    f"same validation scenes): {against_start(best, start_val)}")  # fmt: skip
