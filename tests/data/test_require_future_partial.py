@@ -7,7 +7,7 @@ import pytest
 from synthetic import make_scene, write_dataset
 
 from trajpref.data import load_dataset
-from trajpref.data.trajnet import require_future, scene_file
+from trajpref.data.trajnet import require_future, source_file_of
 from trajpref.errors import DataError
 from trajpref.evaluation import evaluate
 from trajpref.models.baseline import ConstantVelocity
@@ -72,8 +72,8 @@ def test_scattered_steps_and_no_source():
         require_future(TrajectoryDataset(scenes, DatasetInfo("toy", "test", "m", 0.4)), "check")
 
 
-def test_scene_file_reads_both_id_forms():
-    assert scene_file("crowds_zara01.txt@frame=1110") == "crowds_zara01.txt"
-    assert scene_file("a#b.ndjson#12") == "a#b.ndjson"
-    assert scene_file("biwi_eth.ndjson#3") == "biwi_eth.ndjson"
-    assert scene_file("plain") == "plain"
+def test_source_file_of_reads_both_id_forms():
+    assert source_file_of("crowds_zara01.txt@frame=1110") == "crowds_zara01.txt"
+    assert source_file_of("a#b.ndjson#12") == "a#b.ndjson"
+    assert source_file_of("biwi_eth.ndjson#3") == "biwi_eth.ndjson"
+    assert source_file_of("plain") == "plain"

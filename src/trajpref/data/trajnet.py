@@ -369,7 +369,7 @@ def require_future(dataset, what: str) -> None:
     hidden = [s for s in unknown if not np.isfinite(s.future).any()]
     partial = [s for s in unknown if np.isfinite(s.future).any()]
     named = hidden or partial
-    files = list(dict.fromkeys(scene_file(s.scene_id) for s in named))
+    files = list(dict.fromkeys(source_file_of(s.scene_id) for s in named))
     where = _source_file(getattr(dataset.info, "source", ""), files[0])
     others = f" (and {len(files) - 1} other file(s))" if len(files) > 1 else ""
     total = len(dataset.scenes)
@@ -399,10 +399,11 @@ def require_future(dataset, what: str) -> None:
                     "docs/data.md): move such agents there, or leave them out", where)  # fmt: skip
 
 
-def scene_file(scene_id: str) -> str:
+def source_file_of(scene_id: str) -> str:
     """The source file a scene id names: ``crowds_zara01.txt@frame=120`` (text track files)
     -> ``crowds_zara01.txt``, ``a.ndjson#3`` (TrajNet++ and ``.npz`` files) -> ``a.ndjson``;
-    an id of neither form as it is."""
+    an id of neither form as it is. (``registry.scene_file``, which groups windows for the
+    hold-out and the validation cut, reads the ``@`` form alone.)"""
     for sep in ("@frame=", "#"):
         if sep in scene_id:
             return scene_id.rsplit(sep, 1)[0]
