@@ -210,6 +210,10 @@ CASES: dict[str, tuple[list[str], str]] = {
          "model.samples=5"],
         r"model\.samples: fine-tuning keeps the network of the checkpoint it starts from "
         r"\(model\.samples = \d+ there, 5 asked\)"),
+    "finetune with a pretraining stage's setting": (
+        [*FT, "--from", "{run}/generator.safetensors", "--out", "{out}/ft", "--set",
+         "generator.epochs=3"],
+        r"generator\.epochs: fine-tuning does not read the pretraining stages' settings"),
     "finetune --set method against --method": (
         ["finetune", "--method", "control", "--from", "{run}/generator.safetensors", "--out",
          "{out}/ft", "--device", "cpu", "--set", "finetune.method=rlhf"],

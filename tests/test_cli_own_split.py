@@ -82,3 +82,21 @@ def test_a_built_in_split_that_holds_what_the_model_saw_is_flagged(
         assert overlap is None
     else:
         assert overlap is not None and any(said in n for n in notes), notes
+
+
+def test_a_held_out_scene_is_named_trained_on_unless_the_model_held_it_out(data_root, capsys):
+    """--holdout-scene reads that scene's files of both splits: a model trained on the fold
+    without holding it out trained on most of them (it was said to have "chose its epoch on"
+    them); one that held the same scene out chose its epoch on them."""
+    from trajpref.cli import _held_out_split
+
+    overlap, notes = _evaluate(capsys, "--dataset", "zara1", "--split", "val", "--holdout-scene",
+                               "biwi_hotel", "--model", "zara1/generator", "--max-scenes", "4",
+                               "--data-root", data_root)  # fmt: skip
+    assert overlap == "model trained on these windows (held-out scene biwi_hotel* of zara1)"
+    assert len(notes) == 1 and "held-out scene biwi_hotel* of zara1 is the windows" in notes[0]
+    info = _info("zara1", "val", "")
+    assert _held_out_split({"dataset": "zara1", "holdout_scene": "biwi_hotel"}, info,
+                           "biwi_hotel") == "val"  # fmt: skip
+    assert _held_out_split({"dataset": "zara1"}, info, "biwi_hotel") == "train"
+    assert _held_out_split({"dataset": "eth"}, info, "biwi_hotel") is None

@@ -237,3 +237,20 @@ def test_a_legacy_pt_checkpoint_is_checked_too(walks, tmp_path):
     # a file that cannot be read (a folder named like a checkpoint): no check, no crash
     (tmp_path / "dir.pt").mkdir()
     assert _warned(load_dataset(str(walks), "test"), str(tmp_path / "dir.pt")) == ([], None)
+
+
+@pytest.mark.parametrize(("command", "name", "what"), [
+    (["predict", "--model", "cv", "--samples", "2"], "p.npz", "prediction"),
+    (["plot", "--model", "cv", "--samples", "2", "--scene", "0"], "f.png", "figure"),
+])  # fmt: skip
+def test_predict_and_plot_note_a_replaced_file_as_evaluate_does(capsys, walks, tmp_path,
+                                                                  command, name, what):  # fmt: skip
+    """evaluate said so when --out replaced a file; predict and plot replaced theirs silently
+    (a CLI walkthrough of 2026-12-06)."""
+    out = tmp_path / name
+    argv = [*command, "--dataset", walks, "--no-progress", "--out", out]
+    code, _, err = _run(capsys, *argv)
+    assert code == 0 and "existed and is replaced" not in err
+    code, _, err = _run(capsys, *argv)
+    assert code == 0
+    assert f"trajpref: note: --out {out} existed and is replaced by this {what}" in err

@@ -50,6 +50,9 @@ def test_train_generator_without_a_denoiser_suggests_the_published_name(
     err = capsys.readouterr().err
     assert "pass --denoiser FILE (or a published denoiser's name, e.g. zara1/denoiser" in err
     assert "models/zara1" not in err
+    # an eth run is pointed at eth's denoiser, not zara1's (a CLI walkthrough, 2026-12-06)
+    assert main(["train", "generator", "--config", "eth", "--out", "re"]) == 2
+    assert "published denoiser's name, e.g. eth/denoiser" in capsys.readouterr().err
 
 
 def test_the_python_api_names_the_published_model_for_a_repository_path(monkeypatch, tmp_path):

@@ -1048,7 +1048,8 @@ def _training_windows(spec: str, header: dict, info) -> str | None:
             "sub-folders and train on train/, or use files it did not train on)")  # fmt: skip
 
 
-def _warn_if_trained_otherwise(spec: str, ds, root: str | None = None) -> str | None:
+def _warn_if_trained_otherwise(spec: str, ds, root: str | None = None,
+                               holdout: str | None = None) -> str | None:  # fmt: skip
     """One warning when the model was trained on data whose units or pace differ from this
     data's (as far as both are known): its predictions would be in the wrong units or at the
     wrong pace. The model's side: what its checkpoint recorded of its training data
@@ -1064,7 +1065,9 @@ def _warn_if_trained_otherwise(spec: str, ds, root: str | None = None) -> str | 
     it has no split sub-folders (``_training_windows``), or a split it trained or chose its
     epoch on (``_own_split``; ``root``: the data root, for a fold's split folder given as a
     path); its short form is returned, for the result to record (``evaluate``'s
-    ``overlap``). None otherwise."""
+    ``overlap``); with ``holdout`` (``--holdout-scene``: that scene's windows of both splits),
+    whether the model trained on them or chose its epoch on them (``_held_out_split``). None
+    otherwise."""
     if spec == "cv":
         return None
     try:
@@ -1091,8 +1094,21 @@ def _warn_if_trained_otherwise(spec: str, ds, root: str | None = None) -> str | 
         named = dict(model, trained_on=_training_data(model["trained_on"]))
         warnings.warn(trained_otherwise(spec, named, problems), stacklevel=2)
     try:
+        data = header["config"]["data"]
+        if holdout:
+            split = _held_out_split(data, info, holdout)
+            if split is None:
+                return None
+            role = "trained on" if split == "train" else "chose its epoch on"
+            kind = "training" if split == "train" else "validation"
+            what = ("the windows of its training files" if split == "train"
+                    else "its own held-out validation scene")  # fmt: skip
+            warnings.warn(f"{spec} {role} these windows: the held-out scene {holdout}* of "
+                          f"{info.name} is {what}, its {kind} data, so numbers on it are "
+                          f"{kind} numbers, not a test", stacklevel=2)  # fmt: skip
+            return f"{role} these windows (held-out scene {holdout}* of {info.name})"
         own = _training_windows(spec, header, info)
-        split = None if own is not None else _own_split(header["config"]["data"], info, root)
+        split = None if own is not None else _own_split(data, info, root)
     except (KeyError, TypeError, AttributeError):
         return None
     if own is not None:
@@ -1120,6 +1136,20 @@ def _warn_if_trained_otherwise(spec: str, ds, root: str | None = None) -> str | 
                   "test (evaluate on the test split, or on files it did not train on)",
                   stacklevel=2)  # fmt: skip
     return f"{role} these windows ({split} split of {trained})"
+
+
+def _held_out_split(data: dict, info, holdout: str) -> str | None:
+    """For a held-out scene's windows (``--holdout-scene``: that scene's files of both splits
+    of ``info``'s dataset): ``val`` when the model held out the same scene (it chose its epoch
+    on them and never trained on them), ``train`` when it trained on that dataset without
+    holding it out (its training files are most of these windows), None for a model of other
+    data."""
+    trained = data.get("dataset")
+    if not isinstance(trained, str):
+        return None
+    if not (trained == info.name or _same_path(trained, info.name)):
+        return None
+    return "val" if data.get("holdout_scene") == holdout else "train"
 
 
 def _own_split(data: dict, info, root: str | None) -> str | None:
@@ -1295,10 +1325,11 @@ def _warn_model_and_scorer(args, ds) -> str | None:
     ``survey build`` checks its scorer). Returns what a result records of those trained on
     this very data (``model trained on these windows (...)``), None when neither was."""
     root = getattr(args, "data_root", None)
-    found = {"model": _warn_if_trained_otherwise(args.model, ds, root)}
+    holdout = getattr(args, "holdout_scene", None)
+    found = {"model": _warn_if_trained_otherwise(args.model, ds, root, holdout)}
     scorer = getattr(args, "scorer", None)
     if scorer and not (scorer == args.model or _same_path(scorer, args.model)):
-        found["scorer"] = _warn_if_trained_otherwise(scorer, ds, root)
+        found["scorer"] = _warn_if_trained_otherwise(scorer, ds, root, holdout)
     notes = [f"{role} {note}" for role, note in found.items() if note]
     return "; ".join(notes) or None
 
@@ -1595,14 +1626,20 @@ def _data_fields(ds) -> dict:
             "time_step": info.time_step, "interval_from": info.interval_from}  # fmt: skip
 
 
+def _note_replaced(path: str, what: str) -> None:
+    """A note on stderr when ``--out`` names a file already there, which ``what`` (this
+    command's output) replaces: evaluate, predict and plot write one output per file."""
+    if Path(path).is_file():
+        print(f"trajpref: note: --out {path} existed and is replaced by this {what} (one "
+              f"{what} per file: give each run its own --out to keep both)",
+              file=sys.stderr)  # fmt: skip
+
+
 def _write_result(path: str, out: dict) -> None:
     """Write ``evaluate``'s result as its suffix says: JSON, or CSV (a header and one row;
     null and non-finite numbers as empty cells, nested results as dotted columns). A file
     already there is replaced, and a note on stderr says so (one result per file)."""
-    if Path(path).exists():
-        print(f"trajpref: note: --out {path} existed and is replaced by this result (one "
-              "result per file: give each run its own --out to keep both)",
-              file=sys.stderr)  # fmt: skip
+    _note_replaced(path, "result")
     if Path(path).suffix.lower() != ".csv":
         write_json(path, out)
         return
@@ -1820,7 +1857,9 @@ def _evaluate_in_context(args, overlap: str | None = None) -> int:
     model, device = _predictor(args)
     sampling = _sampling_fields(model)
     ds = _load(args)
-    own = _warn_if_trained_otherwise(args.model, ds, getattr(args, "data_root", None))
+    own = _warn_if_trained_otherwise(
+        args.model, ds, getattr(args, "data_root", None), getattr(args, "holdout_scene", None)
+    )
     _warn_observed_pace(args, model, None, ds)
     _warn_untyped_data(args, model, None, ds)
     overlap = _joined(overlap, own and f"model {own}")
@@ -2034,6 +2073,7 @@ def cmd_predict(args) -> int:
     else:
         arrays["split"] = np.array(ds.info.split)  # 0-d: scene_id names the file, not its split
         meta = _predict_meta(args, ds, samples, scorer, overlap, sampling, device) | subset
+        _note_replaced(args.out, "prediction")
         with atomic_path(args.out) as tmp:
             with open(tmp, "wb") as fh:  # meta: a 0-d string, read without pickle
                 np.savez_compressed(fh, **arrays, meta=np.array(dumps_json(meta)))
@@ -2226,8 +2266,9 @@ def _print_scene_metrics(args, scene, pred: torch.Tensor, units: str, order=None
     future = torch.as_tensor(scene.future, dtype=pred.dtype, device=pred.device)  # [P, T_f, 2]
     ade, fde = (v.cpu().numpy() for v in min_ade_fde(pred, future))  # [P], [P]
     k = pred.shape[0]
-    print(f"scene {args.scene} ({scene.scene_id}): minADE_{k} {ade.mean():.4f} {units}, "
-          f"minFDE_{k} {fde.mean():.4f} {units} (the mean of its {len(ade)} agents; "
+    unit = "" if not units or units in UNKNOWN_UNITS else f" {units}"  # as the axes: none
+    print(f"scene {args.scene} ({scene.scene_id}): minADE_{k} {ade.mean():.4f}{unit}, "
+          f"minFDE_{k} {fde.mean():.4f}{unit} (the mean of its {len(ade)} agents; "
           f"every sample counts)")  # fmt: skip
     for i in range(len(ade)):
         ball = " (the ball)" if int(scene.agent_type[i]) == AGENT_BALL else ""  # drawn as a star
@@ -2256,6 +2297,7 @@ def cmd_plot(args) -> int:
     style = {"limits": args.limits, "width": args.width, "dpi": args.dpi}
     samples = pred.cpu().numpy()  # [K, P, T_f, 2]
     order = scores = None
+    _note_replaced(args.out, "figure")
     if scorer is not None:
         scores = scorer.score(batch, pred).agent_ats.cpu().numpy()  # [K, P]
         top = min(args.draw_samples or 2, args.samples)

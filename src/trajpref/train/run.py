@@ -26,6 +26,7 @@ from trajpref.device import resolve_device
 from trajpref.errors import ConfigError
 from trajpref.io import atomic_path, check_output_dir, write_json
 from trajpref.models import checkpoint as ckpt
+from trajpref.models import zoo
 from trajpref.results import command_line, machine
 from trajpref.rl.presets import own_reward_data
 from trajpref.train.distributed import (
@@ -562,11 +563,14 @@ def train_stage(
     if stage == "generator":  # read before any compute: a wrong file fails at once
         path = Path(denoiser) if denoiser else Path(out_dir) / f"denoiser{ckpt.SUFFIX}"
         if not denoiser and not path.is_file():
+            example = f"{cfg.data.dataset}/denoiser"
+            if example not in zoo.published():  # a folder's run: any published one as a form
+                example = "zara1/denoiser"
             raise ConfigError(
                 f"{path}: the generator trains through a denoiser and there is none in "
                 f"{out_dir}: train it there first (trajpref train diffusion ... --out "
                 f"{out_dir}) or pass --denoiser FILE (or a published denoiser's name, e.g. "
-                "zara1/denoiser: `trajpref models` lists them)"
+                f"{example}: `trajpref models` lists them)"
             )
         payload = ckpt.load(path)
         if payload["kind"] != "denoiser":
