@@ -68,14 +68,15 @@ def test_a_model_trained_on_a_folder_records_its_pace_and_units(paced_run, logge
                                              "units": "m", "agent_types": [0]}  # fmt: skip
 
 
-def test_data_at_another_step_than_the_models_is_named_in_one_line(capsys, paced_run, logged):
+def test_data_at_another_step_than_the_models_is_named_in_one_line(capsys, paced_run, logged,
+                                                                    tmp_path):  # fmt: skip
     model = paced_run / "generator.safetensors"
     base = ["--dataset", logged, "--model", model, "--samples", "4", "--no-progress",
             "--device", "cpu"]  # fmt: skip
     warning = f"trajpref: warning: {model} was trained on {logged}: {PACE}\n"
     # forgetting --time-step: 0.1 s histories for a 0.4 s model, now said in every command
-    for command in (["evaluate"], ["predict", "--rank", "--out", logged.parent / "p.npz"],
-                    ["plot", "--out", logged.parent / "p.png"]):  # fmt: skip
+    for command in (["evaluate"], ["predict", "--rank", "--out", tmp_path / "p.npz"],
+                    ["plot", "--out", tmp_path / "p.png"]):  # fmt: skip
         code, _, err = _run(capsys, *command, *base)
         assert (code, err) == (0, warning), command
     # read as the model was (its units too, else they are asked for): silent
