@@ -523,9 +523,10 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--width", type=float, default=None, metavar="INCHES",
                     help="the figure's width; its text has its printed size at this width, so "
                     "give the width it is printed at: 3.3 for a paper's column, where --scorer "
-                    "stacks its two panels (default 6.4; 7 with --scorer). A title wider than "
-                    "that widens the canvas: the one made is long, so give --title or "
-                    "--no-title")  # fmt: skip
+                    "stacks its two panels (default 6.4; 7 with --scorer). The figure is "
+                    "exactly this wide, its height follows the scene; a longer title is "
+                    "wrapped onto more lines (the one made is long: give --title or "
+                    "--no-title)")  # fmt: skip
     pl.add_argument("--limits", default="auto", metavar="auto|all|X0,X1,Y0,Y1",
                     help="the axes: auto (default) holds every history and ground truth and the "
                     "bulk of the samples, leaving out a sample that reaches farther from its "
@@ -2410,6 +2411,16 @@ def cmd_finetune(args) -> int:
         )
         raise ConfigError(f"--from {args.start}: a folder, not a checkpoint file{hint}")
     _check_checkpoint("--from", args.start)
+    stages = [
+        o.split("=", 1)[0].strip()
+        for o in args.overrides or []
+        if o.split("=", 1)[0].strip().split(".", 1)[0] in ("generator", "denoiser")
+    ]
+    if stages:  # the user's own --set: a config shared with training (the demo's) may hold them
+        raise ConfigError(f"{stages[0]}: fine-tuning does not read the pretraining stages' "
+                          "settings (generator.*, denoiser.*); its own are finetune.* "
+                          "(finetune.epochs, finetune.lr, ...: trajpref config show lists "
+                          "them)")  # fmt: skip
     cfg = finetune_config(args.start, args.method, args.preset, args.config, args.overrides,
                           args.seed, args.equal_budget)  # fmt: skip
     _warn_if_validation_reads_training(cfg.data)

@@ -1,7 +1,5 @@
 import numpy as np
 import pytest
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 from PIL import Image
 
 from trajpref.errors import ConfigError
@@ -56,21 +54,6 @@ def test_plot_survey_summary_skips_missing_values(tmp_path):
                               {"human": ["", "**", "ns"]}, tmp_path / "s.png", "t",
                               xlims={"human": (0, 5)})  # fmt: skip
     assert out.read_bytes()[:8] == PNG
-
-
-def test_long_titles_and_labels_are_not_clipped(tmp_path):
-    """The saved canvas grows to hold the whole title: a title wider than the 6.4-inch figure
-    is still in the picture (it was cut at the figure's edge)."""
-    hist, fut, pred = _scene()
-    title = "zara1/test scene 100, models/zara1/generator-long.safetensors, K=20; " * 3
-    fig = Figure(dpi=120)
-    text = fig.text(0, 0, title, fontsize=9)
-    title_px = text.get_window_extent(FigureCanvasAgg(fig).get_renderer()).width
-    assert title_px > 6.4 * 120  # wider than the figure itself
-    for out in (plot_scene(hist, fut, pred, tmp_path / "a.png", "m", title),
-                plot_scene_scored(hist, fut, pred, np.zeros((5, 3)), tmp_path / "b.png", "m",
-                                  title)):  # fmt: skip
-        assert Image.open(out).size[0] >= title_px
 
 
 def test_plot_curves_lays_panels_in_a_grid_and_refuses_none(tmp_path):

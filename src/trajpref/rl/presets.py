@@ -342,13 +342,6 @@ def finetune_config(
     if cfg.finetune.method != method:
         raise ConfigError(f"finetune.method={cfg.finetune.method} contradicts --method {method}; "
                           "choose the method with --method alone")  # fmt: skip
-    stages = [o.split("=", 1)[0].strip() for o in overrides or []
-              if o.split("=", 1)[0].strip().split(".", 1)[0] in ("generator", "denoiser")]
-    if stages:  # the pretraining stages' settings: fine-tuning reads none of them
-        raise ConfigError(f"{stages[0]}: fine-tuning does not read the pretraining stages' "
-                          "settings (generator.*, denoiser.*); its own are finetune.* "
-                          "(finetune.epochs, finetune.lr, ...: trajpref config show lists "
-                          "them)")  # fmt: skip
     now = to_dict(cfg)
     for section in ("model", "diffusion"):  # the network and its schedule come from the start
         changed = [k for k, v in now[section].items() if v != resolved[section].get(k)]

@@ -8,11 +8,15 @@ The scene figures (``plot_scene``, ``plot_scene_scored``) give each agent a colo
 colour-blind-safe palette (``PALETTE``) and, beyond its length, another marker (``MARKERS``);
 their legend, in a neutral colour, explains the line styles and markers. By default their
 axes hold every history and ground truth and the bulk of the samples, not a sample that runs
-far out (``scene_limits``)."""
+far out (``scene_limits``). They are exactly ``width`` inches wide (a PDF's or SVG's page, a
+PNG's ``width * dpi`` pixels), their height what their panels take at that width: a title or
+legend wider than that is wrapped onto more lines, not cut off and not widening the page."""
 
 from __future__ import annotations
 
 import math
+import re
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -51,10 +55,17 @@ SCENE_WIDTH = 6.4
 """``plot_scene``'s default width in inches."""
 SCORED_WIDTH = 7.0
 """``plot_scene_scored``'s default width in inches (a two-column page's text width)."""
+EDGE = 0.1
+"""Inches that a scene figure's title and legend keep clear of each side of the page (their
+lines are wrapped to the width less twice this)."""
 _STYLE = {"font.size": 8, "axes.titlesize": 9, "axes.labelsize": 8, "xtick.labelsize": 7,
-          "ytick.labelsize": 7, "legend.fontsize": 7, "pdf.fonttype": 42}  # fmt: skip
-"""Text in points at the printed size (a figure made ``width`` inches wide shows it so), and
-TrueType fonts embedded in PDF files (as journals ask)."""
+          "ytick.labelsize": 7, "legend.fontsize": 7, "pdf.fonttype": 42,
+          "text.hinting": "none"}  # fmt: skip
+"""Text in points at the printed size (a scene figure is ``width`` inches wide: printed at
+that width, it shows them so), TrueType fonts embedded in PDF files (as journals ask), and
+text not hinted to a PNG's pixels: it takes the same width at every dpi as in a PDF or SVG,
+so that the layout (the legend's columns, the title's lines) is the same in each (hinted
+text at 120 dpi is up to 5 % wider than at 300)."""
 
 
 def figure_format(out: str | Path) -> str:
@@ -277,26 +288,146 @@ def _set_axes(ax, box: tuple[float, float, float, float], units: str | None,
     ax.grid(alpha=0.3)
 
 
-def _legend_below(fig, axes, handles: list[Line2D], title: str, width: float,
-                  suptitle: str = "") -> None:  # fmt: skip
-    """The legend, centred under the laid-out ``axes`` and their x labels, and ``suptitle``
-    centred above them and their titles (the layout is then frozen; the saved canvas grows
-    to hold both). The legend's columns fit the figure's ``width`` in inches."""
-    fig.draw_without_rendering()  # lay out: the axes and their labels have their places now
+_BREAK_AFTER = re.compile(r"(?<=[_/@.,;:=+-])")
+"""Where a word too long for a line (a file name) is broken when it has to be: after these."""
+
+
+def _dollars(text: str) -> int:
+    return text.count("$") - text.count(r"\$")
+
+
+def _wrap(fig, text: str, width: float, fontsize: float) -> str:
+    """``text`` with line breaks added so that no line is wider than ``width`` inches at
+    ``fontsize`` points (as ``fig`` draws it): between words, and a word wider than that
+    after one of ``_/@.,;:=+-`` (``_BREAK_AFTER``), else between any two characters. Its own
+    line breaks are kept, and mathtext (``$...$``) is kept on one line. (Matplotlib reads a
+    line with an even number of ``$`` as mathtext: in a line with an odd number, which it
+    draws as it is, they are escaped, so that no part of it becomes mathtext.)"""
     renderer = fig.canvas.get_renderer()
-    boxes = [ax.get_tightbbox(renderer) for ax in axes]
-    left, right = min(b.x0 for b in boxes), max(b.x1 for b in boxes)
-    bottom, top = min(b.y0 for b in boxes), max(b.y1 for b in boxes)
-    fig.set_layout_engine("none")
-    to_figure = fig.transFigure.inverted()
-    x, y = to_figure.transform(((left + right) / 2, bottom))
-    ncols = len(handles) if width >= 8 else 4 if width >= 6 else 2
-    fig.legend(handles=handles, loc="upper center", bbox_to_anchor=(x, y), ncols=ncols,
-               frameon=False, title=title, title_fontsize=7,
-               columnspacing=1.2, handlelength=2.2)  # fmt: skip
-    if suptitle:  # 6 points above the panels' titles, never over them
-        x, y = to_figure.transform(((left + right) / 2, top + 6 * fig.dpi / 72))
-        fig.text(x, y, suptitle, ha="center", va="bottom", fontsize=9, gid="suptitle")
+    probe = fig.text(0, 0, "", fontsize=fontsize)
+
+    def fits(line: str) -> bool:
+        probe.set_text(line)
+        return probe.get_window_extent(renderer).width <= width * fig.dpi
+
+    lines = []
+    try:
+        for paragraph in text.split("\n"):
+            if _dollars(paragraph) % 2:  # not mathtext: none of its lines either
+                paragraph = re.sub(r"(?<!\\)\$", r"\\$", paragraph)
+            words: list[str] = []
+            for word in paragraph.split(" "):
+                if words and _dollars(words[-1]) % 2:  # within $...$: one word
+                    words[-1] += " " + word
+                else:
+                    words.append(word)
+            line = ""
+            for word in words:
+                parts = [word]
+                if not fits(word) and not _dollars(word):  # broken where it can
+                    parts = [q for part in _BREAK_AFTER.split(word) if part
+                             for q in ([part] if fits(part) else list(part))]  # fmt: skip
+                for j, part in enumerate(parts):
+                    joined = line + (" " if j == 0 and line else "") + part
+                    if not line or fits(joined):
+                        line = joined
+                    else:
+                        lines.append(line)
+                        line = part
+            lines.append(line)
+    finally:
+        probe.remove()
+    return "\n".join(lines)
+
+
+def _legend_below(fig, handles: list[Line2D], title: str, width: float) -> None:
+    """The legend, centred at the foot of the figure (the constrained layout keeps its room
+    under the panels), in as many columns as fit ``width`` inches less ``EDGE`` a side: all
+    of them from 8 inches, at most 4 from 6, else at most 2, down to 1; a legend too wide in
+    one column has its title and labels wrapped."""
+    room = width - 2 * EDGE
+    renderer = fig.canvas.get_renderer()
+    most = len(handles) if width >= 8 else 4 if width >= 6 else 2
+    for ncols in range(min(most, len(handles)), 0, -1):
+        legend = fig.legend(handles=handles, loc="outside lower center", ncols=ncols,
+                            frameon=False, title=title, title_fontsize=7,
+                            columnspacing=1.2, handlelength=2.2)  # fmt: skip
+        wide = legend.get_window_extent(renderer).width / fig.dpi
+        if wide <= room or ncols == 1:
+            break
+        legend.remove()
+    if wide > room:  # one column: its labels beside their handles, and its title, wrapped
+        texts = legend.get_texts()
+        label = max(t.get_window_extent(renderer).width for t in texts) / fig.dpi
+        for t in texts:
+            t.set_text(_wrap(fig, t.get_text(), max(room - (wide - label), 0.1), 7))
+        legend.get_title().set_text(_wrap(fig, title, room, 7))
+
+
+def _title(fig, title: str, width: float) -> None:
+    """``title`` centred at the top of the figure, above the panels and their own titles,
+    wrapped to ``width`` inches less ``EDGE`` a side (none when empty)."""
+    if title:
+        fig.suptitle(_wrap(fig, title, width - 2 * EDGE, 9), fontsize=9).set_gid("suptitle")
+
+
+def _laid_out(fig) -> bool:
+    """Lay ``fig`` out (its constrained layout); False where the layout found no room for the
+    axes (the figure too short for its titles, labels and legend) and left them as they were.
+    Other warnings are passed on."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fig.draw_without_rendering()
+    ok = True
+    for w in caught:
+        if "constrained_layout not applied" in str(w.message):
+            ok = False
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return ok
+
+
+def _fit_height(fig, axes, dpi: float) -> None:
+    """Give ``fig`` (its width fixed, laid out by its constrained layout) the height at which
+    its equal-aspect ``axes`` fill the width the layout gives them: no empty band above and
+    below them, none beside them. The layout is found with the axes free to take any shape
+    (the constrained layout leaves bands it cannot use around an axes of fixed aspect), each
+    step making them as tall as their x and y scales then need; a panel's title wider than
+    its panel is wrapped to its width (the layout makes no room beside a panel for its
+    title). ``dpi``: the PNG's, checked against ``MAX_PIXELS``."""
+    w = fig.get_figwidth()
+    titles = [ax.title.get_text() for ax in axes]
+    aspects = [ax.get_aspect() for ax in axes]  # 1.0: x and y at one scale
+    renderer = fig.canvas.get_renderer()
+    for ax in axes:
+        ax.set_aspect("auto")
+    for _ in range(12):
+        h = fig.get_figheight()
+        if not _laid_out(fig):  # too short for its text: taller, then fitted
+            fig.set_size_inches(w, 1.5 * h + 1.0)
+            continue
+        wrapped = False
+        for ax, title in zip(axes, titles, strict=True):
+            room, shown = ax.get_position().width * w, ax.title.get_text()  # inches
+            ax.title.set_text(title)
+            if ax.title.get_window_extent(renderer).width > room * fig.dpi:
+                ax.title.set_text(_wrap(fig, title, room, ax.title.get_fontsize()))
+            wrapped |= ax.title.get_text() != shown
+        if wrapped:  # laid out again with the titles' new lines
+            continue
+        rows: dict[int, float] = {}
+        for ax, aspect in zip(axes, aspects, strict=True):
+            box, (x0, x1), (y0, y1) = ax.get_position(), ax.get_xlim(), ax.get_ylim()
+            tall = box.width * w * aspect * abs((y1 - y0) / (x1 - x0))  # inches it should be
+            row = ax.get_subplotspec().rowspan.start
+            rows[row] = max(rows.get(row, -math.inf), tall - box.height * h)
+        change = sum(rows.values())  # inches the figure is too short (> 0) or too tall
+        if abs(change) < 1e-3:
+            break
+        fig.set_size_inches(w, max(h + change, 0.5))
+    for ax, aspect in zip(axes, aspects, strict=True):
+        ax.set_aspect(aspect, adjustable="box")
+    _check_pixels((w, fig.get_figheight()), dpi)
 
 
 def plot_scene(
@@ -320,10 +451,12 @@ def plot_scene(
     beyond ``len(PALETTE)`` agents, marker): history solid with dots, samples thin, the ground
     truth dashed on top with its end marked. ``limits``: ``auto`` (default: the samples that
     run far out do not widen the axes, ``scene_limits``), ``all`` or (x0, x1, y0, y1).
-    ``max_samples``: draw only each agent's first so many samples. ``width``: inches (default
-    ``SCENE_WIDTH``; text is at its printed size, so 3.3 suits a paper's column); ``dpi``: a
-    PNG's pixels per inch (default ``DPI``). An empty ``title`` draws none. ``units`` None
-    (or ``""``, ``unknown``): the axes are titled without a unit (``axis_label``).
+    ``max_samples``: draw only each agent's first so many samples. ``width``: the figure's
+    width in inches (default ``SCENE_WIDTH``), exactly (its height follows the scene's
+    aspect); text is at its printed size, so 3.3 suits a paper's column; ``dpi``: a PNG's
+    pixels per inch (default ``DPI``). A ``title`` is centred at the top, wrapped to the
+    width (an empty one draws none). ``units`` None (or ``""``, ``unknown``): the axes are
+    titled without a unit (``axis_label``).
     """
     figure_format(out)
     _check_size(width, dpi)
@@ -337,10 +470,11 @@ def plot_scene(
     aspect = (box[3] - box[2]) / (box[1] - box[0])
     w = SCENE_WIDTH if width is None else width
     with plt.rc_context(_STYLE):
-        # the axes' aspect sets the height; "compressed" keeps no empty band around them
+        # the width is fixed; the axes' aspect sets the height (_fit_height), laid out with
+        # room for the labels, the title and the legend (from a height with room to spare)
         _check_pixels((w, (w - 0.7) * aspect + 0.8), dpi or DPI)
-        fig, ax = plt.subplots(figsize=(w, (w - 0.7) * aspect + 0.8), dpi=dpi or DPI,
-                               layout="compressed")  # fmt: skip
+        fig, ax = plt.subplots(figsize=(w, (w - 0.7) * aspect + 2.5), dpi=dpi or DPI,
+                               layout="constrained")  # fmt: skip
         for i in range(p):
             if pred is not None:
                 start = np.repeat(history[None, i, -1:], len(pred), 0)  # [K', 1, 2]
@@ -350,12 +484,12 @@ def plot_scene(
             is_ball = agent_type is not None and int(agent_type[i]) == BALL
             _draw_agent(ax, i, history[i], future[i], is_ball)
         _set_axes(ax, box, units)
-        if title:
-            ax.set_title(title, fontsize=9)
+        _title(fig, title, w)
         samples = None if pred is None else f"samples ({len(pred)} per agent)"
-        _legend_below(fig, [ax], _legend_handles(samples, ball=ball),
-                      "colour and marker: one agent", w)  # fmt: skip
-        return _save(fig, out, dpi)
+        _legend_below(fig, _legend_handles(samples, ball=ball), "colour and marker: one agent",
+                      w)  # fmt: skip
+        _fit_height(fig, [ax], dpi or DPI)
+        return _save(fig, out, dpi, True)
 
 
 def _ordinal(n: int) -> str:
@@ -403,10 +537,11 @@ def plot_scene_scored(
     history [P, T_h, 2], future [P, T_f, 2], pred [K, P, T_f, 2], scores [K, P] (higher is
     better, e.g. each agent's ATS), agent_type [P] (``BALL`` draws a star). ``limits``:
     ``auto`` (default: every history and ground truth and the shown samples that do not run
-    far out among their agent's K), ``all`` or (x0, x1, y0, y1). ``width``: inches (default
-    ``SCORED_WIDTH``; below 5 the panels are stacked, one above the other, so that 3.3 suits
-    a paper's column); ``dpi``: a PNG's pixels per inch (default ``DPI``). An empty
-    ``title`` draws none.
+    far out among their agent's K), ``all`` or (x0, x1, y0, y1). ``width``: the figure's
+    width in inches (default ``SCORED_WIDTH``), exactly (its height follows the panels'
+    aspect); below 5 the panels are stacked, one above the other, so that 3.3 suits a paper's
+    column; ``dpi``: a PNG's pixels per inch (default ``DPI``). A ``title`` is centred at the
+    top, wrapped to the width (an empty one draws none).
     """
     figure_format(out)
     _check_size(width, dpi)
@@ -423,15 +558,16 @@ def plot_scene_scored(
     w = SCORED_WIDTH if width is None else width
     stacked = w < 5
     with plt.rc_context(_STYLE):
-        # "compressed": the equal-aspect panels keep no empty band around them
+        # the width is fixed; the panels' aspect sets the height (_fit_height), laid out with
+        # room for the labels, the titles and the legend (from a height with room to spare)
         if stacked:
             size = (w, 2 * (w - 0.7) * aspect + 1.2)
         else:
             size = (w, (w - 1.0) / 2 * aspect + 1.0)
         _check_pixels(size, dpi or DPI)
-        fig, axes = plt.subplots(2 if stacked else 1, 1 if stacked else 2, figsize=size,
-                                 dpi=dpi or DPI, sharex=True, sharey=True,
-                                 layout="compressed")  # fmt: skip
+        fig, axes = plt.subplots(2 if stacked else 1, 1 if stacked else 2,
+                                 figsize=(size[0], size[1] + 2.5), dpi=dpi or DPI,
+                                 sharex=True, sharey=True, layout="constrained")  # fmt: skip
         for i in range(p):
             c = agent_style(i)[0]
             is_ball = agent_type is not None and int(agent_type[i]) == BALL
@@ -452,10 +588,11 @@ def plot_scene_scored(
         ranks = [(f"{_ordinal(r + 1)} by score", *rank_style(r, top)) for r in range(top)]
         if k == 1:
             ranks = [("its one sample", *rank_style(0, 1))]
-        _legend_below(fig, list(axes), _legend_handles(None, ranks, ball),
-                      "colour and marker: one agent (its number beside it)", w,
-                      title)  # fmt: skip
-        return _save(fig, out, dpi)
+        _title(fig, title, w)
+        _legend_below(fig, _legend_handles(None, ranks, ball),
+                      "colour and marker: one agent (its number beside it)", w)  # fmt: skip
+        _fit_height(fig, list(axes), dpi or DPI)
+        return _save(fig, out, dpi, True)
 
 
 def plot_panel(
@@ -581,19 +718,23 @@ NO_DATE = {"pdf": {"CreationDate": None}, "svg": {"Date": None}}
 """Vector files carry no creation date, so that the same figure is the same bytes."""
 
 
-def _save(fig, out: str | Path, dpi: float | None = None) -> Path:
+def _save(fig, out: str | Path, dpi: float | None = None, sized: bool = False) -> Path:
     """Lay out, write in the format ``out``'s suffix names (``figure_format``) through a
-    temporary file, close. The saved canvas grows to hold every title and label
-    (``bbox_inches="tight"``), so nothing is clipped however long the title or however tall
-    the axes' aspect. ``dpi``: a PNG's pixels per inch (default: the figure's own)."""
+    temporary file, close. ``dpi``: a PNG's pixels per inch (default: the figure's own).
+    ``sized``: the figure is written at its own size (the scene figures: their width is
+    the one asked for, and their layout holds every title, label and legend); otherwise
+    the saved canvas grows or shrinks to hold every title and label (``bbox_inches="tight"``,
+    the study's and the benchmarks' figures), so nothing is clipped however long the title
+    or however tall the axes' aspect."""
     out = Path(out)
     try:
         fmt = figure_format(out)
         if fig.get_layout_engine() is None:  # a figure with its own layout engine keeps it
             fig.tight_layout()
+        tight = {} if sized else {"bbox_inches": "tight", "pad_inches": 0.1}
         with atomic_path(out) as tmp:
-            fig.savefig(tmp, format=fmt, dpi=dpi or fig.dpi, bbox_inches="tight",
-                        pad_inches=0.1, metadata=NO_DATE.get(fmt))  # fmt: skip
+            fig.savefig(tmp, format=fmt, dpi=dpi or fig.dpi, metadata=NO_DATE.get(fmt),
+                        **tight)  # fmt: skip
     finally:
         plt.close(fig)
     return out
