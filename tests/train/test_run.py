@@ -425,6 +425,10 @@ def test_a_new_run_in_a_used_folder_moves_the_earlier_runs_record_aside(tiny_cfg
     assert (out / "denoiser_metrics.replaced-1.jsonl").is_file()
     assert "moved aside to denoiser_metrics.replaced-1.jsonl and denoiser_run.replaced-1.json" \
         in capsys.readouterr().err  # fmt: skip
+    # and its resume state: a new run stopped before its first epoch left the earlier run's
+    # state beside its own config (a CLI walkthrough of 2026-12-06)
+    old = torch.load(out / "denoiser_last.replaced-1.pt", weights_only=True)
+    assert old["step"] > torch.load(out / "denoiser_last.pt", weights_only=True)["step"] == 1
     # a record left without a log (a run stopped before its first epoch) keeps them paired
     (out / "denoiser_metrics.jsonl").unlink()
     train_stage("diffusion", tiny_cfg, out, device="cpu", progress=False, max_steps=1)
@@ -434,6 +438,7 @@ def test_a_new_run_in_a_used_folder_moves_the_earlier_runs_record_aside(tiny_cfg
     assert {p.name for p in out.glob("*replaced-3*")} == {
         "denoiser_run.replaced-3.json",
         "denoiser_metrics.replaced-3.jsonl",
+        "denoiser_last.replaced-3.pt",
     }
 
 

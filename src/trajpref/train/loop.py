@@ -45,9 +45,10 @@ folder moves them aside (``set_aside``) rather than appending to another run's."
 
 def set_aside(out_dir: str | Path, stage: str, names: tuple[str, ...] = RUN_FILES) -> list[str]:
     """Move an earlier run's ``<stage>_<name>`` files (of ``names``, those that exist) to
-    ``<stage>_metrics.replaced-<k>.jsonl``, ``<stage>_run.replaced-<k>.json``: one ``k`` for
-    all, free for every file of ``RUN_FILES``, so that a log and its record stay paired. Says
-    so on stderr; returns the new names."""
+    ``<stage>_metrics.replaced-<k>.jsonl``, ``<stage>_run.replaced-<k>.json`` (and
+    ``<stage>_last.replaced-<k>.pt``): one ``k`` for all, free for every file of ``RUN_FILES``
+    and ``names``, so that a log, its record and its state stay paired. Says so on stderr;
+    returns the new names."""
     out_dir = Path(out_dir)
     present = [n for n in names if (out_dir / f"{stage}_{n}").exists()]
     if not present:
@@ -58,7 +59,7 @@ def set_aside(out_dir: str | Path, stage: str, names: tuple[str, ...] = RUN_FILE
         return out_dir / f"{stage}_{stem}.replaced-{k}.{ext}"
 
     k = 1
-    while any(aside(n, k).exists() for n in RUN_FILES):
+    while any(aside(n, k).exists() for n in (*RUN_FILES, *names)):
         k += 1
     moved = []
     for name in present:

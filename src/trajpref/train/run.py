@@ -36,7 +36,13 @@ from trajpref.train.distributed import (
     init_from_env,
     launcher_command,
 )
-from trajpref.train.loop import check_resume_matches, fit, load_resume_state, set_aside
+from trajpref.train.loop import (
+    RUN_FILES,
+    check_resume_matches,
+    fit,
+    load_resume_state,
+    set_aside,
+)
 from trajpref.train.stages import (
     build_denoiser_stage,
     build_finetune_stage,
@@ -511,8 +517,8 @@ def _run(
             check_resume_matches(state, built.trainable, resume, optim.ema_epochs > 0)
         if info.is_main:
             out_dir.mkdir(parents=True, exist_ok=True)
-            if state is None:  # another run's log and record are not this run's
-                set_aside(out_dir, name)
+            if state is None:  # another run's log, record and resume state are not this run's
+                set_aside(out_dir, name, (*RUN_FILES, "last.pt"))
             for path in (out_dir / "config.yaml", out_dir / f"{name}_config.yaml"):
                 save_config(cfg, path)  # the run's last stage's; this stage's, kept
                 if info.enabled:
