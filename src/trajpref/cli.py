@@ -90,7 +90,12 @@ from trajpref.models.timing import (
     unstated_timing,
 )
 from trajpref.results import machine
-from trajpref.rl.presets import EQUAL_BUDGET_VALIDATIONS, EQUAL_BUDGET_WARMUP, finetune_config
+from trajpref.rl.presets import (
+    EQUAL_BUDGET_VALIDATIONS,
+    EQUAL_BUDGET_WARMUP,
+    check_no_pretraining_keys,
+    finetune_config,
+)
 from trajpref.score import TrajectoryScorer, score_timesteps
 from trajpref.score.scorer import PRECISIONS, reads_agent_types
 from trajpref.score.selection import (
@@ -1100,14 +1105,10 @@ def _warn_if_trained_otherwise(spec: str, ds, root: str | None = None,
             split = _held_out_split(data, info, holdout)
             if split is None:
                 return None
-            role = "trained on" if split == "train" else "chose its epoch on"
-            kind = "training" if split == "train" else "validation"
             what = ("the windows of its training files" if split == "train"
                     else "its own held-out validation scene")  # fmt: skip
-            warnings.warn(f"{spec} {role} these windows: the held-out scene {holdout}* of "
-                          f"{info.name} is {what}, its {kind} data, so numbers on it are "
-                          f"{kind} numbers, not a test", stacklevel=2)  # fmt: skip
-            return f"{role} these windows (held-out scene {holdout}* of {info.name})"
+            return _overlap(spec, split, f"the held-out scene {holdout}* of {info.name} is {what}",
+                            f"held-out scene {holdout}* of {info.name}", "")  # fmt: skip
         own = _training_windows(spec, header, info)
         split = None if own is not None else _own_split(data, info, root)
     except (KeyError, TypeError, AttributeError):
@@ -1115,28 +1116,34 @@ def _warn_if_trained_otherwise(spec: str, ds, root: str | None = None,
     if own is not None:
         warnings.warn(own, stacklevel=2)
         return f"trained on these windows ({info.name} has no split sub-folders)"
-    shared = None if split is not None else _shared_split(header["config"]["data"], info)
-    if shared is not None:
-        split, (name, part) = shared
-        role = "trained on" if split == "train" else "chose its epoch on"
-        kind = "training" if split == "train" else "validation"
-        what = f"{info.name}'s {info.split} split holds {name}'s {part} split"
-        if (name, part) == (info.name, info.split):
-            what = f"this is {name}'s {part} split"
-        warnings.warn(f"{spec} {role} these windows: {what}, its {kind} data, so numbers "
-                      f"on it are {kind} numbers, not a test (evaluate on the test split)",
-                      stacklevel=2)  # fmt: skip
-        return f"{role} these windows ({name}'s {part} split)"
-    if split is None:
+    if split is not None:
+        trained = data["dataset"]
+        return _overlap(
+            spec,
+            split,
+            f"{info.source} is the {split} split of {trained}",
+            f"{split} split of {trained}",
+            " (evaluate on the test split, or on files it did not train on)",
+        )
+    shared = _shared_split(data, info)
+    if shared is None:
         return None
-    trained = header["config"]["data"]["dataset"]
+    split, (name, part) = shared
+    what = f"{info.name}'s {info.split} split holds {name}'s {part} split"
+    if (name, part) == (info.name, info.split):
+        what = f"this is {name}'s {part} split"
+    return _overlap(spec, split, what, f"{name}'s {part} split", " (evaluate on the test split)")
+
+
+def _overlap(spec: str, split: str, what: str, where: str, advice: str) -> str:
+    """The warning that ``spec`` trained on (``split`` ``train``) or chose its epoch on
+    (``val``) these windows, ``what`` saying how, then ``advice``; returns the form a result
+    records (``overlap``), ``where`` in its parentheses."""
     role = "trained on" if split == "train" else "chose its epoch on"
     kind = "training" if split == "train" else "validation"
-    warnings.warn(f"{spec} {role} these windows: {info.source} is the {split} split of "
-                  f"{trained}, its {kind} data, so numbers on it are {kind} numbers, not a "
-                  "test (evaluate on the test split, or on files it did not train on)",
-                  stacklevel=2)  # fmt: skip
-    return f"{role} these windows ({split} split of {trained})"
+    warnings.warn(f"{spec} {role} these windows: {what}, its {kind} data, so numbers on it are "
+                  f"{kind} numbers, not a test{advice}", stacklevel=3)  # fmt: skip
+    return f"{role} these windows ({where})"
 
 
 def _held_out_split(data: dict, info, holdout: str) -> str | None:
@@ -1963,9 +1970,9 @@ def _check_trajnet_targets(args) -> None:
     for flag, given in outputs:
         base = trajnet_output_base(given, folder)
         bases[flag] = _resolved(base)
+        written = trajnet_output_paths(given, [f.name for f in files], True) if folder else {}
         if folder:
             check_output_dir(base, flag)
-            written = trajnet_output_paths(given, [f.name for f in files], True)
             for target in written.values():
                 check_output_file(target, ".ndjson", flag)
             others = sorted(p.name for p in base.glob("*.ndjson")
@@ -1987,9 +1994,7 @@ def _check_trajnet_targets(args) -> None:
                 raise ConfigError(f"{flag} {given}: writes {base}, {what} {source} (it would "
                                   "replace or add to the data read): write the predictions "
                                   "outside it")  # fmt: skip
-        targets = [base]  # every file written, each compared with every source file
-        if folder:
-            targets += trajnet_output_paths(given, [f.name for f in files], True).values()
+        targets = [base, *written.values()]  # every file written, against every source file
         for source, target in itertools.product(files, targets):
             if _resolved(source) == _resolved(target) or (
                 target.exists() and source.exists() and os.path.samefile(source, target)
@@ -2411,16 +2416,7 @@ def cmd_finetune(args) -> int:
         )
         raise ConfigError(f"--from {args.start}: a folder, not a checkpoint file{hint}")
     _check_checkpoint("--from", args.start)
-    stages = [
-        o.split("=", 1)[0].strip()
-        for o in args.overrides or []
-        if o.split("=", 1)[0].strip().split(".", 1)[0] in ("generator", "denoiser")
-    ]
-    if stages:  # the user's own --set: a config shared with training (the demo's) may hold them
-        raise ConfigError(f"{stages[0]}: fine-tuning does not read the pretraining stages' "
-                          "settings (generator.*, denoiser.*); its own are finetune.* "
-                          "(finetune.epochs, finetune.lr, ...: trajpref config show lists "
-                          "them)")  # fmt: skip
+    check_no_pretraining_keys(args.overrides or [])  # the user's own --set
     cfg = finetune_config(args.start, args.method, args.preset, args.config, args.overrides,
                           args.seed, args.equal_budget)  # fmt: skip
     _warn_if_validation_reads_training(cfg.data)

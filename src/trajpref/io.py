@@ -32,19 +32,28 @@ def _nearest_existing(path: Path) -> Path:
     return Path(".")
 
 
-def _probe_folder(folder: Path, what: str, path: Path) -> None:
-    """Make sure a file can be created in the existing ``folder`` (write permission, a
-    writable file system, not /proc or /sys): create one and remove it at once."""
-    if not folder.is_dir():
-        raise ConfigError(f"{what} {path}: {folder} is not a folder")
+def write_probe(folder: str | Path) -> OSError | None:
+    """Create a file in ``folder`` and remove it at once: the ``OSError`` creating it raised
+    (no write permission, a read-only file system or mount, /proc or /sys), or None. What
+    ``os.access`` cannot tell root, whom ``chattr +i`` or a read-only mount still stops."""
     try:
         fd, probe = tempfile.mkstemp(prefix=".trajpref-probe-", dir=folder)
     except OSError as exc:
-        raise ConfigError(
-            f"{what} {path}: cannot write in {folder} ({exc.strerror or exc.__class__.__name__})"
-        ) from None
+        return exc
     os.close(fd)
     os.unlink(probe)
+    return None
+
+
+def _probe_folder(folder: Path, what: str, path: Path) -> None:
+    """Make sure a file can be created in the existing ``folder`` (``write_probe``)."""
+    if not folder.is_dir():
+        raise ConfigError(f"{what} {path}: {folder} is not a folder")
+    exc = write_probe(folder)
+    if exc is not None:
+        raise ConfigError(
+            f"{what} {path}: cannot write in {folder} ({exc.strerror or exc.__class__.__name__})"
+        )
 
 
 def check_output_file(path: str | Path, suffix: str | None = None, what: str = "--out") -> Path:

@@ -340,13 +340,17 @@ def _observed_frames(own: list[int], sid: int, p: int, s: int, e: int, t_hist: i
     return list(expected)
 
 
+def _first_few(values: list[int], few: int) -> str:
+    """``120, 130, 140 and 2 more``: the first ``few`` values, and how many follow."""
+    head = ", ".join(str(v) for v in values[:few])
+    return head + (f" and {len(values) - few} more" if len(values) > few else "")
+
+
 def _frames_text(frames: list[int]) -> str:
     """``frame 120`` or ``frames 120, 130, 140 and 2 more``."""
     if not frames:
         return ""
-    head = ", ".join(str(f) for f in frames[:3])
-    more = f" and {len(frames) - 3} more" if len(frames) > 3 else ""
-    return f"frame{'s' if len(frames) > 1 else ''} {head}{more}"
+    return f"frame{'s' if len(frames) > 1 else ''} {_first_few(frames, 3)}"
 
 
 def observed_only(scenes: list[Scene]) -> list[Scene]:
@@ -429,8 +433,7 @@ def _steps_text(steps: np.ndarray) -> str:
     values = [int(v) for v in steps]
     if len(values) > 1 and values[-1] - values[0] == len(values) - 1:
         return f"{values[0]}..{values[-1]}"
-    head = ", ".join(str(v) for v in values[:4])
-    return head + (f" and {len(values) - 4} more" if len(values) > 4 else "")
+    return _first_few(values, 4)
 
 
 def _context(

@@ -177,16 +177,20 @@ its scenes), and not the largest, so that one mistracked agent
 among many is not taken for the data's units."""
 
 
+def _cpu_float64(history: Any) -> torch.Tensor:
+    """``history`` (numpy or torch) as a float64 CPU tensor, for the checks' arithmetic."""
+    if isinstance(history, torch.Tensor):
+        return history.detach().to("cpu", torch.float64)
+    return torch.as_tensor(history, dtype=torch.float64)
+
+
 def pace_quantile(history: Any, scale: float, q: float = PACE_QUANTILE) -> tuple[float, int] | None:
     """The ``q`` quantile over agents (linear interpolation) of the observed step
     (``data.transforms.observed_pace``: first to last observed position per step, divided by
     ``scale``) of ``history`` [N, T_h, 2] (numpy or torch; agents with a non-finite position
     are left out), and the number of agents it was taken over; None when no agent has two
     finite observed steps."""
-    if isinstance(history, torch.Tensor):
-        hist = history.detach().to("cpu", torch.float64)  # [N, T_h, 2]
-    else:
-        hist = torch.as_tensor(history, dtype=torch.float64)  # [N, T_h, 2]
+    hist = _cpu_float64(history)  # [N, T_h, 2]
     if hist.ndim != 3 or hist.shape[1] < 2 or hist.shape[0] == 0:
         return None
     pace = observed_pace(hist, scale)  # [N] model units per step
@@ -241,10 +245,7 @@ def observed_jumps(history: Any, scale: float, agent_type: Any = None) -> torch.
     with a single observed step (between consecutive finite positions) above ``JUMP_LIMIT``
     model units (divided by ``scale``); an agent typed ``AGENT_BALL`` in ``agent_type`` [N]
     (None: all people) never counts, a ball being that fast."""
-    if isinstance(history, torch.Tensor):
-        hist = history.detach().to("cpu", torch.float64)  # [N, T_h, 2]
-    else:
-        hist = torch.as_tensor(history, dtype=torch.float64)  # [N, T_h, 2]
+    hist = _cpu_float64(history)  # [N, T_h, 2]
     if hist.ndim != 3 or hist.shape[1] < 2:
         return torch.zeros(hist.shape[0] if hist.ndim else 0, dtype=torch.bool)
     steps = (hist[:, 1:] - hist[:, :-1]).norm(dim=-1) / scale  # [N, T_h - 1], NaN where unseen

@@ -205,7 +205,28 @@ def equal_budget_args(minutes: float, warmup: int, eval_minutes: float) -> list[
 
 def _override_keys(overrides: list[str]) -> set[str]:
     """The keys of ``key=value`` overrides."""
-    return {text.partition("=")[0].strip() for text in overrides}
+    return set(override_key_list(overrides))
+
+
+def override_key_list(overrides: list[str]) -> list[str]:
+    """The keys of ``key=value`` overrides, in the order given."""
+    return [text.partition("=")[0].strip() for text in overrides]
+
+
+PRETRAINING = ("generator", "denoiser")
+"""The config sections of the pretraining stages (``check_no_pretraining_keys``)."""
+
+
+def check_no_pretraining_keys(overrides: list[str]) -> None:
+    """ConfigError naming the first of a user's own ``overrides`` that sets a pretraining
+    stage (``generator.*``, ``denoiser.*``), which fine-tuning never reads. For the command
+    line's ``--set`` only: a config shared with training (the demo's) may hold them."""
+    stages = [k for k in override_key_list(overrides) if k.partition(".")[0] in PRETRAINING]
+    if stages:
+        raise ConfigError(f"{stages[0]}: fine-tuning does not read the pretraining stages' "
+                          "settings (generator.*, denoiser.*); its own are finetune.* "
+                          "(finetune.epochs, finetune.lr, ...: trajpref config show lists "
+                          "them)")  # fmt: skip
 
 
 def _undescribed(data: dict[str, Any], overrides: list[str]) -> list[str]:

@@ -52,7 +52,6 @@ import errno
 import os
 import re
 import sqlite3
-import tempfile
 import threading
 import warnings
 from collections.abc import Iterator
@@ -61,7 +60,7 @@ from pathlib import Path
 from typing import Any
 
 from trajpref.errors import ConfigError, TrajprefError
-from trajpref.io import atomic_path
+from trajpref.io import atomic_path, write_probe
 from trajpref.survey.manifest import CRITERIA, RATING_MAX, RATING_MIN, Study
 
 RATER_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.@-]{0,63}")
@@ -218,12 +217,9 @@ def _why_unwritable(path: Path) -> str | None:
     creates (and removes) a temporary file in the folder, opens the file for writing (without
     writing); for the error message of a failed open only (``os.access`` is no help to root,
     whom ``chattr +i`` or a read-only mount still stops)."""
-    try:
-        fd, probe = tempfile.mkstemp(prefix=".trajpref-write-test-", dir=path.parent)
-    except OSError as exc:
+    exc = write_probe(path.parent)
+    if exc is not None:
         return _read_only_folder(path, exc) if exc.errno in READ_ONLY_ERRNOS else None
-    os.close(fd)
-    os.unlink(probe)
     try:
         os.close(os.open(path, os.O_RDWR))
     except OSError as exc:
