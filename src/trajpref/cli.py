@@ -370,8 +370,14 @@ def _add_run_args(p: argparse.ArgumentParser, example: str, last: str, seed: str
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse, with usage errors in the one-line form that every other error takes (its
-    sub-commands' parsers are of this class too)."""
+    """argparse, with usage errors in the one-line form that every other error takes, and
+    without argparse's abbreviations of long options (``--max-sc`` for ``--max-scenes``): a
+    script that abbreviates would break, or change meaning, when a later option shares the
+    prefix. Its sub-commands' parsers, ``survey``'s included, are of this class too
+    (``add_subparsers`` makes its parsers of the parent's class)."""
+
+    def __init__(self, *args, allow_abbrev: bool = False, **kwargs):
+        super().__init__(*args, allow_abbrev=allow_abbrev, **kwargs)
 
     def error(self, message: str):
         self.exit(2, f"trajpref: error: {message} (see: {self.prog} --help)\n")
@@ -433,6 +439,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="also every metric per scene-size bin: upper edges of the bins in "
         "agents per scene (default 5,10,20: <=5, 6-10, 11-20, >20); JSON: 'bins'",
     )
+    ev.add_argument("--slots", nargs="?", const="auto", default=None, metavar="R",
+                    help="also minADE/minFDE (and Col-I/Col-II) per agent's place in its "
+                    "scene: places 1..R each on their own, the agents after them together "
+                    "(default R: the model's agent roles, else 3). For data whose scenes list "
+                    "their agents in fixed roles, as Robo's leader, follower, approacher; "
+                    "elsewhere a place is only the listing order; JSON: 'slots'")  # fmt: skip
     ev.add_argument("--collision-radius", type=float, default=None, metavar="R",
                     help="Col-I/Col-II person radius, in the data's units (collision when "
                     "centres come within 2R; default: TrajNet++'s 0.1 for data in metres, "
@@ -1763,6 +1775,32 @@ def _print_bins(bins: dict) -> None:
               + " ".join(f"{_fmt(row.get(k)):>8}" for k, _ in cols))  # fmt: skip
 
 
+def _parse_slots(text: str | None, model: object) -> int | None:
+    """``--slots [R]`` -> R; ``auto`` (the flag alone): the model's agent roles
+    (``Predictor.agent_roles``), else 3. ConfigError unless an integer >= 1."""
+    if text is None:
+        return None
+    if text == "auto":
+        return int(getattr(model, "agent_roles", 0) or 0) or 3
+    try:
+        slots = int(text)
+    except ValueError:
+        slots = 0
+    if slots < 1:
+        raise ConfigError(f"--slots takes an integer >= 1 (or nothing: the model's agent roles, "
+                          f"else 3), got {text!r}")  # fmt: skip
+    return slots
+
+
+def _print_slots(slots: dict) -> None:
+    cols = [(k, name) for k, name in BIN_COLUMNS[:2] + BIN_COLUMNS[4:6]
+            if any(k in row for row in slots.values())]  # fmt: skip
+    print("  " + f"{'place':>8} {'agents':>8} " + " ".join(f"{name:>8}" for _, name in cols))
+    for label, row in slots.items():
+        print("  " + f"{label:>8} {row['agents']:>8} "
+              + " ".join(f"{_fmt(row.get(k)):>8}" for k, _ in cols))  # fmt: skip
+
+
 def cmd_evaluate(args) -> int:
     _check_model_args(args)
     if args.out:
@@ -1774,6 +1812,7 @@ def cmd_evaluate(args) -> int:
     if args.collision_radius is not None:
         resolve_collision_radius(args.collision_radius, "")  # ConfigError unless > 0
     model, device = _predictor(args)
+    slots = _parse_slots(args.slots, model)
     _warn_fixed_sampling(args, model)
     sampling = _sampling_fields(model)
     scorer = _scorer(args.scorer, device, args) if args.scorer else None
@@ -1789,7 +1828,7 @@ def cmd_evaluate(args) -> int:
         progress=not args.no_progress, scorer=scorer,
         collision_radius="auto" if args.collision_radius is None else args.collision_radius,
         bins=bins, allow_overlap=True,  # _check_fold_overlap has refused or been allowed
-        agents=args.agents,
+        agents=args.agents, slots=slots,
     )  # fmt: skip
     seconds = time.perf_counter() - start
     out = {
@@ -1805,7 +1844,7 @@ def cmd_evaluate(args) -> int:
         "seed": args.seed,
         **_selection_fields(args),
         **_scorer_fields(args, scorer),
-        **{k: v for k, v in result.items() if k != "bins"},
+        **{k: v for k, v in result.items() if k not in ("bins", "slots")},
         **_data_fields(ds),
         "seconds": round(seconds, 3),
         "overlap": overlap,
@@ -1814,6 +1853,8 @@ def cmd_evaluate(args) -> int:
     }
     if bins is not None:
         out["bins"] = result["bins"]
+    if slots is not None:
+        out["slots"] = result["slots"]
     bad = [k for k, v in out.items() if isinstance(v, float) and not math.isfinite(v)]
     if bad:
         collisions = {"col_i_pct", "col_ii_pct", "col_gt_pct"}
@@ -1846,6 +1887,8 @@ def cmd_evaluate(args) -> int:
         _print_collisions(out)
         if bins is not None:
             _print_bins(out["bins"])
+        if slots is not None:
+            _print_slots(out["slots"])
     return 0
 
 
@@ -1853,8 +1896,9 @@ def _evaluate_in_context(args, overlap: str | None = None) -> int:
     """``evaluate --in-context``: the usual metrics with per-window adaptation, plus the
     windows that had context, before/after on them and seconds per window. ``overlap``: what
     ``_check_fold_overlap`` allowed."""
-    if args.keep is not None or args.scorer or args.bins is not None:
-        raise ConfigError("--in-context does not combine with --keep, --scorer or --bins")
+    if args.keep is not None or args.scorer or args.bins is not None or args.slots is not None:
+        raise ConfigError("--in-context does not combine with --keep, --scorer, --bins or "
+                          "--slots")  # fmt: skip
     if args.agents != "all" or args.max_scenes is not None:  # its context is the split's
         raise ConfigError("--in-context does not combine with --agents persons or primary, "
                           "or --max-scenes (it adapts on the split's other windows)")  # fmt: skip

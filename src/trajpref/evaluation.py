@@ -20,6 +20,7 @@ from trajpref.metrics import (
     CollisionAccumulator,
     CollisionFlags,
     MetricAccumulator,
+    SlotMetrics,
     check_bin_edges,
     check_collision_radius,
     collision_flags,
@@ -300,6 +301,7 @@ def evaluate(
     bins: tuple[int, ...] | None = None,
     allow_overlap: bool = False,
     agents: Literal["all", "persons", "primary"] = "all",
+    slots: int | None = None,
 ) -> dict:  # fmt: skip
     """minADE_K / minFDE_K per agent and joint over a whole split; with a ``scorer``, also
     maxATS_K / maxFTS_K and the top-1 / top-5 recall of the ground-truth-free ranking.
@@ -309,7 +311,12 @@ def evaluate(
     (``col_i_pct``, ``col_ii_pct``, ``col_gt_pct``, ``col_agents``, ``col_radius``;
     docs/social.md); when off, these keys hold None. With ``bins`` (upper edges of scene-size
     bins, e.g. ``metrics.SCENE_SIZE_EDGES``), ``out["bins"]`` maps each bin's label to the same
-    metrics over its scenes (maxATS / maxFTS / meanATS with a scorer).
+    metrics over its scenes (maxATS / maxFTS / meanATS with a scorer). With ``slots`` = R,
+    ``out["slots"]`` maps each agent's place in its scene (``"1"`` .. ``"R"``, then ``">R"``
+    for the rest) to minADE / minFDE (and Col-I / Col-II) over the agents in that place
+    (``metrics.SlotMetrics``): Robo's leader, follower and approacher for R = 3, the roles
+    its scenes list in that order; elsewhere a place is only the listing order. With
+    ``agents="persons"`` the places count the persons alone.
 
     ``agents="persons"`` computes every metric over the agents of ``agent_type``
     ``AGENT_PERSON`` only (NBA's players: SocialVAE's protocol; ``AGENT_SETS``): the model and
@@ -356,10 +363,10 @@ def evaluate(
                               f"{dataset.info.name}/{dataset.info.split} is not TrajNet++ data, "
                               "so its first agent per scene would be an arbitrary one: use "
                               "agents='all' or 'persons' (--agents all|persons)")  # fmt: skip
-        if bins is not None:
-            raise ConfigError("agents='primary' does not combine with bins (--bins): every "
-                              "scene has one primary, so every scene would fall in the first "
-                              "bin")  # fmt: skip
+        if bins is not None or slots is not None:
+            raise ConfigError("agents='primary' does not combine with bins (--bins) or slots "
+                              "(--slots): every scene has one primary, so every scene would "
+                              "fall in the first bin, every agent in the first place")  # fmt: skip
     if persons and not any((s.agent_type == AGENT_PERSON).any() for s in dataset.scenes):
         raise DataError(f"agents='persons': {dataset.info.name}/{dataset.info.split} has no "
                         f"agent of agent_type {AGENT_PERSON} (person) to evaluate")  # fmt: skip
@@ -371,6 +378,10 @@ def evaluate(
             check_bin_edges(bins)
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
+    try:
+        slot_acc = SlotMetrics(slots, radius) if slots is not None else None
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
     acc = MetricAccumulator()
     col_acc = CollisionAccumulator(radius) if radius is not None else None
     bin_acc = BinnedMetrics(bins, radius) if bins is not None else None
@@ -403,6 +414,8 @@ def evaluate(
                 values = {"max_ats": res.ats.amax(0), "max_fts": res.fts.amax(0),
                           "mean_ats": res.ats.mean(0)}  # fmt: skip
             bin_acc.update(pred, batch.future, batch.scene, batch.num_scenes, values, flags)
+        if slot_acc is not None:
+            slot_acc.update(pred, batch.future, batch.scene, batch.num_scenes, flags)
     out: dict = acc.compute()
     if col_acc is not None:
         out.update(col_acc.compute())
@@ -412,6 +425,8 @@ def evaluate(
         out.update(score_acc.compute())
     if bin_acc is not None:
         out["bins"] = bin_acc.compute()
+    if slot_acc is not None:
+        out["slots"] = slot_acc.compute()
     if agents != "all":
         out["agent_set"] = agents
     return out

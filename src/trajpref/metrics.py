@@ -383,3 +383,81 @@ class BinnedMetrics:
             row.update({k: v / acc.scenes for k, v in self.value_sums[b].items()})
             out[label] = row
         return out
+
+
+# ----------------------------------------------------------------------------- agent slots
+
+
+def agent_slot(scene: torch.Tensor, num_scenes: int) -> torch.Tensor:
+    """Each agent's place in its scene, counted from 0 in batch order: scene [N] -> [N].
+
+    Datasets whose scenes list their agents in fixed roles (Robo: leader, follower,
+    approacher; ``ModelConfig.agent_roles``) give each role its place; elsewhere the place is
+    only the order the agents were listed in (ascending agent id in a text file)."""
+    counts = torch.bincount(scene, minlength=num_scenes)  # [B]
+    starts = torch.cumsum(counts, 0) - counts  # [B] first packed index of each scene
+    order = torch.argsort(scene, stable=True)  # [N] agents grouped by scene, order kept
+    slot = torch.empty_like(scene)
+    slot[order] = torch.arange(scene.numel(), device=scene.device) - starts[scene[order]]
+    return slot
+
+
+def slot_labels(slots: int) -> list[str]:
+    """Names of the places reported by ``SlotMetrics``: 3 -> ['1', '2', '3', '>3']."""
+    if not isinstance(slots, int) or isinstance(slots, bool) or slots < 1:
+        raise ValueError(f"slots must be an integer >= 1, got {slots!r}")
+    return [*(str(s) for s in range(1, slots + 1)), f">{slots}"]
+
+
+class SlotMetrics:
+    """minADE/minFDE (and the collision rates, when flags are passed) per agent's place in
+    its scene: places 1..``slots`` each on their own, the agents after them together.
+
+    Per-agent metrics only: one scene has one agent in a place, so a joint metric per place
+    would equal the per-agent one. Collision flags are the batch's own (each agent tested
+    against every neighbour of its scene), counted for the agents of each place."""
+
+    def __init__(self, slots: int, collision_radius: float | None = None) -> None:
+        self.labels = slot_labels(slots)
+        self.slots = slots
+        self.sums = [{"min_ade": 0.0, "min_fde": 0.0} for _ in self.labels]
+        self.agents = [0 for _ in self.labels]
+        self.collisions = (
+            None if collision_radius is None
+            else [CollisionAccumulator(collision_radius) for _ in self.labels]
+        )  # fmt: skip
+
+    def update(
+        self, pred: torch.Tensor, future: torch.Tensor, scene: torch.Tensor, num_scenes: int,
+        flags: CollisionFlags | None = None,
+    ) -> None:  # fmt: skip
+        """One batch. With a collision radius, ``flags`` are this batch's
+        ``collision_flags`` at that radius (required then; ignored without one)."""
+        _check(pred, future)
+        if self.collisions is not None and flags is None:
+            raise ValueError("SlotMetrics with a collision radius needs each batch's flags")
+        ade, fde = min_ade_fde(pred, future)  # [N] each
+        group = agent_slot(scene, num_scenes).clamp(max=self.slots)  # [N] 0..slots
+        for g in group.unique().tolist():
+            members = group == g  # [N]
+            self.sums[g]["min_ade"] += float(ade[members].sum())
+            self.sums[g]["min_fde"] += float(fde[members].sum())
+            self.agents[g] += int(members.sum())
+            if self.collisions is not None:
+                self.collisions[g].add(flags, members)
+
+    def compute(self) -> dict[str, dict[str, float | int]]:
+        """label -> ``agents``, ``min_ade``, ``min_fde`` (and the collision keys); a place
+        without agents holds only ``{"agents": 0}``."""
+        out: dict[str, dict[str, float | int]] = {}
+        for g, label in enumerate(self.labels):
+            n = self.agents[g]
+            if n == 0:
+                out[label] = {"agents": 0}
+                continue
+            row: dict[str, float | int] = {"agents": n}
+            row.update({k: v / n for k, v in self.sums[g].items()})
+            if self.collisions is not None:
+                row.update(self.collisions[g].compute())
+            out[label] = row
+        return out
