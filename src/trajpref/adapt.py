@@ -35,6 +35,7 @@ from trajpref.data.trajnet import require_future
 from trajpref.data.transforms import to_model_frame
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, DataError
+from trajpref.io import bar_options
 from trajpref.metrics import MetricAccumulator
 from trajpref.models.generator import Generator
 from trajpref.models.losses import generator_loss
@@ -262,7 +263,7 @@ def adapt_and_predict(
     start = time.perf_counter()
     preds, contexts = [], []
     label = progress if isinstance(progress, str) else f"in-context {dataset.info.name}"
-    for i in tqdm(indices, desc=label, unit="window", disable=not progress, leave=False):
+    for i in tqdm(indices, desc=label, unit="window", leave=False, **bar_options(progress)):
         rng = torch.Generator().manual_seed(window_seed(seed, i))
         batch = collate([dataset[i]]).to(device)
         use = ctx[i] if cfg.steps > 0 else []

@@ -174,30 +174,45 @@ def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> N
                    "trained with data.holdout_scene=PREFIX (docs/data.md)")  # fmt: skip
 
 
-NO_CAP = "none"
-"""``--max-log-sigma none`` as parsed: no cap on the samples' sigma (``_model_setting`` gives
-None), told apart from the option's absence (None: the file's own cap)."""
+NUMBER_OR_NONE = {
+    "max_log_sigma": ("--max-log-sigma", "a number (model units) or none (no cap)", False),
+    "neighbour_radius": ("--neighbour-radius", "a distance > 0 in the data's units (the "
+                         "model's: metres, pixels) or none (every pair of a scene attends)",
+                         True),
+}  # fmt: skip
+"""The options that take a number or the word ``none`` (``_number_or_none``), by their
+``args`` names: the flag, what it takes (as its error says), and whether the number must be
+finite and > 0 here (the radius; the cap's number is checked where the generator takes it,
+``_set_generator``)."""
 
 
-def _cap_or_none(text: str) -> float | str:
-    """``--max-log-sigma``'s value: a number, or ``none`` (any case) for no cap (``NO_CAP``)."""
-    if text.strip().lower() == NO_CAP:
-        return NO_CAP
+def _number_or_none(args, name: str) -> tuple[bool, float | None]:
+    """An option of ``NUMBER_OR_NONE`` as given: ``(False, None)`` when absent (each file's
+    own value applies), ``(True, None)`` for ``none`` in any case (no cap; every pair of a
+    scene attends), else ``(True, number)``. ConfigError for anything else."""
+    text = getattr(args, name, None)
+    if text is None:
+        return False, None
+    flag, takes, positive = NUMBER_OR_NONE[name]
+    if str(text).strip().lower() == "none":
+        return True, None
     try:
-        return float(text)
+        value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"takes a number (model units) or none (no cap), "
-                                         f"got {text!r}") from None  # fmt: skip
+        value = None
+    if value is None or (positive and not (math.isfinite(value) and value > 0)):
+        raise ConfigError(f"{flag} takes {takes}, got {text!r}")
+    return True, value
 
 
 def _model_setting(args, name: str) -> tuple[bool, object]:
     """A generator option of ``MODEL_SETTINGS`` as given: ``(False, None)`` when absent (the
     file's own value applies), else ``(True, value)``; ``--max-log-sigma none`` is ``(True,
-    None)``, no cap."""
+    None)``, no cap (``_number_or_none``)."""
+    if name in NUMBER_OR_NONE:
+        return _number_or_none(args, name)
     value = getattr(args, name, None)
-    if value is None:
-        return False, None
-    return True, None if value == NO_CAP else value
+    return value is not None, value
 
 
 def _add_model_args(p: argparse.ArgumentParser) -> None:
@@ -233,7 +248,7 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
                    help="generators: multiply the spread of the K initial samples about their "
                    "mean by this (1: as trained; default: the file's model.spread_scale; "
                    "docs/pretraining.md, 'The samples' spread at prediction time')")  # fmt: skip
-    p.add_argument("--max-log-sigma", type=_cap_or_none, default=None, metavar="C|none",
+    p.add_argument("--max-log-sigma", default=None, metavar="C|none",
                    help="generators: cap each sample's log sigma at this (model units); none: "
                    "no cap (default: the file's model.max_log_sigma, 1 for sdd/generator; "
                    "docs/pretraining.md, 'A cap on the samples' sigma')")  # fmt: skip
@@ -247,7 +262,10 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
                    "docs/pretraining.md, 'A neighbour radius')")  # fmt: skip
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     p.add_argument("--max-agents", type=int, default=MAX_AGENTS,
-                   help="agents per batch of whole scenes (default 1024). Lower it to save "
+                   help="a batch size, not a scene filter: at most this many agents per batch "
+                   "of whole scenes (default 1024); no scene is skipped, whatever its "
+                   "size: one larger than this is a batch of its own (survey build's "
+                   "--max-agents, by contrast, skips larger scenes). Lower it to save "
                    "memory, but note that it is not only a memory setting: the random draws "
                    "come from one stream in batch order, so another batching gives each agent "
                    "other draws and sampled metrics move within their sampling noise; "
@@ -788,31 +806,12 @@ def _check_model_args(args) -> None:
     if getattr(args, "scorer", None):
         _check_checkpoint("--scorer", args.scorer)
     _check_chosen(args)
-    given, _ = _neighbour_radius(args)  # ConfigError for a bad value
+    _number_or_none(args, "max_log_sigma")  # ConfigError for a bad value
+    given, _ = _number_or_none(args, "neighbour_radius")  # ConfigError for a bad value
     if given and args.model == "cv" and not getattr(args, "scorer", None):
         raise ConfigError("--neighbour-radius applies to diffusion models and scorers: "
                           "--model cv has no attention across agents (with --scorer it sets "
                           "the scorer's)")  # fmt: skip
-
-
-def _neighbour_radius(args) -> tuple[bool, float | None]:
-    """``--neighbour-radius`` as given: ``(False, None)`` when absent (each file's own radius
-    applies), else ``(True, R)``, R a distance > 0 or None for ``none`` (every pair attends).
-    ConfigError for anything else."""
-    text = getattr(args, "neighbour_radius", None)
-    if text is None:
-        return False, None
-    if str(text).strip().lower() == "none":
-        return True, None
-    try:
-        radius = float(text)
-    except ValueError:
-        radius = math.nan
-    if not (math.isfinite(radius) and radius > 0):
-        raise ConfigError(f"--neighbour-radius takes a distance > 0 in the data's units (the "
-                          f"model's: metres, pixels) or none (every pair of a scene attends), "
-                          f"got {text!r}")  # fmt: skip
-    return True, radius
 
 
 def cmd_data_stats(args) -> int:
@@ -907,7 +906,7 @@ def _predictor(args):
         given, value = _model_setting(args, name)
         if given:
             _set_generator(model, flag, **{name: value})
-    given, radius = _neighbour_radius(args)
+    given, radius = _number_or_none(args, "neighbour_radius")
     if given and hasattr(model, "neighbour_radius"):  # cv has none (its --scorer takes it)
         model.neighbour_radius = radius
     return model, device
@@ -1416,7 +1415,7 @@ def _scorer(path: str, device, args=None, every: int = RANK_SCORE_EVERY):
     scorer = TrajectoryScorer.from_checkpoint(path, device)
     if args is None:
         return scorer
-    given, radius = _neighbour_radius(args)
+    given, radius = _number_or_none(args, "neighbour_radius")
     if given:
         scorer.neighbour_radius = radius
     if not hasattr(args, "score_every"):
@@ -1574,7 +1573,7 @@ def _model_fields(args) -> dict:
         given, value = _model_setting(args, name)
         if given and model.get(name) != value:  # the file's own value: the file's digest
             model[name] = value
-    given, radius = _neighbour_radius(args)
+    given, radius = _number_or_none(args, "neighbour_radius")
     if given and model.get("neighbour_radius") != radius:  # the file's own: its digest
         model["neighbour_radius"] = radius
     if args.deterministic or args.stochastic:
@@ -2302,7 +2301,7 @@ def _plot_title(args, ds, scene, random: bool) -> str:
         given, value = _model_setting(args, name)
         if given:
             settings.append(f"{name.replace('_', '-')} {'none' if value is None else f'{value:g}'}")
-    given, radius = _neighbour_radius(args)
+    given, radius = _number_or_none(args, "neighbour_radius")
     if given:
         settings.append(f"neighbour-radius {'none' if radius is None else f'{radius:g}'}")
     scorer = f"; ranked by {args.scorer}" if args.scorer else ""

@@ -103,6 +103,7 @@ def main(argv: list[str] | None = None) -> int:
         description="make demo: the whole pipeline on the CPU in a few minutes (simulate Robo, "
         "train the denoiser and the generator, fine-tune with RLHF-ReS, evaluate, plot)",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        allow_abbrev=False,  # as the trajpref command: long options spelled out in full
     )
     parser.add_argument("--out", default="out/demo", help="output folder")
     parser.add_argument("--data-root", default=None, help="data folder; None: $TRAJPREF_DATA")

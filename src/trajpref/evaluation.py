@@ -15,6 +15,7 @@ from trajpref.data.registry import ETH_UCY, NAMES, sgan_folds
 from trajpref.data.trajnet import from_trajnet, require_future
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, DataError, TrajprefError
+from trajpref.io import bar_options
 from trajpref.metrics import (
     BinnedMetrics,
     CollisionAccumulator,
@@ -219,7 +220,7 @@ def sampled_batches(
     device = resolve_device(device)
     gen = torch.Generator().manual_seed(seed)  # CPU: draws are identical on every device
     loader = SceneLoader(dataset, max_agents=max_agents, shuffle=False)
-    for batch in tqdm(loader, desc=desc, unit="batch", disable=not progress, leave=False):
+    for batch in tqdm(loader, desc=desc, unit="batch", leave=False, **bar_options(progress)):
         batch = batch.to(device)
         pred = model.predict(batch, num_samples, gen)
         check_prediction(model, pred, batch, num_samples)

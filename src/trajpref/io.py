@@ -1,5 +1,6 @@
 """Small file helpers: write-then-rename so a failed run never leaves a half-written file,
-output checks made before any compute, and JSON that is always valid (no NaN/Infinity)."""
+output checks made before any compute, and JSON that is always valid (no NaN/Infinity); and
+the progress bars' options, quieter where stderr is a log file (``bar_options``)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import contextlib
 import json
 import math
 import os
+import sys
 import tempfile
 import warnings
 from collections.abc import Iterator
@@ -202,3 +204,33 @@ def load_tensors(path: str | Path) -> Any:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         return torch.load(path, map_location="cpu", weights_only=True)
+
+
+LOG_REDRAW_SECONDS = 60.0
+"""How often at most a progress bar is redrawn when stderr is not a terminal (a log file,
+``nohup``, a pipe): tqdm's own 0.1 s writes ten carriage-return updates a second into a log
+(36,000 in an hour of training). The lines a run prints (per epoch, summaries, warnings) are
+lines either way."""
+
+
+def _is_terminal(stream: Any) -> bool:
+    """Whether ``stream`` is a terminal (False for a file, a pipe, a closed stream, or an
+    object without ``isatty``)."""
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError, OSError):
+        return False
+
+
+def bar_options(show: bool) -> dict[str, Any]:
+    """The options of every progress bar (``tqdm(..., **bar_options(progress))``): hidden
+    unless ``show`` (the commands' ``--no-progress``); on a stderr that is not a terminal,
+    redrawn at most every ``LOG_REDRAW_SECONDS`` (the first state and the end are still
+    drawn)."""
+    if not show:
+        return {"disable": True}
+    if _is_terminal(sys.stderr):
+        return {"disable": False}
+    # maxinterval too: tqdm's monitor thread would otherwise redraw every maxinterval (10 s)
+    return {"disable": False, "mininterval": LOG_REDRAW_SECONDS,
+            "maxinterval": LOG_REDRAW_SECONDS}  # fmt: skip

@@ -29,7 +29,7 @@ from tqdm.auto import tqdm
 from trajpref.config import DataConfig, OptimConfig
 from trajpref.data.transforms import augment
 from trajpref.errors import ConfigError, TrajprefError
-from trajpref.io import atomic_path, dumps_json, load_tensors
+from trajpref.io import atomic_path, bar_options, dumps_json, load_tensors
 from trajpref.models import checkpoint as ckpt
 from trajpref.results import machine
 from trajpref.train.distributed import DistInfo, RankBatches, gather_generators
@@ -603,7 +603,7 @@ def fit(
             desc = f"{stage.name} epoch {epoch + 1}/{optim_cfg.epochs}"
         # closed here, not by its finalizer: see keeps_interrupts
         with tqdm(itertools.islice(loader, steps_per_epoch), total=steps_per_epoch, desc=desc,
-                  unit="batch", disable=not show, leave=False) as bar:  # fmt: skip
+                  unit="batch", leave=False, **bar_options(show)) as bar:  # fmt: skip
             for batch, mine, whole in bar:
                 _stop_if_interrupted()  # a Ctrl-C that a finalizer swallowed
                 if not stage.context:

@@ -20,6 +20,7 @@ from trajpref.data.transforms import to_model_frame
 from trajpref.diffusion.schedule import DDPMSchedule
 from trajpref.errors import ConfigError
 from trajpref.evaluation import NonFinitePrediction, evaluate
+from trajpref.io import bar_options
 from trajpref.models import checkpoint as ckpt
 from trajpref.models.critic import Critic
 from trajpref.models.denoiser import Denoiser
@@ -154,8 +155,8 @@ def build_denoiser_stage(
         total, agents = 0.0, 0
         loader = SceneLoader(val_set, max_agents=cfg.data.max_agents)
         # closed here, not by its finalizer, where a Ctrl-C is lost (train.loop.keeps_interrupts)
-        with tqdm(loader, desc="denoiser validation", unit="batch", disable=not progress,
-                  leave=False) as bar:  # fmt: skip
+        with tqdm(loader, desc="denoiser validation", unit="batch", leave=False,
+                  **bar_options(progress)) as bar:  # fmt: skip
             for batch in bar:
                 loss, _ = objective(batch.to(device), gen)
                 total += float(loss) * batch.num_agents
