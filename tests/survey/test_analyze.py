@@ -189,7 +189,8 @@ def _insert(path, *rows) -> None:
     now = "2026-12-05T00:00:00"
     with sqlite3.connect(path) as db:
         for rater, scene, panel in rows:
-            db.execute("INSERT INTO answers VALUES (?, ?, ?, 3, 3, 1, ?, ?)",
+            db.execute("INSERT INTO answers (rater, scene, panel, social, kinetics, revision, "
+                       "created_at, updated_at) VALUES (?, ?, ?, 3, 3, 1, ?, ?)",
                        (rater, scene, panel, now, now))  # fmt: skip
     db.close()
 

@@ -79,8 +79,9 @@ def test_rate_a_whole_study_in_the_browser(browser, tiny_study, tmp_path):
 
     folder = Path(shutil.copytree(tiny_study, tmp_path / "study"))
     study = load_study(folder)
-    items = [(s.id, p.id) for s in study.scenes for p in s.panels]  # display order
-    assert len(items) == 9
+    # the order this rater is shown (their own: another rater sees another)
+    items = [(s.id, p.id) for s, panels in study.rater_order("judge-1") for p in panels]
+    assert len(items) == 9 and items != [(s.id, p.id) for s in study.scenes for p in s.panels]
     d = browser
     wait = WebDriverWait(d, 15)
 
@@ -112,6 +113,13 @@ def test_rate_a_whole_study_in_the_browser(browser, tiny_study, tmp_path):
         d.find_element(By.ID, "start").click()
         until("view", "rate")
         assert d.find_element(By.ID, "progress-text").text == "0 / 9 answered"
+        # pictures are numbered by where they are shown, never by their letters
+        assert d.find_element(By.ID, "where").text == "Scene 1 of 3 · picture 1 of 3 (1 of 9)"
+        assert (
+            d.find_element(By.ID, "panel-image")
+            .get_attribute("src")
+            .endswith(f"images/{items[0][0]}-{items[0][1]}.png")
+        )
         # panels 1-4 with the mouse
         for n in range(4):
             social, kinetics = 1 + n, 5 - n
@@ -155,6 +163,9 @@ def test_rate_a_whole_study_in_the_browser(browser, tiny_study, tmp_path):
         rows = db.execute(
             "SELECT rater, scene, panel, social, kinetics, revision FROM answers"
         ).fetchall()
+        where = db.execute(
+            "SELECT scene, panel, scene_position, panel_position FROM answers"
+        ).fetchall()
         raters = db.execute("SELECT rater, kind, submitted_at IS NOT NULL FROM raters").fetchall()
     # one row per panel; panel 4 was written three times (each change of an answered panel
     # is saved at once: first answer, then the new social rating, then the new kinetics one)
@@ -162,6 +173,8 @@ def test_rate_a_whole_study_in_the_browser(browser, tiny_study, tmp_path):
         ("judge-1", s, p, *expected[(s, p)], 3 if (s, p) == items[3] else 1) for s, p in items
     )
     assert raters == [("judge-1", "human", 1)]
+    shown = study.positions("judge-1")  # each answer stored with where it was shown
+    assert all((sp, pp) == shown[(s, p)][:2] for s, p, sp, pp in where)
     assert (tmp_path / "survey-page.png").read_bytes()[:4] == b"\x89PNG"
 
 

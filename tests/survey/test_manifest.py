@@ -25,8 +25,8 @@ def _rename(obj: dict, old: str, new: str) -> None:
         (
             lambda m: _rename(m, "instructions", "instruction"),
             "top level: unknown key 'instruction' (did you mean 'instructions'?); the keys "
-            "are: build, consent, created, dataset, format, instructions, key, methods, scenes, "
-            "synthetic, title",
+            "are: build, consent, created, dataset, format, instructions, key, methods, order, "
+            "scenes, synthetic, title",
         ),
         (
             lambda m: m.update(titel="Rate these"),

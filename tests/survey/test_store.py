@@ -10,6 +10,8 @@ from trajpref.survey.manifest import DATABASE, load_study
 from trajpref.survey.store import SCHEMA, AnswerError, AnswerStore, StoreError
 
 OK = {"social": 4, "kinetics": 2}
+COLUMNS = "(rater, scene, panel, social, kinetics, revision, created_at, updated_at)"
+"""The columns an answer added by hand names (the positions left out: NULL)."""
 
 
 def _rows(path) -> list[tuple]:
@@ -101,6 +103,10 @@ def test_progress_returns_what_a_rater_has_answered(store):
         "submitted": False,
         "consent_required": False,
         "consented": False,
+        "order": [
+            {"scene": sc.id, "panels": [p.id for p in panels]}
+            for sc, panels in store.study.rater_order("nobody")
+        ],
     }
     store.save("r1", "s02", "C", OK)
     got = store.progress("r1")
@@ -234,7 +240,8 @@ def test_answers_that_match_no_panel_or_no_rater_are_counted(store):
     _raw(
         store.path,
         *[
-            f"INSERT INTO answers VALUES ('{r}', '{s}', '{p}', 3, 3, 1, '{now}', '{now}')"
+            f"INSERT INTO answers {COLUMNS} VALUES ('{r}', '{s}', '{p}', 3, 3, 1, '{now}', "
+            f"'{now}')"
             for r, s, p in [("r1", "S01", "A"), ("r1", "s01", "Z"), ("ghost", "s01", "B"),
                             ("ghost", "s02", "A"), ("ghost", "s09", "A")]
         ],
@@ -249,7 +256,8 @@ def test_answers_that_match_no_panel_or_no_rater_are_counted(store):
         (
             ["ALTER TABLE answers RENAME COLUMN kinetics TO kinetic"],
             "table answers has no column kinetics (it has rater, scene, panel, social, "
-            "kinetic, revision, created_at, updated_at; the schema is in docs/survey.md)",
+            "kinetic, revision, created_at, updated_at, scene_position, panel_position; the "
+            "schema is in docs/survey.md)",
         ),
         (
             # what `sqlite3 answers.sqlite ".import --csv answers.csv answers"` makes: TEXT
@@ -372,7 +380,8 @@ def test_rater_ids_that_differ_only_by_case_are_one_rater(store):
 def test_a_mixed_case_id_of_an_older_database_resumes_under_any_case(store):
     now = "2026-12-05T00:00:00"
     _raw(store.path, f"INSERT INTO raters VALUES ('Bob', 'human', '{now}', NULL)",
-         f"INSERT INTO answers VALUES ('Bob', 's01', 'A', 3, 3, 1, '{now}', '{now}')")  # fmt: skip
+         f"INSERT INTO answers {COLUMNS} VALUES ('Bob', 's01', 'A', 3, 3, 1, '{now}', "
+         f"'{now}')")  # fmt: skip
     assert store.progress("bob")["answered"] == 1
     store.save("BOB", "s01", "B", OK)
     assert store.raters() == {"Bob": "human"}  # no second rater

@@ -305,7 +305,12 @@ def test_export_writes_one_csv_row_per_answer_with_the_method_behind_each_panel(
         assert r["method"] == key.method and r["ats"] == ("" if gt else str(key.ats))
         assert float(r["ade"]) == key.ade and r["units"] == "m" and r["kind"] == "human"
         assert float(r["human_score"]) == (int(r["social"]) + 3) / 2
-    assert [r["position"] for r in rows[:3]] == ["1", "2", "3"]
+    # where that rater was shown the picture: each rater's own order (alice and bob differ)
+    shown = {r: study.positions(r) for r in ("alice", "bob")}
+    for r in rows:
+        got = (int(r["scene_position"]), int(r["panel_position"]), int(r["position"]))
+        assert got == shown[r["rater"]][(r["scene"], r["panel"])]
+    assert shown["alice"] != shown["bob"]
     code, out, _ = _run(capsys, "survey", "export", synthetic_study, "--csv", path, "--raters",
                         "synthetic")  # fmt: skip
     assert code == 0 and "SYNTHETIC" in out

@@ -344,7 +344,8 @@ def test_the_docs_name_simulate_db_sigterm_line_breaks_and_the_blinding_limits()
     assert "`survey simulate study/ --raters 20 [--seed 0 --prefix synthetic --db PATH]`" in text
     assert "a blank line starts a new paragraph" not in text
     assert "SIGTERM" in text and "SIGKILL" in text
-    assert "smallest" in text and "not counterbalanced" in text
+    assert "drawn differently" in text  # the one limit of the blinding left
+    assert "an order of their own" in text and "one byte size" in text  # the two lifted
 
 
 # ---- 7. the page says whose session it resumed ----------------------------------------------
@@ -372,7 +373,7 @@ const study = { title: "t", instructions: "", consent: null, scale: [1, 5],
   criteria: [{ id: "social", label: "S", help: "" }, { id: "kinetics", label: "K", help: "" }],
   scenes: [{ id: "s01", reference: null, panels: [{ id: "A", image: "images/s01-A.png" }] }] };
 const progress = (rater) => ({ rater, answers: {}, answered: 0, total: 1, submitted: false,
-  consent_required: false, consented: false });
+  consent_required: false, consented: false, order: [{ scene: "s01", panels: ["A"] }] });
 const fetch = async (path) => ({ ok: true, status: 200, json: async () =>
   path === "api/study" ? study : progress(decodeURIComponent(path.split("/").pop())) });
 const localStorage = { getItem: (k) => store.has(k) ? store.get(k) : null,

@@ -20,6 +20,11 @@
   panel and every method has at least ``MIN_ANSWERS`` answers: an unfinished pilot names none,
   and no tests are run. A mark of a row that scores above the best method (the ground truth,
   typically) carries ``ABOVE``: its stars then mean significantly *higher*.
+- Position effect (``PositionCheck``): the mean human score by the picture's place within its
+  scene as the rater was shown it (1 = first), and a Friedman test over the (rater, scene)
+  blocks with every picture answered (a Wilcoxon signed-rank test for two pictures per scene).
+  With per-rater orders (``Study.order`` ``rater``) position and method are unrelated; with a
+  fixed order they are confounded, and the report says so.
 - Raters left out by request (``--exclude-rater``: a failed attention check, a test run) are
   dropped before anything is computed and named in the report; rater ids that differ only by
   case (an older or imported database) are counted apart, with a warning.
@@ -167,6 +172,78 @@ def spearman(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
 
 
 @dataclass
+class PositionCheck:
+    """Is a picture rated differently for where it is shown within its scene?"""
+
+    order: str
+    """The study's presentation order (``Study.order``): ``rater`` or ``fixed``."""
+    positions: list[dict[str, float]]
+    """Per place within the scene (1 = shown first): ``position``, ``answers``, ``mean`` and
+    ``sd`` of the human score."""
+    test: str = ""
+    """``Friedman`` (three or more pictures per scene), ``Wilcoxon signed-rank`` (two), or
+    empty (no test: fewer than two complete blocks or one picture per scene)."""
+    blocks: int = 0
+    """(rater, scene) pairs in which every picture was answered: the test's blocks."""
+    statistic: float = math.nan
+    """Friedman's chi-squared (Wilcoxon's W)."""
+    p: float = math.nan
+    """Its p-value (chi-squared approximation with tie correction; Wilcoxon: see
+    ``wilcoxon``)."""
+    note: str = ""
+    """How to read it (with a fixed order, position and method are the same thing)."""
+
+
+def position_check(study: Study, rows: list[tuple],
+                   positions: dict[tuple[str, str, str], tuple] | None = None
+                   ) -> PositionCheck:  # fmt: skip
+    """The position-effect check of ``rows`` (``AnswerStore.rows()``). ``positions``
+    (``AnswerStore.positions()``: (rater, scene, panel) -> (scene position, panel position,
+    position)): where each answer's picture was shown; without it (or for an answer it
+    lacks), where ``Study.positions`` shows it to that rater now."""
+    own: dict[str, dict[tuple[str, str], tuple[int, int, int]]] = {}
+    size = {s.id: len(s.panels) for s in study.scenes}
+    k = max(size.values())
+    by_pos: dict[int, list[float]] = {j: [] for j in range(1, k + 1)}
+    blocks: dict[tuple[str, str], dict[int, float]] = {}
+    for rater, _, scene, panel, social, kinetics, _ in rows:
+        where = (positions or {}).get((rater, scene, panel))
+        if where is None:
+            if rater not in own:
+                own[rater] = study.positions(rater)
+            where = own[rater][(scene, panel)]
+        h = (social + kinetics) / 2
+        by_pos.setdefault(where[1], []).append(h)
+        if size[scene] == k:
+            blocks.setdefault((rater, scene), {})[where[1]] = h
+    table = []
+    for j, v in sorted(by_pos.items()):
+        mean, sd = _mean_sd(v)
+        table.append({"position": j, "answers": len(v), "mean": mean, "sd": sd})
+    complete = [b for b in blocks.values() if sorted(b) == list(range(1, k + 1))]
+    columns = [np.array([b[j] for b in complete]) for j in range(1, k + 1)]  # k x [n]
+    if study.order == "fixed":
+        note = ("every rater saw the same order (a fixed-order study): each place within a scene "
+                "always showed the same method, so a difference between places cannot be told "
+                "from a difference between methods")  # fmt: skip
+    else:
+        note = ("each rater saw an order of their own, so the places within a scene are not "
+                "tied to the methods: a significant difference is a position effect")  # fmt: skip
+    check = PositionCheck(study.order, table, blocks=len(complete), note=note)
+    if len(complete) < 2 or k < 2:
+        return check
+    if k == 2:
+        w, p, _ = wilcoxon(columns[0], columns[1])
+        check.test, check.statistic, check.p = "Wilcoxon signed-rank", w, p
+        return check
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # every block all ties: NaN
+        res = stats.friedmanchisquare(*columns)
+    check.test, check.statistic, check.p = "Friedman", float(res.statistic), float(res.pvalue)
+    return check
+
+
+@dataclass
 class MethodRow:
     """One row of the table."""
 
@@ -263,6 +340,8 @@ class Analysis:
     """``trajpref`` (the version that analysed) and ``build``: what the manifest's build
     record says of the versions and models that built the study (``trajpref_version``,
     ``torch_version``, ``hashes``; empty for a study built before they were recorded)."""
+    position_effect: PositionCheck | None = None
+    """The position-effect check (``position_check``)."""
 
     def to_dict(self) -> dict[str, Any]:
         return _finite(asdict(self))
@@ -368,7 +447,25 @@ class Analysis:
                 out.append(f"| {level.replace('_', ' ')} | {score.upper()} | {c['n']} | "
                            f"{_num(c['spearman'])} | {_p(c['spearman_p'])} | "
                            f"{_num(c['kendall'])} | {_p(c['kendall_p'])} |")  # fmt: skip
+        if self.position_effect is not None:
+            out += ["", *self.position_markdown()]
         return "\n".join(out) + "\n"
+
+    def position_markdown(self) -> list[str]:
+        """The report's section on the position effect."""
+        c = self.position_effect
+        out = ["## Position effect", "",
+               "Human score by the picture's place within its scene, as each rater was shown "
+               "it (1 = first).", "",
+               "| Place in scene | answers | Human score |", "|---|---|---|"]  # fmt: skip
+        out += [f"| {r['position']} | {r['answers']} | {_pm(r['mean'], r['sd'])} |"
+                for r in c.positions]  # fmt: skip
+        name = "chi²" if c.test == "Friedman" else "W"
+        test = (f"{c.test} test over {c.blocks} (rater, scene) blocks with every picture "
+                f"answered: {name} = {_num(c.statistic)}, p = {_p(c.p)}" if c.test
+                else f"no test: {c.blocks} (rater, scene) blocks with every picture answered "
+                "(at least 2 are needed)")  # fmt: skip
+        return [*out, "", f"{test}; {c.note}."]
 
 
 def ignored_text(ignored: dict[str, int]) -> str:
@@ -470,12 +567,14 @@ def select_rows(rows: list[tuple], rater_kind: RaterKind = "auto",
 
 def analyze(study: Study, rows: list[tuple], rater_kind: RaterKind = "auto",
             ignored: dict[str, int] | None = None,
-            exclude: list[str] | tuple[str, ...] = ()) -> Analysis:  # fmt: skip
+            exclude: list[str] | tuple[str, ...] = (),
+            positions: dict[tuple[str, str, str], tuple] | None = None) -> Analysis:  # fmt: skip
     """The analysis of ``rows`` (``AnswerStore.rows()``: rater, kind, scene, panel, social,
     kinetics, submitted). ``rater_kind``: ``auto`` uses the human raters when there are any,
     else the synthetic ones. ``ignored`` (``AnswerStore.ignored()``) is reported as given.
     ``exclude``: rater ids (as stored, ``AnswerStore.find_raters``) whose answers are left
-    out and named in the report."""
+    out and named in the report. ``positions`` (``AnswerStore.positions()``): where each
+    answer's picture was shown, for the position-effect check (``position_check``)."""
     ignored = dict(ignored or NOTHING_IGNORED)
     if not rows:
         note = f"; {ignored_text(ignored)}" if ignored["answers"] else ""
@@ -587,6 +686,7 @@ def analyze(study: Study, rows: list[tuple], rater_kind: RaterKind = "auto",
         excluded_answers=excluded_answers, case_variants=case_variants(raters),
         units=str(study.dataset.get("units") or "unknown"), no_best=no_best,
         unused_synthetic=unused, study_id=study.study_id, provenance=provenance(study),
+        position_effect=position_check(study, rows, positions),
     )  # fmt: skip
 
 
@@ -652,11 +752,11 @@ def run_analysis(
         check_output_file(path, what="cannot write")
     store = AnswerStore(db or study.folder / DATABASE, study, readonly=True)
     try:
-        rows, ignored = store.rows(), store.ignored()
+        rows, ignored, positions = store.rows(), store.ignored(), store.positions()
         excluded = store.find_raters(list(exclude))
     finally:
         store.close()
-    result = analyze(study, rows, rater_kind, ignored, excluded)
+    result = analyze(study, rows, rater_kind, ignored, excluded, positions)
     if ignored["answers"]:
         warnings.warn(f"{store.path}: {ignored_text(ignored)}", stacklevel=2)
     if result.case_variants:

@@ -20,7 +20,7 @@ from trajpref.data.registry import check_protocol
 from trajpref.data.text import DEFAULT_MAX_COORD
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, TrajprefError
-from trajpref.io import read_checkpoint_header
+from trajpref.io import bar_options, read_checkpoint_header
 from trajpref.models import checkpoint as ckpt
 from trajpref.models.registry import BUILTIN, load_predictor
 from trajpref.models.timing import UNKNOWN_UNITS, model_timing
@@ -97,6 +97,11 @@ class BuildConfig:
     consent: str = ""
     """A consent text (``--consent FILE``'s contents) that every rater agrees to before the
     first picture; empty: none."""
+    fixed_order: bool = False
+    """``--fixed-order``: every rater sees the scenes and panels in one order (the manifest's,
+    shuffled once with ``seed``), as studies built before 2026-12-06 did; default: each
+    rater sees an order of their own (``Study.rater_order``), so that a position effect is
+    spread over the methods."""
     device: str = "auto"
     """auto, cpu or cuda."""
 
@@ -309,7 +314,7 @@ def build_study(cfg: BuildConfig, out: str | Path, progress: bool = True,
                           cfg.max_agents, cfg.min_gap)  # fmt: skip
     order = np.random.default_rng(cfg.seed + 1).permutation(len(picks))  # presentation order
     scenes = []
-    for j in tqdm(order, desc="survey build", unit="scene", disable=not progress, leave=False):
+    for j in tqdm(order, desc="survey build", unit="scene", leave=False, **bar_options(progress)):
         index, stratum = picks[int(j)]
         scene = ds[index]
         batch = collate([scene]).to(device)
@@ -344,5 +349,5 @@ def build_study(cfg: BuildConfig, out: str | Path, progress: bool = True,
         units=None if ds.info.units in UNKNOWN_UNITS else ds.info.units,  # axes: no unit
         dataset={"name": ds.info.name, "split": ds.info.split, "units": ds.info.units,
                  "frame_interval": ds.info.frame_interval, "scenes_in_split": len(ds)},
-        build=record, consent=cfg.consent,
+        build=record, consent=cfg.consent, order="fixed" if cfg.fixed_order else "rater",
     )  # fmt: skip

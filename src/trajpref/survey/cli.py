@@ -50,7 +50,9 @@ def add_parser(
     b.add_argument("--seed", type=int, default=0,
                    help="seed of the draw, sampling, shuffling (default 0)")  # fmt: skip
     b.add_argument("--min-agents", type=int, default=1, help="smallest scene (default 1)")
-    b.add_argument("--max-agents", type=int, default=8, help="largest scene (default 8)")
+    b.add_argument("--max-agents", type=int, default=8,
+                   help="largest scene drawn for the study, in agents (default 8): a "
+                   "scene-size filter, not evaluate's batch size")  # fmt: skip
     b.add_argument("--min-gap", type=int, default=20, help="picked scenes are this many "
                    "positions apart in the split (default 20: no shared frames)")  # fmt: skip
     b.add_argument("--strata", type=int, default=3, help="scene-size strata (default 3)")
@@ -62,6 +64,10 @@ def add_parser(
     b.add_argument("--consent", default=None, metavar="FILE", help="a UTF-8 text file: the "
                    "consent text every rater reads and agrees to ('I agree') before the first "
                    "picture; the agreement is recorded per rater (default: none)")  # fmt: skip
+    b.add_argument("--fixed-order", action="store_true", help="show every rater the scenes "
+                   "and panels in one order (shuffled once at build time); default: each rater "
+                   "sees an order of their own, so that position effects spread over the "
+                   "methods")  # fmt: skip
     b.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     b.add_argument("--out", required=True, help="the new study folder")
     b.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -171,6 +177,7 @@ def cmd_build(args, check_data_args: Callable[[argparse.Namespace], None],
         seed=args.seed, min_agents=args.min_agents, max_agents=args.max_agents,
         min_gap=args.min_gap, strata=args.strata, ground_truth=args.ground_truth,
         title=args.title, device=args.device, consent=read_consent(args.consent),
+        fixed_order=args.fixed_order,
     )  # fmt: skip
 
     def warn(ds) -> None:  # as `evaluate` warns, for every checkpoint: methods and scorer

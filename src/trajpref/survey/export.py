@@ -1,11 +1,11 @@
 """``trajpref survey export``: the answers as one CSV table for R, pandas or SPSS.
 
-One row per answer (long format), unblinded: the rater, the scene and panel as the rater saw
-them, the method behind the panel and what the key says about it (ATS, FTS, ADE, FDE in the
-data's units; the ground truth's ATS and FTS empty: defined as 0, not measured), the two
-ratings and their mean, when the answer was given, and the record of what built the study
-(study id, versions, the method's checkpoint hashes). The same raters
-as ``analyze`` (``--raters``, ``--exclude-rater``). Rater ids are personal data: the file is
+One row per answer (long format), unblinded: the rater, the scene and panel, where that rater
+was shown the picture, the method behind the panel and what the key says about it (ATS, FTS,
+ADE, FDE in the data's units; the ground truth's ATS and FTS empty: defined as 0, not
+measured), the two ratings and their mean, when the answer was given, and the record of what
+built the study (study id, versions, the method's checkpoint hashes). The same raters as
+``analyze`` (``--raters``, ``--exclude-rater``). Rater ids are personal data: the file is
 written owner-only (0600), atomically.
 """
 
@@ -22,16 +22,22 @@ from trajpref.survey.manifest import DATABASE, GROUND_TRUTH, load_study
 from trajpref.survey.store import AnswerStore, case_variants, private_output
 
 COLUMNS = (
-    "rater", "kind", "submitted_at", "scene", "panel", "position", "method", "social",
-    "kinetics", "human_score", "ats", "fts", "ade", "fde", "units", "source", "agents",
-    "stratum", "revision", "created_at", "updated_at", "consented_at", "study_id",
-    "weights_hash", "model_hash", "trajpref_version", "torch_version",
+    "rater", "kind", "submitted_at", "scene", "panel", "position", "scene_position",
+    "panel_position", "method", "social", "kinetics", "human_score", "ats", "fts", "ade", "fde",
+    "units", "source", "agents", "stratum", "revision", "created_at", "updated_at",
+    "consented_at", "study_id", "weights_hash", "model_hash", "trajpref_version",
+    "torch_version",
 )  # fmt: skip
-"""The CSV's columns. ``position``: the picture's place in the order every rater sees (1 =
-first); ``human_score``: the mean of the two ratings; ``ade``/``fde`` in ``units``;
-``created_at``/``updated_at``: the answer's first and last save (UTC); ``submitted_at``:
-when the rater submitted (empty if not); ``ats``/``fts`` empty (NA) for the ground truth (0 by
-definition, not a measurement: an average over the column must not mix it in);
+"""The CSV's columns. ``position``: the picture's place in the order this row's rater was
+shown the pictures (1 = first; raters of a study built with per-rater orders see different
+orders); ``scene_position``: its scene's place in that order (1 = first scene);
+``panel_position``: the picture's place within its scene (1 = first shown of the scene); for
+an answer saved before positions were recorded (2026-12-06), when every rater saw the
+manifest's order, that order's (``AnswerStore.shown_at``); ``human_score``: the mean of the
+two ratings; ``ade``/``fde`` in ``units``; ``created_at``/``updated_at``: the answer's first
+and last save (UTC); ``submitted_at``: when the rater submitted (empty if not);
+``ats``/``fts`` empty (NA) for the ground truth (0 by definition, not a measurement: an
+average over the column must not mix it in);
 ``consented_at``: when the rater agreed to the study's consent text (empty if the study has
 none or for synthetic raters); ``study_id``: ``Study.study_id``; ``weights_hash``/``model_hash``:
 the method's checkpoint (empty for cv and the ground truth, or a study built before they were
@@ -63,22 +69,18 @@ def export_csv(folder: str | Path, path: str | Path, db: str | Path | None = Non
     build = study.build or {}
     hashes = (build.get("hashes") or {}).get("methods") or {}
     versions = [build.get("trajpref_version") or "", build.get("torch_version") or ""]
-    where = {}
-    position = 0
-    for s in study.scenes:
-        for p in s.panels:
-            position += 1
-            where[(s.id, p.id)] = (position, s, p.key)
+    where = {(s.id, p.id): (s, p.key) for s in study.scenes for p in s.panels}
     with private_output(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
         out = csv.writer(fh)
         out.writerow(COLUMNS)
         for _, _, r in chosen:
-            pos, scene, key = where[(r["scene"], r["panel"])]
+            scene, key = where[(r["scene"], r["panel"])]
             gt = key.method == GROUND_TRUTH
             h = hashes.get(key.method) or {}
             out.writerow([
-                r["rater"], r["kind"], r["submitted_at"] or "", r["scene"], r["panel"], pos,
-                key.method, r["social"], r["kinetics"], (r["social"] + r["kinetics"]) / 2,
+                r["rater"], r["kind"], r["submitted_at"] or "", r["scene"], r["panel"],
+                r["position"], r["scene_position"], r["panel_position"], key.method,
+                r["social"], r["kinetics"], (r["social"] + r["kinetics"]) / 2,
                 "" if gt else key.ats, "" if gt else key.fts, key.ade, key.fde, units,
                 scene.source, scene.agents, scene.stratum, r["revision"], r["created_at"],
                 r["updated_at"], r.get("consented_at") or "", study.study_id,

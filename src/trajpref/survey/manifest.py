@@ -53,9 +53,14 @@ IMAGE_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}\.png")
 METHOD_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9 _.+-]{0,39}")
 """Method names given to ``survey build``. These patterns are checked with ``fullmatch``
 (``re.match`` with ``$`` would let a trailing newline through)."""
+ORDERS = ("rater", "fixed")
+"""The manifest's ``order``: ``rater``, each rater sees the scenes, and the panels within each
+scene, in an order of their own (``Study.rater_order``); ``fixed``, every rater sees the
+manifest's order (``survey build --fixed-order``, and every study built before 2026-12-06,
+whose manifest has no ``order``)."""
 KEYS = {
-    "manifest": ("format", "title", "instructions", "consent", "created", "synthetic",
-                 "dataset", "build", "methods", "scenes", "key"),
+    "manifest": ("format", "title", "instructions", "consent", "order", "created",
+                 "synthetic", "dataset", "build", "methods", "scenes", "key"),
     "scene": ("id", "reference", "panels"),
     "panel": ("id", "image"),
     "key scene": ("source", "index", "agents", "stratum", "panels"),
@@ -97,7 +102,8 @@ class Panel:
     """One image to rate."""
 
     id: str
-    """The panel's letter within its scene (``A``, ``B``, ...), in display order."""
+    """The panel's letter within its scene (``A``, ``B``, ...), in the manifest's order (a
+    rater of a study of ``order`` ``rater`` sees the panels in an order of their own)."""
     image: str
     """Its file name under ``images/``."""
     key: PanelKey
@@ -106,7 +112,7 @@ class Panel:
 
 @dataclass(frozen=True)
 class StudyScene:
-    """One scene of the study and its panels, in display order."""
+    """One scene of the study and its panels, in the manifest's order."""
 
     id: str
     """Public id, e.g. ``s01``."""
@@ -138,7 +144,8 @@ class Study:
     methods: tuple[str, ...]
     """Method names in the order given to ``build`` (the ground truth first when rated)."""
     scenes: tuple[StudyScene, ...]
-    """The scenes, in the order raters see them."""
+    """The scenes, in the manifest's order (the order every rater sees with ``order``
+    ``fixed``; ``rater_order`` gives a rater's)."""
     dataset: dict[str, Any] = field(default_factory=dict)
     """``name``, ``split``, ``units``, ``frame_interval`` (seconds per step, as read) and
     ``scenes_in_split`` of the data."""
@@ -152,6 +159,43 @@ class Study:
     """A consent text shown to every rater before the first picture, with an "I agree" step
     that the answers database records per rater; empty: none (the manifest's optional
     ``consent``)."""
+    order: str = "fixed"
+    """The presentation order (``ORDERS``): ``rater``, each rater's own (``rater_order``);
+    ``fixed``, the manifest's for every rater (a manifest without ``order``: built before
+    2026-12-06, when every rater saw that order)."""
+
+    def rater_order(self, rater: str) -> tuple[tuple[StudyScene, tuple[Panel, ...]], ...]:
+        """The scenes, each with its panels, in the order ``rater`` sees them. ``order``
+        ``fixed``: the manifest's. ``rater``: a permutation of the scenes, and within each
+        scene of its panels, that is a function of the study (``study_id``) and the rater id
+        in lower case (ids are matched ignoring case): the same at every visit (a reload, a
+        resumed session, another machine), another for another rater or study. Each item is
+        ranked by a SHA-256 hash of the study id, the rater id and the scene id (and the
+        panel letter): a uniformly random order per rater, the same on every platform and
+        with every version of numpy."""
+        if self.order == "fixed":
+            return tuple((s, s.panels) for s in self.scenes)
+        seed = f"trajpref-survey-order\0{self.study_id}\0{rater.lower()}"
+
+        def rank(*names: str) -> bytes:
+            return hashlib.sha256("\0".join((seed, *names)).encode()).digest()
+
+        scenes = sorted(self.scenes, key=lambda s: rank(s.id))
+        return tuple((s, tuple(sorted(s.panels, key=lambda p: rank(s.id, p.id))))
+                     for s in scenes)  # fmt: skip
+
+    def positions(self, rater: str | None = None) -> dict[tuple[str, str], tuple[int, int, int]]:
+        """(scene id, panel letter) -> (scene position, panel position within the scene,
+        position among all the panels), each from 1: where ``rater`` sees each panel
+        (``rater_order``); ``None``: the manifest's order."""
+        order = (self.rater_order(rater) if rater is not None
+                 else tuple((s, s.panels) for s in self.scenes))  # fmt: skip
+        out, n = {}, 0
+        for i, (s, panels) in enumerate(order, 1):
+            for j, p in enumerate(panels, 1):
+                n += 1
+                out[(s.id, p.id)] = (i, j, n)
+        return out
 
     @property
     def consent_hash(self) -> str:
@@ -239,6 +283,7 @@ def manifest_dict(study: Study) -> dict[str, Any]:
         "title": study.title,
         "instructions": study.instructions,
         **({"consent": study.consent} if study.consent else {}),
+        "order": study.order,
         "created": study.created,
         "synthetic": study.synthetic,
         "dataset": study.dataset,
@@ -432,6 +477,9 @@ def load_study(folder: str | Path) -> Study:
                                  stratum or 0))  # fmt: skip
     if set(key) != {s.id for s in scenes}:
         raise r.fail("key", "does not match the scenes")
+    order = r.get(raw, "order", str, "manifest", optional=True) or "fixed"
+    if order not in ORDERS:
+        raise r.fail("order", f"expected {' or '.join(map(repr, ORDERS))}, got {order!r:.40}")
     dataset = r.get(raw, "dataset", dict, "manifest", optional=True) or {}
     build = r.get(raw, "build", dict, "manifest", optional=True) or {}
     return Study(
@@ -445,4 +493,5 @@ def load_study(folder: str | Path) -> Study:
         synthetic=bool(r.get(raw, "synthetic", bool, "manifest", optional=True)),
         created=r.get(raw, "created", str, "manifest", optional=True) or "",
         consent=r.get(raw, "consent", str, "manifest", optional=True) or "",
+        order=order,
     )

@@ -7,7 +7,8 @@ Routes::
     GET  /images/{name}.png                      a panel image named in the manifest
     GET  /api/study                              the public study: scenes, panels, criteria,
                                                  the consent text and its ``consent_hash``
-    GET  /api/raters/{rater}                     a rater's answers so far (to resume)
+    GET  /api/raters/{rater}                     a rater's answers so far (to resume) and the
+                                                 order the rater sees the pictures in
     PUT  /api/raters/{rater}/answers/{scene}/{panel}   {"social": 1..5, "kinetics": 1..5}
     POST /api/raters/{rater}/submit              {"submit": true}: mark the answers final
                                                  (every panel answered, else 409)

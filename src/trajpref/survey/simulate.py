@@ -8,9 +8,12 @@ of the shown futures divided by the median over the method panels of the study,
     b_rater ~ N(0, bias_sd) once per rater,  noise ~ N(0, noise_sd) per answer,
 
 so that the ground truth (e = 0) gets about ``top`` and a median panel about ``top - slope``.
-Their answers are stored with kind ``synthetic`` and submitted; ``analyze`` labels any result
-that uses them. Agreement between synthetic raters and ATS/FTS measures how ATS/FTS follow
-the distance to the ground truth, never how they follow people.
+Their answers are stored with kind ``synthetic`` and submitted, each rater's in the order that
+rater is shown the pictures (``Study.rater_order``: the positions recorded, as for a person);
+the ratings do not depend on the order (these raters have no position effect), so a seed gives
+the same ratings whatever the study's ``order``. ``analyze`` labels any result that uses them.
+Agreement between synthetic raters and ATS/FTS measures how ATS/FTS follow the distance to the
+ground truth, never how they follow people.
 """
 
 from __future__ import annotations
@@ -73,8 +76,10 @@ def simulate(study: Study, store: AnswerStore, cfg: SimulateConfig) -> list[str]
         bias = rng.normal(0, cfg.bias_sd)
         latent = cfg.top - cfg.slope * err + bias + rng.normal(0, cfg.noise_sd, err.shape)
         ratings = np.clip(np.rint(latent), RATING_MIN, RATING_MAX).astype(int)  # [Q, 2]
-        store.save_many(rater, [(s, p, {"social": int(r[0]), "kinetics": int(r[1])})
-                                for (s, p, _), r in zip(panels, ratings, strict=True)],
+        given = {(s, p): {"social": int(r[0]), "kinetics": int(r[1])}
+                 for (s, p, _), r in zip(panels, ratings, strict=True)}  # fmt: skip
+        store.save_many(rater, [(s.id, p.id, given[(s.id, p.id)])  # in this rater's order
+                                for s, shown in study.rater_order(rater) for p in shown],
                         kind="synthetic")  # fmt: skip
         store.submit(rater, kind="synthetic")
     return ids

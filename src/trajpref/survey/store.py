@@ -7,8 +7,14 @@ Schema (``SCHEMA``)::
     raters(rater PRIMARY KEY, kind, created_at, submitted_at)
         kind: 'human' (the page) or 'synthetic' (``survey simulate``)
     answers(rater, scene, panel, social, kinetics, revision, created_at, updated_at,
-            PRIMARY KEY (rater, scene, panel))
-        social, kinetics: 1..5 (CHECK); revision: 1, +1 for each later change
+            scene_position, panel_position, PRIMARY KEY (rater, scene, panel))
+        social, kinetics: 1..5 (CHECK); revision: 1, +1 for each later change;
+        scene_position, panel_position: where the rater was shown the picture when the answer
+        was last saved (``Study.positions``: the scene's place in the rater's order, and the
+        panel's within the scene, from 1); NULL in a file written before they were recorded
+        (2026-12-06), whose server showed every rater the manifest's order: readers give
+        such an answer that order's position (``shown_at``); a writer that opens such a file
+        adds the two columns (``ALTER TABLE``), its rows kept
     consents(rater, agreed_at, text_hash, PRIMARY KEY (rater, text_hash))
         when a rater agreed to the study's consent text, and a hash of that text
         (``Study.consent_hash``): one row per text agreed to, so that an agreement to an
@@ -99,6 +105,8 @@ CREATE TABLE IF NOT EXISTS answers (
     revision   INTEGER NOT NULL DEFAULT 1,
     created_at TEXT NOT NULL,
     updated_at TEXT NOT NULL,
+    scene_position INTEGER CHECK (scene_position >= 1),
+    panel_position INTEGER CHECK (panel_position >= 1),
     PRIMARY KEY (rater, scene, panel)
 );
 {CONSENTS_TABLE}
@@ -111,7 +119,10 @@ TABLES = {
                 "updated_at"),
     "consents": ("rater", "agreed_at", "text_hash"),
 }  # fmt: skip
-"""The columns of each table of ``SCHEMA``, checked whenever a file is opened."""
+"""The columns of each table of ``SCHEMA`` that every file has, checked whenever a file is
+opened (``POSITION_COLUMNS`` may be missing: a file written before them)."""
+POSITION_COLUMNS = ("scene_position", "panel_position")
+"""The columns of ``answers`` that record where the picture was shown (added 2026-12-06)."""
 
 
 class AnswerError(TrajprefError, ValueError):
@@ -340,6 +351,7 @@ class AnswerStore:
                 self.db.execute("PRAGMA synchronous=FULL")
                 self.db.execute("PRAGMA foreign_keys=ON")
                 self._migrate_consents()
+                self._add_position_columns()
                 self.db.executescript(SCHEMA)
                 self._check_tables(new_file_ok=False)
                 self._check_study(claim=True)
@@ -435,6 +447,30 @@ class AnswerStore:
             raise
         self.db.execute("COMMIT")
 
+    def _position_columns(self) -> bool:
+        """The ``answers`` table has ``POSITION_COLUMNS`` (a file written before 2026-12-06
+        has not)."""
+        have = {r[1] for r in self.db.execute("PRAGMA table_info(answers)")}
+        return all(c in have for c in POSITION_COLUMNS)
+
+    def _add_position_columns(self) -> None:
+        """An ``answers`` table without ``POSITION_COLUMNS`` (written before they were
+        recorded) gets them, NULL in its rows (``shown_at`` gives those answers the manifest
+        order's positions); in one transaction. Nothing for a new file (``SCHEMA`` has them)."""
+        if not self._has_table("answers") or self._position_columns():
+            return
+        self.db.execute("BEGIN IMMEDIATE")
+        try:
+            have = {r[1] for r in self.db.execute("PRAGMA table_info(answers)")}
+            for column in POSITION_COLUMNS:
+                if column not in have:  # not added meanwhile by another process
+                    self.db.execute(f"ALTER TABLE answers ADD COLUMN {column} INTEGER "
+                                    f"CHECK ({column} >= 1)")  # fmt: skip
+        except BaseException:
+            self.db.execute("ROLLBACK")
+            raise
+        self.db.execute("COMMIT")
+
     def _consents_key(self) -> list[str]:
         """The primary key columns of the ``consents`` table, in order ([] without one)."""
         rows = self.db.execute("PRAGMA table_info(consents)").fetchall()
@@ -470,6 +506,15 @@ class AnswerStore:
             raise ConfigError(f"{self.path}: {_count(n, 'panel')} answered more than once by "
                               f"the same rater, the first: rater {r[0]!r:.40}, scene "
                               f"{r[1]!r:.40}, panel {r[2]!r:.40}")  # fmt: skip
+        if self._position_columns():
+            bad = " OR ".join(f"NOT ({c} IS NULL OR (typeof({c}) = 'integer' AND {c} >= 1))"
+                              for c in POSITION_COLUMNS)  # fmt: skip
+            n, r = self._first(f"SELECT rater, scene, panel FROM answers WHERE {bad}")
+            if n:
+                raise ConfigError(f"{self.path}: {_count(n, 'answer')} with a scene_position or "
+                                  "panel_position that is not an integer >= 1 (or empty), the "
+                                  f"first: rater {r[0]!r:.40}, scene {r[1]!r:.40}, panel "
+                                  f"{r[2]!r:.40}")  # fmt: skip
         n, r = self._first("SELECT rater FROM raters GROUP BY rater HAVING count(*) > 1")
         if n:
             raise ConfigError(f"{self.path}: {_count(n, 'rater id')} in more than one row of "
@@ -604,14 +649,17 @@ class AnswerStore:
     def save_many(self, rater: str, answers: list[tuple[str, str, Any]],
                   kind: str = "human") -> dict[str, int]:  # fmt: skip
         """``save`` for several ``(scene, panel, ratings)`` of one rater, in one transaction:
-        all are written or none. Returns the revision of the last one."""
+        all are written or none. Returns the revision of the last one. Each answer is stored
+        with the place where this rater is shown its picture (``Study.positions``: the
+        server computes it, the page does not send it)."""
         rater = check_rater(rater)
         if kind not in KINDS:
             raise AnswerError(f"kind must be one of {KINDS}", 422)
         checked = []
+        shown = self.study.positions(rater)  # where this rater sees each picture
         for scene, panel, ratings in answers:
             self.check_panel(scene, panel)
-            checked.append((scene, panel, *check_ratings(ratings)))
+            checked.append((scene, panel, *check_ratings(ratings), *shown[(scene, panel)][:2]))
         now = _now()
         revision = 0
         with self._tx("the answer" if len(checked) == 1 else "the answers"):
@@ -622,16 +670,19 @@ class AnswerStore:
             if kind == "human" and self.study.consent and self._agreed(rater) is None:
                 raise AnswerError(f"rater {rater} has not agreed to the study's consent text: "
                                   "agree first (POST /api/raters/ID/consent)", 403)  # fmt: skip
-            for scene, panel, social, kinetics in checked:
+            for scene, panel, social, kinetics, scene_pos, panel_pos in checked:
                 revision = self.db.execute(
                     """INSERT INTO answers (rater, scene, panel, social, kinetics, revision,
-                                            created_at, updated_at)
-                       VALUES (?, ?, ?, ?, ?, 1, ?, ?)
+                                            created_at, updated_at, scene_position,
+                                            panel_position)
+                       VALUES (?, ?, ?, ?, ?, 1, ?, ?, ?, ?)
                        ON CONFLICT (rater, scene, panel) DO UPDATE SET
                            social = excluded.social, kinetics = excluded.kinetics,
-                           revision = answers.revision + 1, updated_at = excluded.updated_at
+                           revision = answers.revision + 1, updated_at = excluded.updated_at,
+                           scene_position = excluded.scene_position,
+                           panel_position = excluded.panel_position
                        RETURNING revision""",
-                    (rater, scene, panel, social, kinetics, now, now),
+                    (rater, scene, panel, social, kinetics, now, now, scene_pos, panel_pos),
                 ).fetchall()[0][0]
             answered = self._answered(rater)
         return {"revision": revision, "answered": answered, "total": self.total}
@@ -695,11 +746,15 @@ class AnswerStore:
 
     def progress(self, rater: str) -> dict[str, Any]:
         """A rater's answers so far: ``{"rater", "answers": {scene: {panel: {social,
-        kinetics}}}, "answered", "total", "submitted", "consent_required", "consented"}``
-        (empty for an unknown rater); ``rater`` is the id as stored (lower case, or an older
-        file's spelling); ``consent_required``: the study has a consent text, ``consented``:
-        the rater agreed to it."""
+        kinetics}}}, "answered", "total", "submitted", "consent_required", "consented",
+        "order"}`` (empty for an unknown rater); ``rater`` is the id as stored (lower case, or
+        an older file's spelling); ``consent_required``: the study has a consent text,
+        ``consented``: the rater agreed to it; ``order``: the scenes and their panels in the
+        order this rater sees them, ``[{"scene": id, "panels": [letter, ...]}, ...]``
+        (``Study.rater_order``: the page shows them so)."""
         rater = check_rater(rater)
+        order = [{"scene": s.id, "panels": [p.id for p in panels]}
+                 for s, panels in self.study.rater_order(rater)]  # fmt: skip
         failed = "the answers could not be read"
         with self._lock:
             if not self.readonly:
@@ -727,6 +782,7 @@ class AnswerStore:
             "submitted": bool(row and row[1]),
             "consent_required": bool(self.study.consent),
             "consented": agreed is not None,
+            "order": order,
         }
 
     def _read(self, query: str, params: tuple = ()) -> list[tuple]:
@@ -748,6 +804,45 @@ class AnswerStore:
         )
         return [(*r[:6], bool(r[6])) for r in rows if r[3] in self.panels.get(r[2], ())]
 
+    def _position_select(self) -> str:
+        """The SELECT list of the stored positions: ``NULL, NULL`` for a file without them."""
+        with self._lock:
+            stored = self._position_columns()
+        return ", ".join(f"a.{c}" for c in POSITION_COLUMNS) if stored else "NULL, NULL"
+
+    def shown_at(self, rows: list[tuple[str, str, str, Any, Any]]
+                 ) -> list[tuple[int, int, int]]:  # fmt: skip
+        """Where each ``(rater, scene, panel, scene_position, panel_position)`` (as stored) was
+        shown: ``(scene position, panel position, position among all the panels)``, from 1.
+        The stored positions when the answer has them (the position among all the panels
+        counted in that rater's order, ``Study.rater_order``); else (NULL: a file written
+        before they were recorded, when every rater saw the manifest's order) the manifest
+        order's."""
+        fixed = self.study.positions()
+        orders: dict[str, dict[int, int]] = {}  # rater -> scene position -> panels before it
+        out = []
+        for rater, scene, panel, scene_pos, panel_pos in rows:
+            if scene_pos is None or panel_pos is None:
+                out.append(fixed[(scene, panel)])
+                continue
+            if rater not in orders:
+                before, start = 0, {}
+                for i, (_, panels) in enumerate(self.study.rater_order(rater), 1):
+                    start[i] = before
+                    before += len(panels)
+                orders[rater] = start
+            start = orders[rater].get(scene_pos, 0)
+            out.append((scene_pos, panel_pos, start + panel_pos))
+        return out
+
+    def positions(self) -> dict[tuple[str, str, str], tuple[int, int, int]]:
+        """(rater, scene, panel) -> where the rater was shown that picture (``shown_at``), for
+        every answer :meth:`rows` gives (``analyze``'s position-effect check)."""
+        rows = self._read(f"SELECT a.rater, a.scene, a.panel, {self._position_select()} "
+                          "FROM answers a JOIN raters r USING (rater)")  # fmt: skip
+        rows = [r for r in rows if r[2] in self.panels.get(r[1], ())]
+        return {r[:3]: w for r, w in zip(rows, self.shown_at(rows), strict=True)}
+
     def ignored(self) -> dict[str, int]:
         """The answers in the file that :meth:`rows` leaves out: ``unknown_panels`` (to a
         scene or panel this study does not have), ``unknown_raters`` (to one of its panels,
@@ -766,21 +861,26 @@ class AnswerStore:
         """Every answer of this study (those :meth:`rows` gives) with its revision and time
         stamps: ``rater``, ``kind``, ``submitted_at``, ``scene``, ``panel``, ``social``,
         ``kinetics``, ``revision``, ``created_at``, ``updated_at``, ``consented_at`` (when the
-        rater agreed to this study's consent text; None if not, or without one) (``survey
-        export``)."""
+        rater agreed to this study's consent text; None if not, or without one), and where the
+        rater was shown the picture (``shown_at``): ``scene_position``, ``panel_position``,
+        ``position`` (``survey export``)."""
         names = ("rater", "kind", "submitted_at", "scene", "panel", "social", "kinetics",
                  "revision", "created_at", "updated_at", "consented_at")  # fmt: skip
+        shown = self._position_select()
         with self._lock:
             consents = self.study.consent and self._has_table("consents")
         agreed = ("(SELECT c.agreed_at FROM consents c WHERE c.rater = a.rater AND "
                   "c.text_hash = ?)" if consents else "NULL")  # fmt: skip
         query = f"""SELECT a.rater, r.kind, r.submitted_at, a.scene, a.panel, a.social,
-                           a.kinetics, a.revision, a.created_at, a.updated_at, {agreed}
+                           a.kinetics, a.revision, a.created_at, a.updated_at, {agreed}, {shown}
                     FROM answers a JOIN raters r USING (rater)
                     ORDER BY a.rater, a.scene, a.panel"""
         rows = self._read(query, (self.study.consent_hash,) if consents else ())
-        return [dict(zip(names, r, strict=True)) for r in rows
-                if r[4] in self.panels.get(r[3], ())]  # fmt: skip
+        rows = [r for r in rows if r[4] in self.panels.get(r[3], ())]
+        where = self.shown_at([(r[0], r[3], r[4], r[11], r[12]) for r in rows])
+        return [{**dict(zip(names, r[:11], strict=True)), "scene_position": w[0],
+                 "panel_position": w[1], "position": w[2]}
+                for r, w in zip(rows, where, strict=True)]  # fmt: skip
 
     def find_raters(self, ids: list[str], option: str = "--exclude-rater") -> list[str]:
         """The stored ids of ``ids`` (each as stored, or differing only by case when that

@@ -3,8 +3,9 @@
 ``build`` fills :class:`SceneData` from a dataset and real models; :func:`make_synthetic_study`
 fills it with made-up scenes and scores (for demos, tests and the load benchmark). Both end in
 :func:`write_study`, which shuffles the methods of every scene behind panel letters, renders one
-image per panel and writes the manifest, all into a temporary folder renamed onto ``out`` at the
-end: a failed build leaves nothing behind.
+image per panel, pads the images of each scene to one byte size (:func:`pad_png`) and writes the
+manifest, all into a temporary folder renamed onto ``out`` at the end: a failed build leaves
+nothing behind.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+import zlib
 from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
@@ -27,6 +29,7 @@ from trajpref.survey.manifest import (
     IMAGES,
     MANIFEST,
     METHOD_RE,
+    ORDERS,
     Panel,
     PanelKey,
     Study,
@@ -181,6 +184,74 @@ def _panel_image(history: np.ndarray, paths: np.ndarray, weights: np.ndarray, ou
         plot_panel(history, paths, weights, out, limits, "", dashed=dashed)
 
 
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+"""The first eight bytes of every PNG file."""
+PAD_CHUNK = b"tpAd"
+"""The type of the chunk that pads a picture (``pad_png``): a private ancillary chunk (lower-case
+first letter: a decoder that does not know it skips it; lower-case second: private; upper-case
+third: as the PNG specification requires; lower-case fourth: safe to copy)."""
+PNG_CHUNK_OVERHEAD = 12
+"""Bytes of a chunk besides its data: length, type, CRC."""
+
+
+def png_chunks(data: bytes) -> list[tuple[bytes, bytes, int]]:
+    """The chunks of PNG ``data``: ``(type, data, crc)`` each, in file order; ``ValueError``
+    for data that is not a well-formed PNG (a bad signature, a chunk past the end, a wrong
+    CRC, bytes after ``IEND``)."""
+    if data[:8] != PNG_SIGNATURE:
+        raise ValueError("not a PNG file")
+    out, pos = [], 8
+    while pos < len(data):
+        if pos + PNG_CHUNK_OVERHEAD > len(data):
+            raise ValueError("a PNG chunk runs past the end of the file")
+        length = int.from_bytes(data[pos : pos + 4], "big")
+        kind = data[pos + 4 : pos + 8]
+        body = data[pos + 8 : pos + 8 + length]
+        end = pos + 8 + length
+        if len(body) != length or end + 4 > len(data):
+            raise ValueError(f"PNG chunk {kind!r} runs past the end of the file")
+        crc = int.from_bytes(data[end : end + 4], "big")
+        if crc != zlib.crc32(kind + body):
+            raise ValueError(f"PNG chunk {kind!r}: wrong CRC")
+        out.append((kind, body, crc))
+        pos = end + 4
+        if kind == b"IEND" and pos != len(data):
+            raise ValueError("bytes after the PNG's IEND chunk")
+    return out
+
+
+def pad_png(data: bytes, size: int) -> bytes:
+    """PNG ``data`` grown to exactly ``size`` bytes by one ``PAD_CHUNK`` of zero bytes just
+    before ``IEND``, with its CRC: the picture decodes to the same pixels (a decoder skips an
+    ancillary chunk it does not know), and the padding says nothing about what is drawn.
+    ``size`` must leave room for the chunk: at least ``len(data) + PNG_CHUNK_OVERHEAD``."""
+    chunks = png_chunks(data)
+    if not chunks or chunks[-1][0] != b"IEND":
+        raise ValueError("a PNG without IEND at its end")
+    fill = size - len(data) - PNG_CHUNK_OVERHEAD
+    if fill < 0:
+        raise ValueError(f"cannot pad a PNG of {len(data)} bytes to {size}: the padding chunk "
+                         f"alone takes {PNG_CHUNK_OVERHEAD}")  # fmt: skip
+    body = bytes(fill)
+    chunk = (fill.to_bytes(4, "big") + PAD_CHUNK + body
+             + zlib.crc32(PAD_CHUNK + body).to_bytes(4, "big"))  # fmt: skip
+    cut = len(data) - PNG_CHUNK_OVERHEAD  # the IEND chunk: always 12 bytes (no data)
+    return data[:cut] + chunk + data[cut:]
+
+
+def equalise_sizes(paths: list[Path]) -> int:
+    """Pad the PNG files ``paths`` (one scene's panels and reference) to one byte size, that of
+    the largest plus one chunk (so every one gets a padding chunk and none stands out by
+    lacking it): a rater who compares the pictures' sizes in the browser's developer tools
+    (the ground truth's, with fewer lines, was the smallest) learns nothing. Returns the
+    size."""
+    data = {p: p.read_bytes() for p in paths}
+    size = max(len(d) for d in data.values()) + PNG_CHUNK_OVERHEAD
+    for p, d in data.items():
+        p.write_bytes(pad_png(d, size))
+    return size
+
+
 def _check_out(out: Path) -> None:
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise ConfigError(f"{out}: already exists; a study folder is never overwritten "
@@ -207,11 +278,15 @@ def write_study(
     build: dict[str, Any] | None = None,
     synthetic: bool = False,
     consent: str = "",
+    order: str = "rater",
 ) -> Study:
     """Shuffle, render and write a study folder; returns it as read back by ``load_study``.
 
     ``methods`` lists the panels of every scene (``GROUND_TRUTH`` among them when it is rated);
-    each scene's panels are put in a random order (seeded) and named A, B, ... The folder
+    each scene's panels are put in a random order (seeded) and named A, B, ...; the images of
+    a scene are padded to one byte size (``equalise_sizes``). ``order``: ``rater``, each
+    rater sees the scenes and panels in an order of their own (``Study.rater_order``);
+    ``fixed``, every rater sees the manifest's. The folder
     appears only once complete, owner-only (0700): the raters' answers go into it. The
     build record gets the study's id (``Study.study_id``, which it does not enter). ``units``
     unknown (``""``, ``unknown``): the pictures' axes name no unit. ``consent``: a consent
@@ -226,6 +301,8 @@ def write_study(
             raise ConfigError(f"method name {m!r}: use letters, digits, ' _.+-' (at most 40)")
     if len(set(methods)) != len(methods):
         raise ConfigError("method names must be unique")
+    if order not in ORDERS:
+        raise ConfigError(f"order must be one of {', '.join(ORDERS)}, got {order!r}")
     rng = np.random.default_rng(seed)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.building-", dir=out.parent))
@@ -238,10 +315,10 @@ def write_study(
             sid = f"s{i + 1:0{width}d}"
             if set(sc.panels) != set(methods):
                 raise ConfigError(f"scene {sid}: panels {sorted(sc.panels)} != {sorted(methods)}")
-            order = [methods[j] for j in rng.permutation(len(methods))]
+            shuffled = [methods[j] for j in rng.permutation(len(methods))]
             limits = scene_limits(sc.history, sc.future, list(sc.panels.values()))
             panels = []
-            for letter, method in zip(_letters(len(order)), order, strict=True):
+            for letter, method in zip(_letters(len(shuffled)), shuffled, strict=True):
                 s = sc.panels[method]
                 name = f"{sid}-{letter}.png"
                 _panel_image(sc.history, s.paths, s.weights, tmp / IMAGES / name, limits, units)
@@ -253,6 +330,8 @@ def write_study(
                 reference = f"{sid}-ref.png"
                 _panel_image(sc.history, sc.future[None], np.ones((1, sc.future.shape[0])),
                              tmp / IMAGES / reference, limits, units, dashed=True)  # fmt: skip
+            equalise_sizes([tmp / IMAGES / p.image for p in panels]
+                           + ([tmp / IMAGES / reference] if reference else []))  # fmt: skip
             entries.append(StudyScene(sid, tuple(panels), reference, sc.source, sc.index,
                                       int(sc.history.shape[0]), sc.stratum))  # fmt: skip
         study = Study(
@@ -266,6 +345,7 @@ def write_study(
             synthetic=synthetic,
             created=datetime.now(timezone.utc).isoformat(timespec="seconds"),
             consent=consent.strip(),
+            order=order,
         )
         study = replace(study, build={**study.build, "study_id": study.study_id})
         write_json(tmp / MANIFEST, manifest_dict(study))
@@ -288,6 +368,7 @@ def make_synthetic_study(
     samples: int = 6,
     top: int = 2,
     ground_truth: GroundTruthMode = "rated",
+    order: str = "rater",
 ) -> Study:
     """A study of made-up walks and made-up predictions (for demos, tests and the load
     benchmark; marked ``synthetic`` in the manifest). Method i adds noise of scale
@@ -314,4 +395,5 @@ def make_synthetic_study(
     return write_study(out, data, names, seed=seed, ground_truth=ground_truth,
                        title="SYNTHETIC study (made-up scenes and scores)",
                        dataset={"name": "synthetic", "split": "test", "units": "m"},
-                       build={"synthetic": True, "seed": seed}, synthetic=True)  # fmt: skip
+                       build={"synthetic": True, "seed": seed}, synthetic=True,
+                       order=order)  # fmt: skip

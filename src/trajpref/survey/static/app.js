@@ -6,6 +6,9 @@
 // The browser remembers its last rater id (localStorage) and resumes that rater's session on
 // the next visit; on a shared machine the next person may not be that rater, so a resumed
 // session says whose it is, with a "Not you? Start as a new rater" control.
+// The server gives each rater the order of the scenes and of the pictures within each scene
+// (the same at every visit, another for another rater); the page numbers the pictures by where
+// it shows them ("picture 2 of 4"), never by their letters.
 "use strict";
 
 const RATER_KEY = "trajpref-survey-rater";
@@ -13,7 +16,8 @@ const $ = (id) => document.getElementById(id);
 
 const state = {
   study: null, // the public study from /api/study
-  items: [], // every panel in order: {scene, panel, image, reference, sceneNo, panelNo}
+  items: [], // every panel in this rater's order: {scene, panel, image, reference, sceneNo,
+  // panelNo, panels} (panelNo of panels within the scene; from the server's progress.order)
   rater: null,
   resumed: false, // the rater came from this browser's memory, not typed in this visit
   pos: 0, // index into items
@@ -134,8 +138,8 @@ function render() {
   $("reference-box").hidden = !item.reference;
   if (item.reference) $("reference-image").src = item.reference;
   $("where").textContent =
-    `Scene ${item.sceneNo} of ${state.study.scenes.length} · picture ${item.panel} ` +
-    `(${state.pos + 1} of ${n})`;
+    `Scene ${item.sceneNo} of ${state.study.scenes.length} · picture ${item.panelNo} of ` +
+    `${item.panels} (${state.pos + 1} of ${n})`;
   $("progress").max = n;
   $("progress").value = done;
   $("progress-text").textContent = `${done} / ${n} answered`;
@@ -275,7 +279,28 @@ async function reloadConsent() {
   }
 }
 
+function setOrder(order) {
+  // this rater's order of the scenes and of the pictures within each scene (the server's)
+  const scenes = {};
+  for (const scene of state.study.scenes) scenes[scene.id] = scene;
+  const images = {};
+  for (const scene of state.study.scenes) {
+    for (const panel of scene.panels) images[`${scene.id}/${panel.id}`] = panel.image;
+  }
+  state.items = [];
+  order.forEach((entry, si) => {
+    entry.panels.forEach((panel, pi) => {
+      state.items.push({
+        scene: entry.scene, panel, image: images[`${entry.scene}/${panel}`],
+        reference: scenes[entry.scene].reference, sceneNo: si + 1, panelNo: pi + 1,
+        panels: entry.panels.length,
+      });
+    });
+  });
+}
+
 function beginRating(progress) {
+  setOrder(progress.order);
   state.answers = {};
   for (const [scene, panels] of Object.entries(progress.answers)) {
     for (const [panel, ratings] of Object.entries(panels)) {
@@ -346,14 +371,6 @@ async function main() {
   $("title").textContent = state.study.title;
   $("instructions").textContent = state.study.instructions;
   $("consent-text").textContent = state.study.consent || "";
-  state.study.scenes.forEach((scene, si) => {
-    scene.panels.forEach((panel, pi) => {
-      state.items.push({
-        scene: scene.id, panel: panel.id, image: panel.image, reference: scene.reference,
-        sceneNo: si + 1, panelNo: pi + 1,
-      });
-    });
-  });
   buildCriteria();
   $("login-form").addEventListener("submit", (event) => {
     event.preventDefault();
