@@ -1,6 +1,24 @@
 """trajpref: human trajectory prediction with a diffusion model refined by RL from a
 quantified human preference (the diffusion score).
 
+Entry points (the README's "Python API"; each subpackage is imported on first use, so that
+``import trajpref`` stays light and ``trajpref.evaluation.evaluate(...)`` works after it):
+
+    from trajpref.models.registry import load_predictor  # a published name, a file, "cv"
+    from trajpref.score import predict_scene, predict_scenes  # a scene's histories -> futures
+    from trajpref.score import TrajectoryScorer, rank_samples  # the diffusion score, ranking
+    from trajpref.score.selection import chosen_selection, select_for_scene  # keep K' of K
+    from trajpref.data import load_dataset, tracks_to_history  # datasets; a tracker's rows
+    from trajpref.evaluation import evaluate, predict_dataset  # the evaluation pass
+    from trajpref.config import load_config  # experiment configs: YAML plus key=value
+    from trajpref.train import train_stage, finetune  # the training stages
+    from trajpref.rl import register_reward  # a reward of one's own for fine-tuning
+    from trajpref.rl.presets import finetune_config  # a fine-tuning config from a start
+    from trajpref.viz import plot_scene, plot_scene_scored  # figures
+    from trajpref.errors import TrajprefError, ConfigError, DataError  # what a user can fix
+
+The command line is ``trajpref`` (``trajpref.cli``; ``trajpref --help``).
+
 Shape vocabulary used in comments throughout the package:
     B scenes, P agents (per scene), N agents packed across a batch, K samples,
     T time (T_h history, T_f future), D = 2 coordinates.
@@ -21,4 +39,29 @@ ONEDNN_CACHE_CAPACITY = 16384
 os.environ.setdefault("ONEDNN_PRIMITIVE_CACHE_CAPACITY", str(ONEDNN_CACHE_CAPACITY))
 
 __version__ = "0.1.0"
-__all__ = ["ONEDNN_CACHE_CAPACITY", "TrajprefError", "__version__"]
+
+SUBPACKAGES = ("adapt", "config", "data", "device", "diffusion", "errors", "evaluation", "io",
+               "metrics", "models", "results", "rl", "score", "survey", "train", "types",
+               "viz")  # fmt: skip
+"""The library's modules and packages, read as attributes of ``trajpref`` on first use
+(``__getattr__``); a test checks that they are every module under ``trajpref`` but the
+entry points (``ENTRY_MODULES``) and ``__main__``."""
+ENTRY_MODULES = ("cli", "demo")
+"""The command line and ``make demo``: read as attributes too, not in ``__all__`` (a star
+import does not load them)."""
+
+__all__ = ["ONEDNN_CACHE_CAPACITY", "TrajprefError", "__version__", *SUBPACKAGES]
+
+
+def __getattr__(name: str):
+    """``trajpref.<subpackage>`` imported on first use (PEP 562): ``import trajpref`` loads
+    none of them, and ``trajpref.evaluation.evaluate(...)`` works after it."""
+    if name in SUBPACKAGES or name in ENTRY_MODULES:
+        import importlib  # here, not at the top: the plain import stays as light as before
+
+        return importlib.import_module(f"{__name__}.{name}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(SUBPACKAGES) | set(ENTRY_MODULES))

@@ -2,8 +2,15 @@
 
 from __future__ import annotations
 
+import contextlib
+import math
+import os
+import sys
 import time
+import warnings
 from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Literal, Protocol
 
 import numpy as np
@@ -11,7 +18,14 @@ import torch
 from tqdm.auto import tqdm
 
 from trajpref.data.loader import SceneLoader
-from trajpref.data.registry import ETH_UCY, NAMES, sgan_folds
+from trajpref.data.registry import (
+    ETH_UCY,
+    NAMES,
+    resolve_data_root,
+    sgan_folds,
+    split_folders,
+    split_sources,
+)
 from trajpref.data.trajnet import from_trajnet, require_future
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, DataError, TrajprefError
@@ -27,9 +41,30 @@ from trajpref.metrics import (
     collision_flags,
     default_collision_radius,
 )
-from trajpref.score.scorer import ScoreAccumulator, ScoreResult, TrajectoryScorer, score_result
+from trajpref.models.predictor import as_integer, check_seed
+from trajpref.models.timing import (
+    UNKNOWN_UNITS,
+    observed_problem,
+    timing_problems,
+    trained_otherwise,
+    unstated_timing,
+)
+from trajpref.score.scorer import (
+    ScoreAccumulator,
+    ScoreResult,
+    TrajectoryScorer,
+    reads_agent_types,
+    score_result,
+)
 from trajpref.score.selection import gather
-from trajpref.types import AGENT_BALL, AGENT_PERSON, Batch, TrajectoryDataset, collate
+from trajpref.types import (
+    AGENT_BALL,
+    AGENT_PERSON,
+    Batch,
+    DatasetInfo,
+    TrajectoryDataset,
+    collate,
+)
 
 COLLISION_KEYS = ("col_i_pct", "col_ii_pct", "col_gt_pct", "col_agents", "col_radius")
 """The collision keys of ``evaluate``'s result (None when the collision metrics are off)."""
@@ -48,9 +83,8 @@ class Predictor(Protocol):
     torch tensor [K, N, T_f, 2] of absolute positions (the data's coordinates, not offsets),
     exactly K samples of every agent of the batch, finite, on the batch's device, its random
     draws taken from ``generator`` (a seeded CPU ``torch.Generator``) so that a seed repeats
-    them. The evaluation pass checks each batch's output (``check_prediction``)."""
-
-    name: str
+    them. The evaluation pass checks each batch's output (``check_prediction``). A ``name``
+    attribute is optional (nothing here reads it)."""
 
     def predict(
         self, batch: Batch, num_samples: int, generator: torch.Generator | None = None
@@ -58,8 +92,8 @@ class Predictor(Protocol):
 
 
 class NotAPredictor(TrajprefError, TypeError):
-    """What the evaluation loop was handed is not a loaded predictor or dataset (a model's
-    name, a dataset's name)."""
+    """What the evaluation loop was handed is not a loaded predictor, dataset or scorer (a
+    model's name, a dataset's name, a denoiser checkpoint's name)."""
 
 
 class PredictionError(DataError):
@@ -155,6 +189,93 @@ def check_inputs(model: object, dataset: object) -> None:
                             f"{type(dataset).__name__}{hint}")  # fmt: skip
 
 
+def check_scorer(scorer: object, needs: str = "score") -> None:
+    """``NotAPredictor`` (a ``TypeError``) unless ``scorer`` is None or a scorer (a
+    ``TrajectoryScorer``, or an object with its method ``needs``): a checkpoint's name or a
+    predictor in its place says how to build one, before any work."""
+    if scorer is None or isinstance(scorer, TrajectoryScorer):
+        return
+    if isinstance(scorer, (str, os.PathLike)):
+        raise NotAPredictor(f"scorer must be a TrajectoryScorer, got the name {str(scorer)!r}: "
+                            f"build it first, TrajectoryScorer.from_checkpoint({str(scorer)!r}), "
+                            "and pass what it returns")  # fmt: skip
+    if callable(getattr(scorer, needs, None)):
+        return
+    if callable(getattr(scorer, "predict", None)):
+        raise NotAPredictor(f"scorer must be a TrajectoryScorer, got a predictor "
+                            f"({type(scorer).__name__}), which samples futures: build the "
+                            "scorer with TrajectoryScorer.from_checkpoint('DATASET/denoiser') "
+                            "(or from the model's own checkpoint)")  # fmt: skip
+    raise NotAPredictor(f"scorer must be a TrajectoryScorer (TrajectoryScorer.from_checkpoint("
+                        f"'DATASET/denoiser')), got {type(scorer).__name__}")  # fmt: skip
+
+
+def check_num_samples(num_samples: object) -> int:
+    """``num_samples`` as a Python int (a numpy integer counts); ConfigError unless an integer
+    >= 1 (not a bool, nor a float such as 20.0)."""
+    count = as_integer(num_samples)
+    if count is None or count < 1:
+        raise ConfigError(f"num_samples must be an integer >= 1, got {num_samples!r}")
+    return count
+
+
+def _own_device(obj: object) -> torch.device | None:
+    """The device of ``obj``'s weights (``obj.device``, a selecting predictor's generator's),
+    None for one that has none (the constant-velocity baseline computes on its inputs')."""
+    for o in (obj, getattr(obj, "base", None)):
+        device = getattr(o, "device", None) if o is not None else None
+        if isinstance(device, (str, torch.device)):
+            with contextlib.suppress(RuntimeError):
+                return torch.device(device)
+    return None
+
+
+def _same_device(a: torch.device, b: torch.device) -> bool:
+    """Whether two devices are one (``cuda`` is the current CUDA device, ``cuda:0`` at
+    first)."""
+    if a.type != b.type:
+        return False
+    if a.type != "cuda" or a.index == b.index:
+        return True
+    current = torch.cuda.current_device() if torch.cuda.is_available() else 0
+    return (current if a.index is None else a.index) == (current if b.index is None else b.index)
+
+
+def pass_device(model: object, device: torch.device | str | None, scorer: object = None,
+                call: str = "evaluate") -> torch.device:  # fmt: skip
+    """Where ``call``'s batches go: ``device`` as ``trajpref.device.resolve_device`` takes it,
+    or for None the model's own device (``model.device``; else the scorer's; else the CPU,
+    for the constant-velocity baseline). A one-line ConfigError, before any work, where the
+    model's (or the scorer's) weights are on another device than that, or on one this machine
+    cannot compute on (``meta``)."""
+    held = [(who, d) for who, d in (("model", _own_device(model)),
+                                    ("scorer", _own_device(scorer))) if d is not None]  # fmt: skip
+    if device is None:
+        if not held:
+            return torch.device("cpu")
+        who, own = held[0]
+        try:
+            resolved = resolve_device(own)
+        except ConfigError as exc:
+            move = ("model.to('cpu') or model.to('cuda')" if who == "model"
+                    else "TrajectoryScorer.from_checkpoint(..., device='cpu')")  # fmt: skip
+            raise ConfigError(f"{call}: the {who}'s weights are on {own}, where it cannot run "
+                              f"({exc}): move it first, {move}") from None  # fmt: skip
+    else:
+        resolved = resolve_device(device)
+    for who, own in held:
+        if _same_device(own, resolved):
+            continue
+        if who == "scorer":
+            raise ConfigError(f"{call}: the scorer's weights are on {own} and the batches go to "
+                              f"{resolved}: build the scorer there, TrajectoryScorer."
+                              f"from_checkpoint(..., device={str(resolved)!r})")  # fmt: skip
+        raise ConfigError(f"{call}(device={str(resolved)!r}): the model's weights are on {own}: "
+                          f"move it first, model.to({str(resolved)!r}), or leave device out "
+                          "(None: the model's own device)")  # fmt: skip
+    return resolved
+
+
 def data_folds(dataset: TrajectoryDataset) -> tuple[str, ...]:
     """The ETH/UCY folds whose data ``dataset`` is: a fold's name (``dataset.info.name``), or
     a folder holding Social-GAN's test files of folds (``registry.sgan_folds``); empty
@@ -186,11 +307,7 @@ def check_fold_overlap(model: object, dataset: TrajectoryDataset, scorer: object
     fold's training files), so such a model has seen this data, whatever the split. What the
     CLI's ``evaluate`` refuses without ``--allow-overlap``; models without a record
     (``timing`` None: cv, a model built in code) pass."""
-    folds = data_folds(dataset)
-    if not folds:
-        return
-    found = [(role, fold) for role, fold in _trained_folds(model, scorer)
-             if any(f != fold for f in folds)]  # fmt: skip
+    folds, found = _fold_findings(model, dataset, scorer)
     if not found:
         return
     where = dataset.info.name
@@ -205,19 +322,505 @@ def check_fold_overlap(model: object, dataset: TrajectoryDataset, scorer: object
                       "allow_overlap=True to evaluate it anyway")  # fmt: skip
 
 
+def _fold_findings(
+    model: object, dataset: TrajectoryDataset, scorer: object = None
+) -> tuple[tuple[str, ...], list[tuple[str, str]]]:
+    """The data's folds (``data_folds``) and ``(role, fold)`` for the model and scorer trained
+    on an ETH/UCY fold other than those (``_trained_folds``)."""
+    folds = data_folds(dataset)
+    if not folds:
+        return folds, []
+    return folds, [(role, fold) for role, fold in _trained_folds(model, scorer)
+                   if any(f != fold for f in folds)]  # fmt: skip
+
+
+def fold_overlap_note(model: object, dataset: TrajectoryDataset,
+                      scorer: object = None) -> str | None:  # fmt: skip
+    """What ``evaluate(allow_overlap=True)`` records as ``overlap`` of a model (or scorer)
+    trained on another ETH/UCY fold than the data's (``check_fold_overlap``): ``zara2 model
+    on zara1``, as the CLI's ``evaluate --allow-overlap`` records it (a folder's path after);
+    None when nothing overlaps."""
+    folds, found = _fold_findings(model, dataset, scorer)
+    if not found:
+        return None
+    name = dataset.info.name
+    tail = "" if name in ETH_UCY else f" ({name})"
+    return "; ".join(f"{fold} {role} on {' and '.join(folds)}{tail}" for role, fold in found)
+
+
+# ------------------------------------------- the data against what the model was trained on
+
+
+@dataclass(frozen=True)
+class ReadingWords:
+    """How the data checks' advice names the ways of reading data: the command line's flags
+    (``CLI_WORDS``) or Python's arguments (``PYTHON_WORDS``)."""
+
+    time_step: str
+    """Reading every n-th frame step, ``{}`` the number."""
+    frame_interval: str
+    """The seconds between an agent's consecutive rows, ``{}`` the number."""
+    units: str
+    """The data's units, ``{}`` their name."""
+    joiner: str
+    """Between the settings that read data as a model read its own."""
+    time_step_name: str
+    frame_interval_name: str
+    units_name: str
+    split: str
+    """What picks the split that is read."""
+    held_out: str
+    """What reads a held-out scene's windows alone, ``{}`` the scene's file-name prefix."""
+
+
+CLI_WORDS = ReadingWords("--time-step {}", "--frame-interval {}", "--units {}", " ",
+                         "--time-step", "--frame-interval", "--units", "--split",
+                         "--split val --holdout-scene {}")  # fmt: skip
+"""The command line's flags, in the CLI's warnings."""
+PYTHON_WORDS = ReadingWords("options=ReadOptions(time_step={})", "frame_interval={}",
+                            "units={!r}", ", ", "ReadOptions.time_step",
+                            "load_dataset's frame_interval", "load_dataset's units",
+                            "load_dataset's split",
+                            "hold_out_scene(train, val, {!r})[1]")  # fmt: skip
+"""``load_dataset``'s arguments, in the warnings of ``evaluate`` and ``predict_dataset``."""
+
+_INTERNAL = (os.path.dirname(os.path.abspath(__file__)),
+             os.path.dirname(os.path.abspath(torch.__file__)))  # fmt: skip
+
+
+def _user_level() -> int:
+    """``warnings.warn``'s ``stacklevel`` for a warning issued by the caller of this function
+    that names the first frame outside trajpref and torch (torch's ``no_grad`` wraps
+    ``evaluate``): the user's line, so that a notebook shows each text once per line that
+    called, whichever entry point it went through."""
+    frame, level = sys._getframe(1), 1
+    while frame.f_back is not None and frame.f_code.co_filename.startswith(_INTERNAL):
+        frame, level = frame.f_back, level + 1
+    return level
+
+
+def same_path(a: str, b: str) -> bool:
+    """Whether two paths name the same file or folder (False where either cannot be
+    resolved)."""
+    with contextlib.suppress(OSError, RuntimeError, TypeError, ValueError):
+        return Path(a).expanduser().resolve() == Path(b).expanduser().resolve()
+    return False
+
+
+def flat_dataset(dataset: str) -> bool:
+    """Whether a folder dataset (or one TrajNet++ file) has no ``train/ val/ test/``
+    sub-folders, so that every split reads the same windows; False for a built-in name or
+    what cannot be read (reading it says why)."""
+    if dataset in NAMES:
+        return False
+    path = Path(dataset).expanduser()
+    try:
+        return path.is_file() or (path.is_dir() and not split_folders(path))
+    except (TrajprefError, OSError):
+        return False
+
+
+def training_data_name(dataset: str) -> str:
+    """How a warning names a model's training data (its ``data.dataset``): an ETH/UCY fold's
+    model was trained on the other four scenes (leave-one-out), not on the fold's own."""
+    if dataset in ETH_UCY:
+        return f"the {dataset} fold (leave-one-out: the other four scenes)"
+    return dataset
+
+
+def step_hint(info: DatasetInfo, model: dict, words: ReadingWords = CLI_WORDS) -> str:
+    """How to read ``info``'s data at the model's step (``model``: ``models.timing.
+    model_timing``'s record): only advice that this data can take (the time step resamples
+    text track files alone; the frame interval is not read where the data state their
+    own)."""
+    step, model_step, every = info.frame_interval, model["step"], info.time_step
+    frame = step / every  # seconds between the files' frames, as read
+    assumed = info.interval_from == "default"
+    interval = (f"{frame:g} s between frames is assumed: give the files' own with "
+                f"{words.frame_interval_name}")  # fmt: skip
+    if not info.text_tracks:
+        if info.interval_from == "dataset":
+            return f"{words.time_step_name} does not resample {info.name}'s windows"
+        fixed = f"{words.time_step_name} does not resample TrajNet++ scenes"
+        if info.interval_from == "declared":
+            return f"its TrajNet++ scenes declare {1 / frame:.4g} fps; {fixed}"
+        return f"{interval}; {fixed}" if assumed else fixed
+    ratio = every * model_step / step
+    if not 0.1 <= ratio <= 100:  # beyond what a time step takes
+        reads = (f"no {words.time_step_name} reads it at the model's step ({ratio:.4g} would be "
+                 "needed)")  # fmt: skip
+    else:
+        reads = f"{words.time_step.format(f'{ratio:.4g}')} reads it at the model's step"
+    model_frame = model_step / model["time_step"]
+    if assumed and model["known"]:  # only the model's step is known: no time-step number
+        return (f"{interval}; {words.time_step.format(f'{model_step:g} / that interval')} then "
+                "reads them at the model's step")  # fmt: skip
+    if assumed:  # both assume 0.4 s: the ratio of their time steps holds if the files step alike
+        if same_path(model["trained_on"], info.name):
+            return f"{reads} (the same files)"
+        return (f"{reads} if these files step as the model's training files did (both assume "
+                f"{frame:g} s between frames: {words.frame_interval_name} gives this "
+                "data's)")  # fmt: skip
+    if not model["known"]:
+        return (f"{reads}, if the model's training files were {model_frame:g} s apart as "
+                "assumed when it was trained")  # fmt: skip
+    return reads
+
+
+def model_reading(model: dict, words: ReadingWords = CLI_WORDS) -> str:
+    """How the model read its training data (``model_timing``'s record), for the warning on
+    data that leave their interval or units unsaid: a built-in dataset's step and units, or
+    the settings that read a folder as the model read it (``--frame-interval 0.1
+    --time-step 4 --units m``)."""
+    step, every, units = model["step"], model["time_step"], model["units"]
+    units = None if units in UNKNOWN_UNITS else units
+    if model["interval_from"] == "dataset":
+        read = "" if every == 1 else f" ({model['trained_on']} read every {every:g})"
+        return f"the model's step is {step:g} s{read}" + (f", its units {units}" if units else "")
+    flags, notes = [], []
+    if model["known"] and step is not None:
+        frame = step / every  # seconds between the rows of its files
+        if model["interval_from"] == "given":
+            flags.append(words.frame_interval.format(f"{frame:g}"))
+        elif model["interval_from"] == "timestamps":
+            notes.append(f"its files' time column gave {frame:g} s between rows")
+        elif model["interval_from"] == "declared":
+            notes.append(f"its TrajNet++ scenes declared {1 / frame:.4g} fps")
+        notes.insert(0, f"{step:g} s per step")
+    if every != 1:
+        flags.append(words.time_step.format(f"{every:g}"))
+    if units:
+        flags.append(words.units.format(units))
+    detail = f" ({'; '.join(notes)})" if notes else ""
+    if not flags:
+        return f"the model's step is {step:g} s{detail}"
+    return f"the model read its data with {words.joiner.join(flags)}{detail}"
+
+
+def unstated_problem(info: DatasetInfo, model: dict, missing: list[str],
+                     words: ReadingWords = CLI_WORDS) -> str:  # fmt: skip
+    """The phrase for data whose interval is only assumed or whose units are unknown
+    (``timing.unstated_timing``'s ``missing``), where the model recorded its own: what the
+    model read, and the settings that say this data's."""
+    said = []
+    if "interval" in missing:
+        frame = info.frame_interval / info.time_step  # as assumed: seconds between rows
+        said.append(f"frame interval is only assumed ({frame:g} s between rows, none given)")
+    if "units" in missing:
+        said.append("units are unknown" if not said else "its units are unknown")
+    flags = []
+    if "interval" in missing:
+        flags.append(f"{words.frame_interval_name} (the seconds between an agent's consecutive "
+                     "rows)")  # fmt: skip
+    if "units" in missing:
+        flags.append(words.units_name)
+    return (f"this data's {' and '.join(said)}, while {model_reading(model, words)}: give this "
+            f"data's with {' and '.join(flags)}")  # fmt: skip
+
+
+def timing_warning(name: str, model: dict, info: DatasetInfo,
+                   words: ReadingWords = CLI_WORDS) -> str | None:  # fmt: skip
+    """The one warning's text when ``name`` was trained on data whose units or pace differ
+    from this data's (``info``), as far as both are known (``models.timing.timing_problems``;
+    ``model``: ``model_timing``'s record); a model trained on a folder before that record is
+    compared only with the same folder read at another time step. Where nothing known differs
+    but this data's interval is only assumed or its units unknown while the model recorded
+    its own, the text names the model's and the settings that give this data's. None when
+    there is nothing to say."""
+    step = info.frame_interval if info.frame_interval > 0 else None
+    problems = timing_problems(model, step, info.units, lambda m: step_hint(info, m, words))
+    if model["step"] is None:  # a folder model without the record: its time step alone
+        every = model["time_step"]
+        if (info.text_tracks and same_path(model["trained_on"], info.name)
+                and not math.isclose(info.time_step, every, rel_tol=0.01)):  # fmt: skip
+            steps = "frame step" if info.time_step == 1 else "frame steps"
+            problems.append(f"this data is read every {info.time_step:g} {steps} of its "
+                            f"files, the model's (the same folder) every {every:g} "
+                            f"({words.time_step.format(f'{every:g}')} reads it at the model's "
+                            "step)")  # fmt: skip
+    if not problems:  # nothing known differs: what this data leaves unsaid, if the model says
+        missing = unstated_timing(model, info.interval_from == "default", info.units)
+        if missing:
+            problems.append(unstated_problem(info, model, missing, words))
+    if not problems:
+        return None
+    return trained_otherwise(name, dict(model, trained_on=training_data_name(model["trained_on"])),
+                             problems)  # fmt: skip
+
+
+def training_windows(name: str, data: dict, info: DatasetInfo,
+                     words: ReadingWords = CLI_WORDS) -> str | None:  # fmt: skip
+    """One warning's text when this data (``info``) is the model's own training folder
+    (``data``: its checkpoint's ``config.data``), read whole because it has no split
+    sub-folders: whatever the split says, its windows are those the model trained on. None
+    otherwise (a held-out scene read alone is another source, and so not this case)."""
+    trained = data.get("dataset")
+    if not isinstance(trained, str) or not same_path(trained, info.name):
+        return None
+    if not same_path(info.source, info.name) or not flat_dataset(trained):
+        return None
+    holdout = data.get("holdout_scene") or ""
+    held = (f" (all but its held-out scene {holdout}*, which {words.held_out.format(holdout)} "
+            "reads alone)" if holdout else "")  # fmt: skip
+    return (f"{name} was trained on {trained}, which has no train/, val/ or test/ sub-folders: "
+            f"whatever {words.split} says, this data is the windows it trained on{held}, so "
+            "numbers on it are training numbers, not a test (give the folder train/ val/ test/ "
+            "sub-folders and train on train/, or use files it did not train on)")  # fmt: skip
+
+
+def held_out_split(data: dict, info: DatasetInfo, holdout: str) -> str | None:
+    """For a held-out scene's windows (the CLI's ``--holdout-scene``: that scene's files of
+    both splits of ``info``'s dataset): ``val`` when the model held out the same scene (it
+    chose its epoch on them and never trained on them), ``train`` when it trained on that
+    dataset without holding it out (its training files are most of these windows), None for
+    a model of other data."""
+    trained = data.get("dataset")
+    if not isinstance(trained, str):
+        return None
+    if not (trained == info.name or same_path(trained, info.name)):
+        return None
+    return "val" if data.get("holdout_scene") == holdout else "train"
+
+
+def own_split(data: dict, info: DatasetInfo, root: str | None) -> str | None:
+    """``train`` or ``val`` when this data (``info``) is a split the model trained on or chose
+    its epoch on, read from the same folder (``info.source``): the training dataset's own
+    split by name (``--dataset zara1 --split train``), its split folder given as a path
+    (``eth_ucy/zara1/train``, under the data root ``root`` or ``$TRAJPREF_DATA``), or a split
+    sub-folder of the folder it trained on. None otherwise, and for data the model trained on
+    in another way (``val_dataset``, a held-out scene) that this does not follow."""
+    trained = data.get("dataset")
+    if not isinstance(trained, str) or data.get("holdout_scene"):
+        return None
+    folders: dict[str, Path] = {}
+    if trained in ETH_UCY:
+        with contextlib.suppress(TrajprefError, OSError):
+            base = resolve_data_root(root) / "eth_ucy" / trained
+            folders = {split: base / split for split in ("train", "val")}
+    elif trained not in NAMES:
+        with contextlib.suppress(TrajprefError, OSError):
+            folders = split_folders(Path(trained).expanduser())
+    validated_elsewhere = bool(data.get("val_dataset"))  # it chose its epoch on another folder
+    if trained in NAMES and info.name == trained and info.split in ("train", "val"):
+        if info.split == "val" and validated_elsewhere:
+            return None
+        return info.split  # a built-in dataset's own split, whatever folder it was read from
+    if validated_elsewhere:
+        folders.pop("val", None)
+    for split in ("train", "val"):
+        if split in folders and same_path(str(folders[split]), str(info.source)):
+            return split
+    return None
+
+
+def shared_split(data: dict, info: DatasetInfo) -> tuple[str, tuple[str, str]] | None:
+    """``("train" | "val", (dataset, split))`` when built-in data (``info``: a name of
+    ``NAMES``) holds windows of a built-in split the model trained on (its ``dataset``'s
+    training split) or chose its epoch on (its ``val_dataset``'s, else its ``dataset``'s,
+    validation split), across names (``registry.split_sources``: robo-mix is made of robo-sim
+    and the official Robo val split; robo/generator chose its epoch on Robo's val split);
+    None otherwise. ``own_split`` has named the same-name cases first."""
+    trained, chosen = data.get("dataset"), data.get("val_dataset") or data.get("dataset")
+    if info.name not in NAMES or not all(isinstance(d, str) and d in NAMES
+                                         for d in (trained, chosen)):  # fmt: skip
+        return None
+    if data.get("holdout_scene"):
+        return None
+    here = split_sources(info.name, info.split)
+    for kind, seen in (("train", split_sources(trained, "train")),
+                       ("val", split_sources(chosen, "val"))):  # fmt: skip
+        common = sorted(here & seen)
+        if common:
+            return kind, common[0]
+    return None
+
+
+def overlap_warning(name: str, split: str, what: str, where: str, advice: str) -> str:
+    """The warning that ``name`` trained on (``split`` ``train``) or chose its epoch on
+    (``val``) these windows, ``what`` saying how, then ``advice``; returns the form a result
+    records (``overlap``), ``where`` in its parentheses."""
+    role = "trained on" if split == "train" else "chose its epoch on"
+    kind = "training" if split == "train" else "validation"
+    warnings.warn(f"{name} {role} these windows: {what}, its {kind} data, so numbers on it are "
+                  f"{kind} numbers, not a test{advice}", stacklevel=_user_level())  # fmt: skip
+    return f"{role} these windows ({where})"
+
+
+def check_trained_on(name: str, model: dict, data: dict | None, info: DatasetInfo,
+                     root: str | None = None, holdout: str | None = None,
+                     words: ReadingWords = CLI_WORDS, *,
+                     val_known: bool = True) -> str | None:  # fmt: skip
+    """The checks of one model (``name``; ``model``: ``models.timing.model_timing``'s record
+    of its checkpoint; ``data``: the checkpoint's ``config.data``, None where unknown) against
+    the data it is given (``info``), what the CLI's ``evaluate``, ``predict`` and ``plot`` and
+    Python's ``evaluate`` and ``predict_dataset`` check: one ``UserWarning`` when its training
+    data's units or pace differ from this data's (``timing_warning``), and a second when this
+    data is the model's own training folder read whole (``training_windows``), or a split it
+    trained or chose its epoch on (``own_split``, ``shared_split``; ``root``: the data root,
+    for a fold's split folder given as a path), or with ``holdout`` (a held-out scene's
+    windows of both splits) whether it trained or chose its epoch on them
+    (``held_out_split``). Returns the second's short form, what a result records as
+    ``overlap``; None otherwise. ``val_known`` False: the record does not say where the model
+    chose its epoch (``val_dataset``), so the validation findings are left out."""
+    text = timing_warning(name, model, info, words)
+    if text is not None:
+        warnings.warn(text, stacklevel=_user_level())
+    if data is None:
+        return None
+    try:
+        if holdout:
+            split = held_out_split(data, info, holdout)
+            if split is None or (split == "val" and not val_known):
+                return None
+            what = ("the windows of its training files" if split == "train"
+                    else "its own held-out validation scene")  # fmt: skip
+            return overlap_warning(name, split,
+                                   f"the held-out scene {holdout}* of {info.name} is {what}",
+                                   f"held-out scene {holdout}* of {info.name}", "")  # fmt: skip
+        own = training_windows(name, data, info, words)
+        split = None if own is not None else own_split(data, info, root)
+        shared = None if own is not None or split is not None else shared_split(data, info)
+    except (KeyError, TypeError, AttributeError):
+        return None
+    if own is not None:
+        warnings.warn(own, stacklevel=_user_level())
+        return f"trained on these windows ({info.name} has no split sub-folders)"
+    if split is not None and (split == "train" or val_known):
+        trained = data["dataset"]
+        return overlap_warning(
+            name,
+            split,
+            f"{info.source or 'this data'} is the {split} split of {trained}",
+            f"{split} split of {trained}",
+            " (evaluate on the test split, or on files it did not train on)",
+        )
+    if split is not None:  # a validation split, and the record does not say where it chose
+        shared = None
+    if shared is None or (shared[0] == "val" and not val_known):
+        return None
+    split, (dataset, part) = shared
+    what = f"{info.name}'s {info.split} split holds {dataset}'s {part} split"
+    if (dataset, part) == (info.name, info.split):
+        what = f"this is {dataset}'s {part} split"
+    return overlap_warning(name, split, what, f"{dataset}'s {part} split",
+                           " (evaluate on the test split)")  # fmt: skip
+
+
+def warn_observed_pace(checked: list[tuple[str, object]], dataset: TrajectoryDataset) -> None:
+    """One warning per pass, for the first of ``checked`` (``(name, predictor or scorer)``,
+    the model before its scorer; the constant-velocity baseline reads any units) where the
+    split's observed steps are far from its training (``models.timing.observed_problem``):
+    the 90th percentile of its agents' pace above ``timing.PACE_LIMIT`` model units (data in
+    other units, e.g. centimetres for a metre model, which the generator's speed clamp hides
+    and the score does not), else one agent jumping more than ``timing.JUMP_LIMIT`` in one
+    step (a tracker id switch)."""
+    if not len(dataset) or not checked:
+        return
+    history = np.concatenate([s.history for s in dataset.scenes])  # [N, T_h, 2]
+    types = np.concatenate([s.agent_type for s in dataset.scenes])  # [N]
+    for name, obj in checked:
+        problem = observed_problem(obj, history, name, types)
+        if problem is not None:
+            warnings.warn(problem, stacklevel=_user_level())
+            return
+
+
+def warn_untyped_data(checked: list[tuple[str, object]], dataset: TrajectoryDataset) -> None:
+    """One warning when one of ``checked`` (``(name, predictor or scorer)``) learned from
+    agent-type flags (NBA's ball, ``score.scorer.reads_agent_types``) and this data flag no
+    ball (a folder without a type column, or players only: every agent is read as a person;
+    a walkthrough measured minFDE 0.256 -> 0.319 m on NBA scenes whose ball was read that
+    way). Data with a flagged agent, or models trained without flags, say nothing."""
+    if any(bool((s.agent_type != AGENT_PERSON).any()) for s in dataset.scenes):
+        return
+    for name, obj in checked:
+        if reads_agent_types(obj):
+            warnings.warn(f"{name} was trained with agent types (the ball flagged "
+                          f"{AGENT_BALL}), and this data flag no ball: every agent is read as "
+                          "a person; if a ball is among them, a 5th column of BALL / PLAYER "
+                          "flags it (docs/data_format.md)", stacklevel=_user_level())  # fmt: skip
+            return
+
+
+_RECORD = {"trained_on": None, "step": None, "known": False, "interval_from": None,
+           "time_step": 1.0, "units": "unknown", "agent_types": None}  # fmt: skip
+"""``models.timing.model_timing``'s keys, with the values of a record that says nothing."""
+
+
+def _record(obj: object) -> dict | None:
+    """``obj.timing`` (``models.timing.attach_timing``: what a loaded checkpoint recorded of
+    its training data) with every key of ``model_timing``'s record, None without one."""
+    timing = getattr(obj, "timing", None)
+    if not isinstance(timing, dict) or not isinstance(timing.get("trained_on"), str):
+        return None
+    return {**_RECORD, **timing}
+
+
+def _checked(model: object, scorer: object) -> list[tuple[str, object, dict]]:
+    """``(name, object, record)`` for the model (a selecting predictor's generator) and the
+    scorers (``scorer``, a selecting predictor's own) that carry a checkpoint's record
+    (``_record``); a scorer whose record is the model's (the same training data: the same
+    findings) is left out."""
+    found: list[tuple[str, object, dict]] = []
+    candidates = (("the model", getattr(model, "base", model)),
+                  ("the scorer", getattr(model, "scorer", None)),
+                  ("the scorer", scorer))  # fmt: skip
+    for name, obj in candidates:
+        record = _record(obj) if obj is not None else None
+        if record is None or any(obj is o or record == r for _, o, r in found):
+            continue
+        found.append((name, obj, record))
+    return found
+
+
+def check_against_training(model: object, dataset: TrajectoryDataset,
+                           scorer: object = None) -> str | None:  # fmt: skip
+    """What ``evaluate`` and ``predict_dataset`` check, before any work, of the data against
+    what the model and scorer were trained on, as the CLI's ``evaluate`` and ``predict`` do:
+    for each that carries its checkpoint's record (``timing``: ``load_predictor``,
+    ``TrajectoryScorer.from_checkpoint``; models built in code and ``cv`` have none), a
+    ``UserWarning`` when its training data's units or step differ from this data's
+    (``check_trained_on``: e.g. 10 Hz tracks, 0.1 s, given to a 0.4 s model, or centimetres
+    to a metre one), or when this data is a split it trained on or chose its epoch on (e.g.
+    ``zara1/generator`` on zara1's train split); one when this data's observed pace is far
+    from its training (``warn_observed_pace``), and one when it reads agent types that this
+    data do not flag (``warn_untyped_data``). Returns what a result records as ``overlap``
+    (``model trained on these windows (train split of zara1)``), None when nothing overlaps.
+
+    Where the record does not say on which data the model chose its epoch (``val_dataset``,
+    which ``models.timing.model_timing`` does not record), a validation split is not named."""
+    checked = _checked(model, scorer)
+    notes = []
+    for name, obj, record in checked:
+        data = {"dataset": record["trained_on"], "val_dataset": record.get("val_dataset"),
+                "holdout_scene": record.get("holdout_scene")}  # fmt: skip
+        note = check_trained_on(name, record, data, dataset.info, words=PYTHON_WORDS,
+                                val_known="val_dataset" in obj.timing)  # fmt: skip
+        if note:
+            notes.append(f"{name.removeprefix('the ')} {note}")
+    objects = [(name, obj) for name, obj, _ in checked]
+    warn_observed_pace(objects, dataset)
+    warn_untyped_data(objects, dataset)
+    return "; ".join(notes) or None
+
+
 @torch.no_grad()
 def sampled_batches(
     model: Predictor, dataset: TrajectoryDataset, num_samples: int = 20, seed: int = 0,
-    device: torch.device | str = "cpu", max_agents: int = 1024, progress: bool = True,
+    device: torch.device | str | None = None, max_agents: int = 1024, progress: bool = True,
     desc: str = "sample",
 ) -> Iterator[tuple[Batch, torch.Tensor]]:  # fmt: skip
     """The one pass over a split: ``(batch, pred [K, N, T_f, 2])`` for every batch of whole
     scenes, in dataset order, with one seeded CPU generator for the whole pass. ``device`` as
     ``trajpref.device.resolve_device`` takes it (``auto``: CUDA when available, else the CPU;
-    a device this machine lacks is a ``ConfigError``). Each batch's prediction is checked
+    a device this machine lacks is a ``ConfigError``); None: the model's own (``pass_device``:
+    the CPU for a model without one; a model on another device than the one given is a
+    ``ConfigError``). ``num_samples`` and ``seed``: integers (numpy's too; ``ConfigError``
+    otherwise, ``check_num_samples``, ``check_seed``). Each batch's prediction is checked
     (``check_prediction``: K = ``num_samples`` samples of every agent, finite, ...)."""
     check_inputs(model, dataset)
-    device = resolve_device(device)
+    num_samples, seed = check_num_samples(num_samples), check_seed(seed)
+    device = pass_device(model, device, call="sampled_batches")
     gen = torch.Generator().manual_seed(seed)  # CPU: draws are identical on every device
     loader = SceneLoader(dataset, max_agents=max_agents, shuffle=False)
     for batch in tqdm(loader, desc=desc, unit="batch", leave=False, **bar_options(progress)):
@@ -237,6 +840,7 @@ def resolve_collision_radius(radius: float | None | Literal["auto"], units: str)
             check_collision_radius(radius)
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
+        radius = float(radius)
     return radius
 
 
@@ -296,13 +900,14 @@ def _agent_mask(batch: Batch, agents: str) -> torch.Tensor | None:
 @torch.no_grad()
 def evaluate(
     model: Predictor, dataset: TrajectoryDataset, num_samples: int = 20, seed: int = 0,
-    device: torch.device | str = "cpu", max_agents: int = 1024, progress: bool = True,
+    device: torch.device | str | None = None, max_agents: int = 1024, progress: bool = True,
     scorer: TrajectoryScorer | None = None,
     collision_radius: float | None | Literal["auto"] = "auto",
     bins: tuple[int, ...] | None = None,
     allow_overlap: bool = False,
     agents: Literal["all", "persons", "primary"] = "all",
     slots: int | None = None,
+    check_data: bool = True,
 ) -> dict:  # fmt: skip
     """minADE_K / minFDE_K per agent and joint over a whole split; with a ``scorer``, also
     maxATS_K / maxFTS_K and the top-1 / top-5 recall of the ground-truth-free ranking.
@@ -343,7 +948,25 @@ def evaluate(
     ``num_samples`` exactly, on the batch's device, finite; else a ``PredictionError`` (a
     ``DataError``) naming the predictor's class. ``device``: where the batches go, as
     ``trajpref.device.resolve_device`` takes it (``auto``, ``cpu``, ``cuda[:i]``; a device
-    this machine lacks is a ``ConfigError`` before any work).
+    this machine lacks is a ``ConfigError`` before any work); None (the default): the
+    model's own device (``model.device``: where ``load_predictor(..., device=...)`` put it;
+    the CPU for a model without one, such as ``cv``). A model or scorer whose weights are on
+    another device than the one given is a ``ConfigError`` before any work
+    (``pass_device``). The other arguments are checked before any work too: ``scorer`` a
+    ``TrajectoryScorer`` (a checkpoint's name is a ``NotAPredictor`` saying to build it with
+    ``TrajectoryScorer.from_checkpoint``), ``num_samples`` an integer >= 1 and ``seed`` an
+    integer (numpy's too), ``collision_radius`` a number > 0, ``bins`` strictly increasing
+    integers, ``slots`` an integer >= 1; a ``ConfigError`` otherwise.
+
+    ``check_data`` (default True): before any work, the data are checked against what the
+    model and the scorer were trained on, as the CLI checks them (``check_against_training``:
+    a ``UserWarning`` for another time step or other units than the model's training data,
+    an observed pace far from it, or a split it trained or chose its epoch on), and the result
+    holds ``overlap``: what this data shares with the model's (or scorer's) training or
+    validation data (``model trained on these windows (train split of zara1)``; with
+    ``allow_overlap=True`` also ``zara2 model on zara1``), None when nothing; the CLI's
+    ``evaluate --json`` records it the same way. ``check_data=False`` (the CLI, which has made
+    its own checks) skips them, and the result has no ``overlap`` key.
 
     A model (or ``scorer``) whose checkpoint says it was trained on one ETH/UCY fold
     (``model.timing["trained_on"]``), evaluated on another fold's data (a fold's name, or a
@@ -352,7 +975,8 @@ def evaluate(
     windows); ``allow_overlap=True`` evaluates it anyway, as the CLI's ``--allow-overlap``.
     """
     check_inputs(model, dataset)
-    device = resolve_device(device)  # before any work
+    num_samples, seed = check_num_samples(num_samples), check_seed(seed)
+    device = pass_device(model, device, scorer)  # before any work
     require_future(dataset, "evaluate")  # TrajNet++ test files: NaN metrics otherwise
     if agents not in AGENT_SETS:
         raise ConfigError(f"agents must be one of {', '.join(AGENT_SETS)}, got {agents!r}")
@@ -371,18 +995,24 @@ def evaluate(
     if persons and not any((s.agent_type == AGENT_PERSON).any() for s in dataset.scenes):
         raise DataError(f"agents='persons': {dataset.info.name}/{dataset.info.split} has no "
                         f"agent of agent_type {AGENT_PERSON} (person) to evaluate")  # fmt: skip
-    if not allow_overlap:
-        check_fold_overlap(model, dataset, scorer)
     radius = resolve_collision_radius(collision_radius, dataset.info.units)
     if bins is not None:
         try:
-            check_bin_edges(bins)
+            bins = check_bin_edges(bins)
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
     try:
         slot_acc = SlotMetrics(slots, radius) if slots is not None else None
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
+    if not allow_overlap:
+        check_fold_overlap(model, dataset, scorer)
+    check_scorer(scorer)  # (a record of its fold is read first, whatever it is)
+    overlap = None
+    if check_data:  # warnings, as the CLI's; the folds' overlap allowed is recorded first
+        folds = fold_overlap_note(model, dataset, scorer) if allow_overlap else None
+        overlap = "; ".join(n for n in (folds, check_against_training(model, dataset, scorer))
+                            if n) or None  # fmt: skip
     acc = MetricAccumulator()
     col_acc = CollisionAccumulator(radius) if radius is not None else None
     bin_acc = BinnedMetrics(bins, radius) if bins is not None else None
@@ -430,14 +1060,16 @@ def evaluate(
         out["slots"] = slot_acc.compute()
     if agents != "all":
         out["agent_set"] = agents
+    if check_data:
+        out["overlap"] = overlap
     return out
 
 
 @torch.no_grad()
 def predict_dataset(
     model: Predictor, dataset: TrajectoryDataset, num_samples: int = 20, seed: int = 0,
-    device: torch.device | str = "cpu", max_agents: int = 1024, progress: bool = True,
-    scorer: TrajectoryScorer | None = None,
+    device: torch.device | str | None = None, max_agents: int = 1024, progress: bool = True,
+    scorer: TrajectoryScorer | None = None, check_data: bool = True,
 ) -> dict[str, np.ndarray]:  # fmt: skip
     """Samples for a whole split, as the arrays ``trajpref predict`` saves.
 
@@ -451,9 +1083,18 @@ def predict_dataset(
     among the samples it drew, in ``pred``'s order (after the ranking, when there is one).
     Where every scene carries its agents' ids in the source data (``Scene.agent_id``: text
     track files and TrajNet++ files do), ``agent_id`` [N] is added (``source_agent_ids``).
+
+    The arguments are checked before any work as ``evaluate`` checks them (``device`` None:
+    the model's own); with ``check_data`` (default True) the data too, against what the model
+    and the scorer were trained on (``check_against_training``: ``UserWarning``s, as the CLI's
+    ``predict`` gives); the CLI, which has made its own, passes False.
     """
     check_inputs(model, dataset)
-    device = resolve_device(device)  # before any work
+    check_scorer(scorer, "scene_residual")
+    num_samples, seed = check_num_samples(num_samples), check_seed(seed)
+    device = pass_device(model, device, scorer, "predict_dataset")  # before any work
+    if check_data:
+        check_against_training(model, dataset, scorer)
     parts: dict[str, list[np.ndarray]] = {k: [] for k in ("history", "future", "pred", "scene")}
     parts["agent_type"] = []
     offset = 0

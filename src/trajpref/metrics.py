@@ -14,6 +14,7 @@ Shapes: pred [K, N, T_f, 2], future [N, T_f, 2], scene [N] (scene index per agen
 from __future__ import annotations
 
 import math
+import operator
 from dataclasses import dataclass
 
 import torch
@@ -128,12 +129,13 @@ def default_collision_radius(units: str) -> float | None:
 
 
 def check_collision_radius(radius: float) -> None:
-    """ValueError unless ``radius`` is a finite number > 0."""
+    """ValueError unless ``radius`` is a finite number > 0 (a Python or numpy number; not a
+    bool, nor text such as ``'0.1'``, which ``float`` would read but no distance takes)."""
     try:
         value = float(radius)
     except (TypeError, ValueError):
         value = math.nan
-    if isinstance(radius, bool) or not (math.isfinite(value) and value > 0):
+    if isinstance(radius, (bool, str, bytes)) or not (math.isfinite(value) and value > 0):
         raise ValueError(f"the collision radius must be a finite number > 0, got {radius!r}")
 
 
@@ -299,19 +301,37 @@ SCENE_SIZE_EDGES = (5, 10, 20)
 """Upper edges of the scene-size bins (agents per scene): <= 5, 6-10, 11-20, > 20 (§8.5)."""
 
 
-def check_bin_edges(edges: tuple[int, ...]) -> None:
-    """ValueError unless ``edges`` are strictly increasing integers >= 1."""
+def _integer(value) -> int | None:
+    """``value`` as a Python int when it is an integer (an ``int``, a numpy integer, a 0-d
+    integer tensor), else None: never a bool (nor numpy's or torch's), a float or text."""
+    if isinstance(value, bool) or (isinstance(value, torch.Tensor) and value.dtype == torch.bool):
+        return None  # numpy's bool refuses operator.index itself
+    try:
+        return operator.index(value)
+    except TypeError:
+        return None
+
+
+def check_bin_edges(edges: tuple[int, ...]) -> tuple[int, ...]:
+    """``edges`` as a tuple of Python ints; ValueError unless they are strictly increasing
+    integers >= 1 (Python or numpy integers, in a tuple, a list or a 1-d array; not bools nor
+    floats)."""
+    try:
+        values = [_integer(e) for e in edges] if not isinstance(edges, (str, bytes)) else [None]
+    except TypeError:  # not a sequence (a bare number, a 0-d array)
+        values = [None]
     if (
-        not edges
-        or any(not isinstance(e, int) or e < 1 for e in edges)
-        or any(b <= a for a, b in zip(edges, edges[1:], strict=False))
+        not values
+        or any(v is None or v < 1 for v in values)
+        or any(b <= a for a, b in zip(values, values[1:], strict=False))
     ):
         raise ValueError(f"bin edges must be strictly increasing integers >= 1, got {edges}")
+    return tuple(values)
 
 
 def bin_labels(edges: tuple[int, ...] = SCENE_SIZE_EDGES) -> list[str]:
     """Names of the bins: (5, 10, 20) -> ['<=5', '6-10', '11-20', '>20']."""
-    check_bin_edges(edges)
+    edges = check_bin_edges(edges)
     labels = [f"<={edges[0]}"]
     for lo, hi in zip(edges, edges[1:], strict=False):
         labels.append(f"{lo + 1}" if hi == lo + 1 else f"{lo + 1}-{hi}")
@@ -320,7 +340,7 @@ def bin_labels(edges: tuple[int, ...] = SCENE_SIZE_EDGES) -> list[str]:
 
 def size_bin(sizes: torch.Tensor, edges: tuple[int, ...] = SCENE_SIZE_EDGES) -> torch.Tensor:
     """The bin of each scene size: [B] agents per scene -> [B] in 0..len(edges)."""
-    check_bin_edges(edges)
+    edges = check_bin_edges(edges)
     bounds = torch.tensor(edges, dtype=sizes.dtype, device=sizes.device)  # [E]
     return torch.bucketize(sizes, bounds)  # [B]: edges[b-1] < size <= edges[b]
 
@@ -334,7 +354,7 @@ class BinnedMetrics:
         self, edges: tuple[int, ...] = SCENE_SIZE_EDGES,
         collision_radius: float | None = COLLISION_RADIUS, parts: int = COLLISION_PARTS,
     ) -> None:  # fmt: skip
-        self.edges = tuple(edges)
+        self.edges = check_bin_edges(edges)
         self.labels = bin_labels(self.edges)
         self.metrics = [MetricAccumulator() for _ in self.labels]
         self.collisions = (
@@ -403,10 +423,12 @@ def agent_slot(scene: torch.Tensor, num_scenes: int) -> torch.Tensor:
 
 
 def slot_labels(slots: int) -> list[str]:
-    """Names of the places reported by ``SlotMetrics``: 3 -> ['1', '2', '3', '>3']."""
-    if not isinstance(slots, int) or isinstance(slots, bool) or slots < 1:
+    """Names of the places reported by ``SlotMetrics``: 3 -> ['1', '2', '3', '>3']. ``slots``
+    a Python or numpy integer >= 1 (not a bool nor a float: ValueError)."""
+    count = _integer(slots)
+    if count is None or count < 1:
         raise ValueError(f"slots must be an integer >= 1, got {slots!r}")
-    return [*(str(s) for s in range(1, slots + 1)), f">{slots}"]
+    return [*(str(s) for s in range(1, count + 1)), f">{count}"]
 
 
 class SlotMetrics:
@@ -419,7 +441,7 @@ class SlotMetrics:
 
     def __init__(self, slots: int, collision_radius: float | None = None) -> None:
         self.labels = slot_labels(slots)
-        self.slots = slots
+        self.slots = _integer(slots)
         self.sums = [{"min_ade": 0.0, "min_fde": 0.0} for _ in self.labels]
         self.agents = [0 for _ in self.labels]
         self.collisions = (

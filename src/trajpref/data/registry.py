@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 import os
 import warnings
 from dataclasses import dataclass
@@ -21,6 +22,7 @@ import numpy as np
 from trajpref.config import BUILTIN_DATASETS
 from trajpref.data import arrays, text, trajnet
 from trajpref.data.robo_sim import simulate
+from trajpref.data.stats import METRES_PER_UNIT
 from trajpref.errors import ConfigError, DataError, TrajprefError
 from trajpref.types import DatasetInfo, Scene, TrajectoryDataset
 
@@ -116,6 +118,51 @@ def resolve_data_root(root: str | Path | None = None) -> Path:
     return path
 
 
+UNKNOWN = "unknown"
+"""The units of a folder read without ``units`` (nothing said of them)."""
+PIXEL_NAMES = frozenset({"px", "pixel", "pixels", "pix"})
+"""The names of pixels (``models.timing.PIXEL_UNITS``, ``viz.plot.IMAGE_UNITS``: a test
+checks that they agree)."""
+KNOWN_UNITS = frozenset(METRES_PER_UNIT) | PIXEL_NAMES | {UNKNOWN}
+"""Unit names the library reads something into (compared in any case): metres and their
+fractions and feet (``data.stats.METRES_PER_UNIT``: the walking-speed note; metres alone set
+the default collision radius), pixels (figures drawn y down), and ``unknown``. Another name is
+kept as given, with a ``UserWarning`` (``check_units``)."""
+
+
+def check_frame_interval(frame_interval: float | None) -> float | None:
+    """``frame_interval`` (seconds between an agent's consecutive rows) as a float, None
+    staying None; ``ConfigError`` unless it is a real, finite number > 0 (a string such as
+    ``'0.4'`` included): the rule of ``models.timing.check_pace`` for the positions handed
+    to a model (which this layer may not import)."""
+    if frame_interval is None:
+        return None
+    if (isinstance(frame_interval, bool) or not isinstance(frame_interval, numbers.Real)
+            or not math.isfinite(frame_interval) or frame_interval <= 0):  # fmt: skip
+        raise ConfigError(f"frame_interval: seconds between an agent's consecutive rows, a "
+                          f"number > 0, got {frame_interval!r}")  # fmt: skip
+    return float(frame_interval)
+
+
+def check_units(units: str | None) -> str:
+    """``units`` as a dataset's unit name: None is ``unknown`` (as ``DataConfig.units``
+    None); ``ConfigError`` for anything but a non-empty string; a ``UserWarning`` for a name
+    outside ``KNOWN_UNITS``, which is kept as given but means nothing to the library (as
+    ``--units``: the CLI reads data through ``load_dataset``)."""
+    if units is None:
+        return UNKNOWN
+    if not isinstance(units, str) or not units.strip():
+        raise ConfigError(f"units: a unit name such as 'm' or 'px', or 'unknown' (the "
+                          f"default), got {units!r}")  # fmt: skip
+    if units.strip().lower() not in KNOWN_UNITS:
+        known = ", ".join(sorted(KNOWN_UNITS - {UNKNOWN}))
+        warnings.warn(f"units {units!r} is none of the names trajpref knows ({known}, or "
+                      f"{UNKNOWN}): kept as given, but no speed is read in metres, collision "
+                      "metrics need a radius in these units, and a model's units are compared "
+                      "by name", stacklevel=3)  # fmt: skip
+    return units
+
+
 def _check_split(split: str) -> None:
     if split not in SPLITS:
         raise TrajprefError(f"unknown split {split!r}; choose one of {', '.join(SPLITS)}")
@@ -126,14 +173,18 @@ def load_dataset(
     split: str = "test",
     root: str | Path | None = None,
     frame_interval: float | None = None,
-    units: str = "unknown",
+    units: str | None = "unknown",
     options: text.ReadOptions | None = None,
     protocol: str = "all",
 ) -> TrajectoryDataset:
     """Load one split of a dataset as a list of scenes in absolute coordinates.
 
     ``frame_interval`` and ``units`` describe user folders (a path ``name``) only; built-in
-    datasets know their own. ``frame_interval`` None: for text files the step of their frame
+    datasets know their own, and given for one they are ignored with a ``UserWarning`` (as
+    the CLI's ``--frame-interval`` and ``--units``). ``frame_interval`` is a number of seconds
+    > 0 (``check_frame_interval``) and ``units`` a unit name (``check_units``: None is
+    ``unknown``; a name outside ``KNOWN_UNITS`` warns): anything else is a ``ConfigError``,
+    before any file is read. ``frame_interval`` None: for text files the step of their frame
     column when its header names it as seconds (``time``, ``timestamp``: ``text_interval``),
     else ``DEFAULT_FRAME_INTERVAL`` (0.4 s); the declared ``fps`` of TrajNet++ files
     (``trajnet_interval``; a value given that differs from it is ignored with a
@@ -144,6 +195,16 @@ def load_dataset(
     """
     _check_split(split)
     check_protocol(protocol)
+    frame_interval = check_frame_interval(frame_interval)
+    units = check_units(units)
+    given = [f"frame_interval={frame_interval:g}"] if frame_interval is not None else []
+    given += [f"units={units!r}"] if units != UNKNOWN else []
+    if name in NAMES and given:  # as the CLI's --frame-interval and --units
+        spec = SPECS.get(name)
+        own = f" ({spec.units}, {spec.frame_interval:g} s)" if spec is not None else ""
+        warnings.warn(f"frame_interval and units describe a folder dataset; {name} knows its "
+                      f"own{own}, so {' and '.join(given)} "
+                      f"{'is' if len(given) == 1 else 'are'} ignored", stacklevel=2)  # fmt: skip
     data = _load(name, split, root, frame_interval, units, options)
     step = options.time_step if options is not None else 1.0
     if step != 1.0:  # read every ``step`` frame steps: each window step spans that much more
@@ -345,14 +406,21 @@ def run_splits(
                           "read, whose partial-future agents have no whole future to validate "
                           "on")  # fmt: skip
     options = text.ReadOptions(data.delimiter, data.max_gap, data.max_coord, data.time_step)
-    # a folder's frame interval and units (built-in datasets know their own)
-    described = {"frame_interval": data.frame_interval, "units": data.units or "unknown"}
-    val = load_dataset(data.val_dataset or data.dataset, "val", root, options=options,
-                       **described)  # fmt: skip
+
+    def described(name: str) -> dict:
+        """A folder's frame interval and units (a built-in dataset knows its own: with a
+        built-in training set and a folder for validation, they describe the folder)."""
+        if name in NAMES:
+            return {}
+        return {"frame_interval": data.frame_interval, "units": data.units or UNKNOWN}
+
+    val_name = data.val_dataset or data.dataset
+    val = load_dataset(val_name, "val", root, options=options, **described(val_name))
     # agents that leave the view count as targets in training only (``partial_future``)
     options = dataclasses.replace(options, partial_future=data.partial_future,
                                   reverse_context=data.reverse_context)  # fmt: skip
-    train = load_dataset(data.dataset, "train", root, options=options, **described)
+    train = load_dataset(data.dataset, "train", root, options=options,
+                         **described(data.dataset))  # fmt: skip
     if data.holdout_scene:
         train, val = hold_out_scene(train, val, data.holdout_scene)
     if data.val_cut:

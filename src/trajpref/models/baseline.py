@@ -7,7 +7,8 @@ from dataclasses import dataclass
 
 import torch
 
-from trajpref.errors import ConfigError
+from trajpref.errors import ConfigError, DataError
+from trajpref.models.predictor import as_integer
 from trajpref.types import Batch
 
 
@@ -31,14 +32,28 @@ class ConstantVelocity:
             raise ConfigError("heading_std_deg and speed_log_std must be >= 0")
 
     name = "cv"
+    frame_interval = None
+    """Seconds per step: None, as for a model whose checkpoint does not know it (the baseline
+    extrapolates at whatever step its histories have; ``DiffusionPredictor.frame_interval``)."""
+    units = None
+    """Coordinate units: None, unknown (it works in any; ``DiffusionPredictor.units``)."""
+    t_hist = None
+    """Observed steps it needs: None, any number from 2 (``predict_scene`` takes any T_h)."""
 
     @torch.no_grad()
     def predict(
         self, batch: Batch, num_samples: int = 1, generator: torch.Generator | None = None
     ) -> torch.Tensor:
-        """Absolute future positions [K, N, T_f, 2]."""
-        if num_samples < 1:
-            raise ConfigError("num_samples must be >= 1")
+        """Absolute future positions [K, N, T_f, 2]. The velocity is the last two observed
+        positions' difference: a history of fewer than 2 steps is a ``DataError``."""
+        count = as_integer(num_samples)  # numpy integers count too
+        if count is None or count < 1:
+            raise ConfigError(f"num_samples must be an integer >= 1, got {num_samples!r}")
+        num_samples = count
+        if batch.history.ndim != 3 or batch.history.shape[1] < 2:
+            raise DataError(f"constant velocity needs at least 2 observed steps (its velocity "
+                            f"is the last two positions' difference): history [N, T_h, 2] "
+                            f"with T_h >= 2, got {list(batch.history.shape)}")  # fmt: skip
         t_fut = batch.future.shape[1]
         vel = batch.history[:, -1] - batch.history[:, -2]  # [N, 2]
         vel = vel[None].expand(num_samples, -1, -1).clone()  # [K, N, 2]

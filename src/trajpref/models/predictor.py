@@ -83,6 +83,22 @@ def as_integer(value) -> int | None:
         return None
 
 
+SEED_RANGE = (-(2**63), 2**64 - 1)
+"""The seeds ``torch.Generator.manual_seed`` takes (a negative one counts modulo 2**64)."""
+
+
+def check_seed(value, name: str = "seed") -> int:
+    """``value`` as a Python int seed (``as_integer``: a numpy integer from a planner's arrays
+    counts), else ``ConfigError``: for None, a float, a string, a bool, or an integer outside
+    ``SEED_RANGE``. The one check of the seeds the public API takes (``predict_scene``,
+    ``TrajectoryScorer``, ``SelectionConfig``), before torch reads them."""
+    seed = as_integer(value)
+    if seed is None or not SEED_RANGE[0] <= seed <= SEED_RANGE[1]:
+        raise ConfigError(f"{name} must be an integer (a Python or numpy int) from -2**63 to "
+                          f"2**64 - 1, the seeds torch.Generator takes, got {value!r}")  # fmt: skip
+    return seed
+
+
 def check_histories(history: torch.Tensor, t_hist: int, scale: float | None = None) -> None:
     """``DataError`` unless ``history`` is [N, T_h, 2] with this ``t_hist``, finite, and in
     coordinates float32 can hold for a model of data scale ``scale`` (``check_coordinates``)."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import torch
@@ -17,7 +18,7 @@ BUILTIN = {"cv": ConstantVelocity}
 
 
 def load_predictor(
-    spec: str, *, device: torch.device | str = "cpu", sampler: Sampler | None = None
+    spec: str | os.PathLike, *, device: torch.device | str = "cpu", sampler: Sampler | None = None
 ):
     """``cv`` gives the constant-velocity baseline; a published name (``zara1/generator``)
     or a path loads a checkpoint.

@@ -14,9 +14,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from os import PathLike
+from typing import Literal
 
 import numpy as np
 import torch
@@ -35,7 +38,7 @@ from trajpref.metrics import ade_fde, scene_sum
 from trajpref.models import checkpoint
 from trajpref.models.denoiser import Denoiser, DenoiserShapes
 from trajpref.models.encoder import check_neighbour_radius, scene_features
-from trajpref.models.predictor import as_integer, check_coordinates
+from trajpref.models.predictor import as_integer, check_coordinates, check_seed
 from trajpref.models.timing import (
     attach_timing,
     check_observed_steps,
@@ -76,6 +79,31 @@ def score_timesteps(num_steps: int = 100, every: int = 3, start: int = 0) -> lis
     if not 0 <= start < num_steps:
         raise ConfigError(f"the score's first step must lie in 0..{num_steps - 1}, got {start}")
     return list(range(start, num_steps, every))
+
+
+def check_score_steps(steps, num_steps: int) -> list[int]:
+    """The score steps ``steps`` (a list, a tuple, a numpy array or a 1-D tensor of integers,
+    numpy integers counting: ``np.arange(0, 100, 3)``) as a list of Python ints, each in
+    0..``num_steps - 1``; at least one. ``ConfigError`` for anything else (a fraction such as
+    0.5, a single number, a string)."""
+    want = f"a list of integer diffusion steps in 0..{num_steps - 1}"
+    if isinstance(steps, (str, bytes)) or getattr(steps, "ndim", 1) != 1:
+        raise ConfigError(f"score steps: {want} (e.g. [0] or range(0, {num_steps}, 3)), got "
+                          f"{steps!r}")  # fmt: skip
+    try:
+        given = list(steps)
+    except TypeError:
+        raise ConfigError(f"score steps: {want} (e.g. [0] or range(0, {num_steps}, 3)), got "
+                          f"{steps!r}") from None  # fmt: skip
+    values = [as_integer(s) for s in given]
+    bad = [s for s, v in zip(given, values, strict=True) if v is None]
+    if bad:
+        raise ConfigError(f"score steps must be integers (diffusion steps in "
+                          f"0..{num_steps - 1}), got {bad[0]!r}")  # fmt: skip
+    if not values or min(values) < 0 or max(values) >= num_steps:
+        raise ConfigError(f"score steps must lie in 0..{num_steps - 1} (at least one), got "
+                          f"{values}")  # fmt: skip
+    return values
 
 
 def relative_score(d_pred: torch.Tensor, d_gt: torch.Tensor) -> torch.Tensor:
@@ -146,7 +174,7 @@ class TrajectoryScorer(DenoiserShapes):
         denoiser: Denoiser,
         schedule: DDPMSchedule,
         scale: float,
-        steps: list[int] | None = None,
+        steps: Sequence[int] | None = None,
         seed: int = 0,
         shared_noise: bool = True,
         speed_ref: float | None = None,
@@ -162,13 +190,13 @@ class TrajectoryScorer(DenoiserShapes):
         bfloat16 instructions; docs/selection.md, "Scoring in bfloat16").
         ``neighbour_radius`` (data units; None: off): the denoiser's attention across agents
         reads only the pairs within it (``ModelConfig.neighbour_radius``), measured before
-        ``speed_ref`` scales a scene."""
+        ``speed_ref`` scales a scene. ``steps`` (None: the paper's 34, ``score_timesteps``)
+        are integers in 0..S-1 (``check_score_steps``; numpy integers count) and ``seed`` an
+        integer (``models.predictor.check_seed``): anything else is a ``ConfigError``."""
         self.denoiser = denoiser.eval()
         self.schedule = schedule
         self.scale = float(scale)
-        self.steps = steps if steps is not None else score_timesteps(schedule.num_steps)
-        if not self.steps or min(self.steps) < 0 or max(self.steps) >= schedule.num_steps:
-            raise ConfigError(f"score steps must lie in 0..{schedule.num_steps - 1}")
+        self.steps = score_timesteps(schedule.num_steps) if steps is None else steps
         self.seed = seed
         self.shared_noise = shared_noise
         if speed_ref is not None and not speed_ref > 0:
@@ -187,6 +215,27 @@ class TrajectoryScorer(DenoiserShapes):
         self.neighbour_radius = neighbour_radius
 
     @property
+    def steps(self) -> list[int]:
+        """The diffusion steps the residual averages over (Eq. 5's S_score), as Python ints.
+        Set it to integers in 0..S-1 (``check_score_steps``), or use ``with_steps``."""
+        return self._steps
+
+    @steps.setter
+    def steps(self, value: Sequence[int]) -> None:
+        self._steps = check_score_steps(value, self.schedule.num_steps)
+
+    @property
+    def seed(self) -> int:
+        """The seed of the residual's noise (common random numbers: the same call gives the
+        same numbers). Set it to an integer (``models.predictor.check_seed``; numpy integers
+        count); anything else is a ``ConfigError``."""
+        return self._seed
+
+    @seed.setter
+    def seed(self, value: int) -> None:
+        self._seed = check_seed(value)
+
+    @property
     def neighbour_radius(self) -> float | None:
         """Agents whose last observed positions are farther apart than this (data units) do
         not attend to each other in the denoiser's encoder (``ModelConfig.neighbour_radius``;
@@ -199,28 +248,44 @@ class TrajectoryScorer(DenoiserShapes):
         self._neighbour_radius = check_neighbour_radius(value, "scorer.neighbour_radius")
 
     @classmethod
-    def from_checkpoint(cls, path, device="cpu", **kwargs) -> TrajectoryScorer:
-        """From a denoiser checkpoint, or the denoiser embedded in a generator checkpoint; it
-        carries the checkpoint's training step and units (``frame_interval``, ``units``), and
-        its ``model.neighbour_radius`` (a generator file's own, as the predictor loaded from it
-        uses) unless ``neighbour_radius`` is passed."""
+    def from_checkpoint(
+        cls,
+        path: str | PathLike,
+        device: str | torch.device = "cpu",
+        *,
+        steps: Sequence[int] | None = None,
+        seed: int = 0,
+        shared_noise: bool = True,
+        speed_ref: float | None = None,
+        precision: str = "fp32",
+        neighbour_radius: float | None | Literal["checkpoint"] = "checkpoint",
+    ) -> TrajectoryScorer:
+        """From a denoiser checkpoint, or the denoiser embedded in a generator checkpoint
+        (``path``: a published name such as ``zara1/denoiser``, or a file); it carries the
+        checkpoint's training step and units (``frame_interval``, ``units``), and its
+        ``model.neighbour_radius`` (a generator file's own, as the predictor loaded from it
+        uses) unless ``neighbour_radius`` is given (None: off). ``device``: ``auto``, ``cpu``,
+        ``cuda[:i]`` or a ``torch.device``. The other arguments are ``__init__``'s."""
         device = resolve_device(device)  # "auto" as the CLI reads it; a missing GPU in one line
         header = checkpoint.load(path)
         payload = checkpoint.denoiser_of(header)
         denoiser, cfg = checkpoint.build_denoiser(payload)
         schedule = DDPMSchedule.from_config(cfg.diffusion)
-        if "neighbour_radius" not in kwargs:
-            kwargs["neighbour_radius"] = checkpoint.config_of(header).model.neighbour_radius
-        scorer = cls(denoiser.to(device), schedule.to(device), payload["scale"], **kwargs)
+        if isinstance(neighbour_radius, str) and neighbour_radius == "checkpoint":
+            neighbour_radius = checkpoint.config_of(header).model.neighbour_radius
+        scorer = cls(denoiser.to(device), schedule.to(device), payload["scale"], steps, seed,
+                     shared_noise, speed_ref, precision, neighbour_radius)  # fmt: skip
         return attach_timing(scorer, header)
 
-    def with_steps(self, steps: list[int], precision: str | None = None) -> TrajectoryScorer:
+    def with_steps(self, steps: Sequence[int], precision: str | None = None) -> TrajectoryScorer:
         """This scorer at other score steps (and ``precision``; None: its own), sharing its
-        denoiser and schedule; itself when nothing changes."""
+        denoiser and schedule; itself when nothing changes. ``steps`` are checked as
+        ``__init__``'s (``check_score_steps``)."""
+        steps = check_score_steps(steps, self.schedule.num_steps)
         precision = self.precision if precision is None else precision
-        if list(steps) == list(self.steps) and precision == self.precision:
+        if steps == self.steps and precision == self.precision:
             return self
-        other = TrajectoryScorer(self.denoiser, self.schedule, self.scale, list(steps),
+        other = TrajectoryScorer(self.denoiser, self.schedule, self.scale, steps,
                                  self.seed, self.shared_noise, self.speed_ref,
                                  precision, self.neighbour_radius)  # fmt: skip
         other.timing, other.frame_interval, other.units = (self.timing, self.frame_interval,
@@ -365,6 +430,17 @@ def _float_tensor(name: str, value, device: torch.device, unseen: bool = False) 
     return tensor
 
 
+def _require_array(name: str, value, shape: str) -> None:
+    """DataError for None or a single value (a number, a string, a 0-d array) where an array
+    of ``shape`` is needed, before the conversion reads it as one NaN or number."""
+    single = (value is None or isinstance(value, (numbers.Number, str, bytes))
+              or getattr(value, "ndim", None) == 0)  # fmt: skip
+    if single:
+        shown = repr(value) if isinstance(value, (str, bytes)) else str(value)  # 3.0, not np's
+        got = "None" if value is None else f"a single value ({shown})"
+        raise DataError(f"{name} must be an array {shape}, got {got}")
+
+
 def _agent_types(value, p: int, device: torch.device, name: str = "agent_type") -> torch.Tensor:
     if value is None:
         return torch.full((p,), AGENT_PERSON, dtype=torch.int64, device=device)
@@ -498,8 +574,9 @@ def predict_scene(model, history: ArrayLike, num_samples: int = 20,
     ``model`` is what ``models.registry.load_predictor`` returns (a published name, a
     checkpoint or ``cv``). ``agent_type`` [P]: 0 person (the default), 1 ball; a model trained
     with the ball flagged (``reads_agent_types``: nba/generator) given none takes the ball for a
-    player, with a ``UserWarning`` (once per call site). ``seed`` seeds
-    the sampling (the published generators draw no noise: every seed gives the same).
+    player, with a ``UserWarning`` (once per call site). ``seed`` (an integer, numpy integers
+    included; ``models.predictor.check_seed``) seeds the sampling (the published generators
+    draw no noise: every seed gives the same).
     ``num_samples`` below a generator's fixed set (``model.generator.samples``: 20 for the
     published ones, trained best-of-20) takes the first of its set, an arbitrary subset, with
     a ``UserWarning``: to keep a few, predict all 20 and choose with
@@ -537,9 +614,10 @@ def predict_scene(model, history: ArrayLike, num_samples: int = 20,
     T_h positions (docs/score.md, "Python: the planning calls").
 
     A numpy array (or anything ``np.asarray`` reads) gives a numpy array back, a tensor a
-    tensor on the model's device. Wrong shapes, non-numbers, non-finite values and
-    coordinates too large for float32 raise ``DataError``; a model name or a scorer in place
-    of the model, or a bad ``num_samples``, ``ConfigError``. Several scenes at once:
+    tensor on the model's device. Wrong shapes (None or a single number for ``history``
+    included), non-numbers, non-finite values and coordinates too large for float32 raise
+    ``DataError``; a model name or a scorer in place of the model, or a bad ``num_samples``
+    or ``seed``, ``ConfigError``. Several scenes at once:
     ``predict_scenes``."""
     return _predict(model, [history], num_samples, [agent_type], seed, frame_interval, units,
                     [context], single=True)[0]  # fmt: skip
@@ -562,6 +640,9 @@ def predict_scenes(model, histories, num_samples: int = 20, agent_types=None, se
         raise DataError("histories: expected a list of scenes' histories [P, T_h, 2]; got "
                         f"one array {list(histories.shape)}: predict_scene takes one "
                         "scene")  # fmt: skip
+    if histories is None or isinstance(histories, (numbers.Number, str, bytes)):
+        raise DataError(f"histories must be a list of scenes' histories [P, T_h, 2], got "
+                        f"{histories!r}")  # fmt: skip
     histories = list(histories)
     b = len(histories)
     agent_types = [None] * b if agent_types is None else list(agent_types)
@@ -614,6 +695,7 @@ def _predict(model, histories: list, num_samples, agent_types: list, seed, frame
     count = as_integer(num_samples)  # numpy integers count too
     if count is None or count < 1:
         raise ConfigError(f"num_samples must be an integer >= 1, got {num_samples!r}")
+    seed = check_seed(seed)  # np.int64(3) counts; None, 0.5 or 2**70 is a ConfigError
     if not histories:
         raise DataError("histories: no scenes to predict")
     _warn_fixed_set(model, count)
@@ -624,6 +706,7 @@ def _predict(model, histories: list, num_samples, agent_types: list, seed, frame
     given = zip(histories, agent_types, contexts, strict=True)
     for i, (history, agent_type, context) in enumerate(given):
         name = "history" if single else f"histories[{i}]"
+        _require_array(name, history, f"[P, {t_h or 'T_h'}, 2] (agents, observed steps, x/y)")
         hist = _float_tensor(name, history, device)  # [P, T_h, 2]
         if hist.ndim != 3 or hist.shape[2] != 2 or hist.shape[1] != (t_h or hist.shape[1]):
             want = (
@@ -729,9 +812,11 @@ def scene_batch(scorer: TrajectoryScorer, history: ArrayLike, samples: ArrayLike
     _check_scorer(scorer)
     check_pace(scorer, frame_interval, units, name="this scorer", stacklevel=4)
     device = scorer.device
+    t_h, t_f = scorer.t_hist, scorer.t_fut
+    _require_array("history", history, f"[P, {t_h}, 2] (agents, observed steps, x/y)")
+    _require_array("samples", samples, f"[K, P, {t_f}, 2] (samples, agents, future steps, x/y)")
     hist = _float_tensor("history", history, device)  # [P, T_h, 2]
     futs = _float_tensor("samples", samples, device)  # [K, P, T_f, 2]
-    t_h, t_f = scorer.t_hist, scorer.t_fut
     if hist.ndim == 3 and hist.shape[0] == 0 and not allow_empty:
         raise DataError("history: the scene has no agents (P = 0): nothing to rank")
     if futs.ndim == 4 and futs.shape[0] == 0:

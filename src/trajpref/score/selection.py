@@ -19,12 +19,14 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
+import numbers
 import os
 import typing
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
+import numpy as np
 import torch
 
 from trajpref.config import check_choices
@@ -32,7 +34,7 @@ from trajpref.data import transforms
 from trajpref.errors import ConfigError, TrajprefError
 from trajpref.metrics import scene_sum
 from trajpref.models import zoo
-from trajpref.models.predictor import as_integer
+from trajpref.models.predictor import as_integer, check_seed
 from trajpref.score.scorer import (
     TrajectoryScorer,
     reads_agent_types,
@@ -129,12 +131,22 @@ class SelectionConfig:
             value = as_integer(getattr(self, name))  # numpy integers count as integers
             if value is not None:
                 setattr(self, name, value)
+        for name in ("drop", "bandwidth", "temperature", "trust_speed"):  # before comparing
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Real):
+                raise ConfigError(f"selection {name} must be a number, got {value!r}")
+            setattr(self, name, float(value))
+        if isinstance(self.final, np.bool_):  # a planner's numpy flag
+            self.final = bool(self.final)
+        if not isinstance(self.final, bool):
+            raise ConfigError(f"selection final must be True or False, got {self.final!r}")
+        self.seed = check_seed(self.seed, "selection seed")
         if isinstance(self.keep, bool) or not isinstance(self.keep, int) or self.keep < 1:
             raise ConfigError(f"selection keep must be an integer >= 1, got {self.keep!r}")
         if not 0 <= self.drop < 1:
-            raise ConfigError("selection drop must lie in [0, 1)")
-        if self.iters < 0:
-            raise ConfigError("selection iters must be >= 0")
+            raise ConfigError(f"selection drop must lie in [0, 1), got {self.drop!r}")
+        if isinstance(self.iters, bool) or not isinstance(self.iters, int) or self.iters < 0:
+            raise ConfigError(f"selection iters must be an integer >= 0, got {self.iters!r}")
         if not all(math.isfinite(v) and v > 0 for v in (self.bandwidth, self.temperature)):
             raise ConfigError(f"selection bandwidth and temperature must be finite and > 0, "
                               f"got {self.bandwidth} and {self.temperature}")  # fmt: skip

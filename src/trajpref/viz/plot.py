@@ -15,10 +15,13 @@ legend wider than that is wrapped onto more lines, not cut off and not widening 
 from __future__ import annotations
 
 import math
+import numbers
+import operator
 import re
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -28,7 +31,7 @@ import numpy as np  # noqa: E402
 from matplotlib import patheffects  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
-from trajpref.errors import ConfigError  # noqa: E402
+from trajpref.errors import ConfigError, DataError  # noqa: E402
 from trajpref.io import atomic_path  # noqa: E402
 
 FORMATS = {".png": "png", ".pdf": "pdf", ".svg": "svg"}
@@ -82,6 +85,90 @@ def figure_format(out: str | Path) -> str:
 def agent_style(i: int) -> tuple[str, str]:
     """Agent ``i``'s colour and position marker."""
     return PALETTE[i % len(PALETTE)], MARKERS[(i // len(PALETTE)) % len(MARKERS)]
+
+
+HISTORY = "[P, T_h, 2] (agents, observed steps, x/y)"
+"""The shape of a scene figure's histories, as its errors name it."""
+
+
+def as_array(name: str, value: Any, shape: str = "") -> np.ndarray:
+    """``value`` as a float64 numpy array: a numpy array, anything ``np.asarray`` reads (nested
+    lists), or a torch tensor on any device (read through ``.detach().cpu()``; this package
+    does not import torch). ``DataError`` naming ``name`` (and the expected ``shape``) for
+    None, a single number and anything that is not an array of numbers. NaN stays (an unseen
+    position is not drawn)."""
+    expected = f" {shape}" if shape else ""
+    if value is None or isinstance(value, (numbers.Number, str, bytes)):
+        raise DataError(f"{name} must be an array{expected}, got {value!r}")
+    if callable(getattr(value, "detach", None)):  # a torch tensor: to the CPU, bf16 to fp32
+        value = value.detach().cpu()
+        if callable(getattr(value, "is_floating_point", None)) and value.is_floating_point():
+            value = value.float()
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError, RuntimeError) as exc:
+        raise DataError(f"{name}: expected an array of numbers{expected} ({exc})") from None
+    if array.ndim == 0:
+        raise DataError(f"{name} must be an array{expected}, got a single value ({value})")
+    return array
+
+
+def scene_arrays(
+    history: Any, future: Any = None, pred: Any = None
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """A scene figure's inputs as float64 numpy arrays (``as_array``), their shapes checked
+    against each other: history [P, T_h, 2], future [P, T_f, 2] or None (no ground truth, as
+    ``predict_scene``'s output has none), pred [K, P, T_f, 2] or None. ``DataError`` naming
+    the argument, the shape expected and the shape given."""
+    hist = as_array("history", history, HISTORY)
+    if hist.ndim != 3 or hist.shape[2] != 2 or hist.shape[1] < 1:
+        raise DataError(f"history: expected {HISTORY}, got {list(hist.shape)}")
+    p = hist.shape[0]
+    fut = None
+    if future is not None:
+        want = (f"[{p}, T_f, 2] (the history's {p} agents, future steps, x/y; None: no ground "
+                "truth)")  # fmt: skip
+        fut = as_array("future", future, want)
+        if fut.ndim != 3 or fut.shape[0] != p or fut.shape[2] != 2 or fut.shape[1] < 1:
+            raise DataError(f"future: expected {want}, got {list(fut.shape)}")
+    samples = None
+    if pred is not None:
+        t_f = "T_f" if fut is None else fut.shape[1]
+        want = f"[K, {p}, {t_f}, 2] (samples, the history's {p} agents, future steps, x/y)"
+        samples = as_array("pred", pred, want)
+        right = samples.ndim == 4 and samples.shape[1] == p and samples.shape[3] == 2 and (
+            fut is None or samples.shape[2] == fut.shape[1])  # fmt: skip
+        if not right:
+            hint = ""
+            if samples.ndim == 3 and samples.shape[0] == p:
+                hint = " (one sample? add a leading axis: pred[None])"
+            elif samples.ndim == 4 and samples.shape[0] == p and samples.shape[1] != p:
+                hint = (" (agents first? samples lead, as predict_scene returns them: "
+                        "pred.transpose(1, 0, 2, 3))")  # fmt: skip
+            raise DataError(f"pred: expected {want}, got {list(samples.shape)}{hint}")
+    return hist, fut, samples
+
+
+def _agent_types(agent_type: Any, p: int) -> np.ndarray | None:
+    """``agent_type`` [P] as a numpy array (None stays None), its shape checked."""
+    if agent_type is None:
+        return None
+    types = as_array("agent_type", agent_type, f"[{p}] (0 person, {BALL} ball)")
+    if types.shape != (p,):
+        raise DataError(f"agent_type: expected [{p}] (one flag per agent: 0 person, {BALL} "
+                        f"ball), got {list(types.shape)}")  # fmt: skip
+    return types
+
+
+def _count(name: str, value: Any) -> int:
+    """``value`` as an int >= 1 (numpy integers count), else ``ConfigError``."""
+    try:
+        count = None if isinstance(value, bool) else operator.index(value)
+    except TypeError:
+        count = None
+    if count is None or count < 1:
+        raise ConfigError(f"{name}: at least 1 sample per agent, an integer, got {value!r}")
+    return count
 
 
 def far_out(history: np.ndarray, pred: np.ndarray) -> np.ndarray:
@@ -144,7 +231,7 @@ def check_limits(limits) -> str | tuple[float, float, float, float]:
 
 def scene_limits(
     history: np.ndarray,
-    future: np.ndarray,
+    future: np.ndarray | None,
     pred: np.ndarray | None = None,
     limits="auto",
     far: np.ndarray | None = None,
@@ -155,11 +242,12 @@ def scene_limits(
     aspect between 0.35 and 1.3, so that a scene much taller than wide keeps a readable
     panel. A given (x0, x1, y0, y1) is returned as it is.
 
-    history [P, T_h, 2], future [P, T_f, 2], pred [K, P, T_f, 2] or None."""
+    history [P, T_h, 2], future [P, T_f, 2] or None, pred [K, P, T_f, 2] or None."""
     limits = check_limits(limits)
     if not isinstance(limits, str):
         return limits
-    parts = [history.reshape(-1, 2), future.reshape(-1, 2)]
+    history, future, pred = scene_arrays(history, future, pred)
+    parts = [history.reshape(-1, 2)] + ([] if future is None else [future.reshape(-1, 2)])
     if pred is not None and pred.size:
         keep = np.ones(pred.shape[:2], bool)  # [K, P]
         if limits == "auto":
@@ -188,7 +276,10 @@ DPI_RANGE = (10.0, 2400.0)
 
 def in_range(value: float | None, bounds: tuple[float, float]) -> bool:
     """Whether ``value`` is None (the default) or a finite number within ``bounds``."""
-    return value is None or (math.isfinite(value) and bounds[0] <= value <= bounds[1])
+    if value is None:
+        return True
+    number = isinstance(value, numbers.Real) and not isinstance(value, bool)
+    return number and math.isfinite(value) and bounds[0] <= value <= bounds[1]
 
 
 def _check_size(width: float | None, dpi: float | None) -> None:
@@ -212,13 +303,13 @@ def _halo(width: float) -> list:
 
 
 def _legend_handles(samples: str | None, ranks: Sequence[tuple[str, float, float]] = (),
-                    ball: bool = False) -> list[Line2D]:  # fmt: skip
-    """The legend's entries, all in ``NEUTRAL``: what each line style and marker means."""
-    handles = [
-        Line2D([], [], color=NEUTRAL, lw=2.0, marker="o", ms=3, label="history"),
-        Line2D([], [], color=NEUTRAL, lw=1.6, ls="--", marker="x", ms=5, mew=1.4,
-               label="ground truth (x: its end)"),
-    ]  # fmt: skip
+                    ball: bool = False, truth: bool = True) -> list[Line2D]:  # fmt: skip
+    """The legend's entries, all in ``NEUTRAL``: what each line style and marker means (the
+    ground truth's only where it is drawn, ``truth``)."""
+    handles = [Line2D([], [], color=NEUTRAL, lw=2.0, marker="o", ms=3, label="history")]
+    if truth:
+        handles.append(Line2D([], [], color=NEUTRAL, lw=1.6, ls="--", marker="x", ms=5, mew=1.4,
+                              label="ground truth (x: its end)"))  # fmt: skip
     if samples:
         handles.append(Line2D([], [], color=NEUTRAL, lw=0.8, alpha=0.6, label=samples))
     for label, lw, alpha in ranks:
@@ -432,7 +523,7 @@ def _fit_height(fig, axes, dpi: float) -> None:
 
 def plot_scene(
     history: np.ndarray,
-    future: np.ndarray,
+    future: np.ndarray | None,
     pred: np.ndarray | None,
     out: str | Path,
     units: str | None = "m",
@@ -446,8 +537,11 @@ def plot_scene(
 ) -> Path:
     """Write a figure of one scene, in the format ``out``'s suffix names (``FORMATS``).
 
-    history [P, T_h, 2], future [P, T_f, 2], pred [K, P, T_f, 2] or None; absolute
-    coordinates; agent_type [P] (``BALL`` draws a star). Each agent has its own colour (and,
+    history [P, T_h, 2], future [P, T_f, 2] or None (no ground truth: ``predict_scene``'s
+    output), pred [K, P, T_f, 2] or None; absolute coordinates; numpy arrays, lists or torch
+    tensors (on any device); agent_type [P] (``BALL`` draws a star). Shapes that do not fit
+    together are a ``DataError`` naming the argument and the shape expected
+    (``scene_arrays``). Each agent has its own colour (and,
     beyond ``len(PALETTE)`` agents, marker): history solid with dots, samples thin, the ground
     truth dashed on top with its end marked. ``limits``: ``auto`` (default: the samples that
     run far out do not widen the axes, ``scene_limits``), ``all`` or (x0, x1, y0, y1).
@@ -460,13 +554,15 @@ def plot_scene(
     """
     figure_format(out)
     _check_size(width, dpi)
-    if max_samples is not None and max_samples < 1:
-        raise ConfigError(f"max_samples: at least 1 sample per agent, got {max_samples}")
+    if max_samples is not None:
+        max_samples = _count("max_samples", max_samples)
+    history, future, pred = scene_arrays(history, future, pred)
+    p = history.shape[0]
+    agent_type = _agent_types(agent_type, p)
     if pred is not None and max_samples is not None:
         pred = pred[:max_samples]  # [K', P, T_f, 2]
     box = scene_limits(history, future, pred, limits)
-    p = history.shape[0]
-    ball = agent_type is not None and bool((np.asarray(agent_type) == BALL).any())
+    ball = agent_type is not None and bool((agent_type == BALL).any())
     aspect = (box[3] - box[2]) / (box[1] - box[0])
     w = SCENE_WIDTH if width is None else width
     with plt.rc_context(_STYLE):
@@ -482,12 +578,12 @@ def plot_scene(
                 ax.plot(line[:, 0], line[:, 1], color=agent_style(i)[0], lw=0.8, alpha=0.45,
                         zorder=1, gid=f"samples-{i}")  # fmt: skip
             is_ball = agent_type is not None and int(agent_type[i]) == BALL
-            _draw_agent(ax, i, history[i], future[i], is_ball)
+            _draw_agent(ax, i, history[i], None if future is None else future[i], is_ball)
         _set_axes(ax, box, units)
         _title(fig, title, w)
         samples = None if pred is None else f"samples ({len(pred)} per agent)"
-        _legend_below(fig, _legend_handles(samples, ball=ball), "colour and marker: one agent",
-                      w)  # fmt: skip
+        _legend_below(fig, _legend_handles(samples, ball=ball, truth=future is not None),
+                      "colour and marker: one agent", w)  # fmt: skip
         _fit_height(fig, [ax], dpi or DPI)
         return _save(fig, out, dpi, True)
 
@@ -513,6 +609,23 @@ def scored_title(k: int, top: int, score_name: str = "diffusion score (ATS)") ->
     return f"each agent's {best} of K = {k} samples\nby {score_name}"
 
 
+def _scores(scores: Any, k: int, p: int) -> np.ndarray:
+    """``plot_scene_scored``'s ``scores`` as a [K, P] array (higher is better), else a
+    ``DataError`` saying what it takes (a 1-D [K] array: ``rank_samples``' residual)."""
+    want = (f"[{k}, {p}] (one number per sample and agent, higher is better, e.g. each "
+            "agent's ATS: ScoreResult.agent_ats)")  # fmt: skip
+    array = as_array("scores", scores, want)
+    if array.ndim == 1:
+        raise DataError(f"scores: expected {want}, got a 1-D [{len(array)}]: rank_samples' "
+                        "residual is one number per sample, summed over the agents, and lower "
+                        "is better; to draw every agent's samples in its order pass "
+                        f"-np.repeat(residual[:, None], {p}, 1)")  # fmt: skip
+    if array.shape != (k, p):
+        hint = " (agents first? pass scores.T)" if array.shape == (p, k) else ""
+        raise DataError(f"scores: expected {want}, got {list(array.shape)}{hint}")
+    return array
+
+
 def plot_scene_scored(
     history: np.ndarray,
     future: np.ndarray,
@@ -534,8 +647,13 @@ def plot_scene_scored(
     lighter (by rank, as the legend says; ``rank_style``). The ranked panel's title says how
     many of how many samples, ranked by ``score_name`` (``scored_title``).
 
-    history [P, T_h, 2], future [P, T_f, 2], pred [K, P, T_f, 2], scores [K, P] (higher is
-    better, e.g. each agent's ATS), agent_type [P] (``BALL`` draws a star). ``limits``:
+    history [P, T_h, 2], future [P, T_f, 2], pred [K, P, T_f, 2], scores [K, P]: one number
+    per sample and agent, HIGHER IS BETTER (each agent's ATS, ``ScoreResult.agent_ats``; a
+    residual, lower is better, is drawn best-first by its negation). ``rank_samples``'
+    ``residual`` [K] (one number per sample, summed over the agents, lower is better) is
+    refused with that hint. Numpy arrays, lists or torch tensors (on any device); shapes that
+    do not fit together are a ``DataError`` naming the argument and the shape expected.
+    agent_type [P] (``BALL`` draws a star). ``limits``:
     ``auto`` (default: every history and ground truth and the shown samples that do not run
     far out among their agent's K), ``all`` or (x0, x1, y0, y1). ``width``: the figure's
     width in inches (default ``SCORED_WIDTH``), exactly (its height follows the panels'
@@ -545,16 +663,25 @@ def plot_scene_scored(
     """
     figure_format(out)
     _check_size(width, dpi)
-    if top < 1:
-        raise ConfigError(f"top: at least 1 sample per agent, got {top}")
+    top = _count("top", top)
+    if future is None:
+        raise DataError("future: the first panel draws the ground truth [P, T_f, 2], got None "
+                        "(without one, plot_scene draws the samples)")  # fmt: skip
+    if pred is None:
+        raise DataError("pred: expected [K, P, T_f, 2] samples to rank, got None")
+    history, future, pred = scene_arrays(history, future, pred)
     k, p = pred.shape[:2]
+    if k == 0:
+        raise DataError("pred: no samples (K = 0): nothing to rank")
+    scores = _scores(scores, k, p)
+    agent_type = _agent_types(agent_type, p)
     top = min(top, k)
     order = np.argsort(-scores, axis=0, kind="stable")[:top]  # [top, P] best first
     shown = np.take_along_axis(pred, order[..., None, None], 0)  # [top, P, T_f, 2]
     far = np.take_along_axis(far_out(history, pred), order, 0)  # [top, P]
     box = scene_limits(history, future, shown, limits, far=far)
     aspect = (box[3] - box[2]) / (box[1] - box[0])
-    ball = agent_type is not None and bool((np.asarray(agent_type) == BALL).any())
+    ball = agent_type is not None and bool((agent_type == BALL).any())
     w = SCORED_WIDTH if width is None else width
     stacked = w < 5
     with plt.rc_context(_STYLE):
