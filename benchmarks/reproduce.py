@@ -413,7 +413,8 @@ def training_command(job: Job, opts: argparse.Namespace, setup: Setup) -> list[s
     return [sys.executable, str(scripts / "finetune.py"), "--dataset", job.dataset,
             *TRAIN_ARGS[job.column], "--seeds", str(job.seed), "--skip-done",
             *(["--no-start-validation"] if start.is_file() else []),
-            *equal_budget_args(opts.minutes, opts.warmup, opts.eval_minutes),
+            *equal_budget_args(opts.minutes, opts.warmup,
+                               opts.eval_minutes or opts.minutes / 4),  # fmt: skip
             "--device", opts.device, *data]  # fmt: skip
 
 
@@ -775,8 +776,9 @@ def parse_args(argv: list[str] | None, setup: Setup) -> argparse.Namespace:
     parser.add_argument(
         "--eval-minutes",
         type=float,
-        default=1.0,
-        help="full mode: validate after every this many CPU minutes (equal_budget.py's)",
+        default=None,
+        help="full mode: validate after every this many CPU minutes (default: --minutes / 4, "
+        "as equal_budget.py and trajpref finetune --equal-budget)",
     )
     parser.add_argument("--samples", type=int, default=20)
     parser.add_argument("--seed", type=int, default=0, help="evaluation seed")

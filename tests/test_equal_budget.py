@@ -9,7 +9,10 @@ from pathlib import Path
 import pytest
 from bench import load_benchmark
 
+from trajpref.rl.presets import equal_budget_args
+
 ROOT = Path(__file__).resolve().parent.parent
+NOT_CHOSEN = "control not chosen on validation"
 
 
 @pytest.fixture
@@ -54,8 +57,9 @@ def test_the_start_check_reads_the_validation_record_finetune_py_writes(eb, tmp_
 def test_run_jobs_skips_only_the_rows_of_the_same_start(eb, tmp_path, monkeypatch):
     results = tmp_path / "benchmarks" / "results"
     results.mkdir(parents=True)
-    # the default start's control is measured; the long start's is not
-    (results / "finetune_walks.json").write_text(json.dumps([{"method": "control", "seed": 0}]))
+    # the default start's control is measured (under this budget); the long start's is not
+    done = _row("control", 0, 0.44, command=_command(1.0, 4, 0.5))
+    (results / "finetune_walks.json").write_text(json.dumps([done]))
     seen = []
     monkeypatch.setattr(subprocess, "call", lambda cmd, **kw: seen.append(cmd) or 0)
     ns = Namespace(datasets=["walks"], methods=["control"], seeds=[0], minutes=1.0, warmup=4,
@@ -70,13 +74,20 @@ def test_run_jobs_skips_only_the_rows_of_the_same_start(eb, tmp_path, monkeypatc
     assert "finetune.eval_every_minutes=0.5" in cmd  # every method validates by CPU time
 
 
-def _row(method: str, seed: int, fde: float) -> dict:
+def _row(method: str, seed: int, fde: float, command: str | None = None) -> dict:
     return {"dataset": "walks", "split": "test", "protocol": "all", "method": method,
             "seed": seed, "samples": 20, "min_ade": fde / 2, "min_fde": fde,
             "joint_min_ade": fde, "joint_min_fde": 2 * fde, "max_ats": 0.1, "max_fts": 0.1,
             "top1_recall_ats": None, "top5_recall_ats": None, "train_seconds": 240.0,
-            "ms_per_scene": None, "checkpoint": None, "command": None, "date": "2026-11-25",
-            "machine": "test", "uses_score": False}  # fmt: skip
+            "ms_per_scene": None, "checkpoint": None, "command": command,
+            "date": "2026-11-25", "machine": "test", "uses_score": False}  # fmt: skip
+
+
+def _command(minutes: float, warmup: int, eval_minutes: float | None) -> str:
+    """finetune.py's command line as this script runs it (the ``command`` of its rows)."""
+    budget = equal_budget_args(minutes, warmup, eval_minutes)
+    return " ".join(["python", "benchmarks/finetune.py", "--dataset", "walks", "--methods",
+                     "control", "--seeds", "0", "--skip-done", *budget])  # fmt: skip
 
 
 def test_each_start_is_compared_with_its_own_start_row(eb, tmp_path):
@@ -92,22 +103,58 @@ def test_each_start_is_compared_with_its_own_start_row(eb, tmp_path):
     assert "+10.0 %" in lines["control"] and "+10.0 %" in lines["control-long"]
 
 
-def test_each_start_is_compared_with_its_own_control_when_no_run_folder_is_left(eb, tmp_path):
-    """Without run folders (a fresh checkout) the control cannot be chosen on validation;
-    a longer start's rows are then compared with that start's own plain control, never with
-    the default start's (the report did that until 2026-11-27)."""
+def _validated(root: Path, folder: str, val: float) -> None:
+    """A run folder whose fine-tuning validated once, at ``val``."""
+    run = root / "runs" / folder
+    run.mkdir(parents=True)
+    (run / "finetune_metrics.jsonl").write_text(json.dumps({"val_score": val}) + "\n")
+
+
+def test_each_start_is_compared_with_its_own_control(eb, tmp_path):
+    """A longer start's rows are compared with the control chosen among that start's own
+    controls, never with the default start's (the report did that until 2026-11-27)."""
     results = tmp_path / "benchmarks" / "results"
     results.mkdir(parents=True)
     rows = [_row("pretrained", 0, 0.40), _row("pretrained-long", 0, 0.30),
             _row("control", 0, 0.50), _row("control-long", 0, 0.30),
             _row("control-lr3e-5-long", 0, 0.32), _row("rlhf-long", 0, 0.33)]  # fmt: skip
     (results / "rows.json").write_text(json.dumps(rows))
+    _validated(tmp_path, "walks-control-s0-long", 0.40)
+    _validated(tmp_path, "walks-control-s0-lr3e-5-long", 0.45)
     table = eb.report(["walks"], ["control", "control-lr3e-5", "rlhf"])
     lines = {line.split(" | ")[1]: line.split(" | ") for line in table.splitlines()[2:]}
     # columns: dataset, method, seeds, ADE, FDE, vs start, vs the control chosen on val
     assert lines["control-long"][6] == "–"  # it is the control
     assert lines["rlhf-long"][6] == "+10.0 %"  # against control-long (0.30), not control (0.50)
     assert lines["control-lr3e-5-long"][6] == "+6.7 %"
+    assert lines["control"][6] == "–"  # the default start's only control
+
+
+def test_a_control_that_cannot_be_chosen_on_validation_is_named_so(eb, tmp_path):
+    """With several controls and no seed validated by each of them, the report fell back to
+    the plain control under the header "vs the control chosen on val" (walkthrough: a run
+    folder of ``control`` alone turned RLHF's +0.3 % against the chosen control-lr3e-5 into
+    -1.3 %). It now says that no control was chosen on validation."""
+    results = tmp_path / "benchmarks" / "results"
+    results.mkdir(parents=True)
+    rows = [_row("pretrained", 0, 0.40)] + [
+        _row(m, s, f) for s in (0, 1)
+        for m, f in (("control", 0.44), ("control-lr3e-5", 0.46), ("rlhf", 0.42))
+    ]  # fmt: skip
+    (results / "rows.json").write_text(json.dumps(rows))
+    methods = ["control", "control-lr3e-5", "rlhf"]
+
+    def vs_control() -> dict[str, str]:
+        table = eb.report(["walks"], methods, {})
+        return {line.split(" | ")[1]: line.split(" | ")[6] for line in table.splitlines()[3:]}
+
+    assert set(vs_control().values()) == {NOT_CHOSEN}  # no run folder at all
+    _validated(tmp_path, "walks-control-s0", 0.40)  # only the plain control's
+    assert set(vs_control().values()) == {NOT_CHOSEN}
+    _validated(tmp_path, "walks-control-s1-lr3e-5", 0.30)  # each has one, not the same seed
+    assert set(vs_control().values()) == {NOT_CHOSEN}
+    _validated(tmp_path, "walks-control-s0-lr3e-5", 0.35)  # seed 0 has both: 0.35 < 0.40
+    assert vs_control() == {"control": "-4.3 %", "control-lr3e-5": "–", "rlhf": "-8.7 %"}
 
 
 def test_the_control_is_chosen_on_the_seeds_whose_run_folders_are_left(eb, tmp_path):
@@ -168,7 +215,8 @@ def test_a_run_on_one_dataset_keeps_the_other_datasets_of_the_table(eb, tmp_path
     rows += [dict(r, dataset="other") for r in rows]
     (results / "rows.json").write_text(json.dumps(rows))
     table = results / "meta" / "equal_budget.md"
-    table.write_text(eb.report(["walks"], ["control"]).replace("| – |\n", "| 1 of 1 |\n") + "\n")
+    counted = eb.report(["walks"], ["control"]).replace("0 | 4.0 | – |", "0 | 4.0 | 1 of 1 |")
+    table.write_text(counted + "\n")
     kept = [line for line in table.read_text().splitlines() if line.startswith("| walks")]
     assert any(line.endswith("| 1 of 1 |") for line in kept)  # a cell only the table holds
     assert eb.previous_datasets(eb.previous_table(table)) == ["walks"]
@@ -178,3 +226,189 @@ def test_a_run_on_one_dataset_keeps_the_other_datasets_of_the_table(eb, tmp_path
     assert [line for line in written if line.startswith("| walks")] == kept
     assert any(line.startswith("| other | control") for line in written)
     assert "| walks | control" in (tmp_path / "docs" / "rlhf.md").read_text()
+
+
+PUBLISHED = ("--set finetune.max_minutes=4.0 --set finetune.budget_clock=cpu "
+             "--set finetune.epochs=100000")  # fmt: skip
+"""The budget arguments of the published rows' commands, before their validation interval."""
+
+
+def _jobs(**kw) -> Namespace:
+    args = dict(datasets=["walks"], methods=["control"], seeds=[0], minutes=4.0, warmup=4,
+                eval_minutes=None, workers=1, data_root=None, start="generator")  # fmt: skip
+    return Namespace(**{**args, **kw})
+
+
+def _published_rows(results: Path) -> None:
+    """walks' 4-minute table: control, control-lr3e-5 and rlhf-set over seeds 0-2."""
+    results.mkdir(parents=True, exist_ok=True)
+    (results / "pretrained_walks.json").write_text(json.dumps([_row("pretrained", 0, 0.40)]))
+    for method, fde, tag in (("control", 0.44, ""), ("control-lr3e-5", 0.42, "_lr3e-5"),
+                             ("rlhf-set", 0.43, "_set")):  # fmt: skip
+        rows = [_row(method, s, fde, command=_command(4.0, 4, None)) for s in (0, 1, 2)]
+        (results / f"finetune_walks{tag}.json").write_text(json.dumps(rows))
+
+
+def test_a_row_is_done_only_under_the_budget_asked_for(eb, tmp_path, monkeypatch, capsys):
+    """``--minutes 0.1`` found the 4-minute rows "already measured" (2 of 2, 0 to run) and
+    printed the old table: the rows were keyed on method and seed alone (walkthrough). Rows of
+    another budget are now refused before anything runs (finetune.py would skip them too)."""
+    _published_rows(tmp_path / "benchmarks" / "results")
+    seen = []
+    monkeypatch.setattr(subprocess, "call", lambda cmd, **kw: seen.append(cmd) or 0)
+    with pytest.raises(SystemExit, match=r"0\.1 CPU min.*\n.*4 CPU min.*control s0"):
+        eb.run_jobs(_jobs(minutes=0.1, methods=["control", "rlhf-set"]))
+    assert seen == []
+    eb.run_jobs(_jobs(methods=["control", "rlhf-set"]))  # the published budget: done
+    assert seen == [] and "2 of 2 rows already measured" in capsys.readouterr().out
+
+
+def test_a_new_seed_of_another_budget_is_refused_not_averaged_in(eb, tmp_path, monkeypatch):
+    """``--seeds 7 --minutes 0.05`` ran a 3-second control that the table then averaged into
+    the 4-minute control's rows (walkthrough). It is refused, and so is a report of such rows."""
+    results = tmp_path / "benchmarks" / "results"
+    _published_rows(results)
+    seen = []
+    monkeypatch.setattr(subprocess, "call", lambda cmd, **kw: seen.append(cmd) or 0)
+    with pytest.raises(SystemExit, match="one table compares one budget"):
+        eb.run_jobs(_jobs(seeds=[7], minutes=0.05))
+    assert seen == []
+    rows = json.loads((results / "finetune_walks.json").read_text())
+    rows.append(_row("control", 7, 0.50, command=_command(0.05, 4, None)))
+    (results / "finetune_walks.json").write_text(json.dumps(rows))
+    with pytest.raises(SystemExit, match=r"(?s)different budgets.*0\.05 CPU min[^\n]*control s7"):
+        eb.report(["walks"], ["control", "control-lr3e-5", "rlhf-set"], {})
+    # another start's rows are another table's
+    rows[-1]["method"] = "control-long"
+    (results / "finetune_walks.json").write_text(json.dumps(rows))
+    assert "| walks | control-long | 7 |" in eb.report(["walks"], ["control"], {})
+
+
+def test_a_run_folder_started_under_another_budget_is_refused(eb, tmp_path, monkeypatch):
+    """finetune.py resumes a job's run folder, or takes a finished run as the job's: one
+    started under another budget would give this budget's row another budget's model."""
+    (tmp_path / "benchmarks" / "results").mkdir(parents=True)
+    seen = []
+    monkeypatch.setattr(subprocess, "call", lambda cmd, **kw: seen.append(cmd) or 0)
+    run = tmp_path / "runs" / "walks-control-s0"
+    run.mkdir(parents=True)
+    (run / "finetune_config.yaml").write_text(
+        "finetune:\n  max_minutes: 0.05\n  warmup_steps: 4\n  eval_every_minutes: 0.0125\n"
+        "  eval_every: 5\n"
+    )
+    with pytest.raises(SystemExit, match="runs/walks-control-s0 was started under 0.05 CPU"):
+        eb.run_jobs(_jobs())
+    assert seen == []
+    eb.run_jobs(_jobs(minutes=0.05))
+    assert len(seen) == 1
+
+
+def test_the_budget_of_a_row_is_read_from_its_command(eb):
+    published = f"python benchmarks/finetune.py --dataset zara1 --methods control {PUBLISHED}"
+    assert eb.row_budget({"command": published + " --set finetune.eval_every_minutes=1.0 "
+                          "--set finetune.warmup_steps=4"}) == eb.PUBLISHED_BUDGET  # fmt: skip
+    # the rows of before 2026-11-27 validated every 3 epochs
+    old = eb.row_budget({"command": published + " --set finetune.eval_every=3 "
+                         "--set finetune.warmup_steps=4"})  # fmt: skip
+    assert old == eb.Budget(4.0, 4, None, 3) and old != eb.PUBLISHED_BUDGET
+    assert str(old) == "4 CPU min, warm-up 4, validation every 3 epochs"
+    # a row whose command names no budget (or has none) is taken as the published table's
+    assert eb.row_budget({"command": None}) == eb.PUBLISHED_BUDGET
+    assert eb.row_budget({"command": "python x.py --set finetune.lr=3e-5"}) == eb.PUBLISHED_BUDGET
+    assert eb.requested_budget(4.0, 4, None) == eb.PUBLISHED_BUDGET  # 4 / 4 = every minute
+    assert eb.requested_budget(2.0, 4, None) == eb.Budget(2.0, 4, 0.5)
+    assert eb.row_budget({"command": _command(0.1, 4, None)}) == eb.requested_budget(0.1, 4, None)
+
+
+def test_validation_defaults_to_a_quarter_of_the_budget_as_the_cli(eb, tmp_path, monkeypatch):
+    """``trajpref finetune --equal-budget M`` validates every M / 4 minutes; the script
+    validated every minute whatever ``--minutes`` was (walkthrough)."""
+    (tmp_path / "benchmarks" / "results" / "meta").mkdir(parents=True)
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "rlhf.md").write_text("<!-- equal-budget:start -->\n"
+                                               "<!-- equal-budget:end -->\n")  # fmt: skip
+    seen = []
+    monkeypatch.setattr(subprocess, "call", lambda cmd, **kw: seen.append(cmd) or 0)
+    monkeypatch.setattr("sys.argv", ["equal_budget.py", "--datasets", "walks", "--methods",
+                                     "control", "--seeds", "0", "--minutes", "2"])  # fmt: skip
+    eb.main()
+    assert "finetune.eval_every_minutes=0.5" in seen[0]
+    assert "finetune.max_minutes=2.0" in seen[0]
+
+
+def _table(eb, tmp_path: Path, rows: list[dict]) -> list[str]:
+    results = tmp_path / "benchmarks" / "results"
+    (results / "meta").mkdir(parents=True, exist_ok=True)
+    (results / "rows.json").write_text(json.dumps(rows))
+    return eb.report(["walks"], ["control", "control-lr3e-5", "rlhf"], {}).splitlines()
+
+
+def _three_seeds() -> list[dict]:
+    return [_row("pretrained", 0, 0.40)] + [
+        _row(m, s, f) for s in (0, 1, 2)
+        for m, f in (("control", 0.44), ("control-lr3e-5", 0.46), ("rlhf", 0.42))
+    ]  # fmt: skip
+
+
+def _counted(lines: list[str]) -> list[str]:
+    """A table's lines as a machine with every run folder wrote them: the control chosen on
+    validation (control-lr3e-5) and the runs that beat the start counted."""
+    out = lines[:2]
+    for line in lines[2:]:
+        cells = line.split(" | ")
+        if cells[1] in ("control", "rlhf"):
+            cells[6] = "-4.3 %" if cells[1] == "control" else "-8.7 %"
+        if not cells[1].startswith("start"):
+            cells[-1] = "2 of 3 |"
+        out.append(" | ".join(cells))
+    return out
+
+
+def test_a_few_run_folders_keep_the_lines_that_the_other_folders_gave(eb, tmp_path):
+    """The previous lines were dropped as soon as one run folder of the start existed here,
+    e.g. of a new seed: the control fell back and "runs beating the start" became "0 of 1"
+    (walkthrough). They are now kept unless every row has its run folder."""
+    lines = _table(eb, tmp_path, _three_seeds())
+    before = _counted(lines)
+    (tmp_path / "benchmarks" / "results" / "meta" / "equal_budget.md").write_text(
+        "\n".join(before) + "\n")  # fmt: skip
+    _validated(tmp_path, "walks-control-s0", 0.40)
+    assert eb.report(["walks"], ["control", "control-lr3e-5", "rlhf"]).splitlines() == before
+
+
+def test_a_changed_cell_in_any_column_is_noticed(eb, tmp_path):
+    """Only the minFDE20 cell was compared, so a stale start maxATS (zara1: 0.298 in the
+    table, 0.304 in the rows and the README) and other cells survived regenerations. The
+    start's line is now always today's, and a method line that changed in any column from
+    the rows has its start's lines computed again."""
+    rows = _three_seeds()
+    lines = _table(eb, tmp_path, rows)
+    before = _counted(lines)
+    stale = before[2].replace("| 0.100 | – | – |", "| 0.098 | – | – |")
+    assert stale != before[2]
+    meta = tmp_path / "benchmarks" / "results" / "meta" / "equal_budget.md"
+    meta.write_text("\n".join([*before[:2], stale, *before[3:]]) + "\n")
+    assert eb.report(["walks"], ["control", "control-lr3e-5", "rlhf"]).splitlines() == before
+    for r in rows:  # rlhf's maxATS re-measured, its minFDE20 the same
+        if r["method"] == "rlhf":
+            r["max_ats"] = 0.2
+    (tmp_path / "benchmarks" / "results" / "rows.json").write_text(json.dumps(rows))
+    again = eb.report(["walks"], ["control", "control-lr3e-5", "rlhf"]).splitlines()
+    assert again == _table(eb, tmp_path, rows)  # computed from the rows alone
+    assert again[-1].split(" | ")[6] == NOT_CHOSEN and "| 0.200 ± 0.000 |" in again[-1]
+
+
+def test_the_published_table_is_what_the_stored_rows_give():
+    """docs/rlhf.md's equal-budget table and meta/equal_budget.md regenerate unchanged from
+    benchmarks/results/ in a checkout without run folders (this repository's)."""
+    eb = load_benchmark("equal_budget")
+    eb._best_val = lambda *a: None  # a fresh checkout: no run folder
+    before = eb.previous_table(eb.table_path())
+    table = eb.report(eb.previous_datasets(before), list(eb.METHODS), before)
+    assert table + "\n" == eb.table_path().read_text()
+    assert f"<!-- equal-budget:start -->\n{table}\n" in (ROOT / "docs" / "rlhf.md").read_text()
+    budgets = eb.table_budgets(eb.previous_datasets(before), list(eb.METHODS))
+    assert {b for (_, start), b in budgets.items() if start == "generator"} == {
+        eb.PUBLISHED_BUDGET}  # fmt: skip
+    assert {b for (_, start), b in budgets.items() if start == "generator-long"} == {
+        eb.Budget(4.0, 4, None, 3)}  # fmt: skip

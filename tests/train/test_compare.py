@@ -212,3 +212,22 @@ def test_the_start_row_of_fine_tuning_is_no_epoch_and_never_kept(tmp_path, capsy
     alone = _budget_run(tmp_path / "c", [], [], None, start_fde=0.1)
     with pytest.raises(TrajprefError, match="has not validated an epoch yet .*start's validation"):
         compare.read_curve(alone, "finetune", metrics)
+
+
+def test_the_whole_schedule_is_the_runs_final_validation_past_its_budget(tmp_path, capsys):
+    """The step that crosses a time budget overshoots it: a set-aware run of 0.2 minutes
+    (12 s) validated at 11.5 s and, after its last step, at 12.6 s. The 1.00 row matched the
+    nearest validation, 11.5 s, and so showed epoch 2 where the run ended (and kept) epoch 3
+    (walkthrough, 2026-12-06)."""
+    metrics = ("val_min_ade", "val_min_fde")
+    run = _budget_run(tmp_path / "set", [4.0, 11.5, 12.6], [0.40, 0.35, 0.30], 0.2)
+    curve = compare.read_curve(run, "finetune", metrics)
+    assert curve.budget == 0.2 and curve.kept == 3
+    rows = compare.curve_rows({"set": [curve]}, metrics, (0.5, 0.75, 1.0))
+    assert [row["runs"][0]["epoch"] for row in rows] == [1, 2, 3]  # 6 s -> 4 s, 9 s -> 11.5 s
+    assert main(["compare", "--stage", "finetune", f"set={run}"]) == 0
+    assert "| 1.00 | 0.2000 / 0.3000 (3) |" in capsys.readouterr().out
+    # a run its epochs ended: the last epoch, as before
+    ended = _run(tmp_path / "e", 8, {3: (0.2, 0.3), 7: (0.2, 0.3), 8: (0.2, 0.3)})
+    epochs = compare.read_curve(ended, "generator", metrics)
+    assert epochs.nearest(1.0) == 8

@@ -72,7 +72,12 @@ class RunCurve:
 
     def nearest(self, share: float) -> int:
         """The validated epoch closest to ``share`` of the schedule (the earlier on a tie):
-        of its epochs, or of its time budget for a run the budget ended."""
+        of its epochs, or of its time budget for a run the budget ended. The whole schedule
+        (``share`` 1) is the run's final validation: the step that crosses a time budget
+        overshoots it, so the final validation can lie further past the budget than the one
+        before lies short of it, and the nearest would miss the run's end."""
+        if share >= 1:
+            return max(self.points)
         if self.budget is not None:
             target = share * 60 * self.budget
             return min(self.points, key=lambda e: (abs(self.seconds[e] - target), e))
@@ -177,7 +182,8 @@ def curve_rows(
     groups: dict[str, list[RunCurve]], metrics: tuple[str, ...], shares: tuple[float, ...]
 ) -> list[dict[str, Any]]:
     """For each share of the schedule (of a budget-ended run's time budget), every run's
-    metrics at its nearest validated epoch."""
+    metrics at its nearest validated epoch; at share 1, its final validation
+    (``RunCurve.nearest``)."""
     for s in shares:
         if not 0 < s <= 1:
             raise TrajprefError(f"shares lie in (0, 1], got {s}")
