@@ -102,7 +102,8 @@ def study_run(run: Path, args: argparse.Namespace) -> dict[str, Any]:
         raise SystemExit(f"{run}: no config.yaml (not a training run folder)")
     dataset = yaml.safe_load(cfg_path.read_text())["data"]["dataset"]
     logged = {r["epoch"]: r for r in read_metrics(run, "generator") if "val_score" in r}
-    files = sorted(run.glob(f"generator_epoch*{ckpt.SUFFIX}"))
+    files = sorted(p for p in run.glob(f"generator_epoch*{ckpt.SUFFIX}")
+                   if ".replaced-" not in p.name)  # an earlier run's, set aside  # fmt: skip
     if not files:
         raise SystemExit(f"{run}: no generator_epoch*{ckpt.SUFFIX} (train with --set "
                          "generator.keep_checkpoints=true)")  # fmt: skip

@@ -62,8 +62,10 @@ from trajpref.evaluation import (
     CLI_WORDS,
     check_trained_on,
     evaluate,
+    lineage_folds,
     predict_dataset,
     resolve_collision_radius,
+    role_notes,
     sampled_batches,
     warn_observed_pace,
     warn_untyped_data,
@@ -97,6 +99,8 @@ from trajpref.results import machine
 from trajpref.rl.presets import (
     EQUAL_BUDGET_VALIDATIONS,
     EQUAL_BUDGET_WARMUP,
+    PAPER_WEIGHTS,
+    PRESETS,
     check_no_pretraining_keys,
     finetune_config,
 )
@@ -124,6 +128,7 @@ from trajpref.train.run import (
     last_state_path,
     train_stage,
 )
+from trajpref.train.stages import finetune_preset
 from trajpref.types import AGENT_BALL, collate
 from trajpref.viz import plot
 from trajpref.viz.plot import FORMATS, check_limits, plot_scene, plot_scene_scored
@@ -991,16 +996,18 @@ def _checkpoint_header(spec: str) -> dict:
         return {k: v for k, v in ckpt.load(path).items() if k != "state_dict"}
 
 
-def _trained_on(spec: str) -> str | None:
-    """The ``data.dataset`` that checkpoint ``spec`` (a path or a published name) was trained
-    on; None for cv or a file whose header this cannot read (loading it says what is wrong)."""
+def _trained_on(spec: str) -> list[tuple[str, str | None]]:
+    """``(fold, via)`` for each ETH/UCY fold that checkpoint ``spec`` (a path or a published
+    name) was trained on: its own ``data.dataset``'s (``via`` None), then those of the other
+    runs of its training lineage (``evaluation.lineage_folds``: the generator a fine-tune
+    started from, a generator's denoiser; ``via`` names it). Empty for cv, other data, or a
+    file whose header this cannot read (loading it says what is wrong)."""
     if spec == "cv":
-        return None
+        return []
     try:
-        dataset = _checkpoint_header(spec)["config"]["data"]["dataset"]
+        return lineage_folds(model_timing(_checkpoint_header(spec)))
     except (TrajprefError, KeyError, TypeError, ValueError, AttributeError, OSError):
-        return None
-    return dataset if isinstance(dataset, str) else None
+        return []
 
 
 def _data_folds(dataset: str) -> tuple[str, ...]:
@@ -1012,14 +1019,15 @@ def _data_folds(dataset: str) -> tuple[str, ...]:
     return () if dataset in NAMES else sgan_folds(dataset)
 
 
-def _fold_overlaps(args) -> list[tuple[str, str, str]]:
-    """``(role, checkpoint, fold)`` for each checkpoint of the command (``model``: --model;
-    ``scorer``: a --scorer naming another one) trained on an ETH/UCY fold other than the
-    data's (``_data_folds``: --dataset's fold, or the folds whose Social-GAN test files a
-    --dataset folder holds). Social-GAN's leave-one-out folders give each fold's training split
-    the other four scenes' ``*_train`` files, which hold most of their windows (84 % of the
-    rows of zara1's test file are in the zara2 fold's training files): such a model has seen
-    this data, whatever the split."""
+def _fold_overlaps(args) -> list[tuple[str, str, str, str | None]]:
+    """``(role, checkpoint, fold, via)`` for each checkpoint of the command (``model``:
+    --model; ``scorer``: a --scorer naming another one) trained on an ETH/UCY fold other than
+    the data's (``_data_folds``: --dataset's fold, or the folds whose Social-GAN test files a
+    --dataset folder holds), itself (``via`` None) or through another run of its training
+    lineage (``_trained_on``: a fine-tune's start, a generator's denoiser). Social-GAN's
+    leave-one-out folders give each fold's training split the other four scenes' ``*_train``
+    files, which hold most of their windows (84 % of the rows of zara1's test file are in the
+    zara2 fold's training files): such a model has seen this data, whatever the split."""
     folds = _data_folds(args.dataset)
     if not folds:
         return []
@@ -1029,9 +1037,9 @@ def _fold_overlaps(args) -> list[tuple[str, str, str]]:
         specs["scorer"] = scorer
     found = []
     for role, spec in specs.items():
-        fold = _trained_on(spec)
-        if fold in ETH_UCY and any(f != fold for f in folds):
-            found.append((role, spec, fold))
+        for fold, via in _trained_on(spec):
+            if any(f != fold for f in folds):
+                found.append((role, spec, fold, via))
     return found
 
 
@@ -1048,31 +1056,32 @@ def _check_fold_overlap(args) -> str | None:
     folds = _data_folds(data)
     folder = data not in ETH_UCY
     trained = " and ".join(
-        f"{spec} was trained on {_training_data(fold)}, "
+        f"{spec}{f' (through {via})' if via else ''} was trained on {_training_data(fold)}, "
         f"{' and '.join(f for f in folds if f != fold)} among them"
-        for _, spec, fold in found
+        for _, spec, fold, via in found
     )
     scenes = " and ".join(folds)
     where = ""
     if folder:
         files = ", ".join(name for f in folds for name in SGAN_TEST_FILES[f])
         where = f"--dataset {data} holds {scenes}'s Social-GAN test files ({files}), and "
-    own = " and ".join(dict.fromkeys(fold for _, _, fold in found))
+    own = " and ".join(dict.fromkeys(fold for _, _, fold, _ in found))
     target = f"--dataset {data}" if not folder else "that folder"
     if len(folds) > 1:
         advice = "evaluate each fold's scenes apart, each with its own fold's models"
     else:
         published = zoo.published()
         picks = []
-        for role, _, _ in found:
+        for role in dict.fromkeys(role for role, *_ in found):
             name = f"{folds[0]}/{'generator' if role == 'model' else 'denoiser'}"
             picks.append((f"--{role} {name}", name in published))
         if all(ok for _, ok in picks):
             advice = (f"evaluate each fold with its own fold's models, e.g. "
                       f"{' '.join(p for p, _ in picks)} on {target}")  # fmt: skip
         else:
+            roles = dict.fromkeys(role for role, *_ in found)
             picks = [p if ok else f"a {role} of your own trained on the {folds[0]} fold"
-                     for (p, ok), (role, _, _) in zip(picks, found, strict=True)]  # fmt: skip
+                     for (p, ok), role in zip(picks, roles, strict=True)]  # fmt: skip
             advice = (f"evaluate each fold with its own fold's models: on {target}, "
                       f"{' and '.join(picks)}")  # fmt: skip
     problem = (f"{trained}: {where}those training files hold most of {scenes}'s windows, so "
@@ -1082,7 +1091,8 @@ def _check_fold_overlap(args) -> str | None:
                           "overlap in the result")  # fmt: skip
     warnings.warn(problem, stacklevel=2)
     tail = f" ({data})" if folder else ""
-    return "; ".join(f"{fold} {role} on {scenes}{tail}" for role, _, fold in found)
+    return "; ".join(f"{fold} {role} on {scenes}{tail}" + (f" (through {via})" if via else "")
+                     for role, _, fold, via in found)  # fmt: skip
 
 
 def _warn_model_and_scorer(args, ds) -> str | None:
@@ -1096,7 +1106,7 @@ def _warn_model_and_scorer(args, ds) -> str | None:
     scorer = getattr(args, "scorer", None)
     if scorer and not (scorer == args.model or _same_path(scorer, args.model)):
         found["scorer"] = _warn_if_trained_otherwise(scorer, ds, root, holdout)
-    notes = [f"{role} {note}" for role, note in found.items() if note]
+    notes = [role_notes(role, note) for role, note in found.items() if note]
     return "; ".join(notes) or None
 
 
@@ -1295,8 +1305,11 @@ def _model_fields(args) -> dict:
     --stochastic applied;
     ``models.checkpoint.header_model_hash``), ``weights_hash`` (the weights' own content hash,
     which a fine-tuned model's ``start_hash`` names), and for a fine-tuned model
-    ``finetune_method``, ``finetune_reward`` and ``start_hash`` (the header's ``meta.method``,
-    ``models.checkpoint.finetune_reward`` and ``meta.from``). None for cv."""
+    ``finetune_method``, ``finetune_preset``, ``finetune_reward`` and ``start_hash`` (the
+    header's ``meta.method``, ``meta.preset``, ``models.checkpoint.finetune_reward`` and
+    ``meta.from``; a fine-tune written before ``meta.preset``: the preset whose values its
+    config's finetune section holds, ``train.stages.finetune_preset``, None for none). None for
+    cv."""
     if args.model == "cv":
         return {"model_hash": None, "weights_hash": None}
     header = _checkpoint_header(args.model)
@@ -1316,7 +1329,10 @@ def _model_fields(args) -> dict:
            "weights_hash": header.get("hash")}  # fmt: skip
     meta = header.get("meta") or {}
     if meta.get("method") is not None:
-        out.update(finetune_method=meta["method"], finetune_reward=ckpt.finetune_reward(header),
+        preset = (meta["preset"] if "preset" in meta
+                  else finetune_preset(header["config"].get("finetune")))  # fmt: skip
+        out.update(finetune_method=meta["method"], finetune_preset=preset,
+                   finetune_reward=ckpt.finetune_reward(header),
                    start_hash=meta.get("from"))  # fmt: skip
     return out
 
@@ -2115,6 +2131,8 @@ def cmd_train(args) -> int:
     if args.seed is not None:
         cfg = dataclasses.replace(cfg, seed=args.seed)
     _warn_if_validation_reads_training(cfg.data)
+    if args.stage == "generator" and args.denoiser is not None:
+        _warn_if_data_seen_before("--denoiser", args.denoiser, "the denoiser", cfg.data.dataset)
     summary = train_stage(
         args.stage,
         cfg,
@@ -2150,12 +2168,29 @@ REWARD_LABELS = {"set": "set-aware reward", "sda": "SDA reward"}
 """How the summary line names a ``finetune.reward`` other than the diffusion score."""
 
 
-def _method_label(finetune_cfg) -> str:
-    """A fine-tuning run's method as its summary line names it: ``rlhf``, or with a reward
-    other than the score, ``rlhf, set-aware reward`` (the checkpoint's ``meta.method`` keeps
-    the plain method; ``config.finetune.reward`` says the reward)."""
+def _method_label(finetune_cfg, preset: str | None = None) -> str:
+    """A fine-tuning run's method as its summary line names it: ``rlhf``, with a reward
+    other than the score ``rlhf, set-aware reward`` (the checkpoint's ``meta.method`` keeps
+    the plain method; ``config.finetune.reward`` says the reward), and with the preset whose
+    values the config holds (``train.stages.finetune_preset``, the checkpoint's
+    ``meta.preset``) ``rlhf, paper preset``; ``preset`` (--preset) with a value of it changed
+    by --set: ``rlhf, paper preset with finetune.clip changed``."""
     reward = REWARD_LABELS.get(finetune_cfg.reward) if finetune_cfg.method != "control" else None
-    return finetune_cfg.method + (f", {reward}" if reward else "")
+    label = finetune_cfg.method + (f", {reward}" if reward else "")
+    held = finetune_preset(finetune_cfg)
+    if held is not None:
+        return f"{label}, {held} preset"
+    if preset is not None and preset in PRESETS:
+        changed = [f"finetune.{k}" for k, v in PRESETS[preset].items()
+                   if getattr(finetune_cfg, k, v) != v]  # fmt: skip
+        if finetune_cfg.method in PAPER_WEIGHTS:
+            weights = dict(zip(("policy_weight", "value_weight"),
+                               PAPER_WEIGHTS[finetune_cfg.method], strict=True))  # fmt: skip
+            changed += [f"finetune.{k}" for k, v in weights.items()
+                        if getattr(finetune_cfg, k) != v]  # fmt: skip
+        return f"{label}, {preset} preset" + (f" with {', '.join(changed)} changed"
+                                              if changed else "")  # fmt: skip
+    return label
 
 
 def _check_checkpoint(flag: str, spec: str) -> None:
@@ -2196,12 +2231,37 @@ def cmd_finetune(args) -> int:
     cfg = finetune_config(args.start, args.method, args.preset, args.config, args.overrides,
                           args.seed, args.equal_budget)  # fmt: skip
     _warn_if_validation_reads_training(cfg.data)
+    _warn_if_data_seen_before("--from", args.start, "the start", cfg.data.dataset)
     summary = finetune(cfg, args.start, args.out, args.data_root, args.device, args.resume,
-                       progress=not args.no_progress)  # fmt: skip
+                       progress=not args.no_progress, equal_budget=args.equal_budget)  # fmt: skip
     if summary.get("rank", 0) == 0:
-        print(_summary_line(f"fine-tuned ({_method_label(cfg.finetune)})", summary,
+        label = _method_label(cfg.finetune, args.preset)
+        print(_summary_line(f"fine-tuned ({label})", summary,
                             Path(args.out) / f"finetune{ckpt.SUFFIX}"))  # fmt: skip
     return 0
+
+
+def _warn_if_data_seen_before(flag: str, spec: str, what: str, dataset: str) -> None:
+    """One warning (first process alone) when the checkpoint a run builds on (``spec``, given
+    as ``flag``: finetune's --from, train generator's --denoiser) was trained, itself or
+    through its own lineage (``_trained_on``), on an ETH/UCY fold other than the run's data
+    (``dataset``: a fold, or a folder of Social-GAN test files): that fold's leave-one-out
+    training files hold most of the run's data's windows, so the result cannot be tested on
+    its own data's test split (``evaluate`` refuses it without --allow-overlap)."""
+    folds = _data_folds(dataset)
+    if not folds or not _is_main_process():
+        return
+    found = [(fold, via) for fold, via in _trained_on(spec) if any(f != fold for f in folds)]
+    if not found:
+        return
+    own = " and ".join(folds)
+    seen = " and ".join(f"the {fold} fold" + (f" (through {via})" if via else "")
+                        for fold, via in found)  # fmt: skip
+    warnings.warn(f"{flag} {spec}: {what} was trained on {seen}, whose leave-one-out training "
+                  f"files (the other four scenes') hold most of {own}'s windows: what this "
+                  f"run writes has seen most of {own}'s test split, and evaluate refuses it there "
+                  f"(--allow-overlap records the overlap); for numbers on {own}, build on "
+                  f"{own}'s own models", stacklevel=2)  # fmt: skip
 
 
 def _yaml_value(value) -> str:
@@ -2236,8 +2296,7 @@ def cmd_models(args) -> int:
     if args.name is not None:
         zoo.resolve(args.name)  # an unknown name lists the published ones
         if args.json:
-            entry = next(e for e in zoo.entries() if e["name"] == args.name)
-            print(json.dumps(entry))
+            print(json.dumps(zoo.entry(args.name)))
         else:
             print(zoo.card(args.name), end="")
         return 0

@@ -926,8 +926,31 @@ def unknown_key_message(unknown: list[str], known: list[str], where: str = "",
         return (f"unknown config key {where}{unknown[0]} in {stored}{more}: probably written by "
                 f"a newer trajpref than this one, which added the key; upgrade trajpref to read "
                 f"it ({valid})")  # fmt: skip
-    close = difflib.get_close_matches(unknown[0], known, n=1, cutoff=0.6)
-    hint = f" (did you mean {where}{close[0]}?)" if close else ""
+    # names other libraries and papers use, which difflib matches to the wrong key
+    # (reward_weight -> reg_weight, the regulariser; kl_weight -> value_weight); a
+    # dotted one is in another section (``where`` not repeated)
+    aliases = {
+        "reward_weight": "policy_weight", "pg_weight": "policy_weight",
+        "rl_weight": "policy_weight", "score_weight": "policy_weight",
+        "critic_weight": "value_weight", "vf_coef": "value_weight", "value_coef": "value_weight",
+        "kl_weight": "kl_coef", "kl_beta": "kl_coef", "kl_penalty": "kl_coef", "kl": "kl_coef",
+        "sft_weight": "reg_weight", "bc_weight": "reg_weight",
+        "learning_rate": "lr", "num_epochs": "epochs", "n_epochs": "epochs",
+        "grad_norm": "grad_clip", "max_grad_norm": "grad_clip", "clip_grad_norm": "grad_clip",
+        "cliprange": "clip", "clip_range": "clip", "cliprange_value": "value_clip",
+        "clip_range_vf": "value_clip", "lam": "gae_lambda", "discount": "gamma",
+        "batch_size": "data.max_agents",
+    }  # fmt: skip
+    alias = aliases.get(unknown[0], "")
+    if where and alias.startswith(where):  # this section's own
+        alias = alias[len(where) :]
+    if "." in alias:
+        close = [alias]  # another section's key, named in full
+    elif alias in known:
+        close = [where + alias]
+    else:
+        close = [where + c for c in difflib.get_close_matches(unknown[0], known, n=1, cutoff=0.6)]
+    hint = f" (did you mean {close[0]}?)" if close else ""
     return (f"unknown config key {where}{unknown[0]}{hint}{more}; {valid} (all keys with their "
             "meaning: trajpref config show)")  # fmt: skip
 

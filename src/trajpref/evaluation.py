@@ -44,6 +44,7 @@ from trajpref.metrics import (
 from trajpref.models.predictor import as_integer, check_seed
 from trajpref.models.timing import (
     UNKNOWN_UNITS,
+    lineage_others,
     observed_problem,
     timing_problems,
     trained_otherwise,
@@ -286,27 +287,58 @@ def data_folds(dataset: TrajectoryDataset) -> tuple[str, ...]:
     return () if name in NAMES else sgan_folds(name)
 
 
-def _trained_folds(model: object, scorer: object) -> list[tuple[str, str]]:
-    """``(role, fold)`` for the model and scorer (a selecting predictor's base and scorer
+def lineage_folds(record: object) -> list[tuple[str, str | None]]:
+    """``(fold, via)`` for each ETH/UCY fold that a ``models.timing.model_timing`` record's
+    model was trained on, its own run's (``via`` None) first, then the other runs of its
+    ``lineage`` (``timing.lineage_others``: a fine-tune's start, a generator's denoiser; ``via``
+    names it), each fold once; a record without a lineage (a hand-made one, or older than it)
+    gives its ``trained_on`` alone. Empty for no record."""
+    if not isinstance(record, dict):
+        return []
+    found: list[tuple[str, str | None]] = []
+    own = record.get("trained_on")
+    lineage = record.get("lineage")
+    if isinstance(lineage, list) and lineage and isinstance(lineage[-1], dict):
+        own = lineage[-1].get("dataset")
+    if isinstance(own, str) and own in ETH_UCY:
+        found.append((own, None))
+    for entry, via in lineage_others(record):
+        fold = entry.get("dataset")
+        if fold in ETH_UCY and all(fold != f for f, _ in found):
+            found.append((fold, via))
+    return found
+
+
+def _trained_folds(model: object, scorer: object) -> list[tuple[str, str, str | None]]:
+    """``(role, fold, via)`` for the model and scorer (a selecting predictor's base and scorer
     included) whose ``timing`` (``models.timing.attach_timing``: a loaded checkpoint's
-    record) says they were trained on an ETH/UCY fold."""
-    found = []
+    record) says they were trained on an ETH/UCY fold, through their own run (``via`` None)
+    or another of their lineage (``lineage_folds``: a fine-tune's start, a generator's
+    denoiser)."""
+    found: list[tuple[str, str, str | None]] = []
     for role, obj in (("model", model), ("model", getattr(model, "base", None)),
                       ("scorer", getattr(model, "scorer", None)), ("scorer", scorer)):  # fmt: skip
-        timing = getattr(obj, "timing", None)
-        fold = timing.get("trained_on") if isinstance(timing, dict) else None
-        if isinstance(fold, str) and fold in ETH_UCY and (role, fold) not in found:
-            found.append((role, fold))
+        for fold, via in lineage_folds(getattr(obj, "timing", None)):
+            if all((role, fold) != (r, f) for r, f, _ in found):
+                found.append((role, fold, via))
     return found
+
+
+def _who(role: str, via: str | None) -> str:
+    """``the model``, or ``the model (through its denoiser)``: who a fold finding is of."""
+    return f"the {role}" + (f" (through {via})" if via else "")
 
 
 def check_fold_overlap(model: object, dataset: TrajectoryDataset, scorer: object = None) -> None:
     """ConfigError when the model (or scorer) was trained on an ETH/UCY fold other than the
     data's (``data_folds``): Social-GAN's leave-one-out training files of one fold hold most
     of the other folds' windows (84 % of the rows of zara1's test file are in the zara2
-    fold's training files), so such a model has seen this data, whatever the split. What the
-    CLI's ``evaluate`` refuses without ``--allow-overlap``; models without a record
-    (``timing`` None: cv, a model built in code) pass."""
+    fold's training files), so such a model has seen this data, whatever the split. Every
+    run of the model's training lineage counts (``lineage_folds``: a fine-tune of a zara1
+    generator on eth has seen zara1's windows through its start, and a generator trained
+    through another fold's denoiser through it). What the CLI's ``evaluate`` refuses without
+    ``--allow-overlap``; models without a record (``timing`` None: cv, a model built in
+    code) pass."""
     folds, found = _fold_findings(model, dataset, scorer)
     if not found:
         return
@@ -314,9 +346,9 @@ def check_fold_overlap(model: object, dataset: TrajectoryDataset, scorer: object
     own = " and ".join(folds)
     if where not in ETH_UCY:
         where = f"{where} (it holds {own}'s Social-GAN test files)"
-    trained = "; ".join(f"the {role} was trained on the {fold} fold, whose leave-one-out "
+    trained = "; ".join(f"{_who(role, via)} was trained on the {fold} fold, whose leave-one-out "
                         f"training files (the other four scenes') hold most of {own}'s windows"
-                        for role, fold in found)  # fmt: skip
+                        for role, fold, via in found)  # fmt: skip
     raise ConfigError(f"evaluate on {where}: {trained}, so this evaluates on data it trained "
                       f"on: evaluate each fold with its own fold's models, or pass "
                       "allow_overlap=True to evaluate it anyway")  # fmt: skip
@@ -324,13 +356,13 @@ def check_fold_overlap(model: object, dataset: TrajectoryDataset, scorer: object
 
 def _fold_findings(
     model: object, dataset: TrajectoryDataset, scorer: object = None
-) -> tuple[tuple[str, ...], list[tuple[str, str]]]:
-    """The data's folds (``data_folds``) and ``(role, fold)`` for the model and scorer trained
-    on an ETH/UCY fold other than those (``_trained_folds``)."""
+) -> tuple[tuple[str, ...], list[tuple[str, str, str | None]]]:
+    """The data's folds (``data_folds``) and ``(role, fold, via)`` for the model and scorer
+    trained on an ETH/UCY fold other than those (``_trained_folds``)."""
     folds = data_folds(dataset)
     if not folds:
         return folds, []
-    return folds, [(role, fold) for role, fold in _trained_folds(model, scorer)
+    return folds, [(role, fold, via) for role, fold, via in _trained_folds(model, scorer)
                    if any(f != fold for f in folds)]  # fmt: skip
 
 
@@ -338,14 +370,17 @@ def fold_overlap_note(model: object, dataset: TrajectoryDataset,
                       scorer: object = None) -> str | None:  # fmt: skip
     """What ``evaluate(allow_overlap=True)`` records as ``overlap`` of a model (or scorer)
     trained on another ETH/UCY fold than the data's (``check_fold_overlap``): ``zara2 model
-    on zara1``, as the CLI's ``evaluate --allow-overlap`` records it (a folder's path after);
-    None when nothing overlaps."""
+    on zara1``, as the CLI's ``evaluate --allow-overlap`` records it (a folder's path after;
+    ``through its denoiser`` and the like for a fold of its lineage); None when nothing
+    overlaps."""
     folds, found = _fold_findings(model, dataset, scorer)
     if not found:
         return None
     name = dataset.info.name
     tail = "" if name in ETH_UCY else f" ({name})"
-    return "; ".join(f"{fold} {role} on {' and '.join(folds)}{tail}" for role, fold in found)
+    return "; ".join(f"{fold} {role} on {' and '.join(folds)}{tail}"
+                     + (f" (through {via})" if via else "")
+                     for role, fold, via in found)  # fmt: skip
 
 
 # ------------------------------------------- the data against what the model was trained on
@@ -635,15 +670,64 @@ def shared_split(data: dict, info: DatasetInfo) -> tuple[str, tuple[str, str]] |
     return None
 
 
+def _overlap_text(name: str, split: str, what: str, where: str, advice: str) -> tuple[str, str]:
+    """``overlap_warning``'s warning and record, without warning."""
+    role = "trained on" if split == "train" else "chose its epoch on"
+    kind = "training" if split == "train" else "validation"
+    return (f"{name} {role} these windows: {what}, its {kind} data, so numbers on it are "
+            f"{kind} numbers, not a test{advice}", f"{role} these windows ({where})")  # fmt: skip
+
+
 def overlap_warning(name: str, split: str, what: str, where: str, advice: str) -> str:
     """The warning that ``name`` trained on (``split`` ``train``) or chose its epoch on
     (``val``) these windows, ``what`` saying how, then ``advice``; returns the form a result
     records (``overlap``), ``where`` in its parentheses."""
-    role = "trained on" if split == "train" else "chose its epoch on"
-    kind = "training" if split == "train" else "validation"
-    warnings.warn(f"{name} {role} these windows: {what}, its {kind} data, so numbers on it are "
-                  f"{kind} numbers, not a test{advice}", stacklevel=_user_level())  # fmt: skip
-    return f"{role} these windows ({where})"
+    text, record = _overlap_text(name, split, what, where, advice)
+    warnings.warn(text, stacklevel=_user_level())
+    return record
+
+
+def _own_windows(name: str, data: dict, info: DatasetInfo, root: str | None,
+                 holdout: str | None, words: ReadingWords,
+                 val_known: bool) -> tuple[str, str] | None:  # fmt: skip
+    """``check_trained_on``'s findings for one run's data config ``data``: the warning's text
+    and the record's, None when this data is none of its training or validation windows."""
+    try:
+        if holdout:
+            split = held_out_split(data, info, holdout)
+            if split is None or (split == "val" and not val_known):
+                return None
+            what = ("the windows of its training files" if split == "train"
+                    else "its own held-out validation scene")  # fmt: skip
+            return _overlap_text(name, split,
+                                 f"the held-out scene {holdout}* of {info.name} is {what}",
+                                 f"held-out scene {holdout}* of {info.name}", "")  # fmt: skip
+        own = training_windows(name, data, info, words)
+        split = None if own is not None else own_split(data, info, root)
+        shared = None if own is not None or split is not None else shared_split(data, info)
+    except (KeyError, TypeError, AttributeError):
+        return None
+    if own is not None:
+        return own, f"trained on these windows ({info.name} has no split sub-folders)"
+    if split is not None and (split == "train" or val_known):
+        trained = data["dataset"]
+        return _overlap_text(
+            name,
+            split,
+            f"{info.source or 'this data'} is the {split} split of {trained}",
+            f"{split} split of {trained}",
+            " (evaluate on the test split, or on files it did not train on)",
+        )
+    if split is not None:  # a validation split, and the record does not say where it chose
+        shared = None
+    if shared is None or (shared[0] == "val" and not val_known):
+        return None
+    split, (dataset, part) = shared
+    what = f"{info.name}'s {info.split} split holds {dataset}'s {part} split"
+    if (dataset, part) == (info.name, info.split):
+        what = f"this is {dataset}'s {part} split"
+    return _overlap_text(name, split, what, f"{dataset}'s {part} split",
+                         " (evaluate on the test split)")  # fmt: skip
 
 
 def check_trained_on(name: str, model: dict, data: dict | None, info: DatasetInfo,
@@ -659,51 +743,36 @@ def check_trained_on(name: str, model: dict, data: dict | None, info: DatasetInf
     trained or chose its epoch on (``own_split``, ``shared_split``; ``root``: the data root,
     for a fold's split folder given as a path), or with ``holdout`` (a held-out scene's
     windows of both splits) whether it trained or chose its epoch on them
-    (``held_out_split``). Returns the second's short form, what a result records as
-    ``overlap``; None otherwise. ``val_known`` False: the record does not say where the model
-    chose its epoch (``val_dataset``), so the validation findings are left out."""
+    (``held_out_split``). The other runs of the record's ``lineage`` (a fine-tune's start
+    generator, a generator's denoiser: ``timing.lineage_others``) are checked alike, each
+    finding once, named ``through`` that run. Returns the findings' short forms (joined by
+    ``; ``), what a result records as ``overlap``; None otherwise. ``val_known`` False: the
+    record does not say where the model chose its epoch (``val_dataset``), so the validation
+    findings of its own run are left out."""
     text = timing_warning(name, model, info, words)
     if text is not None:
         warnings.warn(text, stacklevel=_user_level())
     if data is None:
         return None
-    try:
-        if holdout:
-            split = held_out_split(data, info, holdout)
-            if split is None or (split == "val" and not val_known):
-                return None
-            what = ("the windows of its training files" if split == "train"
-                    else "its own held-out validation scene")  # fmt: skip
-            return overlap_warning(name, split,
-                                   f"the held-out scene {holdout}* of {info.name} is {what}",
-                                   f"held-out scene {holdout}* of {info.name}", "")  # fmt: skip
-        own = training_windows(name, data, info, words)
-        split = None if own is not None else own_split(data, info, root)
-        shared = None if own is not None or split is not None else shared_split(data, info)
-    except (KeyError, TypeError, AttributeError):
-        return None
-    if own is not None:
-        warnings.warn(own, stacklevel=_user_level())
-        return f"trained on these windows ({info.name} has no split sub-folders)"
-    if split is not None and (split == "train" or val_known):
-        trained = data["dataset"]
-        return overlap_warning(
-            name,
-            split,
-            f"{info.source or 'this data'} is the {split} split of {trained}",
-            f"{split} split of {trained}",
-            " (evaluate on the test split, or on files it did not train on)",
-        )
-    if split is not None:  # a validation split, and the record does not say where it chose
-        shared = None
-    if shared is None or (shared[0] == "val" and not val_known):
-        return None
-    split, (dataset, part) = shared
-    what = f"{info.name}'s {info.split} split holds {dataset}'s {part} split"
-    if (dataset, part) == (info.name, info.split):
-        what = f"this is {dataset}'s {part} split"
-    return overlap_warning(name, split, what, f"{dataset}'s {part} split",
-                           " (evaluate on the test split)")  # fmt: skip
+    runs: list[tuple[dict, str | None, bool]] = [(data, None, val_known)]
+    runs += [(entry, via, True) for entry, via in lineage_others(model, data)]
+    notes: list[str] = []
+    seen: set[str] = set()  # the findings' records, without their run
+    for run_data, via, known in runs:
+        who = name if via is None else f"{name} (through {via})"
+        found = _own_windows(who, run_data, info, root, holdout, words, known)
+        if found is None or found[1] in seen:  # the same windows, named through another run
+            continue
+        seen.add(found[1])
+        warnings.warn(found[0], stacklevel=_user_level())
+        notes.append(found[1] if via is None else f"{found[1][:-1]}, through {via})")
+    return "; ".join(notes) or None
+
+
+def role_notes(role: str, note: str) -> str:
+    """``check_trained_on``'s findings (``; ``-joined) as a result records them, each after
+    ``role`` (``model``, ``scorer``)."""
+    return "; ".join(f"{role} {part}" for part in note.split("; "))
 
 
 def warn_observed_pace(checked: list[tuple[str, object]], dataset: TrajectoryDataset) -> None:
@@ -743,7 +812,8 @@ def warn_untyped_data(checked: list[tuple[str, object]], dataset: TrajectoryData
 
 
 _RECORD = {"trained_on": None, "step": None, "known": False, "interval_from": None,
-           "time_step": 1.0, "units": "unknown", "agent_types": None}  # fmt: skip
+           "time_step": 1.0, "units": "unknown", "agent_types": None, "val_dataset": None,
+           "holdout_scene": None, "lineage": None}  # fmt: skip
 """``models.timing.model_timing``'s keys, with the values of a record that says nothing."""
 
 
@@ -787,8 +857,11 @@ def check_against_training(model: object, dataset: TrajectoryDataset,
     data do not flag (``warn_untyped_data``). Returns what a result records as ``overlap``
     (``model trained on these windows (train split of zara1)``), None when nothing overlaps.
 
-    Where the record does not say on which data the model chose its epoch (``val_dataset``,
-    which ``models.timing.model_timing`` does not record), a validation split is not named."""
+    The record (``models.timing.model_timing``) says where the model chose its epoch
+    (``val_dataset``) and which scene it held out (``holdout_scene``), so that a validation
+    split is named (``robo/generator`` on Robo's val split); a hand-made record without
+    ``val_dataset`` names training splits alone. The other runs of its ``lineage`` (a
+    fine-tune's start, a generator's denoiser) are checked too (``check_trained_on``)."""
     checked = _checked(model, scorer)
     notes = []
     for name, obj, record in checked:
@@ -797,7 +870,7 @@ def check_against_training(model: object, dataset: TrajectoryDataset,
         note = check_trained_on(name, record, data, dataset.info, words=PYTHON_WORDS,
                                 val_known="val_dataset" in obj.timing)  # fmt: skip
         if note:
-            notes.append(f"{name.removeprefix('the ')} {note}")
+            notes.append(role_notes(name.removeprefix("the "), note))
     objects = [(name, obj) for name, obj, _ in checked]
     warn_observed_pace(objects, dataset)
     warn_untyped_data(objects, dataset)

@@ -439,6 +439,7 @@ def test_a_new_run_in_a_used_folder_moves_the_earlier_runs_record_aside(tiny_cfg
         "denoiser_run.replaced-3.json",
         "denoiser_metrics.replaced-3.jsonl",
         "denoiser_last.replaced-3.pt",
+        "denoiser.replaced-3.safetensors",  # its checkpoint too, with the same number
     }
 
 

@@ -9,6 +9,7 @@ the checkpoint recorded of its training data.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import numbers
 import warnings
@@ -36,6 +37,87 @@ def same_units(a: str, b: str) -> bool:
     return a == b or any(a in names and b in names for names in (METRE_UNITS, PIXEL_UNITS))
 
 
+LINEAGE_STAGES = ("denoiser", "generator", "finetune")
+"""The runs a checkpoint's training lineage names (``training_lineage``), in training order."""
+LINEAGE_KEYS = ("dataset", "val_dataset", "holdout_scene")
+"""What a lineage entry records of a run's data config: the data it trained on (its
+``dataset``'s training split), chose its epoch on (``val_dataset``'s validation split, None:
+``dataset``'s) and held out of training (``holdout_scene``, None: no scene)."""
+VIA = {"denoiser": "its denoiser", "generator": "the generator it was fine-tuned from",
+       "finetune": "the fine-tune it started from"}  # fmt: skip
+"""How a warning names a lineage entry other than the checkpoint's own run, by its stage."""
+
+
+def lineage_entry(data: Any, stage: str) -> dict[str, Any]:
+    """One run of a checkpoint's training lineage (``training_lineage``): its ``stage``
+    (``LINEAGE_STAGES``) and what its data config (``data``: a ``config.DataConfig`` or its
+    dict) says of the windows it trained and chose its epoch on (``LINEAGE_KEYS``; an empty
+    ``val_dataset`` or ``holdout_scene`` is None)."""
+    get = data.get if isinstance(data, dict) else lambda key: getattr(data, key, None)
+    return {"stage": stage, "dataset": get("dataset"), "val_dataset": get("val_dataset") or None,
+            "holdout_scene": get("holdout_scene") or None}  # fmt: skip
+
+
+def _valid_entry(entry: Any) -> bool:
+    return (isinstance(entry, dict) and entry.get("stage") in LINEAGE_STAGES
+            and isinstance(entry.get("dataset"), str)
+            and all(entry.get(k) is None or isinstance(entry.get(k), str)
+                    for k in ("val_dataset", "holdout_scene")))  # fmt: skip
+
+
+def training_lineage(header: dict) -> list[dict[str, Any]]:
+    """Every run whose training data went into a checkpoint (its header or payload), in
+    training order, the checkpoint's own run last: ``lineage_entry`` dicts. A generator's
+    denoiser trained on its own data and the generator learns through it (a fine-tune's reward
+    is that denoiser's score), and a fine-tune starts from a generator trained on other data
+    than ``data.dataset`` may say (``finetune --set data.dataset=eth`` of a zara1 generator):
+    what the meta's ``trained_on`` list records, written at training time (``train.stages``),
+    its last entry the checkpoint's own run (read from its ``config.data``, what the other
+    checks read, should the two differ: a header edited after training). A
+    checkpoint written before the record: its own ``config.data`` after, for a generator, its
+    embedded denoiser's (a published one's, kept beside it, is its own dataset's); a fine-tune
+    of then has lost its start's."""
+    meta = header.get("meta") or {}
+    recorded = meta.get("trained_on") if isinstance(meta, dict) else None
+    if isinstance(recorded, list) and recorded and all(_valid_entry(e) for e in recorded):
+        out = [lineage_entry(e, e["stage"]) for e in recorded]
+        own = lineage_entry(header["config"]["data"], out[-1]["stage"])
+        return [*out[:-1], own] if isinstance(own["dataset"], str) else out
+    out = []
+    denoiser = header.get("denoiser")
+    if header.get("kind") == "generator" and isinstance(denoiser, dict):
+        with contextlib.suppress(KeyError, TypeError, AttributeError):
+            out = [e for e in training_lineage(denoiser) if e["stage"] == "denoiser"]
+    finetuned = isinstance(meta, dict) and meta.get("method") is not None
+    stage = "finetune" if finetuned else header.get("kind")
+    own = lineage_entry(header["config"]["data"], stage if stage in LINEAGE_STAGES else "generator")
+    return [*out, own] if isinstance(own["dataset"], str) else out
+
+
+def lineage_data(entry: dict[str, Any]) -> tuple[Any, ...]:
+    """What two lineage entries must share to see the same windows (``LINEAGE_KEYS``)."""
+    return tuple(entry.get(k) or None for k in LINEAGE_KEYS)
+
+
+def lineage_others(record: dict, own: dict | None = None) -> list[tuple[dict[str, Any], str]]:
+    """The runs of a ``model_timing`` record's ``lineage`` whose data differ from its own run's
+    (``own``: a data config dict, by default the lineage's last entry), latest first, each once,
+    with how a warning names it (``VIA``: ``its denoiser``, ``the generator it was fine-tuned
+    from``); empty for a record without a lineage."""
+    lineage = record.get("lineage") if isinstance(record, dict) else None
+    if not isinstance(lineage, list) or not lineage:
+        return []
+    seen = {lineage_data(own if own is not None else lineage[-1])}
+    out = []
+    for entry in reversed(lineage):
+        key = lineage_data(entry)
+        if key in seen:
+            continue
+        seen.add(key)
+        out.append((entry, VIA.get(entry.get("stage"), "its training lineage")))
+    return out
+
+
 def model_timing(header: dict) -> dict:
     """The pace and units a checkpoint's model was trained at, from its header (what
     ``train.run.data_timing`` recorded in its meta, else a built-in dataset's own): the keys
@@ -45,11 +127,18 @@ def model_timing(header: dict) -> dict:
     ``interval_from`` (where that interval came from, ``DatasetInfo.interval_from``'s names;
     None when nothing was recorded; a built-in dataset's step is the registry's, whatever the
     record says), ``time_step`` (its ``data.time_step``), ``units`` and ``agent_types`` (the
-    agent-type flags its training windows held, None where not recorded: before 2026-12-06)."""
+    agent-type flags its training windows held, None where not recorded: before 2026-12-06),
+    ``val_dataset`` and ``holdout_scene`` (where it chose its epoch: its ``data.val_dataset``,
+    None for its own dataset's val split, and its ``data.holdout_scene``, None for none), and
+    ``lineage`` (``training_lineage``: every run whose data went into it, a fine-tune's start
+    and a generator's denoiser among them)."""
     data = header["config"]["data"]
     read_every = float(data.get("time_step", 1.0))
     out = {"trained_on": data["dataset"], "step": None, "known": False, "interval_from": None,
-           "time_step": read_every, "units": "unknown", "agent_types": None}  # fmt: skip
+           "time_step": read_every, "units": "unknown", "agent_types": None,
+           "val_dataset": data.get("val_dataset") or None,
+           "holdout_scene": data.get("holdout_scene") or None,
+           "lineage": training_lineage(header)}  # fmt: skip
     timing = (header.get("meta") or {}).get("data_timing")
     source = SPECS.get(data["dataset"])
     if isinstance(timing, dict):

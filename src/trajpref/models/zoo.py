@@ -86,15 +86,25 @@ def header(path: Path) -> dict[str, Any]:
 
 
 def resolve(name: str, root: Path | None = None) -> Path:
-    """The file of a published model; an unknown name is an error that lists the known ones."""
+    """The file of a published model, or ``name`` itself when it is a file (a run's own
+    checkpoint: ``trajpref models res/finetune.safetensors`` shows its header,
+    ``file_card``); an unknown name is an error that lists the known ones."""
     models = published(root)
     if name in models:
         return models[name]
+    if Path(name).is_file():
+        return Path(name)
     known = ", ".join(models) or "none (the package was built without its models)"
+    folder = " (a folder: name a checkpoint file in it)" if Path(name).is_dir() else ""
     raise TrajprefError(
-        f"{name}: neither a checkpoint file nor a published model; published: {known} "
+        f"{name}: neither a checkpoint file nor a published model{folder}; published: {known} "
         "(`trajpref models` describes them)"
     )
+
+
+def _published_name(path: Path, root: Path | None = None) -> str | None:
+    """The published name of a file of the zoo given by its path, or None."""
+    return next((n for n, f in published(root).items() if f.resolve() == path.resolve()), None)
 
 
 def load_index(root: Path | None = None) -> dict[str, dict[str, Any]]:
@@ -135,11 +145,89 @@ def _from_header(name: str, path: Path) -> dict[str, Any]:
 
 
 def card(name: str, root: Path | None = None) -> str:
-    """The model card (Markdown) of a published model."""
-    path = resolve(name, root).with_suffix(".md")
+    """The model card (Markdown) of a published model; for a checkpoint file that is not one
+    (a run's own, given by its path), what its header says (``file_card``)."""
+    path = resolve(name, root)
+    if name not in published(root):  # a file, by its path
+        name = _published_name(path, root) or ""
+        if not name:
+            return file_card(path)
+        path = published(root)[name]
+    path = path.with_suffix(".md")
     if not path.is_file():
         raise TrajprefError(f"{name}: published without a model card ({path.name})")
     return path.read_text()
+
+
+def entry(name: str, root: Path | None = None) -> dict[str, Any]:
+    """What ``trajpref models NAME --json`` prints: a published model's entry (``entries``),
+    or for a checkpoint file given by its path, what its header says (``_from_header``, with
+    its ``path`` and ``indexed: False``)."""
+    path = resolve(name, root)
+    found = next((e for e in entries(root) if e["name"] == name), None)
+    if found is None and _published_name(path, root) is not None:
+        found = next(e for e in entries(root) if e["name"] == _published_name(path, root))
+    if found is not None:
+        return found
+    head = header(path)
+    out = _from_header(str(path), path)
+    out.update(dataset=(head.get("meta") or {}).get("dataset", out["dataset"]), indexed=False,
+               path=str(path), hash=head.get("hash"))  # fmt: skip
+    return out
+
+
+def _val(values: dict[str, Any]) -> str:
+    """``min_ade 0.2990, min_fde 0.5380, score 1.23``: a validation's numbers."""
+    keys = [k for k in ("min_ade", "min_fde", "score") if isinstance(values.get(k), (int, float))]
+    return ", ".join(f"{k} {values[k]:.4g}" for k in keys) or "-"
+
+
+def file_card(path: Path) -> str:
+    """A short card (Markdown) of a checkpoint file that is not published (a run's own,
+    ``<stage>.safetensors``, ``_raw``, ``_epoch<E>``), from its header alone (its weights
+    are not read): what it is, what it was trained on, the epoch it kept with its validation,
+    where and how long it trained."""
+    head = header(path)
+    meta = head.get("meta") or {}
+    kind = head.get("kind", "?")
+    config = head.get("config") or {}
+    lines = [f"# {path}", ""]
+    what = f"A **{kind}** checkpoint"
+    if meta.get("method"):
+        reward = f" (reward `{meta['reward']}`)" if meta.get("reward") else ""
+        what += f" fine-tuned with `{meta['method']}`{reward}"
+        if meta.get("from"):
+            what += f" from the generator with weights hash `{meta['from']}`"
+    lines += [f"{what}: a training run's own file, not a published model (`trajpref models` "
+              f"lists those). Weights hash `{head.get('hash', '?')}`.", ""]  # fmt: skip
+    data = config.get("data") or {}
+    dataset = meta.get("dataset") or data.get("dataset")
+    if dataset:
+        digest = f" (data hash `{meta['data_hash']}`)" if meta.get("data_hash") else ""
+        lines.append(f"- Data: `{dataset}`{digest}.")
+    if "epoch" in meta:
+        kept = f"- Kept: epoch {meta['epoch']}, step {meta.get('step', '?')}"
+        if isinstance(meta.get("val"), dict):
+            kept += f"; its validation: {_val(meta['val'])}"
+        lines.append(kept + ".")
+    if meta.get("weights"):
+        lines.append(f"- Weights: {meta['weights']}.")
+    elif meta.get("ema_epochs"):
+        lines.append(f"- Weights: a moving average of the training iterates (ema_epochs "
+                     f"{meta['ema_epochs']:g}).")  # fmt: skip
+    if meta.get("machine") or meta.get("train_seconds") is not None:
+        processes = meta.get("processes", 1)
+        on = f" on {meta['machine']}" if meta.get("machine") else ""
+        spent = meta.get("train_seconds")
+        took = f"{spent / 60:.1f} min of training steps" if spent is not None else "trained"
+        lines.append(f"- Trained{on}, {processes} process(es): {took} to the kept epoch.")
+    model = config.get("model") or {}
+    if kind == "generator" and "samples" in model:
+        lines.append(f"- Samples K = {model['samples']}, tau = {model.get('tau', '?')}.")
+    stage = path.name.partition(".")[0].partition("_")[0]  # finetune_raw -> finetune
+    lines += ["", f"Its run folder holds the run's config (`{stage}_config.yaml`), metrics log "
+              f"and run record. `trajpref evaluate --model {path}` tests it.", ""]  # fmt: skip
+    return "\n".join(lines)
 
 
 def _minutes(train: dict[str, Any]) -> str:

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -314,6 +316,59 @@ def _check_file_under_preset(cfg: ExperimentConfig, config: str | Path, base: di
         )
 
 
+UNREAD_SHOWN = 6
+"""How many of a ``--config`` file's unread values ``unread_file_note`` names (then a count)."""
+
+
+def _as_yaml(value: Any) -> str:
+    """A value as a ``--set`` takes it: ``true``, ``null``, ``0.5``, ``eth``."""
+    return yaml.safe_dump(value, default_flow_style=True).strip().removesuffix("...").strip()
+
+
+def unread_file_note(config: str | Path, cfg: ExperimentConfig, method: str,
+                     overrides: list[str]) -> str | None:  # fmt: skip
+    """The one line that says what a fine-tuning run's ``--config`` file gives that the run
+    does not read (None when it reads all of it): its values of the data, network, noise
+    schedule and seed that differ from the run's (the start's, or ``overrides``'; a key the
+    overrides name is theirs), its ``finetune.method`` where ``--method`` chooses another,
+    and that a file without a finetune section changes nothing. The pretraining stages'
+    sections are the start's training and are not named."""
+    path = resolve_config(config)
+    loaded = yaml.safe_load(path.read_text()) or {}
+    if not isinstance(loaded, dict):
+        return None
+    shown = str(config) if Path(config).suffix else path.name  # a shipped name: eth.yaml
+    named, now = _override_keys(overrides), to_dict(cfg)
+    unread = []
+    for section, value in loaded.items():
+        if section in ("data", "model", "diffusion") and isinstance(value, dict):
+            for key, given in value.items():
+                if f"{section}.{key}" not in named and given != now[section].get(key):
+                    unread.append(f"{section}.{key}={_as_yaml(given)} (the run's: "
+                                  f"{_as_yaml(now[section].get(key))})")  # fmt: skip
+        elif section == "seed" and "seed" not in named and value != cfg.seed:
+            unread.append(f"seed={value} (the run's: {cfg.seed}; --seed {value} sets it)")
+    own = loaded.get("finetune")
+    if isinstance(own, dict) and own.get("method", method) != method:
+        unread.append(f"finetune.method={own['method']} (--method {method} chooses the method)")
+    if isinstance(own, dict) and not unread:
+        return None
+    head = f"{shown}: fine-tuning reads a --config file's finetune section alone"
+    if not isinstance(own, dict):
+        head += " and this file has none, so it changes nothing in this run"
+    if not unread:
+        return head
+    more = len(unread) - UNREAD_SHOWN
+    listed = ", ".join(unread[:UNREAD_SHOWN]) + (f" and {more} more" if more > 0 else "")
+    advice = []
+    if any(u.startswith(("data.", "seed=")) for u in unread):
+        advice.append("the data and the seed are set with --set data.KEY=VALUE and --seed")
+    if any(u.startswith(("model.", "diffusion.")) for u in unread):
+        advice.append("the network and its noise schedule (model.*, diffusion.*) are the "
+                      "start's")  # fmt: skip
+    return f"{head}; not read: {listed}" + (f" ({'; '.join(advice)})" if advice else "")
+
+
 def finetune_config(
     start: str | Path | dict[str, Any],
     method: str,
@@ -338,7 +393,9 @@ def finetune_config(
     settings leave unread (``READ_WHEN``: e.g. ``set_bandwidth`` without ``reward=set``),
     RLHF-ReS with the set-aware reward, a ``config`` file that gives a key of the preset
     another value (the preset would replace it), and any ``model.*`` or ``diffusion.*``
-    change (the network is the start's)."""
+    change (the network is the start's). A ``config`` file's values that the run does not
+    read (its other sections, a method other than ``method``) are named in one warning
+    (``unread_file_note``; on the first process alone under torchrun)."""
     payload = start if isinstance(start, dict) else checkpoint.load(start)
     if payload["kind"] != "generator":
         where = "the start" if isinstance(start, dict) else str(start)
@@ -377,7 +434,11 @@ def finetune_config(
             )
     _check_reads(cfg, method, overrides or [], preset)
     if preset and config is not None:
-        # --method wins over a file's method, with or without a preset
+        # --method wins over a file's method, with or without a preset (the note names it)
         preset_keys = _override_keys(preset_overrides(preset, method)) - {"finetune.method"}
         _check_file_under_preset(cfg, config, base, preset_keys, overrides or [])
+    if config is not None and os.environ.get("RANK", "0") == "0":
+        note = unread_file_note(config, cfg, method, overrides or [])
+        if note is not None:
+            warnings.warn(note, stacklevel=2)
     return cfg

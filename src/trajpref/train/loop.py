@@ -14,6 +14,7 @@ import itertools
 import json
 import math
 import os
+import re
 import shutil
 import sys
 import time
@@ -42,32 +43,68 @@ RUN_FILES = ("metrics.jsonl", "run.json")
 sessions (``<stage>_run.json``, ``train.run.record_session``). A run started anew in the same
 folder moves them aside (``set_aside``) rather than appending to another run's."""
 
+RUN_STATE = (*RUN_FILES, "last.pt")
+"""A run's log, record and resume state (``<stage>_<name>``)."""
 
-def set_aside(out_dir: str | Path, stage: str, names: tuple[str, ...] = RUN_FILES) -> list[str]:
-    """Move an earlier run's ``<stage>_<name>`` files (of ``names``, those that exist) to
-    ``<stage>_metrics.replaced-<k>.jsonl``, ``<stage>_run.replaced-<k>.json`` (and
-    ``<stage>_last.replaced-<k>.pt``): one ``k`` for all, free for every file of ``RUN_FILES``
-    and ``names``, so that a log, its record and its state stay paired. Says so on stderr;
-    returns the new names."""
+
+def checkpoint_files(out_dir: str | Path, stage: str) -> list[str]:
+    """The names of the checkpoints that ``fit`` writes for ``stage`` in ``out_dir`` and that
+    exist there: ``<stage>.safetensors`` (the best), ``<stage>_raw.safetensors`` (the best raw
+    weights, with ``ema_epochs``) and ``<stage>_epoch<E>.safetensors`` (``keep_checkpoints``);
+    never one already set aside (``.replaced-<k>.``)."""
     out_dir = Path(out_dir)
-    present = [n for n in names if (out_dir / f"{stage}_{n}").exists()]
-    if not present:
+    epoch = re.compile(rf"{re.escape(stage)}_epoch\d+{re.escape(ckpt.SUFFIX)}")
+    names = [f"{stage}{ckpt.SUFFIX}", f"{stage}_raw{ckpt.SUFFIX}"]
+    names += sorted(p.name for p in out_dir.glob(f"{stage}_epoch*{ckpt.SUFFIX}")
+                    if epoch.fullmatch(p.name))  # fmt: skip
+    return [n for n in names if (out_dir / n).is_file()]
+
+
+def _aside_name(name: str, k: int) -> str:
+    """``metrics.jsonl`` -> ``metrics.replaced-<k>.jsonl`` (the first dot's place)."""
+    stem, _, ext = name.partition(".")
+    return f"{stem}.replaced-{k}.{ext}"
+
+
+def set_aside(out_dir: str | Path, stage: str, names: tuple[str, ...] = RUN_FILES,
+              checkpoints: bool = False) -> list[str]:  # fmt: skip
+    """Move an earlier run's ``<stage>_<name>`` files (of ``names``, those that exist), and
+    with ``checkpoints`` its checkpoints (``checkpoint_files``), out of the way of a new run:
+    ``<stage>_metrics.jsonl`` to ``<stage>_metrics.replaced-<k>.jsonl``, ``<stage>_run.json``
+    to ``<stage>_run.replaced-<k>.json``, ``<stage>_last.pt`` to
+    ``<stage>_last.replaced-<k>.pt``, ``<stage>.safetensors`` to
+    ``<stage>.replaced-<k>.safetensors``, ``<stage>_raw.safetensors`` and
+    ``<stage>_epoch<E>.safetensors`` alike: one ``k`` for all, free for every one of them (and
+    of ``RUN_STATE`` and the best checkpoints), so that a run's log, record, state and
+    checkpoints stay paired, and no file of the earlier run is left to be read as the new
+    run's. Says so on stderr; returns the new names."""
+    out_dir = Path(out_dir)
+    files = [f"{stage}_{n}" for n in names if (out_dir / f"{stage}_{n}").exists()]
+    models = checkpoint_files(out_dir, stage) if checkpoints else []
+    if not files and not models:
         return []
-
-    def aside(name: str, k: int) -> Path:  # metrics.jsonl -> metrics.replaced-<k>.jsonl
-        stem, _, ext = name.partition(".")
-        return out_dir / f"{stage}_{stem}.replaced-{k}.{ext}"
-
+    every = {f"{stage}_{n}" for n in (*RUN_STATE, *names)}
+    every |= {f"{stage}{ckpt.SUFFIX}", f"{stage}_raw{ckpt.SUFFIX}", *files, *models}
     k = 1
-    while any(aside(n, k).exists() for n in (*RUN_FILES, *names)):
+    while any((out_dir / _aside_name(n, k)).exists() for n in every):
         k += 1
-    moved = []
-    for name in present:
-        (out_dir / f"{stage}_{name}").rename(aside(name, k))
-        moved.append(aside(name, k).name)
-    print(f"[{stage}] {out_dir} held an earlier run: moved aside to {' and '.join(moved)}; "
-          "its other files are replaced as this run writes", file=sys.stderr)  # fmt: skip
-    return moved
+    for name in (*files, *models):
+        (out_dir / name).rename(out_dir / _aside_name(name, k))
+    moved = [_aside_name(n, k) for n in files]
+    kept = [_aside_name(n, k) for n in models]
+    epochs = [n for n in kept if "_epoch" in n]
+    if len(epochs) > 2:  # the kept epochs' checkpoints, counted
+        kept = [n for n in kept if n not in epochs]
+        kept.append(f"{len(epochs)} {stage}_epoch<E>.replaced-{k}{ckpt.SUFFIX}")
+    what = []
+    if moved:
+        what.append(f"moved aside to {' and '.join(moved)}")
+    if kept:
+        listed = ", ".join(kept[:-1]) + (" and " if kept[:-1] else "") + kept[-1]
+        what.append(f"{'and ' if moved else 'moved '}its checkpoints to {listed}")
+    print(f"[{stage}] {out_dir} held an earlier run: {', '.join(what)}; this run writes its "
+          "own", file=sys.stderr)  # fmt: skip
+    return [*moved, *(_aside_name(n, k) for n in models)]
 
 
 class MetricLog:
@@ -170,19 +207,25 @@ def _lr_lambda(
 def warmup_note(name: str, cfg: OptimConfig, total: int) -> str | None:
     """A line for a stage ``name`` whose linear warm-up lasts as long as its ``total``
     optimiser steps or longer (a config written for a larger dataset, run on a small one:
-    ``warmup_steps`` 200 at 3 steps an epoch), so that the learning rate never reaches its
-    peak and never decays, with the numbers and the setting that shortens it; None for any
-    other (a warm-up that ends before the run does, fine-tuning's default 20 of 36 steps among
-    them, is a schedule of its own). The schedule itself is left as the config says."""
+    ``warmup_steps`` 200 at 3 steps an epoch), so that the learning rate reaches its peak at
+    the last step at best and never decays, with the numbers and the setting that shortens it;
+    None for any other (a warm-up that ends before the run does, fine-tuning's default 20 of 36
+    steps among them, is a schedule of its own), and for a warm-up of one step or none, which
+    runs its first step at the full rate and leaves nothing to shorten. The schedule itself is
+    left as the config says."""
     warm = cfg.warmup_steps
-    if warm < total or total <= 0:
+    if warm <= 1 or warm < total or total <= 0:
         return None
-    tenth = max(1, total // 10)
+    tenth = max(1, total // 10)  # < warm: warm >= 2 and warm >= total
+    if warm == total:
+        reach = f"reaches {name}.lr={cfg.lr:g} only at the last step"
+    else:
+        reach = (f"never reaches {name}.lr={cfg.lr:g} (it climbs to about "
+                 f"{cfg.lr * total / warm:.2g})")  # fmt: skip
     return (f"[{name}] the warm-up ({name}.warmup_steps={warm}) lasts all of this run's "
-            f"{total} optimiser steps: the learning rate never reaches {name}.lr={cfg.lr:g} "
-            f"(it climbs to about {cfg.lr * total / warm:.2g}) and never decays; a shorter "
-            f"warm-up: --set {name}.warmup_steps=N (e.g. N={tenth}, a tenth of the "
-            "steps)")  # fmt: skip
+            f"{total} optimiser steps: the learning rate {reach} and never decays; a shorter "
+            f"warm-up: --set {name}.warmup_steps=N (e.g. N={tenth}"
+            f"{', a tenth of the steps' if total >= 10 else ''})")  # fmt: skip
 
 
 def _budget_share(seconds: float, cfg: OptimConfig, dist_info: DistInfo,
@@ -457,6 +500,7 @@ def fit(
     max_steps: int | None = None,
     identity: str | None = None,
     run_meta: dict[str, Any] | None = None,
+    equal_budget: float | None = None,
 ) -> dict[str, Any]:
     """Train ``stage`` and keep the checkpoint with the best validation ``score``.
 
@@ -468,6 +512,9 @@ def fit(
     (for tests). ``identity`` (what the run is: its config and start, as text) is kept in the
     resume state, so that a resume can be checked against it (``train.run``); ``run_meta`` is
     recorded with every checkpoint beside its validation (``train.run``: the data's digest).
+    ``equal_budget``: the minutes of ``finetune --equal-budget`` that set ``max_minutes``
+    (``rl.presets.equal_budget_overrides``), for the advice of a run its budget ended: that
+    option, not the ``--set`` keys it refuses beside it.
 
     A stage with ``validate_start`` (fine-tuning) validates its start once, before its first
     step, on the same scenes: logged first as ``"epoch": 0, "start": true`` (never a kept
@@ -745,14 +792,23 @@ def fit(
     budget_reached = (optim_cfg.max_minutes is not None and step < total
                       and spent >= 60 * optim_cfg.max_minutes)  # fmt: skip
     if budget_reached and main:
-        how = ("annealed to it (budget_schedule)" if optim_cfg.budget_schedule
-               else "cut mid-schedule (budget_schedule is off)")  # fmt: skip
-        unset = f"--set {stage.name}.max_minutes=null --set {stage.name}.budget_schedule=false"
-        more = spent / max(1, step) * (total - step) / 60  # minutes at this pace
-        tqdm.write(f"[{stage.name}] the time budget of {optim_cfg.max_minutes:g} min "
-                   f"({optim_cfg.budget_clock} clock) ended the stage after {step} of its "
-                   f"{total} steps, {how}; to train every step (about {_duration(more)} more "
-                   f"at this pace): {unset}")  # fmt: skip
+        if equal_budget is not None:  # the protocol's budget ends every run, by design
+            tqdm.write(f"[{stage.name}] the equal budget (--equal-budget {equal_budget:g}: "
+                       f"{optim_cfg.max_minutes:g} min of {optim_cfg.budget_clock} time on "
+                       f"training steps) ended the stage after {step} step"
+                       f"{'s' * (step != 1)}, as the protocol "
+                       "does; to train longer, resume with a larger --equal-budget (and give "
+                       "every method you compare the same)")  # fmt: skip
+        else:
+            how = ("annealed to it (budget_schedule)" if optim_cfg.budget_schedule
+                   else "cut mid-schedule (budget_schedule is off)")  # fmt: skip
+            unset = (f"--set {stage.name}.max_minutes=null --set "
+                     f"{stage.name}.budget_schedule=false")  # fmt: skip
+            more = spent / max(1, step) * (total - step) / 60  # minutes at this pace
+            tqdm.write(f"[{stage.name}] the time budget of {optim_cfg.max_minutes:g} min "
+                       f"({optim_cfg.budget_clock} clock) ended the stage after {step} of its "
+                       f"{total} steps, {how}; to train every step (about {_duration(more)} "
+                       f"more at this pace): {unset}")  # fmt: skip
     if start_val is not None and "epoch" in best and main:
         tqdm.write(f"[{stage.name}] kept epoch {best['epoch']} against its start (epoch 0, the "
                    f"same validation scenes): {against_start(best, start_val)}")  # fmt: skip

@@ -7,6 +7,7 @@ import dataclasses
 import hashlib
 import json
 import os
+import re
 import shlex
 import sys
 import time
@@ -37,7 +38,7 @@ from trajpref.train.distributed import (
     launcher_command,
 )
 from trajpref.train.loop import (
-    RUN_FILES,
+    RUN_STATE,
     check_resume_matches,
     fit,
     load_resume_state,
@@ -250,13 +251,15 @@ def resume_command(out_dir: str | Path, name: str, resume: str | Path) -> str | 
 
 
 def check_resume(state: dict[str, Any], identity: str, epochs: int, out_dir: Path,
-                 resume: str | Path, name: str,
-                 max_minutes: float | None = None) -> None:  # fmt: skip
+                 resume: str | Path, name: str, max_minutes: float | None = None,
+                 equal_budget: float | None = None) -> None:  # fmt: skip
     """A resume state belongs to this run folder, was written by a run of the same config and
     start (``run_identity``; states older than the record are not checked; the data are
     checked apart, ``check_resume_data``) and has something left to train: epochs, and with
     ``max_minutes`` time in its budget; else a one-line ``ConfigError`` before anything is
-    written. A changed config is refused with the command that started the run (its run
+    written (``equal_budget``: the ``--equal-budget`` minutes that set ``max_minutes``, which a
+    spent budget's advice names). A changed config is refused with the command that started
+    the run (its run
     record), which restores every option; the pretraining stages also name their
     ``<name>_config.yaml``, which their ``--config`` reads whole (fine-tuning's ``--config``
     reads only the finetune section)."""
@@ -287,24 +290,28 @@ def check_resume(state: dict[str, Any], identity: str, epochs: int, out_dir: Pat
             raise ConfigError(f"--resume {resume}: this run differs from the one that wrote the "
                               f"state ({_shown(changed)}); resume with {how}; only {name}."
                               f"{{{','.join(RESUME_FREE)}}} may change")  # fmt: skip
-    why = _nothing_left(state, epochs, max_minutes, name)
+    why = _nothing_left(state, epochs, max_minutes, name, equal_budget)
     if why is not None:
         raise ConfigError(f"--resume {resume}: {why}")
 
 
 def _nothing_left(state: dict[str, Any], epochs: int, max_minutes: float | None,
-                  name: str) -> str | None:  # fmt: skip
+                  name: str, equal_budget: float | None = None) -> str | None:  # fmt: skip
     """Why a resume state of stage ``name`` has nothing left to train under ``epochs`` and
-    ``max_minutes`` (its epochs done, or its budget spent), or None when it has."""
+    ``max_minutes`` (its epochs done, or its budget spent), or None when it has. A budget set
+    by ``finetune --equal-budget`` (``equal_budget``) is raised with that option, which refuses
+    a ``--set`` of ``max_minutes`` beside it."""
     done = int(state["epoch"]) + 1
     if done >= epochs:
         return (f"the state has finished {done} epochs and this run has {epochs}: nothing left "
                 f"to train (raise {name}.epochs to train longer)")  # fmt: skip
     spent = float(state.get("spent", state.get("elapsed", 0.0)))  # the budget clock's seconds
     if max_minutes is not None and spent >= 60 * max_minutes:
+        how = (f"raise {name}.max_minutes to train longer" if equal_budget is None else
+               f"resume with --equal-budget above {equal_budget:g} to train longer: it sets "
+               f"{name}.max_minutes")  # fmt: skip
         return (f"the budget of {max_minutes:g} min is spent (the state has trained "
-                f"{spent / 60:.3g} min): nothing left to train (raise {name}.max_minutes to "
-                "train longer)")  # fmt: skip
+                f"{spent / 60:.3g} min): nothing left to train ({how})")  # fmt: skip
     return None
 
 
@@ -481,6 +488,7 @@ def _run(
     build,
     name: str,
     start: str | None = None,
+    equal_budget: float | None = None,
 ) -> dict[str, Any]:
     """What every stage shares: devices and DDP, the datasets, the run folder's config, the
     loop. ``build(train, val, device) -> (Stage, OptimConfig)`` supplies the stage ``name``;
@@ -490,7 +498,9 @@ def _run(
     The run folder and the resume state are checked before any data is read, the data the
     state was trained on once they are read, and all before anything is written (a failed
     check leaves nothing behind). A new run in a folder that holds another's moves that run's
-    metrics log and run record aside (``loop.set_aside``)."""
+    metrics log, run record, resume state and checkpoints of stage ``name`` aside
+    (``loop.set_aside``). ``equal_budget``: the minutes of ``finetune --equal-budget``, for its
+    advice (``fit``) and a note when the process has more than one thread."""
     check_output_dir(out_dir)
     out_dir = Path(out_dir)
     section = getattr(cfg, name)
@@ -498,11 +508,13 @@ def _run(
     if resume is not None:
         state = load_resume_state(resume, name)
         check_resume(state, run_identity(cfg, name, start), section.epochs, out_dir, resume,
-                     name, section.max_minutes)  # fmt: skip
+                     name, section.max_minutes, equal_budget)  # fmt: skip
         check_resume_processes(state, out_dir, name, resume)
     dev = resolve_device(device)
     info, dev = init_from_env(dev)
     set_threads(info)
+    if equal_budget is not None and info.is_main and torch.get_num_threads() > 1:
+        print(equal_budget_threads_note(torch.get_num_threads()), file=sys.stderr)
     try:
         train, val = run_splits(cfg.data, data_root)
         data = data_fingerprint(train, val)
@@ -517,8 +529,8 @@ def _run(
             check_resume_matches(state, built.trainable, resume, optim.ema_epochs > 0)
         if info.is_main:
             out_dir.mkdir(parents=True, exist_ok=True)
-            if state is None:  # another run's log, record and resume state are not this run's
-                set_aside(out_dir, name, (*RUN_FILES, "last.pt"))
+            if state is None:  # another run's log, record, state and checkpoints: not this run's
+                set_aside(out_dir, name, RUN_STATE, checkpoints=True)
             for path in (out_dir / "config.yaml", out_dir / f"{name}_config.yaml"):
                 save_config(cfg, path)  # the run's last stage's; this stage's, kept
                 if info.enabled:
@@ -535,8 +547,8 @@ def _run(
         start_time = time.perf_counter()
         summary = fit(built, train, cfg.data, optim, out_dir, dev, cfg.seed, state, info,
                       progress, max_steps, run_identity(cfg, name, start, data),
-                      {"data_hash": data_digest(data),
-                       "data_timing": data_timing(train)})  # fmt: skip
+                      {"data_hash": data_digest(data), "data_timing": data_timing(train)},
+                      equal_budget)  # fmt: skip
         summary["wall_seconds"] = time.perf_counter() - start_time
         barrier(info)  # every rank done (rank 0 may still have been writing) before teardown
         summary["train_agents"] = train.num_agents
@@ -611,6 +623,30 @@ def check_config_of_start(cfg: ExperimentConfig, payload: dict[str, Any],
                 )
 
 
+def equal_budget_threads_note(threads: int) -> str:
+    """The line that ``finetune --equal-budget`` prints on more than one thread."""
+    return (f"[finetune] --equal-budget on {threads} threads: the budget counts this process's "
+            "CPU time on all of them, so the steps it buys depend on how well each method's "
+            "steps use the threads, and the runs do not compare with the equal-budget table's "
+            "(one thread each); run each method on one thread (OMP_NUM_THREADS=1)")  # fmt: skip
+
+
+OWN_OUTPUT = re.compile(rf"finetune(_raw|_epoch\d+)?{re.escape(ckpt.SUFFIX)}")
+"""The names of the checkpoints a fine-tuning run writes in its folder (``loop.fit``)."""
+
+
+def _check_start_not_output(start: str | Path, out_dir: str | Path) -> None:
+    """A start that is one of the fine-tuning checkpoints in ``out_dir`` (a run fine-tuned
+    again in its own folder) is refused: the new run moves it aside (a resumed one writes over
+    it), and its record would name a file that no longer holds the start."""
+    path = ckpt.resolve_path(start)
+    if path.resolve().parent == Path(out_dir).resolve() and OWN_OUTPUT.fullmatch(path.name):
+        raise ConfigError(f"--from {start}: a checkpoint of the fine-tuning run in {out_dir}, "
+                          "which this run there replaces (it moves the folder's finetune "
+                          "checkpoints aside, or writes over them when it resumes): copy it "
+                          "out of the folder first, or choose another --out")  # fmt: skip
+
+
 def finetune(
     cfg: ExperimentConfig,
     start: str | Path,
@@ -620,12 +656,18 @@ def finetune(
     resume: str | None = None,
     progress: bool = True,
     max_steps: int | None = None,
+    equal_budget: float | None = None,
 ) -> dict[str, Any]:
     """RLHF / RLHF-ReS fine-tuning from the generator checkpoint ``start`` (DDP-aware);
     ``cfg`` comes from ``rl.presets.finetune_config`` with the same ``start``: its network
     and noise schedule (``model``, ``diffusion``) must be the start's, or a ``ConfigError``
-    names the first difference before anything is written."""
+    names the first difference before anything is written. ``equal_budget``: the minutes
+    ``cfg`` was resolved with (``finetune_config(equal_budget=...)``, ``--equal-budget``): a
+    run its budget ended, or a resume with the budget spent, then names that option rather
+    than the ``--set finetune.max_minutes`` it refuses, and a process of more than one thread
+    says that the protocol's runs take one."""
     cfg = with_absolute_folders(cfg)
+    _check_start_not_output(start, out_dir)
     payload = ckpt.load(start)
     if payload["kind"] != "generator":
         raise ConfigError(f"{start}: fine-tuning starts from a generator checkpoint")
@@ -638,4 +680,4 @@ def finetune(
         return build_finetune_stage(cfg, payload, val, dev), cfg.finetune
 
     return _run(cfg, out_dir, data_root, device, resume, progress, max_steps, build,
-                STAGE_NAMES["finetune"], payload.get("hash"))  # fmt: skip
+                STAGE_NAMES["finetune"], payload.get("hash"), equal_budget)  # fmt: skip

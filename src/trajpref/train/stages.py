@@ -28,7 +28,9 @@ from trajpref.models.encoder import scene_features
 from trajpref.models.generator import Generator
 from trajpref.models.losses import denoiser_loss, generator_loss, wta_temperature
 from trajpref.models.predictor import DiffusionPredictor
+from trajpref.models.timing import lineage_entry, training_lineage
 from trajpref.rl.objective import RLObjective
+from trajpref.rl.presets import PAPER_WEIGHTS, PRESETS
 from trajpref.score.scorer import TrajectoryScorer
 from trajpref.types import Batch, TrajectoryDataset
 
@@ -84,6 +86,37 @@ def data_scale(dataset: TrajectoryDataset) -> float:
         total += float((rel.astype("float64") ** 2).sum())
         count += rel.size
     return max(1e-3, (total / max(1, count)) ** 0.5)
+
+
+def trained_on(cfg: ExperimentConfig, stage: str,
+               before: dict[str, Any] | None = None) -> list[dict[str, Any]]:  # fmt: skip
+    """What a checkpoint of ``stage`` (``denoiser``, ``generator``, ``finetune``) records in
+    its meta as ``trained_on``: the training lineage of the checkpoint it builds on (``before``:
+    the generator's denoiser, the fine-tune's start; ``models.timing.training_lineage``, which
+    reads a file written before the record from its config), then this run's data
+    (``timing.lineage_entry``). The fold-overlap and own-windows checks read every entry: a
+    fine-tune of a zara1 generator on eth has seen zara1's windows, whatever its
+    ``data.dataset``."""
+    earlier = training_lineage(before) if before is not None else []
+    return [*earlier, lineage_entry(cfg.data, stage)]
+
+
+def finetune_preset(finetune: Any) -> str | None:
+    """The preset (``rl.presets.PRESETS``) whose every value a fine-tuning config holds
+    (``finetune``: a ``config.FinetuneConfig`` or its dict), with the method's policy and value
+    weights (``PAPER_WEIGHTS``) as ``--preset`` sets them; None for any other (the default, a
+    preset with a value changed, the control). A fine-tune's meta records it (``preset``) and
+    ``evaluate --json`` shows it (``finetune_preset``): ``kl_form`` alone told a ``--preset
+    paper`` run from a default one."""
+    values = dataclasses.asdict(finetune) if dataclasses.is_dataclass(finetune) else finetune
+    if not isinstance(values, dict) or values.get("method") not in PAPER_WEIGHTS:
+        return None
+    policy, value = PAPER_WEIGHTS[values["method"]]
+    for name, preset in PRESETS.items():
+        wanted = {**preset, "policy_weight": policy, "value_weight": value}
+        if all(k in values and values[k] == v for k, v in wanted.items()):
+            return name
+    return None
 
 
 def _leapfrog_validation(predictor: DiffusionPredictor, val: TrajectoryDataset, samples: int,
@@ -163,8 +196,10 @@ def build_denoiser_stage(
                 agents += batch.num_agents
         return {"denoise_loss": total / agents, "score": total / agents}
 
+    lineage = trained_on(cfg, "denoiser")
+
     def payload(meta: dict[str, Any]) -> dict[str, Any]:
-        return ckpt.denoiser_payload(denoiser, cfg, scale, meta)
+        return ckpt.denoiser_payload(denoiser, cfg, scale, {**meta, "trained_on": lineage})
 
     return Stage("denoiser", objective, denoiser, validate, payload,
                  networks=(denoiser,)), scale  # fmt: skip
@@ -256,8 +291,11 @@ def build_generator_stage(
     validate = _leapfrog_validation(sampler, val_set, cfg.model.samples, cfg.data.max_agents,
                                     device)  # fmt: skip
 
+    lineage = trained_on(cfg, "generator", denoiser_payload)
+
     def payload(meta: dict[str, Any]) -> dict[str, Any]:
-        return ckpt.generator_payload(generator, denoiser_payload, cfg, meta)
+        return ckpt.generator_payload(generator, denoiser_payload, cfg,
+                                      {**meta, "trained_on": lineage})  # fmt: skip
 
     return Stage("generator", objective, generator, validate, payload,
                  on_progress=objective.set_progress,
@@ -302,8 +340,12 @@ def build_finetune_stage(
     validate = _leapfrog_validation(sampler, val_set, cfg.model.samples, cfg.data.max_agents,
                                     device, metric_scorer, keys)  # fmt: skip
 
+    lineage = trained_on(cfg, "finetune", start)
+    preset = finetune_preset(cfg.finetune)
+
     def payload(meta: dict[str, Any]) -> dict[str, Any]:
-        meta = {**meta, "method": cfg.finetune.method, "from": start.get("hash")}
+        meta = {**meta, "method": cfg.finetune.method, "preset": preset,
+                "from": start.get("hash"), "trained_on": lineage}  # fmt: skip
         return ckpt.generator_payload(sampler.generator, start["denoiser"], cfg, meta, critic)
 
     epochs = cfg.finetune.ppo_epochs if cfg.finetune.method != "control" else 1
