@@ -426,15 +426,19 @@ def test_predict_and_evaluate_refuse_torchrun_and_rank_0_alone_says_why(
     assert (code, stdout, err) == (2, "", "")
 
 
-def test_an_error_every_rank_meets_is_printed_by_rank_0_only(capsys, monkeypatch, folder,
-                                                             tmp_path):  # fmt: skip
+def test_an_error_is_printed_by_every_rank_that_meets_it(capsys, monkeypatch, folder, tmp_path):
+    """Every rank prints its own error, ranks above 0 with their number: an error only rank 1
+    met (a file missing on its machine) showed nothing but torchrun's exit code."""
     argv = ["train", "diffusion", "--dataset", folder, "--set", "denoiser.epoch=2",
             "--out", tmp_path / "r", "--no-progress"]  # fmt: skip
     _torchrun_env(monkeypatch, rank=1)
-    assert _run(capsys, *argv) == (2, "", "")
+    code, out, err = _run(capsys, *argv)
+    assert (code, out) == (2, "") and err.startswith("trajpref: error: [rank 1] ")
+    assert err.count("trajpref: error:") == 1 and "denoiser.epochs" in err
     _torchrun_env(monkeypatch, rank=0)
     code, _, err = _run(capsys, *argv)
     assert code == 2 and err.count("trajpref: error:") == 1 and "denoiser.epochs" in err
+    assert "[rank" not in err
 
 
 def _state_then(exc_or_signal):

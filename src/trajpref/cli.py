@@ -116,11 +116,13 @@ from trajpref.score.selection import (
 from trajpref.survey.cli import add_parser as add_survey_parser
 from trajpref.train import compare
 from trajpref.train.distributed import (
+    EveryRankError,
     env_info,
     fallback_launcher,
     launcher_command,
     launcher_note,
 )
+from trajpref.train.loop import Terminated
 from trajpref.train.run import (
     STAGE_NAMES,
     cli_resume_command,
@@ -2367,11 +2369,9 @@ TRAINING = ("train", "finetune")
 """The commands that run under torchrun (each process a rank); the others run in one."""
 
 
-class Terminated(Exception):
-    """SIGTERM (a scheduler's cancel or preemption, forwarded by torchrun) during training."""
-
-
 def _raise_terminated(signum, frame) -> None:
+    """SIGTERM during training: ``Terminated`` (``train.loop``; a BaseException, as Ctrl-C's
+    KeyboardInterrupt, so that neither an ``except Exception`` nor a finalizer drops it)."""
     raise Terminated
 
 
@@ -2416,9 +2416,13 @@ def main(argv: list[str] | None = None) -> int:
         with warnings.catch_warnings():
             warnings.showwarning = _one_line_warning  # restored when the command ends
             return args.func(args)
-    except TrajprefError as exc:  # the same on every rank (input, config, data)
+    except TrajprefError as exc:
+        # under torchrun each rank says what it met (one rank's own: a file missing on its
+        # machine), prefixed with its rank; what every rank raises alike, rank 0 alone
         if main_rank:
             print(f"trajpref: error: {exc}", file=sys.stderr)
+        elif not isinstance(exc, EveryRankError):
+            print(f"trajpref: error: [rank {os.environ.get('RANK')}] {exc}", file=sys.stderr)
         return 2
     except Terminated:
         if main_rank:

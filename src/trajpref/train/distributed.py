@@ -34,6 +34,13 @@ repository took 47.6 s (a fine-tuning validation on two CPU cores, runs/ac_57), 
 leaves a 75-fold margin and still ends a hung run within the hour."""
 
 
+class EveryRankError(ConfigError):
+    """A ``ConfigError`` that every rank of a launch raises alike: from what the ranks share
+    (the launch's process count) or have compared with each other (``gather_objects``:
+    ``train.run.check_same_run``). Rank 0 alone prints it (``cli.main``); a ``ConfigError`` of
+    one rank's own (a file missing on its machine) is printed by that rank."""
+
+
 @dataclass
 class DistInfo:
     rank: int = 0
@@ -160,13 +167,21 @@ class RankBatches:
             else:
                 yield idx[mine], int(sizes[mine].sum()), total
 
-    def idle_batches(self) -> int:
-        """How many batches of the current epoch leave some rank without a scene."""
+    def idle_batches(self, epoch: int = 0, limit: int | None = None) -> int:
+        """How many of epoch ``epoch``'s batches leave some rank without a scene: of its first
+        ``limit`` (the steps a stage takes of an epoch), or of all of them. Each epoch's
+        shuffle makes its own batches, so the count is that epoch's."""
         if not self.info.enabled:
             return 0
+        before = self.loader.epoch
+        self.loader.set_epoch(epoch)
+        try:
+            batches = self.loader.batches()[:limit]
+        finally:
+            self.loader.set_epoch(before)
         return sum(
             any(len(s) == 0 for s in split_batch(self.sizes[idx], self.info.world_size))
-            for idx in self.loader.batches()
+            for idx in batches
         )
 
     def __iter__(self) -> Iterator[tuple[Batch, int, int]]:
@@ -174,16 +189,31 @@ class RankBatches:
             yield collate([self.scenes[i] for i in idx]), agents, total
 
 
+def gather_objects(value: Any, info: DistInfo) -> list[Any]:
+    """Every rank's ``value`` (anything picklable, small), in rank order: a collective (every
+    rank calls it); with one process, ``[value]``."""
+    if not info.enabled:
+        return [value]
+    gathered: list[Any] = [None] * info.world_size
+    dist.all_gather_object(gathered, value)
+    return gathered
+
+
+def largest(value: float, info: DistInfo, device: torch.device) -> float:
+    """The largest of the ranks' ``value``: a collective (every rank calls it); with one
+    process, ``value``."""
+    if not info.enabled:
+        return value
+    t = torch.tensor(value, dtype=torch.float64, device=device)
+    dist.all_reduce(t, op=dist.ReduceOp.MAX)
+    return float(t)
+
+
 def gather_generators(generators: dict[str, torch.Generator],
                       info: DistInfo) -> list[dict[str, torch.Tensor]]:  # fmt: skip
     """Every rank's states of its random ``generators`` (name -> generator), in rank order:
     a collective (every rank calls it); with one process, its own."""
-    own = {name: g.get_state() for name, g in generators.items()}
-    if not info.enabled:
-        return [own]
-    gathered: list[Any] = [None] * info.world_size
-    dist.all_gather_object(gathered, own)
-    return gathered
+    return gather_objects({name: g.get_state() for name, g in generators.items()}, info)
 
 
 def launcher_command() -> list[str] | None:

@@ -33,7 +33,7 @@ from trajpref.errors import ConfigError, TrajprefError
 from trajpref.io import atomic_path, bar_options, dumps_json, load_tensors
 from trajpref.models import checkpoint as ckpt
 from trajpref.results import machine
-from trajpref.train.distributed import DistInfo, RankBatches, gather_generators
+from trajpref.train.distributed import DistInfo, RankBatches, gather_generators, largest
 from trajpref.train.ema import WeightAverage, ema_decay
 from trajpref.train.stages import Stage
 from trajpref.types import TrajectoryDataset
@@ -235,12 +235,7 @@ def _budget_share(seconds: float, cfg: OptimConfig, dist_info: DistInfo,
     ``budget_schedule``."""
     if not cfg.budget_schedule or cfg.max_minutes is None:
         return 0.0
-    share = seconds / (60 * cfg.max_minutes)
-    if dist_info.enabled:
-        t = torch.tensor(share, dtype=torch.float64, device=device)
-        torch.distributed.all_reduce(t, op=torch.distributed.ReduceOp.MAX)
-        share = float(t)
-    return share
+    return largest(seconds / (60 * cfg.max_minutes), dist_info, device)
 
 
 def save_resume_state(path: Path, state: dict[str, Any]) -> None:
@@ -396,7 +391,10 @@ def _summed(agents: int, sums: dict[str, float],
 
 def _should_stop(step: int, max_steps: int | None, seconds: float, max_minutes: float | None,
                  dist_info: DistInfo, device: torch.device) -> bool:  # fmt: skip
-    """Whether the step or time budget is spent (all ranks agree, or DDP would hang)."""
+    """Whether the step or time budget is spent (all ranks agree, or DDP would hang: a
+    collective, unless neither limit is set, which every rank knows alike)."""
+    if max_steps is None and max_minutes is None:
+        return False
     stop = max_steps is not None and step >= max_steps
     stop = stop or (max_minutes is not None and seconds >= 60 * max_minutes)
     if dist_info.enabled:
@@ -404,6 +402,16 @@ def _should_stop(step: int, max_steps: int | None, seconds: float, max_minutes: 
         torch.distributed.all_reduce(flag, op=torch.distributed.ReduceOp.MAX)
         stop = bool(flag)
     return stop
+
+
+def idle_note(name: str, idle: int, steps: int, epoch: int, world_size: int) -> str:
+    """The line that says how many (``idle``) of the ``steps`` batches that stage ``name``
+    takes of epoch ``epoch`` (0-based: the first this session trains) leave one of the
+    ``world_size`` processes without a scene."""
+    return (f"[{name}] {idle} of the {steps} batches of epoch {epoch + 1} hold fewer scenes "
+            f"than the {world_size} processes (each epoch's shuffle makes its own batches, "
+            "so other epochs count their own): in each, a process without a scene repeats one "
+            "at zero weight (the training is the same, that process's time is lost)")  # fmt: skip
 
 
 def can_compile(device: torch.device) -> bool:
@@ -434,20 +442,34 @@ def precision_autocast(device: torch.device, precision: str) -> torch.autocast:
     return torch.autocast(device.type, dtype=torch.bfloat16, enabled=precision == "bf16")
 
 
+class Terminated(BaseException):
+    """SIGTERM during training (a scheduler's cancel or preemption, forwarded by torchrun),
+    raised by the CLI's signal handler (``cli.main``: exit status 143 and the resume advice).
+    A ``BaseException``, as ``KeyboardInterrupt`` is: an ``except Exception`` on its way (a
+    file reader's, a library's) does not take it for an error of its own, and
+    ``keeps_interrupts`` keeps it when it lands in a finalizer (as an ``Exception`` it was
+    printed as "Exception ignored" and dropped: the run trained on)."""
+
+
+INTERRUPTS = (KeyboardInterrupt, Terminated)
+"""What stops a run wherever it lands, a finalizer included (``keeps_interrupts``)."""
+
 _swallowed: list[BaseException] = []
-"""KeyboardInterrupts that Python ignored during ``fit`` because they were raised in a
-finalizer (``keeps_interrupts``), until ``_stop_if_interrupted`` raises one again."""
+"""Interrupts (``INTERRUPTS``) that Python ignored during ``fit`` because they were raised in
+a finalizer (``keeps_interrupts``), until ``_stop_if_interrupted`` raises one again."""
 
 
 def keeps_interrupts(function: Callable[..., Any]) -> Callable[..., Any]:
-    """``function`` stopped by every Ctrl-C. Python prints a KeyboardInterrupt raised while
-    an object's finalizer runs (a progress bar's ``tqdm.__del__``, as the bar is freed in the
-    training thread) as "Exception ignored in ..." and drops it: the run trained on to its end
-    and exited with status 0 (1 Ctrl-C in 9, sent as an epoch ended). Closing the bars does
-    not prevent it (their finalizer still runs). While ``function`` runs, Python's hook for
-    such exceptions (``sys.unraisablehook``) keeps them instead (any other goes to the hook
-    it replaced), and ``_stop_if_interrupted`` raises one again: at the loop's next step,
-    after its epoch's state is saved, or when ``function`` returns."""
+    """``function`` stopped by every Ctrl-C and SIGTERM (``INTERRUPTS``). Python prints a
+    KeyboardInterrupt raised while an object's finalizer runs (a progress bar's
+    ``tqdm.__del__``, as the bar is freed in the training thread) as "Exception ignored in
+    ..." and drops it: the run trained on to its end and exited with status 0 (1 Ctrl-C in
+    9, sent as an epoch ended), and the CLI's ``Terminated`` alike (SIGTERM, which torchrun
+    forwards). Closing the bars does not prevent it (their finalizer still runs).
+    While ``function`` runs, Python's hook for such exceptions (``sys.unraisablehook``) keeps
+    them instead (any other goes to the hook it replaced), and ``_stop_if_interrupted`` raises
+    the first again: at the loop's next step, after its epoch's state is saved, or when
+    ``function`` returns."""
 
     @functools.wraps(function)
     def kept(*args: Any, **kwargs: Any) -> Any:
@@ -455,8 +477,9 @@ def keeps_interrupts(function: Callable[..., Any]) -> Callable[..., Any]:
 
         def hook(unraisable: Any) -> None:
             if unraisable.exc_type is not None and issubclass(unraisable.exc_type,
-                                                              KeyboardInterrupt):  # fmt: skip
-                _swallowed.append(unraisable.exc_value)
+                                                              INTERRUPTS):  # fmt: skip
+                value = unraisable.exc_value
+                _swallowed.append(value if value is not None else unraisable.exc_type())
             else:
                 previous(unraisable)
 
@@ -474,10 +497,12 @@ def keeps_interrupts(function: Callable[..., Any]) -> Callable[..., Any]:
 
 
 def _stop_if_interrupted() -> None:
-    """Raise the KeyboardInterrupt that a finalizer swallowed, if one did (``keeps_interrupts``)."""
+    """Raise the interrupt (a KeyboardInterrupt, or ``Terminated``) that a finalizer
+    swallowed, if one did (``keeps_interrupts``): the first, as its own type."""
     if _swallowed:
+        first = _swallowed[0]
         _swallowed.clear()
-        raise KeyboardInterrupt
+        raise first.with_traceback(None)
 
 
 def _averaged(average: WeightAverage | None):
@@ -530,7 +555,10 @@ def fit(
     the whole batches', summed over the ranks; each rank's random generators are saved, and a
     resume restores each rank's own: the loop's noise and augmentation generators and torch's
     own (``torch_generators``, which dropout draws from), so that a resumed run ends bit for
-    bit where an uninterrupted one does.
+    bit where an uninterrupted one does. A time budget (``max_minutes``) is the busiest rank's:
+    each rank reads its own clock (``budget_clock`` cpu: its own process's CPU time), the
+    ranks stop together when one has spent the budget, and the seconds recorded (the log's
+    ``budget_<clock>_seconds``, the resume state's ``spent``) are the largest over the ranks.
     """
     dist_info = dist_info or DistInfo()
     out_dir = Path(out_dir)
@@ -607,12 +635,10 @@ def fit(
         unused = stage.unused_parameters
         objective = DistributedDataParallel(objective, device_ids=device_ids,
                                             find_unused_parameters=unused)  # fmt: skip
-        idle = loader.idle_batches()
+        idle = loader.idle_batches(start_epoch, steps_per_epoch)
         if idle and main:
-            tqdm.write(f"[{stage.name}] {idle} of the {len(loader)} batches of an epoch hold "
-                       f"fewer scenes than the {dist_info.world_size} processes: in each, a "
-                       "process without a scene repeats one at zero weight (the training is "
-                       "the same, that process's time is lost)")  # fmt: skip
+            tqdm.write(idle_note(stage.name, idle, steps_per_epoch, start_epoch,
+                                 dist_info.world_size))  # fmt: skip
 
     log = MetricLog(out_dir, stage.name, main, fresh=resume is None,
                     through=None if resume is None else start_epoch)  # fmt: skip
@@ -714,7 +740,9 @@ def fit(
                 if stop:
                     break
         elapsed += time.perf_counter() - t0
-        spent += clock() - c0
+        # the busiest rank's (a collective), as _should_stop's: the log, the resume state, the
+        # budget's end and a resume's check (train.run._nothing_left) read this one number
+        spent = largest(spent + (clock() - c0), dist_info, device)
         epoch_seconds = time.perf_counter() - t0
         if dist_info.enabled:  # the whole batches': every rank's agents and losses
             agents, sums = _summed(agents, sums, device)

@@ -22,6 +22,7 @@ import torch
 
 from trajpref.config import ExperimentConfig, OptimConfig, save_config, to_dict
 from trajpref.data import run_splits, text
+from trajpref.data.loader import SceneLoader
 from trajpref.data.registry import NAMES
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError
@@ -32,8 +33,11 @@ from trajpref.results import command_line, machine
 from trajpref.rl.presets import own_reward_data
 from trajpref.train.distributed import (
     DistInfo,
+    EveryRankError,
     barrier,
     cleanup,
+    env_info,
+    gather_objects,
     init_from_env,
     launcher_command,
 )
@@ -439,9 +443,12 @@ def set_threads(info: DistInfo) -> None:
         cores = os.cpu_count() or 1
     threads = torch.get_num_threads()
     if info.local_rank == 0 and info.local_world_size * threads > cores:
+        per = cores // info.local_world_size  # threads each process may have: 0, 1, ...
+        how = (f"start at most {cores} processes here (--nproc_per_node)" if per < 1 else
+               f"set OMP_NUM_THREADS={per}, or start fewer processes")  # fmt: skip
         warnings.warn(f"{info.local_world_size} processes of {threads} thread(s) each on this "
-                      f"machine's {cores} cores: they wait on each other (start fewer, or set "
-                      "OMP_NUM_THREADS lower)", stacklevel=2)  # fmt: skip
+                      f"machine's {cores} cores: they wait on each other ({how})",
+                      stacklevel=2)  # fmt: skip
 
 
 def _note_processes(path: Path, info: DistInfo) -> None:
@@ -477,6 +484,85 @@ def check_resume_processes(state: dict[str, Any], out_dir: Path, name: str,
         )
 
 
+FOLDER_KEYS = ("dataset", "val_dataset")
+"""``data`` keys that may name a folder, whose path may differ between machines holding the
+same files: ``run_facts`` compares what the ranks read (``data_fingerprint``) instead."""
+
+
+def run_facts(cfg: ExperimentConfig, name: str, start: str | None,
+              data: dict[str, dict[str, str]], train: TrajectoryDataset,
+              state: dict[str, Any] | None, max_steps: int | None = None,
+              equal_budget: float | None = None) -> dict[str, Any]:  # fmt: skip
+    """What each process of a torchrun launch must hold alike to train one run of stage
+    ``name`` (``check_same_run``): the config sections that shape it (seed, data less its
+    folders' paths, model, diffusion, the stage's own, its length and budget included), the
+    hash of the checkpoint it starts from, the data it reads (``data_fingerprint``), its
+    batches per epoch, the resume state's epoch and step, and the limits given besides."""
+    full = to_dict(cfg)
+    shape = {k: full[k] for k in ("seed", "model", "diffusion", name)}
+    shape["data"] = {k: v for k, v in full["data"].items() if k not in FOLDER_KEYS}
+    batches = len(SceneLoader(train, max_agents=cfg.data.max_agents, shuffle=True,
+                              seed=cfg.seed))  # fmt: skip
+    resumed = None if state is None else f"epoch {int(state['epoch']) + 1}, step {state['step']}"
+    return {"config": shape, "start": start, "data_files": data, "batches_per_epoch": batches,
+            "resumed_after": resumed, "max_steps": max_steps,
+            "equal_budget": equal_budget}  # fmt: skip
+
+
+def _flat(value: Any, prefix: str = "") -> dict[str, Any]:
+    """A nested dict's leaves by dotted key."""
+    if not isinstance(value, dict):
+        return {prefix.rstrip("."): value}
+    out: dict[str, Any] = {}
+    for key, item in value.items():
+        out.update(_flat(item, f"{prefix}{key}."))
+    return out
+
+
+def check_same_run(info: DistInfo, facts: dict[str, Any]) -> None:
+    """Every rank's ``facts`` (``run_facts``) are rank 0's, or an ``EveryRankError`` raised on
+    every rank that names the first rank that differs and how: a collective, taken right
+    after the data are read and before anything is trained or written. Without it a rank
+    given other data, another config or its own ``--seed`` either trained another shuffle of
+    the batches without a word (scenes trained twice, others never) or took another number of
+    steps and left the others waiting in a collective until the timeout (60 min)."""
+    if not info.enabled:
+        return
+    every = [_flat(f) for f in gather_objects(facts, info)]
+    differ = []
+    for rank, own in enumerate(every[1:], 1):
+        keys = sorted(set(every[0]) | set(own))
+        changes = [f"{k}: {every[0].get(k, 'absent')!r} -> {own.get(k, 'absent')!r}"
+                   for k in keys if every[0].get(k, _ABSENT) != own.get(k, _ABSENT)]  # fmt: skip
+        if changes:
+            differ.append((rank, changes))
+    if not differ:
+        return
+    rank, changes = differ[0]
+    more = [str(r) for r, _ in differ[1:]]
+    also = f"; so do rank(s) {', '.join(more)}" if more else ""
+    raise EveryRankError(
+        f"the {info.world_size} processes of this launch do not train one run: rank {rank} "
+        f"differs from rank 0 (rank 0's -> rank {rank}'s: {_shown(changes)}){also}. Nothing "
+        "was trained or written: start every process with the same options and config (--seed "
+        "is the run's, not each process's), the same data and the same files to start or "
+        "resume from (on several machines: a shared --out)"
+    )
+
+
+def cpu_budget_note(name: str, section: OptimConfig, info: DistInfo) -> str | None:
+    """The line a stage with a CPU-time budget (``budget_clock`` cpu, ``max_minutes``) prints
+    on several processes (None otherwise): the clock is each process's own."""
+    if not info.enabled or section.max_minutes is None or section.budget_clock != "cpu":
+        return None
+    n = info.world_size
+    return (f"[{name}] {name}.budget_clock=cpu on {n} processes: the budget of "
+            f"{section.max_minutes:g} min counts each process's own CPU time (the stage ends "
+            f"when the busiest has spent it), so the {n} processes together spend up to {n} "
+            "times it, and the steps it buys are not one process's on the same budget "
+            f"(budget_clock=wall counts the launch's elapsed time)")  # fmt: skip
+
+
 def _run(
     cfg: ExperimentConfig,
     out_dir: str | Path,
@@ -500,7 +586,11 @@ def _run(
     check leaves nothing behind). A new run in a folder that holds another's moves that run's
     metrics log, run record, resume state and checkpoints of stage ``name`` aside
     (``loop.set_aside``). ``equal_budget``: the minutes of ``finetune --equal-budget``, for its
-    advice (``fit``) and a note when the process has more than one thread."""
+    advice (``fit``) and a note when the process has more than one thread.
+
+    Under torchrun every rank compares what it is about to train with rank 0's once the data
+    are read (``check_same_run``, before anything is written), and a CPU-time budget says that
+    its clock is each process's own (``cpu_budget_note``)."""
     check_output_dir(out_dir)
     out_dir = Path(out_dir)
     section = getattr(cfg, name)
@@ -515,6 +605,9 @@ def _run(
     set_threads(info)
     if equal_budget is not None and info.is_main and torch.get_num_threads() > 1:
         print(equal_budget_threads_note(torch.get_num_threads()), file=sys.stderr)
+    note = cpu_budget_note(name, section, info)
+    if note is not None and info.is_main:
+        print(note, file=sys.stderr)
     try:
         train, val = run_splits(cfg.data, data_root)
         data = data_fingerprint(train, val)
@@ -527,6 +620,9 @@ def _run(
         built, optim = build(train, val, dev)
         if state is not None:
             check_resume_matches(state, built.trainable, resume, optim.ema_epochs > 0)
+        # every rank trains the run rank 0 does (a collective): before anything is written
+        check_same_run(info, run_facts(cfg, name, start, data, train, state, max_steps,
+                                       equal_budget))  # fmt: skip
         if info.is_main:
             out_dir.mkdir(parents=True, exist_ok=True)
             if state is None:  # another run's log, record, state and checkpoints: not this run's
@@ -541,7 +637,7 @@ def _run(
                 print(f"[{name}] resumed on {info.world_size} process(es) from a state "
                       f"written on {state.get('world_size', 1)}: the batches, steps and "
                       "learning rates continue as they were; the random draws (noise, "
-                      "augmentation) are not those an uninterrupted run would take",
+                      "augmentation, dropout) are not those an uninterrupted run would take",
                       file=sys.stderr)  # fmt: skip
         barrier(info)
         start_time = time.perf_counter()
@@ -665,7 +761,17 @@ def finetune(
     ``cfg`` was resolved with (``finetune_config(equal_budget=...)``, ``--equal-budget``): a
     run its budget ended, or a resume with the budget spent, then names that option rather
     than the ``--set finetune.max_minutes`` it refuses, and a process of more than one thread
-    says that the protocol's runs take one."""
+    says that the protocol's runs take one; under torchrun (several processes) it is refused
+    (an ``EveryRankError``): the protocol's budget is one process's CPU time."""
+    launch = env_info()
+    if equal_budget is not None and launch.enabled:  # every rank alike: rank 0 says it
+        raise EveryRankError(
+            f"--equal-budget under torchrun ({launch.world_size} processes): the equal-budget "
+            "protocol is one process on one thread (its budget is that process's CPU time, so "
+            f"{launch.world_size} processes would spend {launch.world_size} times it, and the "
+            "runs would not compare with its table's): run it without torchrun, with "
+            "OMP_NUM_THREADS=1"
+        )
     cfg = with_absolute_folders(cfg)
     _check_start_not_output(start, out_dir)
     payload = ckpt.load(start)
