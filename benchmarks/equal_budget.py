@@ -10,10 +10,14 @@ own CPU time are spent on training steps (``finetune.budget_clock=cpu``: validat
 evaluation are not counted, and other jobs sharing the machine do not eat into it), validates
 after every ``--eval-minutes`` of that time (default ``--minutes`` / 4, as ``trajpref finetune
 --equal-budget``: the published 4-minute rows validated every minute; until 2026-11-27 every 3
-epochs), keeps the checkpoint chosen on validation and writes its test row. Validation happens
-only at the end of an epoch (the first epoch after which the interval has passed, and after the
-last): a method whose epochs are longer than the interval validates once per epoch, so fewer
-times. Methods:
+epochs, which ``--eval-epochs 3`` asks for again), keeps the checkpoint chosen on validation and
+writes its test row. Without any of ``--minutes``, ``--warmup``, ``--eval-minutes`` and
+``--eval-epochs`` a start's jobs take the budget its stored rows have (``stored_budget``: the
+published ``-long`` rows' 4 CPU min, warm-up 4, validation every 3 epochs, so that ``--start
+generator-long --methods rlhf-sda`` extends that table), else 4 CPU minutes, warm-up 4,
+validation every minute. Validation happens only at the end of an epoch (the first epoch after
+which the interval has passed, and after the last): a method whose epochs are longer than the
+interval validates once per epoch, so fewer times. Methods:
 
 - ``control``: the supervised generator loss alone (no score), the equal-budget control;
 - ``rlhf``, ``rlhf-res``: the paper's methods at the fine-tuning defaults;
@@ -105,15 +109,19 @@ def main() -> None:
     parser.add_argument("--methods", nargs="+", default=["control", "rlhf", "rlhf-res", "rlhf-set"],
                         choices=list(METHODS))  # fmt: skip
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
-    parser.add_argument("--minutes", type=float, default=4.0, help="CPU minutes of training")
+    parser.add_argument("--minutes", type=float, default=None,
+                        help=f"CPU minutes of training (default {DEFAULT_MINUTES:g}, or the "
+                        "budget of the start's stored rows: see --eval-epochs)")  # fmt: skip
     parser.add_argument(
         "--warmup",
         type=int,
-        default=EQUAL_BUDGET_WARMUP,
-        help="learning-rate warm-up steps, the same for every method (the default 20 would "
-        "leave the RL methods, which fit ~16 steps in 4 CPU minutes, below the full rate)",
+        default=None,
+        help="learning-rate warm-up steps, the same for every method (default "
+        f"{EQUAL_BUDGET_WARMUP}: the fine-tuning default 20 would leave the RL methods, which "
+        "fit ~16 steps in 4 CPU minutes, below the full rate)",
     )
-    parser.add_argument(
+    every = parser.add_mutually_exclusive_group()
+    every.add_argument(
         "--eval-minutes",
         type=float,
         default=None,
@@ -122,6 +130,15 @@ def main() -> None:
         "as trajpref finetune --equal-budget; 1.0 for the published 4-minute rows); before "
         "2026-11-27 every 3 epochs, which gave a supervised control with cheap epochs many "
         "more checkpoints to choose from than the RL methods",
+    )
+    every.add_argument(
+        "--eval-epochs",
+        type=int,
+        default=None,
+        help="validate every this many epochs instead (finetune.eval_every; no "
+        "eval_every_minutes), as the published generator-long rows did (3). Given none of "
+        "--minutes, --warmup, --eval-minutes and --eval-epochs, the jobs take the budget the "
+        "start's stored rows of these datasets have",
     )
     parser.add_argument("--workers", type=int, default=2, help="jobs at once (one thread each)")
     parser.add_argument(
@@ -365,10 +382,10 @@ def _stored(dataset: str, method: str, seed: int, start: str) -> list[dict]:
 
 def _one_budget(jobs: list[tuple[str, str, int]], start: str, budget: Budget) -> None:
     """Refuse jobs that would put rows of two budgets in one table: their dataset has rows of
-    a table method from ``start`` measured under another budget (finetune.py keys its rows and
-    ``--skip-done`` on method and seed alone, so it would skip or overwrite them, and the table
-    would compare methods given different budgets), or a job's run folder was started with
-    another budget (finetune.py would resume it, or take its finished run as this one)."""
+    a table method from ``start`` measured under another budget (finetune.py keys its rows on
+    method and seed alone, so it would overwrite them, and the table would compare methods
+    given different budgets), or a job's run folder was started with another budget
+    (finetune.py would resume it, or take its finished run as this one)."""
     rows = merge_rows(read_rows(ROOT / "benchmarks" / "results", protocol="all"))
     names = {row_name(m, start) for m in METHODS}
     problems = []
@@ -401,9 +418,76 @@ def _which(rows: list[dict]) -> str:
     return "; ".join(f"{m} s{','.join(str(s) for s in sorted(v))}" for m, v in seeds.items())
 
 
+DEFAULT_MINUTES = 4.0
+"""``--minutes`` when no budget is given and the start has no stored rows."""
+
+
+def stored_budget(datasets: list[str], start: str) -> Budget | None:
+    """The one budget of the stored rows of ``start``'s table methods in ``datasets``; None
+    when there are none. Rows of several budgets: an error naming them (``_one_budget`` would
+    refuse any of them)."""
+    rows = merge_rows(read_rows(ROOT / "benchmarks" / "results", protocol="all"))
+    names = {row_name(m, start) for m in METHODS}
+    found: dict[Budget, list[dict]] = {}
+    for r in rows:
+        if r["dataset"] in datasets and r["method"] in names:
+            found.setdefault(row_budget(r), []).append(r)
+    if len(found) > 1:
+        lines = "\n  ".join(f"{b}: {_which(these)}" for b, these in found.items())
+        sys.exit(f"the stored rows from {start} of {', '.join(datasets)} have several "
+                 f"budgets:\n  {lines}\nname the budget (--minutes, --warmup, --eval-minutes "
+                 "or --eval-epochs)")  # fmt: skip
+    return next(iter(found), None)
+
+
+def job_budget(args: argparse.Namespace) -> Budget:
+    """The budget of this invocation's jobs: the options given (``--eval-epochs`` N:
+    validation every N epochs), the others at their defaults; none given, the budget the
+    start's stored rows of these datasets have (``stored_budget``), else the defaults (4 CPU
+    minutes, warm-up ``EQUAL_BUDGET_WARMUP``, validation every minutes / 4)."""
+    epochs = getattr(args, "eval_epochs", None)
+    given = (args.minutes, args.warmup, args.eval_minutes, epochs)
+    if all(v is None for v in given):
+        stored = stored_budget(list(args.datasets), args.start)
+        if stored is not None:
+            return stored
+    if epochs is not None and args.eval_minutes is not None:
+        sys.exit("--eval-minutes and --eval-epochs exclude each other")
+    minutes = DEFAULT_MINUTES if args.minutes is None else args.minutes
+    warmup = EQUAL_BUDGET_WARMUP if args.warmup is None else args.warmup
+    if epochs is not None:
+        if epochs < 1:
+            sys.exit(f"--eval-epochs must be >= 1, got {epochs}")
+        return Budget(minutes, warmup, None, epochs)
+    return requested_budget(minutes, warmup, args.eval_minutes)
+
+
+def budget_args(budget: Budget) -> list[str]:
+    """finetune.py's ``--set`` arguments of a budget: ``rl.presets.equal_budget_args``, with
+    ``finetune.eval_every=N`` in place of the minutes for validation every N epochs (as the
+    published ``-long`` rows' commands); ``row_budget`` reads the budget back from them."""
+    out: list[str] = []
+    if budget.minutes is not None and budget.warmup is not None:
+        out = equal_budget_args(budget.minutes, budget.warmup, budget.eval_minutes)
+        if budget.eval_minutes is None and budget.eval_epochs is not None:
+            out = [
+                f"finetune.eval_every={budget.eval_epochs}"
+                if a.startswith("finetune.eval_every_minutes=")
+                else a
+                for a in out
+            ]
+    sets = [b for a, b in zip(out, out[1:], strict=False) if a == "--set"]
+    if not out or budget_of(sets) != budget:  # the rows' commands would say another
+        sys.exit(
+            f"cannot run jobs under {budget} (stored rows' budget?): name the budget "
+            "with --minutes, --warmup and --eval-minutes or --eval-epochs"
+        )
+    return out
+
+
 def run_jobs(args: argparse.Namespace) -> None:
     jobs = [(d, m, s) for s in args.seeds for d in args.datasets for m in args.methods]
-    budget = requested_budget(args.minutes, args.warmup, args.eval_minutes)
+    budget = job_budget(args)
     _one_budget(jobs, args.start, budget)
     todo = [j for j in jobs if not _done(*j, args.start, budget)]
     print(f"{len(jobs) - len(todo)} of {len(jobs)} rows already measured under {budget}; "
@@ -411,7 +495,7 @@ def run_jobs(args: argparse.Namespace) -> None:
     logs = ROOT / "runs" / "logs"
     logs.mkdir(parents=True, exist_ok=True)
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-    budget_args = equal_budget_args(args.minutes, args.warmup, args.eval_minutes)
+    sets = budget_args(budget)
     data = ["--data-root", args.data_root] if args.data_root else []
 
     def one(job: tuple[str, str, int]) -> tuple[tuple[str, str, int], int, float]:
@@ -419,7 +503,7 @@ def run_jobs(args: argparse.Namespace) -> None:
         cmd = [sys.executable, str(ROOT / "benchmarks" / "finetune.py"), "--dataset", dataset,
                *job_args(method, args.start), "--seeds", str(seed), "--skip-done",
                "--no-start-validation",
-               *budget_args, *data]  # fmt: skip
+               *sets, *data]  # fmt: skip
         t0 = time.perf_counter()
         name = row_name(method, args.start)
         with open(logs / f"equal_budget-{dataset}-{name}-s{seed}.log", "a") as log:

@@ -22,6 +22,8 @@ import json
 from contextlib import contextmanager
 from pathlib import Path
 
+from equal_budget import budget_of, row_budget
+
 from trajpref.data import load_dataset
 from trajpref.device import resolve_device
 from trajpref.evaluation import evaluate
@@ -64,7 +66,10 @@ def main() -> None:
     parser.add_argument(
         "--skip-done",
         action="store_true",
-        help="skip (method, seed) pairs that already have a row in the results file",
+        help="skip (method, seed) pairs that already have a row in the results file measured "
+        "under this invocation's budget (the --set keys of equal_budget.py's budget: "
+        "finetune.max_minutes, warmup_steps, eval_every_minutes, eval_every; a row's are read "
+        "from its command); a row of another budget is run again and replaced",
     )
     parser.add_argument(
         "--no-start-validation",
@@ -93,7 +98,9 @@ def main() -> None:
     out = ROOT / "benchmarks" / "results" / f"finetune_{args.dataset}{suffix}.json"
     jobs = [(m, s) for m in args.methods for s in args.seeds]
     if args.skip_done and out.is_file():
-        done = {(r["method"], r["seed"]) for r in json.loads(out.read_text())}
+        budget = budget_of(args.overrides)  # as row_budget reads it back from the command
+        done = {(r["method"], r["seed"]) for r in json.loads(out.read_text())
+                if row_budget(r) == budget}  # fmt: skip
         jobs = [(m, s) for m, s in jobs if (_method_name(m, args.tag), s) not in done]
     if not jobs:
         print(f"{args.dataset}: every requested row is already in {out.name}")

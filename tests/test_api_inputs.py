@@ -290,11 +290,30 @@ def test_the_lazy_names_are_every_module_and_help_names_the_entry_points():
     here = {p.stem for p in SRC.glob("*.py")} | {p.parent.name for p in SRC.glob("*/__init__.py")}
     named = set(trajpref.SUBPACKAGES) | set(trajpref.ENTRY_MODULES)
     assert named == here - {"__init__", "__main__"}
-    assert set(trajpref.SUBPACKAGES) <= set(trajpref.__all__) <= set(dir(trajpref))
+    assert set(trajpref.__all__) | named <= set(dir(trajpref))
     for entry in ("load_predictor", "predict_scene", "rank_samples", "select_for_scene",
                   "load_dataset", "evaluate", "load_config", "train_stage", "register_reward",
                   "finetune_config", "plot_scene"):  # fmt: skip
         assert entry in trajpref.__doc__, entry
+
+
+def test_a_star_import_loads_no_subpackage_and_keeps_matplotlibs_backend():
+    """Review of walkthrough 66: ``__all__`` listed every subpackage, so ``from trajpref
+    import *`` imported them all, viz among them, which switched matplotlib to Agg."""
+    assert trajpref.__all__ == ["ONEDNN_CACHE_CAPACITY", "TrajprefError", "__version__"]
+    code = (
+        "import sys, matplotlib\n"
+        "matplotlib.use('pdf')\n"
+        "from trajpref import *\n"
+        "assert matplotlib.get_backend() == 'pdf', matplotlib.get_backend()\n"
+        "loaded = sorted(m for m in sys.modules if m.startswith('trajpref.'))\n"
+        "assert loaded == ['trajpref.errors'], loaded\n"
+        "assert ONEDNN_CACHE_CAPACITY and TrajprefError and __version__\n"
+        "import trajpref\n"
+        "assert callable(trajpref.evaluation.evaluate)\n"  # still served on first use
+        "assert {'evaluation', 'viz', 'cli'} <= set(dir(trajpref))\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
 
 
 def test_the_readme_qualifies_finetune_config():

@@ -412,3 +412,78 @@ def test_the_published_table_is_what_the_stored_rows_give():
         eb.PUBLISHED_BUDGET}  # fmt: skip
     assert {b for (_, start), b in budgets.items() if start == "generator-long"} == {
         eb.Budget(4.0, 4, None, 3)}  # fmt: skip
+
+
+# ---- review of walkthrough 66: the -long rows' budget (validation every 3 epochs) ----------
+
+
+def _long_command(method: str, seed: int) -> str:
+    """A published generator-long row's command: validation every 3 epochs."""
+    return (f"python benchmarks/finetune.py --dataset walks --methods {method} --tag long "
+            f"--start generator-long --seeds {seed} --skip-done --no-start-validation "
+            f"{PUBLISHED} --set finetune.eval_every=3 --set finetune.warmup_steps=4")  # fmt: skip
+
+
+def _main(eb, tmp_path, monkeypatch, *argv) -> list[list[str]]:
+    """``equal_budget.py ARGV`` with finetune.py's processes recorded, not run."""
+    (tmp_path / "benchmarks" / "results" / "meta").mkdir(parents=True, exist_ok=True)
+    (tmp_path / "docs").mkdir(exist_ok=True)
+    (tmp_path / "docs" / "rlhf.md").write_text("<!-- equal-budget:start -->\n"
+                                               "<!-- equal-budget:end -->\n")  # fmt: skip
+    seen = []
+    monkeypatch.setattr(subprocess, "call", lambda cmd, **kw: seen.append(cmd) or 0)
+    monkeypatch.setattr("sys.argv", ["equal_budget.py", *argv])
+    eb.main()
+    return seen
+
+
+def test_the_long_starts_rows_are_extended_under_the_budget_they_have(eb, tmp_path, monkeypatch):
+    """``--start generator-long --methods rlhf-sda`` was refused: the published -long rows
+    validated every 3 epochs, and the script could only ask for validation every N CPU
+    minutes. Given no budget, the jobs now take the budget of the start's stored rows."""
+    results = tmp_path / "benchmarks" / "results"
+    results.mkdir(parents=True)
+    rows = [_row("control-long", s, 0.4, command=_long_command("control", s)) for s in (0, 1)]
+    (results / "finetune_walks_long.json").write_text(json.dumps(rows))
+    assert {eb.row_budget(r) for r in rows} == {eb.Budget(4.0, 4, None, 3)}
+    seen = _main(eb, tmp_path, monkeypatch, "--start", "generator-long", "--datasets", "walks",
+                 "--methods", "rlhf-sda", "--seeds", "0")  # fmt: skip
+    assert len(seen) == 1
+    cmd = seen[0]
+    assert "finetune.eval_every=3" in cmd and not any("eval_every_minutes" in a for a in cmd)
+    assert cmd[cmd.index("--tag") + 1] == "sda-long"
+    # the command, as finetune.py stores it in the row, reads back as the same budget
+    assert eb.row_budget({"command": " ".join(cmd)}) == eb.Budget(4.0, 4, None, 3)
+    # named, the same budget runs too; another is refused as before
+    seen = _main(eb, tmp_path, monkeypatch, "--start", "generator-long", "--datasets", "walks",
+                 "--methods", "rlhf-sda", "--seeds", "0", "--eval-epochs", "3")  # fmt: skip
+    assert len(seen) == 1 and "finetune.eval_every=3" in seen[0]
+    with pytest.raises(SystemExit, match="one table compares one budget"):
+        _main(eb, tmp_path, monkeypatch, "--start", "generator-long", "--datasets", "walks",
+              "--methods", "rlhf-sda", "--seeds", "0", "--minutes", "4")  # fmt: skip
+
+
+def test_eval_epochs_and_the_defaults_without_stored_rows(eb, tmp_path, monkeypatch):
+    seen = _main(eb, tmp_path, monkeypatch, "--datasets", "walks", "--methods", "control",
+                 "--seeds", "0", "--eval-epochs", "2", "--minutes", "1")  # fmt: skip
+    assert eb.row_budget({"command": " ".join(seen[0])}) == eb.Budget(1.0, 4, None, 2)
+    seen = _main(eb, tmp_path, monkeypatch, "--datasets", "walks", "--methods", "control",
+                 "--seeds", "1")  # fmt: skip
+    assert eb.row_budget({"command": " ".join(seen[0])}) == eb.PUBLISHED_BUDGET
+    with pytest.raises(SystemExit):  # one interval or the other
+        _main(eb, tmp_path, monkeypatch, "--datasets", "walks", "--eval-epochs", "2",
+              "--eval-minutes", "1")  # fmt: skip
+
+
+def test_stored_rows_of_several_budgets_need_the_budget_named(eb, tmp_path, monkeypatch):
+    results = tmp_path / "benchmarks" / "results"
+    _published_rows(results)
+    rows = [_row("control-long", 0, 0.4, command=_long_command("control", 0))]
+    (results / "finetune_walks_long.json").write_text(json.dumps(rows))
+    assert eb.stored_budget(["walks"], "generator") == eb.PUBLISHED_BUDGET
+    assert eb.stored_budget(["walks"], "generator-long") == eb.Budget(4.0, 4, None, 3)
+    assert eb.stored_budget(["other"], "generator") is None
+    rows.append(_row("rlhf-long", 0, 0.4, command=_command(4.0, 4, None)))
+    (results / "finetune_walks_long.json").write_text(json.dumps(rows))
+    with pytest.raises(SystemExit, match=r"(?s)several budgets.*every 3 epochs.*name the "):
+        eb.stored_budget(["walks"], "generator-long")

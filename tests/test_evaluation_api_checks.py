@@ -27,6 +27,9 @@ from trajpref.score.scorer import TrajectoryScorer
 from trajpref.types import DatasetInfo, TrajectoryDataset
 
 ZARA1 = "the model was trained on the zara1 fold (leave-one-out: the other four scenes)"
+WHO = " [the model: zara1/generator]"
+"""What ends every warning of zara1/generator's checks in Python (``model_identity``: the name
+``load_predictor`` was given)."""
 
 
 def _logged(root: Path, scale: float = 1.0) -> Path:
@@ -77,7 +80,7 @@ def test_data_at_another_step_than_the_models_warn_in_evaluate_and_predict_datas
             "it at the model's step)")  # fmt: skip
     for call in (evaluate, predict_dataset):
         messages, _ = _messages(call, zara1, data, progress=False)
-        assert f"{ZARA1}: {pace}" in messages, call.__name__
+        assert f"{ZARA1}: {pace}{WHO}" in messages, call.__name__
     # the advice read as given: 0.4 s windows say nothing of the step
     data = load_dataset(str(tmp_path / "log"), "test", units="m",
                         options=_every(4))  # fmt: skip
@@ -95,9 +98,9 @@ def test_data_in_other_units_warn_of_units_and_pace(tmp_path, zara1):
     data = load_dataset(str(_logged(tmp_path / "cm", 100.0)), "test", units="cm",
                         options=_every(4))  # fmt: skip
     messages, _ = _messages(evaluate, zara1, data, progress=False)
-    assert f"{ZARA1}: this data is in cm, the model's in m" in messages
+    assert f"{ZARA1}: this data is in cm, the model's in m{WHO}" in messages
     assert any(m.startswith("the model is given agents much faster than it was trained on")
-               for m in messages)  # fmt: skip
+               and m.endswith(WHO) for m in messages)  # fmt: skip
     messages, _ = _messages(predict_dataset, zara1, data, progress=False)
     assert len(messages) == 2
 
@@ -108,7 +111,7 @@ def test_the_models_own_training_split_warns_and_is_recorded(data_root, zara1):
     assert messages == [
         f"the model trained on these windows: {train.info.source} is the train split of "
         "zara1, its training data, so numbers on it are training numbers, not a test (evaluate "
-        "on the test split, or on files it did not train on)"
+        f"on the test split, or on files it did not train on){WHO}"
     ]
     assert res["overlap"] == "model trained on these windows (train split of zara1)"
     # its test split: nothing to say, nothing overlaps
@@ -154,7 +157,55 @@ def test_a_validation_split_is_named_where_the_record_says_where_the_epoch_was_c
     assert messages == ["the model trained on these windows: this data is the train split of "
                         "robo-sim, its training data, so numbers on it are training numbers, "
                         "not a test (evaluate on the test split, or on files it did not train "
-                        "on)"]  # fmt: skip
+                        "on) [the model: a checkpoint trained on robo-sim]"]  # fmt: skip
+
+
+def _lineage(*stages: str, dataset: str = "robo-sim") -> list[dict]:
+    return [{"stage": st, "dataset": dataset, "val_dataset": None, "holdout_scene": None}
+            for st in stages]  # fmt: skip
+
+
+def test_a_loop_over_models_is_warned_of_each_model(capsys):
+    """Review of walkthrough 66: the texts named every model "the model", so Python's default
+    filter (a text once per line that issues it) showed the first model's warning alone when
+    one line evaluated several models on a split they trained on. Each text now ends with
+    which model it is about: the checkpoint where the object names one, else its stage and
+    training data from its record."""
+    run = {"num_samples": 2, "progress": False, "collision_radius": None}
+    data = _data("robo-sim", "train")
+    generator = _recorded({"trained_on": "robo-sim",
+                           "lineage": _lineage("denoiser", "generator")})  # fmt: skip
+    tuned = _recorded({"trained_on": "robo-sim",
+                       "lineage": _lineage("denoiser", "generator", "finetune")})  # fmt: skip
+    named = _recorded({"trained_on": "robo-sim", "lineage": _lineage("generator")})
+    named.checkpoint = "runs/robo-rlhf/finetune.safetensors"
+    held = _recorded({"trained_on": "robo-sim", "holdout_scene": "sim_07",
+                      "val_dataset": "robo"})  # fmt: skip
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.resetwarnings()
+        warnings.simplefilter("default")  # Python's own: once per text and line
+        for model in (generator, tuned, named, generator, tuned):
+            res = evaluate(model, data, **run)  # one line for every model
+            assert res["overlap"] == "model trained on these windows (train split of robo-sim)"
+    said = [str(w.message) for w in seen if issubclass(w.category, UserWarning)]
+    tail = [m.rsplit(" [", 1)[1] for m in said]
+    assert tail == ["the model: a generator trained on robo-sim]",
+                    "the model: a fine-tune trained on robo-sim]",
+                    "the model: runs/robo-rlhf/finetune.safetensors]"]  # fmt: skip
+    assert all(m.startswith("the model trained on these windows: this data is the train split")
+               for m in said)  # fmt: skip
+    assert {w.filename for w in seen} == {__file__}  # at the user's line
+    # what else a record says: its held-out scene and where it chose its epoch
+    messages, _ = _messages(evaluate, held, _data("robo-sim", "train"), **run)
+    assert all(
+        m.endswith(
+            "[the model: a checkpoint trained on robo-sim, held-out scene "
+            "sim_07*, its epoch chosen on robo's val split]"
+        )
+        for m in messages
+    )
+    # the CLI's texts name the model by its --model, as before: no label
+    assert "[" not in capsys.readouterr().err
 
 
 # ------------------------------------------------------------------------- 2: the seed

@@ -1,9 +1,12 @@
 """benchmarks/finetune.py: a run folder is never resumed or reused from another start."""
 
+import json
 from pathlib import Path
 
 import pytest
 from bench import load_benchmark
+
+from trajpref.rl.presets import equal_budget_args
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -31,3 +34,54 @@ def test_an_unrecorded_old_run_folder_is_not_reused(ft, tmp_path):
     (run / "finetune.safetensors").write_text("old model")
     with pytest.raises(SystemExit, match="no record of its start"):
         ft.check_start(run, tmp_path / "a.safetensors")
+
+
+# ---- review of walkthrough 66: --skip-done compares the budget -------------------------------
+
+
+class _WouldRun(Exception):
+    """Raised where finetune.py starts its first job (reading the test split)."""
+
+
+def _skip_done(ft, tmp_path, monkeypatch, rows: list[dict], *sets: str) -> list[str]:
+    """finetune.py --skip-done over ``rows``: ``["ran"]`` when it would start a job."""
+    monkeypatch.setattr(ft, "ROOT", tmp_path)
+    (tmp_path / "models" / "walks").mkdir(parents=True, exist_ok=True)
+    (tmp_path / "models" / "walks" / "generator.safetensors").write_text("start")
+    results = tmp_path / "benchmarks" / "results"
+    results.mkdir(parents=True, exist_ok=True)
+    (results / "finetune_walks.json").write_text(json.dumps(rows))
+
+    def read_the_test_split(*args, **kwargs):
+        raise _WouldRun
+
+    monkeypatch.setattr(ft, "load_dataset", read_the_test_split)
+    monkeypatch.setattr("sys.argv", ["finetune.py", "--dataset", "walks", "--methods", "control",
+                                     "rlhf", "--seeds", "0", "--skip-done",
+                                     "--no-start-validation",
+                                     *[w for s in sets for w in ("--set", s)]])  # fmt: skip
+    try:
+        ft.main()
+    except _WouldRun:
+        return ["ran"]
+    return []
+
+
+def test_skip_done_keeps_only_the_rows_of_the_budget_asked_for(ft, tmp_path, monkeypatch,
+                                                                capsys):  # fmt: skip
+    """``reproduce.py`` full mode with ``--minutes 2`` kept the 4-minute rows: ``--skip-done``
+    matched rows on method and seed alone. It now compares the budget read from each row's
+    command (equal_budget.py's ``row_budget``) with this invocation's ``--set``s."""
+    four = equal_budget_args(4.0, 4, None)  # the published budget
+    two = equal_budget_args(2.0, 4, None)
+    command = " ".join(["python", "benchmarks/finetune.py", "--seeds", "0", "--skip-done", *four])
+    rows = [{"method": m, "seed": 0, "command": command} for m in ("control", "rlhf")]
+    sets = [b for a, b in zip(two, two[1:], strict=False) if a == "--set"]
+    assert _skip_done(ft, tmp_path, monkeypatch, rows, *sets) == ["ran"]  # 2 min: to run
+    sets4 = [b for a, b in zip(four, four[1:], strict=False) if a == "--set"]
+    assert _skip_done(ft, tmp_path, monkeypatch, rows, *sets4) == []  # 4 min: done
+    assert "every requested row is already in" in capsys.readouterr().out
+    # rows and a run whose commands name no budget (the main table): done, as before
+    plain = [{"method": m, "seed": 0, "command": "python x.py"} for m in ("control", "rlhf")]
+    assert _skip_done(ft, tmp_path, monkeypatch, plain) == []
+    assert _skip_done(ft, tmp_path, monkeypatch, plain, "finetune.max_minutes=2.0") == ["ran"]

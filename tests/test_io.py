@@ -127,3 +127,21 @@ def test_dotted_flattens_nested_dicts_one_level_of_keys():
     nested = {"min_ade": 0.2, "bins": {"<=5": {"min_fde": 0.3}, "6-10": {}}, "seed": None}
     assert dotted(nested) == {"min_ade": 0.2, "bins.<=5.min_fde": 0.3, "seed": None}
     assert dotted({}) == {}
+
+
+def test_progress_bars_keep_tqdms_pace_in_a_notebook(monkeypatch):
+    """Review of walkthrough 66: in Jupyter stderr is no terminal either, so evaluate()'s bar
+    was throttled to one redraw a minute: it sat at 0 % and vanished. A notebook kernel
+    (``ipykernel`` loaded) gets tqdm's own pace; a log still gets the throttle."""
+    import io
+    import sys
+    import types
+
+    from trajpref.io import LOG_REDRAW_SECONDS, bar_options
+
+    monkeypatch.setattr(sys, "stderr", io.StringIO())  # not a terminal, as in Jupyter
+    monkeypatch.delitem(sys.modules, "ipykernel", raising=False)
+    assert bar_options(True)["mininterval"] == LOG_REDRAW_SECONDS  # a log file, a pipe
+    monkeypatch.setitem(sys.modules, "ipykernel", types.ModuleType("ipykernel"))
+    assert bar_options(True) == {"disable": False}
+    assert bar_options(False) == {"disable": True}  # --no-progress / progress=False still hide

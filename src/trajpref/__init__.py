@@ -44,13 +44,14 @@ SUBPACKAGES = ("adapt", "config", "data", "device", "diffusion", "errors", "eval
                "metrics", "models", "results", "rl", "score", "survey", "train", "types",
                "viz")  # fmt: skip
 """The library's modules and packages, read as attributes of ``trajpref`` on first use
-(``__getattr__``); a test checks that they are every module under ``trajpref`` but the
-entry points (``ENTRY_MODULES``) and ``__main__``."""
+(``__getattr__``) and listed by ``dir(trajpref)``; a test checks that they are every module
+under ``trajpref`` but the entry points (``ENTRY_MODULES``) and ``__main__``."""
 ENTRY_MODULES = ("cli", "demo")
-"""The command line and ``make demo``: read as attributes too, not in ``__all__`` (a star
-import does not load them)."""
+"""The command line and ``make demo``: read as attributes too."""
 
-__all__ = ["ONEDNN_CACHE_CAPACITY", "TrajprefError", "__version__", *SUBPACKAGES]
+__all__ = ["ONEDNN_CACHE_CAPACITY", "TrajprefError", "__version__"]
+"""What ``from trajpref import *`` gives: the names defined here, no subpackage (a star import
+would otherwise load every one, ``viz`` among them, which sets matplotlib's backend)."""
 
 
 def __getattr__(name: str):

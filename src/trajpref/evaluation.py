@@ -732,8 +732,8 @@ def _own_windows(name: str, data: dict, info: DatasetInfo, root: str | None,
 
 def check_trained_on(name: str, model: dict, data: dict | None, info: DatasetInfo,
                      root: str | None = None, holdout: str | None = None,
-                     words: ReadingWords = CLI_WORDS, *,
-                     val_known: bool = True) -> str | None:  # fmt: skip
+                     words: ReadingWords = CLI_WORDS, *, val_known: bool = True,
+                     tail: str = "") -> str | None:  # fmt: skip
     """The checks of one model (``name``; ``model``: ``models.timing.model_timing``'s record
     of its checkpoint; ``data``: the checkpoint's ``config.data``, None where unknown) against
     the data it is given (``info``), what the CLI's ``evaluate``, ``predict`` and ``plot`` and
@@ -748,10 +748,11 @@ def check_trained_on(name: str, model: dict, data: dict | None, info: DatasetInf
     finding once, named ``through`` that run. Returns the findings' short forms (joined by
     ``; ``), what a result records as ``overlap``; None otherwise. ``val_known`` False: the
     record does not say where the model chose its epoch (``val_dataset``), so the validation
-    findings of its own run are left out."""
+    findings of its own run are left out. ``tail`` ends every warning's text (Python's
+    ``check_against_training``: which model it is about, ``model_identity``)."""
     text = timing_warning(name, model, info, words)
     if text is not None:
-        warnings.warn(text, stacklevel=_user_level())
+        warnings.warn(text + tail, stacklevel=_user_level())
     if data is None:
         return None
     runs: list[tuple[dict, str | None, bool]] = [(data, None, val_known)]
@@ -764,7 +765,7 @@ def check_trained_on(name: str, model: dict, data: dict | None, info: DatasetInf
         if found is None or found[1] in seen:  # the same windows, named through another run
             continue
         seen.add(found[1])
-        warnings.warn(found[0], stacklevel=_user_level())
+        warnings.warn(found[0] + tail, stacklevel=_user_level())
         notes.append(found[1] if via is None else f"{found[1][:-1]}, through {via})")
     return "; ".join(notes) or None
 
@@ -775,40 +776,47 @@ def role_notes(role: str, note: str) -> str:
     return "; ".join(f"{role} {part}" for part in note.split("; "))
 
 
-def warn_observed_pace(checked: list[tuple[str, object]], dataset: TrajectoryDataset) -> None:
+def warn_observed_pace(checked: list[tuple[str, object]], dataset: TrajectoryDataset,
+                       tail: str = "") -> bool:  # fmt: skip
     """One warning per pass, for the first of ``checked`` (``(name, predictor or scorer)``,
     the model before its scorer; the constant-velocity baseline reads any units) where the
     split's observed steps are far from its training (``models.timing.observed_problem``):
     the 90th percentile of its agents' pace above ``timing.PACE_LIMIT`` model units (data in
     other units, e.g. centimetres for a metre model, which the generator's speed clamp hides
     and the score does not), else one agent jumping more than ``timing.JUMP_LIMIT`` in one
-    step (a tracker id switch)."""
+    step (a tracker id switch). ``tail`` ends the text (``check_trained_on``'s); returns
+    whether it warned."""
     if not len(dataset) or not checked:
-        return
+        return False
     history = np.concatenate([s.history for s in dataset.scenes])  # [N, T_h, 2]
     types = np.concatenate([s.agent_type for s in dataset.scenes])  # [N]
     for name, obj in checked:
         problem = observed_problem(obj, history, name, types)
         if problem is not None:
-            warnings.warn(problem, stacklevel=_user_level())
-            return
+            warnings.warn(problem + tail, stacklevel=_user_level())
+            return True
+    return False
 
 
-def warn_untyped_data(checked: list[tuple[str, object]], dataset: TrajectoryDataset) -> None:
+def warn_untyped_data(checked: list[tuple[str, object]], dataset: TrajectoryDataset,
+                      tail: str = "") -> bool:  # fmt: skip
     """One warning when one of ``checked`` (``(name, predictor or scorer)``) learned from
     agent-type flags (NBA's ball, ``score.scorer.reads_agent_types``) and this data flag no
     ball (a folder without a type column, or players only: every agent is read as a person;
     a walkthrough measured minFDE 0.256 -> 0.319 m on NBA scenes whose ball was read that
-    way). Data with a flagged agent, or models trained without flags, say nothing."""
+    way). Data with a flagged agent, or models trained without flags, say nothing. ``tail``
+    ends the text (``check_trained_on``'s); returns whether it warned."""
     if any(bool((s.agent_type != AGENT_PERSON).any()) for s in dataset.scenes):
-        return
+        return False
     for name, obj in checked:
         if reads_agent_types(obj):
             warnings.warn(f"{name} was trained with agent types (the ball flagged "
                           f"{AGENT_BALL}), and this data flag no ball: every agent is read as "
                           "a person; if a ball is among them, a 5th column of BALL / PLAYER "
-                          "flags it (docs/data_format.md)", stacklevel=_user_level())  # fmt: skip
-            return
+                          f"flags it (docs/data_format.md){tail}",
+                          stacklevel=_user_level())  # fmt: skip
+            return True
+    return False
 
 
 _RECORD = {"trained_on": None, "step": None, "known": False, "interval_from": None,
@@ -843,6 +851,28 @@ def _checked(model: object, scorer: object) -> list[tuple[str, object, dict]]:
     return found
 
 
+def model_identity(obj: object, record: dict) -> str:
+    """Which model or scorer a Python data-check warning is about, beyond its role: the
+    checkpoint it was loaded from where the object names one (a ``checkpoint`` string or
+    path), else what its record (``_record``: ``models.timing.model_timing``) says of it: its
+    stage and training data, e.g. ``a fine-tune trained on zara1, held-out scene
+    crowds_zara02*``. Two models of one loop are then two texts, each warned of once
+    (Python's default filter shows a text once per line that issues it)."""
+    source = getattr(obj, "checkpoint", None)
+    if isinstance(source, (str, os.PathLike)) and str(source):
+        return str(source)
+    lineage = record.get("lineage")
+    own = lineage[-1] if isinstance(lineage, list) and lineage else {}
+    stage = own.get("stage") if isinstance(own, dict) else None
+    stage = {"finetune": "fine-tune"}.get(stage, stage) or "checkpoint"
+    parts = [f"a {stage} trained on {record['trained_on']}"]
+    if record.get("holdout_scene"):
+        parts.append(f"held-out scene {record['holdout_scene']}*")
+    if record.get("val_dataset") and record["val_dataset"] != record["trained_on"]:
+        parts.append(f"its epoch chosen on {record['val_dataset']}'s val split")
+    return ", ".join(parts)
+
+
 def check_against_training(model: object, dataset: TrajectoryDataset,
                            scorer: object = None) -> str | None:  # fmt: skip
     """What ``evaluate`` and ``predict_dataset`` check, before any work, of the data against
@@ -854,7 +884,9 @@ def check_against_training(model: object, dataset: TrajectoryDataset,
     to a metre one), or when this data is a split it trained on or chose its epoch on (e.g.
     ``zara1/generator`` on zara1's train split); one when this data's observed pace is far
     from its training (``warn_observed_pace``), and one when it reads agent types that this
-    data do not flag (``warn_untyped_data``). Returns what a result records as ``overlap``
+    data do not flag (``warn_untyped_data``). Each text ends with which model or scorer it is
+    about (``model_identity``: ``[the model: a generator trained on zara1]``), so that a loop
+    over several models is warned of each. Returns what a result records as ``overlap``
     (``model trained on these windows (train split of zara1)``), None when nothing overlaps.
 
     The record (``models.timing.model_timing``) says where the model chose its epoch
@@ -863,17 +895,21 @@ def check_against_training(model: object, dataset: TrajectoryDataset,
     ``val_dataset`` names training splits alone. The other runs of its ``lineage`` (a
     fine-tune's start, a generator's denoiser) are checked too (``check_trained_on``)."""
     checked = _checked(model, scorer)
+    labels = [f"{name}: {model_identity(obj, record)}" for name, obj, record in checked]
     notes = []
-    for name, obj, record in checked:
+    for (name, obj, record), label in zip(checked, labels, strict=True):
         data = {"dataset": record["trained_on"], "val_dataset": record.get("val_dataset"),
                 "holdout_scene": record.get("holdout_scene")}  # fmt: skip
         note = check_trained_on(name, record, data, dataset.info, words=PYTHON_WORDS,
-                                val_known="val_dataset" in obj.timing)  # fmt: skip
+                                val_known="val_dataset" in obj.timing,
+                                tail=f" [{label}]")  # fmt: skip
         if note:
             notes.append(role_notes(name.removeprefix("the "), note))
-    objects = [(name, obj) for name, obj, _ in checked]
-    warn_observed_pace(objects, dataset)
-    warn_untyped_data(objects, dataset)
+    # one warning each at most, for the first that has the problem (as the functions do)
+    for warn in (warn_observed_pace, warn_untyped_data):
+        for (name, obj, _), label in zip(checked, labels, strict=True):
+            if warn([(name, obj)], dataset, tail=f" [{label}]"):
+                break
     return "; ".join(notes) or None
 
 

@@ -222,14 +222,22 @@ def _is_terminal(stream: Any) -> bool:
         return False
 
 
+def in_notebook() -> bool:
+    """Whether this process is a Jupyter kernel (``ipykernel`` is loaded, as in every notebook
+    and in nothing run from a terminal or a log): there stderr is no terminal, yet a
+    progress bar is watched live (``tqdm.auto`` draws a notebook widget)."""
+    return "ipykernel" in sys.modules
+
+
 def bar_options(show: bool) -> dict[str, Any]:
     """The options of every progress bar (``tqdm(..., **bar_options(progress))``): hidden
     unless ``show`` (the commands' ``--no-progress``); on a stderr that is not a terminal,
     redrawn at most every ``LOG_REDRAW_SECONDS`` (the first state and the end are still
-    drawn)."""
+    drawn), except in a notebook (``in_notebook``), where a bar throttled to a minute would
+    sit at 0 % and vanish at the end of a pass shorter than that."""
     if not show:
         return {"disable": True}
-    if _is_terminal(sys.stderr):
+    if _is_terminal(sys.stderr) or in_notebook():
         return {"disable": False}
     # maxinterval too: tqdm's monitor thread would otherwise redraw every maxinterval (10 s)
     return {"disable": False, "mininterval": LOG_REDRAW_SECONDS,

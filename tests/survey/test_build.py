@@ -122,11 +122,10 @@ def _png_text(data: bytes) -> bytes:
     return out
 
 
-def test_the_images_one_text_chunk_is_matplotlibs_software_version(tiny_study):
-    # docs/survey.md, "Blinding", says so
+def test_the_images_have_no_text_chunk(tiny_study):
+    # docs/survey.md, "Blinding", says so (they are written uncompressed, chunk by chunk)
     for image in (tiny_study / "images").iterdir():
-        text = _png_text(image.read_bytes())
-        assert text.startswith(b"Software\x00Matplotlib version") and text.count(b"\x00") == 1
+        assert _png_text(image.read_bytes()) == b""
 
 
 def test_the_served_page_never_names_a_method(tiny_study, tmp_path):
@@ -212,3 +211,43 @@ def test_a_study_folder_is_owner_only_whatever_the_umask(tmp_path):
             assert oct(study.folder.stat().st_mode & 0o777) == "0o700"
     finally:
         os.umask(old)
+
+
+# ---- review of walkthrough 66: a built-in dataset's ignored options are warned of once -------
+
+
+def test_read_data_gives_the_frame_interval_and_units_to_a_folder_dataset_only(monkeypatch, walks):
+    from trajpref.survey import build
+
+    calls = []
+
+    def fake_load(name, split, root, frame_interval, units, **kwargs):
+        calls.append((name, split, frame_interval, units))
+        return split
+
+    monkeypatch.setattr(build, "load_dataset", fake_load)
+    monkeypatch.setattr(build, "hold_out_scene", lambda train, val, scene: (train, val))
+    cfg = BuildConfig(dataset="zara1", models={"a": "cv"}, units="m", frame_interval=0.4,
+                      split="val", holdout_scene="crowds_zara02")  # fmt: skip
+    assert build.read_data(cfg) == "val"
+    assert calls == [("zara1", "train", None, None), ("zara1", "val", None, None)]
+    calls.clear()
+    cfg = BuildConfig(dataset=str(walks), models={"a": "cv"}, units="m", frame_interval=0.4)
+    build.read_data(cfg)
+    assert calls == [(str(walks), "test", 0.4, "m")]
+
+
+def test_survey_build_warns_once_of_a_built_in_datasets_ignored_options(
+    capsys, data_root, tmp_path
+):
+    from trajpref.cli import main
+
+    code = main(["survey", "build", "--dataset", "zara1", "--units", "m", "--frame-interval",
+                 "0.4", "--split", "val", "--holdout-scene", "crowds_zara02", "--models",
+                 "a=cv", "--scorer", "zara1/denoiser", "--scenes", "2", "--samples", "2",
+                 "--data-root", str(data_root), "--no-progress",
+                 "--out", str(tmp_path / "s")])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert err.count("describe a folder dataset") == 1, err
+    assert "--frame-interval and --units describe a folder dataset" in err

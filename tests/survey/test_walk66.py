@@ -15,6 +15,7 @@ import os
 import sqlite3
 import subprocess
 import sys
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -24,18 +25,23 @@ from scipy import stats
 from starlette.testclient import TestClient
 
 from trajpref.cli import main
-from trajpref.survey.analyze import analyze, run_analysis
+from trajpref.survey.analyze import analyze, run_analysis, wilcoxon
 from trajpref.survey.export import export_csv
 from trajpref.survey.manifest import DATABASE, GROUND_TRUTH, MANIFEST, load_study
 from trajpref.survey.server import create_app
 from trajpref.survey.simulate import SimulateConfig, simulate
 from trajpref.survey.store import AnswerStore
 from trajpref.survey.study import (
-    PAD_CHUNK,
+    SceneData,
+    ground_truth_panel,
     make_synthetic_study,
-    pad_png,
     png_chunks,
+    scene_limits,
+    shown_predictions,
+    stored_png,
+    write_study,
 )
+from trajpref.viz.plot import plot_panel
 
 METHODS = ("methodalpha", "methodbeta")  # as in conftest.py
 OK = {"social": 4, "kinetics": 2}
@@ -222,7 +228,8 @@ def test_a_database_of_the_previous_version_is_read_by_analyze_and_export_and_ke
     study = load_study(synthetic_study)
     before = path.read_bytes()
     result, _ = run_analysis(synthetic_study, out=tmp_path / "analysis")
-    assert result.raters == 2 and result.position_effect.blocks == 2 * len(study.scenes)
+    check = result.position_effect
+    assert result.raters == 2 and (check.blocks, check.scenes) == (2, 2 * len(study.scenes))
     done = export_csv(synthetic_study, tmp_path / "a.csv")
     assert done["answers"] == 2 * study.num_panels
     assert path.read_bytes() == before  # read-only: no column added by a reader
@@ -281,23 +288,66 @@ def test_analyze_checks_for_a_position_effect_with_friedmans_test(synthetic_stud
                 place = where[(s.id, p.id)][1]
                 score = {1: 5, 2: 3, 3: 2}[place] if i % 2 else {1: 4, 2: 4, 3: 1}[place]
                 rows.append((rater, "human", s.id, p.id, score, score, True))
-                blocks.setdefault((rater, s.id), {})[place] = score
+                blocks.setdefault(rater, {})[place] = score  # the same in each of its scenes
     result = analyze(study, rows)
     check = result.position_effect
-    assert check.order == "rater" and check.test == "Friedman" and check.blocks == 18
+    assert check.order == "rater" and check.test == "Friedman"
+    assert check.blocks == 6 and check.scenes == 18  # the raters are the blocks
     expected = stats.friedmanchisquare(*[[b[j] for b in blocks.values()] for j in (1, 2, 3)])
     assert check.statistic == pytest.approx(expected.statistic)
-    assert check.p == pytest.approx(expected.pvalue) and check.p < 0.001
+    assert check.p == pytest.approx(expected.pvalue) and check.p < 0.01
     assert [(r["position"], r["answers"], r["mean"]) for r in check.positions] == [
         (1, 18, 4.5), (2, 18, 3.5), (3, 18, 1.5)]  # fmt: skip
     md = result.markdown()
     assert "## Position effect" in md and "| 1 | 18 | 4.50 ± 0.51 |" in md
-    assert "Friedman test over 18 (rater, scene) blocks" in md and "position effect" in md
+    assert "Friedman test over 6 raters (each one block" in md and "position effect" in md
+    assert "18 (rater, scene) pairs in all" in md and "raters are independent" in md
     js = result.to_dict()["position_effect"]
-    assert js["test"] == "Friedman" and js["blocks"] == 18
+    assert js["test"] == "Friedman" and js["blocks"] == 6 and js["scenes"] == 18
     # a fixed-order study: the report says that place and method cannot be told apart
     fixed = analyze(dataclasses.replace(study, order="fixed"), rows)
     assert "cannot be told from a difference between methods" in fixed.markdown()
+
+
+def test_the_position_test_takes_raters_as_blocks_a_hand_made_case(synthetic_study):
+    """Review of walkthrough 66: the test took every (rater, scene) pair as an independent
+    block, so a rater's many scenes counted as many raters. Three raters, three scenes of three
+    pictures; each rater's mean score per place (over the scenes in which they answered every
+    picture) is one block: ranks (3, 2, 1), (3, 2, 1), (1, 3, 2), rank sums 7, 7, 4, so
+    chi2 = 12 / (3 * 3 * 4) * (49 + 49 + 16) - 3 * 3 * 4 = 2 and p = exp(-1). Taken over the
+    8 complete (rater, scene) pairs, the same answers gave p = 0.053, a seventh of it."""
+    study = load_study(synthetic_study)
+    # per rater: place -> (social, kinetics) in every scene; the human score is their mean
+    plan = {"r0": {1: (5, 4), 2: (3, 3), 3: (2, 2)},  # 4.5, 3, 2
+            "r1": {1: (4, 4), 2: (4, 3), 3: (1, 1)},  # 4, 3.5, 1
+            "r2": {1: (2, 2), 2: (5, 5), 3: (3, 3)}}  # 2, 5, 3  # fmt: skip
+    rows, pairs = [], {}
+    for rater, scores in plan.items():
+        where = study.positions(rater)
+        for n, s in enumerate(study.scenes):
+            for p in s.panels:
+                place = where[(s.id, p.id)][1]
+                social, kinetics = scores[place]
+                if rater == "r2" and n < 2:  # r2's first two scenes: other scores, same means
+                    social = kinetics = ((1, 5, 3), (3, 5, 3))[n][place - 1]
+                if rater == "r1" and n == 2:  # r1 left a picture out: not in r1's means
+                    if place == 3:
+                        continue
+                    social = kinetics = 1 if place == 1 else 5
+                else:
+                    pairs.setdefault((rater, s.id), {})[place] = (social + kinetics) / 2
+                rows.append((rater, "human", s.id, p.id, social, kinetics, True))
+    where = study.positions("r3")  # a rater without one complete scene: no block
+    rows += [("r3", "human", s.id, p.id, 5, 5, True) for s in study.scenes for p in s.panels
+             if where[(s.id, p.id)][1] != 2]  # fmt: skip
+    check = analyze(study, rows).position_effect
+    assert (check.test, check.blocks, check.scenes) == ("Friedman", 3, 3 + 2 + 3)
+    assert check.statistic == pytest.approx(2.0)
+    assert check.p == pytest.approx(np.exp(-1.0))
+    # the (rater, scene) pairs as blocks, as before: one rater counted many times
+    assert len(pairs) == 8
+    old = stats.friedmanchisquare(*[[b[j] for b in pairs.values()] for j in (1, 2, 3)])
+    assert old.pvalue == pytest.approx(0.0531, abs=1e-4) and old.pvalue < check.p / 5
 
 
 def test_the_position_check_uses_wilcoxon_for_two_pictures_per_scene(tmp_path):
@@ -309,30 +359,30 @@ def test_the_position_check_uses_wilcoxon_for_two_pictures_per_scene(tmp_path):
         rows += [(f"r{i}", "human", s.id, p.id, 5 - where[(s.id, p.id)][1], 3, True)
                  for s in study.scenes for p in s.panels]  # fmt: skip
     check = analyze(study, rows).position_effect
-    assert check.test == "Wilcoxon signed-rank" and check.blocks == 15
-    assert check.p < 0.001  # the first picture always rated one point higher
+    assert check.test == "Wilcoxon signed-rank" and (check.blocks, check.scenes) == (5, 15)
+    # five raters (not 15 pairs), each rating the first picture one point higher
+    assert check.p == pytest.approx(wilcoxon(np.full(5, 4.0), np.full(5, 3.0))[1])
+    assert check.p > 0.01
 
 
 # ---- 6. the pictures of a scene have one byte size -----------------------------------------
 
 
 def _decode(data: bytes) -> np.ndarray:
-    return np.asarray(Image.open(io.BytesIO(data)).convert("RGBA"))
+    return np.asarray(Image.open(io.BytesIO(data)).convert("RGB"))
 
 
-def _unpadded(data: bytes) -> bytes:
-    """``data`` without its padding chunk: the PNG as matplotlib wrote it."""
-    out, pos = data[:8], 8
-    while pos < len(data):
-        length = int.from_bytes(data[pos : pos + 4], "big")
-        if data[pos + 4 : pos + 8] != PAD_CHUNK:
-            out += data[pos : pos + 12 + length]
-        pos += 12 + length
-    return out
+def _layout(data: bytes) -> list[tuple[bytes, int]]:
+    """A PNG's chunks as (type, length): everything of its bytes but the pixels."""
+    return [(kind, len(body)) for kind, body, _ in png_chunks(data)]
 
 
 @pytest.mark.parametrize("which", ["tiny", "reference"])
-def test_a_scenes_pictures_have_one_size(which, tiny_study, tmp_path):
+def test_a_scenes_pictures_have_one_size_and_one_chunk_layout(which, tiny_study, tmp_path):
+    """Review of walkthrough 66: a zero-filled padding chunk gave every picture one size, but
+    its length (and IDAT's) still told the ground truth's (the smallest IDAT, the most
+    padding) in every scene: now no chunk length differs, and the pixels are stored, not
+    compressed."""
     folder = (tiny_study if which == "tiny" else make_synthetic_study(
         tmp_path / "ref", scenes=2, methods=METHODS, ground_truth="reference").folder)  # fmt: skip
     study = load_study(folder)
@@ -341,43 +391,48 @@ def test_a_scenes_pictures_have_one_size(which, tiny_study, tmp_path):
         files += [folder / "images" / s.reference] if s.reference else []
         data = [f.read_bytes() for f in files]
         assert len({len(d) for d in data}) == 1, [len(d) for d in data]
+        layouts = [_layout(d) for d in data]  # well formed, every CRC right
+        assert all(lay == layouts[0] for lay in layouts), layouts
+        assert [k for k, _ in layouts[0]] == [b"IHDR", b"IDAT", b"IEND"]  # no text chunk
         for d in data:
-            chunks = png_chunks(d)  # well formed, every CRC right
-            pads = [c for c in chunks if c[0] == PAD_CHUNK]
-            assert len(pads) == 1 and set(pads[0][1]) <= {0}  # zeros: nothing of the method
-            assert chunks[-2][0] == PAD_CHUNK and chunks[-1][0] == b"IEND"
-            assert np.array_equal(_decode(d), _decode(_unpadded(d)))  # the same pixels
-        sizes = [len(_unpadded(d)) for d in data]
-        assert max(sizes) + 12 == len(data[0])  # the largest grew by one empty chunk
-    if which == "tiny":  # the ground truth's picture was the smallest of every scene
-        gt = [next(p for p in s.panels if p.key.method == GROUND_TRUTH) for s in study.scenes]
-        raw = {p.image: len(_unpadded((folder / "images" / p.image).read_bytes()))
-               for s in study.scenes for p in s.panels}  # fmt: skip
-        assert any(raw[g.image] == min(raw[p.image] for p in s.panels)
-                   for g, s in zip(gt, study.scenes, strict=True))  # fmt: skip
+            chunks = dict((k, body) for k, body, _ in png_chunks(d))
+            w, h = int.from_bytes(chunks[b"IHDR"][:4], "big"), int.from_bytes(
+                chunks[b"IHDR"][4:8], "big")  # fmt: skip
+            assert chunks[b"IHDR"][8:] == bytes([8, 2, 0, 0, 0])  # 8-bit RGB
+            raw = zlib.decompress(chunks[b"IDAT"])
+            assert len(raw) == h * (1 + 3 * w)
+            assert chunks[b"IDAT"] == zlib.compress(raw, 0)  # deflate stored blocks
+            assert _decode(d).shape == (h, w, 3)
 
 
-def test_padding_a_png_keeps_its_pixels_and_refuses_too_little_room(tmp_path):
-    import matplotlib
+def test_stored_pictures_keep_the_pixels_of_the_render(tmp_path):
+    """The uncompressed pictures decode to the pixels matplotlib drew (its PNG's, opaque)."""
+    rng = np.random.default_rng(3)
+    history = rng.normal(0, 1, (3, 8, 2)).cumsum(1)  # [P, T_h, 2]
+    future = history[:, -1:] + rng.normal(0, 1, (3, 12, 2)).cumsum(1)  # [P, T_f, 2]
+    pred = future[None] + rng.normal(0, 0.3, (6, 3, 12, 2)).cumsum(2)  # [K, P, T_f, 2]
+    d_pred = 1 + rng.random((6, 3, 12))  # [K, P, T_f]
+    panels = {"alpha": shown_predictions(pred, d_pred, np.ones((3, 12)), future, 2),
+              GROUND_TRUTH: ground_truth_panel(future)}  # fmt: skip
+    scene = SceneData(history, future, panels, "made#0", 0, 0)
+    study = write_study(tmp_path / "s", [scene], [GROUND_TRUTH, "alpha"])
+    limits = scene_limits(history, future, list(panels.values()))
+    for p in study.scenes[0].panels:
+        shown = panels[p.key.method]
+        plot_panel(history, shown.paths, shown.weights, tmp_path / "own.png", limits, "m")
+        drawn = np.asarray(Image.open(tmp_path / "own.png").convert("RGBA"))
+        assert (drawn[..., 3] == 255).all()  # opaque: RGB loses nothing
+        assert np.array_equal(_decode((study.folder / "images" / p.image).read_bytes()),
+                              drawn[..., :3])  # fmt: skip
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(2, 2))
-    ax.plot([0, 1, 2], [0, 2, 1])
-    fig.savefig(tmp_path / "a.png")
-    plt.close(fig)
-    data = (tmp_path / "a.png").read_bytes()
-    padded = pad_png(data, len(data) + 500)
-    assert len(padded) == len(data) + 500 and _unpadded(padded) == data
-    assert np.array_equal(_decode(padded), _decode(data))
-    assert np.array_equal(plt.imread(io.BytesIO(padded)), plt.imread(io.BytesIO(data)))
-    least = png_chunks(pad_png(data, len(data) + 12))  # the least padding: an empty chunk
-    assert least[-2][:2] == (PAD_CHUNK, b"") and least[:-2] == png_chunks(data)[:-1]
-    with pytest.raises(ValueError, match="cannot pad"):
-        pad_png(data, len(data) + 11)
+def test_a_stored_png_is_a_function_of_its_pixel_size_alone():
+    a = stored_png(np.zeros((40, 30, 3), np.uint8))
+    b = stored_png(np.random.default_rng(0).integers(0, 256, (40, 30, 3), dtype=np.uint8))
+    assert len(a) == len(b) and _layout(a) == _layout(b)
+    assert np.array_equal(_decode(b), np.asarray(Image.open(io.BytesIO(b))))
     with pytest.raises(ValueError, match="wrong CRC"):
-        png_chunks(padded[:-5] + b"\x00" + padded[-4:])
+        png_chunks(a[:-5] + b"\x00" + a[-4:])
 
 
 def test_the_served_pictures_name_no_method(tiny_study, tmp_path):

@@ -32,9 +32,9 @@ def load_predictor(
     if spec in BUILTIN:
         return BUILTIN[spec]()
     if zoo.is_name(spec):  # DATASET/NAME: a published model, or an error listing them
-        return checkpoint.load_predictor(
+        return _named(checkpoint.load_predictor(
             checkpoint.resolve_path(spec), sampler=sampler, device=device
-        )
+        ), spec)  # fmt: skip
     try:
         path = checkpoint.resolve_path(spec)
     except TrajprefError:
@@ -51,4 +51,11 @@ def load_predictor(
             f"{spec}: no such model (use 'cv', a published name such as zara1/generator "
             "(`trajpref models` lists them) or a checkpoint file)"
         ) from None
-    return checkpoint.load_predictor(path, sampler=sampler, device=device)
+    return _named(checkpoint.load_predictor(path, sampler=sampler, device=device), spec)
+
+
+def _named(model, spec: str | os.PathLike):
+    """``model`` with ``checkpoint``: the name or path it was loaded by, which the Python data
+    checks' warnings name (``evaluation.model_identity``)."""
+    model.checkpoint = str(spec)
+    return model

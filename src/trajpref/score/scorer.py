@@ -275,6 +275,7 @@ class TrajectoryScorer(DenoiserShapes):
             neighbour_radius = checkpoint.config_of(header).model.neighbour_radius
         scorer = cls(denoiser.to(device), schedule.to(device), payload["scale"], steps, seed,
                      shared_noise, speed_ref, precision, neighbour_radius)  # fmt: skip
+        scorer.checkpoint = str(path)  # named by the data checks' warnings
         return attach_timing(scorer, header)
 
     def with_steps(self, steps: Sequence[int], precision: str | None = None) -> TrajectoryScorer:

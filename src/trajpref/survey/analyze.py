@@ -21,8 +21,11 @@
   and no tests are run. A mark of a row that scores above the best method (the ground truth,
   typically) carries ``ABOVE``: its stars then mean significantly *higher*.
 - Position effect (``PositionCheck``): the mean human score by the picture's place within its
-  scene as the rater was shown it (1 = first), and a Friedman test over the (rater, scene)
-  blocks with every picture answered (a Wilcoxon signed-rank test for two pictures per scene).
+  scene as the rater was shown it (1 = first), and a Friedman test whose blocks are the raters
+  (a Wilcoxon signed-rank test for two pictures per scene): each rater's mean score at each
+  place, over the scenes in which they answered every picture. A rater's scenes are not
+  independent of each other (one rater's habits run through all of them), raters are: a test
+  over (rater, scene) pairs would count one rater's many scenes as many independent blocks.
   With per-rater orders (``Study.order`` ``rater``) position and method are unrelated; with a
   fixed order they are confounded, and the report says so.
 - Raters left out by request (``--exclude-rater``: a failed attention check, a test run) are
@@ -182,9 +185,14 @@ class PositionCheck:
     ``sd`` of the human score."""
     test: str = ""
     """``Friedman`` (three or more pictures per scene), ``Wilcoxon signed-rank`` (two), or
-    empty (no test: fewer than two complete blocks or one picture per scene)."""
+    empty (no test: fewer than two raters with a complete scene, or one picture per scene)."""
     blocks: int = 0
-    """(rater, scene) pairs in which every picture was answered: the test's blocks."""
+    """Raters with at least one scene in which they answered every picture: the test's
+    blocks (each rater's mean score per place over those scenes; raters are independent of
+    each other, a rater's scenes are not)."""
+    scenes: int = 0
+    """(rater, scene) pairs in which every picture was answered: what the raters' means are
+    taken over."""
     statistic: float = math.nan
     """Friedman's chi-squared (Wilcoxon's W)."""
     p: float = math.nan
@@ -220,8 +228,13 @@ def position_check(study: Study, rows: list[tuple],
     for j, v in sorted(by_pos.items()):
         mean, sd = _mean_sd(v)
         table.append({"position": j, "answers": len(v), "mean": mean, "sd": sd})
-    complete = [b for b in blocks.values() if sorted(b) == list(range(1, k + 1))]
-    columns = [np.array([b[j] for b in complete]) for j in range(1, k + 1)]  # k x [n]
+    complete: dict[str, list[dict[int, float]]] = {}  # rater -> their complete scenes
+    for (rater, _), b in blocks.items():
+        if sorted(b) == list(range(1, k + 1)):
+            complete.setdefault(rater, []).append(b)
+    # one block per rater: their mean score at each place over their complete scenes; k x [R]
+    columns = [np.array([np.mean([b[j] for b in scenes]) for scenes in complete.values()])
+               for j in range(1, k + 1)]  # fmt: skip
     if study.order == "fixed":
         note = ("every rater saw the same order (a fixed-order study): each place within a scene "
                 "always showed the same method, so a difference between places cannot be told "
@@ -229,7 +242,8 @@ def position_check(study: Study, rows: list[tuple],
     else:
         note = ("each rater saw an order of their own, so the places within a scene are not "
                 "tied to the methods: a significant difference is a position effect")  # fmt: skip
-    check = PositionCheck(study.order, table, blocks=len(complete), note=note)
+    check = PositionCheck(study.order, table, blocks=len(complete),
+                          scenes=sum(len(v) for v in complete.values()), note=note)  # fmt: skip
     if len(complete) < 2 or k < 2:
         return check
     if k == 2:
@@ -461,10 +475,12 @@ class Analysis:
         out += [f"| {r['position']} | {r['answers']} | {_pm(r['mean'], r['sd'])} |"
                 for r in c.positions]  # fmt: skip
         name = "chi²" if c.test == "Friedman" else "W"
-        test = (f"{c.test} test over {c.blocks} (rater, scene) blocks with every picture "
-                f"answered: {name} = {_num(c.statistic)}, p = {_p(c.p)}" if c.test
-                else f"no test: {c.blocks} (rater, scene) blocks with every picture answered "
-                "(at least 2 are needed)")  # fmt: skip
+        blocks = (f"{c.blocks} rater{'' if c.blocks == 1 else 's'} (each one block: their "
+                  f"mean score at each place over the scenes in which they answered every "
+                  f"picture, {c.scenes} (rater, scene) pairs in all; raters are independent "
+                  f"of each other, one rater's scenes are not)")  # fmt: skip
+        test = (f"{c.test} test over {blocks}: {name} = {_num(c.statistic)}, p = {_p(c.p)}"
+                if c.test else f"no test: {blocks}; at least 2 raters are needed")  # fmt: skip
         return [*out, "", f"{test}; {c.note}."]
 
 

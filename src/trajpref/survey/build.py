@@ -16,7 +16,7 @@ from tqdm.auto import tqdm
 
 from trajpref import __version__
 from trajpref.data import ReadOptions, hold_out_scene, load_dataset
-from trajpref.data.registry import check_protocol
+from trajpref.data.registry import SPECS, check_protocol
 from trajpref.data.text import DEFAULT_MAX_COORD
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, TrajprefError
@@ -146,10 +146,14 @@ class BuildConfig:
 
 
 def read_data(cfg: BuildConfig) -> TrajectoryDataset:
-    """The split the scenes are drawn from, read as ``trajpref evaluate`` reads it."""
+    """The split the scenes are drawn from, read as ``trajpref evaluate`` reads it: the frame
+    interval and units go to a folder dataset only (a built-in has its own; the CLI has warned
+    once of options it ignores, and ``load_dataset`` would warn again for every split)."""
+    folder = cfg.dataset not in SPECS
 
     def split(name: str) -> TrajectoryDataset:
-        return load_dataset(cfg.dataset, name, cfg.data_root, cfg.frame_interval, cfg.units,
+        return load_dataset(cfg.dataset, name, cfg.data_root,
+                            cfg.frame_interval if folder else None, cfg.units if folder else None,
                             options=cfg.read_options(), protocol=cfg.protocol)  # fmt: skip
 
     if cfg.holdout_scene:  # the held-out scene's windows of both splits

@@ -3,9 +3,9 @@
 ``build`` fills :class:`SceneData` from a dataset and real models; :func:`make_synthetic_study`
 fills it with made-up scenes and scores (for demos, tests and the load benchmark). Both end in
 :func:`write_study`, which shuffles the methods of every scene behind panel letters, renders one
-image per panel, pads the images of each scene to one byte size (:func:`pad_png`) and writes the
-manifest, all into a temporary folder renamed onto ``out`` at the end: a failed build leaves
-nothing behind.
+image per panel, rewrites the images uncompressed so that a scene's are of one byte size
+(:func:`store_uncompressed`) and writes the manifest, all into a temporary folder renamed onto
+``out`` at the end: a failed build leaves nothing behind.
 """
 
 from __future__ import annotations
@@ -186,10 +186,6 @@ def _panel_image(history: np.ndarray, paths: np.ndarray, weights: np.ndarray, ou
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 """The first eight bytes of every PNG file."""
-PAD_CHUNK = b"tpAd"
-"""The type of the chunk that pads a picture (``pad_png``): a private ancillary chunk (lower-case
-first letter: a decoder that does not know it skips it; lower-case second: private; upper-case
-third: as the PNG specification requires; lower-case fourth: safe to copy)."""
 PNG_CHUNK_OVERHEAD = 12
 """Bytes of a chunk besides its data: length, type, CRC."""
 
@@ -220,35 +216,59 @@ def png_chunks(data: bytes) -> list[tuple[bytes, bytes, int]]:
     return out
 
 
-def pad_png(data: bytes, size: int) -> bytes:
-    """PNG ``data`` grown to exactly ``size`` bytes by one ``PAD_CHUNK`` of zero bytes just
-    before ``IEND``, with its CRC: the picture decodes to the same pixels (a decoder skips an
-    ancillary chunk it does not know), and the padding says nothing about what is drawn.
-    ``size`` must leave room for the chunk: at least ``len(data) + PNG_CHUNK_OVERHEAD``."""
-    chunks = png_chunks(data)
-    if not chunks or chunks[-1][0] != b"IEND":
-        raise ValueError("a PNG without IEND at its end")
-    fill = size - len(data) - PNG_CHUNK_OVERHEAD
-    if fill < 0:
-        raise ValueError(f"cannot pad a PNG of {len(data)} bytes to {size}: the padding chunk "
-                         f"alone takes {PNG_CHUNK_OVERHEAD}")  # fmt: skip
-    body = bytes(fill)
-    chunk = (fill.to_bytes(4, "big") + PAD_CHUNK + body
-             + zlib.crc32(PAD_CHUNK + body).to_bytes(4, "big"))  # fmt: skip
-    cut = len(data) - PNG_CHUNK_OVERHEAD  # the IEND chunk: always 12 bytes (no data)
-    return data[:cut] + chunk + data[cut:]
+def _chunk(kind: bytes, body: bytes) -> bytes:
+    return (len(body).to_bytes(4, "big") + kind + body
+            + zlib.crc32(kind + body).to_bytes(4, "big"))  # fmt: skip
 
 
-def equalise_sizes(paths: list[Path]) -> int:
-    """Pad the PNG files ``paths`` (one scene's panels and reference) to one byte size, that of
-    the largest plus one chunk (so every one gets a padding chunk and none stands out by
-    lacking it): a rater who compares the pictures' sizes in the browser's developer tools
-    (the ground truth's, with fewer lines, was the smallest) learns nothing. Returns the
-    size."""
-    data = {p: p.read_bytes() for p in paths}
-    size = max(len(d) for d in data.values()) + PNG_CHUNK_OVERHEAD
-    for p, d in data.items():
-        p.write_bytes(pad_png(d, size))
+def stored_png(rgb: np.ndarray) -> bytes:
+    """An 8-bit RGB PNG of ``rgb`` [H, W, 3] (uint8) whose pixel data are not compressed:
+    the signature, ``IHDR``, one ``IDAT`` (a zlib stream of deflate *stored* blocks, level 0:
+    its length is a function of the byte count alone, whatever the pixels) and ``IEND``; no
+    text or other chunk. Two pictures of one pixel size are therefore of one byte size, with
+    the same chunks of the same lengths: only their pixels differ."""
+    rgb = np.ascontiguousarray(rgb, dtype=np.uint8)
+    if rgb.ndim != 3 or rgb.shape[2] != 3 or 0 in rgb.shape:
+        raise ValueError(f"expected pixels [H, W, 3], got {list(rgb.shape)}")
+    h, w = rgb.shape[:2]
+    rows = np.concatenate([np.zeros((h, 1), np.uint8), rgb.reshape(h, 3 * w)], axis=1)
+    header = w.to_bytes(4, "big") + h.to_bytes(4, "big") + bytes([8, 2, 0, 0, 0])
+    return (PNG_SIGNATURE + _chunk(b"IHDR", header)  # 8-bit, RGB, no interlacing
+            + _chunk(b"IDAT", zlib.compress(rows.tobytes(), 0))  # filter 0 on every row
+            + _chunk(b"IEND", b""))  # fmt: skip
+
+
+def png_rgb(path: Path) -> np.ndarray:
+    """A PNG file's pixels as 8-bit RGB [H, W, 3], transparent parts laid on white (the
+    page's background; matplotlib's panels are opaque). Read with Pillow, which matplotlib
+    requires."""
+    from PIL import Image  # what matplotlib reads and writes PNG files with
+
+    with Image.open(path) as image:
+        rgba = np.asarray(image.convert("RGBA"), dtype=np.float64)  # [H, W, 4]
+    alpha = rgba[..., 3:] / 255.0
+    return np.rint(rgba[..., :3] * alpha + 255.0 * (1.0 - alpha)).astype(np.uint8)
+
+
+def store_uncompressed(paths: list[Path]) -> int:
+    """Rewrite the PNG files ``paths`` (one scene's panels and reference) with the same
+    pixels as ``stored_png``: uncompressed, so that their byte sizes and chunk lengths say
+    nothing of what is drawn (compressed, the ground truth's picture, with fewer lines, was
+    the smallest of its scene). Pictures of different pixel sizes (never seen: a scene's
+    panels share their axes) are first grown to the largest with white on the right and at
+    the bottom. Returns the files' one byte size."""
+    pixels = {p: png_rgb(p) for p in paths}
+    h = max(a.shape[0] for a in pixels.values())
+    w = max(a.shape[1] for a in pixels.values())
+    sizes = set()
+    for p, a in pixels.items():
+        if a.shape[:2] != (h, w):
+            a = np.pad(a, ((0, h - a.shape[0]), (0, w - a.shape[1]), (0, 0)),
+                       constant_values=255)  # fmt: skip
+        data = stored_png(a)
+        p.write_bytes(data)
+        sizes.add(len(data))
+    (size,) = sizes
     return size
 
 
@@ -283,11 +303,11 @@ def write_study(
     """Shuffle, render and write a study folder; returns it as read back by ``load_study``.
 
     ``methods`` lists the panels of every scene (``GROUND_TRUTH`` among them when it is rated);
-    each scene's panels are put in a random order (seeded) and named A, B, ...; the images of
-    a scene are padded to one byte size (``equalise_sizes``). ``order``: ``rater``, each
-    rater sees the scenes and panels in an order of their own (``Study.rater_order``);
-    ``fixed``, every rater sees the manifest's. The folder
-    appears only once complete, owner-only (0700): the raters' answers go into it. The
+    each scene's panels are put in a random order (seeded) and named A, B, ...; the images are
+    written uncompressed, so that a scene's are of one byte size (``store_uncompressed``).
+    ``order``: ``rater``, each rater sees the scenes and panels in an order of their own
+    (``Study.rater_order``); ``fixed``, every rater sees the manifest's. The folder appears
+    only once complete, owner-only (0700): the raters' answers go into it. The
     build record gets the study's id (``Study.study_id``, which it does not enter). ``units``
     unknown (``""``, ``unknown``): the pictures' axes name no unit. ``consent``: a consent
     text every rater agrees to first (``Study.consent``).
@@ -330,8 +350,8 @@ def write_study(
                 reference = f"{sid}-ref.png"
                 _panel_image(sc.history, sc.future[None], np.ones((1, sc.future.shape[0])),
                              tmp / IMAGES / reference, limits, units, dashed=True)  # fmt: skip
-            equalise_sizes([tmp / IMAGES / p.image for p in panels]
-                           + ([tmp / IMAGES / reference] if reference else []))  # fmt: skip
+            store_uncompressed([tmp / IMAGES / p.image for p in panels]
+                               + ([tmp / IMAGES / reference] if reference else []))  # fmt: skip
             entries.append(StudyScene(sid, tuple(panels), reference, sc.source, sc.index,
                                       int(sc.history.shape[0]), sc.stratum))  # fmt: skip
         study = Study(
