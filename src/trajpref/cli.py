@@ -33,6 +33,7 @@ from trajpref.config import (
     field_docs,
     in_section,
     load_config,
+    read_yaml,
 )
 from trajpref.data import (
     PROTOCOLS,
@@ -127,6 +128,7 @@ from trajpref.train.run import (
     STAGE_NAMES,
     cli_resume_command,
     finetune,
+    interval_note,
     last_state_path,
     train_stage,
 )
@@ -877,28 +879,11 @@ def cmd_data_stats(args) -> int:
             elif key == "mean_speed":
                 value = speed_text(value, ds.info.units)
             elif key == "frame_interval":
-                value = f"{value:g} s{_interval_note(ds.info)}"
+                value = f"{value:g} s{interval_note(ds.info)}"
             elif key in ("interval_from", "time_step"):
                 continue  # in frame_interval's note
             print(f"{key:>{width}}: {value}")
     return 0
-
-
-INTERVAL_NOTES = {"dataset": "", "given": "given", "declared": "declared by the TrajNet++ scenes",
-                  "timestamps": "the step of the files' time column",
-                  "default": "assumed: none given (--frame-interval)"}  # fmt: skip
-"""How ``data stats`` says where a frame interval comes from (``DatasetInfo.interval_from``)."""
-
-
-def _interval_note(info) -> str:
-    """`` (0.1 s between frames: the step of the files' time column; read every 4)`` after
-    the step ``data stats`` prints (a time column's step is in seconds, a ``time_ms`` or
-    ``timestamp_ms`` one's divided by 1000); empty for a built-in dataset read as recorded."""
-    source = INTERVAL_NOTES.get(info.interval_from, info.interval_from)
-    if info.time_step == 1.0:
-        return f" ({source})" if source else ""
-    frame = f"{info.frame_interval / info.time_step:g} s between frames"
-    return f" ({frame}{f': {source}' if source else ''}; read every {info.time_step:g})"
 
 
 def _predictor(args):
@@ -983,7 +968,7 @@ def _warn_if_trained_otherwise(spec: str, ds, root: str | None = None,
     except (TrajprefError, KeyError, TypeError, ValueError, AttributeError, OSError):
         return None  # not a checkpoint this check can read: loading it has said what it needed
     data = header["config"]["data"]  # model_timing has read it
-    return check_trained_on(spec, model, data, ds.info, root, holdout, CLI_WORDS)
+    return check_trained_on(spec, model, data, ds.info, root, holdout, CLI_WORDS, dataset=ds)
 
 
 def _checkpoint_header(spec: str) -> dict:
@@ -2130,6 +2115,7 @@ def cmd_train(args) -> int:
         if value is not None:
             overrides.append(f"data.{key}={json.dumps(value)}")
     cfg = load_config(args.config, overrides)
+    _check_folders_beside_config(cfg.data, args.config)
     if args.seed is not None:
         cfg = dataclasses.replace(cfg, seed=args.seed)
     _warn_if_validation_reads_training(cfg.data)
@@ -2149,6 +2135,30 @@ def cmd_train(args) -> int:
         kept = Path(args.out) / f"{STAGE_NAMES[args.stage]}{ckpt.SUFFIX}"
         print(_summary_line(f"trained {args.stage}", summary, kept))
     return 0
+
+
+def _check_folders_beside_config(data, config: str | None) -> None:
+    """A ``ConfigError`` for a config file's relative ``data.dataset`` (or ``val_dataset``)
+    that is no folder here but is one beside the config file: a relative path is read from
+    the current folder, not the config file's (which ``unknown dataset`` did not say)."""
+    if config is None or not Path(config).is_file():
+        return  # the defaults, or a shipped config's name
+    given = read_yaml(config)
+    given = given.get("data") if isinstance(given, dict) else None
+    for key in ("dataset", "val_dataset"):
+        value = getattr(data, key)
+        if not isinstance(given, dict) or given.get(key) != value:
+            continue  # not the file's (--dataset, --set)
+        if not value or value in NAMES or Path(value).expanduser().is_absolute():
+            continue
+        beside = Path(config).resolve().parent / Path(value).expanduser()
+        if not Path(value).expanduser().exists() and beside.exists():
+            raise ConfigError(
+                f"data.{key}: {value}: no such folder in the current folder ({Path.cwd()}); a "
+                f"relative path in a config file is read from the folder trajpref runs in, not "
+                f"the config file's ({config}), beside which {beside} is: write data.{key}: "
+                f"{beside} in the file, or run trajpref from {beside.parent}"
+            )
 
 
 def _summary_line(what: str, summary: dict, kept: Path) -> str:

@@ -950,9 +950,37 @@ def unknown_key_message(unknown: list[str], known: list[str], where: str = "",
         close = [where + alias]
     else:
         close = [where + c for c in difflib.get_close_matches(unknown[0], known, n=1, cutoff=0.6)]
-    hint = f" (did you mean {close[0]}?)" if close else ""
+    exact, near = _other_sections(unknown[0], where)
+    elsewhere = exact if not alias else []
+    if not close and not alias:
+        elsewhere = near
+    if elsewhere:  # a key of another section, written in this one (data.epochs, a top units)
+        named = ", ".join(elsewhere[:-1]) + (" or " if elsewhere[:-1] else "") + elsewhere[-1]
+        close = [f"{named}? {'it is a key' if exact else 'close to keys'} of "
+                 f"{'another section' if len(elsewhere) == 1 else 'other sections'}"]  # fmt: skip
+    hint = f" (did you mean {close[0]}{'' if elsewhere else '?'})" if close else ""
     return (f"unknown config key {where}{unknown[0]}{hint}{more}; {valid} (all keys with their "
             "meaning: trajpref config show)")  # fmt: skip
+
+
+def _other_sections(key: str, where: str) -> tuple[list[str], list[str]]:
+    """``key`` as a dotted name in the experiment config's sections (and its top level) other
+    than ``where`` (``"data."``, or empty for the top level): a key written in the wrong
+    section. Returns the exact names, and the close ones (difflib); both empty for a section
+    that is not the experiment config's (nothing to compare with)."""
+    hints = typing.get_type_hints(ExperimentConfig)
+    places = {"": [f.name for f in fields(ExperimentConfig)
+                   if not dataclasses.is_dataclass(hints[f.name])]}  # fmt: skip
+    for f in fields(ExperimentConfig):
+        if dataclasses.is_dataclass(hints[f.name]):
+            places[f"{f.name}."] = [g.name for g in fields(hints[f.name])]
+    if where not in places:
+        return [], []
+    others = {p: keys for p, keys in places.items() if p != where}
+    exact = [p + key for p, keys in others.items() if key in keys]
+    near = [p + k for p, keys in others.items()
+            for k in difflib.get_close_matches(key, keys, n=1, cutoff=0.8)]  # fmt: skip
+    return exact, near
 
 
 def field_docs(cls: type) -> dict[str, str]:
@@ -1074,6 +1102,63 @@ def resolve_config(path: str | Path) -> Path:
                       f"{', '.join(builtin_configs())}, e.g. --config zara1)")  # fmt: skip
 
 
+def _repeated_keys(node: yaml.Node, prefix: str = "",
+                   seen: set[int] | None = None) -> tuple[str, int, int] | None:  # fmt: skip
+    """The first key that a composed YAML mapping (at any depth) gives twice: its dotted
+    name, and the lines (1-based) of its first and second appearance; None when none is."""
+    seen = set() if seen is None else seen
+    if id(node) in seen:  # an alias: its anchor's mapping was checked where it was written
+        return None
+    seen.add(id(node))
+    if isinstance(node, yaml.MappingNode):
+        first: dict[tuple[str, str], int] = {}
+        for key, value in node.value:
+            if isinstance(key, yaml.ScalarNode) and key.tag != "tag:yaml.org,2002:merge":
+                name = (key.tag, key.value)
+                if name in first:
+                    return f"{prefix}{key.value}", first[name], key.start_mark.line + 1
+                first[name] = key.start_mark.line + 1
+            inner = f"{prefix}{key.value}." if isinstance(key, yaml.ScalarNode) else prefix
+            found = _repeated_keys(value, inner, seen)
+            if found is not None:
+                return found
+    elif isinstance(node, yaml.SequenceNode):
+        for item in node.value:
+            found = _repeated_keys(item, prefix, seen)
+            if found is not None:
+                return found
+    return None
+
+
+def read_yaml(path: str | Path | None, text: str | None = None, name: str = "",
+              prefix: str = "") -> Any:  # fmt: skip
+    """The YAML document of file ``path`` (or ``text``, shown as ``name``; its keys named
+    after ``prefix``, a ``--set`` key's ``data.``), refusing a key given twice in one mapping,
+    at any depth, with a ``ConfigError`` naming the key, the file and both lines: YAML's
+    readers keep the last of them without a word, so a second ``data:`` section would drop
+    the first one's keys (a run on the default dataset). Invalid YAML is a ``ConfigError``
+    too. Every YAML file a user writes is read with it."""
+    shown = name or str(path)
+    try:
+        text = Path(path).read_text() if text is None else text
+        node = yaml.compose(text, Loader=yaml.SafeLoader)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{shown}: not valid YAML ({exc.__class__.__name__})") from None
+    repeated = _repeated_keys(node, prefix) if node is not None else None
+    if repeated is not None:
+        key, first, again = repeated
+        where = f"{shown}, line {again}: " if text.count("\n") else f"{shown}: "
+        lines = f" (first on line {first})" if first != again else ""
+        if "." in key:
+            what = "YAML keeps only the last value without a word: write it once"
+        else:
+            what = (f"YAML keeps only the last {key}: section, and the first one's keys would "
+                    f"be dropped without a word: write one {key}: section holding all its "
+                    "keys")  # fmt: skip
+        raise ConfigError(f"{where}{key} is given twice{lines}; {what}")
+    return yaml.safe_load(text)
+
+
 def load_config(
     path: str | Path | None,
     overrides: list[str] | None = None,
@@ -1089,10 +1174,7 @@ def load_config(
     data: dict[str, Any] = copy.deepcopy(base) if base is not None else {}
     if path is not None:
         path = resolve_config(path)
-        try:
-            loaded = yaml.safe_load(path.read_text()) or {}
-        except yaml.YAMLError as exc:
-            raise ConfigError(f"{path}: not valid YAML ({exc.__class__.__name__})") from None
+        loaded = read_yaml(path) or {}
         if not isinstance(loaded, dict):
             raise ConfigError(f"{path}: the top level must be a mapping")
         for key, value in loaded.items():
@@ -1108,7 +1190,7 @@ def load_config(
             node = node.setdefault(part, {})
             if not isinstance(node, dict):
                 raise ConfigError(f"override {item!r}: {part} is not a section")
-        node[parts[-1]] = yaml.safe_load(value)
+        node[parts[-1]] = read_yaml(None, value, f"--set {item}", f"{key}.")
     return experiment_from_dict(data)
 
 

@@ -44,11 +44,14 @@ from trajpref.metrics import (
 from trajpref.models.predictor import as_integer, check_seed
 from trajpref.models.timing import (
     UNKNOWN_UNITS,
+    VIA,
     lineage_others,
     observed_problem,
+    shared_files,
     timing_problems,
     trained_otherwise,
     unstated_timing,
+    window_digests,
 )
 from trajpref.score.scorer import (
     ScoreAccumulator,
@@ -730,10 +733,67 @@ def _own_windows(name: str, data: dict, info: DatasetInfo, root: str | None,
                          " (evaluate on the test split)")  # fmt: skip
 
 
+SHOWN_FILES = 3
+"""How many same-content file pairs a warning names (``content_overlaps``), then a count."""
+
+
+def content_overlaps(
+    model: dict, digests: dict[str, str], info: DatasetInfo
+) -> list[tuple[str, str | None, list[str], bool]]:
+    """``(split, via, pairs, all)`` for each run of a ``model_timing`` record's ``lineage``
+    (its own run first, ``via`` None, then the others named as ``timing.VIA`` names them)
+    whose recorded ``files`` (``timing.split_files``, at training time since 2026-12) of its
+    ``train`` or ``val`` split hold the windows of files of this data (``digests``:
+    ``timing.window_digests`` of the data evaluated; ``info``: its split names them): the
+    pairs as ``test/zara02_copy.csv = train/crowds_zara02_train.csv``, and whether they are
+    all this data's files. Each file of this data is found once per split (the latest run).
+    Empty for a record without digests (published checkpoints, files trained before)."""
+    lineage = model.get("lineage") if isinstance(model, dict) else None
+    if not isinstance(lineage, list) or not digests:
+        return []
+    out, found = [], set()
+    last = len(lineage) - 1
+    for i in range(last, -1, -1):
+        entry = lineage[i]
+        files = entry.get("files") if isinstance(entry, dict) else None
+        if not isinstance(files, dict):
+            continue
+        via = None if i == last else VIA.get(entry.get("stage"), "its training lineage")
+        for split in ("train", "val"):
+            pairs = [(f, t) for f, t in shared_files(digests, files.get(split))
+                     if (f, split) not in found]  # fmt: skip
+            if not pairs:
+                continue
+            found.update((f, split) for f, _ in pairs)
+            shown = [f"{info.split}/{f} = " + (f"{split}/{t}" if t else f"a file of its {split} "
+                     "split") for f, t in pairs]  # fmt: skip
+            out.append((split, via, shown, len(pairs) == len(digests)))
+    return out
+
+
+def _content_text(who: str, via: str | None, split: str, shown: list[str], whole: bool,
+                  total: int) -> tuple[str, str]:  # fmt: skip
+    """The warning and record of one ``content_overlaps`` finding of model ``who`` (through
+    ``via``: ``its denoiser``, None for its own run)."""
+    role = "trained on" if split == "train" else "chose its epoch on"
+    kind = "training" if split == "train" else "validation"
+    listed = ", ".join(shown[:SHOWN_FILES])
+    if len(shown) > SHOWN_FILES:
+        listed += f" and {len(shown) - SHOWN_FILES} more"
+    some = "" if whole else f"{len(shown)} of this data's {total} files: "
+    text = (f"{who} {role} these windows: this data holds files {via or 'the model'} {role}: "
+            f"{some}"
+            f"{listed} (the same windows under another name or folder), so numbers on it are "
+            f"{'' if whole else 'partly '}{kind} numbers, not a test (evaluate on files it did "
+            f"not {'train' if split == 'train' else 'choose its epoch'} on)")  # fmt: skip
+    return text, f"{role} {'these' if whole else 'some of these'} windows ({listed})"
+
+
 def check_trained_on(name: str, model: dict, data: dict | None, info: DatasetInfo,
                      root: str | None = None, holdout: str | None = None,
                      words: ReadingWords = CLI_WORDS, *, val_known: bool = True,
-                     tail: str = "") -> str | None:  # fmt: skip
+                     tail: str = "",
+                     dataset: TrajectoryDataset | None = None) -> str | None:  # fmt: skip
     """The checks of one model (``name``; ``model``: ``models.timing.model_timing``'s record
     of its checkpoint; ``data``: the checkpoint's ``config.data``, None where unknown) against
     the data it is given (``info``), what the CLI's ``evaluate``, ``predict`` and ``plot`` and
@@ -749,7 +809,11 @@ def check_trained_on(name: str, model: dict, data: dict | None, info: DatasetInf
     ``; ``), what a result records as ``overlap``; None otherwise. ``val_known`` False: the
     record does not say where the model chose its epoch (``val_dataset``), so the validation
     findings of its own run are left out. ``tail`` ends every warning's text (Python's
-    ``check_against_training``: which model it is about, ``model_identity``)."""
+    ``check_against_training``: which model it is about, ``model_identity``). With
+    ``dataset`` (the data ``info`` describes, its windows), the files of its split are
+    compared by content with those the lineage's runs trained and chose their epoch on
+    (``content_overlaps``: a copy of a training file in ``test/``, a training folder copied
+    elsewhere), for the roles the path checks above have not found."""
     text = timing_warning(name, model, info, words)
     if text is not None:
         warnings.warn(text + tail, stacklevel=_user_level())
@@ -767,6 +831,21 @@ def check_trained_on(name: str, model: dict, data: dict | None, info: DatasetInf
         seen.add(found[1])
         warnings.warn(found[0] + tail, stacklevel=_user_level())
         notes.append(found[1] if via is None else f"{found[1][:-1]}, through {via})")
+    lineage = model.get("lineage") if isinstance(model, dict) else None
+    recorded = isinstance(lineage, list) and any(
+        isinstance(e, dict) and isinstance(e.get("files"), dict) for e in lineage
+    )
+    if dataset is not None and recorded:  # digests of this data only where the model has some
+        roles = {n.split(" these windows", 1)[0].split(" some of", 1)[0] for n in seen}
+        digests = window_digests(dataset)
+        for split, via, shown, whole in content_overlaps(model, digests, info):
+            role = "trained on" if split == "train" else "chose its epoch on"
+            if role in roles:  # this data's windows already named by path
+                continue
+            who = name if via is None else f"{name} (through {via})"
+            text, record = _content_text(who, via, split, shown, whole, len(digests))
+            warnings.warn(text + tail, stacklevel=_user_level())
+            notes.append(record if via is None else f"{record[:-1]}, through {via})")
     return "; ".join(notes) or None
 
 
@@ -902,7 +981,7 @@ def check_against_training(model: object, dataset: TrajectoryDataset,
                 "holdout_scene": record.get("holdout_scene")}  # fmt: skip
         note = check_trained_on(name, record, data, dataset.info, words=PYTHON_WORDS,
                                 val_known="val_dataset" in obj.timing,
-                                tail=f" [{label}]")  # fmt: skip
+                                tail=f" [{label}]", dataset=dataset)  # fmt: skip
         if note:
             notes.append(role_notes(name.removeprefix("the "), note))
     # one warning each at most, for the first that has the problem (as the functions do)

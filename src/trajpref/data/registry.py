@@ -526,6 +526,15 @@ def _user_folder(
                       "train/), or, to train or fine-tune, --set data.val_dataset=FOLDER (a "
                       "folder of validation track files); to evaluate, predict or plot "
                       "validation files, give their folder as --dataset")  # fmt: skip
+        others = _other_folders(path, splits)
+        if others:  # folders that may be the split under another name (validation/, testing/)
+            renames = [f"{o}/ to {SPLIT_ALIASES[o.lower()]}/" for o in others
+                       if SPLIT_ALIASES.get(o.lower()) not in (None, *splits)]  # fmt: skip
+            present.append(
+                f"and {', '.join(f'{o}/' for o in others)}, which are not split "
+                f"folders: only train/, val/ and test/ are"
+                + (f"; rename {' and '.join(renames)}" if renames else "")
+            )
         raise DataError(f"no {split}/ sub-folder (found {', '.join(present)}){remedy}", path)
     has_text = bool(text.matching_files(folder, USER_TEXT))
     if text.matching_files(folder, ("*.ndjson",)):
@@ -592,6 +601,24 @@ def text_interval(steps: dict[Path, tuple[str | None, float]], given: float | No
                       "in training)", trajnet.FrameRateWarning, stacklevel=4)  # fmt: skip
         return DEFAULT_FRAME_INTERVAL, "default"
     return float(f"{first:.9g}"), "timestamps"
+
+
+SPLIT_ALIASES = {"training": "train", "trn": "train", "validation": "val", "valid": "val",
+                 "validate": "val", "dev": "val", "testing": "test", "tests": "test",
+                 "tst": "test", "eval": "test"}  # fmt: skip
+"""Other names of split folders, which the missing-split error suggests renaming."""
+
+
+def _other_folders(path: Path, splits: dict[str, Path]) -> list[str]:
+    """The sub-folders of ``path`` that are not its split folders, sorted (hidden ones left
+    out); empty when it cannot be read."""
+    try:
+        entries = text.folder_entries(path)
+    except (OSError, DataError):
+        return []
+    kept = {p.name for p in splits.values()}
+    return sorted(e.name for e in entries
+                  if e.is_dir() and e.name not in kept and not e.name.startswith("."))  # fmt: skip
 
 
 def split_folders(path: Path) -> dict[str, Path]:

@@ -10,19 +10,21 @@ the checkpoint recorded of its training data.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import math
 import numbers
 import warnings
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
 import torch
 
 from trajpref.data.registry import SPECS
 from trajpref.data.transforms import observed_pace
 from trajpref.errors import ConfigError
 from trajpref.metrics import METRE_UNITS
-from trajpref.types import AGENT_BALL
+from trajpref.types import AGENT_BALL, TrajectoryDataset
 
 UNKNOWN_UNITS = ("", "unknown")
 """Unit names that say nothing (a folder read without ``--units``)."""
@@ -48,21 +50,107 @@ VIA = {"denoiser": "its denoiser", "generator": "the generator it was fine-tuned
 """How a warning names a lineage entry other than the checkpoint's own run, by its stage."""
 
 
-def lineage_entry(data: Any, stage: str) -> dict[str, Any]:
+DIGEST_CHARS = 10
+"""Hex digits of a file's content digest kept in a checkpoint (``files_record``): 40 bits, so
+that a split of NBA's 938 test files compared with its 3,379 training files has about one
+chance in 300,000 of a false match."""
+NAMED_FILES = 64
+"""A split of at most this many files records each file's name beside its digest
+(``files_record``), for the warning to name it; a larger one (NBA's thousands of files)
+records the digests alone, 10 characters a file."""
+
+
+def window_digests(dataset: TrajectoryDataset) -> dict[str, str]:
+    """``{file: digest}``: per source file of ``dataset`` (a window's ``scene_id`` before
+    ``@`` or ``#``), a 16-digit BLAKE2 digest of its windows' values (positions, agent types,
+    context agents) and of their ids after the file's name (``@frame=0.4``, ``#12``). The
+    file's name and folder are left out, so that a file copied to another folder or under
+    another name, or touched, gives the same digest when read the same way, while changed
+    lines or another reading (time step) do not. One pass over arrays in memory."""
+    digests: dict[str, Any] = {}
+    for scene in dataset.scenes:
+        source = scene.scene_id.split("@", 1)[0].split("#", 1)[0]
+        h = digests.setdefault(source, hashlib.blake2b(digest_size=8))
+        h.update(scene.scene_id[len(source) :].encode())
+        for values in (scene.history, scene.future, scene.agent_type, scene.context,
+                       scene.context_reverse):  # fmt: skip
+            if values is not None:
+                h.update(str(values.shape).encode())
+                h.update(np.ascontiguousarray(values).tobytes())
+    return {f: digests[f].hexdigest() for f in sorted(digests)}
+
+
+def files_record(digests: dict[str, str]) -> dict[str, str] | str:
+    """What a checkpoint records of one split's ``window_digests``: ``{file: digest}`` with
+    ``DIGEST_CHARS`` digits, or for more than ``NAMED_FILES`` files the sorted digests alone
+    run together in one string (unnamed)."""
+    short = {f: d[:DIGEST_CHARS] for f, d in digests.items()}
+    if len(short) <= NAMED_FILES:
+        return short
+    return "".join(sorted(set(short.values())))
+
+
+def record_files(record: Any) -> dict[str, str | None]:
+    """``{digest: file name or None}`` of one split's ``files_record`` (empty for anything
+    else: a checkpoint written before the record, a damaged one)."""
+    if isinstance(record, dict):
+        return {d: f for f, d in record.items() if isinstance(d, str) and isinstance(f, str)}
+    if isinstance(record, str) and len(record) % DIGEST_CHARS == 0:
+        return {record[i : i + DIGEST_CHARS]: None for i in range(0, len(record), DIGEST_CHARS)}
+    return {}
+
+
+def split_files(train: TrajectoryDataset, val: TrajectoryDataset) -> dict[str, Any]:
+    """What a lineage entry records of the files a run trained and chose its epoch on
+    (``lineage_entry``'s ``files``): ``{"train": files_record, "val": files_record}``."""
+    return {"train": files_record(window_digests(train)),
+            "val": files_record(window_digests(val))}  # fmt: skip
+
+
+def shared_files(a: dict[str, str], b: Any) -> list[tuple[str, str | None]]:
+    """``(file of a, file of b)`` for each file of ``a`` (``window_digests``) whose windows
+    are those of a file of ``b`` (``window_digests`` or a checkpoint's ``files_record``; the
+    file's name None where the record keeps none), in ``a``'s order: the same content under
+    any name or folder (compared on ``DIGEST_CHARS`` digits). Empty when none."""
+    known = {d[:DIGEST_CHARS]: f for d, f in record_files(b).items()}
+    return [(name, known[d[:DIGEST_CHARS]]) for name, d in a.items() if d[:DIGEST_CHARS] in known]
+
+
+def same_content_note(train: TrajectoryDataset, val: TrajectoryDataset) -> str | None:
+    """The note for a run whose validation split holds files with the windows of its
+    training files (``shared_files``: a file copied into both ``train/`` and ``val/``, under
+    any name): the epoch it keeps is then chosen on windows it trained on. None when none."""
+    same = shared_files(window_digests(val), window_digests(train))
+    if not same:
+        return None
+    shown = ", ".join(f"{val.info.split}/{v} = {train.info.split}/{t}" for v, t in same[:3])
+    more = f" and {len(same) - 3} more" if len(same) > 3 else ""
+    return (f"the validation data holds files with the windows of training files: {shown}"
+            f"{more}; the epoch kept is chosen on windows the model trains on, and its "
+            "validation numbers are training numbers (give val/ other files)")  # fmt: skip
+
+
+def lineage_entry(data: Any, stage: str, files: dict[str, Any] | None = None) -> dict[str, Any]:
     """One run of a checkpoint's training lineage (``training_lineage``): its ``stage``
     (``LINEAGE_STAGES``) and what its data config (``data``: a ``config.DataConfig`` or its
     dict) says of the windows it trained and chose its epoch on (``LINEAGE_KEYS``; an empty
-    ``val_dataset`` or ``holdout_scene`` is None)."""
+    ``val_dataset`` or ``holdout_scene`` is None); with ``files`` (``split_files``: the
+    content digests of its training and validation files, recorded since 2026-12), those as
+    ``files``."""
     get = data.get if isinstance(data, dict) else lambda key: getattr(data, key, None)
-    return {"stage": stage, "dataset": get("dataset"), "val_dataset": get("val_dataset") or None,
-            "holdout_scene": get("holdout_scene") or None}  # fmt: skip
+    out = {"stage": stage, "dataset": get("dataset"), "val_dataset": get("val_dataset") or None,
+           "holdout_scene": get("holdout_scene") or None}  # fmt: skip
+    if isinstance(files, dict):
+        out["files"] = files
+    return out
 
 
 def _valid_entry(entry: Any) -> bool:
     return (isinstance(entry, dict) and entry.get("stage") in LINEAGE_STAGES
             and isinstance(entry.get("dataset"), str)
             and all(entry.get(k) is None or isinstance(entry.get(k), str)
-                    for k in ("val_dataset", "holdout_scene")))  # fmt: skip
+                    for k in ("val_dataset", "holdout_scene"))
+            and (entry.get("files") is None or isinstance(entry.get("files"), dict)))  # fmt: skip
 
 
 def training_lineage(header: dict) -> list[dict[str, Any]]:
@@ -80,8 +168,8 @@ def training_lineage(header: dict) -> list[dict[str, Any]]:
     meta = header.get("meta") or {}
     recorded = meta.get("trained_on") if isinstance(meta, dict) else None
     if isinstance(recorded, list) and recorded and all(_valid_entry(e) for e in recorded):
-        out = [lineage_entry(e, e["stage"]) for e in recorded]
-        own = lineage_entry(header["config"]["data"], out[-1]["stage"])
+        out = [lineage_entry(e, e["stage"], e.get("files")) for e in recorded]
+        own = lineage_entry(header["config"]["data"], out[-1]["stage"], out[-1].get("files"))
         return [*out[:-1], own] if isinstance(own["dataset"], str) else out
     out = []
     denoiser = header.get("denoiser")

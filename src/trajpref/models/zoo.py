@@ -20,6 +20,7 @@ from typing import Any
 
 from trajpref.errors import TrajprefError
 from trajpref.io import read_checkpoint_header
+from trajpref.models.timing import UNKNOWN_UNITS, model_timing
 
 ZOO_DIR = Path(__file__).resolve().parent.parent / "zoo"
 """Where the published checkpoints live: inside the installed package."""
@@ -182,6 +183,50 @@ def _val(values: dict[str, Any]) -> str:
     return ", ".join(f"{k} {values[k]:.4g}" for k in keys) or "-"
 
 
+DEFAULT_SAMPLES = 20
+"""``trajpref evaluate``'s ``--samples`` default: a generator of another K needs its own."""
+INTERVAL_FROM = {"given": "given", "timestamps": "its files' time column",
+                 "declared": "declared by its TrajNet++ scenes",
+                 "default": "0.4 s between frames assumed, none given",
+                 "dataset": "the dataset's own"}  # fmt: skip
+"""How a card says where a run's frame interval came from (``DatasetInfo.interval_from``)."""
+
+
+def reading_flags(timing: dict[str, Any]) -> tuple[list[str], str]:
+    """The data flags that read data as a checkpoint's run read its own (``timing``:
+    ``timing.model_timing``'s record: ``--frame-interval`` where it was given, ``--time-step``
+    other than 1, ``--units`` where known, for a folder), and its seconds per step with where
+    its interval came from (``0.4 s per step (its files' time column)``; empty when
+    unknown)."""
+    flags = []
+    step, every, units = timing.get("step"), timing.get("time_step", 1.0), timing.get("units")
+    builtin = timing.get("interval_from") == "dataset"
+    if timing.get("interval_from") == "given" and step is not None:
+        flags.append(f"--frame-interval {step / every:g}")
+    if every != 1:
+        flags.append(f"--time-step {every:g}")
+    if units not in UNKNOWN_UNITS and units is not None and not builtin:
+        flags.append(f"--units {units}")
+    pace = ""
+    if step is not None:
+        origin = INTERVAL_FROM.get(str(timing.get("interval_from")))
+        pace = f"{step:g} s per step" + (f" ({origin})" if origin else "")
+    return flags, pace
+
+
+def _lineage_text(lineage: list[dict[str, Any]]) -> str:
+    """``denoiser on `D`, then generator on `D` (its epoch chosen on `V`'s val split)``."""
+    parts = []
+    for e in lineage:
+        text = f"{e.get('stage')} on `{e.get('dataset')}`"
+        if e.get("holdout_scene"):
+            text += f" (scene `{e['holdout_scene']}*` held out, its epoch chosen on it)"
+        elif e.get("val_dataset"):
+            text += f" (its epoch chosen on `{e['val_dataset']}`'s val split)"
+        parts.append(text)
+    return ", then ".join(parts)
+
+
 def file_card(path: Path) -> str:
     """A short card (Markdown) of a checkpoint file that is not published (a run's own,
     ``<stage>.safetensors``, ``_raw``, ``_epoch<E>``), from its header alone (its weights
@@ -202,9 +247,23 @@ def file_card(path: Path) -> str:
               f"lists those). Weights hash `{head.get('hash', '?')}`.", ""]  # fmt: skip
     data = config.get("data") or {}
     dataset = meta.get("dataset") or data.get("dataset")
+    try:
+        timing = model_timing(head)
+    except (KeyError, TypeError, ValueError, AttributeError):
+        timing = None  # a header without its data section
+    flags, pace = reading_flags(timing) if timing else ([], "")
     if dataset:
         digest = f" (data hash `{meta['data_hash']}`)" if meta.get("data_hash") else ""
-        lines.append(f"- Data: `{dataset}`{digest}.")
+        read = f", read with `{' '.join(flags)}`" if flags else ""
+        lines.append(f"- Data: `{dataset}`{digest}{read}" + (f": {pace}." if pace else "."))
+    if timing and timing.get("lineage"):
+        lines.append(f"- Lineage: {_lineage_text(timing['lineage'])}.")
+    denoiser = head.get("denoiser")
+    if isinstance(denoiser, dict) and denoiser.get("hash"):
+        lines.append(f"- Denoiser: weights hash `{denoiser['hash']}` (inside this file).")
+    if meta.get("method"):
+        lines.append(f"- Preset: `{meta['preset']}`." if meta.get("preset")
+                     else "- Preset: none (its own fine-tuning settings).")  # fmt: skip
     if "epoch" in meta:
         kept = f"- Kept: epoch {meta['epoch']}, step {meta.get('step', '?')}"
         if isinstance(meta.get("val"), dict):
@@ -225,8 +284,15 @@ def file_card(path: Path) -> str:
     if kind == "generator" and "samples" in model:
         lines.append(f"- Samples K = {model['samples']}, tau = {model.get('tau', '?')}.")
     stage = path.name.partition(".")[0].partition("_")[0]  # finetune_raw -> finetune
-    lines += ["", f"Its run folder holds the run's config (`{stage}_config.yaml`), metrics log "
-              f"and run record. `trajpref evaluate --model {path}` tests it.", ""]  # fmt: skip
+    command = f"trajpref evaluate --model {path}"
+    if dataset:
+        command += f" --dataset {dataset} --split test" + "".join(f" {f}" for f in flags)
+    samples = model.get("samples")
+    if kind == "generator" and isinstance(samples, int) and samples != DEFAULT_SAMPLES:
+        command += f" --samples {samples}"
+    lines += ["", f"The run folder it came from holds the run's config (`{stage}_config.yaml`), "
+              "metrics log and run record; the file alone rebuilds its model. "
+              f"`{command}` tests it.", ""]  # fmt: skip
     return "\n".join(lines)
 
 

@@ -12,14 +12,18 @@ epoch and is not read (``read_metrics``).
 
 from __future__ import annotations
 
+import contextlib
 import math
 import statistics
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from trajpref.config import load_config
 from trajpref.errors import TrajprefError
+from trajpref.io import read_checkpoint_header
+from trajpref.models.timing import model_timing, same_units
 from trajpref.train.loop import read_metrics
 from trajpref.train.run import STAGE_NAMES
 
@@ -65,6 +69,9 @@ class RunCurve:
     """What the budget counted (``budget_clock``)."""
     seconds: dict[int, float] = field(default_factory=dict)
     """{epoch: seconds of the budget's clock} at each validated epoch (a budget-ended run)."""
+    setting: dict[str, Any] = field(default_factory=dict)
+    """What its validation was measured on (``run_setting``): the data, where it chose its
+    epoch, units, pace and samples; ``setting_differences`` compares runs by it."""
 
     def at(self, epoch: int) -> dict[str, float]:
         """The metrics validated at ``epoch``."""
@@ -91,6 +98,66 @@ class RunCurve:
             return f"{epoch} of {self.epochs}"
         minutes = self.seconds[epoch] / 60
         return f"{epoch} ({minutes:.2g} of {self.budget:g} min, {self.clock} budget)"
+
+
+SETTING_KEYS = ("data.dataset", "validated on", "units", "data.time_step", "seconds per step",
+                "model.samples")  # fmt: skip
+"""What ``run_setting`` records of a run, in the order a warning names them."""
+
+
+def run_setting(run_dir: str | Path, stage: str) -> dict[str, Any]:
+    """What a stage's validation numbers were measured on, from its ``<stage>_config.yaml``
+    (``stage_config_path``) and, where it has one, its checkpoint's header (the units and
+    seconds per step its data were read at, ``models.timing.model_timing``): the keys of
+    ``SETTING_KEYS`` that it can tell (``validated on``: ``data.val_dataset``'s val split,
+    else the dataset's own, with a held-out scene; ``model.samples`` for the generator's
+    stages only, the denoiser's validation draws none). Empty where neither can be read."""
+    out: dict[str, Any] = {}
+    config = stage_config_path(run_dir, stage)
+    if config.is_file():
+        with contextlib.suppress(TrajprefError, OSError, ValueError, TypeError):
+            cfg = load_config(config)
+            data = cfg.data
+            val = f"{data.val_dataset}'s val split" if data.val_dataset else "its own val split"
+            if data.holdout_scene:
+                val = f"held-out scene {data.holdout_scene}*"
+            out = {"data.dataset": data.dataset, "validated on": val,
+                   "units": data.units or "unknown", "data.time_step": data.time_step}  # fmt: skip
+            if stage != "denoiser":
+                out["model.samples"] = cfg.model.samples
+    with contextlib.suppress(TrajprefError, OSError, ValueError, TypeError, KeyError):
+        timing = model_timing(read_checkpoint_header(Path(run_dir) / f"{stage}.safetensors"))
+        out["units"] = timing["units"]
+        if timing["step"] is not None:
+            out["seconds per step"] = round(float(timing["step"]), 6)
+    return out
+
+
+def _same_setting(key: str, a: Any, b: Any) -> bool:
+    if key == "units":
+        return same_units(str(a), str(b))
+    if isinstance(a, float) and isinstance(b, (int, float)):
+        return math.isclose(a, b, rel_tol=0.01)
+    return a == b
+
+
+def setting_differences(groups: dict[str, list[RunCurve]]) -> list[str]:
+    """One line per run whose validation was measured on other data or settings than the
+    first group's first run's (``RunCurve.setting``: dataset, validation data, units, time
+    step, seconds per step, samples), naming the fields that differ, each ``theirs -> its``;
+    empty when all match (a key one of the two cannot tell is not compared)."""
+    curves = [c for cs in groups.values() for c in cs]
+    if len(curves) < 2:
+        return []
+    first, lines = curves[0], []
+    for c in curves[1:]:
+        diff = [f"{k} {first.setting[k]} -> {c.setting[k]}" for k in SETTING_KEYS
+                if k in first.setting and k in c.setting
+                and not _same_setting(k, first.setting[k], c.setting[k])]  # fmt: skip
+        if diff:
+            lines.append(f"{c.run} was validated otherwise than {first.run} ({'; '.join(diff)}):"
+                         " its numbers and their change are not measured alike")  # fmt: skip
+    return lines
 
 
 def read_curve(run_dir: str | Path, stage: str, metrics: tuple[str, ...]) -> RunCurve:
@@ -120,18 +187,19 @@ def read_curve(run_dir: str | Path, stage: str, metrics: tuple[str, ...]) -> Run
     points = {int(r["epoch"]): {m: float(r[m]) for m in metrics} for r in validated}
     kept = int(min(validated, key=lambda r: r["val_score"])["epoch"])
     config = stage_config_path(run_dir, stage)
+    setting = run_setting(run_dir, stage)
     if not config.is_file():
-        return RunCurve(str(run_dir), int(rows[-1]["epoch"]), points, kept)
+        return RunCurve(str(run_dir), int(rows[-1]["epoch"]), points, kept, setting=setting)
     section = getattr(load_config(config), stage)
     key = f"budget_{section.budget_clock}_seconds"  # the clock max_minutes counted
     ended = (section.max_minutes is not None and rows[-1]["epoch"] < section.epochs
              and all(key in r for r in validated)
              and rows[-1].get(key, 0.0) >= 60 * section.max_minutes)  # fmt: skip
     if not ended:
-        return RunCurve(str(run_dir), int(section.epochs), points, kept)
+        return RunCurve(str(run_dir), int(section.epochs), points, kept, setting=setting)
     seconds = {int(r["epoch"]): float(r[key]) for r in validated}
     return RunCurve(str(run_dir), int(section.epochs), points, kept, section.max_minutes,
-                    section.budget_clock, seconds)  # fmt: skip
+                    section.budget_clock, seconds, setting)  # fmt: skip
 
 
 def parse_group(text: str) -> tuple[str, list[str]]:
@@ -147,9 +215,13 @@ def parse_group(text: str) -> tuple[str, list[str]]:
 
 def summarise(groups: dict[str, list[RunCurve]], metrics: tuple[str, ...]) -> dict[str, Any]:
     """Each group's kept values: mean and sample standard deviation (None for one run) per
-    metric, and the relative change of the mean against the first group's."""
+    metric, and the relative change of the mean against the first group's. A ``UserWarning``
+    per run validated on other data or settings than the first run (``setting_differences``):
+    the numbers are still summarised."""
     if not groups:
         raise TrajprefError("nothing to compare: give at least one run")
+    for line in setting_differences(groups):
+        warnings.warn(line, stacklevel=2)
     out: dict[str, Any] = {}
     first: dict[str, float] | None = None
     for name, curves in groups.items():

@@ -104,7 +104,26 @@ def set_aside(out_dir: str | Path, stage: str, names: tuple[str, ...] = RUN_FILE
         what.append(f"{'and ' if moved else 'moved '}its checkpoints to {listed}")
     print(f"[{stage}] {out_dir} held an earlier run: {', '.join(what)}; this run writes its "
           "own", file=sys.stderr)  # fmt: skip
+    best = f"{stage}{ckpt.SUFFIX}"
+    if stage == "denoiser" and best in models:
+        note = trained_through_note(out_dir, _aside_name(best, k))
+        if note is not None:
+            print(f"[{stage}] {note}", file=sys.stderr)
     return [*moved, *(_aside_name(n, k) for n in models)]
+
+
+def trained_through_note(out_dir: Path, old: str) -> str | None:
+    """What a denoiser set aside (as ``old``, in ``out_dir``) beside the folder's generator
+    files means for them (None when there are none): they were trained through the old
+    denoiser, which their resume and their generator checkpoint still need."""
+    generator = [n for n in (*checkpoint_files(out_dir, "generator"), "generator_last.pt")
+                 if (out_dir / n).is_file()]  # fmt: skip
+    if not generator:
+        return None
+    listed = ", ".join(generator[:-1]) + (" and " if generator[:-1] else "") + generator[-1]
+    return (f"the folder's generator files ({listed}) were trained through the old denoiser, "
+            f"now {old}, not the one this run trains: resume that generator with --denoiser "
+            f"{out_dir / old}, or train a new generator through the new denoiser")  # fmt: skip
 
 
 class MetricLog:
@@ -732,10 +751,11 @@ def fit(
                     if optim_cfg.max_minutes is not None:  # the share of the budget spent
                         used = (spent + clock() - c0) / (60 * optim_cfg.max_minutes)
                         post["budget"] = f"{min(1.0, used):.0%}"
-                    bar.set_postfix(post)
+                    bar.set_postfix(post, refresh=False)  # drawn at the bar's own pace
                     stop = _should_stop(step, max_steps, spent + clock() - c0,
                                         optim_cfg.max_minutes, dist_info, device)  # fmt: skip
                     if stop:
+                        bar.refresh()  # the state it ended at (its budget's share) is drawn
                         break
                 if stop:
                     break

@@ -13,6 +13,7 @@ import sys
 import time
 import typing
 import warnings
+from collections.abc import Callable
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Literal
@@ -20,15 +21,22 @@ from typing import Any, Literal
 import numpy as np
 import torch
 
-from trajpref.config import ExperimentConfig, OptimConfig, save_config, to_dict
-from trajpref.data import run_splits, text
+from trajpref.config import DataConfig, ExperimentConfig, OptimConfig, save_config, to_dict
+from trajpref.data import mean_speed, run_splits, speed_note, text
 from trajpref.data.loader import SceneLoader
-from trajpref.data.registry import NAMES
+from trajpref.data.registry import NAMES, USER_TEXT
 from trajpref.device import resolve_device
-from trajpref.errors import ConfigError
-from trajpref.io import atomic_path, check_output_dir, write_json
+from trajpref.errors import ConfigError, TrajprefError
+from trajpref.io import atomic_path, check_output_dir, read_checkpoint_header, write_json
 from trajpref.models import checkpoint as ckpt
 from trajpref.models import zoo
+from trajpref.models.timing import (
+    UNKNOWN_UNITS,
+    model_timing,
+    same_content_note,
+    timing_problems,
+    trained_otherwise,
+)
 from trajpref.results import command_line, machine
 from trajpref.rl.presets import own_reward_data
 from trajpref.train.distributed import (
@@ -52,6 +60,7 @@ from trajpref.train.stages import (
     build_denoiser_stage,
     build_finetune_stage,
     build_generator_stage,
+    data_scale,
 )
 from trajpref.types import TrajectoryDataset
 
@@ -142,6 +151,112 @@ def data_timing(train: TrajectoryDataset) -> dict[str, Any]:
     return {"frame_interval": info.frame_interval, "interval_from": info.interval_from,
             "time_step": info.time_step, "units": info.units,
             "agent_types": types}  # fmt: skip
+
+
+INTERVAL_NOTES = {"dataset": "", "given": "given", "declared": "declared by the TrajNet++ scenes",
+                  "timestamps": "the step of the files' time column",
+                  "default": "assumed: none given (--frame-interval)"}  # fmt: skip
+"""How ``data stats`` and a training run's split lines say where a frame interval comes from
+(``DatasetInfo.interval_from``)."""
+
+
+def interval_note(info: Any) -> str:
+    """`` (0.1 s between frames: the step of the files' time column; read every 4)`` after
+    the step ``data stats`` prints (a time column's step is in seconds, a ``time_ms`` or
+    ``timestamp_ms`` one's divided by 1000); empty for a built-in dataset read as recorded."""
+    source = INTERVAL_NOTES.get(info.interval_from, info.interval_from)
+    if info.time_step == 1.0:
+        return f" ({source})" if source else ""
+    frame = f"{info.frame_interval / info.time_step:g} s between frames"
+    return f" ({frame}{f': {source}' if source else ''}; read every {info.time_step:g})"
+
+
+def split_line(dataset: TrajectoryDataset, role: str) -> str:
+    """The line a training run prints of one split it read (``role``: train or val): its
+    dataset and split, scenes (windows) and agents, the seconds per step and where they come
+    from (``interval_note``, as ``data stats`` says it) and the units."""
+    info = dataset.info
+    return (f"{role}: {info.name} ({info.split} split): {len(dataset)} scenes, "
+            f"{dataset.num_agents} agents, {info.frame_interval:g} s per step"
+            f"{interval_note(info)}, units {info.units}")  # fmt: skip
+
+
+SMALL_VALIDATION = 20
+"""Validation scenes (windows) under which a run warns that its choice of epoch is noise."""
+
+
+def _time_column(info: Any, options: text.ReadOptions) -> tuple[str, str, float] | None:
+    """The first track file of a text folder split whose frame column is a time
+    (``text.column_seconds``): its name, the column's name and its step in seconds; None when
+    there is none (frame numbers, no header, not a text folder, unreadable)."""
+    try:
+        files = text.track_files(info.source, USER_TEXT)
+    except (TrajprefError, OSError):
+        return None
+    for path in files[:1]:  # one file: the reader already read them all alike
+        try:
+            tracks = text.read_tracks(path, options=options)
+        except (TrajprefError, OSError):
+            return None
+        per = text.column_seconds(tracks.frame_name)
+        step = text.frame_step(tracks.frames)
+        if per is not None and step > 0:
+            return path.name, str(tracks.frame_name), step * per
+    return None
+
+
+def data_warnings(train: TrajectoryDataset, val: TrajectoryDataset,
+                  data: DataConfig) -> list[str]:  # fmt: skip
+    """What a training run warns of the splits it read: a mean speed that is no walking pace
+    (``speed_note``, as ``data stats`` says it), a frame interval only assumed while
+    ``data.time_step`` reads every n-th row (the step recorded is n times an assumed 0.4 s), a
+    given interval that overrides the files' time column with another step, and a validation
+    split too small to choose an epoch on."""
+    out = []
+    for ds in (train, val) if val.info.name != train.info.name else (train,):
+        info = ds.info
+        note = speed_note(mean_speed(ds), info.units, info.frame_interval, info.interval_from,
+                          info.time_step)  # fmt: skip
+        if note is not None:
+            out.append(f"{info.name}: {note}")
+    info = train.info
+    rows = info.frame_interval / info.time_step
+    if info.interval_from == "default" and info.time_step != 1.0:
+        out.append(
+            f"{info.name}: data.time_step {info.time_step:g} reads every "
+            f"{info.time_step:g} rows, but the seconds between rows are assumed "
+            f"({rows:g} s: no --frame-interval and no time column), so the model "
+            f"records {info.frame_interval:g} s per step, which evaluate and predict "
+            "trust: give the files' own with --frame-interval (data.frame_interval)"
+        )
+    if info.interval_from == "given" and info.text_tracks:
+        options = text.ReadOptions(data.delimiter, data.max_gap, data.max_coord)
+        found = _time_column(info, options)
+        if found is not None and not np.isclose(found[2], rows, rtol=0.01):
+            name, column, seconds = found
+            out.append(f"{info.name}: --frame-interval {rows:g} (data.frame_interval) overrides "
+                       f"the files' time column ({name}'s {column} column steps {seconds:g} s "
+                       f"between rows): the model records {info.frame_interval:g} s per step "
+                       f"where the files say {seconds * info.time_step:g} s; leave "
+                       "--frame-interval out to read the time column (in seconds), or check "
+                       "the column")  # fmt: skip
+    if len(val) < SMALL_VALIDATION:
+        out.append(
+            f"validation has {len(val)} scenes (windows) of {val.info.name}: the epoch "
+            f"it keeps is chosen on so few that the choice is mostly noise; give "
+            f"validation more recordings (at least {SMALL_VALIDATION} windows)"
+        )
+    return out
+
+
+def report_data(name: str, train: TrajectoryDataset, val: TrajectoryDataset,
+                data: DataConfig) -> None:  # fmt: skip
+    """Say what a run read (``split_line`` for each split, on stderr) and warn
+    (``data_warnings``): on the first process alone."""
+    for ds, role in ((train, "train"), (val, "val")):
+        print(f"[{name}] {split_line(ds, role)}", file=sys.stderr)
+    for message in data_warnings(train, val, data):
+        warnings.warn(message, stacklevel=3)
 
 
 def data_digest(data: dict[str, dict[str, str]]) -> str:
@@ -280,6 +395,14 @@ def check_resume(state: dict[str, Any], identity: str, epochs: int, out_dir: Pat
         if changed:
             start = changed[0].startswith("start")
             which = "the checkpoint it starts from" if start else "its config"
+            found = start_file(out_dir, saved_run.get("start")) if start else None
+            if found is not None and name in START_FLAGS:
+                aside = ("the earlier one, set aside when a new one was trained in the folder"
+                         if ".replaced-" in found.name else "in the run's folder")  # fmt: skip
+                raise ConfigError(f"--resume {resume}: the state was trained from another "
+                                  f"checkpoint than this run's ({_shown(changed)}); {found} "
+                                  f"is that checkpoint ({aside}): resume with "
+                                  f"{START_FLAGS[name]} {found}")  # fmt: skip
             command = resume_command(out_dir, name, resume)
             config = out_dir / f"{name}_config.yaml"
             if name != "finetune" and not start:  # train --config reads the whole file
@@ -297,6 +420,26 @@ def check_resume(state: dict[str, Any], identity: str, epochs: int, out_dir: Pat
     why = _nothing_left(state, epochs, max_minutes, name, equal_budget)
     if why is not None:
         raise ConfigError(f"--resume {resume}: {why}")
+
+
+START_FLAGS = {"generator": "--denoiser", "finetune": "--from"}
+"""The option that names the checkpoint a stage starts from (``run_identity``'s ``start``)."""
+
+
+def start_file(out_dir: Path, digest: Any) -> Path | None:
+    """The checkpoint in ``out_dir`` whose weights' hash is ``digest`` (a resume state's
+    start), the folder's own first, then those set aside (``*.replaced-<k>.safetensors``), or
+    None: a denoiser replaced by a new run in the folder is found there."""
+    if not isinstance(digest, str) or not out_dir.is_dir():
+        return None
+    files = sorted(out_dir.glob(f"*{ckpt.SUFFIX}"), key=lambda p: (".replaced-" in p.name, p.name))
+    for path in files:
+        try:
+            if read_checkpoint_header(path).get("hash") == digest:
+                return path
+        except (TrajprefError, OSError):
+            continue
+    return None
 
 
 def _nothing_left(state: dict[str, Any], epochs: int, max_minutes: float | None,
@@ -575,6 +718,7 @@ def _run(
     name: str,
     start: str | None = None,
     equal_budget: float | None = None,
+    notes: Callable[[TrajectoryDataset], list[str]] | None = None,
 ) -> dict[str, Any]:
     """What every stage shares: devices and DDP, the datasets, the run folder's config, the
     loop. ``build(train, val, device) -> (Stage, OptimConfig)`` supplies the stage ``name``;
@@ -590,7 +734,8 @@ def _run(
 
     Under torchrun every rank compares what it is about to train with rank 0's once the data
     are read (``check_same_run``, before anything is written), and a CPU-time budget says that
-    its clock is each process's own (``cpu_budget_note``)."""
+    its clock is each process's own (``cpu_budget_note``). Once every check has passed, the
+    first process says what the run read (``report_data``) and warns of ``notes(train)``."""
     check_output_dir(out_dir)
     out_dir = Path(out_dir)
     section = getattr(cfg, name)
@@ -611,6 +756,8 @@ def _run(
     try:
         train, val = run_splits(cfg.data, data_root)
         data = data_fingerprint(train, val)
+        if info.is_main and (same := same_content_note(train, val)) is not None:
+            warnings.warn(same, stacklevel=2)  # the epoch would be chosen on training windows
         if state is not None:
             try:
                 check_resume_data(state, data, resume)
@@ -623,6 +770,10 @@ def _run(
         # every rank trains the run rank 0 does (a collective): before anything is written
         check_same_run(info, run_facts(cfg, name, start, data, train, state, max_steps,
                                        equal_budget))  # fmt: skip
+        if info.is_main:  # once every check that refuses the run has passed
+            report_data(name, train, val, cfg.data)
+            for note in notes(train) if notes is not None else ():
+                warnings.warn(note, stacklevel=3)
         if info.is_main:
             out_dir.mkdir(parents=True, exist_ok=True)
             if state is None:  # another run's log, record, state and checkpoints: not this run's
@@ -693,11 +844,61 @@ def train_stage(
     def build(train, val, dev):
         if payload is None:
             return build_denoiser_stage(cfg, train, val, dev)[0], cfg.denoiser
-        return build_generator_stage(cfg, payload, val, dev), cfg.generator
+        return build_generator_stage(cfg, payload, val, dev, train), cfg.generator
+
+    def notes(train: TrajectoryDataset) -> list[str]:
+        if payload is None:
+            return []
+        note = denoiser_data_note(payload, str(denoiser or path), train)
+        return [] if note is None else [note]
 
     start = payload.get("hash") if payload is not None else None  # the generator's denoiser
     return _run(cfg, out_dir, data_root, device, resume, progress, max_steps, build,
-                STAGE_NAMES[stage], start)  # fmt: skip
+                STAGE_NAMES[stage], start, notes=notes)  # fmt: skip
+
+
+def _denoiser_step_hint(model: dict[str, Any]) -> str:
+    """``timing_problems``' advice for a denoiser of another step than the generator's data."""
+    return (f"the generator would learn {model['step']:g} s steps' motion through it from "
+            "data that step otherwise")  # fmt: skip
+
+
+SCALE_TOLERANCE = 1.25
+"""How far (as a ratio either way) the generator's data scale may be from the denoiser's
+before ``denoiser_data_note`` names the difference."""
+
+
+def denoiser_data_note(payload: dict[str, Any], name: str,
+                       train: TrajectoryDataset) -> str | None:  # fmt: skip
+    """The warning for a generator run whose denoiser (``payload``, shown as ``name``) was
+    trained on data of other units or another step than ``train`` (``models.timing``'s
+    ``timing_problems``, as evaluate compares a model with its data), or whose data scale is
+    not this data's (``SCALE_TOLERANCE``): the generator takes the denoiser's scale, so it
+    reads this data divided by another data's spread. None when nothing known differs."""
+    try:
+        timing = model_timing(payload)
+    except (KeyError, TypeError, ValueError, AttributeError):
+        return None
+    info = train.info
+    units = None if info.units in UNKNOWN_UNITS else info.units
+    step = info.frame_interval if info.interval_from != "default" or timing["known"] else None
+    problems = timing_problems(timing, step, units, _denoiser_step_hint)
+    scale, own = float(payload["scale"]), data_scale(train)
+    off = not 1 / SCALE_TOLERANCE <= own / scale <= SCALE_TOLERANCE
+    if not problems and not off:
+        return None
+    shown = "" if timing["units"] in UNKNOWN_UNITS else f" {timing['units']}"
+    here = "" if units is None else f" {units}"
+    consequence = (f"the generator takes the denoiser's data scale ({scale:.3g}{shown}) for this "
+                   f"data, whose own is {own:.3g}{here}, so these tracks reach the networks at "
+                   f"{own / scale:.3g} times the size the denoiser learned, and it scores "
+                   "samples of data it never saw")  # fmt: skip
+    head = trained_otherwise(f"--denoiser {name}", timing, problems) if problems else (
+        f"--denoiser {name} was trained on {timing['trained_on']}")  # fmt: skip
+    return (
+        f"{head}; {consequence}: train a denoiser on this data first (trajpref train "
+        "diffusion with this run's config and --out), then the generator through it"
+    )
 
 
 def check_config_of_start(cfg: ExperimentConfig, payload: dict[str, Any],
@@ -783,7 +984,7 @@ def finetune(
         print(note, file=sys.stderr)
 
     def build(train, val, dev):
-        return build_finetune_stage(cfg, payload, val, dev), cfg.finetune
+        return build_finetune_stage(cfg, payload, val, dev, train), cfg.finetune
 
     return _run(cfg, out_dir, data_root, device, resume, progress, max_steps, build,
                 STAGE_NAMES["finetune"], payload.get("hash"), equal_budget)  # fmt: skip

@@ -28,7 +28,7 @@ from trajpref.models.encoder import scene_features
 from trajpref.models.generator import Generator
 from trajpref.models.losses import denoiser_loss, generator_loss, wta_temperature
 from trajpref.models.predictor import DiffusionPredictor
-from trajpref.models.timing import lineage_entry, training_lineage
+from trajpref.models.timing import lineage_entry, split_files, training_lineage
 from trajpref.rl.objective import RLObjective
 from trajpref.rl.presets import PAPER_WEIGHTS, PRESETS
 from trajpref.score.scorer import TrajectoryScorer
@@ -88,17 +88,21 @@ def data_scale(dataset: TrajectoryDataset) -> float:
     return max(1e-3, (total / max(1, count)) ** 0.5)
 
 
-def trained_on(cfg: ExperimentConfig, stage: str,
-               before: dict[str, Any] | None = None) -> list[dict[str, Any]]:  # fmt: skip
+def trained_on(cfg: ExperimentConfig, stage: str, before: dict[str, Any] | None = None,
+               train: TrajectoryDataset | None = None,
+               val: TrajectoryDataset | None = None) -> list[dict[str, Any]]:  # fmt: skip
     """What a checkpoint of ``stage`` (``denoiser``, ``generator``, ``finetune``) records in
     its meta as ``trained_on``: the training lineage of the checkpoint it builds on (``before``:
     the generator's denoiser, the fine-tune's start; ``models.timing.training_lineage``, which
     reads a file written before the record from its config), then this run's data
-    (``timing.lineage_entry``). The fold-overlap and own-windows checks read every entry: a
-    fine-tune of a zara1 generator on eth has seen zara1's windows, whatever its
+    (``timing.lineage_entry``), with the content digests of its ``train`` and ``val`` files
+    where both are given (``timing.split_files``: evaluate finds a copy of a training file
+    under another name or folder). The fold-overlap and own-windows checks read every entry:
+    a fine-tune of a zara1 generator on eth has seen zara1's windows, whatever its
     ``data.dataset``."""
     earlier = training_lineage(before) if before is not None else []
-    return [*earlier, lineage_entry(cfg.data, stage)]
+    files = split_files(train, val) if train is not None and val is not None else None
+    return [*earlier, lineage_entry(cfg.data, stage, files)]
 
 
 def finetune_preset(finetune: Any) -> str | None:
@@ -196,7 +200,7 @@ def build_denoiser_stage(
                 agents += batch.num_agents
         return {"denoise_loss": total / agents, "score": total / agents}
 
-    lineage = trained_on(cfg, "denoiser")
+    lineage = trained_on(cfg, "denoiser", train=train, val=val)
 
     def payload(meta: dict[str, Any]) -> dict[str, Any]:
         return ckpt.denoiser_payload(denoiser, cfg, scale, {**meta, "trained_on": lineage})
@@ -274,9 +278,11 @@ def _check_augmentations(model: ModelConfig, data: DataConfig) -> None:
 
 def build_generator_stage(
     cfg: ExperimentConfig, denoiser_payload: dict[str, Any], val: TrajectoryDataset,
-    device: torch.device,
+    device: torch.device, train: TrajectoryDataset | None = None,
 ) -> Stage:  # fmt: skip
-    """Stage 2. Validation: minADE_K + minFDE_K of the leapfrog sampler (lower is better)."""
+    """Stage 2. Validation: minADE_K + minFDE_K of the leapfrog sampler (lower is better).
+    ``train``: the training split, whose files' content digests the checkpoint's lineage
+    records (``trained_on``; without it, its validation files' are not recorded either)."""
     _check_augmentations(cfg.model, cfg.data)
     torch.manual_seed(cfg.seed)
     denoiser, dcfg = ckpt.build_denoiser(denoiser_payload)
@@ -291,7 +297,7 @@ def build_generator_stage(
     validate = _leapfrog_validation(sampler, val_set, cfg.model.samples, cfg.data.max_agents,
                                     device)  # fmt: skip
 
-    lineage = trained_on(cfg, "generator", denoiser_payload)
+    lineage = trained_on(cfg, "generator", denoiser_payload, train, val)
 
     def payload(meta: dict[str, Any]) -> dict[str, Any]:
         return ckpt.generator_payload(generator, denoiser_payload, cfg,
@@ -320,11 +326,13 @@ class PolicyAndCritic(nn.Module):
 
 def build_finetune_stage(
     cfg: ExperimentConfig, start: dict[str, Any], val: TrajectoryDataset, device: torch.device,
+    train: TrajectoryDataset | None = None,
 ) -> Stage:  # fmt: skip
     """Stage 3, from a generator checkpoint payload ``start``. Validation: minADE_K +
     minFDE_K of the policy's leapfrog samples (lower is better), with maxATS/maxFTS,
     meanATS and top-1 recall logged (scored at the paper's every-3 steps). The loop validates
-    the start too, once, before the first step (``validate_start``: epoch 0 of the log)."""
+    the start too, once, before the first step (``validate_start``: epoch 0 of the log).
+    ``train``: as ``build_generator_stage``'s."""
     if start["kind"] != "generator":
         raise ConfigError("fine-tuning starts from a generator checkpoint")
     torch.manual_seed(cfg.seed)
@@ -340,7 +348,7 @@ def build_finetune_stage(
     validate = _leapfrog_validation(sampler, val_set, cfg.model.samples, cfg.data.max_agents,
                                     device, metric_scorer, keys)  # fmt: skip
 
-    lineage = trained_on(cfg, "finetune", start)
+    lineage = trained_on(cfg, "finetune", start, train, val)
     preset = finetune_preset(cfg.finetune)
 
     def payload(meta: dict[str, Any]) -> dict[str, Any]:

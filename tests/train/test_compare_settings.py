@@ -1,0 +1,76 @@
+"""``trajpref compare`` warns of runs validated on other data or settings (walkthrough 66: a
+run validated on a tiny folder, or on feet against metres, printed +74.8 % / +269.6 % without
+a word); the tables still print."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+from trajpref.cli import main
+from trajpref.config import ExperimentConfig, save_config
+from trajpref.models import checkpoint as ckpt
+from trajpref.train import compare
+
+
+def _run(path: Path, **data) -> Path:
+    """A generator run folder validated at epochs 1 and 2, its config's data (and
+    ``samples``) as given."""
+    path.mkdir(parents=True)
+    rows = [{"epoch": e, "val_min_ade": 0.3 / e, "val_min_fde": 0.6 / e, "val_score": 0.9 / e}
+            for e in (1, 2)]  # fmt: skip
+    (path / "generator_metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    cfg = ExperimentConfig()
+    cfg.generator.epochs = 2
+    cfg.model.samples = data.pop("samples", cfg.model.samples)
+    for key, value in data.items():
+        setattr(cfg.data, key, value)
+    save_config(cfg, path / "generator_config.yaml")
+    return path
+
+
+def _compare(capsys, *groups):
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        code = main(["compare", *map(str, groups)])
+    return code, *capsys.readouterr()
+
+
+def test_runs_validated_on_other_data_are_named_with_their_fields(tmp_path, capsys):
+    a = _run(tmp_path / "a", dataset="/data/m", units="m", time_step=4.0)
+    b = _run(tmp_path / "b", dataset="/data/tiny", units="m", time_step=4.0,
+             val_dataset="/data/tinyval")  # fmt: skip
+    c = _run(tmp_path / "c", dataset="/data/m", units="ft", time_step=1.0, samples=4)
+    code, out, err = _compare(capsys, f"control={a}", f"tiny={b}", f"feet={c}")
+    assert code == 0 and "| control |" in out and "change against the first" in out
+    lines = [line for line in err.splitlines() if "validated otherwise" in line]
+    assert len(lines) == 2
+    assert lines[0].startswith(f"trajpref: warning: {b} was validated otherwise than {a} ("
+                               "data.dataset /data/m -> /data/tiny; validated on its own val "
+                               "split -> /data/tinyval's val split)")  # fmt: skip
+    assert "units m -> ft; data.time_step 4.0 -> 1.0; model.samples 20 -> 4" in lines[1]
+
+
+def test_runs_alike_say_nothing(tmp_path, capsys):
+    a = _run(tmp_path / "a", dataset="/data/m", units="m")
+    b = _run(tmp_path / "b", dataset="/data/m", units="metres")
+    code, _, err = _compare(capsys, f"control={a}", f"candidate={b}")
+    assert code == 0 and "validated otherwise" not in err
+
+
+def test_the_checkpoints_step_and_units_are_compared(tmp_path, tiny_run):
+    a = _run(tmp_path / "a", dataset="/data/m")
+    b = _run(tmp_path / "b", dataset="/data/m")
+    for run, step in ((a, 0.4), (b, 0.1)):
+        payload = ckpt.load(tiny_run / "generator.safetensors")
+        payload["meta"]["data_timing"] = {"frame_interval": step, "interval_from": "given",
+                                          "time_step": 1.0, "units": "m"}  # fmt: skip
+        ckpt.save(run / "generator.safetensors", payload)
+    metrics = ("val_min_ade",)
+    groups = {"a": [compare.read_curve(a, "generator", metrics)],
+              "b": [compare.read_curve(b, "generator", metrics)]}  # fmt: skip
+    assert compare.setting_differences(groups) == [
+        f"{b} was validated otherwise than {a} (seconds per step 0.4 -> 0.1): its numbers and "
+        "their change are not measured alike"
+    ]
