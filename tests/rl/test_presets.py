@@ -315,3 +315,15 @@ def test_a_yaml_value_that_the_preset_would_replace_is_refused(tiny_run, tmp_pat
         res = finetune_config(start, "rlhf-res", "paper", config=own, overrides=[
             "finetune.policy_weight=1.0", "finetune.value_weight=5.0"]).finetune  # fmt: skip
     assert (res.method, res.policy_weight) == ("rlhf-res", 1.0)
+
+
+def test_a_finetune_file_with_a_key_written_twice_is_refused(tiny_run, tmp_path):
+    """finetune --config reads its file as train --config does (config.read_yaml): YAML
+    would keep the last of two finetune: sections without a word."""
+    start = str(tiny_run / "generator.safetensors")
+    twice = tmp_path / "twice.yaml"
+    twice.write_text("finetune:\n  clip: 0.3\nfinetune:\n  lr: 0.0001\n")
+    with pytest.raises(ConfigError, match=r"finetune is given twice"):
+        finetune_config(start, "rlhf", config=twice)
+    with pytest.raises(ConfigError, match=r"finetune is given twice"):
+        finetune_config(start, "rlhf", "paper", config=twice)

@@ -19,6 +19,7 @@ from trajpref.config import (
     ExperimentConfig,
     FinetuneConfig,
     load_config,
+    read_yaml,
     resolve_config,
     to_dict,
 )
@@ -295,7 +296,7 @@ def _check_file_under_preset(cfg: ExperimentConfig, config: str | Path, base: di
     """Refuse a ``--config`` file whose finetune section gives a key that the preset sets
     (and ``overrides`` does not) another value: the preset, applied after the file, would
     replace it without a word."""
-    loaded = yaml.safe_load(resolve_config(config).read_text()) or {}
+    loaded = read_yaml(resolve_config(config)) or {}
     given = loaded.get("finetune") if isinstance(loaded, dict) else None
     if not isinstance(given, dict):
         return
@@ -334,7 +335,7 @@ def unread_file_note(config: str | Path, cfg: ExperimentConfig, method: str,
     and that a file without a finetune section changes nothing. The pretraining stages'
     sections are the start's training and are not named."""
     path = resolve_config(config)
-    loaded = yaml.safe_load(path.read_text()) or {}
+    loaded = read_yaml(path) or {}
     if not isinstance(loaded, dict):
         return None
     shown = str(config) if Path(config).suffix else path.name  # a shipped name: eth.yaml
