@@ -271,3 +271,32 @@ def test_a_resume_after_the_denoiser_was_replaced_names_the_set_aside_file(
     summary = train_stage("generator", tiny_cfg, out, device="cpu", progress=False,
                           resume=str(out / "generator_last.pt"), denoiser=str(old))  # fmt: skip
     assert summary["best"]
+
+
+def test_the_data_scale_leaves_unseen_future_steps_out():
+    """data.partial_future's targets hold NaN future steps: the scale came out 0.001, and every
+    generator run through its own folder's denoiser was told the scale was wrong."""
+    from trajpref.train.stages import data_scale
+    from trajpref.types import DatasetInfo, Scene, TrajectoryDataset
+
+    history = np.zeros((1, 8, 2), np.float32)
+    future = np.array([[[3.0, 4.0], [np.nan, np.nan]]], np.float32)  # one seen step, 5 m away
+    scene = Scene(history, future, np.zeros(1, np.int64), "s")
+    data = TrajectoryDataset([scene], DatasetInfo("toy", "train", "m", 0.4))
+    assert data_scale(data) == pytest.approx(5 / 2**0.5)  # RMS over the seen step's x and y
+
+
+def test_a_time_column_in_another_unit_than_seconds_is_not_said_to_be_overridden(tmp_path):
+    """A 'timestamp' column in nanoseconds: data stats asks for --frame-interval, and training
+    then told the user to leave it out ('the files say 4e+08 s')."""
+    data = _timed_folder(tmp_path / "d")
+    for path in data.rglob("*.csv"):
+        lines = path.read_text().splitlines()
+        rows = [lines[0]] + [
+            f"{round(float(t) * 1e9)},{rest}"
+            for t, rest in (line.split(",", 1) for line in lines[1:])
+        ]
+        path.write_text("\n".join(rows) + "\n")
+    cfg = _cfg(data, "data.units=m", "data.time_step=4", "data.frame_interval=0.1")
+    messages, _ = _train("diffusion", cfg, tmp_path / "o")
+    assert not [m for m in messages if "overrides the files' time column" in m]

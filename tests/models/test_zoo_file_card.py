@@ -61,3 +61,16 @@ def test_the_cards_evaluate_command_runs(tiny_run):
     run = subprocess.run([sys.executable, "-m", "trajpref.cli", *args], capture_output=True,
                          text=True, timeout=300)  # fmt: skip
     assert run.returncode == 0, run.stderr
+
+
+def test_a_run_validated_on_another_dataset_is_tested_on_that_ones_test_split(tiny_run, tmp_path):
+    """robo.yaml trains on robo-sim and chooses its epoch on robo: its card pointed at
+    robo-sim's simulated test split, not robo's real one the published cards test on."""
+    payload = ckpt.load(tiny_run / "generator.safetensors")
+    payload["config"]["data"]["dataset"] = "robo-sim"
+    payload["config"]["data"]["val_dataset"] = "robo"
+    payload["meta"].pop("dataset", None)
+    path = tmp_path / "generator.safetensors"
+    ckpt.save(path, payload)
+    card = zoo.file_card(path)
+    assert "--dataset robo --split test" in card and "--dataset robo-sim --split" not in card

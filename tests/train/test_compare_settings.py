@@ -74,3 +74,17 @@ def test_the_checkpoints_step_and_units_are_compared(tmp_path, tiny_run):
         f"{b} was validated otherwise than {a} (seconds per step 0.4 -> 0.1): its numbers and "
         "their change are not measured alike"
     ]
+
+
+def test_units_one_run_cannot_tell_are_not_a_difference(tmp_path, capsys):
+    """A built-in dataset's config leaves its units to the dataset (None) and a run without its
+    checkpoint cannot say them: an identical run was reported as 'units m -> unknown'."""
+
+    def curve(run: str, units: str | None) -> compare.RunCurve:
+        setting = {"data.dataset": "zara1", "validated on": "its own val split", "units": units}
+        return compare.RunCurve(run, 2, {1: {"val_score": 1.0}}, 1, setting=setting)
+
+    with_file, without = curve("a", "m"), curve("b", None)  # b: its checkpoint deleted
+    assert compare.setting_differences({"a": [with_file], "b": [without]}) == []
+    other = curve("c", "ft")
+    assert "units m -> ft" in compare.setting_differences({"a": [with_file], "c": [other]})[0]

@@ -285,8 +285,9 @@ def file_card(path: Path) -> str:
         lines.append(f"- Samples K = {model['samples']}, tau = {model.get('tau', '?')}.")
     stage = path.name.partition(".")[0].partition("_")[0]  # finetune_raw -> finetune
     command = f"trajpref evaluate --model {path}"
-    if dataset:
-        command += f" --dataset {dataset} --split test" + "".join(f" {f}" for f in flags)
+    test_on = data.get("val_dataset") or dataset  # robo.yaml: trained on robo-sim, tested on robo
+    if test_on:
+        command += f" --dataset {test_on} --split test" + "".join(f" {f}" for f in flags)
     samples = model.get("samples")
     if kind == "generator" and isinstance(samples, int) and samples != DEFAULT_SAMPLES:
         command += f" --samples {samples}"

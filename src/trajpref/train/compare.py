@@ -23,7 +23,7 @@ from typing import Any
 from trajpref.config import load_config
 from trajpref.errors import TrajprefError
 from trajpref.io import read_checkpoint_header
-from trajpref.models.timing import model_timing, same_units
+from trajpref.models.timing import UNKNOWN_UNITS, model_timing, same_units
 from trajpref.train.loop import read_metrics
 from trajpref.train.run import STAGE_NAMES
 
@@ -122,12 +122,12 @@ def run_setting(run_dir: str | Path, stage: str) -> dict[str, Any]:
             if data.holdout_scene:
                 val = f"held-out scene {data.holdout_scene}*"
             out = {"data.dataset": data.dataset, "validated on": val,
-                   "units": data.units or "unknown", "data.time_step": data.time_step}  # fmt: skip
+                   "units": data.units, "data.time_step": data.time_step}  # fmt: skip
             if stage != "denoiser":
                 out["model.samples"] = cfg.model.samples
     with contextlib.suppress(TrajprefError, OSError, ValueError, TypeError, KeyError):
         timing = model_timing(read_checkpoint_header(Path(run_dir) / f"{stage}.safetensors"))
-        out["units"] = timing["units"]
+        out["units"] = None if timing["units"] in UNKNOWN_UNITS else timing["units"]
         if timing["step"] is not None:
             out["seconds per step"] = round(float(timing["step"]), 6)
     return out
@@ -145,14 +145,16 @@ def setting_differences(groups: dict[str, list[RunCurve]]) -> list[str]:
     """One line per run whose validation was measured on other data or settings than the
     first group's first run's (``RunCurve.setting``: dataset, validation data, units, time
     step, seconds per step, samples), naming the fields that differ, each ``theirs -> its``;
-    empty when all match (a key one of the two cannot tell is not compared)."""
+    empty when all match (a key one of the two cannot tell, None, is not compared: a
+    built-in dataset's config leaves its units to the dataset, a run without its checkpoint
+    cannot say them)."""
     curves = [c for cs in groups.values() for c in cs]
     if len(curves) < 2:
         return []
     first, lines = curves[0], []
     for c in curves[1:]:
         diff = [f"{k} {first.setting[k]} -> {c.setting[k]}" for k in SETTING_KEYS
-                if k in first.setting and k in c.setting
+                if first.setting.get(k) is not None and c.setting.get(k) is not None
                 and not _same_setting(k, first.setting[k], c.setting[k])]  # fmt: skip
         if diff:
             lines.append(f"{c.run} was validated otherwise than {first.run} ({'; '.join(diff)}):"

@@ -24,7 +24,7 @@ import torch
 from trajpref.config import DataConfig, ExperimentConfig, OptimConfig, save_config, to_dict
 from trajpref.data import mean_speed, run_splits, speed_note, text
 from trajpref.data.loader import SceneLoader
-from trajpref.data.registry import NAMES, USER_TEXT
+from trajpref.data.registry import NAMES, SECONDS_STEPS, USER_TEXT
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, TrajprefError
 from trajpref.io import atomic_path, check_output_dir, read_checkpoint_header, write_json
@@ -232,7 +232,8 @@ def data_warnings(train: TrajectoryDataset, val: TrajectoryDataset,
     if info.interval_from == "given" and info.text_tracks:
         options = text.ReadOptions(data.delimiter, data.max_gap, data.max_coord)
         found = _time_column(info, options)
-        if found is not None and not np.isclose(found[2], rows, rtol=0.01):
+        plausible = found is not None and SECONDS_STEPS[0] <= found[2] <= SECONDS_STEPS[1]
+        if plausible and not np.isclose(found[2], rows, rtol=0.01):  # else data stats' advice
             name, column, seconds = found
             out.append(f"{info.name}: --frame-interval {rows:g} (data.frame_interval) overrides "
                        f"the files' time column ({name}'s {column} column steps {seconds:g} s "

@@ -10,6 +10,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import torch
 from torch import nn
 from tqdm.auto import tqdm
@@ -79,12 +80,14 @@ class Stage:
 
 def data_scale(dataset: TrajectoryDataset) -> float:
     """RMS of the future positions relative to each agent's last observation: networks see
-    coordinates divided by it, so one config serves metres and pixels."""
+    coordinates divided by it, so one config serves metres and pixels. Unseen future steps
+    (NaN: ``data.partial_future``'s targets) are left out; they had made it 0.001."""
     total, count = 0.0, 0
     for s in dataset.scenes:
-        rel = s.future - s.history[:, -1:]  # [P, T_f, 2]
-        total += float((rel.astype("float64") ** 2).sum())
-        count += rel.size
+        rel = (s.future - s.history[:, -1:]).astype("float64")  # [P, T_f, 2]
+        seen = np.isfinite(rel)
+        total += float((rel[seen] ** 2).sum())
+        count += int(seen.sum())
     return max(1e-3, (total / max(1, count)) ** 0.5)
 
 
