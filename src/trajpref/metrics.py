@@ -301,9 +301,12 @@ SCENE_SIZE_EDGES = (5, 10, 20)
 """Upper edges of the scene-size bins (agents per scene): <= 5, 6-10, 11-20, > 20 (§8.5)."""
 
 
-def _integer(value) -> int | None:
+def as_integer(value) -> int | None:
     """``value`` as a Python int when it is an integer (an ``int``, a numpy integer, a 0-d
-    integer tensor), else None: never a bool (nor numpy's or torch's), a float or text."""
+    integer tensor), else None: never a bool (nor numpy's or torch's), a float or text. What
+    the count arguments of the public API accept, so that ``np.int64(20)`` from a planner's
+    arrays counts as 20 (``models.predictor`` takes it from here: metrics imports no other
+    trajpref module)."""
     if isinstance(value, bool) or (isinstance(value, torch.Tensor) and value.dtype == torch.bool):
         return None  # numpy's bool refuses operator.index itself
     try:
@@ -317,7 +320,7 @@ def check_bin_edges(edges: tuple[int, ...]) -> tuple[int, ...]:
     integers >= 1 (Python or numpy integers, in a tuple, a list or a 1-d array; not bools nor
     floats)."""
     try:
-        values = [_integer(e) for e in edges] if not isinstance(edges, (str, bytes)) else [None]
+        values = [as_integer(e) for e in edges] if not isinstance(edges, (str, bytes)) else [None]
     except TypeError:  # not a sequence (a bare number, a 0-d array)
         values = [None]
     if (
@@ -425,7 +428,7 @@ def agent_slot(scene: torch.Tensor, num_scenes: int) -> torch.Tensor:
 def slot_labels(slots: int) -> list[str]:
     """Names of the places reported by ``SlotMetrics``: 3 -> ['1', '2', '3', '>3']. ``slots``
     a Python or numpy integer >= 1 (not a bool nor a float: ValueError)."""
-    count = _integer(slots)
+    count = as_integer(slots)
     if count is None or count < 1:
         raise ValueError(f"slots must be an integer >= 1, got {slots!r}")
     return [*(str(s) for s in range(1, count + 1)), f">{count}"]
@@ -441,7 +444,7 @@ class SlotMetrics:
 
     def __init__(self, slots: int, collision_radius: float | None = None) -> None:
         self.labels = slot_labels(slots)
-        self.slots = _integer(slots)
+        self.slots = as_integer(slots)
         self.sums = [{"min_ade": 0.0, "min_fde": 0.0} for _ in self.labels]
         self.agents = [0 for _ in self.labels]
         self.collisions = (

@@ -130,17 +130,18 @@ the default collision radius), pixels (figures drawn y down), and ``unknown``. A
 kept as given, with a ``UserWarning`` (``check_units``)."""
 
 
-def check_frame_interval(frame_interval: float | None) -> float | None:
-    """``frame_interval`` (seconds between an agent's consecutive rows) as a float, None
-    staying None; ``ConfigError`` unless it is a real, finite number > 0 (a string such as
-    ``'0.4'`` included): the rule of ``models.timing.check_pace`` for the positions handed
-    to a model (which this layer may not import)."""
+def check_frame_interval(frame_interval: float | None,
+                         what: str = "seconds between an agent's consecutive rows",
+                         ) -> float | None:  # fmt: skip
+    """``frame_interval`` (``what``: seconds between an agent's consecutive rows, or the
+    history's positions for ``models.timing.check_pace``) as a float, None staying None;
+    ``ConfigError`` unless it is a real, finite number > 0 (a string such as ``'0.4'``
+    included)."""
     if frame_interval is None:
         return None
     if (isinstance(frame_interval, bool) or not isinstance(frame_interval, numbers.Real)
             or not math.isfinite(frame_interval) or frame_interval <= 0):  # fmt: skip
-        raise ConfigError(f"frame_interval: seconds between an agent's consecutive rows, a "
-                          f"number > 0, got {frame_interval!r}")  # fmt: skip
+        raise ConfigError(f"frame_interval: {what}, a number > 0, got {frame_interval!r}")
     return float(frame_interval)
 
 

@@ -7,7 +7,6 @@ all call it; the networks' coordinate frame is ``data.transforms.to_model_frame`
 
 from __future__ import annotations
 
-import operator
 import typing
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -21,6 +20,7 @@ from trajpref.data.transforms import from_model_frame
 from trajpref.diffusion.samplers import denoise, sample_full
 from trajpref.diffusion.schedule import DDPMSchedule
 from trajpref.errors import ConfigError, DataError
+from trajpref.metrics import as_integer  # one definition for every layer above metrics
 from trajpref.models.denoiser import Denoiser, DenoiserShapes
 from trajpref.models.encoder import SceneFeatures, check_neighbour_radius, scene_features
 from trajpref.models.generator import Generator, GeneratorOutput
@@ -69,18 +69,6 @@ class Rollout:
     """[K, N, T_f, 2] the denoised samples after tau steps."""
     explore: torch.Tensor | None
     """[K, N, T_f, 2] the exploration noise added to Y^tau, or None."""
-
-
-def as_integer(value) -> int | None:
-    """``value`` as a Python int when it is an integer (an ``int``, a numpy integer, a 0-d
-    integer tensor; never a bool), else None: what the count arguments of the public API
-    accept, so that ``np.int64(20)`` from a planner's arrays counts as 20."""
-    if isinstance(value, bool) or (isinstance(value, torch.Tensor) and value.dtype == torch.bool):
-        return None  # (numpy's bool refuses operator.index itself)
-    try:
-        return operator.index(value)
-    except TypeError:
-        return None
 
 
 SEED_RANGE = (-(2**63), 2**64 - 1)

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from trajpref.data.registry import SPECS
+from trajpref.data.registry import SPECS, check_frame_interval
 from trajpref.data.transforms import observed_pace
 from trajpref.errors import ConfigError
 from trajpref.metrics import METRE_UNITS
@@ -317,12 +317,7 @@ def check_pace(
     ``attach_timing``'s record) was trained on: the Python side of the CLI's warning. Only
     what both sides know is compared: ``frame_interval`` against a recorded, known step; units
     against recorded units. ConfigError for a ``frame_interval`` that is not a number > 0."""
-    if frame_interval is not None:
-        if (isinstance(frame_interval, bool) or not isinstance(frame_interval, numbers.Real)
-                or not math.isfinite(frame_interval) or frame_interval <= 0):  # fmt: skip
-            raise ConfigError(f"frame_interval: seconds between the history's positions, a "
-                              f"number > 0, got {frame_interval!r}")  # fmt: skip
-        frame_interval = float(frame_interval)
+    frame_interval = check_frame_interval(frame_interval, "seconds between the history's positions")
     if units is not None and not isinstance(units, str):
         raise ConfigError(f"units: a unit name such as 'm' or 'px', got {units!r}")
     timing = getattr(obj, "timing", None)
