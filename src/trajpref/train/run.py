@@ -27,7 +27,13 @@ from trajpref.data.loader import SceneLoader
 from trajpref.data.registry import NAMES, SECONDS_STEPS, USER_TEXT
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, TrajprefError
-from trajpref.io import atomic_path, check_output_dir, read_checkpoint_header, write_json
+from trajpref.io import (
+    atomic_path,
+    check_output_dir,
+    dotted,
+    read_checkpoint_header,
+    write_json,
+)
 from trajpref.models import checkpoint as ckpt
 from trajpref.models import zoo
 from trajpref.models.timing import (
@@ -653,16 +659,6 @@ def run_facts(cfg: ExperimentConfig, name: str, start: str | None,
             "equal_budget": equal_budget}  # fmt: skip
 
 
-def _flat(value: Any, prefix: str = "") -> dict[str, Any]:
-    """A nested dict's leaves by dotted key."""
-    if not isinstance(value, dict):
-        return {prefix.rstrip("."): value}
-    out: dict[str, Any] = {}
-    for key, item in value.items():
-        out.update(_flat(item, f"{prefix}{key}."))
-    return out
-
-
 def check_same_run(info: DistInfo, facts: dict[str, Any]) -> None:
     """Every rank's ``facts`` (``run_facts``) are rank 0's, or an ``EveryRankError`` raised on
     every rank that names the first rank that differs and how: a collective, taken right
@@ -672,7 +668,7 @@ def check_same_run(info: DistInfo, facts: dict[str, Any]) -> None:
     steps and left the others waiting in a collective until the timeout (60 min)."""
     if not info.enabled:
         return
-    every = [_flat(f) for f in gather_objects(facts, info)]
+    every = [dotted(f) for f in gather_objects(facts, info)]  # each rank's facts, dotted keys
     differ = []
     for rank, own in enumerate(every[1:], 1):
         keys = sorted(set(every[0]) | set(own))
