@@ -4,7 +4,8 @@ split (chosen on validation), one row per method and seed.
     python benchmarks/finetune.py --dataset zara1 --methods rlhf rlhf-res --seeds 0 1 2 \
         --data-root ../shared/data [--preset paper] [--set finetune.epochs=3 ...]
 
-Runs go to runs/<dataset>-<method>-s<seed>[-<tag>] (resumed when their _last.pt exists).
+Runs go to runs/<dataset>-<method>-s<seed>[-<tag>] (resumed when their _last.pt exists; a
+folder started from another start or with other settings is refused).
 Writes benchmarks/results/finetune_<dataset>[_<tag>].json and, with ``--publish``, seed 0's
 model of the untagged run as models/<dataset>/<method>.safetensors. Every invocation also writes
 benchmarks/results/meta/finetune_start_<dataset>.json: the start's validation exactly as the
@@ -24,6 +25,8 @@ from pathlib import Path
 
 from equal_budget import budget_of, row_budget
 
+from trajpref import io
+from trajpref.config import load_config, to_dict
 from trajpref.data import load_dataset
 from trajpref.device import resolve_device
 from trajpref.evaluation import evaluate
@@ -112,6 +115,7 @@ def main() -> None:
         cfg = finetune_config(str(start), method, args.preset, None, args.overrides, seed)
         last = run / "finetune_last.pt"
         check_start(run, start)
+        check_settings(run, cfg)
         if finished(last, cfg.finetune):  # epochs or budget spent: a resume would be refused
             state = load_resume_state(last)
             summary = {"train_seconds": state["elapsed"], "steps": state["step"]}
@@ -183,6 +187,32 @@ def check_start(run: Path, start: Path) -> None:
         )
     run.mkdir(parents=True, exist_ok=True)
     record.write_text(json.dumps(want, indent=2) + "\n")
+
+
+SETTINGS_FREE = ("finetune.keep_checkpoints",)
+"""The settings in which a run folder may differ from the invocation that reuses it: what the
+run keeps on disk, nothing that shapes its model or its budget."""
+
+
+def check_settings(run: Path, cfg) -> None:
+    """Refuse a run folder whose fine-tuning was started with other settings than this
+    invocation's ``cfg`` (its ``finetune_config.yaml``, the resolved config the stage writes):
+    another budget, preset, learning rate or seed. Unchecked, finetune.py would resume such a
+    run under the new settings (a resume may change the budget) or, when its budget is spent,
+    take its finished model as this invocation's row. A folder without the file has not
+    started a run (``check_start`` has dealt with older folders)."""
+    saved = run / "finetune_config.yaml"
+    if not saved.is_file():
+        return
+    have, want = io.dotted(to_dict(load_config(saved))), io.dotted(to_dict(cfg))
+    changed = [f"{k}: {have.get(k)!r} -> {want.get(k)!r}"
+               for k in sorted(set(have) | set(want))
+               if k not in SETTINGS_FREE and have.get(k) != want.get(k)]  # fmt: skip
+    if changed:
+        more = f" (and {len(changed) - 3} more)" if len(changed) > 3 else ""
+        raise SystemExit(f"{run} was fine-tuned with other settings than these ("
+                         f"{'; '.join(changed[:3])}{more}): move the folder away, or name the "
+                         "new runs with --tag")  # fmt: skip
 
 
 def start_meta(dataset: str, start: str = "generator") -> Path:

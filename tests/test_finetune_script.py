@@ -85,3 +85,70 @@ def test_skip_done_keeps_only_the_rows_of_the_budget_asked_for(ft, tmp_path, mon
     plain = [{"method": m, "seed": 0, "command": "python x.py"} for m in ("control", "rlhf")]
     assert _skip_done(ft, tmp_path, monkeypatch, plain) == []
     assert _skip_done(ft, tmp_path, monkeypatch, plain, "finetune.max_minutes=2.0") == ["ran"]
+
+
+# ---- a run folder of other settings is neither resumed nor reused ------------------------------
+
+
+def _saved_run(tmp_path: Path, *sets: str) -> tuple[Path, Path]:
+    """A run folder as the fine-tuning stage leaves it (``finetune_config.yaml``, its start's
+    record) under ``tmp_path`` posing as the repository, from zara1's published generator."""
+    from trajpref.config import save_config
+    from trajpref.rl.presets import finetune_config
+
+    start = tmp_path / "models" / "zara1" / "generator.safetensors"
+    start.parent.mkdir(parents=True)
+    for name in ("generator.safetensors", "denoiser.safetensors"):  # it names its denoiser
+        (start.parent / name).symlink_to(ROOT / "models" / "zara1" / name)
+    run = tmp_path / "runs" / "zara1-control-s0"
+    save_config(finetune_config(str(start), "control", None, None, list(sets), 0),
+                tmp_path / "cfg.yaml")  # fmt: skip
+    return start, run
+
+
+def test_a_run_folder_of_another_budget_or_setting_is_refused(tmp_path):
+    ft = load_benchmark("finetune")
+    from trajpref.config import load_config, save_config
+    from trajpref.rl.presets import finetune_config
+
+    start, run = _saved_run(tmp_path)
+    ft.check_start(run, start)
+    saved = load_config(tmp_path / "cfg.yaml")
+    save_config(saved, run / "finetune_config.yaml")
+    ft.check_settings(run, saved)  # the same settings: resumed or reused
+    kept = finetune_config(str(start), "control", None, None, ["finetune.keep_checkpoints=true"], 0)
+    ft.check_settings(run, kept)  # what it keeps on disk may differ
+    other = finetune_config(str(start), "control", None, None, ["finetune.max_minutes=8"], 0)
+    with pytest.raises(SystemExit, match=r"finetune\.max_minutes: None -> 8\.0.*--tag"):
+        ft.check_settings(run, other)
+    seed = finetune_config(str(start), "control", None, None, None, 1)
+    with pytest.raises(SystemExit, match=r"other settings than these \(seed: 0 -> 1\)"):
+        ft.check_settings(run, seed)
+    ft.check_settings(tmp_path / "runs" / "new", other)  # no run started there: nothing to check
+
+
+def test_finetune_py_refuses_a_finished_run_of_another_learning_rate(tmp_path, monkeypatch):
+    """A finished run folder was taken as this invocation's row whatever its settings: a
+    control fine-tuned at another learning rate (or under another budget) gave the row of
+    this one. finetune.py now compares the folder's resolved config before it resumes or
+    reuses it."""
+    ft = load_benchmark("finetune")
+    from trajpref.config import load_config, save_config
+
+    start, run = _saved_run(tmp_path, "finetune.lr=3e-5")
+    ft.check_start(run, start)
+    save_config(load_config(tmp_path / "cfg.yaml"), run / "finetune_config.yaml")
+    (run / "finetune_last.pt").write_text("a finished state")
+
+    def reused(*args, **kwargs):
+        raise AssertionError("the run folder was resumed or reused")
+
+    monkeypatch.setattr(ft, "ROOT", tmp_path)
+    monkeypatch.setattr(ft, "load_dataset", lambda *a, **k: None)
+    monkeypatch.setattr(ft.TrajectoryScorer, "from_checkpoint", lambda *a, **k: None)
+    monkeypatch.setattr(ft, "finished", reused)
+    monkeypatch.setattr(ft, "finetune", reused)
+    monkeypatch.setattr("sys.argv", ["finetune.py", "--dataset", "zara1", "--methods", "control",
+                                     "--seeds", "0", "--no-start-validation"])  # fmt: skip
+    with pytest.raises(SystemExit, match=r"finetune\.lr: 3e-05 -> "):
+        ft.main()
