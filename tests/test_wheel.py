@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 
+import trajpref
 from trajpref.cli import main
 from trajpref.models import zoo
 
@@ -54,6 +55,8 @@ def test_the_wheel_holds_the_zoo_and_stays_small(wheel):
     mb = wheel.stat().st_size / 2**20
     assert mb < MAX_WHEEL_MB, f"{wheel.name}: {mb:.1f} MB"
     names = set(zipfile.ZipFile(wheel).namelist())
+    # the package's version is written once (trajpref.__version__, which --version prints)
+    assert wheel.name.split("-")[1] == trajpref.__version__, wheel.name
     published = zoo.published()
     assert len(published) >= 2
     for name in published:
@@ -62,6 +65,9 @@ def test_the_wheel_holds_the_zoo_and_stays_small(wheel):
     assert "trajpref/zoo/index.json" in names
     assert "trajpref/py.typed" in names  # PEP 561: its type hints are for type checkers
     assert "trajpref/__main__.py" in names  # python -m trajpref
+    assert "trajpref/resources/demo.yaml" in names  # python -m trajpref.demo
+    for asset in ("index.html", "app.js", "style.css"):  # trajpref survey serve
+        assert f"trajpref/survey/static/{asset}" in names, asset
     from trajpref.config import builtin_configs
 
     for name in builtin_configs():  # --config NAME works from an installed wheel

@@ -72,7 +72,7 @@ def run(out: Path, data_root: str | None, samples: int, seed: int, config: Path,
     epochs = cfg.generator.epochs
     demo_model = f"demo model ({epochs} generator epoch{'s' * (epochs != 1)}, {ft_budget})"
     print(f"[4/5] {where} ({test.num_agents} agents, {len(test)} scenes), metres, K={samples}; "
-          f"the {demo_model}, not the published configs/robo.yaml one:")  # fmt: skip
+          f"the {demo_model}, not the published robo config (--config robo):")  # fmt: skip
     print(f"  {'method':<26} {'minADE':>7} {'minFDE':>7} {'jADE':>7} {'jFDE':>7} "
           f"{'maxATS':>7} {'maxFTS':>7}")  # fmt: skip
     for name, model in models.items():
