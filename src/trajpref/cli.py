@@ -27,6 +27,7 @@ import torch
 from trajpref import __version__
 from trajpref.adapt import ADAPT_OBJECTIVES, ADAPT_PARAMS, AdaptConfig, evaluate_in_context
 from trajpref.config import (
+    FINETUNE_METHODS,
     ExperimentConfig,
     ModelConfig,
     config_entries,
@@ -34,6 +35,7 @@ from trajpref.config import (
     in_section,
     load_config,
     read_yaml,
+    uses_rl,
 )
 from trajpref.data import (
     PROTOCOLS,
@@ -46,12 +48,15 @@ from trajpref.data import (
 )
 from trajpref.data.loader import SceneLoader
 from trajpref.data.registry import (
+    DEFAULT_FRAME_INTERVAL,
     ETH_UCY,
     NAMES,
     SGAN_TEST_FILES,
     SPECS,
     SPLITS,
+    check_frame_interval,
     check_protocol_for,
+    own_reading_note,
     sgan_folds,
     split_folders,
 )
@@ -641,7 +646,7 @@ def build_parser() -> argparse.ArgumentParser:
         "refuses its name. docs/rlhf.md describes every setting (trajpref config show lists "
         "them).",
     )
-    ft.add_argument("--method", required=True, choices=["rlhf", "rlhf-res", "control"],
+    ft.add_argument("--method", required=True, choices=list(FINETUNE_METHODS),
                     help="rlhf: the policy and value losses on all K samples of each agent "
                     "(Eq. 15-17); rlhf-res: on each scene's best-scored sample k* only "
                     "(Eq. 18-20); control: the supervised generator loss alone on clean "
@@ -731,17 +736,18 @@ def _check_data_args(args) -> None:
         return
     given = args.frame_interval is not None or args.units is not None
     args._interval_given = args.frame_interval is not None
-    args.frame_interval = 0.4 if args.frame_interval is None else args.frame_interval
+    if args.frame_interval is None:
+        args.frame_interval = DEFAULT_FRAME_INTERVAL
     args.units = "unknown" if args.units is None else args.units
-    if not (math.isfinite(args.frame_interval) and args.frame_interval > 0):
+    try:  # the registry's rule, in the option's words
+        check_frame_interval(args.frame_interval)
+    except ConfigError:
         raise ConfigError(f"--frame-interval must be a number of seconds > 0, "
-                          f"got {args.frame_interval}")  # fmt: skip
+                          f"got {args.frame_interval}") from None  # fmt: skip
     args._data_checked = True
     if args.dataset in SPECS and given:
-        spec = SPECS[args.dataset]
-        warnings.warn(f"--frame-interval and --units describe a folder dataset; {args.dataset} "
-                      f"knows its own ({spec.units}, {spec.frame_interval:g} s), so they are "
-                      "ignored", stacklevel=2)  # fmt: skip
+        warnings.warn(own_reading_note(args.dataset, "--frame-interval and --units",
+                                       "they are ignored"), stacklevel=2)  # fmt: skip
     _read_options(args)  # --delimiter, --max-gap, --max-coord, --time-step
     check_protocol_for(args.dataset, args.protocol)  # sgan is ETH/UCY's (not SDD's, NBA's)
     if args.holdout_scene is not None:
@@ -2151,13 +2157,14 @@ def _check_folders_beside_config(data, config: str | None) -> None:
             continue  # not the file's (--dataset, --set)
         if not value or value in NAMES or Path(value).expanduser().is_absolute():
             continue
-        beside = Path(config).resolve().parent / Path(value).expanduser()
+        folder = Path(config).resolve().parent  # where the file's relative paths would hold
+        beside = folder / Path(value).expanduser()
         if not Path(value).expanduser().exists() and beside.exists():
             raise ConfigError(
                 f"data.{key}: {value}: no such folder in the current folder ({Path.cwd()}); a "
                 f"relative path in a config file is read from the folder trajpref runs in, not "
                 f"the config file's ({config}), beside which {beside} is: write data.{key}: "
-                f"{beside} in the file, or run trajpref from {beside.parent}"
+                f"{beside} in the file, or run trajpref from {folder}"
             )
 
 
@@ -2187,7 +2194,7 @@ def _method_label(finetune_cfg, preset: str | None = None) -> str:
     values the config holds (``train.stages.finetune_preset``, the checkpoint's
     ``meta.preset``) ``rlhf, paper preset``; ``preset`` (--preset) with a value of it changed
     by --set: ``rlhf, paper preset with finetune.clip changed``."""
-    reward = REWARD_LABELS.get(finetune_cfg.reward) if finetune_cfg.method != "control" else None
+    reward = REWARD_LABELS.get(finetune_cfg.reward) if uses_rl(finetune_cfg.method) else None
     label = finetune_cfg.method + (f", {reward}" if reward else "")
     held = finetune_preset(finetune_cfg)
     if held is not None:

@@ -694,6 +694,28 @@ class GeneratorTrainConfig(OptimConfig):
                 raise ConfigError(f"GeneratorTrainConfig.{name} must be >= 0")
 
 
+FinetuneMethod = Literal["rlhf", "rlhf-res", "control"]
+"""The fine-tuning methods (``FinetuneConfig.method``): the one list of their names."""
+FINETUNE_METHODS: tuple[str, ...] = typing.get_args(FinetuneMethod)
+"""``FinetuneMethod``'s names, in order: the CLI's ``--method`` choices."""
+USES_RL = {"rlhf": True, "rlhf-res": True, "control": False}
+"""Whether each fine-tuning method is an RL method (a reward, a critic, PPO epochs) or the
+supervised control; written out per method. The code asks ``uses_rl`` (an unknown name is
+an error); a method's other facts have their own tables, each refusing a name it lacks
+(docs/rlhf.md, "Adding a fine-tuning method")."""
+if set(USES_RL) != set(FINETUNE_METHODS):
+    raise AssertionError("config: USES_RL must name every method of FinetuneMethod")
+
+
+def uses_rl(method: str) -> bool:
+    """Whether fine-tuning ``method`` is an RL method (``USES_RL``); a name without an entry
+    there is a ``ConfigError``, never taken for one of the others."""
+    if method not in USES_RL:
+        raise ConfigError(f"unknown fine-tuning method {method!r}: USES_RL has no entry for it "
+                          f"(known: {', '.join(USES_RL)})")  # fmt: skip
+    return USES_RL[method]
+
+
 @dataclass
 class FinetuneConfig(OptimConfig):
     """RLHF / RLHF-ReS fine-tuning of the generator (the paper's Sec. 5-6). The ``paper``
@@ -712,7 +734,7 @@ class FinetuneConfig(OptimConfig):
     steps_per_epoch: int | None = 12
     """Cap on optimiser steps per epoch (None: a full pass); the default 3 x 12 steps is the
     budget measured in docs/rlhf.md."""
-    method: Literal["rlhf", "rlhf-res", "control"] = "rlhf-res"
+    method: FinetuneMethod = "rlhf-res"
     """``rlhf`` (policy and value losses on all K samples), ``rlhf-res`` (on k* only), or
     ``control``: the supervised generator loss alone on clean rollouts, no score and no
     reward (the equal-budget control that any RL gain is measured against)."""

@@ -74,12 +74,27 @@ class SourceSpec:
     """Observed frames per window."""
     t_fut: int = 12
     """Future frames per window."""
+    text_tracks: bool = False
+    """Its splits are text track files that the reader cuts into windows (``frame agent x
+    y``: ETH/UCY's, NBA's), not windows already cut (``.npz``) or simulated: its
+    ``DatasetInfo.text_tracks`` (which the fold-overlap checks read), and it takes
+    ``ReadOptions.time_step``."""
+    folder_options: bool | None = None
+    """Whether it takes what a folder of its text track files takes: ``data.partial_future``
+    and ``--protocol sgan`` (``takes_folder_options``). None: as ``text_tracks``. NBA says
+    False: its peers count every agent (no sgan), and it refused both before they were keyed
+    on this."""
+
+    @property
+    def takes_folder_options(self) -> bool:
+        """``folder_options``, or where it is None, ``text_tracks``."""
+        return self.text_tracks if self.folder_options is None else self.folder_options
 
 
 SPECS = {
-    **{name: SourceSpec("m", 0.4) for name in ETH_UCY},
+    **{name: SourceSpec("m", 0.4, text_tracks=True) for name in ETH_UCY},
     "sdd": SourceSpec("px", 0.4),
-    "nba": SourceSpec("m", 0.12),
+    "nba": SourceSpec("m", 0.12, text_tracks=True, folder_options=False),
     "robo": SourceSpec("m", 0.5),
     "robo-sim": SourceSpec("m", 0.5),
     "robo-mix": SourceSpec("m", 0.5),
@@ -201,11 +216,9 @@ def load_dataset(
     given = [f"frame_interval={frame_interval:g}"] if frame_interval is not None else []
     given += [f"units={units!r}"] if units != UNKNOWN else []
     if name in NAMES and given:  # as the CLI's --frame-interval and --units
-        spec = SPECS.get(name)
-        own = f" ({spec.units}, {spec.frame_interval:g} s)" if spec is not None else ""
-        warnings.warn(f"frame_interval and units describe a folder dataset; {name} knows its "
-                      f"own{own}, so {' and '.join(given)} "
-                      f"{'is' if len(given) == 1 else 'are'} ignored", stacklevel=2)  # fmt: skip
+        ignored = f"{' and '.join(given)} {'is' if len(given) == 1 else 'are'} ignored"
+        warnings.warn(own_reading_note(name, "frame_interval and units", ignored),
+                      stacklevel=2)  # fmt: skip
     data = _load(name, split, root, frame_interval, units, options)
     step = options.time_step if options is not None else 1.0
     if step != 1.0:  # read every ``step`` frame steps: each window step spans that much more
@@ -215,10 +228,33 @@ def load_dataset(
     return apply_protocol(data, protocol)
 
 
+def own_reading_note(name: str, options: str, ignored: str) -> str:
+    """The warning for a built-in dataset ``name`` given a folder's description (``options``:
+    how the caller names its frame interval and units; ``ignored``: what is ignored): it
+    knows its own (``SPECS``). ``load_dataset`` and the CLI's data options say it alike."""
+    spec = SPECS.get(name)
+    own = f" ({spec.units}, {spec.frame_interval:g} s)" if spec is not None else ""
+    return f"{options} describe a folder dataset; {name} knows its own{own}, so {ignored}"
+
+
 def check_protocol(protocol: str) -> None:
     """Raise a clear error unless ``protocol`` is one of ``PROTOCOLS``."""
     if protocol not in PROTOCOLS:
         raise TrajprefError(f"unknown protocol {protocol!r}; choose one of {', '.join(PROTOCOLS)}")
+
+
+def _takes_folder_options(name: str) -> bool:
+    """Whether the built-in ``name`` takes a text-track folder's options (``SourceSpec.
+    takes_folder_options``); a name without a ``SPECS`` entry does not (reading it is an
+    error of its own)."""
+    spec = SPECS.get(name)
+    return spec is not None and spec.takes_folder_options
+
+
+def _has_text_tracks(name: str) -> bool:
+    """Whether the built-in ``name``'s splits are text track files (``SourceSpec.text_tracks``)."""
+    spec = SPECS.get(name)
+    return spec is not None and spec.text_tracks
 
 
 def check_protocol_for(name: str, protocol: str) -> None:
@@ -226,13 +262,17 @@ def check_protocol_for(name: str, protocol: str) -> None:
     ``sgan`` is the counting of Social-GAN's ETH/UCY loader, so it is refused for the other
     built-in datasets (on SDD it would silently drop the windows of lone agents, about half
     the test agents, and the SDD and NBA peers count every agent; on NBA and Robo it changes
-    nothing). A folder of one's own data may use either protocol."""
+    nothing). A folder of one's own data may use either protocol, and so may a built-in
+    dataset of text tracks whose ``SPECS`` entry takes a folder's options (the ETH/UCY folds;
+    ``SourceSpec.takes_folder_options``)."""
     check_protocol(protocol)
-    if protocol != "sgan" or name in ETH_UCY or name not in NAMES:
+    if protocol != "sgan" or name not in NAMES or _takes_folder_options(name):
         return
+    others = [n for n in NAMES if n not in ETH_UCY and _takes_folder_options(n)]
+    also = f" and {', '.join(others)}" if others else ""  # text-track datasets added since
     raise ConfigError(
         f"--protocol sgan is Social-GAN's ETH/UCY counting (windows with at least "
-        f"{SGAN_MIN_AGENTS} agents), for the ETH/UCY folds ({', '.join(ETH_UCY)}) only; the "
+        f"{SGAN_MIN_AGENTS} agents), for the ETH/UCY folds ({', '.join(ETH_UCY)}){also} only; the "
         "SDD and NBA peers count every agent (on sdd, sgan would drop the lone agents' "
         "windows, about half of the test agents): use --protocol all (the default) for "
         f"{name} (docs/data.md, 'Evaluation protocols')"
@@ -445,16 +485,18 @@ def _load(
     options: text.ReadOptions | None,
 ) -> TrajectoryDataset:
     options = options or text.ReadOptions()
-    if options.partial_future and name in NAMES and name not in ETH_UCY:
+    if options.partial_future and name in NAMES and not _takes_folder_options(name):
+        why = ("its SPECS entry takes no folder options (SourceSpec.folder_options)"
+               if _has_text_tracks(name) else "comes as windows already cut")  # fmt: skip
         raise ConfigError(f"partial_future cuts windows from text track files (ETH/UCY or "
-                          f"a folder of them); {name} comes as windows already cut")  # fmt: skip
-    if options.time_step != 1.0 and name in ("sdd", "robo", "robo-sim", "robo-mix"):
+                          f"a folder of them); {name} {why}")  # fmt: skip
+    if options.time_step != 1.0 and name in SPECS and not SPECS[name].text_tracks:
         raise ConfigError(f"time_step resamples text track files; {name} comes as windows "
                           "already cut (or simulated)")  # fmt: skip
     if name in NAMES:
         data = _built_in(name, split, root, options)
         info = dataclasses.replace(data.info, interval_from="dataset",
-                                   text_tracks=name in (*ETH_UCY, "nba"))  # fmt: skip
+                                   text_tracks=SPECS[name].text_tracks)  # fmt: skip
         return TrajectoryDataset(data.scenes, info)
     path = Path(name).expanduser()
     if path.exists() or path.is_symlink() or os.sep in name or name.startswith("."):

@@ -28,7 +28,7 @@ import torch
 from safetensors import SafetensorError
 from safetensors.torch import load_file, save_file
 
-from trajpref.config import ExperimentConfig, experiment_from_dict, to_dict
+from trajpref.config import USES_RL, ExperimentConfig, experiment_from_dict, to_dict
 from trajpref.diffusion.schedule import DDPMSchedule
 from trajpref.errors import TrajprefError
 from trajpref.io import atomic_path, load_tensors, read_checkpoint_header, resume_state_message
@@ -133,8 +133,10 @@ def generator_payload(generator: Generator, denoiser: dict[str, Any], cfg: Exper
 
 
 def _run_reward(method: str, reward: str | None) -> str | None:
-    """The reward a fine-tuning run of ``method`` trained with: None for the control."""
-    return None if method == "control" else reward
+    """The reward a fine-tuning run of ``method`` trained with: None for a method that is no
+    RL (``config.USES_RL``: the control). A name that table lacks (read from a file that an
+    older or newer trajpref wrote) is taken for RL unless it is ``control``."""
+    return reward if USES_RL.get(method, method != "control") else None
 
 
 def finetune_reward(header: dict[str, Any]) -> str | None:
@@ -553,6 +555,16 @@ def predictor_from_payload(payload: dict[str, Any], sampler: Sampler | None = No
     return predictor.eval()
 
 
+def untouched_rng():
+    """A context in which building modules (their random initialisation, overwritten by the
+    loaded weights) leaves torch's global CPU random stream where it was: the loading calls
+    (``load_predictor``, ``TrajectoryScorer.from_checkpoint``) draw nothing from a caller's
+    ``torch.manual_seed``. Modules are built on the CPU, so the GPUs' streams are not forked
+    (nor initialised). Training builds from payloads without it: its stages seed, build and
+    go on drawing from one stream (``train.stages``), as its published runs did."""
+    return torch.random.fork_rng(devices=[])
+
+
 def load_predictor(path: str | Path, *, sampler: Sampler | None = None, device: Any = "cpu"):
     """A ``DiffusionPredictor`` from a checkpoint file, on ``device``, in eval mode.
 
@@ -561,11 +573,14 @@ def load_predictor(path: str | Path, *, sampler: Sampler | None = None, device: 
     carries its training data's step and units (``models.timing.attach_timing``:
     ``frame_interval``, ``units``, ``timing``) and the file's ``model.neighbour_radius`` (a
     generator file's own, or a bare denoiser's; training code, which builds its predictors
-    from payloads, never applies it).
+    from payloads, never applies it). Loading draws nothing from torch's global random stream
+    (``untouched_rng``): ``torch.manual_seed(s)`` gives the same draws after it as before.
     """
     from trajpref.models.timing import attach_timing
 
     payload = load(path)
-    predictor = predictor_from_payload(payload, sampler).to(device).eval()
+    with untouched_rng():  # a planner's torch.manual_seed stream is not moved by loading
+        predictor = predictor_from_payload(payload, sampler)
+    predictor = predictor.to(device).eval()
     predictor.neighbour_radius = config_of(payload).model.neighbour_radius
     return attach_timing(predictor, payload)

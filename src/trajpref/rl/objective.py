@@ -17,8 +17,9 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from trajpref.config import FinetuneConfig, GeneratorTrainConfig
+from trajpref.config import FINETUNE_METHODS, USES_RL, FinetuneConfig, GeneratorTrainConfig, uses_rl
 from trajpref.data.transforms import from_model_frame, to_model_frame
+from trajpref.errors import ConfigError
 from trajpref.metrics import scene_sum
 from trajpref.models.critic import Critic
 from trajpref.models.losses import generator_loss
@@ -28,6 +29,24 @@ from trajpref.rl.rewards import call_reward, handcrafted_reward, hide_future
 from trajpref.rl.set_reward import marginal_gains
 from trajpref.score.scorer import TrajectoryScorer, score_timesteps
 from trajpref.types import Batch
+
+LOSS_SAMPLES = {"rlhf": "all", "rlhf-res": "best"}
+"""Which samples each RL method's policy and value losses see (``RLObjective.selection``):
+``all`` K samples of each agent (RLHF) or ``best``, each scene's best-scored one, k*
+(RLHF-ReS). Every RL method of ``config.USES_RL`` has an entry; a method without one is an
+error, never trained as another (docs/rlhf.md, "Adding a fine-tuning method")."""
+if set(LOSS_SAMPLES) != {m for m in FINETUNE_METHODS if USES_RL[m]}:
+    raise AssertionError("rl.objective: LOSS_SAMPLES must name every RL method of "
+                         "config.FinetuneMethod")  # fmt: skip
+
+
+def loss_samples(method: str) -> str:
+    """``LOSS_SAMPLES``'s entry of RL ``method``; a ``ConfigError`` for a name without one."""
+    if method not in LOSS_SAMPLES:
+        raise ConfigError(f"fine-tuning method {method!r} has no entry in "
+                          f"rl.objective.LOSS_SAMPLES (which samples its losses see); known: "
+                          f"{', '.join(LOSS_SAMPLES)}")  # fmt: skip
+    return LOSS_SAMPLES[method]
 
 
 def best_sample(r: torch.Tensor, scene: torch.Tensor, num_scenes: int) -> torch.Tensor:
@@ -128,7 +147,11 @@ class RLObjective(nn.Module):
         self.reg_cfg = reg_cfg
         # a hand-crafted reward's callable, looked up once (a name not registered in this
         # process is refused here, before any step); None for the diffusion score's rewards
-        self.handcrafted = handcrafted_reward(cfg.reward) if cfg.method != "control" else None
+        # (an unknown method is refused here too: every dispatch below has its entry)
+        rl_method = uses_rl(cfg.method)
+        if rl_method:
+            loss_samples(cfg.method)
+        self.handcrafted = handcrafted_reward(cfg.reward) if rl_method else None
         steps = score_timesteps(sampler.schedule.num_steps, cfg.score_every)
         self.scorer = TrajectoryScorer(self.denoiser, sampler.schedule, sampler.scale, steps)
         t_f = sampler.denoiser.cfg.t_fut
@@ -164,7 +187,7 @@ class RLObjective(nn.Module):
         """One update: on ``memo`` (a rollout collected earlier by ``collect``, for several
         PPO epochs per rollout) or, without it, on a fresh rollout whose graph the losses
         reuse (one update per rollout)."""
-        if self.rl.method == "control":
+        if not uses_rl(self.rl.method):
             return self.supervised(batch, generator)
         if memo is None:
             memo = self.collect(batch, generator, live=True)
@@ -335,8 +358,13 @@ class RLObjective(nn.Module):
     def selection(
         self, score: torch.Tensor, batch: Batch
     ) -> Callable[[torch.Tensor], torch.Tensor]:
-        """Which samples the policy and value losses see: all K (RLHF) or k* (RLHF-ReS)."""
-        if self.rl.method == "rlhf":
+        """Which samples the policy and value losses see: all K (RLHF) or k* (RLHF-ReS), as
+        ``LOSS_SAMPLES`` says of the method (a method without an entry is an error)."""
+        samples = loss_samples(self.rl.method)
+        if samples == "all":
             return lambda x: x
-        k_star = best_sample(score, batch.scene, batch.num_scenes)  # [B]
-        return lambda x: take_sample(x, k_star, batch.scene)
+        if samples == "best":
+            k_star = best_sample(score, batch.scene, batch.num_scenes)  # [B]
+            return lambda x: take_sample(x, k_star, batch.scene)
+        raise ConfigError(f"rl.objective.LOSS_SAMPLES[{self.rl.method!r}] = {samples!r}: "
+                          "RLObjective.selection knows 'all' and 'best'")  # fmt: skip

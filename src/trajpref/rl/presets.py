@@ -22,13 +22,16 @@ from trajpref.config import (
     read_yaml,
     resolve_config,
     to_dict,
+    uses_rl,
 )
 from trajpref.errors import ConfigError
 from trajpref.models import checkpoint
+from trajpref.rl.objective import loss_samples
 from trajpref.rl.rewards import BUILTIN_REWARDS, SCORE_REWARDS, check_reward
 
 PAPER_WEIGHTS = {"rlhf": (1.0, 5.0), "rlhf-res": (0.3, 1.5)}
-"""(policy, value) weights of Eq. 17 (alpha_p, alpha_v) and Eq. 20 (beta_p, beta_v)."""
+"""(policy, value) weights of Eq. 17 (alpha_p, alpha_v) and Eq. 20 (beta_p, beta_v): the
+RL methods' weights that ``--preset`` sets (a method without an entry takes no preset)."""
 
 PRESETS: dict[str, dict[str, object]] = {
     "paper": {
@@ -52,7 +55,8 @@ def preset_overrides(preset: str, method: str) -> list[str]:
     if preset not in PRESETS:
         raise ConfigError(f"unknown preset {preset!r}; choose {', '.join(PRESETS)}")
     if method not in PAPER_WEIGHTS:
-        raise ConfigError(f"unknown method {method!r}; choose {', '.join(PAPER_WEIGHTS)}")
+        raise ConfigError(f"method {method!r} takes no preset (rl.presets.PAPER_WEIGHTS has "
+                          f"no weights for it); choose {', '.join(PAPER_WEIGHTS)}")  # fmt: skip
     pw, vw = PAPER_WEIGHTS[method]
     values = {**PRESETS[preset], "method": method, "policy_weight": pw, "value_weight": vw}
     return [f"finetune.{k}={'null' if v is None else v}" for k, v in values.items()]
@@ -151,7 +155,7 @@ def own_reward_data(cfg: ExperimentConfig) -> tuple[ExperimentConfig, str | None
     mirrored scene. ``sda`` trains without scaled scenes (``NO_SCALING``): its thresholds are
     distances. Other runs are returned as they are."""
     ft = cfg.finetune
-    if ft.method == "control" or ft.reward in SCORE_REWARDS:
+    if not uses_rl(ft.method) or ft.reward in SCORE_REWARDS:
         return cfg, None
     if ft.reward in BUILTIN_REWARDS:  # sda: distances against fixed thresholds
         fixed, why, what = (NO_SCALING, "its thresholds are distances in the data's units",
@@ -257,7 +261,7 @@ def _check_reads(cfg: ExperimentConfig, method: str, overrides: list[str],
             key not in preset_keys and getattr(cfg.finetune, key) != getattr(default, key)
         )
 
-    if method == "control":
+    if not uses_rl(method):
         changed = [k for k in RL_ONLY if given(k)]
         if changed:
             keys = ", ".join(f"finetune.{k}" for k in changed)
@@ -269,10 +273,11 @@ def _check_reads(cfg: ExperimentConfig, method: str, overrides: list[str],
             )
         return
     check_reward(cfg.finetune.reward)  # a name registered in this process, or a built-in
-    if method == "rlhf-res" and cfg.finetune.reward == "set":
+    if loss_samples(method) == "best" and cfg.finetune.reward == "set":
+        name = "RLHF-ReS" if method == "rlhf-res" else f"--method {method}"
         raise ConfigError(
             "finetune.reward=set rewards each sample by what it adds to its K samples' set, "
-            "and RLHF-ReS trains only each scene's best-scored sample, which undoes the set "
+            f"and {name} trains only each scene's best-scored sample, which undoes the set "
             "view (docs/rlhf.md): use it with --method rlhf"
         )
     preset_keys = tuple(PRESETS[preset]) if preset else ()
@@ -401,7 +406,7 @@ def finetune_config(
     if payload["kind"] != "generator":
         where = "the start" if isinstance(start, dict) else str(start)
         raise ConfigError(f"{where}: fine-tuning starts from a generator checkpoint")
-    if preset and method == "control":
+    if preset and not uses_rl(method):
         raise ConfigError("the control takes no preset (it has no policy or value loss)")
     extra = preset_overrides(preset, method) if preset else [f"finetune.method={method}"]
     extra.append(f"seed={0 if seed is None else seed}")

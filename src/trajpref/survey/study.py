@@ -37,7 +37,7 @@ from trajpref.survey.manifest import (
     load_study,
     manifest_dict,
 )
-from trajpref.viz.plot import plot_panel
+from trajpref.viz.plot import NO_UNITS, plot_panel
 
 GroundTruthMode = Literal["rated", "reference"]
 
@@ -168,16 +168,12 @@ def scene_limits(history: np.ndarray, future: np.ndarray, panels: list[ShownSet]
     return (float(lo[0] - pad), float(hi[0] + pad), float(lo[1] - pad), float(hi[1] + pad))
 
 
-UNKNOWN_UNITS = ("", "unknown")
-"""Unit names that say nothing: the pictures then show no unit."""
-
-
 def _panel_image(history: np.ndarray, paths: np.ndarray, weights: np.ndarray, out: Path,
                  limits: tuple[float, float, float, float], units: str,
                  dashed: bool = False) -> None:  # fmt: skip
     """``plot_panel``; for data of unknown units without the axis titles, so that no rater
     reads "x [unknown]" (the tick values stay)."""
-    if units not in UNKNOWN_UNITS:
+    if units not in NO_UNITS:  # the figures' own (models.timing.UNKNOWN_UNITS, None besides)
         plot_panel(history, paths, weights, out, limits, units, dashed=dashed)
         return
     with mpl.rc_context({"axes.labelcolor": "none"}):  # its titles name a unit: not drawn

@@ -15,7 +15,13 @@ import torch
 from torch import nn
 from tqdm.auto import tqdm
 
-from trajpref.config import DataConfig, ExperimentConfig, GeneratorTrainConfig, ModelConfig
+from trajpref.config import (
+    DataConfig,
+    ExperimentConfig,
+    GeneratorTrainConfig,
+    ModelConfig,
+    uses_rl,
+)
 from trajpref.data.loader import SceneLoader
 from trajpref.data.transforms import to_model_frame
 from trajpref.diffusion.schedule import DDPMSchedule
@@ -359,10 +365,11 @@ def build_finetune_stage(
                 "from": start.get("hash"), "trained_on": lineage}  # fmt: skip
         return ckpt.generator_payload(sampler.generator, start["denoiser"], cfg, meta, critic)
 
-    epochs = cfg.finetune.ppo_epochs if cfg.finetune.method != "control" else 1
+    rl_method = uses_rl(cfg.finetune.method)  # an unknown method is refused
+    epochs = cfg.finetune.ppo_epochs if rl_method else 1
     return Stage("finetune", objective, PolicyAndCritic(sampler.generator, critic), validate,
                  payload, objective.collect_frozen if epochs > 1 else None, epochs,
                  networks=(sampler.generator, sampler.denoiser),
                  nonfinite_hint="lower the learning rate or clip the reward",
                  context=sampler.generator.cfg.context_agents, validate_start=True,
-                 unused_parameters=cfg.finetune.method == "control")  # fmt: skip
+                 unused_parameters=not rl_method)  # fmt: skip
