@@ -22,12 +22,19 @@ from trajpref.errors import ConfigError, DataError
 EPS_STEPS = 1e-3
 """Times within this share of ``step`` of each other count as equal (float rounding of frame
 times such as ``now - 3 * 0.4``): 0.4 ms at a 0.4 s step."""
+CYCLE_SLACK = 1.5
+"""With ``hold=``, an agent whose last observation at or before ``now`` is at most this many of
+its own observation intervals old (the median gap between its times: seen in the tracker's
+latest cycle, its stamp a little late or jittered) is extrapolated to ``now`` at its last
+velocity; one unseen for longer (missed detections, occlusion) is held where it was last seen,
+its motion since being unknown."""
 
 
 class LeftOutWarning(UserWarning):
     """``tracks_to_history`` left out agents that the tracker saw in its current cycle: their
     detections are stamped a little before ``now`` (per-detection timestamps a few ms apart
-    within one cycle) or after it (a nominal cycle time as ``now``); ``hold=`` keeps them."""
+    within one cycle) or after it (a nominal cycle time as ``now``); the message gives each
+    one's age at ``now`` and a ``hold=`` that keeps them."""
 
 
 class TrackHistory(NamedTuple):
@@ -46,8 +53,9 @@ class TrackHistory(NamedTuple):
     """[C]: the input agent id of each ``context`` row."""
     left_out_ids: list
     """Agents observed at or before ``now`` that have no position at ``now`` (last seen more than
-    ``hold`` seconds before it): gone from view, or occluded; in no array (a ``LeftOutWarning``
-    where some were seen in the tracker's current cycle: ``tracks_to_history``)."""
+    ``hold`` seconds before it, and not within ``hold`` after it): gone from view, or occluded;
+    in no array (a ``LeftOutWarning`` where some were seen in the tracker's current cycle:
+    ``tracks_to_history``)."""
     frame_times: np.ndarray
     """[T_h] float64: the time of each frame, ``now - (T_h - 1 - i) * step``."""
 
@@ -67,21 +75,43 @@ def tracks_to_history(times: Any, ids: Sequence[Hashable] | np.ndarray, xy: Any,
 
     - Frame i (i = 0 .. T_h - 1) is at ``now - (T_h - 1 - i) * step`` (``frame_times``).
     - An agent's position at a frame is linearly interpolated between its own two observations
-      around it (an observation at the frame's time is used as it is). It is never
-      extrapolated: frames before the agent's first observation are NaN.
+      around it (an observation at the frame's time is used as it is). Frames before the
+      agent's first observation are NaN; past its last one, only ``hold`` (below) fills any.
     - Observations more than ``max_gap`` seconds apart (default ``2 * step``) are not bridged:
       the frames between them are NaN.
-    - Rows after ``now`` are not read (a log can be replayed by moving ``now``).
-    - The frame at ``now`` takes the agent's observation at ``now``, or, when its last one is
-      at most ``hold`` seconds earlier (default 0: none), that last position, held (for a
-      tracker whose agents carry their own timestamps a few ms apart within one cycle). An
-      agent with no position at ``now`` is left out of both arrays: ``left_out_ids`` lists it
-      (no model reads a neighbour that is unseen at the last frame). Where some of them have
-      an observation within half their own observation interval of ``now`` (before or after
-      it: seen in the tracker's current cycle, not gone), one ``LeftOutWarning`` per call
-      names how many and the remedy, ``hold=`` about one tracker cycle (0.1 s at 10 Hz); an
-      agent that left the view a cycle or more ago is left out without a word, and so is
-      every agent of input on one time grid with ``now`` on it.
+    - Rows after ``now`` are not read (a log can be replayed by moving ``now``), but for the
+      tolerance ``hold`` below.
+    - The frame at ``now`` takes the agent's observation at ``now``. ``hold`` (seconds,
+      default 0: none) is a tolerance on the time stamps around ``now``, for a tracker whose
+      agents carry their own stamps a few ms apart within one cycle, or a ``now`` set to the
+      cycle's nominal time; the frames after the agent's last observation at or before
+      ``now`` (the frame at ``now``, and any other such frame) are then, first rule that
+      applies:
+
+      1. interpolated linearly toward its first observation after ``now``, when that is at
+         most ``hold`` seconds after ``now`` and at most ``max_gap`` after the last one (the
+         only use of a row after ``now``);
+      2. when its last observation is at most ``hold`` seconds before ``now`` and at most
+         ``CYCLE_SLACK`` (1.5) of its own observation intervals old (seen in the tracker's
+         latest cycle), extrapolated linearly at its velocity between that observation and
+         the latest one at least as much earlier (within ``max_gap``);
+      3. when its last observation is at most ``hold`` seconds before ``now``, that position,
+         held (an agent missing from the tracker's latest cycles, or seen once: its motion
+         since is unknown; a moving agent's held frames lag it by its speed times their
+         distance from that observation, and read as it slowing down).
+
+      A stamp of the tracker's latest cycle is never placed at ``now`` as if observed then,
+      so a 10 Hz tracker's stamps some ms off the frame grid give no velocity bias (a stale
+      position held at ``now`` reads as the agent slowing down). With ``hold=0`` (or every
+      agent observed at ``now``) none of this applies. An agent with no position at ``now``
+      is left out of both arrays: ``left_out_ids`` lists it (no model reads a neighbour that
+      is unseen at the last frame). Where some of them have an observation within half their
+      own observation interval of ``now`` (before or after it: seen in the tracker's current
+      cycle, not gone), one ``LeftOutWarning`` per call names them with the age at ``now`` of
+      their latest observation at or before it, and suggests a ``hold=`` above the oldest
+      (1.25 times it, rounded up to 10 ms); an agent that left the view a cycle or more ago
+      is left out without a word, and so is every agent of input on one time grid with
+      ``now`` on it.
     - An agent with a position at every frame is a ``history`` row; one with a position at
       ``now`` but NaN at some earlier frame (a track that started inside the window, or a gap)
       is a ``context`` row.
@@ -115,17 +145,18 @@ def tracks_to_history(times: Any, ids: Sequence[Hashable] | np.ndarray, xy: Any,
         raise DataError(f"ids: agent ids must sort among themselves (ints, strings), got "
                         f"{', '.join(kinds)}: map them to ints first") from None  # fmt: skip
     full, part, full_ids, part_ids, left_out = [], [], [], [], []
-    current = 0  # left-out agents that the tracker saw in its current cycle
+    current = []  # (id, age at now) of the left-out agents seen in the tracker's current cycle
     for key in order:
         every = np.asarray(groups[key])
-        rows = every[t[every] <= now + eps]  # rows after now are not read
-        if not len(rows):
+        rows = every[t[every] <= now + hold + eps]  # rows after now + hold are not read
+        if not (t[rows] <= now + eps).any():
             continue  # first seen after now: not there yet
-        track = _agent_track(key, t[rows], pos[rows], frames, max_gap, hold, eps)  # [T_h, 2]
+        track, age = _agent_track(key, t[rows], pos[rows], frames, now, max_gap, hold, eps)
         seen = np.isfinite(track).all(-1)  # [T_h]
         if not seen[-1]:
             left_out.append(key)
-            current += _seen_this_cycle(t[every], now, step, eps)
+            if _seen_this_cycle(t[every], now, step, eps):
+                current.append((key, age))
         elif seen.all():
             full.append(track)
             full_ids.append(key)
@@ -133,15 +164,31 @@ def tracks_to_history(times: Any, ids: Sequence[Hashable] | np.ndarray, xy: Any,
             part.append(track)
             part_ids.append(key)
     if current:
-        warnings.warn(f"tracks_to_history: {current} agent(s) seen in the tracker's current "
-                      "cycle (within half their observation interval of now) have no position "
-                      "at now and are left out (left_out_ids): their detections are stamped a "
-                      "little before now, or after it. Pass hold= about one tracker cycle "
-                      "(hold=0.1 at 10 Hz) to hold their last position at now",
-                      LeftOutWarning, stacklevel=2)  # fmt: skip
+        warnings.warn(_left_out_message(current, hold), LeftOutWarning, stacklevel=2)
     return TrackHistory(history=_stack(full, t_hist), context=_stack(part, t_hist), ids=full_ids,
                         context_ids=part_ids, left_out_ids=left_out,
                         frame_times=frames)  # fmt: skip
+
+
+SHOWN_AGES = 5
+"""How many left-out agents a ``LeftOutWarning`` names with their age (the others counted)."""
+
+
+def _left_out_message(current: list[tuple[Hashable, float]], hold: float) -> str:
+    """The ``LeftOutWarning`` for the left-out agents ``current`` ((id, age at now of its latest
+    observation at or before now), in id order) seen in the tracker's current cycle, under the
+    ``hold`` given."""
+    oldest = max(age for _, age in current)
+    suggest = math.ceil(round(oldest * 1.25 * 100, 6)) / 100  # above the oldest: 0.111 -> 0.14
+    shown = ", ".join(f"{key!r}: {age:.3f} s" for key, age in current[:SHOWN_AGES])
+    more = f" and {len(current) - SHOWN_AGES} more" if len(current) > SHOWN_AGES else ""
+    return (f"tracks_to_history: {len(current)} agent(s) seen in the tracker's current cycle "
+            "(within half their observation interval of now) have no position at now and are "
+            f"left out (left_out_ids): their latest stamp at or before now is older than "
+            f"hold={hold:g} s (age at now by id: {shown}{more}), their detections being stamped "
+            f"a little before now, or after it. Pass hold={suggest:g} (above the oldest age) to "
+            "place them at now, interpolated toward a stamp within hold after now, else "
+            "extrapolated at their last velocity (tracks_to_history's rules)")  # fmt: skip
 
 
 def _seen_this_cycle(t: np.ndarray, now: float, step: float, eps: float) -> bool:
@@ -154,10 +201,38 @@ def _seen_this_cycle(t: np.ndarray, now: float, step: float, eps: float) -> bool
     return bool((np.abs(t - now) <= interval / 2 + eps).any())
 
 
-def _agent_track(key, t: np.ndarray, p: np.ndarray, frames: np.ndarray, max_gap: float,
-                 hold: float, eps: float) -> np.ndarray:  # fmt: skip
+def _agent_track(key, t: np.ndarray, p: np.ndarray, frames: np.ndarray, now: float,
+                 max_gap: float, hold: float, eps: float) -> tuple[np.ndarray, float]:  # fmt: skip
     """One agent's positions [T_h, 2] at ``frames`` from its rows (times t [n], positions
-    p [n, 2], all at or before now), NaN where the rules of ``tracks_to_history`` give none."""
+    p [n, 2], at or before ``now`` but for those within ``hold`` after it), NaN where the rules
+    of ``tracks_to_history`` give none, and the age at ``now`` of its last observation at or
+    before it."""
+    t, p = _distinct_rows(key, t, p)
+    n = int(np.count_nonzero(t <= now + eps))  # rows at or before now: the first n
+    t_in, p_in = t[:n], p[:n]
+    at = np.clip(frames, t_in[0], t_in[-1])  # [T_h] inside the observed span (after it: last)
+    track = np.stack([np.interp(at, t_in, p_in[:, 0]), np.interp(at, t_in, p_in[:, 1])], -1)
+    inside = (frames >= t_in[0] - eps) & (frames <= t_in[-1] + eps)  # [T_h]
+    if n > 1:
+        right = np.clip(np.searchsorted(t_in, at, side="left"), 1, n - 1)  # [T_h] obs >= at
+        on_obs = (np.abs(t_in[right] - at) <= eps) | (np.abs(t_in[right - 1] - at) <= eps)
+        bridged = on_obs | (t_in[right] - t_in[right - 1] <= max_gap + eps)  # [T_h]
+        inside &= bridged
+    track[~inside] = np.nan
+    last, age = t_in[-1], now - float(t_in[-1])
+    past = frames > last + eps  # [T_h] frames after the last observation at or before now
+    if hold > 0 and past.any():
+        since = (frames[past] - last)[:, None]  # [k, 1] seconds after that observation
+        if n < len(t) and t[n] - last <= max_gap + eps:  # rule 1: a stamp within hold after now
+            track[past] = p_in[-1] + since / (t[n] - last) * (p[n] - p_in[-1])
+        elif age <= hold + eps:  # rules 2 and 3: extrapolated, or held
+            track[past] = p_in[-1] + since * _velocity(t_in, p_in, age, max_gap, eps)
+    return track, age
+
+
+def _distinct_rows(key, t: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One agent's rows sorted by time, the same (time, position) twice kept once;
+    ``DataError`` for two positions at one time."""
     sort = np.argsort(t, kind="stable")
     t, p = t[sort], p[sort]
     same = np.flatnonzero(np.diff(t) == 0)  # duplicate times: row j equals row j + 1
@@ -171,17 +246,27 @@ def _agent_track(key, t: np.ndarray, p: np.ndarray, frames: np.ndarray, max_gap:
         keep = np.ones(len(t), dtype=bool)
         keep[same + 1] = False
         t, p = t[keep], p[keep]
-    at = np.clip(frames, t[0], t[-1])  # [T_h] inside the observed span (after it: p[-1])
-    track = np.stack([np.interp(at, t, p[:, 0]), np.interp(at, t, p[:, 1])], -1)  # [T_h, 2]
-    inside = (frames >= t[0] - eps) & (frames <= t[-1] + eps)  # [T_h]
-    if len(t) > 1:
-        right = np.clip(np.searchsorted(t, at, side="left"), 1, len(t) - 1)  # [T_h] obs >= at
-        on_obs = (np.abs(t[right] - at) <= eps) | (np.abs(t[right - 1] - at) <= eps)  # [T_h]
-        bridged = on_obs | (t[right] - t[right - 1] <= max_gap + eps)  # [T_h]
-        inside &= bridged
-    held = (frames > t[-1] + eps) & (frames <= t[-1] + hold + eps)  # [T_h] p[-1] (clipped)
-    track[~(inside | held)] = np.nan
-    return track
+    return t, p
+
+
+def _velocity(t: np.ndarray, p: np.ndarray, age: float, max_gap: float,
+              eps: float) -> np.ndarray:  # fmt: skip
+    """[2] the velocity at which an agent observed at distinct times ``t`` [n] (ascending)
+    at positions ``p`` [n, 2] is extrapolated ``age`` seconds past its last observation
+    (``tracks_to_history``'s rule 2): between that observation and the latest one at least
+    ``age`` earlier (the earliest within ``max_gap`` when none is), so that the noise of two
+    close stamps is not magnified. Zero (held, rule 3) for an agent seen once, one whose
+    last observation is more than ``CYCLE_SLACK`` of its observation intervals (the median gap
+    between its times) old, or one with no other observation within ``max_gap``."""
+    if len(t) < 2 or age > CYCLE_SLACK * float(np.median(np.diff(t))) + eps:
+        return np.zeros(2)
+    base = t[-1] - t[:-1]  # [n - 1] > 0, descending
+    near = base <= max_gap + eps
+    if not near.any():
+        return np.zeros(2)
+    long = near & (base >= age - eps)
+    j = int(np.flatnonzero(long)[-1]) if long.any() else int(np.flatnonzero(near)[0])
+    return (p[-1] - p[j]) / base[j]
 
 
 def _stack(tracks: list[np.ndarray], t_hist: int) -> np.ndarray:

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from trajpref.data.registry import SPECS, check_frame_interval
+from trajpref.data.registry import PIXEL_NAMES, SECONDS_STEPS, SPECS, check_frame_interval
 from trajpref.data.transforms import observed_pace
 from trajpref.errors import ConfigError
 from trajpref.metrics import METRE_UNITS
@@ -28,8 +28,9 @@ from trajpref.types import AGENT_BALL, TrajectoryDataset
 
 UNKNOWN_UNITS = ("", "unknown")
 """Unit names that say nothing (a folder read without ``--units``)."""
-PIXEL_UNITS = frozenset({"px", "pixel", "pixels", "pix"})
-"""The names of pixels (a model trained with ``--units px`` reads ``--units pixels`` data)."""
+PIXEL_UNITS = PIXEL_NAMES
+"""The names of pixels (a model trained with ``--units px`` reads ``--units pixels`` data):
+``data.registry.PIXEL_NAMES`` itself, one definition."""
 
 
 def same_units(a: str, b: str) -> bool:
@@ -299,10 +300,21 @@ def trained_otherwise(name: str, model: dict, problems: list[str]) -> str:
     return f"{name} was trained on {model['trained_on']}: {'; '.join(problems)}"
 
 
-def _resample_hint(model: dict) -> str:
-    step = model["step"]
-    return (f"resample the history to one position every {step:g} s; the futures step "
-            f"{step:g} s too")  # fmt: skip
+RESAMPLER = "trajpref.data.tracks_to_history"
+"""The public call that resamples a tracker's rows to a model's step, named by ``check_pace``."""
+
+
+def _resample_hint(model: dict, step: float | None = None) -> str:
+    """How to give the model (``model_timing``'s record) its own step, for data stepping
+    ``step`` seconds: a step above ``SECONDS_STEPS``' ceiling (10 s) is first asked whether it
+    is in milliseconds (``frame_interval=400`` for 0.4 s)."""
+    want = model["step"]
+    prefix = ""
+    if step is not None and step > SECONDS_STEPS[1]:
+        prefix = f"milliseconds? pass seconds, frame_interval={step / 1000:g}; else "
+    return (f"{prefix}resample the history to one position every {want:g} s, e.g. with "
+            f"{RESAMPLER}(times, ids, xy, now, step={want:g}); the futures step {want:g} s "
+            "too")  # fmt: skip
 
 
 def check_pace(
@@ -324,7 +336,8 @@ def check_pace(
     if timing is None or (frame_interval is None and units is None):
         return
     known = dict(timing, step=getattr(obj, "frame_interval", None))  # compare known steps only
-    problems = timing_problems(known, frame_interval, units, _resample_hint)
+    problems = timing_problems(known, frame_interval, units,
+                               lambda m: _resample_hint(m, frame_interval))  # fmt: skip
     if problems:
         warnings.warn(trained_otherwise(name, timing, problems), stacklevel=stacklevel)
 
