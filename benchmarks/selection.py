@@ -44,8 +44,8 @@ from trajpref.score.selection import (
     METHODS,
     WEIGHTED,
     SelectionConfig,
+    batch_observed_pace,
     gather,
-    observed_pace,
     select_samples,
     within_pace,
 )
@@ -241,7 +241,7 @@ def main() -> None:
         seconds["score"] += time.perf_counter() - t1
         trusted = within_pace(batch, model.scale, trust_speed)  # [N] or None
         if cuts:
-            pace_bin = torch.bucketize(observed_pace(batch, model.scale), torch.tensor(cuts))
+            pace_bin = torch.bucketize(batch_observed_pace(batch, model.scale), torch.tensor(cuts))
             bin_agents += torch.bincount(pace_bin, minlength=bins).double()  # [bins]
         for i, cfg in enumerate(configs):
             t2 = time.perf_counter()

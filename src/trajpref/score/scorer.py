@@ -40,9 +40,11 @@ from trajpref.models.denoiser import Denoiser, DenoiserShapes
 from trajpref.models.encoder import check_neighbour_radius, scene_features
 from trajpref.models.predictor import as_integer, check_coordinates, check_seed
 from trajpref.models.timing import (
+    JUMP_LIMIT,
     attach_timing,
     check_observed_steps,
     check_pace,
+    observed_jumps,
 )
 from trajpref.types import AGENT_BALL, AGENT_PERSON, Batch
 
@@ -265,11 +267,13 @@ class TrajectoryScorer(DenoiserShapes):
         checkpoint's training step and units (``frame_interval``, ``units``), and its
         ``model.neighbour_radius`` (a generator file's own, as the predictor loaded from it
         uses) unless ``neighbour_radius`` is given (None: off). ``device``: ``auto``, ``cpu``,
-        ``cuda[:i]`` or a ``torch.device``. The other arguments are ``__init__``'s."""
+        ``cuda[:i]`` or a ``torch.device``. The other arguments are ``__init__``'s. Building
+        it draws nothing from torch's global random stream (``checkpoint.untouched_rng``)."""
         device = resolve_device(device)  # "auto" as the CLI reads it; a missing GPU in one line
         header = checkpoint.load(path)
         payload = checkpoint.denoiser_of(header)
-        denoiser, cfg = checkpoint.build_denoiser(payload)
+        with checkpoint.untouched_rng():  # torch's global stream as the caller seeded it
+            denoiser, cfg = checkpoint.build_denoiser(payload)
         schedule = DDPMSchedule.from_config(cfg.diffusion)
         if isinstance(neighbour_radius, str) and neighbour_radius == "checkpoint":
             neighbour_radius = checkpoint.config_of(header).model.neighbour_radius
@@ -542,8 +546,12 @@ def rank_samples(
     ``from_checkpoint``: ``scorer.with_steps([0])`` is 10-25x cheaper). The order depends
     on the scorer's ``seed`` and on the order the agents are listed in (docs/score.md).
     Wrong shapes, non-numbers, non-finite values and coordinates too large for float32 raise
-    ``DataError``. A scene without agents (history [0, T_h, 2], samples [K, 0, T_f, 2]: an
-    empty view) has nothing to tell the samples apart: order ``0..K-1`` and residuals 0.
+    ``DataError``; so do samples that do not continue the history (``check_samples_continue``:
+    an agent whose first future position is, in every sample, a jump above
+    ``models.timing.JUMP_LIMIT`` model units from its last observed position: samples in
+    another frame than the history, or given as offsets from the last position). A scene
+    without agents (history [0, T_h, 2], samples [K, 0, T_f, 2]: an empty view) has nothing
+    to tell the samples apart: order ``0..K-1`` and residuals 0.
     """
     batch, futs = scene_batch(scorer, history, samples, agent_type, frame_interval=frame_interval,
                               units=units, allow_empty=True)  # fmt: skip
@@ -805,7 +813,8 @@ def scene_batch(scorer: TrajectoryScorer, history: ArrayLike, samples: ArrayLike
     scorer's units and lengths) as a one-scene Batch with an unknown (NaN) future, and the
     samples as a float32 tensor on the scorer's device. DataError for wrong shapes,
     non-finite values and coordinates too large for float32 (``predict_scene``'s check,
-    ``models.predictor.check_coordinates``); ConfigError for something other than a scorer;
+    ``models.predictor.check_coordinates``) and for samples that do not continue the history
+    (``check_samples_continue``); ConfigError for something other than a scorer;
     a warning where ``frame_interval`` or ``units`` differ from the scorer's (``rank_samples``
     documents the conventions). A scene without agents (P = 0) is a DataError, unless
     ``allow_empty``: then its (empty) Batch comes back, which the caller must not run the
@@ -839,7 +848,49 @@ def scene_batch(scorer: TrajectoryScorer, history: ArrayLike, samples: ArrayLike
     types = _agent_types(agent_type, p, device)
     if p:  # cm given to a metre scorer scrambles its ranking without an error; or an id switch
         check_observed_steps(scorer, hist, name="this scorer", stacklevel=4, agent_type=types)
+        check_samples_continue(scorer, hist, futs, types)
     return _join([(hist, types, None)], t_f), futs
+
+
+def check_samples_continue(scorer: TrajectoryScorer, hist: torch.Tensor, futs: torch.Tensor,
+                           types: torch.Tensor | None = None) -> None:  # fmt: skip
+    """DataError when an agent's samples do not continue its history: in every one of the
+    K samples futs [K, P, T_f, 2], the step from the agent's last observed position
+    (hist [P, T_h, 2]) to its first future position is a jump (``models.timing.observed_jumps``:
+    above ``JUMP_LIMIT`` model units of ``scorer``, the history's own rule; balls in ``types``
+    [P] are not checked). Samples in another frame than the history (a robot's frame and the
+    map's) or given as offsets from the last position are ranked without any error otherwise,
+    and their order means nothing. A frame offset below the limit (7.4 m at zara1's scale) is
+    not caught; one stray sample is not an error; an agent whose history itself steps above
+    the limit is left to ``check_observed_steps``' warning (data in other units moves every
+    step that far; a tracker id switch). The published generators' samples start at most
+    0.75 model units from the last observed position (200 test scenes of each published
+    dataset, walkthrough 67)."""
+    k, p = futs.shape[:2]
+    if not k or not p:
+        return
+    scale = float(scorer.scale)
+    last = hist[None, :, -1].expand(k, -1, -1)  # [K, P, 2]
+    pairs = torch.stack([last, futs[:, :, 0]], dim=2).reshape(k * p, 2, 2)  # [K*P, 2, 2]
+    kinds = None if types is None else types.reshape(1, -1).expand(k, -1).reshape(-1)  # [K*P]
+    far = observed_jumps(pairs, scale, kinds).reshape(k, p).all(0)  # [P]
+    far &= ~observed_jumps(hist, scale, types)  # its history's own jump: already warned of
+    if not bool(far.any()):
+        return
+    agents = far.nonzero().flatten().tolist()
+    gap = (futs[:, :, 0] - last).norm(dim=-1).min(0).values  # [P] the nearest sample's
+    shown = ", ".join(f"{i} ({float(gap[i]):.4g})" for i in agents[:5])
+    more = f" and {len(agents) - 5} more" if len(agents) > 5 else ""
+    units = getattr(scorer, "units", None) or "data units"
+    raise DataError(
+        f"samples do not continue the history: the first future position of agent(s) "
+        f"{shown}{more} is, in every sample, more than {JUMP_LIMIT * scale:.4g} {units} "
+        f"({JUMP_LIMIT:g} model units at this scorer's data scale {scale:g}; the nearest "
+        f"sample's distance in brackets) from its last observed position. Samples in another "
+        f"frame than the history (e.g. a robot's frame and the map's), or given as offsets "
+        f"from the last position? Give both as absolute positions in one frame (offsets o: "
+        f"history[None, :, -1:] + o)"
+    )
 
 
 def _join(scenes: list[tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]],

@@ -488,18 +488,19 @@ def select_samples(pred: torch.Tensor, cfg: SelectionConfig, residual: torch.Ten
     return idx[:, batch.scene]  # [K', N]
 
 
-def observed_pace(batch: Batch, scale: float) -> torch.Tensor:
+def batch_observed_pace(batch: Batch, scale: float) -> torch.Tensor:
     """Each agent's observed displacement per step [N], first to last observed position, in
-    model units (data units / ``scale``): the measure of ``model.max_speed``."""
+    model units (data units / ``scale``): the measure of ``model.max_speed``;
+    ``data.transforms.observed_pace`` of the batch's histories."""
     return transforms.observed_pace(batch.history, scale)  # [N]
 
 
 def within_pace(batch: Batch, scale: float, trust_speed: float) -> torch.Tensor | None:
-    """Agents [N] bool whose ``observed_pace`` is at most ``trust_speed``; None when the gate
-    is off (``trust_speed`` 0)."""
+    """Agents [N] bool whose ``batch_observed_pace`` is at most ``trust_speed``; None when the
+    gate is off (``trust_speed`` 0)."""
     if trust_speed <= 0:
         return None
-    return observed_pace(batch, scale) <= trust_speed
+    return batch_observed_pace(batch, scale) <= trust_speed
 
 
 def score_steps(scorer: TrajectoryScorer, cfg: SelectionConfig) -> TrajectoryScorer:
@@ -518,17 +519,54 @@ def select_with_scorer(pred: torch.Tensor, cfg: SelectionConfig, batch: Batch,
     """``select_samples`` with the residual and the pace gate computed by ``scorer`` at the
     config's score steps (``score_steps``; only for the methods that read the score):
     pred [K, N, T_f, 2] -> idx [K', N]."""
+    return _select_scored(pred, cfg, batch, scorer, generator)[0]
+
+
+def _select_scored(pred: torch.Tensor, cfg: SelectionConfig, batch: Batch,
+                   scorer: TrajectoryScorer | None, generator: torch.Generator | None
+                   ) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor]:  # fmt: skip
+    """``select_with_scorer``, with what it computed on the way: idx [K', N], the residual
+    [K, N] (None for a method that reads no score) and ``scored`` [N] bool, the agents whose
+    indices were chosen with the score (``select_samples``' fallback: an agent outside the
+    pace gate, or with ``per="scene"`` any agent of its scene, is chosen by the method's
+    score-free counterpart; every agent, for a method that reads no score)."""
     residual = trusted = None
     if cfg.uses_score:
         d = score_steps(scorer, cfg).residual(batch, pred)  # [K, N, T_f]
         residual = d[..., -1] if cfg.final else d.sum(-1)  # [K, N]
         trusted = within_pace(batch, scorer.scale, cfg.trust_speed)  # [N] or None
-    return select_samples(pred, cfg, residual, batch, generator, trusted)
+    idx = select_samples(pred, cfg, residual, batch, generator, trusted)  # [K', N]
+    n = pred.shape[1]
+    scored = torch.full((n,), cfg.uses_score, dtype=torch.bool, device=pred.device)  # [N]
+    if trusted is not None:
+        scored = trusted.to(pred.device)
+        if cfg.per == "scene":  # a scene falls back as a whole when any agent of it does
+            whole = scene_sum((~scored).to(pred.dtype), batch.scene, batch.num_scenes) == 0
+            scored = whole[batch.scene]  # [N]
+    return idx, residual, scored
+
+
+class SceneSelection(typing.NamedTuple):
+    """What ``select_for_scene(..., return_info=True)`` returns (numpy arrays, or tensors
+    when an input was one)."""
+
+    idx: typing.Any
+    """[K', P] int64 sample indices per agent, in selection order (the default return)."""
+    residual: typing.Any
+    """[K, P] float32 each sample's residual per agent at ``cfg``'s score steps, summed over
+    the future steps (the last step only with ``cfg.final``): lower is more human-like; the
+    numbers the selection read. None for a method that reads no score (nothing is scored)."""
+    trusted: typing.Any
+    """[P] bool: the agents whose samples were chosen with the score. False for an agent
+    observed faster than ``cfg.trust_speed`` (model units per step, ``within_pace``), which
+    falls back to the method's score-free counterpart (``SCORE_FREE``; with
+    ``cfg.per="scene"`` every agent, when any does), and for every agent of a method that reads
+    no score. Its ``residual`` is still there, but the selection did not use it."""
 
 
 def select_for_scene(scorer: TrajectoryScorer, history, samples, cfg: SelectionConfig,
                      agent_type=None, *, frame_interval: float | None = None,
-                     units: str | None = None):  # fmt: skip
+                     units: str | None = None, return_info: bool = False):  # fmt: skip
     """Keep ``cfg.keep`` of the K sampled futures of ONE scene given only its history (the
     planning use, beside ``rank_samples``): history [P, T_h, 2], samples [K, P, T_f, 2]
     (numpy arrays or tensors, in the scorer's units and lengths; the scorer checks them, and
@@ -540,9 +578,17 @@ def select_for_scene(scorer: TrajectoryScorer, history, samples, cfg: SelectionC
     ``cfg``. ``agent_type``, ``frame_interval`` and ``units``: as ``rank_samples`` (a
     selection that reads the score of a scorer trained with the ball flagged, given no
     ``agent_type``, warns). The checks are
-    ``rank_samples``' (``scene_batch``). A scene without agents (history [0, T_h, 2], samples
-    [K, 0, T_f, 2]: an empty view) gives idx [K', 0] (``cfg.keep`` still at most K) without
-    running the scorer."""
+    ``rank_samples``' (``scene_batch``; samples that do not continue the history, in another
+    frame or given as offsets, are a ``DataError``). A scene without agents (history
+    [0, T_h, 2], samples [K, 0, T_f, 2]: an empty view) gives idx [K', 0] (``cfg.keep``
+    still at most K) without running the scorer.
+
+    ``return_info=True`` returns a ``SceneSelection`` ``(idx, residual, trusted)`` instead
+    of idx alone, from the same pass (nothing is scored twice): ``residual`` [K, P], each
+    sample's residual per agent as the selection read it (None for a method that reads no
+    score), and ``trusted`` [P] bool, the agents whose samples were chosen with the score
+    (False: chosen by coverage alone, as for an agent observed faster than
+    ``cfg.trust_speed``). The kept samples' residuals: ``residual[idx, np.arange(P)]``."""
     batch, pred = scene_batch(scorer, history, samples, agent_type, frame_interval=frame_interval,
                               units=units, allow_empty=True)  # pred [K, P, T_f, 2]  # fmt: skip
     if agent_type is None and batch.num_agents and cfg.uses_score and reads_agent_types(scorer):
@@ -551,12 +597,15 @@ def select_for_scene(scorer: TrajectoryScorer, history, samples, cfg: SelectionC
         if cfg.keep > pred.shape[0]:
             raise ConfigError(f"cannot keep {cfg.keep} of {pred.shape[0]} samples")
         idx = torch.empty(cfg.keep, 0, dtype=torch.int64, device=pred.device)  # [K', 0]
+        residual = pred.new_zeros(pred.shape[0], 0) if cfg.uses_score else None  # [K, 0]
+        scored = torch.zeros(0, dtype=torch.bool, device=pred.device)  # [0]
     else:
         generator = torch.Generator().manual_seed(cfg.seed)
-        idx = select_with_scorer(pred, cfg, batch, scorer, generator)  # [K', P]
-    if isinstance(history, torch.Tensor) or isinstance(samples, torch.Tensor):
-        return idx
-    return idx.cpu().numpy()
+        idx, residual, scored = _select_scored(pred, cfg, batch, scorer, generator)  # [K', P]
+    as_tensor = isinstance(history, torch.Tensor) or isinstance(samples, torch.Tensor)
+    out = [idx, residual, scored] if as_tensor else [
+        None if t is None else t.cpu().numpy() for t in (idx, residual, scored)]  # fmt: skip
+    return SceneSelection(*out) if return_info else out[0]
 
 
 def derived_generator(generator: torch.Generator, seed: int,
