@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+import yaml
 
 from trajpref import __version__
 from trajpref.adapt import ADAPT_OBJECTIVES, ADAPT_PARAMS, AdaptConfig, evaluate_in_context
@@ -35,6 +36,7 @@ from trajpref.config import (
     in_section,
     load_config,
     read_yaml,
+    to_dict,
     uses_rl,
 )
 from trajpref.data import (
@@ -658,7 +660,7 @@ def build_parser() -> argparse.ArgumentParser:
     ft.add_argument(
         "--preset",
         default=None,
-        choices=["paper"],
+        choices=list(PRESETS),
         help="'paper': Eq. 13-20 as written, with the paper's loss weights for the method "
         "(default: FinetuneConfig's values, which depart from the equations as printed where "
         "validation said so: kl_form, ratio_against, likelihood, score_every, value_target, "
@@ -690,12 +692,17 @@ def build_parser() -> argparse.ArgumentParser:
 
     cf = sub.add_parser("config", help="the training config's keys, values and meanings")
     cf_sub = cf.add_subparsers(dest="config_command", required=True, metavar="COMMAND")
-    show = cf_sub.add_parser("show", help="print every config key with its value and docstring")
+    show = cf_sub.add_parser("show", help="print every config key with its value and docstring "
+                          "(--yaml: as a YAML file to edit)")  # fmt: skip
     show.add_argument("--config", default=None, help="YAML config to resolve, or a shipped "
                       "config's name (e.g. zara1); default: the built-in defaults")  # fmt: skip
     show.add_argument("--set", dest="overrides", action="append", default=[],
                       metavar="KEY=VALUE", help="override a value, as train and finetune "
                       "take it (repeatable)")  # fmt: skip
+    show.add_argument("--yaml", action="store_true", help="print the resolved config as a "
+                      "YAML file that --config reads back (every key, without the docstrings): "
+                      "`trajpref config show --config zara1 --yaml > my.yaml`, edit it, then "
+                      "--config my.yaml")  # fmt: skip
     show.set_defaults(func=cmd_config_show)
     add_survey_parser(sub, add_data_args=_add_data_args, check_data_args=_check_data_args,
                       warn_if_trained_otherwise=_warn_if_trained_otherwise)  # fmt: skip
@@ -2291,9 +2298,27 @@ def _yaml_value(value) -> str:
     return str(value)
 
 
+def config_yaml(cfg: ExperimentConfig, source: str) -> str:
+    """``cfg`` as a YAML document, every key, that ``load_config`` reads back to an equal
+    config; ``source``: what it was resolved from (the command), said in its first comment."""
+    source = " ".join(source.splitlines())  # one comment line
+    head = (
+        f"# {source} (trajpref {__version__}): every key, resolved.\n"
+        "# `trajpref config show` documents each key; read this file with --config FILE.\n"
+    )
+    return head + yaml.safe_dump(to_dict(cfg), sort_keys=False)
+
+
 def cmd_config_show(args) -> int:
-    """Every key of the (resolved) config, its value and its docstring, section by section."""
+    """Every key of the (resolved) config, its value and its docstring, section by section;
+    with --yaml, the resolved config as a YAML file (``config_yaml``)."""
     cfg = load_config(args.config, args.overrides)
+    if args.yaml:
+        words = ["trajpref", "config", "show"]
+        words += ["--config", args.config] if args.config else []
+        words += [w for item in args.overrides for w in ("--set", item)]
+        print(config_yaml(cfg, shlex.join([*words, "--yaml"])), end="")
+        return 0
     sections = field_docs(ExperimentConfig)
     current = ""  # the section printed last (None: top-level keys)
     for key, value, doc in config_entries(cfg):

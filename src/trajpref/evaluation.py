@@ -21,6 +21,7 @@ from trajpref.data.loader import SceneLoader
 from trajpref.data.registry import (
     ETH_UCY,
     NAMES,
+    SECONDS_STEPS,
     resolve_data_root,
     sgan_folds,
     split_folders,
@@ -470,7 +471,19 @@ def step_hint(info: DatasetInfo, model: dict, words: ReadingWords = CLI_WORDS) -
     """How to read ``info``'s data at the model's step (``model``: ``models.timing.
     model_timing``'s record): only advice that this data can take (the time step resamples
     text track files alone; the frame interval is not read where the data state their
-    own)."""
+    own). A frame interval given above ``SECONDS_STEPS``' ceiling (10 s) is first asked
+    whether it is in milliseconds (``--frame-interval 400`` for 0.4 s), as
+    ``models.timing.check_pace`` asks in Python."""
+    hint = _reading_hint(info, model, words)
+    frame = info.frame_interval / info.time_step  # seconds between the files' rows, as given
+    if info.interval_from == "given" and frame > SECONDS_STEPS[1]:
+        seconds = words.frame_interval.format(f"{frame / 1000:g}")
+        return f"milliseconds? pass seconds, {seconds}; else {hint}"
+    return hint
+
+
+def _reading_hint(info: DatasetInfo, model: dict, words: ReadingWords) -> str:
+    """``step_hint`` but for the question on milliseconds."""
     step, model_step, every = info.frame_interval, model["step"], info.time_step
     frame = step / every  # seconds between the files' frames, as read
     assumed = info.interval_from == "default"

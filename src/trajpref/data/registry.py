@@ -8,11 +8,13 @@ sub-folders when present), or to one ``.ndjson`` file. Formats: ``docs/data_form
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import numbers
 import os
 import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -513,7 +515,8 @@ def _built_in(name: str, split: str, root: str | Path | None,
     if name == "robo-sim":
         return _robo_sim(split)
     if name == "robo-mix":
-        return _robo_mix(split, root, options)
+        with _layout_on_missing(name, resolve_data_root(root)):
+            return _robo_mix(split, root, options)
     spec = SPECS.get(name)
     if spec is None:
         raise TrajprefError(f"built-in dataset {name!r} (config.BUILTIN_DATASETS) has no entry in "
@@ -525,24 +528,59 @@ def _built_in(name: str, split: str, root: str | Path | None,
                             f"that reads it; the datasets it reads: {', '.join(BRANCHES)} "
                             "(docs/data.md, \"Adding a built-in dataset\")")  # fmt: skip
     base = resolve_data_root(root)
-    if name in ETH_UCY:
-        folder = base / "eth_ucy" / name / split
-        scenes = text.read_folder(folder, spec.t_hist, spec.t_fut, options=options,
-                                  units=spec.units)  # fmt: skip
-        source = folder
-    elif name == "sdd":
-        scenes, source = _sdd(base, split, options)
-    elif name == "nba":
-        scenes, source = _nba(base, split, spec, options)
-    elif name == "robo":
-        scenes, source = _robo(base, split, options)
-    else:  # a name added to BRANCHES without its branch here
-        raise AssertionError(f"data.registry._built_in: {name!r} is in BRANCHES but has no "
-                             "branch")  # fmt: skip
+    with _layout_on_missing(name, base):
+        if name in ETH_UCY:
+            folder = base / "eth_ucy" / name / split
+            scenes = text.read_folder(folder, spec.t_hist, spec.t_fut, options=options,
+                                      units=spec.units)  # fmt: skip
+            source = folder
+        elif name == "sdd":
+            scenes, source = _sdd(base, split, options)
+        elif name == "nba":
+            scenes, source = _nba(base, split, spec, options)
+        elif name == "robo":
+            scenes, source = _robo(base, split, options)
+        else:  # a name added to BRANCHES without its branch here
+            raise AssertionError(f"data.registry._built_in: {name!r} is in BRANCHES but has no "
+                                 "branch")  # fmt: skip
     info = DatasetInfo(
         name, split, spec.units, spec.frame_interval, spec.t_hist, spec.t_fut, str(source)
     )
     return TrajectoryDataset(scenes, info)
+
+
+_LAYOUTS = {
+    **{name: f"eth_ucy/{name}/{{train,val,test}}/*.txt" for name in ETH_UCY},
+    "sdd": "sdd/{train,test}.npz",
+    "nba": "nba/rebound/{train,test}/*.txt",
+    "robo": "robo/{val,test}.npz",
+    "robo-mix": "robo/{val,test}.npz",
+}
+"""Where each built-in dataset read from the data root lies under it, for the error on a
+missing folder or file (the README's table, "Data: where each dataset comes from")."""
+
+
+@contextlib.contextmanager
+def _layout_on_missing(name: str, base: Path) -> Iterator[None]:
+    """Re-raise a ``DataError`` for a missing folder or file under the data root ``base``
+    (not a broken link, not a malformed file) with where ``name`` lies under it."""
+    try:
+        yield
+    except DataError as exc:
+        missing = exc.path is not None and exc.line is None
+        if missing:
+            path = Path(exc.path)
+            missing = (not path.exists() and not path.is_symlink()
+                       and path.is_relative_to(base) and name in _LAYOUTS)  # fmt: skip
+        if not missing:
+            raise
+        said = str(exc).removeprefix(f"{exc.path}: ")
+        raise DataError(
+            f"{said}; {name} is read from {_LAYOUTS[name]} under the data root "
+            f'({base}; the README\'s "Data: where each dataset comes from" says '
+            "where each dataset's files come from)",
+            exc.path,
+        ) from None
 
 
 def _user_folder(
