@@ -26,7 +26,7 @@ from pathlib import Path
 from equal_budget import budget_of, row_budget
 
 from trajpref import io
-from trajpref.config import load_config, to_dict
+from trajpref.config import load_config, to_dict, uses_rl
 from trajpref.data import load_dataset
 from trajpref.device import resolve_device
 from trajpref.evaluation import evaluate
@@ -35,7 +35,7 @@ from trajpref.results import RUNNABLE_STARTS, make_row, start_record, start_suff
 from trajpref.rl.presets import finetune_config
 from trajpref.score.scorer import TrajectoryScorer
 from trajpref.train.loop import load_resume_state
-from trajpref.train.run import finetune, finished
+from trajpref.train.run import finetune, finetune_run_config, finished
 from trajpref.train.stages import build_finetune_stage
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -72,7 +72,9 @@ def main() -> None:
         help="skip (method, seed) pairs that already have a row in the results file measured "
         "under this invocation's budget (the --set keys of equal_budget.py's budget: "
         "finetune.max_minutes, warmup_steps, eval_every_minutes, eval_every; a row's are read "
-        "from its command); a row of another budget is run again and replaced",
+        "from its command); a row of another budget is run again and replaced, once its run "
+        "folder (started with other settings, so refused) is moved away or the runs take a "
+        "new --tag",
     )
     parser.add_argument(
         "--no-start-validation",
@@ -136,7 +138,7 @@ def main() -> None:
                 "max_fts", "top1_recall_ats", "top5_recall_ats")},
             train_seconds=round(summary["train_seconds"], 1),
             checkpoint=str(best.relative_to(ROOT)), model_hash=ckpt.model_hash(best),
-            uses_score=cfg.finetune.method != "control"
+            uses_score=uses_rl(cfg.finetune.method)
             and (cfg.finetune.policy_weight > 0 or cfg.finetune.value_weight > 0),
         )  # fmt: skip
         print(f"{args.dataset} {method_name} seed {seed}: minADE {res['min_ade']:.3f} "
@@ -196,7 +198,8 @@ run keeps on disk, nothing that shapes its model or its budget."""
 
 def check_settings(run: Path, cfg) -> None:
     """Refuse a run folder whose fine-tuning was started with other settings than this
-    invocation's ``cfg`` (its ``finetune_config.yaml``, the resolved config the stage writes):
+    invocation's ``cfg`` (its ``finetune_config.yaml``, the config the stage trains with and
+    writes, ``train.run.finetune_run_config``; ``sda`` and registered rewards without scaling):
     another budget, preset, learning rate or seed. Unchecked, finetune.py would resume such a
     run under the new settings (a resume may change the budget) or, when its budget is spent,
     take its finished model as this invocation's row. A folder without the file has not
@@ -204,7 +207,8 @@ def check_settings(run: Path, cfg) -> None:
     saved = run / "finetune_config.yaml"
     if not saved.is_file():
         return
-    have, want = io.dotted(to_dict(load_config(saved))), io.dotted(to_dict(cfg))
+    want = io.dotted(to_dict(finetune_run_config(cfg)[0]))  # as the stage writes it
+    have = io.dotted(to_dict(load_config(saved)))
     changed = [f"{k}: {have.get(k)!r} -> {want.get(k)!r}"
                for k in sorted(set(have) | set(want))
                if k not in SETTINGS_FREE and have.get(k) != want.get(k)]  # fmt: skip

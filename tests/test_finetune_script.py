@@ -152,3 +152,28 @@ def test_finetune_py_refuses_a_finished_run_of_another_learning_rate(tmp_path, m
                                      "--seeds", "0", "--no-start-validation"])  # fmt: skip
     with pytest.raises(SystemExit, match=r"finetune\.lr: 3e-05 -> "):
         ft.main()
+
+
+def test_a_run_folder_of_the_sda_reward_is_its_own_settings(tmp_path):
+    """The review of 34b5da7: the stage writes a config of its own for the sda reward (no
+    scaled scenes, ``rl.presets.own_reward_data``), which the check compared with the
+    invocation's and refused on robo (scale 0.8-1.25): every resume of the published rlhf-sda
+    runs. It now compares with what the stage writes (``train.run.finetune_run_config``)."""
+    ft = load_benchmark("finetune")
+    from trajpref.config import save_config
+    from trajpref.rl.presets import finetune_config
+
+    start = tmp_path / "models" / "robo" / "generator.safetensors"
+    start.parent.mkdir(parents=True)
+    for name in ("generator.safetensors", "denoiser.safetensors"):
+        (start.parent / name).symlink_to(ROOT / "models" / "robo" / name)
+    cfg = finetune_config(str(start), "rlhf", None, None, ["finetune.reward=sda"], 0)
+    assert (cfg.data.scale_min, cfg.data.scale_max) != (1.0, 1.0)  # robo trains scaled
+    run = tmp_path / "runs" / "robo-rlhf-s0-sda"
+    ft.check_start(run, start)
+    save_config(ft.finetune_run_config(cfg)[0], run / "finetune_config.yaml")  # as written
+    ft.check_settings(run, cfg)  # its own folder: resumed or reused
+    other = finetune_config(str(start), "rlhf", None, None, ["finetune.reward=sda",
+                                                              "finetune.lr=1e-5"], 0)  # fmt: skip
+    with pytest.raises(SystemExit, match=r"finetune\.lr"):
+        ft.check_settings(run, other)

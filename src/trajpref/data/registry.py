@@ -488,8 +488,9 @@ def _load(
 ) -> TrajectoryDataset:
     options = options or text.ReadOptions()
     if options.partial_future and name in NAMES and not _takes_folder_options(name):
-        why = ("its SPECS entry takes no folder options (SourceSpec.folder_options)"
-               if _has_text_tracks(name) else "comes as windows already cut")  # fmt: skip
+        why = ("is read as its peers read it, without a folder's options (its SPECS entry, "
+               "SourceSpec.folder_options)" if _has_text_tracks(name)
+               else "comes as windows already cut")  # fmt: skip
         raise ConfigError(f"partial_future cuts windows from text track files (ETH/UCY or "
                           f"a folder of them); {name} {why}")  # fmt: skip
     if options.time_step != 1.0 and name in SPECS and not SPECS[name].text_tracks:

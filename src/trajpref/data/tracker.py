@@ -80,7 +80,8 @@ def tracks_to_history(times: Any, ids: Sequence[Hashable] | np.ndarray, xy: Any,
     - Observations more than ``max_gap`` seconds apart (default ``2 * step``) are not bridged:
       the frames between them are NaN.
     - Rows after ``now`` are not read (a log can be replayed by moving ``now``), but for the
-      tolerance ``hold`` below.
+      tolerance ``hold`` below: with ``hold > 0`` a replay reads up to ``hold`` seconds past
+      ``now`` (rule 1), as a live tracker whose stamps run a little late would have them.
     - The frame at ``now`` takes the agent's observation at ``now``. ``hold`` (seconds,
       default 0: none) is a tolerance on the time stamps around ``now``, for a tracker whose
       agents carry their own stamps a few ms apart within one cycle, or a ``now`` set to the
@@ -188,7 +189,7 @@ def _left_out_message(current: list[tuple[Hashable, float]], hold: float) -> str
             f"hold={hold:g} s (age at now by id: {shown}{more}), their detections being stamped "
             f"a little before now, or after it. Pass hold={suggest:g} (above the oldest age) to "
             "place them at now, interpolated toward a stamp within hold after now, else "
-            "extrapolated at their last velocity (tracks_to_history's rules)")  # fmt: skip
+            "extrapolated at their last velocity or held (tracks_to_history's rules)")  # fmt: skip
 
 
 def _seen_this_cycle(t: np.ndarray, now: float, step: float, eps: float) -> bool:

@@ -861,7 +861,7 @@ def check_samples_continue(scorer: TrajectoryScorer, hist: torch.Tensor, futs: t
     [P] are not checked). Samples in another frame than the history (a robot's frame and the
     map's) or given as offsets from the last position are ranked without any error otherwise,
     and their order means nothing. A frame offset below the limit (7.4 m at zara1's scale) is
-    not caught; one stray sample is not an error; an agent whose history itself steps above
+    not caught; one stray sample of K > 1 is not an error; an agent whose history itself steps above
     the limit is left to ``check_observed_steps``' warning (data in other units moves every
     step that far; a tracker id switch). The published generators' samples start at most
     0.75 model units from the last observed position (200 test scenes of each published

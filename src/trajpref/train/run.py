@@ -76,6 +76,15 @@ STAGE_NAMES = {"diffusion": "denoiser", "generator": "generator", "finetune": "f
 """CLI stage -> the name its files carry (``<name>.safetensors``, ``<name>_last.pt``)."""
 
 
+def finetune_run_config(cfg: ExperimentConfig) -> tuple[ExperimentConfig, str | None]:
+    """-> (the config a fine-tuning run of ``cfg`` trains with and writes beside its
+    checkpoints, ``<out>/finetune_config.yaml``; ``own_reward_data``'s note or None): its
+    folders made absolute (``with_absolute_folders``), and a registered reward's or ``sda``'s
+    scenes without the augmentations it must not see (``rl.presets.own_reward_data``). A
+    script that reuses run folders compares a folder's file with this."""
+    return own_reward_data(with_absolute_folders(cfg))  # a registered reward: unaugmented
+
+
 def with_absolute_folders(cfg: ExperimentConfig) -> ExperimentConfig:
     """``cfg`` with a dataset (or validation dataset) given as a relative folder path made
     absolute, so that the run's config and checkpoints find it from any working directory;
@@ -970,13 +979,12 @@ def finetune(
             "runs would not compare with its table's): run it without torchrun, with "
             "OMP_NUM_THREADS=1"
         )
-    cfg = with_absolute_folders(cfg)
     _check_start_not_output(start, out_dir)
     payload = ckpt.load(start)
     if payload["kind"] != "generator":
         raise ConfigError(f"{start}: fine-tuning starts from a generator checkpoint")
-    check_config_of_start(cfg, payload, start)
-    cfg, note = own_reward_data(cfg)  # a registered reward sees unaugmented scenes
+    check_config_of_start(with_absolute_folders(cfg), payload, start)
+    cfg, note = finetune_run_config(cfg)
     if note is not None and os.environ.get("RANK", "0") == "0":
         print(note, file=sys.stderr)
 
