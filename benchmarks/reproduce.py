@@ -677,7 +677,10 @@ def render(cells: dict, paper: dict, opts, cpu: dict) -> str:
         'largest splits; sizes in the list at the end). "no model": no published generator for '
         'the dataset; "not trained": no rows yet (full mode trains them). The paper\'s numbers '
         'are typed in from its tables (`benchmarks/paper_tables.json`); "LED (its authors)" '
-        "is LED's own published result, for comparison with the paper's run of LED. When all "
+        "is LED's result as others quote it, for comparison with the paper's run of LED: its "
+        "ETH/UCY cells as printed in the MoRE preprint's Table 1 (second-hand, not checked "
+        "against LED's own paper), its SDD cell as the PPT paper quotes it, its NBA cell from "
+        "LED's README (`benchmarks/peers.json`). When all "
         "five ETH/UCY folds are listed, a last line gives their mean (the paper's: our mean of "
         "its five printed rows).",
         "",

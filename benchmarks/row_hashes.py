@@ -13,8 +13,9 @@ committed with a row are the ones it measured (true when a measurement and its w
 one commit, or the weights landed first).
 
     python benchmarks/row_hashes.py --backfill   # once: add the field to every row
-    python benchmarks/row_hashes.py              # report rows that cannot be merged, and rows
-                                                 # whose checkpoint file now holds other weights
+    python benchmarks/row_hashes.py              # report rows that cannot be merged, rows
+                                                 # whose checkpoint file now holds other weights,
+                                                 # and rows without a hash whose file is gone
 """
 
 from __future__ import annotations
@@ -37,8 +38,10 @@ ZOO = "src/trajpref/zoo/"
 """Where ``models/`` (a link) points: the path git tracks the published files under."""
 
 
-def _git(*args: str) -> bytes:
-    return subprocess.run(["git", "-C", str(ROOT), *args], check=True, capture_output=True).stdout
+def _git(*args: str, root: Path | None = None) -> bytes:
+    """``git`` in ``root`` (default: this repository, ``ROOT``)."""
+    where = str(root or ROOT)
+    return subprocess.run(["git", "-C", where, *args], check=True, capture_output=True).stdout
 
 
 def _identity(row: dict[str, Any]) -> str:
@@ -63,10 +66,12 @@ def recorded_at(path: Path) -> dict[str, str]:
 
 
 class Blobs:
-    """``model_hash`` of checkpoint files as committed, cached by git blob."""
+    """``model_hash`` of checkpoint files as committed, cached by git blob; ``root``: the
+    repository (default ``ROOT``)."""
 
-    def __init__(self) -> None:
+    def __init__(self, root: Path | None = None) -> None:
         self.by_blob: dict[tuple[str, str], str | None] = {}
+        self.root = root
 
     def hash_at(self, commit: str, checkpoint: str, sampler: str = "leapfrog") -> str | None:
         if checkpoint.startswith("git show "):
@@ -76,7 +81,8 @@ class Blobs:
             candidates.append(ZOO + checkpoint.removeprefix("models/"))
         for rel in candidates:
             try:
-                blob = _git("rev-parse", "--verify", "-q", f"{commit}:{rel}").decode().strip()
+                blob = _git("rev-parse", "--verify", "-q", f"{commit}:{rel}",
+                            root=self.root).decode().strip()  # fmt: skip
             except subprocess.CalledProcessError:
                 continue
             if (blob, sampler) not in self.by_blob:
@@ -84,11 +90,10 @@ class Blobs:
             return self.by_blob[blob, sampler]
         return None  # never tracked at that commit (a run folder)
 
-    @staticmethod
-    def _digest(blob: str, suffix: str, sampler: str) -> str | None:
+    def _digest(self, blob: str, suffix: str, sampler: str) -> str | None:
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / f"checkpoint{suffix}"
-            path.write_bytes(_git("cat-file", "blob", blob))
+            path.write_bytes(_git("cat-file", "blob", blob, root=self.root))
             try:
                 return ckpt.model_hash(path, sampler)
             except TrajprefError:
@@ -118,10 +123,13 @@ def backfill() -> None:
 
 
 def check() -> int:
-    """Print rows of one measurement with different hashes, and rows whose checkpoint file
-    now holds other weights or settings; 1 when any of the first kind exists."""
+    """Print rows of one measurement with different hashes, rows whose checkpoint file now
+    holds other weights or settings, and rows without a hash whose checkpoint file is gone
+    (``untraceable``: counted apart, listed where the file was a published one, so that "0
+    rows whose checkpoint file has changed" is not read as all of them checked); 1 when any
+    of the first kind exists."""
     groups: dict[tuple, list[tuple[str, dict[str, Any]]]] = defaultdict(list)
-    stale = []
+    stale, unknown = [], []
     for path in sorted(RESULTS.glob("*.json")):
         for row in json.loads(path.read_text()):
             groups[tuple(row[k] for k in ROW_KEY)].append((path.name, row))
@@ -130,6 +138,8 @@ def check() -> int:
                 now = ckpt.model_hash(file, sampler_of(row["method"]))
                 if now != row["model_hash"]:
                     stale.append((path.name, row, now))
+            elif untraceable(row):
+                unknown.append((path.name, row))
     conflicts = 0
     for key, members in groups.items():
         hashes = {r["model_hash"] for _, r in members if r.get("model_hash")}
@@ -141,9 +151,75 @@ def check() -> int:
     for name, row, now in stale:
         print(f"{name}: {row['dataset']} {row['method']} seed {row['seed']} measured "
               f"{row['model_hash']}; {row['checkpoint']} is now {now}")  # fmt: skip
+    published = [(n, r) for n, r in unknown if _published_path(r["checkpoint"])]
+    for name, row in published:
+        print(f"{name}: {row['dataset']} {row['method']} seed {row['seed']} ({row['date']}) "
+              f"names no model_hash and {row['checkpoint']} no longer exists: what it "
+              "measured is unknown")  # fmt: skip
     print(f"{conflicts} measurements with rows of different checkpoints; {len(stale)} rows "
-          "whose checkpoint file has changed since")  # fmt: skip
+          f"whose checkpoint file has changed since; {len(unknown)} rows without a model_hash "
+          f"whose checkpoint file is gone, so unchecked ({len(published)} of a published file, "
+          f"listed; {len(unknown) - len(published)} of a run folder)")  # fmt: skip
     return 1 if conflicts else 0
+
+
+def untraceable(row: dict[str, Any]) -> bool:
+    """A row that names a checkpoint file but no ``model_hash``, whose file is gone: nothing
+    says which weights it measured (a ``git show REV:PATH`` checkpoint is pinned to its
+    commit, so it is not counted)."""
+    checkpoint = row.get("checkpoint")
+    if row.get("model_hash") or not checkpoint or checkpoint.startswith("git show "):
+        return False
+    return not (ROOT / checkpoint).is_file()
+
+
+def _published_path(checkpoint: str) -> bool:
+    """Whether a checkpoint path names a file of the zoo (``models/``, its target ``ZOO``)."""
+    return checkpoint.startswith(("models/", ZOO))
+
+
+def timed_weights(name: str, entry: dict, record: Path, zoo_dir: Path) -> tuple[str, str]:
+    """Whether ``record``'s (meta/speed.json's) timing ``entry`` of the published ``name``
+    timed the weights its file holds now, as ``(status, detail)``: ``same``; ``other`` (the
+    file has changed since; detail: the two hashes); ``unknown`` (nothing tells; detail: why).
+    The rule: the ``model_hash`` the entry records (``benchmarks/speed.py`` since 2026-12-06)
+    against the file's; an entry without one is traced as ``row_hashes.py --backfill`` traces
+    a results row, the file committed with the record (in the record's last commit, when the
+    record has not changed since) standing for the one it timed; without git, or with the
+    record or the file not committed, the status is ``unknown``, never a silent pass."""
+    file = zoo_dir / f"{name}.safetensors"
+    if not file.is_file():
+        return "unknown", "no such file now"
+    now = ckpt.model_hash(file)
+    was = entry.get("model_hash")
+    if not was:
+        was, commit = _committed_hash(record, file)
+        if was is None:
+            return "unknown", "no hash recorded, and git cannot trace one"
+        if was != now:
+            return "other", f"{was} in {commit}, now {now}"
+        return "same", ""
+    return ("same", "") if was == now else ("other", f"timed {was}, now {now}")
+
+
+def _committed_hash(record: Path, file: Path) -> tuple[str | None, str]:
+    """``model_hash`` of ``file`` as committed in the last commit that wrote ``record``, and
+    that commit's short name; (None, "") when git cannot tell (no repository, ``record`` not
+    committed or changed since, ``file`` not tracked in that commit)."""
+
+    def git(*args: str) -> str:
+        return subprocess.run(["git", "-C", str(record.parent), *args], check=True,
+                              capture_output=True, text=True).stdout.strip()  # fmt: skip
+
+    try:
+        top = Path(git("rev-parse", "--show-toplevel")).resolve()
+        if git("status", "--porcelain", "--", str(record)):
+            return None, ""  # the record has changed since its last commit
+        commit = git("log", "-1", "--format=%h", "--", str(record))
+        rel = str(file.resolve().relative_to(top))
+        return (Blobs(top).hash_at(commit, rel) if commit else None), commit
+    except (OSError, ValueError, subprocess.CalledProcessError):
+        return None, ""
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -11,7 +11,8 @@ the ratio full / leapfrog depends less on the machine's load than the latencies 
 two runs of one day on the same kind of host moved it by up to 45 %).
 
 Writes benchmarks/results/meta/speed.json (machine, threads, date, command, one entry per
-model); ``python benchmarks/update_readme.py`` puts it in the README's cost table. A subset
+model with the ``model_hash`` of the file it timed); ``python benchmarks/update_readme.py``
+puts it in the README's cost table, marking the latencies of a file that has changed since. A subset
 (``--datasets``) must go elsewhere (``--out``), so that the file never mixes runs.
 """
 
@@ -65,6 +66,9 @@ def main() -> None:
         picks = ms["scenes"]
         entries[name] = {
             "dataset": dataset,
+            # what was timed (weights, denoiser, scale, settings): update_readme.py marks the
+            # latencies of a file that has changed since
+            "model_hash": ckpt.model_hash(path),
             "scenes": picks,
             "mean_agents_per_scene": test.num_agents / len(test),
             "leapfrog_ms_per_scene": round(ms["leapfrog"], 2),

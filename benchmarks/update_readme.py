@@ -14,10 +14,13 @@ import sys
 import tempfile
 from pathlib import Path
 
+from row_hashes import timed_weights
+
 from trajpref.results import (
     ANCESTRAL_SUFFIX,
     METHODS,
     RETIRED_STARTS,
+    ROW_KEY,
     accuracy_table,
     base_method,
     peers_notes,
@@ -28,6 +31,8 @@ from trajpref.results import (
 )
 
 ROOT = Path(__file__).resolve().parent.parent
+ZOO = ROOT / "src" / "trajpref" / "zoo"
+"""The published files (``models/`` links here), by the path git tracks them under."""
 
 
 EQUAL_BUDGET = ("pretrained", "control", "rlhf", "rlhf-res", "rlhf-set")
@@ -43,6 +48,23 @@ def _latest_equal_budget(row: dict, current: set[tuple[str, str]]) -> bool:
                 for m in EQUAL_BUDGET[1:] for s in ("", *RETIRED_STARTS))  # fmt: skip
     had = any((row["dataset"], m + ANCESTRAL_SUFFIX) in current for m in EQUAL_BUDGET[1:])
     return base in EQUAL_BUDGET and had and not newer
+
+
+def without_superseded(rows: list[dict], root: Path = ROOT) -> list[dict]:
+    """``rows`` less those that a re-measurement supersedes: a row without a ``model_hash``
+    whose checkpoint file is gone (``models/eth/generator.pt`` of 2026-11-22, replaced by the
+    ``.safetensors`` files on 2026-11-23) beside a row of the same measurement (``ROW_KEY``)
+    that names a hash. ``merge_rows`` fills each field from the first row that has it, so the
+    undigested row's numbers would stand beside the re-measurement's (eth's full-sampler line
+    showed the minADE of 2026-11-22 and the maxATS of 2026-12-06)."""
+    hashed = {tuple(r[k] for k in ROW_KEY) for r in rows if r.get("model_hash")}
+
+    def gone(r: dict) -> bool:
+        path = r.get("checkpoint")
+        return bool(path) and not path.startswith("git show ") and not (root / path).is_file()
+
+    return [r for r in rows if r.get("model_hash") or not gone(r)
+            or tuple(r[k] for k in ROW_KEY) not in hashed]  # fmt: skip
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -88,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
 def regenerate(readme: Path, show: bool = True) -> None:
     """Replace the generated blocks of ``readme``; ``show``: print each table."""
     out = print if show else (lambda *_: None)
-    every = read_rows(ROOT / "benchmarks" / "results")
+    every = without_superseded(read_rows(ROOT / "benchmarks" / "results"))
     # the README keeps the methods users run (also from the longer published generators,
     # ``control-long``); fine-tuning ablations (tagged runs) are listed in docs/rlhf_results*.md.
     # Rows of the generators of before 2026-11-24 (``-ancestral``) stay only where they are
@@ -132,7 +154,9 @@ def regenerate(readme: Path, show: bool = True) -> None:
             "the change is taken within each seed, mean ± std. The published samplers are "
             "deterministic (posterior-mean steps), so every seed selects from the same 20 "
             "samples and only `random` differs: the ± is 0 by construction, not a measured "
-            "spread. The joint column selects one set of indices per scene. ms/scene is "
+            "spread. The joint column selects one set of indices per scene: `trajpref "
+            "evaluate` gives it with `--select-per scene` beside the row's options (without "
+            "it, the joint numbers it prints are of the per-agent selections). ms/scene is "
             "the mean over the seeds' runs, some of which shared the machine with training; "
             "the cost bar is measured alone by `benchmarks/selection_cost.py`._"
         )
@@ -156,7 +180,7 @@ def regenerate(readme: Path, show: bool = True) -> None:
     table = accuracy_table(rows, protocol="sgan")
     update_readme(readme, "results-sgan", table)
     out(table)
-    speed = speed_table(ROOT / "benchmarks" / "results" / "meta")
+    speed = speed_table(ROOT / "benchmarks" / "results" / "meta", zoo_dir=ZOO)
     update_readme(readme, "speed", speed)
     out(speed)
     planner = planner_table(ROOT / "benchmarks" / "results" / "meta" / "planner_latency_zara1.json")
@@ -201,14 +225,18 @@ def planner_table(path: Path) -> str | None:
     return "\n".join(lines)
 
 
-def speed_table(meta_dir: Path) -> str:
+def speed_table(meta_dir: Path, zoo_dir: Path | None = None) -> str:
     """Training cost and parameters from meta/pretrained_*.json (default configs); sampler
     latency and the full / leapfrog ratio from meta/speed.json (every published generator,
     timed side by side in one run by benchmarks/speed.py) where it has the model, else from
-    the training run's own timing (marked *)."""
+    the training run's own timing (marked *). With ``zoo_dir`` (the published files), each
+    timed row is checked against its file (``timed_weights``): latencies of weights the file
+    no longer holds are marked †, and the rows nothing can check are named as unknown."""
     speed_path = meta_dir / "speed.json"
     speed = json.loads(speed_path.read_text()) if speed_path.is_file() else {"models": {}}
     timed = speed["models"]
+    checked = ({name: timed_weights(name, t, speed_path, zoo_dir) for name, t in timed.items()}
+               if zoo_dir is not None else {})  # fmt: skip
     cost_path = meta_dir / "train_cost.json"
     cost_run = json.loads(cost_path.read_text()) if cost_path.is_file() else {"datasets": {}}
     estimates = cost_run["datasets"]
@@ -249,8 +277,9 @@ def speed_table(meta_dir: Path) -> str:
         else:
             cost = "– | – | – | –"
         if t is not None:
-            ms = (f"{t['leapfrog_ms_per_scene']:.1f} | {t['full_ms_per_scene']:.1f} "
-                  f"| {t['full_over_leapfrog']:.1f}x")  # fmt: skip
+            mark = "†" if checked.get(name, ("",))[0] == "other" else ""
+            ms = (f"{t['leapfrog_ms_per_scene']:.1f}{mark} | {t['full_ms_per_scene']:.1f}{mark} "
+                  f"| {t['full_over_leapfrog']:.1f}x{mark}")  # fmt: skip
         else:
             ms = (f"{m['ms_per_scene']['leapfrog']:.1f}* | {m['ms_per_scene']['full']:.1f}* "
                   f"| {m['speedup_full_over_leapfrog']:.1f}x*")  # fmt: skip
@@ -276,7 +305,9 @@ def speed_table(meta_dir: Path) -> str:
         lines.append("")
         lines.append(
             f"_Latencies: `{speed['command']}`, {speed['date']}, {speed['machine']}; "
-            f"{speed['samples']} samples, the same test scenes for both samplers._"
+            f"{speed['samples']} samples, the same test scenes for both samplers."
+            + _weights_note(checked, timed)
+            + "_"
         )
     scored = sorted(name.split("/")[0] for name in defaults
                     if (meta_dir / f"score_{name.split('/')[0]}.json").is_file())  # fmt: skip
@@ -284,6 +315,29 @@ def speed_table(meta_dir: Path) -> str:
         lines.append("")
         lines.append(_score_note(meta_dir, scored))
     return "\n".join(lines)
+
+
+def _weights_note(checked: dict[str, tuple[str, str]], timed: dict) -> str:
+    """The latency note's sentences on which weights were timed (``timed_weights``)."""
+    if not checked:
+        return ""
+    other = sorted(n for n, (s, _) in checked.items() if s == "other")
+    unknown = sorted(n for n, (s, _) in checked.items() if s == "unknown")
+    if all(t.get("model_hash") for t in timed.values()):
+        out = " The record names each model's weights hash: each is its file's today"
+    else:
+        some = "any" if not any(t.get("model_hash") for t in timed.values()) else "some"
+        out = (f" The record names no weights hash for {some} model (`benchmarks/speed.py` "
+               "records it since 2026-12-06); traced through git, the files committed with it "
+               "are today's")  # fmt: skip
+    if other:
+        out += (f", except † {' and '.join(f'`{n}` ({checked[n][1]})' for n in other)}: those "
+                "latencies timed the weights that file held before, and the record must be "
+                "measured again (as a whole, so that its rows compare)")  # fmt: skip
+    if unknown:
+        out += (f"; unknown for {' and '.join(f'`{n}` ({checked[n][1]})' for n in unknown)}, "
+                "not checked against its file")  # fmt: skip
+    return out + "."
 
 
 def _score_note(meta_dir: Path, datasets: list[str]) -> str:

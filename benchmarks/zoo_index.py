@@ -2,13 +2,16 @@
 
     python benchmarks/zoo_index.py           # writes models/index.json, models/<D>/<name>.md
                                              # and the README's listing (<!-- models -->)
-    python benchmarks/zoo_index.py --check   # exit 1 if they are not what this would write
+    python benchmarks/zoo_index.py --check   # exit 1 if they are not what this would write,
+                                             # or a card's test row names none of its file's
+                                             # model_hash (``card_row``)
 
 The installed package has no ``benchmarks/results/``, so everything ``trajpref models`` shows
 is copied here into files that ship with the weights (``models/`` links to the package's
 ``src/trajpref/zoo/``): per model its kind, method, the data it was trained on, the training
 machine and minutes (per stage), the command that trains it again, and its test row (minADE20
-/ minFDE20 from ``benchmarks/results/*.json``; a denoiser's row is its full 100-step sampler).
+/ minFDE20 from ``benchmarks/results/*.json``, the row that names the file's ``model_hash``;
+a denoiser's row is its full 100-step sampler).
 Run it after publishing a model (benchmarks/pretrain.py, benchmarks/finetune.py --publish).
 """
 
@@ -20,6 +23,8 @@ import re
 import sys
 from pathlib import Path
 from typing import Any
+
+from row_hashes import timed_weights
 
 from trajpref.config import GENERATOR_ONLY, load_config, resolve_config, to_dict
 from trajpref.data.registry import SPECS
@@ -269,6 +274,37 @@ def _meta(dataset: str, variant: str | None) -> dict[str, Any]:
     return json.loads(path.read_text()) if path.is_file() else {}
 
 
+def _newest(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """The newest of ``rows`` by date (ties: the later row)."""
+    out = rows[0]
+    for r in rows[1:]:
+        if (r.get("date") or "") >= (out.get("date") or ""):
+            out = r
+    return out
+
+
+def card_row(name: str, candidates: list[dict[str, Any]],
+             digest: str | None) -> tuple[dict[str, Any] | None, str | None]:  # fmt: skip
+    """The test row a card shows among ``candidates`` (the rows of its file and method) and,
+    when that row cannot be shown to have measured the file, why: the newest row whose
+    ``model_hash`` is the file's ``digest`` (``checkpoint.model_hash`` for the card's sampler);
+    without one, the newest row of all, with a problem line. A row without a digest whose
+    file has since been replaced (the ``.pt`` files became ``.safetensors`` on 2026-11-23)
+    must not stand beside a re-measurement that names the file's digest, nor pass unnoticed
+    where there is none."""
+    if not candidates:
+        return None, None
+    matching = [r for r in candidates if digest is not None and r.get("model_hash") == digest]
+    if matching:
+        return _newest(matching), None
+    row = _newest(candidates)
+    what = ("names no model_hash" if row.get("model_hash") is None
+            else f"measured {row['model_hash']}")  # fmt: skip
+    return row, (f"{name}: its test row ({row['method']}, {row['date']}, "
+                 f"{row.get('checkpoint')}) {what}, and no row names the file's {digest}: "
+                 "measure the file again")  # fmt: skip
+
+
 def newest_rows(rows: list[dict[str, Any]]) -> dict[tuple, dict[str, Any]]:
     """(zoo name, method) -> the newest row naming that file with that method: other studies
     (the score's, the selection's) keep a copy of the row they started from, which must not
@@ -310,7 +346,6 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
     # a card's test row is the default protocol's (``all``): the same file and method also
     # has ``sgan`` rows, often the newer ones
     rows = [r for r in rows if r.get("protocol", "all") == "all"]
-    by_file = newest_rows(rows)
     den_threads = None  # where a generator card's denoiser command takes its threads from
     entry: dict[str, Any] = {"name": name, "dataset": dataset, "kind": kind,
                              "file": f"{dataset}/{path.name}", "hash": head["hash"]}  # fmt: skip
@@ -358,6 +393,8 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
             today = zoo.header(path.parent / f"generator{ckpt.SUFFIX}").get("hash")
             from_today = meta.get("from") == today
             row, start = tuned_row(rows, dataset, stem, from_today), f"{dataset}/generator"
+            row, unverified = card_row(name, [row] if row else [],
+                                       ckpt.header_model_hash(head, "leapfrog"))  # fmt: skip
             run = _meta(dataset, None)
             machine, machine_from = (row["machine"] if row else None), "test row"
             train_cmd = []
@@ -375,7 +412,9 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
             rebuilt = f"runs/{dataset}-{stem}/finetune{ckpt.SUFFIX}"
         else:
             entry["method"] = "pretrained" + (f"-{variant}" if variant else "")
-            row = by_file.get((name, entry["method"]))
+            row, unverified = card_row(name, [
+                r for r in rows if (_zoo_file(r.get("checkpoint")), r["method"])
+                == (name, entry["method"])], ckpt.header_model_hash(head, "leapfrog"))  # fmt: skip
             run = _meta(dataset, variant)
             machine = run.get("train_machine") or run.get("trained_on")
             machine_from = "training" if machine else "test row"
@@ -398,8 +437,10 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
                 den_head = (zoo.header(den_file) if den_file is not None and den_file.is_file()
                             else None)  # fmt: skip
                 den_cfg = to_dict(ckpt.config_of(den_head)) if den_head else cfg
+                den_digest = ckpt.header_model_hash(den_head, "full") if den_head else None
                 den_machine, den_from = denoiser_machine((den_head or {}).get("meta") or {},
-                                                         rows, dataset, variant)  # fmt: skip
+                                                         rows, dataset, variant,
+                                                         den_digest)  # fmt: skip
                 train_cmd.insert(0, denoiser_command(dataset, out, den_cfg, den_machine))
                 if den_from != "training" and thread_prefix(den_machine):
                     den_threads = den_from
@@ -420,9 +461,10 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
     else:
         entry["sampler"] = "full"
         entry["method"] = "denoiser" + (f"-{variant}" if variant else "")
-        row = _full_sampler_row(rows, dataset, variant)
+        digest = ckpt.header_model_hash(head, "full")
+        row, unverified = card_row(name, _full_sampler_rows(rows, dataset, variant), digest)
         run = _meta(dataset, variant)
-        machine, machine_from = denoiser_machine(meta, rows, dataset, variant)
+        machine, machine_from = denoiser_machine(meta, rows, dataset, variant, digest)
         out = f"runs/{dataset}" + (f"-{variant}" if variant else "")
         train_cmd = [denoiser_command(dataset, out, cfg, machine)]
         seconds = (run.get("stage_seconds") or {}).get("denoiser") or meta.get("train_seconds")
@@ -446,6 +488,8 @@ def describe(name: str, path: Path, rows: list[dict[str, Any]]) -> dict[str, Any
     entry["limits"] = [LIMITS[k] for k in (dataset, name, kind) if k in LIMITS]
     entry["limits"] += generated_limits(name, kind, entry["test"], full_row, head.get("scale"))
     entry["card"] = f"{dataset}/{stem}.md"
+    if unverified:  # not written to the index: build() reports it, --check fails on it
+        entry["_unverified"] = unverified
     return entry
 
 
@@ -469,12 +513,13 @@ def _cost_estimate(dataset: str, kind: str, cfg: dict[str, Any]) -> dict[str, An
             "minutes": {k: cost[k]["minutes"] for k in stages}}  # fmt: skip
 
 
-def _full_sampler_row(rows: list[dict[str, Any]], dataset: str,
-                      variant: str | None) -> dict[str, Any] | None:  # fmt: skip
-    """The full-sampler row of the generator run that trained (and references) a denoiser."""
+def _full_sampler_rows(rows: list[dict[str, Any]], dataset: str,
+                       variant: str | None) -> list[dict[str, Any]]:  # fmt: skip
+    """The full-sampler rows of the generator file that references a denoiser (the run that
+    trained it, and any re-measurement of it)."""
     name = f"{dataset}/generator" + (f"-{variant}" if variant else "")
-    return next((r for r in rows if r["method"] == "full-sampler" and r["dataset"] == dataset
-                 and _zoo_file(r.get("checkpoint")) == name), None)  # fmt: skip
+    return [r for r in rows if r["method"] == "full-sampler" and r["dataset"] == dataset
+            and _zoo_file(r.get("checkpoint")) == name]  # fmt: skip
 
 
 MACHINE_FROM = {
@@ -490,14 +535,16 @@ dataset; the last two say so on the card."""
 
 
 def denoiser_machine(meta: dict[str, Any], rows: list[dict[str, Any]], dataset: str,
-                     variant: str | None) -> tuple[str | None, str]:  # fmt: skip
+                     variant: str | None,
+                     digest: str | None = None) -> tuple[str | None, str]:  # fmt: skip
     """A published denoiser's machine and where it comes from (a ``MACHINE_FROM`` key): its
     checkpoint's own record of the training process (``meta.machine``; no published denoiser
     has one today: each was trained before the field, or reused by a later run), else the
-    machine of its full-sampler test row, else that of its dataset's ``pretrained`` row."""
+    machine of its full-sampler test row (the one its card shows: ``card_row`` with the
+    denoiser's full-sampler ``digest``), else that of its dataset's ``pretrained`` row."""
     if meta.get("machine"):
         return meta["machine"], "training"
-    row = _full_sampler_row(rows, dataset, variant)
+    row, _ = card_row("", _full_sampler_rows(rows, dataset, variant), digest)
     if row is not None:
         return row.get("machine"), "test row"
     return _any_machine(rows, dataset, variant), "another row"
@@ -525,10 +572,12 @@ def _any_machine(rows: list[dict[str, Any]], dataset: str, variant: str | None) 
     return row["machine"] if row else None
 
 
-def speed_note(speed: dict[str, Any], dataset: str) -> str:
+def speed_note(speed: dict[str, Any], dataset: str, changed: bool = False) -> str:
     """A denoiser's cost as a predictor, from ``benchmarks/speed.py``'s record (``speed``):
     the range of full-sampler / leapfrog ratios over the published generators it timed, and
-    the ratio for the dataset's default generator where it timed one; "" without a record."""
+    the ratio for the dataset's default generator where it timed one (``changed``: that
+    generator's file has changed since, ``row_hashes.timed_weights``, and the note says the
+    ratio is the predecessor's); "" without a record."""
     timed = speed.get("models") or {}
     if not timed:
         return ""
@@ -536,6 +585,8 @@ def speed_note(speed: dict[str, Any], dataset: str) -> str:
     own = timed.get(f"{dataset}/generator")
     mine = (f", {own['full_over_leapfrog']:.1f}x beside `{dataset}/generator`" if own
             else "")  # fmt: skip
+    if own and changed:
+        mine += " as it was then (its file has changed since; the README's table marks it)"
     return (f"As a predictor it runs the full 100-step sampler, which took "
             f"{min(ratios):.1f}-{max(ratios):.1f}x the time per scene of each published "
             f"generator's leapfrog in `benchmarks/results/meta/speed.json` "
@@ -623,7 +674,10 @@ def generated_limits(name: str, kind: str, test: dict[str, Any] | None,
     if kind == "denoiser":
         speed_path = RESULTS / "meta" / "speed.json"
         speed = json.loads(speed_path.read_text()) if speed_path.is_file() else {}
-        if note := speed_note(speed, dataset):
+        own = (speed.get("models") or {}).get(f"{dataset}/generator")
+        changed = own is not None and timed_weights(f"{dataset}/generator", own, speed_path,
+                                                    zoo.ZOO_DIR)[0] == "other"  # fmt: skip
+        if note := speed_note(speed, dataset, changed):
             out.append(note)
     return out
 
@@ -824,16 +878,19 @@ def readme_with(text: str, listing: str) -> str:
     return f"{head}{start}\n```\n{listing}\n```\n{end}{rest.split(end, 1)[1]}"
 
 
-def build(root: Path) -> tuple[dict[str, Any], dict[Path, str]]:
+def build(root: Path) -> tuple[dict[str, Any], dict[Path, str], list[str]]:
+    """The index, the cards by path, and the cards whose test row names none of the file's
+    digest (``card_row``'s problem lines)."""
     rows = read_rows(RESULTS)
     models = [describe(name, path, rows) for name, path in zoo.published(root).items()]
+    unverified = [p for e in models if (p := e.pop("_unverified", None))]
     index = {
         "format": zoo.INDEX_FORMAT,
         "generated_by": "python benchmarks/zoo_index.py",
         "models": models,
     }
     cards = {root / e["card"]: card(e) for e in models}
-    return index, cards
+    return index, cards, unverified
 
 
 def main() -> None:
@@ -842,16 +899,21 @@ def main() -> None:
                         help="only check that the index and cards are up to date")  # fmt: skip
     args = parser.parse_args()
     root = zoo.ZOO_DIR
-    index, cards = build(root)
+    index, cards, unverified = build(root)
     files = {root / zoo.INDEX: json.dumps(index, indent=1) + "\n", **cards}
     readme = ROOT / "README.md"
     listing = zoo.table([{**e, "indexed": True} for e in index["models"]])
     files[readme] = readme_with(readme.read_text(), listing)
     stale = [p for p, text in files.items() if not p.is_file() or p.read_text() != text]
+    for problem in unverified:
+        print(f"unverified test row: {problem}")
     if args.check:
         for path in stale:
             print(f"stale: {path}")
-        sys.exit(1 if stale else 0)
+        if not stale and not unverified:
+            print(f"models/{zoo.INDEX} and {len(cards)} cards are up to date (and README.md's "
+                  "model listing)")  # fmt: skip
+        sys.exit(1 if stale or unverified else 0)
     for path in stale:
         path.write_text(files[path])
         print(f"wrote {path}")
