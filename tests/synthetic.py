@@ -64,3 +64,22 @@ TINY_OVERRIDES = [
     "generator.eval_every=1", "data.max_agents=8",
 ]  # fmt: skip
 """Config overrides for a model small enough to train in a second."""
+
+
+def tiny_generator_file(path: Path, seed: int) -> str:
+    """Save a tiny generator checkpoint (``TINY_OVERRIDES``; its denoiser drawn at torch seed 0,
+    the generator at ``seed``) at ``path``; -> its weights' hash (``model_hash``)."""
+    import torch
+
+    from trajpref.config import load_config
+    from trajpref.models import checkpoint as ckpt
+    from trajpref.models.denoiser import Denoiser
+    from trajpref.models.generator import Generator
+
+    cfg = load_config(None, TINY_OVERRIDES)
+    torch.manual_seed(0)
+    den = ckpt.denoiser_payload(Denoiser(cfg.model), cfg, 0.7, {})
+    torch.manual_seed(seed)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    ckpt.save(path, ckpt.generator_payload(Generator(cfg.model), den, cfg, {}))
+    return ckpt.model_hash(path)

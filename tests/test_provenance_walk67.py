@@ -8,14 +8,10 @@ import subprocess
 from pathlib import Path
 
 import pytest
-import torch
 from bench import load_benchmark
-from synthetic import TINY_OVERRIDES
+from synthetic import tiny_generator_file
 
-from trajpref.config import load_config
 from trajpref.models import checkpoint as ckpt
-from trajpref.models.denoiser import Denoiser
-from trajpref.models.generator import Generator
 from trajpref.results import make_row
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -28,16 +24,6 @@ def _row(method, checkpoint, date, model_hash=None, **fields):
             "machine": "m, 2 CPU cores, 2 threads", "min_ade": 0.1, "min_fde": 0.2,
             "joint_min_ade": 0.3, "joint_min_fde": 0.4, "date": date,
             "command": "python benchmarks/x.py", **fields}  # fmt: skip
-
-
-def _generator_file(path: Path, seed: int) -> str:
-    cfg = load_config(None, TINY_OVERRIDES)
-    torch.manual_seed(0)
-    den = ckpt.denoiser_payload(Denoiser(cfg.model), cfg, 0.7, {})
-    torch.manual_seed(seed)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    ckpt.save(path, ckpt.generator_payload(Generator(cfg.model), den, cfg, {}))
-    return ckpt.model_hash(path)
 
 
 def test_a_denoiser_card_shows_the_row_that_names_its_files_digest(monkeypatch):
@@ -142,7 +128,7 @@ def _speed_record(meta: Path, entry: dict) -> None:
 def test_the_latency_table_marks_a_file_that_changed_since_it_was_timed(tmp_path):
     update = load_benchmark("update_readme")
     zoo_dir, meta = tmp_path / "zoo", tmp_path / "meta"
-    now = _generator_file(zoo_dir / "d" / "generator.safetensors", seed=1)
+    now = tiny_generator_file(zoo_dir / "d" / "generator.safetensors", seed=1)
     _speed_record(meta, {"model_hash": now})
     table = update.speed_table(meta, zoo_dir=zoo_dir)
     assert "| 2.0 | 80.0 | 40.0x |" in table and "†" not in table
@@ -169,11 +155,11 @@ def test_a_record_without_hashes_is_traced_to_the_files_committed_with_it(tmp_pa
         subprocess.run([*git, "add", "-A"], check=True, capture_output=True)
         subprocess.run([*git, "commit", "-qm", message], check=True, capture_output=True)
 
-    first = _generator_file(zoo_dir / "d" / "generator.safetensors", seed=1)
+    first = tiny_generator_file(zoo_dir / "d" / "generator.safetensors", seed=1)
     _speed_record(meta, {})
     commit("weights and their timing")
     assert "| 2.0 | 80.0 | 40.0x |" in update.speed_table(meta, zoo_dir=zoo_dir)
-    second = _generator_file(zoo_dir / "d" / "generator.safetensors", seed=2)
+    second = tiny_generator_file(zoo_dir / "d" / "generator.safetensors", seed=2)
     commit("new weights, not timed")
     table = update.speed_table(meta, zoo_dir=zoo_dir)
     assert "| 2.0† | 80.0† | 40.0x† |" in table
@@ -183,7 +169,7 @@ def test_a_record_without_hashes_is_traced_to_the_files_committed_with_it(tmp_pa
 def test_speed_records_the_hash_of_each_file_it_times(tmp_path, monkeypatch):
     speed = load_benchmark("speed")
     path = tmp_path / "d" / "generator.safetensors"
-    digest = _generator_file(path, seed=1)
+    digest = tiny_generator_file(path, seed=1)
 
     class Split:
         num_agents = 3

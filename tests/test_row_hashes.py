@@ -7,27 +7,13 @@ import subprocess
 from pathlib import Path
 
 import pytest
-import torch
 from bench import load_benchmark
-from synthetic import TINY_OVERRIDES
+from synthetic import tiny_generator_file
 
-from trajpref.config import load_config
 from trajpref.models import checkpoint as ckpt
-from trajpref.models.denoiser import Denoiser
-from trajpref.models.generator import Generator
 from trajpref.results import make_row, read_rows
 
 ROOT = Path(__file__).resolve().parent.parent
-
-
-def _generator_file(path: Path, seed: int) -> str:
-    cfg = load_config(None, TINY_OVERRIDES)
-    torch.manual_seed(0)
-    den = ckpt.denoiser_payload(Denoiser(cfg.model), cfg, 0.7, {})
-    torch.manual_seed(seed)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    ckpt.save(path, ckpt.generator_payload(Generator(cfg.model), den, cfg, {}))
-    return ckpt.model_hash(path)
 
 
 def _row(method, checkpoint, fde):
@@ -51,14 +37,14 @@ def test_backfill_takes_the_checkpoint_committed_when_the_row_last_changed(tmp_p
     monkeypatch.setattr(rh, "ROOT", repo)
     monkeypatch.setattr(rh, "RESULTS", results)
     gen = "models/d/generator.safetensors"
-    first = _generator_file(repo / gen, seed=1)
+    first = tiny_generator_file(repo / gen, seed=1)
     rows = [_row("pretrained", gen, 0.40), _row("control", "runs/x/finetune.safetensors", 0.5),
             _row("pretrained-old", gen, 0.45), _row("pretrained-ancestral", gen, 0.5)]  # fmt: skip
     for r in rows:
         del r["model_hash"]  # written before the field existed
     (results / "r.json").write_text(json.dumps(rows))
     _commit(repo, "first weights and rows")
-    second = _generator_file(repo / gen, seed=2)  # new weights; the rows stay as they were
+    second = tiny_generator_file(repo / gen, seed=2)  # new weights; the rows stay as they were
     _commit(repo, "new weights")
     rows[0]["min_fde"] = 0.38  # re-measured on the new weights
     (results / "r.json").write_text(json.dumps(rows))

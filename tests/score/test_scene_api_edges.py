@@ -11,19 +11,6 @@ import torch
 
 from trajpref.errors import ConfigError, DataError
 from trajpref.score import predict_scene, predict_scenes, rank_samples
-from trajpref.score.scorer import TrajectoryScorer
-
-
-@pytest.fixture(scope="module")
-def zara1():
-    from trajpref.models.registry import load_predictor
-
-    return load_predictor("zara1/generator", device="cpu")
-
-
-@pytest.fixture(scope="module")
-def scorer():
-    return TrajectoryScorer.from_checkpoint("zara1/denoiser").with_steps([0, 3])
 
 
 def _walk(p: int, seed: int = 0) -> np.ndarray:

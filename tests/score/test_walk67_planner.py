@@ -18,18 +18,6 @@ from trajpref.types import AGENT_BALL, AGENT_PERSON
 FRAME = "samples do not continue the history.*another frame.*offsets"
 
 
-@pytest.fixture(scope="module")
-def zara1():
-    from trajpref.models.registry import load_predictor
-
-    return load_predictor("zara1/generator", device="cpu")
-
-
-@pytest.fixture(scope="module")
-def scorer():
-    return TrajectoryScorer.from_checkpoint("zara1/denoiser").with_steps([0, 3])
-
-
 def _scene(fast: float = 1.4) -> np.ndarray:
     """[3, 8, 2] three walkers in a map frame (50, 20) m from its origin; agent 2 at ``fast``
     m/s."""
