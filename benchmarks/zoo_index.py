@@ -329,10 +329,26 @@ def tuned_row(rows: list[dict[str, Any]], dataset: str, stem: str,
                  and r["seed"] == 0), None)  # fmt: skip
 
 
+PORTABLE_DATA_ROOT = "../shared/data"
+"""The data root a card's command names: the Makefile's default, relative to the checkout, as
+the repository's documented commands give it."""
+
+_DATA_ROOT = re.compile(r"(--data-root[ =])(/\S*)")
+
+
+def portable_command(command: str | None) -> str | None:
+    """A results row's command as a card shows it: an absolute ``--data-root`` (the machine
+    that ran it) becomes ``PORTABLE_DATA_ROOT``; the row itself keeps what was run."""
+    if command is None:
+        return None
+    return _DATA_ROOT.sub(lambda m: m.group(1) + PORTABLE_DATA_ROOT, command)
+
+
 def _test_row(row: dict[str, Any]) -> dict[str, Any]:
     keys = ("split", "samples", "seed", "min_ade", "min_fde", "joint_min_ade", "joint_min_fde",
             "date", "machine", "command")  # fmt: skip
     out = {k: row.get(k) for k in keys}
+    out["command"] = portable_command(out["command"])
     out["protocol"] = row.get("protocol", "all")  # the windows counted (docs/data.md)
     out["method"] = row["method"]
     return out

@@ -917,21 +917,32 @@ def _join(scenes: list[tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]],
     )
 
 
+# Two samples with the same joint error tie for best. Identical samples give equal errors on
+# the CPU; on a GPU, index_add_ sums a scene's agents in no fixed order, so they may differ in
+# the last bits of a float32 (relative error at most about n * 6e-8 for n agents). A sample
+# within this relative distance of the least error counts as best: 1e-5 covers scenes of
+# over a hundred agents and is far below any difference the metric means to tell apart.
+RECALL_TIE_RTOL = 1e-5
+
+
 def recall_hits(
     pred: torch.Tensor, batch: Batch, order_ats: torch.Tensor, order_fts: torch.Tensor,
     ks: tuple[int, ...] = (1, 5),
 ) -> dict[str, torch.Tensor]:  # fmt: skip
-    """Per scene, is the sample with the least joint ADE (FDE) among the top-k by ATS (FTS)?
+    """Per scene, is a sample with the least joint ADE (FDE) among the top-k by ATS (FTS)?
 
+    Samples that tie for the least error (within ``RECALL_TIE_RTOL``) are all best: ranking
+    either of two identical best samples first is a hit.
     Returns {"top{k}_recall_ats": [B] bool, "top{k}_recall_fts": [B] bool}.
     """
     ade, fde = ade_fde(pred, batch.future)  # [K, N]
-    best_ade = scene_sum(ade, batch.scene, batch.num_scenes).argmin(0)  # [B]
-    best_fde = scene_sum(fde, batch.scene, batch.num_scenes).argmin(0)  # [B]
     out = {}
-    for k in ks:
-        out[f"top{k}_recall_ats"] = (order_ats[:k] == best_ade[None]).any(0)
-        out[f"top{k}_recall_fts"] = (order_fts[:k] == best_fde[None]).any(0)
+    for name, err, order in (("ats", ade, order_ats), ("fts", fde, order_fts)):
+        total = scene_sum(err, batch.scene, batch.num_scenes)  # [K, B]
+        least = total.min(0).values  # [B]
+        best = total <= least + RECALL_TIE_RTOL * least  # [K, B] every sample tied for best
+        for k in ks:
+            out[f"top{k}_recall_{name}"] = best.gather(0, order[:k]).any(0)  # [B]
     return out
 
 
@@ -953,9 +964,11 @@ class ScoreAccumulator:
         self.sums["max_ats"] += float(res.ats.max(0).values.sum())
         self.sums["max_fts"] += float(res.fts.max(0).values.sum())
         self.sums["mean_ats"] += float(res.ats.mean(0).sum())
-        # the ranking comes from the residuals alone (Lemma 1): highest ATS first
-        hits = recall_hits(pred, batch, res.ats.argsort(0, descending=True),
-                           res.fts.argsort(0, descending=True))  # fmt: skip
+        # the ranking comes from the residuals alone (Lemma 1): highest ATS first, by a stable
+        # sort: samples of equal score (identical samples share their noise) keep their drawn
+        # order, so the ranking does not depend on the sort's implementation
+        hits = recall_hits(pred, batch, res.ats.argsort(dim=0, descending=True, stable=True),
+                           res.fts.argsort(dim=0, descending=True, stable=True))  # fmt: skip
         for key, value in hits.items():
             self.sums[key] += float(value.sum())
         self.scenes += batch.num_scenes
