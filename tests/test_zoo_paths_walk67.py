@@ -1,6 +1,7 @@
 """benchmarks/zoo_index.py: a card's test-row command names no machine's data path
 (walkthrough 67, F6)."""
 
+import re
 from pathlib import Path
 
 from bench import load_benchmark
@@ -45,3 +46,10 @@ def test_no_published_card_or_index_names_an_absolute_data_root():
     for path in [zoo_dir / "index.json", *sorted(zoo_dir.glob("*/*.md"))]:
         text = path.read_text()
         assert "--data-root /" not in text and "--data-root=/" not in text, path
+
+
+def test_the_readme_shows_no_machine_specific_data_root():
+    """The README's generated footnotes showed the measuring machine's --data-root
+    (/work/shared/data); update_readme.py now shows each command as the cards do."""
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    assert not re.search(r"--data-root[ =]/", readme)
