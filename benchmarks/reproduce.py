@@ -2,8 +2,13 @@
 
 Table 1 is minADE20 / minFDE20, Table 2 maxATS20 / maxFTS20.
 
-    # from the published checkpoints and the existing result rows, no training (minutes)
+    # from the published checkpoints and the existing result rows, no training (about 70 min
+    # for all eight datasets from scratch on 2 cores; nothing to do where every cell is stored)
     python benchmarks/reproduce.py --quick --data-root ../shared/data [--datasets zara1 eth robo]
+    # measure every evaluated cell again, into a folder of its own (the repository untouched)
+    python benchmarks/reproduce.py --quick --fresh --out out/reproduce --data-root ../shared/data
+    # a smoke run: 10 scenes per dataset, written under runs/reproduce/ (not the tables)
+    python benchmarks/reproduce.py --quick --max-scenes 10 --data-root ../shared/data
     # also train what is missing (pretraining, RLHF, RLHF-ReS, the best method), resuming
     python benchmarks/reproduce.py --data-root ../shared/data
     # only rebuild the tables from what is stored
@@ -38,9 +43,19 @@ children, ``resource.getrusage``) is logged per invocation in
 
 ``--datasets`` limits what a run measures or trains, not what the tables list: a dataset left
 out keeps the cells that earlier runs stored for it (while their keys still match).
+``--fresh`` evaluates every cell again even where its key matches (training jobs are still
+skipped where their rows exist).
 
 Writes docs/reproduce.md (generated) and benchmarks/results/meta/reproduce.json; no rows are
-added to benchmarks/results/*.json by this script itself.
+added to benchmarks/results/*.json by this script itself. ``--out DIR`` sends this script's own
+files there instead (``DIR/state/`` for the stored evaluations and ``invocations.json``,
+``DIR/reproduce.md``, ``DIR/reproduce.json``, ``DIR/logs/``), so the repository's tables and
+state stay as they are; a new folder starts from nothing. Full mode's training subprocesses
+(``benchmarks/pretrain.py``, ``benchmarks/finetune.py``) have no such option: with or without
+``--out`` they write ``runs/``, ``models/`` (a pretrained generator) and their result rows in
+the repository. A ``--max-scenes`` run (a smoke run) never touches the whole-split state or
+docs/reproduce.md: it writes under ``runs/reproduce/`` unless ``--out`` is given, and its files
+are named after the subset (``<D>_<column>_scenes<N>.json``, ``reproduce_scenes<N>.md``).
 """
 
 from __future__ import annotations
@@ -53,7 +68,7 @@ import resource
 import subprocess
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import date
 from pathlib import Path
 from typing import Any, Literal
@@ -106,7 +121,9 @@ ROW_TOLERANCE = 5e-4
 @dataclass
 class Setup:
     """Where the script reads and writes: the repository by default (tests point it at a
-    temporary folder; the training subprocesses always write into the repository)."""
+    temporary folder; the training subprocesses always write into the repository). With
+    ``out`` set, the script's own files (state, report, summary, invocation log, training logs)
+    go there and it reads models, rows, configs and the paper from the fields above it."""
 
     models: Path = ROOT / "models"
     """The published checkpoints, ``<dataset>/generator.safetensors`` etc."""
@@ -122,6 +139,10 @@ class Setup:
     """Logs of the training subprocesses."""
     sources: dict[str, str] = field(default_factory=dict)
     """Extra datasets: table name -> what ``load_dataset`` reads (a folder)."""
+    out: Path | None = None
+    """``--out``: the folder of this script's own files (None: the repository's places)."""
+    scratch: Path = ROOT / "runs" / "reproduce"
+    """The ``out`` of a ``--max-scenes`` run that names none (``runs/`` is not tracked)."""
 
     def __post_init__(self) -> None:
         bad = set(self.sources) & set(DATASETS)
@@ -130,11 +151,30 @@ class Setup:
 
     @property
     def state(self) -> Path:
-        return self.results / "meta" / "reproduce"
+        """The stored evaluations (``<D>_<column>[_scenes<N>].json``) and the invocation log."""
+        return self.out / "state" if self.out else self.results / "meta" / "reproduce"
 
     @property
     def summary(self) -> Path:
-        return self.results / "meta" / "reproduce.json"
+        return self.summary_file(None)
+
+    def summary_file(self, max_scenes: int | None) -> Path:
+        """The summary (cells, jobs, CPU) of a whole-split or a ``--max-scenes`` run."""
+        return (self.out or self.results / "meta") / f"reproduce{subset_suffix(max_scenes)}.json"
+
+    def report(self, max_scenes: int | None) -> Path:
+        """The markdown report: docs/reproduce.md, or ``reproduce[_scenes<N>].md`` in ``out``."""
+        return self.out / f"reproduce{subset_suffix(max_scenes)}.md" if self.out else self.doc
+
+    @property
+    def repository_log(self) -> Path:
+        """The repository's invocation log (the measured cost of a run from scratch)."""
+        return self.results / "meta" / "reproduce" / "invocations.json"
+
+
+def subset_suffix(max_scenes: int | None) -> str:
+    """What names a ``--max-scenes`` run's files apart from the whole split's."""
+    return f"_scenes{max_scenes}" if max_scenes else ""
 
 
 @dataclass
@@ -306,8 +346,10 @@ def eval_key(job: Job, opts: argparse.Namespace, setup: Setup) -> dict[str, Any]
     }  # fmt: skip
 
 
-def state_file(setup: Setup, dataset: str, column: str) -> Path:
-    return setup.state / f"{dataset}_{column}.json"
+def state_file(setup: Setup, dataset: str, column: str, max_scenes: int | None = None) -> Path:
+    """A column's stored evaluation; a ``--max-scenes`` subset's is a file of its own, so a
+    smoke run never replaces the whole split's."""
+    return setup.state / f"{dataset}_{column}{subset_suffix(max_scenes)}.json"
 
 
 def is_done(job: Job, opts: argparse.Namespace, setup: Setup, rows) -> bool:
@@ -316,7 +358,7 @@ def is_done(job: Job, opts: argparse.Namespace, setup: Setup, rows) -> bool:
     if job.kind == "finetune":
         return bool(matching_rows(rows, job.dataset, job.column, opts.samples, job.seed))
     key = eval_key(job, opts, setup)
-    stored = read_json(state_file(setup, job.dataset, job.column))
+    stored = read_json(state_file(setup, job.dataset, job.column, opts.max_scenes))
     return key is not None and stored is not None and stored.get("key") == key
 
 
@@ -399,7 +441,7 @@ def run_evaluation(job: Job, opts: argparse.Namespace, setup: Setup, splits: Spl
         "cpu_seconds": round(cpu_seconds()[0] - cpu, 2),
         "date": date.today().isoformat(), "machine": machine(), "command": command_line(),
     }  # fmt: skip
-    write_json(state_file(setup, job.dataset, job.column), record)
+    write_json(state_file(setup, job.dataset, job.column, opts.max_scenes), record)
 
 
 def training_command(job: Job, opts: argparse.Namespace, setup: Setup) -> list[str]:
@@ -460,7 +502,7 @@ def run_jobs(jobs: list[Job], opts, setup: Setup, splits: Splits) -> tuple[list,
 
 def cell_from_state(job: Job, opts: argparse.Namespace, setup: Setup, rows) -> dict | None:
     """The stored evaluation of a column, when its key matches the checkpoint there now."""
-    record = read_json(state_file(setup, job.dataset, job.column))
+    record = read_json(state_file(setup, job.dataset, job.column, opts.max_scenes))
     key = eval_key(job, opts, setup)
     if record is None or key is None or record.get("key") != key:
         return None
@@ -483,7 +525,8 @@ def cell_from_state(job: Job, opts: argparse.Namespace, setup: Setup, rows) -> d
         files = ", ".join(f"`benchmarks/results/{f}`" for f in sorted({r["_file"] for r in same}))
         detail += f"; {'matches' if agree else 'DIFFERS from'} the `{method}` rows in {files}"
     return {**cell, "source": "evaluated", "detail": detail, "units": record.get("units"),
-            "date": record["date"], "seeds": [key["seed"]], "subset": subset}  # fmt: skip
+            "date": record["date"], "seeds": [key["seed"]], "subset": subset,
+            "seconds": record["wall_seconds"]}  # fmt: skip
 
 
 def cell_from_rows(rows, dataset: str, method: str, samples: int) -> dict | None:
@@ -515,7 +558,9 @@ def table_datasets(opts: argparse.Namespace, setup: Setup) -> list[str]:
     docs/reproduce.md instead of replacing it (their cells still count only while their
     stored keys match today's checkpoints and options)."""
     names = (*DATASETS, *setup.sources)
-    stored = {d for d in names if any(state_file(setup, d, c).is_file() for c in COLUMNS)}
+    stored = {
+        d for d in names if any(state_file(setup, d, c, opts.max_scenes).is_file() for c in COLUMNS)
+    }
     return [d for d in names if d in opts.datasets or d in stored]
 
 
@@ -543,7 +588,7 @@ def build_cells(opts: argparse.Namespace, setup: Setup, failed: list[Job]) -> di
                     )
                     cell = missing_cell("no model", why)
                 elif any(f.dataset == dataset and f.column in (column, method) for f in failed):
-                    cell = missing_cell("failed", "its job failed (logs in runs/logs/)")
+                    cell = missing_cell("failed", f"its job failed (logs in {rel(setup.logs)}/)")
                 elif job is None:
                     how = "full mode trains them" if method in TRAIN_ARGS else "not trainable here"
                     cell = missing_cell("not trained", f"no published weights and no `{method}` "
@@ -643,8 +688,120 @@ def sources_list(cells: dict, best: str) -> str:
     return "\n".join(lines)
 
 
-def render(cells: dict, paper: dict, opts, cpu: dict) -> str:
-    """docs/reproduce.md."""
+FULL_MODE_COST = (
+    "about 3 h of fine-tuning (3 methods x 8 datasets x 1 seed, the default `--seeds 0`, at "
+    "about 7.6 wall minutes a job: in the repository's invocation log, the full-mode runs of "
+    "2026-12-03 (zara2, univ) and 2026-12-06 (sdd) took 4,100 s for 9 fine-tuning jobs and one "
+    "12 s evaluation, 4.8-10.1 min a job by dataset), plus about 177 min to pretrain the "
+    "eight generators (the sum of the eight "
+    "default configs' \"estimated alone\" minutes in the README's cost table, "
+    "`benchmarks/results/meta/train_cost.json`; run beside other jobs they took longer), plus "
+    "quick mode's evaluations"
+)
+"""Full mode's cost from scratch, from the stored logs named in it (not measured as a whole)."""
+
+
+def quick_cost(setup: Setup, cells: dict) -> dict:
+    """What quick mode costs from scratch: the newest logged run that evaluated every dataset
+    with nothing stored (the repository's log), and the evaluated cells' own times."""
+    runs = [e for e in read_json(setup.repository_log, [])
+            if e["mode"] == "quick" and set(DATASETS) <= set(e["datasets"])
+            and e["jobs_skipped"] == 0 and e["jobs_run"] > 0 and not e["jobs_failed"]
+            and not e["interrupted"] and not e.get("max_scenes")]  # fmt: skip
+    per_dataset = {d: sum(c.get("seconds") or 0 for c in row.values()) for d, row in cells.items()}
+    return {"run": runs[-1] if runs else None, "cells": per_dataset}
+
+
+def how_to(cost: dict) -> str:
+    """The "How to reproduce" section: the commands and what they cost."""
+    run, per = cost["run"], cost["cells"]
+    top = sorted((d for d in per if per[d]), key=per.get, reverse=True)[:2]
+    timed = (
+        f"the evaluation times of the cells listed at the end add up to "
+        f"{sum(per.values()) / 60:.0f} min, {' and '.join(top)} {sum(per[d] for d in top) / 60:.0f}"
+        " min of it, most of that Table 2's scoring (the script's estimates per agent: "
+        f"constant velocity {COST['cv']} s scored, {COST['unscored']} s unscored)"
+        if top
+        else "no cell here has an evaluation time yet"
+    )
+    if run is None:
+        measured = f"No quick run of all eight datasets from scratch is logged; {timed}."
+    else:
+        measured = (
+            f"From scratch on all eight datasets it took {run['wall_seconds'] / 60:.0f} min "
+            f"({run['wall_seconds']:,.0f} s) on {run['date']}, {run['machine']} (the "
+            f"repository's log, `benchmarks/results/meta/reproduce/invocations.json`); {timed}."
+        )
+    return "\n".join(
+        [
+            "## How to reproduce",
+            "",
+            "Every stored cell keys on what it depends on (checkpoint and denoiser hashes, "
+            "sampler, K, seed), so a run on a tree whose cells are all stored finds every job "
+            "done and measures nothing. To measure again:",
+            "",
+            "- **Quick mode**, no training: `python benchmarks/reproduce.py --quick --fresh --out "
+            "out/reproduce --data-root ../shared/data` evaluates constant velocity and the "
+            "published checkpoints' full sampler and leapfrog generator on every test split, for "
+            "both tables (the † cells are read from result rows, not trained), and writes "
+            "`out/reproduce/reproduce.md`; `--out` keeps this page and its stored state as they "
+            "are (a new folder starts from nothing, so `--fresh` is only needed without it, where "
+            f"it re-measures into this page). {measured}",
+            "- **Full mode**, `python benchmarks/reproduce.py --data-root ../shared/data`, also "
+            "trains what is missing, one job at a time: the generator of a dataset that has a "
+            "config but none published (`benchmarks/pretrain.py`) and the RLHF, RLHF-ReS and "
+            "rlhf-set rows of each seed that has none (`benchmarks/finetune.py` with "
+            "`benchmarks/equal_budget.py`'s arguments, 4 CPU minutes of training steps a run). "
+            "Where every row exists and every generator is published it trains nothing: to "
+            "retrain, work in a copy of the repository and move the rows "
+            "(`benchmarks/results/finetune_<D>.json`, `finetune_<D>_set.json`) and run folders "
+            "(`runs/<D>-<method>-s<seed>*`) away first. Its training writes `runs/`, `models/` "
+            "and result rows in the repository it runs in, with or without `--out`. From scratch "
+            f"it would take {FULL_MODE_COST}.",
+            "- **One column by itself**: the † columns (RLHF, RLHF-ReS, best) are the rows of "
+            "`python benchmarks/equal_budget.py --datasets D --methods rlhf rlhf-res rlhf-set "
+            "--seeds 0 --minutes 4 --data-root ../shared/data` (docs/rlhf.md); the generators "
+            "behind `full sampler` and `pretrained` are trained and published by `python "
+            "benchmarks/pretrain.py --dataset D --train --data-root ../shared/data` "
+            "(docs/pretraining.md). Both skip or resume what is already there.",
+            "- **A smoke run**: `--max-scenes N` evaluates N evenly spread test scenes per dataset "
+            "and writes under `runs/reproduce/` (or `--out`), never this page or its stored state.",
+        ]
+    )
+
+
+DEPARTURES = (
+    "RLHF settings: the RLHF, RLHF-ReS and best cells are runs at the project's fine-tuning "
+    "defaults, not `--preset paper`; among their departures, RLHF's loss weights are 0.3 / 1.5 "
+    "(RLHF-ReS's pair) where the paper's grid search gave alpha_p = 1, alpha_v = 5 (docs/rlhf.md, "
+    '"The `paper` preset and the defaults that depart from it"). The weights were not measured '
+    "apart; the `paper` preset as a whole diverged on zara1's validation split within 36 steps "
+    '(docs/rlhf.md, "zara1: a first, small measurement (2026-11-22)").',
+    "RLHF budget: each fine-tuning run trains for 4 minutes of its own CPU time on one thread "
+    '(about 30 optimiser steps for the RL methods; docs/rlhf.md, "The equal-budget table '
+    '(2026-11-23)"), where the paper trained for 100 epochs over 12 hours (ETH/UCY) or 24 hours '
+    "(NBA, SDD, Robo) on a GPU (Sec. 7.1). At the defaults the longest runs recorded are a "
+    '6-minute pilot (docs/rlhf.md, "An equal-budget pilot (2026-11-23)"); 240 steps at other '
+    "settings (stronger exploration, RL alone, on a GPU) raised the reward and worsened "
+    'minFDE20 on zara1, eth and Robo (docs/rlhf.md, "Can the reward be raised at all? RL '
+    "alone and stronger exploration (2026-11-22)\"). The paper's budget was not run.",
+    "Robo: the paper trained on its own Robo training split, which is not public; our Robo "
+    "models train on robo-sim, our simulator of the scenario, are chosen on the official val "
+    'split and tested on the official test split (docs/data.md, "Per dataset"; '
+    "docs/robo_sim.md), so every Robo cell is a sim-to-real number. Real robots in training "
+    '(`robo-mix`) were measured for the generator only (docs/pretraining.md, "Robo with real '
+    'data in training (`robo-mix`, 2026-11-23)"), not for the RLHF columns.',
+    "Protocol: every cell of ours counts every window with at least one fully observed agent "
+    '(`all`; docs/data.md, "Evaluation protocols": the windows of LED\'s released ETH/UCY '
+    "data); the paper does not name its protocol. Constant velocity and the pretrained "
+    "generators of the ETH/UCY folds under `sgan` (at least two agents) are in "
+    "`benchmarks/results/protocol_sgan.json`; the other columns were not measured under it.",
+)
+"""Notes on how our columns depart from the paper's setup, each with its measurement."""
+
+
+def render(cells: dict, paper: dict, opts, cpu: dict, cost: dict | None = None) -> str:
+    """docs/reproduce.md (or a ``--out`` folder's reproduce.md)."""
     last = cpu["last_run"]
     if last is None:
         runs = "Nothing has been measured by this script yet."
@@ -666,6 +823,8 @@ def render(cells: dict, paper: dict, opts, cpu: dict) -> str:
         "# The paper's Tables 1 and 2, rebuilt",
         "",
         f"Tables written by `{command_line()}` on {date.today().isoformat()}. {runs}{scenes}",
+        "",
+        how_to(cost or {"run": None, "cells": {}}),
         "",
         f"Test splits, K = {opts.samples}, seed {opts.seed}. Our columns: constant velocity, the "
         "full 100-step sampler and the leapfrog generator (`pretrained`) of "
@@ -710,6 +869,7 @@ def render(cells: dict, paper: dict, opts, cpu: dict) -> str:
         "",
         *[f"- {n}" for n in paper["notes"]],
         f"- SDD: {paper['text_only']['sdd']}",
+        *[f"- {n}" for n in DEPARTURES],
         "- Sampling: the published generators' tau denoising steps are posterior means since "
         '2026-11-24 (docs/pretraining.md, "The switch"), and the default generators have had '
         "none (`model.tau: 0`) since 2026-11-27 to 2026-12-01, so the evaluated `pretrained` "
@@ -746,6 +906,20 @@ def parse_args(argv: list[str] | None, setup: Setup) -> argparse.Namespace:
     )
     parser.add_argument(
         "--report", action="store_true", help="run nothing: rebuild the tables from what is stored"
+    )
+    parser.add_argument(
+        "--fresh",
+        action="store_true",
+        help="evaluate every cell again, even where a stored evaluation matches (training jobs "
+        "are still skipped where their rows exist)",
+    )
+    parser.add_argument(
+        "--out",
+        default=None,
+        help="write this script's state, report (reproduce.md), summary (reproduce.json), "
+        "invocation log and training logs under this folder instead of the repository "
+        "(a new folder starts from nothing); full mode's training still writes runs/, "
+        "models/ and result rows in the repository",
     )
     names = (*DATASETS, *setup.sources)
     parser.add_argument(
@@ -789,8 +963,9 @@ def parse_args(argv: list[str] | None, setup: Setup) -> argparse.Namespace:
         "--max-scenes",
         type=int,
         default=None,
-        help="evaluate on this many evenly spread test scenes (a smoke run; "
-        "the table's numbers use the whole split)",
+        help="evaluate on this many evenly spread test scenes: a smoke run, stored apart from "
+        "the whole split's cells and reported under --out (default runs/reproduce/), never in "
+        "docs/reproduce.md",
     )
     parser.add_argument(
         "--full-sampler-agents",
@@ -810,6 +985,8 @@ def parse_args(argv: list[str] | None, setup: Setup) -> argparse.Namespace:
         parser.error("--max-scenes must be >= 1")
     if args.samples < 1:
         parser.error("--samples must be >= 1")
+    if args.fresh and args.report:
+        parser.error("--fresh measures again; --report measures nothing")
     args.datasets = [d for d in names if d in args.datasets]  # table order, no repeats
     return args
 
@@ -818,14 +995,16 @@ def _hours(entry: dict) -> float:
     return (entry["cpu_seconds_own"] + entry["cpu_seconds_children"]) / 3600
 
 
-def log_invocation(setup: Setup, entry: dict | None) -> dict:
+def log_invocation(setup: Setup, entry: dict | None, max_scenes: int | None = None) -> dict:
     """Append a run's entry to the log (None: a ``--report``, not logged); returns the CPU
-    totals and the last run that ran jobs (or tried to)."""
+    totals and the last run that ran jobs (or tried to), over the runs of the same subset
+    (``--max-scenes``; None: the whole split) only."""
     path = setup.state / "invocations.json"
     log = read_json(path, [])
     if entry is not None:
         log.append(entry)
         write_json(path, log)
+    log = [e for e in log if e.get("max_scenes") == max_scenes]
     return {
         "this_invocation_hours": _hours(entry) if entry else 0.0,
         "all_invocations_hours": sum(_hours(e) for e in log),
@@ -837,6 +1016,9 @@ def log_invocation(setup: Setup, entry: dict | None) -> dict:
 def main(argv: list[str] | None = None, setup: Setup | None = None) -> dict:
     setup = setup or Setup()
     opts = parse_args(argv, setup)
+    if opts.out or (opts.max_scenes and setup.out is None):
+        out = Path(opts.out) if opts.out else setup.scratch  # a subset never writes the tables
+        setup = replace(setup, out=out, logs=out / "logs")
     paper = json.loads(setup.paper.read_text())
     setup.state.mkdir(parents=True, exist_ok=True)
     wall0, (own0, kids0) = time.perf_counter(), cpu_seconds()
@@ -849,9 +1031,13 @@ def main(argv: list[str] | None = None, setup: Setup | None = None) -> dict:
             splits = Splits(opts, setup)
             rows = result_rows(setup)
             jobs = plan(opts, setup)
-            todo = [j for j in jobs if not is_done(j, opts, setup, rows)]
+            todo = [j for j in jobs if (opts.fresh and j.kind == "evaluate")
+                    or not is_done(j, opts, setup, rows)]  # fmt: skip
             skipped = len(jobs) - len(todo)
             print(f"{skipped} of {len(jobs)} jobs already done; {len(todo)} to run")
+            if setup.out and any(j.kind != "evaluate" for j in todo):
+                print("note: the training jobs write runs/, models/ and result rows in the "
+                      f"repository, not under {setup.out}", file=sys.stderr)  # fmt: skip
             done, failed = run_jobs(todo, opts, setup, splits)
         interrupted = False
     finally:
@@ -862,11 +1048,12 @@ def main(argv: list[str] | None = None, setup: Setup | None = None) -> dict:
                  "cpu_seconds_own": round(own - own0, 3),
                  "cpu_seconds_children": round(kids - kids0, 3),
                  "jobs_run": len(done), "jobs_failed": len(failed), "jobs_skipped": skipped,
-                 "interrupted": interrupted}  # fmt: skip
-        cpu = log_invocation(setup, None if opts.report else entry)
+                 "interrupted": interrupted,
+                 **({"max_scenes": opts.max_scenes} if opts.max_scenes else {})}  # fmt: skip
+        cpu = log_invocation(setup, None if opts.report else entry, opts.max_scenes)
     cells = build_cells(opts, setup, failed)
     wall = time.perf_counter() - wall0
-    doc = render(cells, paper, opts, cpu)
+    doc = render(cells, paper, opts, cpu, quick_cost(setup, cells))
     summary = {
         "generated_by": command_line(), "date": date.today().isoformat(), "machine": machine(),
         "mode": "report" if opts.report else entry["mode"], "datasets": opts.datasets,
@@ -877,15 +1064,16 @@ def main(argv: list[str] | None = None, setup: Setup | None = None) -> dict:
                  "skipped": skipped},
         "paper": rel(setup.paper), "cells": cells,
     }  # fmt: skip
-    write_json(setup.summary, summary)
-    setup.doc.parent.mkdir(parents=True, exist_ok=True)
-    setup.doc.write_text(doc)
+    summary_path, report = setup.summary_file(opts.max_scenes), setup.report(opts.max_scenes)
+    write_json(summary_path, summary)
+    report.parent.mkdir(parents=True, exist_ok=True)
+    report.write_text(doc)
     print(comparison_table(cells, paper, "table1", opts.best))
     print()
     print(comparison_table(cells, paper, "table2", opts.best))
     print(f"\n{wall / 60:.1f} min, {cpu['this_invocation_hours']:.3f} CPU-hours "
           f"({cpu['all_invocations_hours']:.3f} over {cpu['invocations']} invocations); "
-          f"wrote {rel(setup.doc)} and {rel(setup.summary)}")  # fmt: skip
+          f"wrote {rel(report)} and {rel(summary_path)}")  # fmt: skip
     if failed:
         print(f"{len(failed)} jobs failed: {[j.label for j in failed]}", file=sys.stderr)
     return summary

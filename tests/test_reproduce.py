@@ -386,3 +386,122 @@ def test_a_published_fine_tune_fills_its_column_only_when_it_started_from_todays
     publish_tuned("0123456789abcdef")  # fine-tuned from a default since replaced
     assert "evaluate walks rlhf-res" not in labels(quick)
     assert any(label.startswith("finetune walks rlhf-res") for label in labels(quick[1:]))
+
+
+# ----------------------------------------------------------------------------- walkthrough 67-E
+
+
+def _files(*folders: Path) -> dict[Path, bytes]:
+    """Every file under the folders, with its bytes."""
+    return {p: p.read_bytes() for f in folders if f.is_dir() for p in f.rglob("*") if p.is_file()}
+
+
+def test_a_subset_run_keeps_the_whole_splits_state_and_tables(setup, tmp_path, monkeypatch):
+    """A smoke run (--max-scenes) once replaced eth's whole-split cells with 10-scene ones and
+    rewrote docs/reproduce.md with "not measured" in every other dataset's cells."""
+    setup.scratch = tmp_path / "runs" / "reproduce"
+    args = ["--quick", "--datasets", "walks", "bare", *SAMPLES]
+    reproduce.main(args, setup)
+    before = _files(setup.results, setup.doc.parent)
+    calls = _counting(monkeypatch)
+    reproduce.main(["--quick", "--datasets", "walks", *SAMPLES, "--max-scenes", "1"], setup)
+    assert len(calls) == 3  # measured, into files of its own
+    assert _files(setup.results, setup.doc.parent) == before
+    stored = json.loads((setup.scratch / "state" / "walks_cv_scenes1.json").read_text())
+    assert stored["scenes"] == 1 and stored["key"]["max_scenes"] == 1
+    report = (setup.scratch / "reproduce_scenes1.md").read_text()
+    assert "use 1 evenly spread test scenes per dataset" in report
+    assert "| not measured |" not in report  # its tables list the subset's datasets only
+    assert (setup.scratch / "reproduce_scenes1.json").is_file()
+    # the whole split's tables keep every cell, and the subset resumes from its own files
+    out = reproduce.main(["--report", "--datasets", "walks", "bare", *SAMPLES], setup)
+    assert out["cells"]["walks"]["pretrained"]["source"] == "evaluated"
+    assert "| not measured |" not in setup.doc.read_text()
+    calls = _counting(monkeypatch)
+    reproduce.main(["--quick", "--datasets", "walks", *SAMPLES, "--max-scenes", "1"], setup)
+    assert calls == []
+
+
+def test_out_sends_the_scripts_own_files_elsewhere_and_leaves_the_repository_alone(
+    setup, tmp_path, monkeypatch
+):
+    args = ["--quick", "--datasets", "walks", "bare", *SAMPLES]
+    reproduce.main(args, setup)
+    before = _files(setup.results, setup.doc.parent, setup.models)
+    elsewhere = tmp_path / "elsewhere"
+    calls = _counting(monkeypatch)
+    reproduce.main([*args, "--out", str(elsewhere)], setup)
+    assert len(calls) == 4  # a new folder starts from nothing
+    assert _files(setup.results, setup.doc.parent, setup.models) == before
+    assert (elsewhere / "reproduce.md").read_text().startswith("<!-- Generated")
+    summary = json.loads((elsewhere / "reproduce.json").read_text())
+    assert summary["cells"]["walks"]["pretrained"]["source"] == "evaluated"
+    assert (elsewhere / "state" / "walks_pretrained.json").is_file()
+    assert len(json.loads((elsewhere / "state" / "invocations.json").read_text())) == 1
+    calls = _counting(monkeypatch)
+    reproduce.main([*args, "--out", str(elsewhere)], setup)
+    assert calls == []  # resumes from the folder
+    # full mode: the training logs go there too (the training scripts write the repository)
+    logs = []
+    monkeypatch.setattr(reproduce, "run_command", lambda cmd, log: logs.append(log) or 1)
+    reproduce.main(["--datasets", "walks", *SAMPLES, "--out", str(elsewhere)], setup)
+    assert len(logs) == 3 and all(log.parent == elsewhere / "logs" for log in logs)
+    assert _files(setup.results, setup.doc.parent, setup.models) == before
+
+
+def test_fresh_measures_again_and_the_report_says_how_to_reproduce(setup, monkeypatch):
+    args = ["--quick", "--datasets", "walks", *SAMPLES]
+    reproduce.main(args, setup)
+    calls = _counting(monkeypatch)
+    reproduce.main(args, setup)
+    assert calls == []
+    reproduce.main([*args, "--fresh"], setup)
+    assert len(calls) == 3
+    with pytest.raises(SystemExit):
+        reproduce.parse_args(["--report", "--fresh"], setup)
+    doc = setup.doc.read_text()
+    section = doc[doc.index("## How to reproduce") : doc.index("## Table 1")]
+    needles = ("--fresh", "--out", "Quick mode", "Full mode", "benchmarks/equal_budget.py",
+               "benchmarks/pretrain.py", "about 3 h of fine-tuning", "about 177 min")  # fmt: skip
+    for needle in needles:
+        assert needle in section, needle
+    assert "No quick run of all eight datasets from scratch is logged" in section
+    # quick mode's cost is the newest logged run of every dataset that found nothing stored
+    log = setup.state / "invocations.json"
+    entries = json.loads(log.read_text())
+    scratch = {**entries[0], "datasets": list(reproduce.DATASETS), "jobs_run": 24,
+               "jobs_skipped": 0, "wall_seconds": 4182.1, "date": "2026-12-05"}  # fmt: skip
+    log.write_text(json.dumps([*entries, scratch]))
+    reproduce.main(["--report", *args[1:]], setup)
+    assert "it took 70 min (4,182 s) on 2026-12-05" in setup.doc.read_text()
+    assert "(minutes)" not in reproduce.__doc__
+
+
+def test_the_note_on_groupnets_zara1_maxats_does_its_arithmetic():
+    paper = json.loads((ROOT / "benchmarks" / "paper_tables.json").read_text())
+    rows = paper["tables"]["table2"]["rows"]
+    values = [rows[d]["GroupNet"][0] for d in paper["datasets"]]
+    assert rows["zara1"]["GroupNet"][0] == 1.05
+    (note,) = [n for n in paper["notes"] if "GroupNet" in n]
+    total = sum(values)
+    instead = total - 1.05 + 0.05
+    assert f"sum to {total:.2f}" in note and f"sum to {instead:.2f}" in note
+    assert f"the mean would be {instead / 7:.2f}" in note  # -0.06, not 0.06
+
+
+def test_the_notes_name_the_departures_that_bear_on_the_rlhf_columns(setup):
+    import re
+
+    reproduce.main(["--quick", "--datasets", "bare", *SAMPLES], setup)
+    doc = setup.doc.read_text()
+    notes = doc[doc.index("## Notes") : doc.index("## Where each cell comes from")]
+    for needle in ("`--preset paper`", "alpha_p = 1, alpha_v = 5", "0.3 / 1.5",
+                   "4 minutes of its own CPU time", "100 epochs over 12 hours", "robo-sim",
+                   "(`all`;", "not measured apart"):  # fmt: skip
+        assert needle in notes, needle
+    linked = re.findall(r'(docs/\w+\.md), "([^"]+)"', notes)
+    assert len(linked) >= 6
+    for name, section in linked:  # each names a section its document has
+        headings = [x.lstrip("#").strip() for x in (ROOT / name).read_text().splitlines()
+                    if x.startswith("#")]  # fmt: skip
+        assert any(h.startswith(section) for h in headings), (name, section)
