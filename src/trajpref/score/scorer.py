@@ -214,6 +214,9 @@ class TrajectoryScorer(DenoiserShapes):
         """Seconds per step of the data the denoiser was trained on; None where unknown."""
         self.units: str | None = None
         """Units of the data the denoiser was trained on (``m``, ``px``); None where unknown."""
+        self.checkpoint: str | None = None
+        """The file it was loaded from (``from_checkpoint``), which the data checks' warnings
+        name; None when built in code."""
         self.neighbour_radius = neighbour_radius
 
     @property
@@ -295,6 +298,7 @@ class TrajectoryScorer(DenoiserShapes):
                                  precision, self.neighbour_radius)  # fmt: skip
         other.timing, other.frame_interval, other.units = (self.timing, self.frame_interval,
                                                            self.units)  # fmt: skip
+        other.checkpoint = self.checkpoint  # the warnings name the same file
         return other
 
     def check_shapes(self, batch: Batch, futures: torch.Tensor) -> None:

@@ -532,6 +532,8 @@ def _select_scored(pred: torch.Tensor, cfg: SelectionConfig, batch: Batch,
     score-free counterpart; every agent, for a method that reads no score)."""
     residual = trusted = None
     if cfg.uses_score:
+        if scorer is None:  # select_indices' own check, before the scorer is used
+            raise ConfigError(f"selection {cfg.method!r} needs the diffusion score (a scorer)")
         d = score_steps(scorer, cfg).residual(batch, pred)  # [K, N, T_f]
         residual = d[..., -1] if cfg.final else d.sum(-1)  # [K, N]
         trusted = within_pace(batch, scorer.scale, cfg.trust_speed)  # [N] or None
