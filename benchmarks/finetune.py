@@ -13,6 +13,14 @@ fine-tuning stage computes it each epoch (the "epoch 0" the run logs start from)
 ``--start-only`` writes just that. ``--start generator-long --tag long`` starts from another
 published generator (its rows are named <method>-long, its start's validation is
 meta/finetune_start_<dataset>_generator-long.json).
+
+``--runs DIR`` and ``--results DIR`` put the run folders and the rows (with their ``meta/``)
+elsewhere (``benchmarks/reproduce.py --out`` uses them, so that its training leaves the
+repository as it is); ``--models DIR`` reads the start from ``DIR/<dataset>/`` instead of
+models/. ``--publish`` writes into the models folder, so with ``--runs`` or ``--results`` it
+needs ``--models`` too (a run kept out of the repository never publishes into it). A row's
+``checkpoint`` is relative to the repository when the run folder lies inside it, otherwise
+absolute (readers join it to the repository's root, which keeps an absolute path as it is).
 """
 
 from __future__ import annotations
@@ -41,6 +49,13 @@ from trajpref.train.stages import build_finetune_stage
 ROOT = Path(__file__).resolve().parent.parent
 
 
+def shown(path: Path) -> str:
+    """A path as rows and records name it: relative to the repository when it lies inside it
+    (the rows written so far), otherwise absolute (``ROOT / shown(p)`` is ``p`` either way)."""
+    path = Path(path).absolute()
+    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--dataset", required=True)
@@ -53,7 +68,7 @@ def main() -> None:
         "--start",
         default="generator",
         choices=list(RUNNABLE_STARTS),
-        help="the published generator to start from, models/<dataset>/<START>.safetensors "
+        help="the published generator to start from, <models>/<dataset>/<START>.safetensors "
         "(another than the default needs a --tag ending in its name, e.g. --start "
         "generator-long --tag long, so that its rows compare with their own start)",
     )
@@ -61,10 +76,34 @@ def main() -> None:
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--samples", type=int, default=20)
     parser.add_argument(
+        "--runs",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="the folder of the run folders (default: the repository's runs/)",
+    )
+    parser.add_argument(
+        "--results",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="where the rows (finetune_<dataset>[_<tag>].json) and meta/ go (default: the "
+        "repository's benchmarks/results/)",
+    )
+    parser.add_argument(
+        "--models",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="the published models: the start is read from, and --publish writes into, "
+        "DIR/<dataset>/ (default: the repository's models/)",
+    )
+    parser.add_argument(
         "--publish",
         action="store_true",
-        help="publish seed 0's model as models/<dataset>/<method>.safetensors (only for the "
-        "dataset's best method: docs/architecture.md, published models)",
+        help="publish seed 0's model as <models>/<dataset>/<method>.safetensors (only for the "
+        "dataset's best method: docs/architecture.md, published models); with --runs or "
+        "--results it needs --models",
     )
     parser.add_argument(
         "--skip-done",
@@ -87,8 +126,14 @@ def main() -> None:
         help="only validate the start (meta/finetune_start_<dataset>.json)",
     )
     args = parser.parse_args()
+    if args.publish and args.models is None and (args.runs or args.results):
+        parser.error("--publish writes into the repository's models/: with --runs or --results "
+                     "name the folder to publish into with --models")  # fmt: skip
+    args.runs = (args.runs or ROOT / "runs").absolute()
+    args.results = (args.results or ROOT / "benchmarks" / "results").absolute()
+    args.models = (args.models or ROOT / "models").absolute()
 
-    start = ROOT / "models" / args.dataset / f"{args.start}{ckpt.SUFFIX}"
+    start = args.models / args.dataset / f"{args.start}{ckpt.SUFFIX}"
     if not start.is_file():
         parser.error(f"no published {args.start} for {args.dataset}: {start} does not exist")
     variant = start_suffix(args.start).lstrip("-")
@@ -100,7 +145,7 @@ def main() -> None:
     if args.start_only:
         return
     suffix = f"_{args.tag}" if args.tag else ""
-    out = ROOT / "benchmarks" / "results" / f"finetune_{args.dataset}{suffix}.json"
+    out = args.results / f"finetune_{args.dataset}{suffix}.json"
     jobs = [(m, s) for m in args.methods for s in args.seeds]
     if args.skip_done and out.is_file():
         budget = budget_of(args.overrides)  # as row_budget reads it back from the command
@@ -113,7 +158,7 @@ def main() -> None:
     test = load_dataset(args.dataset, "test", args.data_root)
     scorer = TrajectoryScorer.from_checkpoint(start, args.device)
     for method, seed in jobs:
-        run = ROOT / "runs" / f"{args.dataset}-{method}-s{seed}{'-' + args.tag if args.tag else ''}"
+        run = args.runs / f"{args.dataset}-{method}-s{seed}{'-' + args.tag if args.tag else ''}"
         cfg = finetune_config(str(start), method, args.preset, None, args.overrides, seed)
         last = run / "finetune_last.pt"
         check_start(run, start)
@@ -129,7 +174,7 @@ def main() -> None:
         res = evaluate(model, test, args.samples, 0, args.device, scorer=scorer,
                        progress=False)  # fmt: skip
         if args.publish and seed == 0 and not args.tag:
-            ckpt.publish(best, ROOT / "models" / args.dataset / f"{method}{ckpt.SUFFIX}")
+            ckpt.publish(best, args.models / args.dataset / f"{method}{ckpt.SUFFIX}")
         method_name = _method_name(method, args.tag)
         row = make_row(
             dataset=args.dataset, split="test", method=method_name, seed=seed,
@@ -137,7 +182,7 @@ def main() -> None:
                 "min_ade", "min_fde", "joint_min_ade", "joint_min_fde", "max_ats",
                 "max_fts", "top1_recall_ats", "top5_recall_ats")},
             train_seconds=round(summary["train_seconds"], 1),
-            checkpoint=str(best.relative_to(ROOT)), model_hash=ckpt.model_hash(best),
+            checkpoint=shown(best), model_hash=ckpt.model_hash(best),
             uses_score=uses_rl(cfg.finetune.method)
             and (cfg.finetune.policy_weight > 0 or cfg.finetune.value_weight > 0),
         )  # fmt: skip
@@ -145,6 +190,7 @@ def main() -> None:
               f"minFDE {res['min_fde']:.3f} maxATS {res['max_ats']:.3f} maxFTS "
               f"{res['max_fts']:.3f} ({summary['train_seconds']:.0f} s, "
               f"{summary['steps']} steps)")  # fmt: skip
+        out.parent.mkdir(parents=True, exist_ok=True)
         with _locked(out):
             # re-read: keeps rows of other methods/seeds, also those written meanwhile by
             # a concurrent invocation for another method or seed
@@ -173,8 +219,7 @@ def check_start(run: Path, start: Path) -> None:
     the start's weights hash in ``<run>/start.json``; a folder with fine-tuning files but no
     record, or with another hash, is an error (it would silently supply an old run's model)."""
     record = run / "start.json"
-    want = {"start": str(start.relative_to(ROOT)) if start.is_relative_to(ROOT) else str(start),
-            "hash": ckpt.load(start)["hash"]}  # fmt: skip
+    want = {"start": shown(start), "hash": ckpt.load(start)["hash"]}
     if record.is_file():
         have = json.loads(record.read_text())
         if have.get("hash") != want["hash"]:
@@ -219,10 +264,11 @@ def check_settings(run: Path, cfg) -> None:
                          "new runs with --tag")  # fmt: skip
 
 
-def start_meta(dataset: str, start: str = "generator") -> Path:
+def start_meta(dataset: str, start: str = "generator", results: Path | None = None) -> Path:
     """Where the start's validation is kept: meta/finetune_start_<dataset>.json for the default
-    generator, meta/finetune_start_<dataset>_<start>.json for another published one."""
-    return ROOT / "benchmarks" / "results" / "meta" / start_record(dataset, start)
+    generator, meta/finetune_start_<dataset>_<start>.json for another published one, under
+    ``results`` (default: the repository's benchmarks/results/)."""
+    return (results or ROOT / "benchmarks" / "results") / "meta" / start_record(dataset, start)
 
 
 def start_validation(args, start: Path) -> dict[str, float]:
@@ -231,9 +277,10 @@ def start_validation(args, start: Path) -> dict[str, float]:
     val = load_dataset(cfg.data.val_dataset or cfg.data.dataset, "val", args.data_root)
     stage = build_finetune_stage(cfg, ckpt.load(start), val, resolve_device(args.device))
     res = stage.validate()
-    meta = {"dataset": args.dataset, "start": str(start.relative_to(ROOT)),
+    meta = {"dataset": args.dataset, "start": shown(start),
             "eval_max_scenes": cfg.finetune.eval_max_scenes, "val": res}  # fmt: skip
-    path = start_meta(args.dataset, args.start)
+    path = start_meta(args.dataset, args.start, args.results)
+    path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(meta, indent=2) + "\n")
     print(f"{args.dataset} start (validation): " + " ".join(f"{k} {v:.4f}" for k, v in res.items()))
     return res

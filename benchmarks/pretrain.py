@@ -24,6 +24,14 @@ models/<dataset>/generator-NAME.safetensors, method ``pretrained-NAME`` in
 pretrained_<dataset>_NAME.json; the README's cost table (this machine, default configs) skips it.
 With ``--keep-replaced NAME`` the default's ``pretrained`` row (and its meta file) is first
 kept as ``pretrained-NAME``, its checkpoint named by the commit that holds its weights.
+
+``--runs DIR``, ``--results DIR`` and ``--models DIR`` put the run folder (``DIR/<dataset>``),
+the rows and meta file, and the published checkpoints elsewhere (``benchmarks/reproduce.py
+--out`` uses all three, so that its training leaves the repository as it is). The script
+publishes into the models folder unless ``--published``, so with ``--runs`` or ``--results``
+it needs ``--models`` too: a run kept out of the repository never publishes into it.
+``--keep-replaced`` names the repository's commits, so it takes none of the three. A row's
+``checkpoint`` is relative to the repository when the file lies inside it, otherwise absolute.
 """
 
 from __future__ import annotations
@@ -42,6 +50,13 @@ from trajpref.train import read_metrics, train_stage
 from trajpref.train.run import finished
 
 ROOT = Path(__file__).resolve().parent.parent
+
+
+def shown(path: Path) -> str:
+    """A path as rows name it: relative to the repository when it lies inside it (the rows
+    written so far), otherwise absolute (``ROOT / shown(p)`` is ``p`` either way)."""
+    path = Path(path).absolute()
+    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
 
 
 def _train(args, run_dir: Path) -> None:
@@ -120,7 +135,30 @@ def _is_full_sampler_row(row: dict) -> bool:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--dataset", required=True, help="config name under configs/")
-    parser.add_argument("--run-dir", default=None, help="default runs/<dataset>")
+    parser.add_argument("--run-dir", default=None, help="default <runs>/<dataset>")
+    parser.add_argument(
+        "--runs",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="the folder of the default run folder (default: the repository's runs/)",
+    )
+    parser.add_argument(
+        "--results",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="where the rows (pretrained_<dataset>[_VARIANT].json) and meta/ go (default: the "
+        "repository's benchmarks/results/)",
+    )
+    parser.add_argument(
+        "--models",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="publish into (and with --published, re-measure from) DIR/<dataset>/ (default: "
+        "the repository's models/); needed with --runs or --results unless --published",
+    )
     parser.add_argument("--train", action="store_true", help="train (or resume) both stages")
     parser.add_argument("--data-root", default=None)
     parser.add_argument("--device", default="cpu")
@@ -168,13 +206,22 @@ def main() -> None:
                      "--train-machine")  # fmt: skip
     if args.variant is not None and not args.variant.replace("-", "").isalnum():
         parser.error("--variant takes letters, digits and '-'")
+    elsewhere = args.runs or args.results or args.models
+    if args.keep_replaced is not None and elsewhere:
+        parser.error("--keep-replaced keeps a row of the repository's published default: no "
+                     "--runs, --results or --models")  # fmt: skip
+    if args.models is None and (args.runs or args.results) and not args.published:
+        parser.error("this publishes into the repository's models/: with --runs or --results "
+                     "name the folder to publish into with --models")  # fmt: skip
+    runs = (args.runs or ROOT / "runs").absolute()
+    results = (args.results or ROOT / "benchmarks" / "results").absolute()
     suffix = f"-{args.variant}" if args.variant else ""
     file_suffix = f"_{args.variant}" if args.variant else ""
 
-    run_dir = Path(args.run_dir or ROOT / "runs" / args.dataset)
+    run_dir = Path(args.run_dir or runs / args.dataset)
     if args.train:
         _train(args, run_dir)
-    models = ROOT / "models" / args.dataset
+    models = (args.models or ROOT / "models").absolute() / args.dataset
     models.mkdir(parents=True, exist_ok=True)
     # the generator names models/<dataset>/denoiser.safetensors by path and hash instead of
     # embedding it; published weights are half precision
@@ -182,9 +229,7 @@ def main() -> None:
     run_generator = run_dir / f"generator{ckpt.SUFFIX}"
     # a retrained default replaces its own denoiser; a variant trained with a denoiser of its
     # own gets its own file: it never overwrites the one the default generator points to
-    meta_path = (
-        ROOT / "benchmarks" / "results" / "meta" / f"pretrained_{args.dataset}{file_suffix}.json"
-    )
+    meta_path = results / "meta" / f"pretrained_{args.dataset}{file_suffix}.json"
     previous = json.loads(meta_path.read_text()) if meta_path.is_file() else None
     if args.published:
         if previous is None or not published.is_file():
@@ -246,13 +291,13 @@ def main() -> None:
             train_seconds=round(secs, 1) if secs is not None else None,
             ms_per_scene=round(ms, 3),
             uses_score=False,
-            checkpoint=str(published.relative_to(ROOT)),
+            checkpoint=shown(published),
             model_hash=ckpt.model_hash(published, sampler_of(method)),
         ))  # fmt: skip
         print(f"{args.dataset} {method:>12}: minADE {res['min_ade']:.3f} minFDE "
               f"{res['min_fde']:.3f}  joint {res['joint_min_ade']:.3f}/"
               f"{res['joint_min_fde']:.3f}  {ms:.1f} ms/scene")  # fmt: skip
-    out = ROOT / "benchmarks" / "results" / f"pretrained_{args.dataset}{file_suffix}.json"
+    out = results / f"pretrained_{args.dataset}{file_suffix}.json"
     # a generator-only run keeps the full sampler's row (same denoiser); a new denoiser
     # published without --full-eval drops it (it measured the old one)
     new_denoiser = args.no_full_eval and logs["denoiser"]
@@ -281,7 +326,7 @@ def main() -> None:
                                       / 2**20,
                           "generator": published.stat().st_size / 2**20},
     }  # fmt: skip
-    meta_path.parent.mkdir(exist_ok=True)
+    meta_path.parent.mkdir(parents=True, exist_ok=True)
     meta_path.write_text(json.dumps(extra, indent=2) + "\n")
     print(json.dumps(extra, indent=2))
 

@@ -31,7 +31,8 @@ Our columns, per dataset (K = 20, test split, seed 0):
 A dataset without a published generator gets constant velocity only ("no model" elsewhere;
 full mode pretrains one when ``configs/<D>.yaml`` exists). In full mode the missing rows are
 trained by ``benchmarks/pretrain.py`` and ``benchmarks/finetune.py`` (with the equal-budget
-table's arguments), one subprocess per job, logs in ``runs/logs/``.
+table's arguments), one subprocess per job, logs in ``runs/logs/``; they write their run folders,
+rows and (pretraining) published generator in the repository, or under ``--out``.
 
 Resuming: every evaluation is stored in ``benchmarks/results/meta/reproduce/<D>_<column>.json``
 with a key (checkpoint and denoiser hashes, sampler, K, seed, scenes); a run skips the
@@ -51,11 +52,17 @@ added to benchmarks/results/*.json by this script itself. ``--out DIR`` sends th
 files there instead (``DIR/state/`` for the stored evaluations and ``invocations.json``,
 ``DIR/reproduce.md``, ``DIR/reproduce.json``, ``DIR/logs/``), so the repository's tables and
 state stay as they are; a new folder starts from nothing. Full mode's training subprocesses
-(``benchmarks/pretrain.py``, ``benchmarks/finetune.py``) have no such option: with or without
-``--out`` they write ``runs/``, ``models/`` (a pretrained generator) and their result rows in
-the repository. A ``--max-scenes`` run (a smoke run) never touches the whole-split state or
-docs/reproduce.md: it writes under ``runs/reproduce/`` unless ``--out`` is given, and its files
-are named after the subset (``<D>_<column>_scenes<N>.json``, ``reproduce_scenes<N>.md``).
+then write there too: ``--runs DIR/runs --results DIR/results`` (run folders, result rows with
+their ``meta/``) and, for pretraining, ``--models DIR/models`` (the published generator;
+fine-tuning reads its start from the folder the tables evaluate). The tables read the rows of
+``DIR/results/`` beside the repository's (a row there replaces the repository's of the same
+measurement and file name) and a generator of ``DIR/models/<D>/`` before the repository's; a
+training job is still skipped where the repository has its row or generator. So a full-mode
+run with ``--out`` leaves the repository's files as they are. A ``--max-scenes`` run (a smoke
+run) never touches the whole-split state or docs/reproduce.md: it writes under
+``runs/reproduce/`` unless ``--out`` is given (its training, as any run's without ``--out``,
+into the repository's places), and its files are named after the subset
+(``<D>_<column>_scenes<N>.json``, ``reproduce_scenes<N>.md``).
 """
 
 from __future__ import annotations
@@ -82,7 +89,7 @@ from trajpref.evaluation import evaluate
 from trajpref.io import read_checkpoint_header, write_json
 from trajpref.models import checkpoint as ckpt
 from trajpref.models.baseline import ConstantVelocity
-from trajpref.results import command_line, machine
+from trajpref.results import ROW_KEY, command_line, machine
 from trajpref.rl.presets import EQUAL_BUDGET_WARMUP, equal_budget_args
 from trajpref.score.scorer import NOISE_LAYOUT, TrajectoryScorer
 from trajpref.types import TrajectoryDataset
@@ -121,9 +128,10 @@ ROW_TOLERANCE = 5e-4
 @dataclass
 class Setup:
     """Where the script reads and writes: the repository by default (tests point it at a
-    temporary folder; the training subprocesses always write into the repository). With
-    ``out`` set, the script's own files (state, report, summary, invocation log, training logs)
-    go there and it reads models, rows, configs and the paper from the fields above it."""
+    temporary folder; the training subprocesses write into the repository unless ``trained``
+    is set). With ``out`` set, the script's own files (state, report, summary, invocation log,
+    training logs) go there and it reads models, rows, configs and the paper from the fields
+    above it (and from ``trained``)."""
 
     models: Path = ROOT / "models"
     """The published checkpoints, ``<dataset>/generator.safetensors`` etc."""
@@ -143,6 +151,10 @@ class Setup:
     """``--out``: the folder of this script's own files (None: the repository's places)."""
     scratch: Path = ROOT / "runs" / "reproduce"
     """The ``out`` of a ``--max-scenes`` run that names none (``runs/`` is not tracked)."""
+    trained: Path | None = None
+    """``--out``: where full mode's training subprocesses write (``runs/``, ``results/``,
+    ``models/``), read beside ``results`` and before ``models`` (None: they write into the
+    repository, the places above)."""
 
     def __post_init__(self) -> None:
         bad = set(self.sources) & set(DATASETS)
@@ -247,12 +259,21 @@ def read_json(path: Path, default: Any = None) -> Any:
 
 def result_rows(setup: Setup) -> list[dict[str, Any]]:
     """Every row of ``results/*.json`` measured under the default protocol (``all``, the
-    paper's), each with the file it came from (``_file``)."""
-    rows = []
-    for path in sorted(setup.results.glob("*.json")):
-        rows.extend({**r, "_file": path.name} for r in json.loads(path.read_text())
-                    if r["protocol"] == "all")  # fmt: skip
-    return rows
+    paper's), each with the file it came from (``_file``, as the report names it); with
+    ``setup.trained``, also the rows its training wrote there, each replacing a repository row
+    of the same measurement (``ROW_KEY``) in a file of the same name."""
+
+    def read(folder: Path, name) -> list[dict[str, Any]]:
+        return [{**r, "_file": name(path), "_key": (*(r[k] for k in ROW_KEY), path.name)}
+                for path in sorted(folder.glob("*.json")) for r in json.loads(path.read_text())
+                if r["protocol"] == "all"]  # fmt: skip
+
+    rows = read(setup.results, lambda path: f"benchmarks/results/{path.name}")
+    if setup.trained is not None:
+        own = read(trained_results(setup), rel)
+        replaced = {r["_key"] for r in own}
+        rows = [r for r in rows if r["_key"] not in replaced] + own
+    return [{k: v for k, v in r.items() if k != "_key"} for r in rows]
 
 
 def matching_rows(rows, dataset: str, method: str, samples: int, seed: int | None = None):
@@ -262,12 +283,27 @@ def matching_rows(rows, dataset: str, method: str, samples: int, seed: int | Non
             and (seed is None or r["seed"] == seed)]  # fmt: skip
 
 
+def trained_results(setup: Setup) -> Path:
+    """Where full mode's fine-tuning writes its rows (and ``meta/``)."""
+    return setup.results if setup.trained is None else setup.trained / "results"
+
+
+def models_of(setup: Setup, dataset: str) -> Path:
+    """The folder of a dataset's models: the one full mode pretrained under ``--out`` when
+    it holds a generator, otherwise the repository's."""
+    if setup.trained is not None:
+        own = setup.trained / "models" / dataset
+        if (own / f"generator{ckpt.SUFFIX}").is_file():
+            return own
+    return setup.models / dataset
+
+
 def generator_path(setup: Setup, dataset: str, name: str = "generator") -> Path:
-    return setup.models / dataset / f"{name}{ckpt.SUFFIX}"
+    return models_of(setup, dataset) / f"{name}{ckpt.SUFFIX}"
 
 
 def denoiser_path(setup: Setup, dataset: str) -> Path:
-    return setup.models / dataset / ckpt.DENOISER_NAME
+    return models_of(setup, dataset) / ckpt.DENOISER_NAME
 
 
 def column_method(column: str, best: str) -> str:
@@ -445,19 +481,27 @@ def run_evaluation(job: Job, opts: argparse.Namespace, setup: Setup, splits: Spl
 
 
 def training_command(job: Job, opts: argparse.Namespace, setup: Setup) -> list[str]:
-    """The benchmark script that trains a job's missing model or rows."""
+    """The benchmark script that trains a job's missing model or rows; with ``setup.trained``
+    (``--out``) it writes its run folders, rows and models there, and fine-tuning starts from
+    the generator the tables evaluate (``models_of``)."""
     data = ["--data-root", opts.data_root] if opts.data_root else []
     scripts = ROOT / "benchmarks"
+    where = []
+    if setup.trained is not None:
+        own = setup.trained.absolute()
+        models = own / "models" if job.kind == "pretrain" else models_of(setup, job.dataset).parent
+        where = ["--runs", str(own / "runs"), "--results", str(own / "results"),
+                 "--models", str(models.absolute())]  # fmt: skip
     if job.kind == "pretrain":
         return [sys.executable, str(scripts / "pretrain.py"), "--dataset", job.dataset,
-                "--train", "--no-full-eval", "--device", opts.device, *data]  # fmt: skip
-    start = setup.results / "meta" / f"finetune_start_{job.dataset}.json"
+                "--train", "--no-full-eval", "--device", opts.device, *data, *where]  # fmt: skip
+    start = trained_results(setup) / "meta" / f"finetune_start_{job.dataset}.json"
     return [sys.executable, str(scripts / "finetune.py"), "--dataset", job.dataset,
             *TRAIN_ARGS[job.column], "--seeds", str(job.seed), "--skip-done",
             *(["--no-start-validation"] if start.is_file() else []),
             *equal_budget_args(opts.minutes, opts.warmup,
                                opts.eval_minutes or opts.minutes / 4),  # fmt: skip
-            "--device", opts.device, *data]  # fmt: skip
+            "--device", opts.device, *data, *where]  # fmt: skip
 
 
 def run_command(cmd: list[str], log: Path) -> int:
@@ -522,7 +566,7 @@ def cell_from_state(job: Job, opts: argparse.Namespace, setup: Setup, rows) -> d
         agree = all(abs(r[k] - cell[k]) <= ROW_TOLERANCE for r in same
                     for k in ("min_ade", "min_fde", "max_ats", "max_fts")
                     if r.get(k) is not None and cell.get(k) is not None)  # fmt: skip
-        files = ", ".join(f"`benchmarks/results/{f}`" for f in sorted({r["_file"] for r in same}))
+        files = ", ".join(f"`{f}`" for f in sorted({r["_file"] for r in same}))
         detail += f"; {'matches' if agree else 'DIFFERS from'} the `{method}` rows in {files}"
     return {**cell, "source": "evaluated", "detail": detail, "units": record.get("units"),
             "date": record["date"], "seeds": [key["seed"]], "subset": subset,
@@ -542,7 +586,7 @@ def cell_from_rows(rows, dataset: str, method: str, samples: int) -> dict | None
     dates = sorted({r["date"] for r in own})
     files = sorted({r["_file"] for r in own})
     detail = (f"from results rows, trained {', '.join(dates)}: method `{method}` in "
-              + ", ".join(f"`benchmarks/results/{f}`" for f in files)
+              + ", ".join(f"`{f}`" for f in files)
               + f", mean over {len(seeds)} seed{'s' if len(seeds) > 1 else ''} "
               f"({', '.join(map(str, seeds))})")  # fmt: skip
     return {**cell, "source": "rows", "detail": detail, "date": dates[-1], "seeds": seeds}
@@ -756,7 +800,9 @@ def how_to(cost: dict) -> str:
             "retrain, work in a copy of the repository and move the rows "
             "(`benchmarks/results/finetune_<D>.json`, `finetune_<D>_set.json`) and run folders "
             "(`runs/<D>-<method>-s<seed>*`) away first. Its training writes `runs/`, `models/` "
-            "and result rows in the repository it runs in, with or without `--out`. From scratch "
+            "and result rows in the repository it runs in, or with `--out DIR` under `DIR/runs/`, "
+            "`DIR/models/` and `DIR/results/` (the tables read those rows beside the "
+            "repository's), leaving the repository's files as they are. From scratch "
             f"it would take {FULL_MODE_COST}.",
             "- **One column by itself**: the † columns (RLHF, RLHF-ReS, best) are the rows of "
             "`python benchmarks/equal_budget.py --datasets D --methods rlhf rlhf-res rlhf-set "
@@ -918,8 +964,9 @@ def parse_args(argv: list[str] | None, setup: Setup) -> argparse.Namespace:
         default=None,
         help="write this script's state, report (reproduce.md), summary (reproduce.json), "
         "invocation log and training logs under this folder instead of the repository "
-        "(a new folder starts from nothing); full mode's training still writes runs/, "
-        "models/ and result rows in the repository",
+        "(a new folder starts from nothing); full mode's training writes its run folders, "
+        "result rows and pretrained models there too (runs/, results/, models/), and the "
+        "tables read them beside the repository's",
     )
     names = (*DATASETS, *setup.sources)
     parser.add_argument(
@@ -1018,7 +1065,10 @@ def main(argv: list[str] | None = None, setup: Setup | None = None) -> dict:
     opts = parse_args(argv, setup)
     if opts.out or (opts.max_scenes and setup.out is None):
         out = Path(opts.out) if opts.out else setup.scratch  # a subset never writes the tables
-        setup = replace(setup, out=out, logs=out / "logs")
+        # with --out the training subprocesses write there too (a smoke run's, without
+        # --out, into the repository as a run without --max-scenes)
+        setup = replace(setup, out=out, logs=out / "logs",
+                        trained=out if opts.out else setup.trained)  # fmt: skip
     paper = json.loads(setup.paper.read_text())
     setup.state.mkdir(parents=True, exist_ok=True)
     wall0, (own0, kids0) = time.perf_counter(), cpu_seconds()
@@ -1035,7 +1085,7 @@ def main(argv: list[str] | None = None, setup: Setup | None = None) -> dict:
                     or not is_done(j, opts, setup, rows)]  # fmt: skip
             skipped = len(jobs) - len(todo)
             print(f"{skipped} of {len(jobs)} jobs already done; {len(todo)} to run")
-            if setup.out and any(j.kind != "evaluate" for j in todo):
+            if setup.trained is None and setup.out and any(j.kind != "evaluate" for j in todo):
                 print("note: the training jobs write runs/, models/ and result rows in the "
                       f"repository, not under {setup.out}", file=sys.stderr)  # fmt: skip
             done, failed = run_jobs(todo, opts, setup, splits)

@@ -441,7 +441,7 @@ def test_out_sends_the_scripts_own_files_elsewhere_and_leaves_the_repository_alo
     calls = _counting(monkeypatch)
     reproduce.main([*args, "--out", str(elsewhere)], setup)
     assert calls == []  # resumes from the folder
-    # full mode: the training logs go there too (the training scripts write the repository)
+    # full mode: the training logs go there too (and the training, test_out_dirs_walk67.py)
     logs = []
     monkeypatch.setattr(reproduce, "run_command", lambda cmd, log: logs.append(log) or 1)
     reproduce.main(["--datasets", "walks", *SAMPLES, "--out", str(elsewhere)], setup)
