@@ -591,9 +591,13 @@ def build_parser() -> argparse.ArgumentParser:
                     "sample drawn; or the x and y ranges in the data's units (write "
                     "--limits=-5,5,-3,3 when the first is negative)")  # fmt: skip
     pl.add_argument("--draw-samples", type=int, default=None, metavar="N",
-                    help="samples drawn per agent: the first N of the --samples K (default all); "
-                    "with --scorer, the N best by score (default 2). The minADE/minFDE printed "
-                    "count all K")  # fmt: skip
+                    help="samples drawn per agent: the first N of the --samples K (or of the "
+                    "--keep K') (default all); with --scorer, the N best by score (default 2). "
+                    "The minADE/minFDE printed count all K (K')")  # fmt: skip
+    pl.add_argument("--no-numbers", action="store_true",
+                    help="no agent numbers beside the agents (default: each agent's index, "
+                    "as the minADE/minFDE lines print it)")  # fmt: skip
+    _add_selection_args(pl, "--scorer")
     titles = pl.add_mutually_exclusive_group()
     titles.add_argument("--title", default=None,
                         help="the figure's title, in place of the one made (the split, scene, "
@@ -933,7 +937,7 @@ def _warn_fixed_sampling(args, model) -> None:
     if getattr(model, "sampler", None) != "leapfrog" or generator is None:
         return
     fixed, asked = generator.samples, args.samples
-    selects = getattr(args, "keep", None) is not None  # plot has no --keep
+    selects = getattr(args, "keep", None) is not None  # a command without --keep lacks it
     if asked < fixed:
         keep = args.keep if selects else asked
         warnings.warn(f"{args.model} emits a set of K = {fixed} samples (trained best-of-"
@@ -1153,7 +1157,7 @@ def _set_generator(model, flag: str, **setting) -> None:
 
 def _scorer(path: str, device, args=None, every: int = RANK_SCORE_EVERY):
     """The scorer of checkpoint ``path``; with a command's ``args``, at its
-    --neighbour-radius (default: the file's) and, where the command has them (plot has not),
+    --neighbour-radius (default: the file's) and, where the command has them,
     its --score-every (default ``every``), --score-from and --score-precision."""
     scorer = TrajectoryScorer.from_checkpoint(path, device)
     if args is None:
@@ -1999,20 +2003,21 @@ def _scene_index(args, ds) -> int:
                         "scene_id (in index order); --scene also takes an index")  # fmt: skip
 
 
-def _plot_samples(model, ds, args, device) -> tuple[object, torch.Tensor, bool]:
-    """The scene's batch (the scene alone) and its samples pred [K, P, T_f, 2] as predict and
+def _plot_samples(model, ds, args, device, samples: int) -> tuple[object, torch.Tensor, bool]:
+    """The scene's batch (the scene alone) and its ``samples`` pred [K, P, T_f, 2] (K' of
+    them with --keep: ``model`` is then ``_selecting``'s, as predict's) as predict and
     evaluate draw them at --seed and --max-agents, and whether the model draws at random.
     A model whose samples do not change with the seed is run on the scene alone; one that
     draws at random runs over the split's batches in order up to the scene's, as those
     commands do (one random stream in batch order), so that the figure's samples are theirs."""
     one = collate([ds[args.scene]]).to(device)
-    pred = model.predict(one, args.samples, torch.Generator().manual_seed(args.seed))
-    other = model.predict(one, args.samples, torch.Generator().manual_seed(args.seed + 1))
+    pred = model.predict(one, samples, torch.Generator().manual_seed(args.seed))
+    other = model.predict(one, samples, torch.Generator().manual_seed(args.seed + 1))
     if torch.equal(pred, other):  # the draws change nothing: this is predict's sample
         return one, pred, False
     groups = SceneLoader(ds, max_agents=args.max_agents, shuffle=False).batches()
     stop = next(j for j, g in enumerate(groups) if args.scene in g)
-    for j, (batch, drawn) in enumerate(sampled_batches(model, ds, args.samples, args.seed,
+    for j, (batch, drawn) in enumerate(sampled_batches(model, ds, samples, args.seed,
                                                        device, args.max_agents,
                                                        not args.no_progress, "plot")):  # fmt: skip
         if j == stop:
@@ -2038,6 +2043,8 @@ def _plot_title(args, ds, scene, random: bool) -> str:
     if args.holdout_scene:
         where += f", held-out scene {args.holdout_scene}*"
     settings = [args.model, f"K={args.samples}"]
+    if args.keep is not None:
+        settings.append(_plot_kept(args))
     if random:
         settings.append(f"seed {args.seed}")
         if args.max_agents != MAX_AGENTS:
@@ -2077,6 +2084,12 @@ def _print_scene_metrics(args, scene, pred: torch.Tensor, units: str, order=None
         print(line)
 
 
+def _plot_kept(args) -> str:
+    """How plot's title and legend say --keep's selection: ``kept 5 of 20 by score-facility
+    (chosen)``."""
+    return f"kept {args.keep} of {args.samples} by {_kept_by(args)}"
+
+
 def cmd_plot(args) -> int:
     _check_model_args(args)
     _check_plot_args(args)
@@ -2086,19 +2099,22 @@ def cmd_plot(args) -> int:
     ds = _load(args)
     _warn_model_and_scorer(args, ds)
     scorer = _scorer(args.scorer, device, args) if args.scorer else None  # --neighbour-radius
+    model, count = _selecting(args, model, device, scores=scorer is not None)  # predict's --keep
     _warn_observed_pace(args, model, scorer, ds)
     _warn_untyped_data(args, model, scorer, ds)
     args.scene = _scene_index(args, ds)
     scene = ds[args.scene]
-    batch, pred, random = _plot_samples(model, ds, args, device)  # pred [K, P, T_f, 2]
+    batch, pred, random = _plot_samples(model, ds, args, device, count)  # pred [K, P, T_f, 2]
     title = _plot_title(args, ds, scene, random)
-    style = {"limits": args.limits, "width": args.width, "dpi": args.dpi}
+    style = {"limits": args.limits, "width": args.width, "dpi": args.dpi,
+             "numbers": not args.no_numbers,
+             "selection": "" if args.keep is None else _plot_kept(args)}  # fmt: skip
     samples = pred.cpu().numpy()  # [K, P, T_f, 2]
     order = scores = None
     _note_replaced(args.out, "figure")
     if scorer is not None:
         scores = scorer.score(batch, pred).agent_ats.cpu().numpy()  # [K, P]
-        top = min(args.draw_samples or 2, args.samples)
+        top = min(args.draw_samples or 2, count)
         order = np.argsort(-scores, axis=0, kind="stable")[:top]  # [top, P] as drawn
         plot_scene_scored(scene.history, scene.future, samples, scores, args.out,
                           ds.info.units, title, top, agent_type=scene.agent_type,

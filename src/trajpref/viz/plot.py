@@ -5,7 +5,8 @@ PNG, PDF or SVG); any other suffix is a ``ConfigError`` before anything is drawn
 written under a ``.pdf`` name broke LaTeX). ``dpi`` sets a PNG's pixels per inch.
 
 The scene figures (``plot_scene``, ``plot_scene_scored``) give each agent a colour of a
-colour-blind-safe palette (``PALETTE``) and, beyond its length, another marker (``MARKERS``);
+colour-blind-safe palette (``PALETTE``) and, beyond its length, another marker (``MARKERS``),
+the ball black with a star (``agent_styles``), and number the agents (``label_offset``);
 their legend, in a neutral colour, explains the line styles and markers. By default their
 axes hold every history and ground truth and the bulk of the samples, not a sample that runs
 far out (``scene_limits``). They are exactly ``width`` inches wide (a PDF's or SVG's page, a
@@ -47,6 +48,9 @@ MARKERS = ("o", "s", "^", "D", "v", "P")
 that share a colour differ in marker."""
 BALL = 1
 """``agent_type`` of the ball (``trajpref.types.AGENT_BALL``): drawn with a star."""
+BALL_COLOUR = "#000000"
+"""The ball's colour (Okabe and Ito's black): no player's, so that it is not taken for one;
+the players take the palette's colours in turn, the ball skipped (``agent_styles``)."""
 NEUTRAL = "0.15"
 """The legend's colour: it explains line styles and markers, not an agent."""
 LIMITS = ("auto", "all")
@@ -63,12 +67,13 @@ EDGE = 0.1
 lines are wrapped to the width less twice this)."""
 _STYLE = {"font.size": 8, "axes.titlesize": 9, "axes.labelsize": 8, "xtick.labelsize": 7,
           "ytick.labelsize": 7, "legend.fontsize": 7, "pdf.fonttype": 42,
-          "text.hinting": "none"}  # fmt: skip
+          "svg.fonttype": "none", "text.hinting": "none"}  # fmt: skip
 """Text in points at the printed size (a scene figure is ``width`` inches wide: printed at
-that width, it shows them so), TrueType fonts embedded in PDF files (as journals ask), and
-text not hinted to a PNG's pixels: it takes the same width at every dpi as in a PDF or SVG,
-so that the layout (the legend's columns, the title's lines) is the same in each (hinted
-text at 120 dpi is up to 5 % wider than at 300)."""
+that width, it shows them so), TrueType fonts embedded in PDF files (as journals ask), an
+SVG's text kept as text (editable, not drawn as outlines), and text not hinted to a PNG's
+pixels: it takes the same width at every dpi as in a PDF or SVG, so that the layout (the
+legend's columns, the title's lines) is the same in each (hinted text at 120 dpi is up to
+5 % wider than at 300)."""
 
 
 def figure_format(out: str | Path) -> str:
@@ -83,8 +88,23 @@ def figure_format(out: str | Path) -> str:
 
 
 def agent_style(i: int) -> tuple[str, str]:
-    """Agent ``i``'s colour and position marker."""
+    """Player ``i``'s colour and position marker (``i`` counts the agents that are not the
+    ball: ``agent_styles``)."""
     return PALETTE[i % len(PALETTE)], MARKERS[(i // len(PALETTE)) % len(MARKERS)]
+
+
+def agent_styles(agent_type: np.ndarray | None, p: int) -> list[tuple[str, str, bool]]:
+    """Each of ``p`` agents' colour, position marker and whether it is the ball: the ball
+    (``agent_type == BALL``) ``BALL_COLOUR`` and a star, the others ``agent_style`` in turn,
+    counting only them (the ball takes no player's colour)."""
+    styles, player = [], 0
+    for i in range(p):
+        if agent_type is not None and int(agent_type[i]) == BALL:
+            styles.append((BALL_COLOUR, "*", True))
+        else:
+            styles.append((*agent_style(player), False))
+            player += 1
+    return styles
 
 
 HISTORY = "[P, T_h, 2] (agents, observed steps, x/y)"
@@ -305,7 +325,8 @@ def _halo(width: float) -> list:
 def _legend_handles(samples: str | None, ranks: Sequence[tuple[str, float, float]] = (),
                     ball: bool = False, truth: bool = True) -> list[Line2D]:  # fmt: skip
     """The legend's entries, all in ``NEUTRAL``: what each line style and marker means (the
-    ground truth's only where it is drawn, ``truth``)."""
+    ground truth's only where it is drawn, ``truth``); the ball's: its star and its dotted
+    history."""
     handles = [Line2D([], [], color=NEUTRAL, lw=2.0, marker="o", ms=3, label="history")]
     if truth:
         handles.append(Line2D([], [], color=NEUTRAL, lw=1.6, ls="--", marker="x", ms=5, mew=1.4,
@@ -317,32 +338,106 @@ def _legend_handles(samples: str | None, ranks: Sequence[tuple[str, float, float
     handles.append(Line2D([], [], color=NEUTRAL, ls="none", marker="o", ms=6, mfc="white",
                           mec="black", mew=0.6, label="last observed position"))  # fmt: skip
     if ball:
-        handles.append(Line2D([], [], color=NEUTRAL, ls="none", marker="*", ms=9, mfc="white",
-                              mec="black", mew=0.6, label="the ball"))  # fmt: skip
+        handles.append(Line2D([], [], color=NEUTRAL, lw=BALL_HISTORY["lw"], ls=BALL_HISTORY["ls"],
+                              marker="*", ms=10, mfc=BALL_COLOUR, mec="white", mew=0.8,
+                              label="the ball"))  # fmt: skip
     return handles
 
 
-def _draw_agent(ax, i: int, history: np.ndarray, future: np.ndarray | None, ball: bool,
-                label: bool = False) -> None:  # fmt: skip
+BALL_HISTORY = {"lw": 1.4, "ls": (0, (1.2, 1.2))}
+"""The ball's history: dotted, with no markers (a player's is solid with dots)."""
+LABEL_OFFSET = 6.0
+"""Points between an agent's last observed position and its number (``label_offset``)."""
+
+
+def label_offset(history: np.ndarray, down: bool = False,
+                 box: tuple[float, float, float, float] | None = None
+                 ) -> tuple[tuple[float, float], str, str]:  # fmt: skip
+    """Where an agent's number goes: its offset in points from the last observed position,
+    and the text's horizontal and vertical alignment. Away from its direction of motion (its
+    last move, or the last one it made where it has stopped): beside its path, on the side
+    that is up on the page (right for a vertical move), tilted back from the direction it
+    goes, so that the number sits neither on its history nor on its future. An agent that
+    never moves has it up and right. ``down``: the y axis points down the page (image
+    coordinates); ``box`` (x0, x1, y0, y1): the axes, from whose edge the number is turned
+    back inwards.
+
+    history [T_h, 2]."""
+    pts = history[np.isfinite(history).all(-1)]  # [T', 2]
+    motion = np.zeros(2)
+    if len(pts) >= 2:
+        steps = np.diff(pts, axis=0)  # [T'-1, 2]
+        size = np.linalg.norm(steps, axis=-1)  # [T'-1]
+        scale = max(1.0, float(np.abs(pts).max()))
+        moved = np.flatnonzero(size > 1e-9 * scale)
+        if len(moved):
+            motion = steps[moved[-1]] / size[moved[-1]]
+    if down:
+        motion[1] = -motion[1]  # on the page
+    if not motion.any():
+        way = np.array([0.78, 0.62])  # up and right
+    else:
+        side = np.array([-motion[1], motion[0]])  # a right angle to the motion
+        if side[1] < -1e-9 or (abs(side[1]) <= 1e-9 and side[0] < 0):
+            side = -side  # the side up the page (right for a vertical move)
+        way = side - 0.5 * motion
+        way /= np.linalg.norm(way)
+    if box is not None and len(pts):
+        x0, x1, y0, y1 = box
+        at = pts[-1]
+        near = 0.08
+        fx, fy = (at[0] - x0) / (x1 - x0), (at[1] - y0) / (y1 - y0)
+        if down:
+            fy = 1 - fy
+        if (fx > 1 - near and way[0] > 0) or (fx < near and way[0] < 0):
+            way[0] = -way[0]
+        if (fy > 1 - near and way[1] > 0) or (fy < near and way[1] < 0):
+            way[1] = -way[1]
+    ha = "left" if way[0] > 0.3 else "right" if way[0] < -0.3 else "center"
+    va = "bottom" if way[1] > 0.3 else "top" if way[1] < -0.3 else "center"
+    return (float(LABEL_OFFSET * way[0]), float(LABEL_OFFSET * way[1])), ha, va
+
+
+def _draw_agent(ax, i: int, history: np.ndarray, future: np.ndarray | None,
+                style: tuple[str, str, bool], label: bool = False, hollow: bool = False,
+                down: bool = False, box=None) -> None:  # fmt: skip
     """Agent ``i``'s history, its last observed position and (unless None) its ground truth,
     drawn over the samples: the ground truth last, with a white outline and its end marked,
-    so that a walker standing still shows it on top of its position marker.
+    so that a walker standing still shows it on top of its position marker. ``style``: its
+    colour, marker and whether it is the ball (``agent_styles``): the ball's history is
+    dotted, and its star, larger, lies over its ground truth with a white edge. ``label``:
+    its number beside it (``label_offset``; ``down`` and ``box`` as that takes them);
+    ``hollow``: its position marker smaller and open, so that samples that start there (an
+    agent standing still) show through it (the ranked panel).
 
     history [T_h, 2], future [T_f, 2]."""
-    c, m = agent_style(i)
-    ax.plot(history[:, 0], history[:, 1], color=c, lw=2.0, marker=m, ms=2.5, zorder=3,
-            gid=f"history-{i}")  # fmt: skip
-    ax.plot(*history[-1], marker="*" if ball else m, ms=10 if ball else 6.5, color=c, mec="black",
-            mew=0.6, ls="none", zorder=4, gid=f"position-{i}")  # fmt: skip
+    c, m, ball = style
+    if ball:
+        ax.plot(history[:, 0], history[:, 1], color=c, zorder=3, gid=f"history-{i}",
+                **BALL_HISTORY)  # fmt: skip
+    else:
+        ax.plot(history[:, 0], history[:, 1], color=c, lw=2.0, marker=m, ms=2.5, zorder=3,
+                gid=f"history-{i}")  # fmt: skip
+    if hollow:
+        ax.plot(*history[-1], marker=m, ms=9 if ball else 5, mfc="none", mec=c, mew=1.0,
+                ls="none", zorder=4, gid=f"position-{i}")  # fmt: skip
+    elif ball:  # over its ground truth (zorder 5, 6): the ball is what the eye looks for
+        ax.plot(*history[-1], marker=m, ms=13, color=c, mec="white", mew=1.0, ls="none",
+                zorder=6.5, gid=f"position-{i}")  # fmt: skip
+    else:
+        ax.plot(*history[-1], marker=m, ms=6.5, color=c, mec="black", mew=0.6, ls="none",
+                zorder=4, gid=f"position-{i}")  # fmt: skip
     if future is not None:
         gt = np.concatenate([history[-1:], future], 0)  # [T_f+1, 2]
         ax.plot(gt[:, 0], gt[:, 1], color=c, lw=1.6, ls="--", zorder=5, path_effects=_halo(3.2),
                 gid=f"truth-{i}")  # fmt: skip
         ax.plot(*gt[-1], marker="x", ms=5, mew=1.4, color=c, ls="none", zorder=6,
                 path_effects=_halo(3.0), gid=f"truth-end-{i}")  # fmt: skip
-    if label:
-        ax.annotate(str(i), history[-1], xytext=(5, 4), textcoords="offset points", fontsize=7,
-                    color=c, fontweight="bold", zorder=7, path_effects=_halo(2.0))  # fmt: skip
+    if label and np.isfinite(history[-1]).all():
+        offset, ha, va = label_offset(history, down, box)
+        ax.annotate(str(i), history[-1], xytext=offset, textcoords="offset points", fontsize=7,
+                    color=c, fontweight="bold", ha=ha, va=va, zorder=7, clip_on=True,
+                    path_effects=_halo(2.0), gid=f"number-{i}")  # fmt: skip
 
 
 NO_UNITS = (None, "", "unknown")
@@ -534,13 +629,16 @@ def plot_scene(
     max_samples: int | None = None,
     width: float | None = None,
     dpi: float | None = None,
+    numbers: bool = True,
+    selection: str = "",
 ) -> Path:
     """Write a figure of one scene, in the format ``out``'s suffix names (``FORMATS``).
 
     history [P, T_h, 2], future [P, T_f, 2] or None (no ground truth: ``predict_scene``'s
     output), pred [K, P, T_f, 2] or None; absolute coordinates; numpy arrays, lists or torch
-    tensors (on any device); agent_type [P] (``BALL`` draws a star). Shapes that do not fit
-    together are a ``DataError`` naming the argument and the shape expected
+    tensors (on any device); agent_type [P] (``BALL``: the ball, drawn in black with a star
+    and a dotted history; the players take the palette's colours, ``agent_styles``). Shapes
+    that do not fit together are a ``DataError`` naming the argument and the shape expected
     (``scene_arrays``). Each agent has its own colour (and,
     beyond ``len(PALETTE)`` agents, marker): history solid with dots, samples thin, the ground
     truth dashed on top with its end marked. ``limits``: ``auto`` (default: the samples that
@@ -550,7 +648,10 @@ def plot_scene(
     aspect); text is at its printed size, so 3.3 suits a paper's column; ``dpi``: a PNG's
     pixels per inch (default ``DPI``). A ``title`` is centred at the top, wrapped to the
     width (an empty one draws none). ``units`` None (or ``""``, ``unknown``): the axes are
-    titled without a unit (``axis_label``).
+    titled without a unit (``axis_label``). ``numbers``: each agent's number (its index)
+    beside its last observed position, away from its path (``label_offset``), as
+    ``plot_scene_scored`` numbers them. ``selection``: how the samples were kept, e.g.
+    ``kept 5 of 20 by score-facility``, said in the legend's samples entry.
     """
     figure_format(out)
     _check_size(width, dpi)
@@ -562,7 +663,8 @@ def plot_scene(
     if pred is not None and max_samples is not None:
         pred = pred[:max_samples]  # [K', P, T_f, 2]
     box = scene_limits(history, future, pred, limits)
-    ball = agent_type is not None and bool((agent_type == BALL).any())
+    styles = agent_styles(agent_type, p)
+    ball = any(s[2] for s in styles)
     aspect = (box[3] - box[2]) / (box[1] - box[0])
     w = SCENE_WIDTH if width is None else width
     with plt.rc_context(_STYLE):
@@ -575,17 +677,25 @@ def plot_scene(
             if pred is not None:
                 start = np.repeat(history[None, i, -1:], len(pred), 0)  # [K', 1, 2]
                 line = _joined(np.concatenate([start, pred[:, i]], 1))  # [K'(T_f+2), 2]
-                ax.plot(line[:, 0], line[:, 1], color=agent_style(i)[0], lw=0.8, alpha=0.45,
+                ax.plot(line[:, 0], line[:, 1], color=styles[i][0], lw=0.8, alpha=0.45,
                         zorder=1, gid=f"samples-{i}")  # fmt: skip
-            is_ball = agent_type is not None and int(agent_type[i]) == BALL
-            _draw_agent(ax, i, history[i], None if future is None else future[i], is_ball)
+            _draw_agent(ax, i, history[i], None if future is None else future[i], styles[i],
+                        label=numbers, down=y_down(units), box=box)  # fmt: skip
         _set_axes(ax, box, units)
         _title(fig, title, w)
-        samples = None if pred is None else f"samples ({len(pred)} per agent)"
+        samples = None
+        if pred is not None:
+            samples = (f"samples per agent: {selection}" if selection
+                       else f"samples ({len(pred)} per agent)")  # fmt: skip
         _legend_below(fig, _legend_handles(samples, ball=ball, truth=future is not None),
-                      "colour and marker: one agent", w)  # fmt: skip
+                      _agents_note(numbers), w)  # fmt: skip
         _fit_height(fig, [ax], dpi or DPI)
         return _save(fig, out, dpi, True)
+
+
+def _agents_note(numbers: bool) -> str:
+    """The legend's title: what an agent's colour and marker (and number) say."""
+    return "colour and marker: one agent" + (" (its number beside it)" if numbers else "")
 
 
 def _ordinal(n: int) -> str:
@@ -597,6 +707,22 @@ def rank_style(rank: int, top: int) -> tuple[float, float]:
     from 2.2 and opaque down to 1.0 and 0.4, by rank alone (not by the score's value)."""
     share = rank / max(top - 1, 1)
     return 2.2 - 1.2 * share, 1.0 - 0.6 * share
+
+
+def rank_entries(top: int, k: int) -> list[tuple[str, float, float]]:
+    """The legend's entries for the ranked samples, (label, line width, opacity): the best,
+    the 2nd and, for more, one entry for all the lower ranks (``3rd`` or ``3rd-20th``, drawn
+    as the last of them), so that 20 ranks take three entries, not twenty; K = 1: its one
+    sample."""
+    if k == 1:
+        return [("its one sample", *rank_style(0, 1))]
+    entries = [(f"{_ordinal(r + 1)} by score", *rank_style(r, top)) for r in range(min(top, 2))]
+    if top == 3:
+        entries.append(("3rd by score", *rank_style(2, top)))
+    elif top > 3:
+        entries.append((f"3rd\u2013{_ordinal(top)} by score",
+                        *rank_style(top - 1, top)))  # fmt: skip
+    return entries
 
 
 def scored_title(k: int, top: int, score_name: str = "diffusion score (ATS)") -> str:
@@ -637,15 +763,23 @@ def plot_scene_scored(
     top: int = 2,
     *,
     score_name: str = "diffusion score (ATS)",
+    direction: str = "higher = more human-like",
     agent_type: np.ndarray | None = None,
     limits="auto",
     width: float | None = None,
     dpi: float | None = None,
+    numbers: bool = True,
+    selection: str = "",
 ) -> Path:
     """Two panels, as the paper's Fig. 2: the ground truth alone, then each agent's ``top``
     samples by score (at most K), the best thickest and opaque, each next one thinner and
     lighter (by rank, as the legend says; ``rank_style``). The ranked panel's title says how
-    many of how many samples, ranked by ``score_name`` (``scored_title``).
+    many of how many samples, ranked by ``score_name`` (``scored_title``); the legend names
+    the best, the 2nd and the lower ranks in one entry (``rank_entries``), and says what
+    ranks them and which way (``direction``: the scores are higher-is-better, and a higher
+    ATS is a sample more human-like by the denoiser than its ground truth's level). In the
+    ranked panel each agent's position marker is small and open, so that the samples of an
+    agent standing still show through it.
 
     history [P, T_h, 2], future [P, T_f, 2], pred [K, P, T_f, 2], scores [K, P]: one number
     per sample and agent, HIGHER IS BETTER (each agent's ATS, ``ScoreResult.agent_ats``; a
@@ -653,13 +787,15 @@ def plot_scene_scored(
     ``residual`` [K] (one number per sample, summed over the agents, lower is better) is
     refused with that hint. Numpy arrays, lists or torch tensors (on any device); shapes that
     do not fit together are a ``DataError`` naming the argument and the shape expected.
-    agent_type [P] (``BALL`` draws a star). ``limits``:
+    agent_type [P] (``BALL``: the ball, black, with a star; ``agent_styles``). ``limits``:
     ``auto`` (default: every history and ground truth and the shown samples that do not run
     far out among their agent's K), ``all`` or (x0, x1, y0, y1). ``width``: the figure's
     width in inches (default ``SCORED_WIDTH``), exactly (its height follows the panels'
     aspect); below 5 the panels are stacked, one above the other, so that 3.3 suits a paper's
     column; ``dpi``: a PNG's pixels per inch (default ``DPI``). A ``title`` is centred at the
-    top, wrapped to the width (an empty one draws none).
+    top, wrapped to the width (an empty one draws none). ``numbers``: each agent's number
+    beside it in the ground truth panel (``label_offset``). ``selection``: how the K samples
+    were kept, e.g. ``kept 5 of 20 by score-facility``, said in the legend's title.
     """
     figure_format(out)
     _check_size(width, dpi)
@@ -681,7 +817,9 @@ def plot_scene_scored(
     far = np.take_along_axis(far_out(history, pred), order, 0)  # [top, P]
     box = scene_limits(history, future, shown, limits, far=far)
     aspect = (box[3] - box[2]) / (box[1] - box[0])
-    ball = agent_type is not None and bool((agent_type == BALL).any())
+    styles = agent_styles(agent_type, p)
+    ball = any(s[2] for s in styles)
+    down = y_down(units)
     w = SCORED_WIDTH if width is None else width
     stacked = w < 5
     with plt.rc_context(_STYLE):
@@ -696,15 +834,15 @@ def plot_scene_scored(
                                  figsize=(size[0], size[1] + 2.5), dpi=dpi or DPI,
                                  sharex=True, sharey=True, layout="constrained")  # fmt: skip
         for i in range(p):
-            c = agent_style(i)[0]
-            is_ball = agent_type is not None and int(agent_type[i]) == BALL
+            c = styles[i][0]
             for rank in range(top):
                 lw, alpha = rank_style(rank, top)
                 path = np.concatenate([history[i, -1:], shown[rank, i]], 0)  # [T_f+1, 2]
                 axes[1].plot(path[:, 0], path[:, 1], color=c, lw=lw, alpha=alpha,
                              zorder=2 - rank / top, gid=f"rank{rank}-{i}")  # fmt: skip
-            _draw_agent(axes[0], i, history[i], future[i], is_ball, label=True)
-            _draw_agent(axes[1], i, history[i], None, is_ball)
+            _draw_agent(axes[0], i, history[i], future[i], styles[i], label=numbers, down=down,
+                        box=box)  # fmt: skip
+            _draw_agent(axes[1], i, history[i], None, styles[i], hollow=True)
         axes[0].set_title("ground truth", fontsize=9)
         axes[1].set_title(scored_title(k, top, score_name), fontsize=9)
         for j, ax in enumerate(axes):
@@ -712,12 +850,13 @@ def plot_scene_scored(
             if stacked and j == 0:
                 ax.set_xlabel("")
                 ax.tick_params(labelbottom=False)
-        ranks = [(f"{_ordinal(r + 1)} by score", *rank_style(r, top)) for r in range(top)]
-        if k == 1:
-            ranks = [("its one sample", *rank_style(0, 1))]
+        note = _agents_note(numbers)
+        if k > 1:
+            note += f"\nline width and shade: rank by {score_name}, {direction}"
+        if selection:
+            note += f"\nsamples per agent: {selection}"
         _title(fig, title, w)
-        _legend_below(fig, _legend_handles(None, ranks, ball),
-                      "colour and marker: one agent (its number beside it)", w)  # fmt: skip
+        _legend_below(fig, _legend_handles(None, rank_entries(top, k), ball), note, w)
         _fit_height(fig, list(axes), dpi or DPI)
         return _save(fig, out, dpi, True)
 
