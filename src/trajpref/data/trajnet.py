@@ -14,6 +14,7 @@ are every agent with rows in those frames. Rows with a ``prediction_number`` are
 from __future__ import annotations
 
 import bisect
+import itertools
 import json
 import math
 import warnings
@@ -316,16 +317,19 @@ def _observed_frames(own: list[int], sid: int, p: int, s: int, e: int, t_hist: i
     ``DataError`` saying what is missing (``read_trajnet``). ``where``: the file and line."""
     t_total = t_hist + t_fut
     last = e - t_fut * step  # the last observed frame of a test scene
-    expected = range(s, last + 1, step)
-    if last < s or (last - s) % step or len(expected) < t_hist:
+    if last < s or (last - s) % step or (last - s) // step + 1 < t_hist:
         raise DataError(f"scene {sid}: its primary agent {p} has {len(own)} frames in {s}..{e}; "
                         f"a window needs {t_total}", *where)  # fmt: skip
+    expected = range(s, last + 1, step)  # lazy: a scene's span may be any size (e = 1e20)
     have = set(own)
-    missing = [f for f in expected if f not in have]
-    if missing:
+    n_missing = (last - s) // step + 1 - sum(1 for f in have if f in expected)
+    if n_missing:  # the first few found without listing a span that may not fit in memory
+        first = list(itertools.islice((f for f in expected if f not in have), 3))
+        more = f" and {n_missing - len(first)} more" if n_missing > len(first) else ""
+        shown_missing = f"frame{'s' if n_missing > 1 else ''} {', '.join(map(str, first))}{more}"
         raise DataError(f"scene {sid}: its primary agent {p} has {len(own)} frames in {s}..{e}; "
                         f"a window needs {t_total}, and an observation-only scene a row at every "
-                        f"frame {s}..{last} (step {step}): {_frames_text(missing)} missing",
+                        f"frame {s}..{last} (step {step}): {shown_missing} missing",
                         *where)  # fmt: skip
     after = [f for f in own if f > last]
     unshown = [f for f in after if not _is_shown(f, shown)]
