@@ -205,7 +205,7 @@ def timed_weights(name: str, entry: dict, record: Path, zoo_dir: Path) -> tuple[
 def _committed_hash(record: Path, file: Path) -> tuple[str | None, str]:
     """``model_hash`` of ``file`` as committed in the last commit that wrote ``record``, and
     that commit's short name; (None, "") when git cannot tell (no repository, ``record`` not
-    committed or changed since, ``file`` not tracked in that commit)."""
+    committed or changed since, ``file`` not tracked in that commit, a shallow clone)."""
 
     def git(*args: str) -> str:
         return subprocess.run(["git", "-C", str(record.parent), *args], check=True,
@@ -213,6 +213,8 @@ def _committed_hash(record: Path, file: Path) -> tuple[str | None, str]:
 
     try:
         top = Path(git("rev-parse", "--show-toplevel")).resolve()
+        if git("rev-parse", "--is-shallow-repository") == "true":
+            return None, ""  # its oldest commit is a graft: it would stand for older ones
         if git("status", "--porcelain", "--", str(record)):
             return None, ""  # the record has changed since its last commit
         commit = git("log", "-1", "--format=%h", "--", str(record))

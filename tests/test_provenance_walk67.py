@@ -166,6 +166,34 @@ def test_a_record_without_hashes_is_traced_to_the_files_committed_with_it(tmp_pa
     assert f"({first} in " in table and f"now {second})" in table
 
 
+@pytest.mark.skipif(shutil.which("git") is None, reason="needs git")
+def test_a_shallow_clone_does_not_trace_a_record_to_its_graft(tmp_path):
+    """The review of 622c5ae: in a clone of depth 1 the record's last commit is the graft,
+    which holds today's files, so an old timing read as today's weights' (the † marks went
+    away without a word). A shallow clone now cannot trace: unknown, said so."""
+    update = load_benchmark("update_readme")
+    repo = tmp_path / "repo"
+    zoo_dir, meta = repo / "zoo", repo / "meta"
+    subprocess.run(["git", "init", "-q", str(repo)], check=True)
+    git = ["git", "-C", str(repo), "-c", "user.name=t", "-c", "user.email=t@t"]
+
+    def commit(message):
+        subprocess.run([*git, "add", "-A"], check=True, capture_output=True)
+        subprocess.run([*git, "commit", "-qm", message], check=True, capture_output=True)
+
+    tiny_generator_file(zoo_dir / "d" / "generator.safetensors", seed=1)
+    _speed_record(meta, {})
+    commit("weights and their timing")
+    tiny_generator_file(zoo_dir / "d" / "generator.safetensors", seed=2)
+    commit("new weights, not timed")
+    shallow = tmp_path / "shallow"
+    subprocess.run(["git", "clone", "-q", "--depth", "1", f"file://{repo}", str(shallow)],
+                   check=True, capture_output=True)  # fmt: skip
+    table = update.speed_table(shallow / "meta", zoo_dir=shallow / "zoo")
+    assert "| 2.0 | 80.0 | 40.0x |" in table  # not marked as today's either: unknown
+    assert "unknown for `d/generator` (no hash recorded, and git cannot trace one)" in table
+
+
 def test_speed_records_the_hash_of_each_file_it_times(tmp_path, monkeypatch):
     speed = load_benchmark("speed")
     path = tmp_path / "d" / "generator.safetensors"
