@@ -16,9 +16,10 @@ meta/finetune_start_<dataset>_generator-long.json).
 
 ``--runs DIR`` and ``--results DIR`` put the run folders and the rows (with their ``meta/``)
 elsewhere (``benchmarks/reproduce.py --out`` uses them, so that its training leaves the
-repository as it is); ``--models DIR`` reads the start from ``DIR/<dataset>/`` instead of
-models/. ``--publish`` writes into the models folder, so with ``--runs`` or ``--results`` it
-needs ``--models`` too (a run kept out of the repository never publishes into it). A row's
+repository as it is); ``--models DIR`` reads the start from, and ``--publish`` writes into,
+``DIR/<dataset>/`` instead of models/. The three go together, all or none (benchmarks/paths.py):
+a run kept out of the repository neither publishes into its models nor adds rows of an
+unpublished start to its results (name the repository's own folder to mean it). A row's
 ``checkpoint`` is relative to the repository when the run folder lies inside it, otherwise
 absolute (readers join it to the repository's root, which keeps an absolute path as it is).
 """
@@ -32,6 +33,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from equal_budget import budget_of, row_budget
+from paths import add_elsewhere_options, require_all_or_none, shown
 
 from trajpref import io
 from trajpref.config import load_config, to_dict, uses_rl
@@ -47,13 +49,6 @@ from trajpref.train.run import finetune, finetune_run_config, finished
 from trajpref.train.stages import build_finetune_stage
 
 ROOT = Path(__file__).resolve().parent.parent
-
-
-def shown(path: Path) -> str:
-    """A path as rows and records name it: relative to the repository when it lies inside it
-    (the rows written so far), otherwise absolute (``ROOT / shown(p)`` is ``p`` either way)."""
-    path = Path(path).absolute()
-    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
 
 
 def main() -> None:
@@ -75,35 +70,19 @@ def main() -> None:
     parser.add_argument("--data-root", default=None)
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--samples", type=int, default=20)
-    parser.add_argument(
-        "--runs",
-        type=Path,
-        default=None,
-        metavar="DIR",
-        help="the folder of the run folders (default: the repository's runs/)",
-    )
-    parser.add_argument(
-        "--results",
-        type=Path,
-        default=None,
-        metavar="DIR",
-        help="where the rows (finetune_<dataset>[_<tag>].json) and meta/ go (default: the "
+    add_elsewhere_options(
+        parser,
+        runs="the folder of the run folders (default: the repository's runs/)",
+        results="where the rows (finetune_<dataset>[_<tag>].json) and meta/ go (default: the "
         "repository's benchmarks/results/)",
-    )
-    parser.add_argument(
-        "--models",
-        type=Path,
-        default=None,
-        metavar="DIR",
-        help="the published models: the start is read from, and --publish writes into, "
+        models="the published models: the start is read from, and --publish writes into, "
         "DIR/<dataset>/ (default: the repository's models/)",
     )
     parser.add_argument(
         "--publish",
         action="store_true",
         help="publish seed 0's model as <models>/<dataset>/<method>.safetensors (only for the "
-        "dataset's best method: docs/architecture.md, published models); with --runs or "
-        "--results it needs --models",
+        "dataset's best method: docs/architecture.md, published models)",
     )
     parser.add_argument(
         "--skip-done",
@@ -126,9 +105,7 @@ def main() -> None:
         help="only validate the start (meta/finetune_start_<dataset>.json)",
     )
     args = parser.parse_args()
-    if args.publish and args.models is None and (args.runs or args.results):
-        parser.error("--publish writes into the repository's models/: with --runs or --results "
-                     "name the folder to publish into with --models")  # fmt: skip
+    require_all_or_none(parser, args)
     args.runs = (args.runs or ROOT / "runs").absolute()
     args.results = (args.results or ROOT / "benchmarks" / "results").absolute()
     args.models = (args.models or ROOT / "models").absolute()
@@ -182,7 +159,7 @@ def main() -> None:
                 "min_ade", "min_fde", "joint_min_ade", "joint_min_fde", "max_ats",
                 "max_fts", "top1_recall_ats", "top5_recall_ats")},
             train_seconds=round(summary["train_seconds"], 1),
-            checkpoint=shown(best), model_hash=ckpt.model_hash(best),
+            checkpoint=shown(best, ROOT), model_hash=ckpt.model_hash(best),
             uses_score=uses_rl(cfg.finetune.method)
             and (cfg.finetune.policy_weight > 0 or cfg.finetune.value_weight > 0),
         )  # fmt: skip
@@ -219,7 +196,7 @@ def check_start(run: Path, start: Path) -> None:
     the start's weights hash in ``<run>/start.json``; a folder with fine-tuning files but no
     record, or with another hash, is an error (it would silently supply an old run's model)."""
     record = run / "start.json"
-    want = {"start": shown(start), "hash": ckpt.load(start)["hash"]}
+    want = {"start": shown(start, ROOT), "hash": ckpt.load(start)["hash"]}
     if record.is_file():
         have = json.loads(record.read_text())
         if have.get("hash") != want["hash"]:
@@ -277,7 +254,7 @@ def start_validation(args, start: Path) -> dict[str, float]:
     val = load_dataset(cfg.data.val_dataset or cfg.data.dataset, "val", args.data_root)
     stage = build_finetune_stage(cfg, ckpt.load(start), val, resolve_device(args.device))
     res = stage.validate()
-    meta = {"dataset": args.dataset, "start": shown(start),
+    meta = {"dataset": args.dataset, "start": shown(start, ROOT),
             "eval_max_scenes": cfg.finetune.eval_max_scenes, "val": res}  # fmt: skip
     path = start_meta(args.dataset, args.start, args.results)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -27,9 +27,10 @@ kept as ``pretrained-NAME``, its checkpoint named by the commit that holds its w
 
 ``--runs DIR``, ``--results DIR`` and ``--models DIR`` put the run folder (``DIR/<dataset>``),
 the rows and meta file, and the published checkpoints elsewhere (``benchmarks/reproduce.py
---out`` uses all three, so that its training leaves the repository as it is). The script
-publishes into the models folder unless ``--published``, so with ``--runs`` or ``--results``
-it needs ``--models`` too: a run kept out of the repository never publishes into it.
+--out`` uses all three, so that its training leaves the repository as it is). The three go
+together, all or none (benchmarks/paths.py): a run kept out of the repository never publishes
+into its models, and a generator published elsewhere never replaces its rows (name the
+repository's own folder to mean it).
 ``--keep-replaced`` names the repository's commits, so it takes none of the three. A row's
 ``checkpoint`` is relative to the repository when the file lies inside it, otherwise absolute.
 """
@@ -41,6 +42,8 @@ import json
 import subprocess
 from pathlib import Path
 
+from paths import add_elsewhere_options, require_all_or_none, shown
+
 from trajpref.config import load_config
 from trajpref.data import load_dataset
 from trajpref.evaluation import evaluate, time_predictors
@@ -50,13 +53,6 @@ from trajpref.train import read_metrics, train_stage
 from trajpref.train.run import finished
 
 ROOT = Path(__file__).resolve().parent.parent
-
-
-def shown(path: Path) -> str:
-    """A path as rows name it: relative to the repository when it lies inside it (the rows
-    written so far), otherwise absolute (``ROOT / shown(p)`` is ``p`` either way)."""
-    path = Path(path).absolute()
-    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
 
 
 def _train(args, run_dir: Path) -> None:
@@ -136,28 +132,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--dataset", required=True, help="config name under configs/")
     parser.add_argument("--run-dir", default=None, help="default <runs>/<dataset>")
-    parser.add_argument(
-        "--runs",
-        type=Path,
-        default=None,
-        metavar="DIR",
-        help="the folder of the default run folder (default: the repository's runs/)",
-    )
-    parser.add_argument(
-        "--results",
-        type=Path,
-        default=None,
-        metavar="DIR",
-        help="where the rows (pretrained_<dataset>[_VARIANT].json) and meta/ go (default: the "
-        "repository's benchmarks/results/)",
-    )
-    parser.add_argument(
-        "--models",
-        type=Path,
-        default=None,
-        metavar="DIR",
-        help="publish into (and with --published, re-measure from) DIR/<dataset>/ (default: "
-        "the repository's models/); needed with --runs or --results unless --published",
+    add_elsewhere_options(
+        parser,
+        runs="the folder of the default run folder (default: the repository's runs/)",
+        results="where the rows (pretrained_<dataset>[_VARIANT].json) and meta/ go (default: "
+        "the repository's benchmarks/results/)",
+        models="publish into (and with --published, re-measure from) DIR/<dataset>/ "
+        "(default: the repository's models/)",
     )
     parser.add_argument("--train", action="store_true", help="train (or resume) both stages")
     parser.add_argument("--data-root", default=None)
@@ -206,13 +187,11 @@ def main() -> None:
                      "--train-machine")  # fmt: skip
     if args.variant is not None and not args.variant.replace("-", "").isalnum():
         parser.error("--variant takes letters, digits and '-'")
+    require_all_or_none(parser, args)
     elsewhere = args.runs or args.results or args.models
     if args.keep_replaced is not None and elsewhere:
         parser.error("--keep-replaced keeps a row of the repository's published default: no "
                      "--runs, --results or --models")  # fmt: skip
-    if args.models is None and (args.runs or args.results) and not args.published:
-        parser.error("this publishes into the repository's models/: with --runs or --results "
-                     "name the folder to publish into with --models")  # fmt: skip
     runs = (args.runs or ROOT / "runs").absolute()
     results = (args.results or ROOT / "benchmarks" / "results").absolute()
     suffix = f"-{args.variant}" if args.variant else ""
@@ -291,7 +270,7 @@ def main() -> None:
             train_seconds=round(secs, 1) if secs is not None else None,
             ms_per_scene=round(ms, 3),
             uses_score=False,
-            checkpoint=shown(published),
+            checkpoint=shown(published, ROOT),
             model_hash=ckpt.model_hash(published, sampler_of(method)),
         ))  # fmt: skip
         print(f"{args.dataset} {method:>12}: minADE {res['min_ade']:.3f} minFDE "

@@ -22,6 +22,16 @@ def make_scene(num_agents: int, seed: int = 0, t_hist: int = 8, t_fut: int = 12)
     )
 
 
+def plot_arrays(p: int = 3, k: int = 5, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Random walks to draw: ``p`` agents' history ``[P, 8, 2]`` and future ``[P, 12, 2]``, and
+    ``k`` noisy predictions of that future ``[K, P, 12, 2]`` (the scene figures' tests)."""
+    rng = np.random.default_rng(seed)
+    hist = rng.normal(size=(p, 8, 2)).cumsum(1)  # [P, T_h, 2]
+    fut = hist[:, -1:] + rng.normal(size=(p, 12, 2)).cumsum(1)  # [P, T_f, 2]
+    pred = fut[None] + rng.normal(size=(k, p, 12, 2))  # [K, P, T_f, 2]
+    return hist, fut, pred
+
+
 def write_tracks(path: Path, rows: list[tuple]) -> Path:
     """Write ``frame agent x y`` rows, tab-separated like the ETH/UCY files."""
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -67,9 +67,8 @@ def test_finetune_writes_its_run_rows_and_start_record_where_it_is_told(
     went into the repository."""
     before = _files(repo)
     out = tmp_path / "out"
-    _finetune(
-        monkeypatch, repo, tiny_run, "--runs", str(out / "runs"), "--results", str(out / "results")
-    )
+    _finetune(monkeypatch, repo, tiny_run, "--runs", str(out / "runs"), "--results",
+              str(out / "results"), "--models", str(repo / "models"))  # fmt: skip
     assert _files(repo) == before  # the repository as it was
     assert not (repo / "runs").exists()
     run = out / "runs" / "walks-rlhf-s0"
@@ -98,7 +97,7 @@ def test_finetune_reads_its_start_from_models_and_publishes_only_where_told(
     elsewhere = ["--runs", str(out / "runs"), "--results", str(out / "results")]
     with pytest.raises(SystemExit):  # would publish into the repository's models/
         _finetune(monkeypatch, repo, tiny_run, *elsewhere, "--publish", "--no-start-validation")
-    assert "name the folder to publish into with --models" in capsys.readouterr().err
+    assert "--models missing" in capsys.readouterr().err
     models = out / "models"
     shutil.copytree(repo / "models", models)
     (repo / "models" / "walks" / "generator.safetensors").unlink()  # read from --models only
@@ -133,7 +132,7 @@ def test_pretrain_writes_its_rows_meta_and_models_where_it_is_told(
     elsewhere = ["--runs", str(out / "runs"), "--results", str(out / "results")]
     with pytest.raises(SystemExit):  # it publishes: not into the repository's models/
         _pretrain(monkeypatch, repo, *elsewhere)
-    assert "name the folder to publish into with --models" in capsys.readouterr().err
+    assert "--models missing" in capsys.readouterr().err
     with pytest.raises(SystemExit):  # names the repository's commits
         _pretrain(monkeypatch, repo, *elsewhere, "--models", str(out / "models"),
                   "--keep-replaced", "old")  # fmt: skip
@@ -256,3 +255,69 @@ def test_a_row_of_the_out_folder_replaces_the_repositorys_of_the_same_measuremen
         ("rlhf", 0.8, str(out / "results" / "finetune_walks.json")),
         ("rlhf-res", 0.7, "benchmarks/results/finetune_walks.json"),
     ]
+
+
+# ----------------------------------------------------- --runs, --results, --models: all or none
+# (walkthrough 67 review: ``--models`` alone still wrote the repository's rows and start
+# records, naming a start or a checkpoint outside it)
+
+
+SOME_BUT_NOT_ALL = [("models",), ("runs",), ("results",), ("runs", "models"), ("results", "models")]
+
+
+def _options(out: Path, names: tuple[str, ...]) -> list[str]:
+    return [arg for name in names for arg in (f"--{name}", str(out / name))]
+
+
+def test_pretrain_with_models_alone_is_refused_and_leaves_the_repository_as_it_is(
+    repo, tiny_run, tmp_path, monkeypatch, capsys
+):
+    """The review's reproducer (``--run-dir /tmp/fr --models /tmp/m``): HEAD's pretrain.py
+    published into /tmp/m and replaced the repository's ``pretrained`` row with that
+    checkpoint, and its meta/pretrained_walks.json."""
+    out = tmp_path / "out"
+    shutil.copytree(tiny_run, out / "fr")
+    before = _files(repo)
+    with pytest.raises(SystemExit) as exit_:
+        _pretrain(monkeypatch, repo, "--run-dir", str(out / "fr"), "--models", str(out / "m"))
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert "--runs, --results and --models go together" in err
+    assert "--runs and --results missing" in err
+    assert _files(repo) == before
+    assert not (out / "m").exists()
+
+
+@pytest.mark.parametrize("names", SOME_BUT_NOT_ALL, ids="+".join)
+@pytest.mark.parametrize("script", ["finetune", "pretrain"])
+def test_some_but_not_all_of_the_three_is_refused_naming_the_missing(
+    script, names, repo, tiny_run, tmp_path, monkeypatch, capsys
+):
+    """HEAD's finetune.py with ``--models`` alone read the start from there and wrote the
+    repository's meta/finetune_start_walks.json (an absolute start) and finetune_walks.json
+    (rows trained from an unpublished start); with ``--runs`` or ``--results`` alone it read
+    the repository's models (refused now too: one rule, the three or none)."""
+    out = tmp_path / "out"
+    shutil.copytree(tiny_run, out / "runs" / "walks")
+    shutil.copytree(repo / "models", out / "models")
+    before = _files(repo)
+    with pytest.raises(SystemExit) as exit_:
+        if script == "finetune":
+            _finetune(monkeypatch, repo, tiny_run, *_options(out, names))
+        else:
+            _pretrain(monkeypatch, repo, *_options(out, names))
+    assert exit_.value.code == 2
+    missing = [f"--{n}" for n in ("runs", "results", "models") if n not in names]
+    assert f"{' and '.join(missing)} missing" in capsys.readouterr().err
+    assert _files(repo) == before
+
+
+def test_a_folder_reached_through_dotdot_is_recorded_absolute(repo, tiny_run, monkeypatch):
+    """``shown`` (now benchmarks/paths.py, once a copy in each script) took ``repo/../out`` for
+    a path inside the repository and recorded ``../out/...``."""
+    out = repo / ".." / "out"
+    _finetune(monkeypatch, repo, tiny_run, "--runs", str(out / "runs"), "--results",
+              str(out / "results"), "--models", str(repo / "models"))  # fmt: skip
+    (row,) = json.loads((out / "results" / "finetune_walks.json").read_text())
+    assert row["checkpoint"] == str(repo.parent / "out" / "runs" / "walks-rlhf-s0"
+                                    / "finetune.safetensors")  # fmt: skip

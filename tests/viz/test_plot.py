@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 from PIL import Image
+from synthetic import plot_arrays
 
 from trajpref.errors import ConfigError
 from trajpref.viz import (
@@ -14,23 +15,15 @@ from trajpref.viz import (
 PNG = b"\x89PNG\r\n\x1a\n"
 
 
-def _scene(p=3, k=5):
-    rng = np.random.default_rng(0)
-    hist = rng.normal(size=(p, 8, 2)).cumsum(1)
-    fut = hist[:, -1:] + rng.normal(size=(p, 12, 2)).cumsum(1)
-    pred = fut[None] + rng.normal(size=(k, p, 12, 2))
-    return hist, fut, pred
-
-
 def test_plot_scene_writes_a_png(tmp_path):
-    hist, fut, pred = _scene()
+    hist, fut, pred = plot_arrays()
     out = plot_scene(hist, fut, pred, tmp_path / "a" / "s.png", "px", "t", np.array([0, 0, 1]))
     assert out.read_bytes()[:8] == PNG
     assert plot_scene(hist, fut, None, tmp_path / "n.png").read_bytes()[:8] == PNG
 
 
 def test_plot_scene_scored_writes_a_png(tmp_path):
-    hist, fut, pred = _scene()
+    hist, fut, pred = plot_arrays()
     scores = np.linspace(-1, 1, 15).reshape(5, 3)
     out = plot_scene_scored(hist, fut, pred, scores, tmp_path / "s.png", "m", "title")
     assert out.read_bytes()[:8] == PNG and out.stat().st_size > 5000
@@ -39,7 +32,7 @@ def test_plot_scene_scored_writes_a_png(tmp_path):
 
 
 def test_plot_panel_gives_every_panel_of_a_scene_the_same_frame(tmp_path):
-    hist, fut, pred = _scene()
+    hist, fut, pred = plot_arrays()
     limits = (-10.0, 10.0, -5.0, 5.0)
     a = plot_panel(hist, pred[:2], np.ones((2, 3)), tmp_path / "a.png", limits)
     b = plot_panel(hist, fut[None], np.zeros((1, 3)), tmp_path / "b.png", limits, dashed=True)
@@ -99,22 +92,6 @@ def test_a_tall_or_flat_scene_is_shown_in_a_readable_box(tmp_path, monkeypatch):
 # --- a paper author's figures (review of 2026-12: formats, limits, ranks, colours) ---
 
 
-@pytest.fixture
-def drawn(monkeypatch):
-    """The figures the plot functions make, kept when they are saved."""
-    import trajpref.viz.plot as plot
-
-    figs = []
-    original = plot._save
-
-    def keep(fig, out, *args, **kwargs):
-        figs.append(fig)
-        return original(fig, out, *args, **kwargs)
-
-    monkeypatch.setattr(plot, "_save", keep)
-    return figs
-
-
 def _lines(fig, prefix):
     return {line.get_gid(): line for ax in fig.axes for line in ax.get_lines()
             if (line.get_gid() or "").startswith(prefix)}  # fmt: skip
@@ -137,7 +114,7 @@ def _all_figures(hist, fut, pred, out):
 
 def test_every_figure_is_written_in_the_format_its_suffix_names(tmp_path):
     """A PNG was written into a .pdf or .svg name (LaTeX then failed on it)."""
-    hist, fut, pred = _scene()
+    hist, fut, pred = plot_arrays()
     for suffix, magic in ((".pdf", b"%PDF"), (".svg", b"<svg"), (".PNG", PNG)):
         for out in _all_figures(hist, fut, pred, tmp_path / f"f{suffix}"):
             head = out.read_bytes()[:400]
@@ -150,7 +127,7 @@ def test_every_figure_is_written_in_the_format_its_suffix_names(tmp_path):
 
 
 def test_dpi_sets_a_pngs_pixels_and_width_its_printed_size(tmp_path):
-    hist, fut, pred = _scene()
+    hist, fut, pred = plot_arrays()
     w1 = Image.open(plot_scene(hist, fut, pred, tmp_path / "a.png", dpi=100)).size[0]
     w2 = Image.open(plot_scene(hist, fut, pred, tmp_path / "b.png", dpi=200)).size[0]
     assert 1.9 < w2 / w1 < 2.1
@@ -166,7 +143,7 @@ def test_dpi_sets_a_pngs_pixels_and_width_its_printed_size(tmp_path):
 
 def test_a_far_out_sample_does_not_set_the_axes(tmp_path, drawn):
     """One sample 100 m out made the scene a small blob in the middle of the axes."""
-    hist, fut, pred = _scene(p=3, k=20)
+    hist, fut, pred = plot_arrays(p=3, k=20)
     pred[4, 1] += np.linspace(0, 100, 12)[:, None]  # [T_f, 2] one sample runs away
     plot_scene(hist, fut, pred, tmp_path / "a.png")
     plot_scene_scored(hist, fut, pred, np.eye(20, 3)[::-1] + (np.arange(20) == 4)[:, None],
@@ -186,7 +163,7 @@ def test_a_far_out_sample_does_not_set_the_axes(tmp_path, drawn):
 
 
 def test_max_samples_caps_the_samples_drawn_per_agent(tmp_path, drawn):
-    hist, fut, pred = _scene(p=3, k=20)
+    hist, fut, pred = plot_arrays(p=3, k=20)
     plot_scene(hist, fut, pred, tmp_path / "a.png", max_samples=4)
     for line in _lines(drawn[0], "samples-").values():
         xy = line.get_xydata()
@@ -198,7 +175,7 @@ def test_max_samples_caps_the_samples_drawn_per_agent(tmp_path, drawn):
 def test_the_ground_truth_is_drawn_over_the_samples_and_the_position_marker(tmp_path, drawn):
     """Twenty samples buried the dashed ground truth, and a walker standing still hid its
     ground truth under its position marker; its end is marked on top now."""
-    hist, fut, pred = _scene()
+    hist, fut, pred = plot_arrays()
     hist[0], fut[0] = hist[0, -1], hist[0, -1]  # standing still
     plot_scene(hist, fut, pred, tmp_path / "a.png")
     truth, ends = _lines(drawn[0], "truth-"), _lines(drawn[0], "truth-end-")
@@ -214,7 +191,7 @@ def test_agents_get_colour_blind_safe_colours_and_markers_beyond_the_palette(tmp
 
     from trajpref.viz.plot import PALETTE
 
-    hist, fut, pred = _scene(p=14, k=2)
+    hist, fut, pred = plot_arrays(p=14, k=2)
     plot_scene(hist, fut, pred, tmp_path / "a.png")
     marks = _lines(drawn[0], "position-")
     styles = {(to_hex(m.get_color()), m.get_marker()) for m in marks.values()}
@@ -226,7 +203,7 @@ def test_the_legend_is_neutral_and_explains_every_marker(tmp_path, drawn):
     """The legend's lines were agent 0's colour, and the ball's star had no entry."""
     from matplotlib.colors import to_hex
 
-    hist, fut, pred = _scene()
+    hist, fut, pred = plot_arrays()
     ball = np.array([0, 0, 1])
     plot_scene(hist, fut, pred, tmp_path / "a.png", agent_type=ball)
     plot_scene_scored(hist, fut, pred, np.zeros((5, 3)), tmp_path / "b.png", agent_type=ball)
@@ -244,7 +221,7 @@ def test_the_legend_is_neutral_and_explains_every_marker(tmp_path, drawn):
 def test_the_ranked_panel_shades_by_rank_and_says_what_it_shows(tmp_path, drawn):
     """The second-ranked sample was 0.97-1.0 opaque (shaded min-max over all K) and the
     title said top-2 whatever K was."""
-    hist, fut, pred = _scene(k=5)
+    hist, fut, pred = plot_arrays(k=5)
     scores = np.array([1.0, 0.99, -5, -6, -7])[:, None].repeat(3, 1)  # [K, P] two close
     plot_scene_scored(hist, fut, pred, scores, tmp_path / "a.png", score_name="S's ATS")
     ranked = drawn[0].axes[1]

@@ -11,36 +11,13 @@ import re
 import numpy as np
 import pytest
 from matplotlib.colors import to_hex, to_rgba
+from synthetic import plot_arrays
 
 import trajpref.cli as cli
 from trajpref.cli import main
 from trajpref.models import zoo
 from trajpref.viz import plot_scene, plot_scene_scored
 from trajpref.viz.plot import PALETTE
-
-
-def _scene(p=3, k=5):
-    rng = np.random.default_rng(0)
-    hist = rng.normal(size=(p, 8, 2)).cumsum(1)  # [P, T_h, 2]
-    fut = hist[:, -1:] + rng.normal(size=(p, 12, 2)).cumsum(1)  # [P, T_f, 2]
-    pred = fut[None] + rng.normal(size=(k, p, 12, 2))  # [K, P, T_f, 2]
-    return hist, fut, pred
-
-
-@pytest.fixture
-def drawn(monkeypatch):
-    """The figures the plot functions make, kept when they are saved."""
-    import trajpref.viz.plot as plot
-
-    figs = []
-    original = plot._save
-
-    def keep(fig, out, *args, **kwargs):
-        figs.append(fig)
-        return original(fig, out, *args, **kwargs)
-
-    monkeypatch.setattr(plot, "_save", keep)
-    return figs
 
 
 def _lines(ax, prefix):
@@ -57,7 +34,7 @@ def test_the_ball_is_black_on_top_of_its_ground_truth_and_takes_no_players_colou
         tmp_path, drawn):  # fmt: skip
     """NBA: the ball's star lay under its own dashed ground truth (zorder 4 < 5), and the ball
     (agent 0) took PALETTE[0], the blue of player 6; its history looked like a player's."""
-    hist, fut, pred = _scene(p=8)
+    hist, fut, pred = plot_arrays(p=8)
     ball = (np.arange(8) == 0).astype(int)
     plot_scene(hist, fut, pred, tmp_path / "a.png", agent_type=ball)
     plot_scene_scored(hist, fut, pred, np.zeros((5, 8)), tmp_path / "b.png", agent_type=ball)
@@ -90,7 +67,7 @@ def test_the_ranked_legend_has_three_rank_entries_and_says_which_way_the_score_r
         tmp_path, drawn):  # fmt: skip
     """--draw-samples 20 listed 20 entries (best ... 20th by score), a third of the figure,
     and nothing said that a higher ATS ranks first."""
-    hist, fut, pred = _scene(k=20)
+    hist, fut, pred = plot_arrays(k=20)
     scores = np.random.default_rng(2).normal(size=(20, 3))  # [K, P]
     plot_scene_scored(hist, fut, pred, scores, tmp_path / "a.png", top=20)
     legend = drawn[0].legends[0]
@@ -111,7 +88,7 @@ def test_the_ranked_legend_has_three_rank_entries_and_says_which_way_the_score_r
 def test_the_ranked_panel_shows_a_standing_agents_samples_through_its_marker(tmp_path, drawn):
     """An almost standing agent's best samples were drawn under its filled position marker
     (samples zorder <= 2, marker 4)."""
-    hist, fut, pred = _scene(k=4)
+    hist, fut, pred = plot_arrays(k=4)
     hist[0] = hist[0, -1] + 0.001 * np.arange(8)[:, None]  # [T_h, 2] almost still
     pred[:, 0] = hist[0, -1] + 0.02 * np.random.default_rng(3).normal(size=(4, 12, 2))
     plot_scene_scored(hist, fut, pred, np.zeros((4, 3)), tmp_path / "a.png")
@@ -163,7 +140,7 @@ def test_image_coordinates_turn_the_numbers_offset_with_the_page(tmp_path, drawn
 
 def test_svg_text_stays_text(tmp_path):
     """The SVG's text was drawn as outlines (no <text> element), so it could not be edited."""
-    hist, fut, pred = _scene()
+    hist, fut, pred = plot_arrays()
     svg = plot_scene(hist, fut, pred, tmp_path / "a.svg", title="Scene one").read_text()
     assert "<text" in svg and "Scene one" in svg
     svg = plot_scene_scored(hist, fut, pred, np.zeros((5, 3)), tmp_path / "b.svg").read_text()

@@ -10,6 +10,7 @@ import warnings
 import numpy as np
 import pytest
 from PIL import Image
+from synthetic import plot_arrays
 
 import trajpref.viz.plot as plot
 from trajpref.viz import plot_scene, plot_scene_scored
@@ -17,14 +18,6 @@ from trajpref.viz import plot_scene, plot_scene_scored
 FILE_TITLE = ("nba/test scene 0 (ATL_BOS_0021500389_3_314.96_312.36_a_long_file_name.txt@"
               "frame=0)\ncv, K=5, seed 0, sampler full, neighbour-radius 2; ranked by "
               "models/nba/denoiser.safetensors")  # fmt: skip
-
-
-def _scene(p=3, k=5):
-    rng = np.random.default_rng(0)
-    hist = rng.normal(size=(p, 8, 2)).cumsum(1)  # [P, T_h, 2]
-    fut = hist[:, -1:] + rng.normal(size=(p, 12, 2)).cumsum(1)  # [P, T_f, 2]
-    pred = fut[None] + rng.normal(size=(k, p, 12, 2))  # [K, P, T_f, 2]
-    return hist, fut, pred
 
 
 def page_width(path) -> float:
@@ -65,7 +58,7 @@ def laid_out(monkeypatch):
 def test_a_scene_figure_is_exactly_its_width_and_holds_everything(tmp_path, laid_out, width):
     """Both figures, with a long title (a file name with no space in it), 14 agents and the
     ball in the legend, stacked (below 5 inches) and side by side."""
-    hist, fut, pred = _scene(p=14)
+    hist, fut, pred = plot_arrays(p=14)
     ball = (np.arange(14) == 13).astype(int)
     scores = np.random.default_rng(1).normal(size=pred.shape[:2])  # [K, P]
     for suffix in (".png", ".pdf"):
@@ -88,7 +81,7 @@ def test_a_scene_figure_is_exactly_its_width_and_holds_everything(tmp_path, laid
 def test_every_format_is_the_width_asked_for(tmp_path, laid_out, scored, units):
     """PDF, SVG and PNG (at two dpi) of one figure: the width, and the same layout (text
     takes the same width at any dpi, so the height is the same too)."""
-    hist, fut, pred = _scene()
+    hist, fut, pred = plot_arrays()
     heights = []
     for name, dpi in (("f.pdf", None), ("f.svg", None), ("f100.png", 100), ("f300.png", 300)):
         out = tmp_path / name
@@ -115,7 +108,7 @@ def test_every_format_is_the_width_asked_for(tmp_path, laid_out, scored, units):
 def test_the_panels_fill_the_width_at_one_scale(tmp_path, laid_out):
     """No empty band beside or above the equal-aspect panels: each is as wide as the layout
     lets it be, and as tall as x and y at one scale make it."""
-    hist, fut, pred = _scene()
+    hist, fut, pred = plot_arrays()
     for limits in ((-20, 20, -1, 1), (-1, 1, -5, 5), "auto"):
         plot_scene(hist, fut, pred, tmp_path / "a.png", limits=limits, width=3.3)
         for width in (3.3, 7.0):
@@ -134,7 +127,7 @@ def test_the_panels_fill_the_width_at_one_scale(tmp_path, laid_out):
 
 def test_a_long_title_is_wrapped_not_cut_off_and_not_widening_the_page(tmp_path, laid_out):
     """(It had widened the saved canvas to the title's width, 2.5 times the figure's.)"""
-    hist, fut, pred = _scene()
+    hist, fut, pred = plot_arrays()
     title = "zara1/test scene 100, models/zara1/generator-long.safetensors, K=20; " * 3
     plot_scene(hist, fut, pred, tmp_path / "a.png", "m", title)
     plot_scene_scored(hist, fut, pred, np.zeros((5, 3)), tmp_path / "b.png", "m", title)
@@ -177,7 +170,7 @@ def test_wrapping_keeps_words_mathtext_and_dollars(tmp_path):
 def test_a_width_too_small_for_the_text_still_lays_out(tmp_path, laid_out):
     """At the least width, 1 inch, the legend is one column with its labels wrapped, and the
     layout does not give up (matplotlib warns when it does)."""
-    hist, fut, pred = _scene()
+    hist, fut, pred = plot_arrays()
     with warnings.catch_warnings():
         warnings.simplefilter("error", UserWarning)
         plot_scene_scored(hist, fut, pred, np.zeros((5, 3)), tmp_path / "a.png", "m",
