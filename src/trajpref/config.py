@@ -1037,12 +1037,19 @@ def config_entries(cfg: Any, prefix: str = "") -> list[tuple[str, Any, str]]:
     return out
 
 
+def _brief(value: Any, limit: int = 120) -> str:
+    """``repr(value)``, cut to ``limit`` characters: a config error names the value it got, and
+    a YAML file's aliases can make one of a few hundred bytes megabytes long."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[: limit - 3]}..."
+
+
 def _coerce(value: Any, hint: Any, name: str) -> Any:
     args = typing.get_args(hint)
     if typing.get_origin(hint) is Literal:
         if value not in args:
             options = ", ".join(repr(a) for a in args)
-            raise ConfigError(f"config {name} must be one of {options}, got {value!r}")
+            raise ConfigError(f"config {name} must be one of {options}, got {_brief(value)}")
         return value
     if value is None:
         if type(None) in args:
@@ -1054,16 +1061,21 @@ def _coerce(value: Any, hint: Any, name: str) -> Any:
             return value
         if isinstance(value, str) and value.lower() in ("true", "false", "1", "0", "yes", "no"):
             return value.lower() in ("true", "1", "yes")
-        raise ConfigError(f"config {name} must be true or false, got {value!r}")
+        raise ConfigError(f"config {name} must be true or false, got {_brief(value)}")
     if base in (int, float) and isinstance(value, bool):
-        raise ConfigError(f"config {name} must be {base.__name__}, got {value!r}")
+        raise ConfigError(f"config {name} must be {base.__name__}, got {_brief(value)}")
+    if base in (int, float, str) and isinstance(value, (list, tuple, dict, set)):
+        raise ConfigError(f"config {name} must be {base.__name__}, got a "
+                          f"{type(value).__name__}: {_brief(value)}")  # fmt: skip
     if base in (int, float, str):
         try:
             out = base(value)
         except (TypeError, ValueError):
-            raise ConfigError(f"config {name} must be {base.__name__}, got {value!r}") from None
+            raise ConfigError(
+                f"config {name} must be {base.__name__}, got {_brief(value)}"
+            ) from None
         if base is int and isinstance(value, float) and value != out:
-            raise ConfigError(f"config {name} must be an integer, got {value!r}")
+            raise ConfigError(f"config {name} must be an integer, got {_brief(value)}")
         return out
     return value
 

@@ -191,7 +191,7 @@ async def _read_json(request: Request, limit: int) -> Any:
             raise AnswerError(f"the body is limited to {limit} bytes", 413)
     try:
         return json.loads(body.decode("utf-8"))
-    except (ValueError, UnicodeDecodeError):
+    except (ValueError, UnicodeDecodeError, RecursionError):  # nested past Python's limit
         raise AnswerError("the body is not valid JSON", 400) from None
 
 
