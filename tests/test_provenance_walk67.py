@@ -143,18 +143,23 @@ def test_the_latency_table_marks_a_file_that_changed_since_it_was_timed(tmp_path
     assert "unknown for `d/generator` (no hash recorded, and git cannot trace one)" in table
 
 
-@pytest.mark.skipif(shutil.which("git") is None, reason="needs git")
-def test_a_record_without_hashes_is_traced_to_the_files_committed_with_it(tmp_path):
-    update = load_benchmark("update_readme")
-    repo = tmp_path / "repo"
-    zoo_dir, meta = repo / "zoo", repo / "meta"
+def _repository(repo: Path):
+    """A new git repository at ``repo`` and a function that commits everything in it."""
     subprocess.run(["git", "init", "-q", str(repo)], check=True)
     git = ["git", "-C", str(repo), "-c", "user.name=t", "-c", "user.email=t@t"]
 
-    def commit(message):
+    def commit(message: str) -> None:
         subprocess.run([*git, "add", "-A"], check=True, capture_output=True)
         subprocess.run([*git, "commit", "-qm", message], check=True, capture_output=True)
 
+    return repo, commit
+
+
+@pytest.mark.skipif(shutil.which("git") is None, reason="needs git")
+def test_a_record_without_hashes_is_traced_to_the_files_committed_with_it(tmp_path):
+    update = load_benchmark("update_readme")
+    repo, commit = _repository(tmp_path / "repo")
+    zoo_dir, meta = repo / "zoo", repo / "meta"
     first = tiny_generator_file(zoo_dir / "d" / "generator.safetensors", seed=1)
     _speed_record(meta, {})
     commit("weights and their timing")
@@ -172,15 +177,8 @@ def test_a_shallow_clone_does_not_trace_a_record_to_its_graft(tmp_path):
     which holds today's files, so an old timing read as today's weights' (the † marks went
     away without a word). A shallow clone now cannot trace: unknown, said so."""
     update = load_benchmark("update_readme")
-    repo = tmp_path / "repo"
+    repo, commit = _repository(tmp_path / "repo")
     zoo_dir, meta = repo / "zoo", repo / "meta"
-    subprocess.run(["git", "init", "-q", str(repo)], check=True)
-    git = ["git", "-C", str(repo), "-c", "user.name=t", "-c", "user.email=t@t"]
-
-    def commit(message):
-        subprocess.run([*git, "add", "-A"], check=True, capture_output=True)
-        subprocess.run([*git, "commit", "-qm", message], check=True, capture_output=True)
-
     tiny_generator_file(zoo_dir / "d" / "generator.safetensors", seed=1)
     _speed_record(meta, {})
     commit("weights and their timing")
