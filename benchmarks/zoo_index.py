@@ -115,6 +115,20 @@ LIMITS = {
     "validation (docs/pretraining.md). Our 8 + 12 split is not LED's 10 + 20, so LED's NBA "
     "numbers are not comparable; its minADE20 / minFDE20 average over all 11 agents of a "
     "window, the ball included.",
+    "nba/generator": "It reads each agent's positions in metres with x along the court's "
+    "94 ft (28.65 m) length and y across its 50 ft (15.24 m) width, as the rebound files have "
+    "them (any origin: a shifted scene gets the same futures, shifted), and `agent_type` (1 "
+    "the ball, 0 a player); no team, no court or basket position. Trained without rotation "
+    "(`data.rotate: false`, mirrored only), it reads a court turned 90 degrees (x and y "
+    "swapped) with no error or warning and predicts it worse: minADE20 0.210 -> 0.330 m "
+    "(+57 %) on 50 evenly spaced test scenes (2026-12-06). Over the players alone "
+    "(`trajpref evaluate --dataset nba --model nba/generator --agents persons`, as SocialVAE "
+    "counts its split) it is 0.180 / 0.322 m (0.59 / 1.06 ft), joint 0.420 / 0.939.",
+    "nba/denoiser": "As a scorer it reads the court's axes as its generator does (x along the "
+    "94 ft length, metres, any origin, `agent_type` 1 for the ball; no team, no court or "
+    "basket position) and was trained without rotation: with x and y swapped, the best of "
+    "`nba/generator`'s 20 samples by `rank_samples` changed in 50 of 50 evenly spaced test "
+    "scenes (2026-12-06), with no warning.",
     "denoiser": "As a scorer (`--scorer`, `TrajectoryScorer`) see docs/score.md: its ranking "
     "matches the paper's top-5 recall on zara1, is at chance on eth.",
 }

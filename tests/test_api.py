@@ -122,7 +122,7 @@ H, S = _walk()
         ([[1.0, 2.0], [3.0]], S, {}, r"history: expected an array of numbers"),
         (torch.zeros(2, 8, 2, dtype=torch.bool), S, {}, r"history: expected real numbers"),
         (H, S, {"agent_type": [0, 0, 0]}, r"agent_type: expected 2 integer flags \[P\]"),
-        (H, S, {"agent_type": [0.0, 1.0]}, r"agent_type: expected 2 integer flags"),
+        (H, S, {"agent_type": [0.0, 0.5]}, r"agent_type: expected 2 integer flags"),
         (H, S, {"agent_type": [0, 7]}, r"agent_type: flags must be 0 \(person\) or 1 \(ball\)"),
     ],
 )  # fmt: skip

@@ -85,7 +85,9 @@ def test_data_at_another_step_than_the_models_is_named_in_one_line(capsys, paced
     # in other units too
     code, _, err = _run(capsys, "evaluate", *base, "--time-step", "4", "--units", "ft")
     assert code == 0 and err == (f"trajpref: warning: {model} was trained on {logged}: this data "
-                                 "is in ft, the model's in m\n")  # fmt: skip
+                                 "is in ft, the model's in m (units are named, not converted: "
+                                 "multiply x and y by 0.3048 to give m before reading "
+                                 "them, and the futures, in m, by 3.281 for ft)\n")  # fmt: skip
 
 
 def test_a_published_model_on_timestamped_files_gets_their_interval(capsys, logged, tmp_path):

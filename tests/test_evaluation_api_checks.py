@@ -98,7 +98,11 @@ def test_data_in_other_units_warn_of_units_and_pace(tmp_path, zara1):
     data = load_dataset(str(_logged(tmp_path / "cm", 100.0)), "test", units="cm",
                         options=_every(4))  # fmt: skip
     messages, _ = _messages(evaluate, zara1, data, progress=False)
-    assert f"{ZARA1}: this data is in cm, the model's in m{WHO}" in messages
+    assert (
+        f"{ZARA1}: this data is in cm, the model's in m (units are named, not converted: "
+        f"multiply x and y by 0.01 to give m before reading them, and the futures, in m, "
+        f"by 100 for cm){WHO}"
+    ) in messages
     assert any(m.startswith("the model is given agents much faster than it was trained on")
                and m.endswith(WHO) for m in messages)  # fmt: skip
     messages, _ = _messages(predict_dataset, zara1, data, progress=False)

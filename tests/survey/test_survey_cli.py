@@ -178,7 +178,9 @@ def test_build_warns_as_evaluate_when_a_model_was_trained_in_other_units_or_step
                         "--min-gap", "0", "--device", "cpu", "--no-progress", "--out",
                         tmp_path / "study")  # fmt: skip
     assert code == 0
-    problems = ("this data is in ft, the model's in m; this data steps 0.1 s, the model's 0.4 s "
+    problems = ("this data is in ft, the model's in m (units are named, not converted: multiply "
+                "x and y by 0.3048 to give m before reading them, and the futures, in m, by "
+                "3.281 for ft); this data steps 0.1 s, the model's 0.4 s "
                 "(--time-step 4 reads it at the model's step)")  # fmt: skip
     assert err.splitlines() == [
         f"trajpref: warning: zara1/generator was trained on the zara1 fold (leave-one-out: the "

@@ -21,6 +21,7 @@ import numpy as np
 import torch
 
 from trajpref.data.registry import PIXEL_NAMES, SECONDS_STEPS, SPECS, check_frame_interval
+from trajpref.data.stats import METRES_PER_UNIT
 from trajpref.data.transforms import observed_pace
 from trajpref.errors import ConfigError
 from trajpref.metrics import METRE_UNITS
@@ -272,12 +273,28 @@ def timing_problems(model: dict, step: float | None, units: str | None,
     problems = []
     known = [u for u in (units, model["units"]) if u is not None and u not in UNKNOWN_UNITS]
     if len(known) == 2 and not same_units(*known):
-        problems.append(f"this data is in {units}, the model's in {model['units']}")
+        problems.append(f"this data is in {units}, the model's in {model['units']}"
+                        + _conversion_hint(units, model["units"]))  # fmt: skip
     if (step is not None and step > 0 and model["step"] is not None
             and not math.isclose(step, model["step"], rel_tol=0.01)):  # fmt: skip
         problems.append(f"this data steps {step:g} s, the model's {model['step']:g} s "
                         f"({hint(model)})")  # fmt: skip
     return problems
+
+
+def _conversion_hint(units: str, model_units: str) -> str:
+    """How to give data in ``units`` to a model in ``model_units`` where both are lengths that
+    ``METRES_PER_UNIT`` knows (ft and m, cm and m): the factor, since a unit name (``--units``,
+    ``units=``) is only compared, never applied. Empty otherwise (pixels: no fixed factor)."""
+    data = METRES_PER_UNIT.get(units.strip().lower())
+    own = METRES_PER_UNIT.get(model_units.strip().lower())
+    if data is None or own is None:
+        return ""
+    return (
+        f" (units are named, not converted: multiply x and y by {data / own:.4g} to give "
+        f"{model_units} before reading them, and the futures, in {model_units}, by "
+        f"{own / data:.4g} for {units})"
+    )
 
 
 def unstated_timing(model: dict, step_assumed: bool, units: str | None) -> list[str]:

@@ -451,22 +451,34 @@ def _require_array(name: str, value, shape: str) -> None:
 
 
 def _agent_types(value, p: int, device: torch.device, name: str = "agent_type") -> torch.Tensor:
+    """``value`` [P] as int64 flags on ``device`` (None: every agent a person). Integers, and
+    floats that are whole numbers (0.0 / 1.0: a pandas column read as float64), are flags;
+    booleans, other floats and non-numbers are a DataError naming the input's own dtype
+    (numpy's for an array or list, torch's for a tensor)."""
     if value is None:
         return torch.full((p,), AGENT_PERSON, dtype=torch.int64, device=device)
+    flags = f"{AGENT_PERSON} (person) or {AGENT_BALL} (ball)"
     try:
-        array = np.array(value.cpu() if isinstance(value, torch.Tensor) else value)  # a copy
+        tensor = isinstance(value, torch.Tensor)
+        array = value.detach().cpu().numpy().copy() if tensor else np.array(value)  # a copy
         types = torch.as_tensor(array)
     except (TypeError, ValueError) as exc:
         raise DataError(f"{name}: expected {p} integer flags [P] ({exc})") from None
+    dtype = value.dtype if isinstance(value, torch.Tensor) else array.dtype  # the input's own
     if types.dtype == torch.bool:  # True would read as 1, a ball
-        raise DataError(f"{name}: expected integer flags {AGENT_PERSON} (person) or "
-                        f"{AGENT_BALL} (ball), got booleans")  # fmt: skip
-    if tuple(types.shape) != (p,) or types.is_floating_point() or types.is_complex():
+        raise DataError(f"{name}: expected integer flags {flags}, got booleans")
+    if tuple(types.shape) != (p,) or types.is_complex():
         raise DataError(f"{name}: expected {p} integer flags [P], got {list(types.shape)} "
-                        f"of {types.dtype}")  # fmt: skip
-    if bool(((types != AGENT_PERSON) & (types != AGENT_BALL)).any()):
-        raise DataError(f"{name}: flags must be {AGENT_PERSON} (person) or "
-                        f"{AGENT_BALL} (ball), got {sorted(set(types.tolist()))}")  # fmt: skip
+                        f"of {dtype}")  # fmt: skip
+    if types.is_floating_point():  # 0.0 / 1.0 are flags; 0.5 or NaN is no type
+        whole = torch.isfinite(types) & (types == types.round())
+        if not bool(whole.all()):
+            bad = types[~whole][0].item()
+            raise DataError(f"{name}: expected {p} integer flags [P], {flags}; got {dtype} "
+                            f"values that are not whole numbers (the first, {bad:g}, at index "
+                            f"{int((~whole).nonzero()[0])})")  # fmt: skip
+    if bool(((types != AGENT_PERSON) & (types != AGENT_BALL)).any()):  # floats compared too
+        raise DataError(f"{name}: flags must be {flags}, got {sorted(set(types.tolist()))}")
     return types.to(device=device, dtype=torch.int64)
 
 
@@ -507,6 +519,38 @@ def warn_untyped(obj, call: str, stacklevel: int) -> None:
                   f"{obj.timing['trained_on']} with the ball flagged (agent_type {AGENT_BALL}) "
                   f"and its {'futures' if model else 'scores'} change with the flags: pass "
                   f"{how}, {AGENT_BALL} for the ball, {AGENT_PERSON} for a player",
+                  stacklevel=stacklevel)  # fmt: skip
+
+
+def warn_ball_count(obj, call: str, counts: list[tuple[int, int]], stacklevel: int) -> None:
+    """A ``UserWarning`` that ``call`` (``predict_scene``, ``predict_scenes``,
+    ``rank_samples``, ``select_for_scene``) was given agent types that flag no ball, or more
+    than one, in a scene, for a model or scorer trained with the ball flagged
+    (``reads_agent_types``: every scene of NBA's splits flags exactly one). ``counts``:
+    ``(scene index, balls flagged)`` of each scene with agents whose types were given;
+    nothing is said when each has one ball."""
+    odd = [(i, n) for i, n in counts if n != 1]
+    if not odd or not reads_agent_types(obj):
+        return
+    model = call.startswith("predict")
+    what = "model" if model else "scorer"
+    tail = (f"this {what} was trained on {obj.timing['trained_on']} with the ball flagged "
+            f"(agent_type {AGENT_BALL}; one in every scene of NBA's splits), so its "
+            f"{'futures' if model else 'scores'} of such a scene are of one it never saw: "
+            f"flag the ball {AGENT_BALL} and each player {AGENT_PERSON}")  # fmt: skip
+    if call != "predict_scenes":
+        n = odd[0][1]
+        found = "no ball" if n == 0 else f"{n} balls"
+        warnings.warn(f"{call}: agent_type flags {found} (agent_type {AGENT_BALL}) in this "
+                      f"scene; {tail}", stacklevel=stacklevel)  # fmt: skip
+        return
+    none = [i for i, n in odd if n == 0]
+    many = [i for i, n in odd if n > 1]
+    parts = [f"no ball in {len(none)}" if none else "",
+             f"two or more balls in {len(many)}" if many else ""]  # fmt: skip
+    first = ", ".join(f"histories[{i}]" for i, _ in odd[:3]) + (", ..." if len(odd) > 3 else "")
+    warnings.warn(f"{call}: agent_types flag {' and '.join(p for p in parts if p)} of the "
+                  f"{len(counts)} scenes given types ({first}); {tail}",
                   stacklevel=stacklevel)  # fmt: skip
 
 
@@ -561,6 +605,9 @@ def rank_samples(
                               units=units, allow_empty=True)  # fmt: skip
     if agent_type is None and batch.num_agents and reads_agent_types(scorer):
         warn_untyped(scorer, "rank_samples", stacklevel=3)  # the ball would rank as a player
+    if agent_type is not None and batch.num_agents:  # NBA's scorer: one ball a scene
+        balls = int((batch.agent_type == AGENT_BALL).sum())
+        warn_ball_count(scorer, "rank_samples", [(0, balls)], stacklevel=3)
     if batch.num_agents == 0:  # an empty view: every sample alike, a residual summed over none
         total = futs.new_zeros(futs.shape[0])  # [K]
         order = torch.arange(futs.shape[0], device=futs.device)  # [K] as they came
@@ -746,6 +793,12 @@ def _predict(model, histories: list, num_samples, agent_types: list, seed, frame
     untyped = any(t is None and len(h) for t, (h, _, _) in zip(agent_types, scenes, strict=True))
     if untyped and reads_agent_types(model):  # the ball would be read as a player
         warn_untyped(model, "predict_scene" if single else "predict_scenes", stacklevel=4)
+    if reads_agent_types(model):  # NBA's: one ball a scene
+        given = zip(agent_types, scenes, strict=True)
+        counts = [(i, int((t == AGENT_BALL).sum())) for i, (flags, (h, t, _)) in
+                  enumerate(given) if flags is not None and len(h)]  # fmt: skip
+        warn_ball_count(model, "predict_scene" if single else "predict_scenes", counts,
+                        stacklevel=4)  # fmt: skip
     if any(c is not None and len(c) for _, _, c in scenes) and not getattr(
             model, "reads_context", False):  # fmt: skip
         warnings.warn("this model reads no context-only neighbours (model.reads_context is "

@@ -40,9 +40,10 @@ from trajpref.score.scorer import (
     reads_agent_types,
     scene_batch,
     score_timesteps,
+    warn_ball_count,
     warn_untyped,
 )
-from trajpref.types import Batch
+from trajpref.types import AGENT_BALL, Batch
 
 Method = Literal["first", "random", "kmeans", "fps", "facility", "medoids", "top",
                  "score-first", "score-kmeans", "score-fps", "score-facility",
@@ -595,6 +596,9 @@ def select_for_scene(scorer: TrajectoryScorer, history, samples, cfg: SelectionC
                               units=units, allow_empty=True)  # pred [K, P, T_f, 2]  # fmt: skip
     if agent_type is None and batch.num_agents and cfg.uses_score and reads_agent_types(scorer):
         warn_untyped(scorer, "select_for_scene", stacklevel=3)  # the ball scored as a player
+    if agent_type is not None and batch.num_agents and cfg.uses_score:  # one ball a scene
+        balls = int((batch.agent_type == AGENT_BALL).sum())
+        warn_ball_count(scorer, "select_for_scene", [(0, balls)], stacklevel=3)
     if batch.num_agents == 0:  # an empty view: K' rows of no agent's indices
         if cfg.keep > pred.shape[0]:
             raise ConfigError(f"cannot keep {cfg.keep} of {pred.shape[0]} samples")
