@@ -902,7 +902,7 @@ def warn_untyped_data(checked: list[tuple[str, object]], dataset: TrajectoryData
     flagged ball in every scene, or models trained without flags, say nothing. ``tail`` ends
     the text (``check_trained_on``'s); returns whether it warned."""
     reader = next((name for name, obj in checked if reads_agent_types(obj)), None)
-    if reader is None or not len(dataset):
+    if reader is None or not dataset.scenes:
         return False
     if not any(bool((s.agent_type != AGENT_PERSON).any()) for s in dataset.scenes):
         warnings.warn(f"{reader} was trained with agent types (the ball flagged "
