@@ -74,3 +74,21 @@ def tiny_run(tmp_path_factory, tiny_cfg) -> Path:
     train_stage("diffusion", tiny_cfg, out, device="cpu", progress=False)
     train_stage("generator", tiny_cfg, out, device="cpu", progress=False)
     return out
+
+
+@pytest.fixture
+def plot_calls(monkeypatch) -> list:
+    """What ``trajpref plot`` (``cli.cmd_plot``) hands to the figure functions, as
+    ``(name, args, kwargs)`` per call; the figures are still written."""
+    import trajpref.cli as cli
+
+    calls = []
+    for name in ("plot_scene", "plot_scene_scored"):
+        original = getattr(cli, name)
+
+        def wrapper(*args, _name=name, _original=original, **kwargs):
+            calls.append((_name, args, kwargs))
+            return _original(*args, **kwargs)
+
+        monkeypatch.setattr(cli, name, wrapper)
+    return calls

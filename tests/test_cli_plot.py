@@ -12,7 +12,6 @@ import torch
 from PIL import Image
 from synthetic import write_tracks
 
-import trajpref.cli as cli
 from trajpref.cli import main
 from trajpref.metrics import min_ade_fde
 
@@ -29,22 +28,9 @@ def base(walks):
 
 
 @pytest.fixture
-def drawn(monkeypatch):
-    """What cmd_plot hands to the figure functions (they still write the figure)."""
-    calls = []
-
-    def keep(name):
-        original = getattr(cli, name)
-
-        def wrapper(*args, **kwargs):
-            calls.append((name, args, kwargs))
-            return original(*args, **kwargs)
-
-        monkeypatch.setattr(cli, name, wrapper)
-
-    keep("plot_scene")
-    keep("plot_scene_scored")
-    return calls
+def drawn(plot_calls):
+    """What cmd_plot hands to the figure functions (conftest's ``plot_calls``)."""
+    return plot_calls
 
 
 def test_plot_writes_the_format_its_suffix_names_at_the_dpi_and_width_given(capsys, base,

@@ -13,7 +13,6 @@ import pytest
 from matplotlib.colors import to_hex, to_rgba
 from synthetic import plot_arrays
 
-import trajpref.cli as cli
 from trajpref.cli import main
 from trajpref.models import zoo
 from trajpref.viz import plot_scene, plot_scene_scored
@@ -156,21 +155,6 @@ def _run(capsys, *argv):
     return code, out, err
 
 
-@pytest.fixture
-def handed(monkeypatch):
-    """What cmd_plot hands to the figure functions (they still write the figure)."""
-    calls = []
-    for name in ("plot_scene", "plot_scene_scored"):
-        original = getattr(cli, name)
-
-        def wrapper(*args, _name=name, _original=original, **kwargs):
-            calls.append((_name, args, kwargs))
-            return _original(*args, **kwargs)
-
-        monkeypatch.setattr(cli, name, wrapper)
-    return calls
-
-
 def _predicted(capsys, walks, tmp_path, flags, scene=0):
     """predict's samples of ``scene`` with ``flags`` [K', P, T_f, 2]."""
     npz = tmp_path / "p.npz"
@@ -181,14 +165,14 @@ def _predicted(capsys, walks, tmp_path, flags, scene=0):
     return z["pred"][:, z["scene"] == scene]
 
 
-def test_plot_keeps_k_prime_as_predict_keeps_them_and_says_so(capsys, walks, tmp_path, handed):
+def test_plot_keeps_k_prime_as_predict_keeps_them_and_says_so(capsys, walks, tmp_path, plot_calls):
     """plot had no --keep: a figure of the samples a selection keeps could not be made."""
     flags = ["--samples", "4", "--keep", "2", "--select", "facility", "--seed", "3"]
     want = _predicted(capsys, walks, tmp_path, flags)  # [2, P, T_f, 2]
     code, out, err = _run(capsys, "plot", "--dataset", walks, "--device", "cpu", "--no-progress",
                           *flags, "--out", tmp_path / "f.png")  # fmt: skip
     assert (code, err) == (0, ""), err
-    name, args, kwargs = handed[-1]
+    name, args, kwargs = plot_calls[-1]
     assert name == "plot_scene"
     np.testing.assert_allclose(args[2], want, atol=1e-6)
     assert "kept 2 of 4 by facility" in args[5]  # the title
@@ -199,7 +183,7 @@ def test_plot_keeps_k_prime_as_predict_keeps_them_and_says_so(capsys, walks, tmp
                         *flags, "--scorer", "zara1/denoiser", "--draw-samples", "5",
                         "--out", tmp_path / "g.png")  # fmt: skip
     assert code == 0, err
-    name, args, kwargs = handed[-1]
+    name, args, kwargs = plot_calls[-1]
     assert name == "plot_scene_scored" and args[2].shape[0] == 2 and args[7] == 2
     assert kwargs["selection"] == "kept 2 of 4 by facility"
     # the selection's checks are predict's
@@ -213,20 +197,20 @@ def test_plot_keeps_k_prime_as_predict_keeps_them_and_says_so(capsys, walks, tmp
 
 @pytest.mark.skipif("zara1/generator" not in zoo.published(),
                     reason="the package was built without its models")  # fmt: skip
-def test_plot_keep_chosen_draws_predicts_chosen_samples(capsys, walks, tmp_path, handed):
+def test_plot_keep_chosen_draws_predicts_chosen_samples(capsys, walks, tmp_path, plot_calls):
     flags = ["--model", "zara1/generator", "--keep", "3", "--chosen"]
     want = _predicted(capsys, walks, tmp_path, [*flags, "--max-scenes", "2"])
     code, _, err = _run(capsys, "plot", "--dataset", walks, "--device", "cpu", "--no-progress",
                         *flags, "--out", tmp_path / "f.png")  # fmt: skip
     assert code == 0, err  # (a warning: the synthetic data has no units)
-    _, args, kwargs = handed[-1]
+    _, args, kwargs = plot_calls[-1]
     np.testing.assert_allclose(args[2], want, atol=1e-5)
     assert kwargs["selection"] == "kept 3 of 20 by score-facility (chosen)"
     assert "kept 3 of 20 by score-facility (chosen)" in args[5]
 
 
-def test_plot_no_numbers(capsys, walks, tmp_path, handed):
+def test_plot_no_numbers(capsys, walks, tmp_path, plot_calls):
     code, _, err = _run(capsys, "plot", "--dataset", walks, "--device", "cpu", "--samples", "2",
                         "--no-progress", "--no-numbers", "--out", tmp_path / "f.png")  # fmt: skip
     assert code == 0, err
-    assert handed[-1][2]["numbers"] is False
+    assert plot_calls[-1][2]["numbers"] is False
