@@ -687,20 +687,13 @@ def shared_split(data: dict, info: DatasetInfo) -> tuple[str, tuple[str, str]] |
 
 
 def _overlap_text(name: str, split: str, what: str, where: str, advice: str) -> tuple[str, str]:
-    """``overlap_warning``'s warning and record, without warning."""
+    """The warning's text that ``name`` trained on (``split`` ``train``) or chose its epoch
+    on (``val``) these windows, ``what`` saying how, then ``advice``, and the form a result
+    records (``overlap``), ``where`` in its parentheses."""
     role = "trained on" if split == "train" else "chose its epoch on"
     kind = "training" if split == "train" else "validation"
     return (f"{name} {role} these windows: {what}, its {kind} data, so numbers on it are "
             f"{kind} numbers, not a test{advice}", f"{role} these windows ({where})")  # fmt: skip
-
-
-def overlap_warning(name: str, split: str, what: str, where: str, advice: str) -> str:
-    """The warning that ``name`` trained on (``split`` ``train``) or chose its epoch on
-    (``val``) these windows, ``what`` saying how, then ``advice``; returns the form a result
-    records (``overlap``), ``where`` in its parentheses."""
-    text, record = _overlap_text(name, split, what, where, advice)
-    warnings.warn(text, stacklevel=_user_level())
-    return record
 
 
 def _own_windows(name: str, data: dict, info: DatasetInfo, root: str | None,
