@@ -70,6 +70,7 @@ from trajpref.evaluation import (
     CLI_WORDS,
     check_trained_on,
     evaluate,
+    fold_notes,
     lineage_folds,
     predict_dataset,
     resolve_collision_radius,
@@ -1095,8 +1096,7 @@ def _check_fold_overlap(args) -> str | None:
                           "overlap in the result")  # fmt: skip
     warnings.warn(problem, stacklevel=2)
     tail = f" ({data})" if folder else ""
-    return "; ".join(f"{fold} {role} on {scenes}{tail}" + (f" (through {via})" if via else "")
-                     for role, _, fold, via in found)  # fmt: skip
+    return fold_notes([(role, fold, via) for role, _, fold, via in found], folds, tail)
 
 
 def _warn_model_and_scorer(args, ds) -> str | None:

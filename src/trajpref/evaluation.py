@@ -381,7 +381,14 @@ def fold_overlap_note(model: object, dataset: TrajectoryDataset,
     if not found:
         return None
     name = dataset.info.name
-    tail = "" if name in ETH_UCY else f" ({name})"
+    return fold_notes(found, folds, "" if name in ETH_UCY else f" ({name})")
+
+
+def fold_notes(found, folds, tail: str = "") -> str:
+    """The ``overlap`` record of fold findings ``found`` (``(role, fold, via)`` each) on the
+    data's ``folds``: ``zara2 model on zara1``, ``tail`` after the folds (a folder's path),
+    ``(through <via>)`` for a fold of the lineage; joined by ``; `` (Python's
+    ``fold_overlap_note`` and the CLI's ``evaluate --allow-overlap``)."""
     return "; ".join(f"{fold} {role} on {' and '.join(folds)}{tail}"
                      + (f" (through {via})" if via else "")
                      for role, fold, via in found)  # fmt: skip
