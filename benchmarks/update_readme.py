@@ -14,7 +14,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from row_hashes import timed_weights
+from row_hashes import timed_weights, untraceable
 from zoo_index import portable_command
 
 from trajpref.results import (
@@ -51,21 +51,17 @@ def _latest_equal_budget(row: dict, current: set[tuple[str, str]]) -> bool:
     return base in EQUAL_BUDGET and had and not newer
 
 
-def without_superseded(rows: list[dict], root: Path = ROOT) -> list[dict]:
+def without_superseded(rows: list[dict]) -> list[dict]:
     """``rows`` less those that a re-measurement supersedes: a row without a ``model_hash``
-    whose checkpoint file is gone (``models/eth/generator.pt`` of 2026-11-22, replaced by the
-    ``.safetensors`` files on 2026-11-23) beside a row of the same measurement (``ROW_KEY``)
-    that names a hash. ``merge_rows`` fills each field from the first row that has it, so the
-    undigested row's numbers would stand beside the re-measurement's (eth's full-sampler line
-    showed the minADE of 2026-11-22 and the maxATS of 2026-12-06)."""
+    whose checkpoint file is gone (``row_hashes.untraceable``: ``models/eth/generator.pt`` of
+    2026-11-22, replaced by the ``.safetensors`` files on 2026-11-23) beside a row of the same
+    measurement (``ROW_KEY``) that names a hash. ``merge_rows`` fills each field from the
+    first row that has it, so the undigested row's numbers would stand beside the
+    re-measurement's (eth's full-sampler line showed the minADE of 2026-11-22 and the maxATS
+    of 2026-12-06)."""
     hashed = {tuple(r[k] for k in ROW_KEY) for r in rows if r.get("model_hash")}
-
-    def gone(r: dict) -> bool:
-        path = r.get("checkpoint")
-        return bool(path) and not path.startswith("git show ") and not (root / path).is_file()
-
-    return [r for r in rows if r.get("model_hash") or not gone(r)
-            or tuple(r[k] for k in ROW_KEY) not in hashed]  # fmt: skip
+    return [r for r in rows
+            if not (untraceable(r) and tuple(r[k] for k in ROW_KEY) in hashed)]  # fmt: skip
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
