@@ -33,6 +33,7 @@ from post_hoc import with_model_setting
 from tqdm import tqdm
 
 from trajpref.data import load_dataset
+from trajpref.device import resolve_device
 from trajpref.evaluation import evaluate
 from trajpref.models import checkpoint as ckpt
 from trajpref.results import write_meta
@@ -116,8 +117,9 @@ def study_run(run: Path, args: argparse.Namespace) -> dict[str, Any]:
         if epoch not in logged:
             raise SystemExit(f"{path}: epoch {epoch} has no validation in the run's metrics log")
         predictor = ckpt.predictor_from_payload(with_settings(payload, settings))
-        res = evaluate(predictor.to(args.device).eval(), test, args.samples, args.seed,
-                       args.device, progress=False, collision_radius=None)  # fmt: skip
+        model = predictor.to(resolve_device(args.device)).eval()  # "auto" as evaluate reads it
+        res = evaluate(model, test, args.samples, args.seed, args.device, progress=False,
+                       collision_radius=None)  # fmt: skip
         epochs.append({"epoch": epoch, "val_score": logged[epoch]["val_score"],
                        "val_min_ade": logged[epoch]["val_min_ade"],
                        "val_min_fde": logged[epoch]["val_min_fde"],

@@ -56,6 +56,7 @@ from post_hoc import (
 
 from trajpref.data import load_dataset
 from trajpref.data.transforms import observed_pace
+from trajpref.device import resolve_device
 from trajpref.models import checkpoint as ckpt
 from trajpref.types import TrajectoryDataset
 
@@ -325,8 +326,8 @@ def merge_sweep_rows(stored: list[dict], new: list[dict]) -> list[dict]:
 def _clamped_metrics(args: argparse.Namespace, payload: dict, val, max_speed: float) -> dict:
     """Validation metrics of a generator payload with ``model.max_speed`` set."""
     predictor = ckpt.predictor_from_payload(with_model_setting(payload, "max_speed", max_speed))
-    return validation_metrics(predictor.to(args.device).eval(), val, args.samples, args.seed,
-                              args.device)  # fmt: skip
+    model = predictor.to(resolve_device(args.device)).eval()  # "auto" as evaluate reads it
+    return validation_metrics(model, val, args.samples, args.seed, args.device)
 
 
 def sweep_table(rows: list[dict], decision: dict) -> str:

@@ -37,6 +37,7 @@ from post_hoc import (
 )
 
 from trajpref.data import hold_out_scene, load_dataset
+from trajpref.device import resolve_device
 from trajpref.models import checkpoint as ckpt
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -60,8 +61,8 @@ def sweep(path: Path, split, args) -> dict[str, dict]:
     out = {}
     for gamma in (1.0, *CANDIDATES):
         predictor = ckpt.predictor_from_payload(with_model_setting(payload, "spread_scale", gamma))
-        out[str(gamma)] = validation_metrics(predictor.to(args.device).eval(), split,
-                                             args.samples, args.seed, args.device)  # fmt: skip
+        model = predictor.to(resolve_device(args.device)).eval()  # "auto" as evaluate reads it
+        out[str(gamma)] = validation_metrics(model, split, args.samples, args.seed, args.device)
     return out
 
 

@@ -19,6 +19,7 @@ import torch
 from post_hoc import study_parser, write_study
 
 from trajpref.data import load_dataset
+from trajpref.device import resolve_device
 from trajpref.evaluation import predict_dataset
 from trajpref.metrics import ade_fde
 from trajpref.models import checkpoint as ckpt
@@ -52,7 +53,7 @@ def main() -> None:
     rows = []
     for spec in args.models:
         payload = ckpt.load(spec)  # a published name or a file (checkpoint.resolve_path)
-        model = ckpt.predictor_from_payload(payload).to(args.device)
+        model = ckpt.predictor_from_payload(payload).to(resolve_device(args.device))
         dataset = payload["config"]["data"]["dataset"]
         data = load_dataset(dataset, args.split, args.data_root)
         arrays = predict_dataset(model, data, args.samples, args.seed, args.device, progress=False)

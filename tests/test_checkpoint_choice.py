@@ -5,6 +5,7 @@ import dataclasses
 import json
 
 import pytest
+import torch
 from bench import load_benchmark
 
 from trajpref.data import load_dataset
@@ -74,8 +75,10 @@ def test_the_script_evaluates_every_kept_epoch_with_the_published_settings(
     train_stage("generator", dataclasses.replace(tiny_cfg, generator=generator), run,
                 device="cpu", progress=False, denoiser=denoiser)  # fmt: skip
     monkeypatch.setattr(mod, "published_settings", lambda dataset, models: {"max_speed": 0.05})
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)  # --device auto: the CPU
     out, png = tmp_path / "choice.json", tmp_path / "choice.png"
-    assert mod.main([str(run), "--samples", "4", "--out", str(out), "--plot", str(png)]) == 0
+    assert mod.main([str(run), "--samples", "4", "--device", "auto", "--out", str(out),
+                     "--plot", str(png)]) == 0  # fmt: skip
     study = json.loads(out.read_text())["studies"][0]
     assert [e["epoch"] for e in study["epochs"]] == [1, 2, 3]
     assert png.is_file() and "by test minADE20" in capsys.readouterr().out

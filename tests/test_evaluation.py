@@ -68,3 +68,62 @@ def test_a_models_name_is_refused_before_any_work_with_how_to_load_it(capsys):
                            r"load_dataset\('hotel', split\)"):  # fmt: skip
             call(ConstantVelocity(), "hotel", progress=True)
     assert capsys.readouterr().err == ""  # no progress bar was drawn
+
+
+class OnDevice(Recorder):
+    """A Recorder whose weights are on ``device`` and that records the device of each batch."""
+
+    def __init__(self, name: str, log: list, device: str) -> None:
+        super().__init__(name, log)
+        self.device = torch.device(device)
+        self.seen: list[torch.device] = []
+
+    def predict(self, batch, num_samples, generator=None):
+        self.seen.append(batch.history.device)
+        return super().predict(batch, num_samples, generator)
+
+
+def test_each_predictor_is_given_its_batches_on_its_own_device(monkeypatch):
+    """The batches were built on the CPU and handed over as they were: on CUDA, a crash."""
+    from trajpref import evaluation
+
+    monkeypatch.setattr(evaluation, "pass_device",
+                        lambda model, device, call: torch.device("meta"))  # fmt: skip
+    model = OnDevice("a", [], "meta")
+    time_predictors({"a": model}, _dataset(3), 1, scenes=3, warmup=1)
+    assert model.seen == [torch.device("meta")] * 4  # the warm-up call, then 3 timed ones
+
+
+def test_a_predictor_on_a_device_it_cannot_run_on_is_refused_before_any_work():
+    log: list = []
+    with pytest.raises(ConfigError, match=r"time_predictors: the model's weights are on meta"):
+        time_predictors({"a": Recorder("a", log), "b": OnDevice("b", log, "meta")},
+                        _dataset(3), 1)  # fmt: skip
+    assert log == []
+
+
+def test_the_clock_is_read_after_the_gpu_has_finished(monkeypatch):
+    """CUDA calls return before the GPU is done: without a synchronize on each side of the
+    clock, one predictor's kernels were charged to the next one's time."""
+    from trajpref import evaluation
+
+    events: list = []
+    monkeypatch.setattr(evaluation, "_sync", lambda device: events.append(("sync", device)))
+    clock = evaluation.time.perf_counter
+    monkeypatch.setattr(evaluation.time, "perf_counter",
+                        lambda: events.append("clock") or clock())  # fmt: skip
+    time_predictors({"a": Recorder("a", [])}, _dataset(2), 1, scenes=2, warmup=0)
+    cpu = ("sync", torch.device("cpu"))
+    assert events == [cpu, "clock", cpu, "clock"] * 2
+
+
+def test_sync_waits_for_a_cuda_device_only(monkeypatch):
+    from trajpref import evaluation
+
+    calls: list = []
+    monkeypatch.setattr(torch.cuda, "synchronize", lambda device=None: calls.append(device))
+    evaluation._sync(torch.device("cpu"))
+    evaluation._sync(torch.device("meta"))
+    assert calls == []
+    evaluation._sync(torch.device("cuda:1"))
+    assert calls == [torch.device("cuda:1")]

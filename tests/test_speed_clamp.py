@@ -158,3 +158,18 @@ def test_checkpoints_need_a_sweep_and_a_reference(sc, monkeypatch, capsys):
     with pytest.raises(SystemExit) as exc:
         sc.main()
     assert exc.value.code == 2 and "the candidate, then the reference" in capsys.readouterr().err
+
+
+def test_clamped_metrics_take_the_device_auto(sc, tiny_run, walks, monkeypatch):
+    """``--device auto`` went to ``predictor.to`` as it was: a RuntimeError naming 'auto'."""
+    import argparse
+
+    import torch
+
+    from trajpref.data import load_dataset
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    args = argparse.Namespace(device="auto", samples=2, seed=0)
+    payload = ckpt.load(tiny_run / "generator.safetensors")
+    res = sc._clamped_metrics(args, payload, load_dataset(str(walks), "val"), 0.3)
+    assert res["min_fde"] > 0

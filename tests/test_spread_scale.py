@@ -51,3 +51,18 @@ def test_the_validation_guard_and_the_ade_guard_can_each_refuse(ss):
     assert not d["checks"]["every_val_min_fde"] and not d["apply"]
     d = ss.decide(_rows(ss, {1.2: -0.03}, ade={1.2: 0.02}))
     assert not d["checks"]["mean_held_out_min_ade"] and not d["apply"]
+
+
+def test_a_sweep_takes_the_device_auto(ss, tiny_run, walks, monkeypatch):
+    """``--device auto`` went to ``predictor.to`` as it was: a RuntimeError naming 'auto'."""
+    import argparse
+
+    import torch
+
+    from trajpref.data import load_dataset
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    args = argparse.Namespace(device="auto", samples=2, seed=0)
+    out = ss.sweep(tiny_run / "generator.safetensors", load_dataset(str(walks), "val"), args)
+    assert set(out) == {"1.0", *(str(g) for g in ss.CANDIDATES)}
+    assert all(row["min_fde"] > 0 for row in out.values())

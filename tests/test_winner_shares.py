@@ -23,3 +23,21 @@ def test_shares_count_the_nearest_sample_and_skip_unobserved_futures():
     # the shares do not depend on how far the losers are
     pred[1, :2] *= 10.0
     assert np.allclose(shares.winner_shares(pred, future)["fde_share"], [2 / 3, 1 / 3])
+
+
+def test_the_study_takes_the_device_auto(tiny_run, tmp_path, monkeypatch, capsys):
+    """``--device auto`` went to ``predictor.to`` as it was: a RuntimeError naming 'auto'."""
+    import json
+    import sys
+
+    import torch
+
+    shares = load_benchmark("winner_shares")
+    monkeypatch.setattr(shares, "OUT", tmp_path)
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    model = str(tiny_run / "generator.safetensors")
+    monkeypatch.setattr(sys, "argv", ["winner_shares.py", "--models", model, "--device", "auto",
+                                      "--samples", "2"])  # fmt: skip
+    shares.main()
+    rows = json.loads((tmp_path / "winner_shares_val.json").read_text())["rows"]
+    assert [r["model"] for r in rows] == [model] and rows[0]["agents"] > 0

@@ -33,8 +33,8 @@ from tqdm.auto import tqdm
 from trajpref.config import GeneratorTrainConfig
 from trajpref.data.trajnet import require_future
 from trajpref.data.transforms import to_model_frame
-from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, DataError
+from trajpref.evaluation import pass_device
 from trajpref.io import bar_options
 from trajpref.metrics import MetricAccumulator
 from trajpref.models.generator import Generator
@@ -251,10 +251,12 @@ def adapt_and_predict(
     ``torch.Generator().manual_seed(window_seed(seed, i))``, so a window's prediction does not
     depend on which other windows are predicted. ``progress``: a progress bar over the
     windows (a string: its label). ``device``: None, the model's; else as
-    ``trajpref.device.resolve_device`` takes it (``auto``, ``cpu``, ``cuda[:i]``)."""
+    ``trajpref.device.resolve_device`` takes it (``auto``, ``cpu``, ``cuda[:i]``). A model
+    whose weights are on another device than that (or on one this machine cannot compute on)
+    is a ``ConfigError`` before any work, as in ``evaluate`` (``evaluation.pass_device``)."""
     cfg = cfg or AdaptConfig()
     _check_model(model)
-    device = model.device if device is None else resolve_device(device)
+    device = pass_device(model, device, call="adapt_and_predict")
     ctx = context_windows(dataset, cfg)
     indices = list(range(len(dataset))) if indices is None else list(indices)
     for i in indices:

@@ -578,8 +578,9 @@ class OptimConfig:
     precision: Literal["fp32", "bf16"] = "fp32"
     """Arithmetic of the training steps' forward passes: ``fp32``, or ``bf16`` (autocast to
     bfloat16 on the stage's device; weights, optimiser state and validation stay float32).
-    bf16 is fast where the CPU has bfloat16 instructions (AVX512-BF16, AMX) or on a GPU;
-    elsewhere it can be slower (docs/pretraining.md, "bfloat16 training steps")."""
+    bf16 is fast where the CPU has bfloat16 instructions (AVX512-BF16, AMX) or on a GPU of
+    compute capability 8 or more (Ampere and later); elsewhere it can be slower
+    (docs/pretraining.md, "bfloat16 training steps")."""
     compile: bool = False
     """Compile the stage's networks with ``torch.compile`` (dynamic shapes) before its first
     step, at a one-off cost of minutes on a CPU; without a C++ compiler the stage trains

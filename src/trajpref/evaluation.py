@@ -1380,6 +1380,14 @@ def _id_text(ids: np.ndarray) -> np.ndarray:
     return ids.astype(str)
 
 
+def _sync(device: torch.device) -> None:
+    """Wait until ``device`` has finished the work queued on it: a CUDA call returns before
+    its kernels have run, so a clock read without this charges them to whatever comes next.
+    Nothing to wait for elsewhere."""
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
 @torch.no_grad()
 def time_predictors(
     predictors: dict[str, Predictor],
@@ -1391,20 +1399,30 @@ def time_predictors(
     """Milliseconds per scene of each predictor, timed side by side: the same ``scenes`` scenes
     (evenly spaced over the split), one scene per call, the predictors interleaved scene by
     scene so that a change in machine load hits them alike. ``warmup`` calls per predictor
-    come first and are not counted. Returns ``{name: ms}`` plus ``"scenes"``."""
+    come first and are not counted. Each predictor runs on its own device (``pass_device``:
+    a ``ConfigError`` before any work for one it cannot run on), its batches moved there
+    before the clock starts; on a GPU the clock is read once the GPU has finished
+    (``_sync``). Returns ``{name: ms}`` plus ``"scenes"``."""
     if not predictors:
         raise ConfigError("time_predictors needs at least one predictor")
     if scenes < 1 or len(dataset) == 0:
         raise ConfigError("time_predictors needs at least one scene")
-    batches = [collate([scene]) for scene in dataset.evenly_spaced(scenes)]
-    for model in predictors.values():
-        for b in batches[:warmup]:
+    devices = {name: pass_device(model, None, call="time_predictors")
+               for name, model in predictors.items()}  # fmt: skip
+    cpu_batches = [collate([scene]) for scene in dataset.evenly_spaced(scenes)]
+    batches = {d: [b.to(d) for b in cpu_batches] for d in set(devices.values())}
+    for name, model in predictors.items():
+        for b in batches[devices[name]][:warmup]:
             model.predict(b, num_samples, torch.Generator().manual_seed(0))
     total = dict.fromkeys(predictors, 0.0)
-    for i, batch in enumerate(batches):
+    for i in range(len(cpu_batches)):
         for name, model in predictors.items():
+            device = devices[name]
             gen = torch.Generator().manual_seed(i)
+            _sync(device)
             start = time.perf_counter()
-            model.predict(batch, num_samples, gen)
+            model.predict(batches[device][i], num_samples, gen)
+            _sync(device)
             total[name] += time.perf_counter() - start
-    return {name: 1000 * t / len(batches) for name, t in total.items()} | {"scenes": len(batches)}
+    scenes_timed = len(cpu_batches)
+    return {name: 1000 * t / scenes_timed for name, t in total.items()} | {"scenes": scenes_timed}

@@ -562,3 +562,15 @@ def test_a_predictor_built_from_a_payload_predicts_in_eval_mode(tiny_run):
     predictor = ckpt.predictor_from_payload(payload)
     assert any(isinstance(m, torch.nn.Dropout) for m in predictor.modules())
     assert not any(m.training for m in predictor.modules())
+
+
+def test_load_predictor_takes_auto_and_says_when_the_gpu_is_missing(tmp_path, cfg, monkeypatch):
+    """``device="auto"`` went to ``predictor.to`` as it was: a RuntimeError naming 'auto'."""
+    path = tmp_path / "d.safetensors"
+    ckpt.save(path, ckpt.denoiser_payload(_denoiser(cfg), cfg, scale=0.7, meta={}))
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    pred = ckpt.load_predictor(path, device="auto")
+    assert pred.device == torch.device("cpu") and not pred.training
+    assert pred.predict(collate([make_scene(2)]), 3).shape == (3, 2, 12, 2)
+    with pytest.raises(ConfigError, match="device 'cuda' requested but no CUDA GPU"):
+        ckpt.load_predictor(path, device="cuda")

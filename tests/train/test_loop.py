@@ -151,3 +151,93 @@ def test_the_budget_message_says_how_long_training_every_step_would_take(minutes
     from trajpref.train.loop import _duration
 
     assert _duration(minutes) == text
+
+
+def _saved_default_optimizer(shapes) -> dict:
+    """The state of PyTorch's default (not fused) AdamW after one step on CPU parameters."""
+    torch.manual_seed(0)
+    params = [torch.nn.Parameter(torch.randn(s)) for s in shapes]
+    opt = make_optimizer(params, OptimConfig(lr=1e-2))
+    for p in params:
+        p.grad = torch.randn_like(p)
+    opt.step()
+    return opt.state_dict()
+
+
+def test_a_resume_that_switches_fused_on_puts_each_step_on_its_parameters_device():
+    """A default AdamW keeps each parameter's ``step`` on the CPU, and torch's
+    ``load_state_dict`` leaves it there when the saved groups were not fused; the fused CUDA
+    kernel reads it on the GPU. ``meta`` stands for the GPU here."""
+    from trajpref.train.loop import resume_optimizer
+
+    shapes = [(8, 4), (8,)]
+    state = _saved_default_optimizer(shapes)
+    assert {s["step"].device.type for s in state["state"].values()} == {"cpu"}
+    fused = OptimConfig(lr=1e-2, fused=True)
+    params = [torch.nn.Parameter(torch.empty(s, device="meta")) for s in shapes]
+    opt = make_optimizer(params, fused)
+    resume_optimizer(opt, state, fused)
+    assert all(group["fused"] is True for group in opt.param_groups)  # the config decides
+    for p in params:
+        step = opt.state[p]["step"]
+        assert step.device == p.device and step.dtype == torch.float32
+    # on the CPU the step keeps its count, and a step after the resume runs
+    cpu = [torch.nn.Parameter(torch.randn(s)) for s in shapes]
+    opt = make_optimizer(cpu, fused)
+    resume_optimizer(opt, state, fused)
+    assert [float(opt.state[p]["step"]) for p in cpu] == [1.0, 1.0]
+    for p in cpu:
+        p.grad = torch.ones_like(p)
+    opt.step()
+    assert [float(opt.state[p]["step"]) for p in cpu] == [2.0, 2.0]
+    # switched off again: the groups follow the config
+    opt = make_optimizer(cpu, OptimConfig(lr=1e-2))
+    resume_optimizer(opt, state, OptimConfig(lr=1e-2))
+    assert all(group["fused"] is None for group in opt.param_groups)
+
+
+def test_a_run_resumed_with_fused_on_ends_where_the_uninterrupted_run_does(tmp_path, tiny_cfg):
+    """Up to float rounding (the fused arithmetic's, docs/pretraining.md, "Fused AdamW
+    steps"): the saved optimiser state carries over to the fused implementation."""
+    from trajpref.train.run import train_stage
+
+    full, stop = tmp_path / "full", tmp_path / "stop"
+    train_stage("diffusion", tiny_cfg, full, device="cpu", progress=False)
+    steps = torch.load(full / "denoiser_last.pt", weights_only=True)["step"]
+    train_stage("diffusion", tiny_cfg, stop, device="cpu", progress=False, max_steps=steps // 2)
+    fused = dataclasses.replace(tiny_cfg, denoiser=dataclasses.replace(tiny_cfg.denoiser,
+                                                                       fused=True))  # fmt: skip
+    train_stage("diffusion", fused, stop, device="cpu", progress=False,
+                resume=str(stop / "denoiser_last.pt"))  # fmt: skip
+    a = torch.load(full / "denoiser_last.pt", weights_only=True)
+    b = torch.load(stop / "denoiser_last.pt", weights_only=True)
+    assert a["step"] == b["step"]
+    assert b["optimizer"]["param_groups"][0]["fused"] is True
+    assert {s["step"].device.type for s in b["optimizer"]["state"].values()} == {"cpu"}
+    for key, value in a["trainable"].items():
+        torch.testing.assert_close(b["trainable"][key], value, rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.parametrize(("capability", "fast"), [((7, 5), False), ((8, 0), True),
+                                                  ((9, 0), True), ((6, 1), False)])  # fmt: skip
+def test_bf16_is_fast_on_ampere_and_later_gpus_only(monkeypatch, capability, fast):
+    """A GPU before Ampere (compute capability 8) has no bfloat16 arithmetic: autocast
+    emulates it, slower than float32 (a T4 is 7.5, a V100 7.0)."""
+    from trajpref.train import loop
+
+    asked: list = []
+    monkeypatch.setattr(torch.cuda, "get_device_capability",
+                        lambda device=None: asked.append(device) or capability)  # fmt: skip
+    assert loop.bf16_is_fast(torch.device("cuda:0")) is fast
+    assert asked == [torch.device("cuda:0")]
+
+
+def test_a_pre_ampere_gpu_is_warned_about_bf16_in_its_own_words(monkeypatch):
+    from trajpref.train import loop
+
+    monkeypatch.setattr(torch.cuda, "get_device_capability", lambda device=None: (7, 0))
+    note = loop.bf16_note("denoiser", torch.device("cuda"))
+    assert note is not None and "compute capability 7.0" in note and "CPU" not in note
+    assert "--set denoiser.precision=fp32" in note
+    monkeypatch.setattr(torch.cuda, "get_device_capability", lambda device=None: (8, 6))
+    assert loop.bf16_note("denoiser", torch.device("cuda")) is None

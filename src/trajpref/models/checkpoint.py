@@ -29,6 +29,7 @@ from safetensors import SafetensorError
 from safetensors.torch import load_file, save_file
 
 from trajpref.config import USES_RL, ExperimentConfig, experiment_from_dict, to_dict
+from trajpref.device import resolve_device
 from trajpref.diffusion.schedule import DDPMSchedule
 from trajpref.errors import TrajprefError
 from trajpref.io import atomic_path, load_tensors, read_checkpoint_header, resume_state_message
@@ -568,6 +569,8 @@ def untouched_rng():
 def load_predictor(path: str | Path, *, sampler: Sampler | None = None, device: Any = "cpu"):
     """A ``DiffusionPredictor`` from a checkpoint file, on ``device``, in eval mode.
 
+    ``device`` as ``trajpref.device.resolve_device`` takes it (``auto``: CUDA when available,
+    else the CPU; a device this machine lacks is a ``ConfigError`` before the file is read).
     ``sampler`` and ``device`` are keyword-only, as in ``registry.load_predictor``, so that the
     two functions cannot be called with their arguments in different orders. The predictor
     carries its training data's step and units (``models.timing.attach_timing``:
@@ -578,6 +581,7 @@ def load_predictor(path: str | Path, *, sampler: Sampler | None = None, device: 
     """
     from trajpref.models.timing import attach_timing
 
+    device = resolve_device(device)  # "auto" as the CLI reads it; a missing GPU in one line
     payload = load(path)
     with untouched_rng():  # a planner's torch.manual_seed stream is not moved by loading
         predictor = predictor_from_payload(payload, sampler)

@@ -202,6 +202,26 @@ def make_optimizer(params: list[nn.Parameter], cfg: OptimConfig) -> torch.optim.
                              fused=fused_flag(cfg))  # fmt: skip
 
 
+def resume_optimizer(optimizer: torch.optim.AdamW, saved: dict[str, Any],
+                     cfg: OptimConfig) -> None:  # fmt: skip
+    """Load a resume state's optimiser state into ``optimizer``, in the implementation ``cfg``
+    names (``fused_flag``), not the one the state was saved with. PyTorch's default AdamW
+    keeps each parameter's ``step`` on the CPU, and ``load_state_dict`` leaves it there when
+    the saved groups were not fused; the fused kernel reads it on the parameter's device (a
+    CUDA kernel cannot read a CPU tensor), so a fused group's steps are moved there as float32,
+    as ``load_state_dict`` does for a state saved fused. Their counts are kept."""
+    optimizer.load_state_dict(saved)
+    fused = fused_flag(cfg)
+    for group in optimizer.param_groups:  # the state brings its own; the config decides
+        group["fused"] = fused
+        if not fused:
+            continue
+        for param in group["params"]:
+            step = optimizer.state.get(param, {}).get("step")
+            if isinstance(step, torch.Tensor):
+                optimizer.state[param]["step"] = step.to(device=param.device, dtype=torch.float32)
+
+
 def _lr_lambda(
     cfg: OptimConfig, total: int, budget_share: Callable[[], float] | None = None
 ) -> Callable[[int], float]:
@@ -443,16 +463,35 @@ def can_compile(device: torch.device) -> bool:
 
 
 def bf16_is_fast(device: torch.device) -> bool:
-    """Whether bfloat16 steps can be expected to beat float32 on ``device``: a GPU, or a CPU
-    whose oneDNN build finds bfloat16 instructions (AVX512-BF16, AMX). Without them autocast
-    emulates bfloat16 and a step is several times slower (docs/pretraining.md, "bfloat16
-    training steps": 7x on an AVX2-only AMD EPYC)."""
+    """Whether bfloat16 steps can be expected to beat float32 on ``device``: a CUDA GPU of
+    compute capability 8 or more (Ampere and later; before it, a T4's 7.5 or a V100's 7.0,
+    bfloat16 is emulated), another GPU, or a CPU whose oneDNN build finds bfloat16
+    instructions (AVX512-BF16, AMX). Without them autocast emulates bfloat16 and a step is
+    several times slower (docs/pretraining.md, "bfloat16 training steps": 7x on an AVX2-only
+    AMD EPYC)."""
+    if device.type == "cuda":
+        return torch.cuda.get_device_capability(device)[0] >= 8
     if device.type != "cpu":
         return True
     try:
         return bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
     except (AttributeError, RuntimeError):  # a build without the probe: assume it is
         return True
+
+
+def bf16_note(stage: str, device: torch.device) -> str | None:
+    """The line a stage with ``precision="bf16"`` prints where bfloat16 is slow on ``device``
+    (``bf16_is_fast``), None where it is not."""
+    if bf16_is_fast(device):
+        return None
+    if device.type == "cuda":
+        major, minor = torch.cuda.get_device_capability(device)
+        why = (f"this GPU (compute capability {major}.{minor}, before Ampere's 8.0) has no "
+               "bfloat16 arithmetic")  # fmt: skip
+    else:
+        why = "this CPU has no bfloat16 instructions (AVX512-BF16, AMX)"
+    return (f"[{stage}] precision bf16: {why}, so bf16 steps run several times slower than "
+            f"fp32 here; --set {stage}.precision=fp32 trains faster")  # fmt: skip
 
 
 def precision_autocast(device: torch.device, precision: str) -> torch.autocast:
@@ -573,11 +612,16 @@ def fit(
     process, other random draws. The log's ``train_*`` values and ``samples_per_second`` are
     the whole batches', summed over the ranks; each rank's random generators are saved, and a
     resume restores each rank's own: the loop's noise and augmentation generators and torch's
-    own (``torch_generators``, which dropout draws from), so that a resumed run ends bit for
-    bit where an uninterrupted one does. A time budget (``max_minutes``) is the busiest rank's:
-    each rank reads its own clock (``budget_clock`` cpu: its own process's CPU time), the
-    ranks stop together when one has spent the budget, and the seconds recorded (the log's
-    ``budget_<clock>_seconds``, the resume state's ``spent``) are the largest over the ranks.
+    own (``torch_generators``, which dropout draws from), so that on the CPU a resumed run
+    ends bit for bit where an uninterrupted one does (at the same thread count and with the
+    same ``precision``, ``compile`` and ``fused``). On a GPU it ends close to it, not bit for
+    bit: nothing calls ``torch.use_deterministic_algorithms``, and CUDA kernels that add with
+    atomics (scatters, some backward passes) or that cuBLAS / cuDNN pick per run can round
+    differently each time, as two uninterrupted GPU runs of one seed can differ. A time
+    budget (``max_minutes``) is the busiest rank's: each rank reads its own clock
+    (``budget_clock`` cpu: its own process's CPU time), the ranks stop together when one has
+    spent the budget, and the seconds recorded (the log's ``budget_<clock>_seconds``, the
+    resume state's ``spent``) are the largest over the ranks.
     """
     dist_info = dist_info or DistInfo()
     out_dir = Path(out_dir)
@@ -617,9 +661,7 @@ def fit(
         where = "(state)" if isinstance(resume, dict) else resume
         check_resume_matches(state, stage.trainable, where, optim_cfg.ema_epochs > 0)
         stage.trainable.load_state_dict(state["trainable"])
-        optimizer.load_state_dict(state["optimizer"])
-        for group in optimizer.param_groups:  # the state brings its own; the config decides
-            group["fused"] = fused_flag(optim_cfg)
+        resume_optimizer(optimizer, state["optimizer"], optim_cfg)
         sched.load_state_dict(state["scheduler"])
         own = _rank_generators(state, dist_info.rank)
         if own is not None:  # a rank the state's run did not have keeps its seeded start
@@ -642,10 +684,9 @@ def fit(
     elif optim_cfg.compile and main:
         tqdm.write(f"[{stage.name}] compile: no C++ compiler on this machine (CXX, c++, g++, "
                    "clang++); training without compiling")  # fmt: skip
-    if optim_cfg.precision == "bf16" and main and not bf16_is_fast(device):
-        tqdm.write(f"[{stage.name}] precision bf16: this CPU has no bfloat16 instructions "
-                   "(AVX512-BF16, AMX), so bf16 steps run several times slower than fp32 "
-                   f"here; --set {stage.name}.precision=fp32 trains faster")  # fmt: skip
+    slow = bf16_note(stage.name, device) if optim_cfg.precision == "bf16" and main else None
+    if slow is not None:
+        tqdm.write(slow)
     objective: nn.Module = stage.objective
     if dist_info.enabled:
         device_ids = [device] if device.type == "cuda" else None
