@@ -165,6 +165,14 @@ CASES: dict[str, tuple[list[str], str]] = {
                          r"no such config file"),
     "invalid YAML": ([*TRAIN, "--config", "{in}/bad.yaml", "--out", "{out}/run"],
                      r"bad\.yaml: not valid YAML"),
+    "--set text of YAML's own characters": (
+        [*TRAIN, "--set", "data.delimiter=,", "--out", "{out}/run"],
+        r"--set data\.delimiter=,: not valid YAML \(ParserError\); a text holding YAML's own "
+        r"characters goes in quotes: --set 'data\.delimiter=\",\"'"),
+    "--set text YAML reads as empty": (
+        [*TRAIN, "--set", "data.delimiter=|", "--out", "{out}/run"],
+        r"--set data\.delimiter=\|: YAML reads '\|' as the empty text; to mean those "
+        r"characters, quote them: --set 'data\.delimiter=\"\|\"'"),
     "generator from a generator": (
         [*GEN, "--denoiser", "{run}/generator.safetensors", "--out", "{out}/run"],
         r"expected a denoiser checkpoint, got a generator"),

@@ -1,4 +1,5 @@
 import dataclasses
+import re
 
 import pytest
 import yaml
@@ -38,6 +39,25 @@ def test_overrides():
     assert cfg.data.rotate is False
     default = ExperimentConfig()
     assert cfg.denoiser == default.denoiser and cfg.diffusion == default.diffusion
+
+
+@pytest.mark.parametrize("value", [",", "|", ">", "&a", "#x", ":"])
+def test_an_override_of_yaml_characters_is_refused_with_the_quoting_that_means_them(value):
+    # unquoted, each is invalid YAML or reads as '' or null, which a config would take silently
+    with pytest.raises(ConfigError, match=f"quote.*--set 'data.delimiter=\"{re.escape(value)}\"'"):
+        load_config(None, [f"data.delimiter={value}"])
+    quoted = load_config(None, [f'data.delimiter="{value}"'])
+    assert quoted.data.delimiter == value
+
+
+@pytest.mark.parametrize("value", ["null", "~", ""])
+def test_an_override_that_spells_null_on_purpose_is_taken(value):
+    assert load_config(None, [f"finetune.reward_clip={value}"]).finetune.reward_clip is None
+
+
+@pytest.mark.parametrize("value", ["''", '""'])
+def test_an_override_that_spells_the_empty_text_on_purpose_is_taken(value):
+    assert load_config(None, [f"data.delimiter={value}"]).data.delimiter == ""
 
 
 def test_overrides_apply_on_top_of_a_file(tmp_path):

@@ -1166,19 +1166,21 @@ def _repeated_keys(node: yaml.Node, prefix: str = "",
 
 
 def read_yaml(path: str | Path | None, text: str | None = None, name: str = "",
-              prefix: str = "") -> Any:  # fmt: skip
+              prefix: str = "", hint: str = "") -> Any:  # fmt: skip
     """The YAML document of file ``path`` (or ``text``, shown as ``name``; its keys named
     after ``prefix``, a ``--set`` key's ``data.``), refusing a key given twice in one mapping,
     at any depth, with a ``ConfigError`` naming the key, the file and both lines: YAML's
     readers keep the last of them without a word, so a second ``data:`` section would drop
     the first one's keys (a run on the default dataset). Invalid YAML is a ``ConfigError``
-    too. Every YAML file a user writes is read with it."""
+    too (``hint``, when given, follows its message). Every YAML file a user writes is read
+    with it."""
     shown = name or str(path)
     try:
         text = Path(path).read_text() if text is None else text
         node = yaml.compose(text, Loader=yaml.SafeLoader)
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{shown}: not valid YAML ({exc.__class__.__name__})") from None
+        more = f"; {hint}" if hint else ""
+        raise ConfigError(f"{shown}: not valid YAML ({exc.__class__.__name__}){more}") from None
     repeated = _repeated_keys(node, prefix) if node is not None else None
     if repeated is not None:
         key, first, again = repeated
@@ -1225,8 +1227,29 @@ def load_config(
             node = node.setdefault(part, {})
             if not isinstance(node, dict):
                 raise ConfigError(f"override {item!r}: {part} is not a section")
-        node[parts[-1]] = read_yaml(None, value, f"--set {item}", f"{key}.")
+        node[parts[-1]] = set_value(key, value)
     return experiment_from_dict(data)
+
+
+EMPTY_SPELLINGS = frozenset({"", "null", "Null", "NULL", "~", '""', "''"})
+"""How a ``--set`` value says "nothing" (null) or the empty text on purpose."""
+
+
+def set_value(key: str, value: str) -> Any:
+    """The value of one ``--set key=value`` override, read as YAML (``read_yaml``). A text
+    made of YAML's own characters is refused with the quoting that means it, rather than read
+    as something else: ``,`` or ``:`` is invalid YAML, and ``|``, ``>``, ``&a`` or ``#x`` read
+    as the empty text or as null, which a config would take without a word (``data.delimiter=|``
+    would become ``''``)."""
+    item = f"{key}={value}"
+    quoted = f"--set '{key}=\"{value.strip()}\"'"
+    hint = f"a text holding YAML's own characters goes in quotes: {quoted}"
+    parsed = read_yaml(None, value, f"--set {item}", f"{key}.", hint=hint)
+    if parsed in ("", None) and value.strip() not in EMPTY_SPELLINGS:
+        what = "the empty text" if parsed == "" else "nothing (null)"
+        raise ConfigError(f"--set {item}: YAML reads {value.strip()!r} as {what}; to mean those "
+                          f"characters, quote them: {quoted}")  # fmt: skip
+    return parsed
 
 
 def save_config(cfg: ExperimentConfig, path: str | Path) -> None:
