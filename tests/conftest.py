@@ -78,17 +78,18 @@ def tiny_run(tmp_path_factory, tiny_cfg) -> Path:
 
 @pytest.fixture
 def plot_calls(monkeypatch) -> list:
-    """What ``trajpref plot`` (``cli.cmd_plot``) hands to the figure functions, as
-    ``(name, args, kwargs)`` per call; the figures are still written."""
-    import trajpref.cli as cli
+    """What ``trajpref plot`` (``cli.cmd_plot``) hands to the figure functions of
+    ``trajpref.viz.plot`` (which it imports when it runs), as ``(name, args, kwargs)`` per
+    call; the figures are still written."""
+    import trajpref.viz.plot as figures
 
     calls = []
     for name in ("plot_scene", "plot_scene_scored"):
-        original = getattr(cli, name)
+        original = getattr(figures, name)
 
         def wrapper(*args, _name=name, _original=original, **kwargs):
             calls.append((_name, args, kwargs))
             return _original(*args, **kwargs)
 
-        monkeypatch.setattr(cli, name, wrapper)
+        monkeypatch.setattr(figures, name, wrapper)
     return calls

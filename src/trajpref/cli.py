@@ -142,8 +142,11 @@ from trajpref.train.run import (
 )
 from trajpref.train.stages import finetune_preset
 from trajpref.types import AGENT_BALL, collate
-from trajpref.viz import plot
-from trajpref.viz.plot import FORMATS, check_limits, plot_scene, plot_scene_scored
+
+# trajpref.viz.plot (matplotlib) is imported inside the commands that draw, not here: every
+# other command would pay for it at start-up (about a second). trajpref.survey.cli imports its
+# heavy modules (scipy, matplotlib) inside its commands for the same reason
+# (tests/test_cli_imports.py).
 
 FRAME_INTERVAL_HELP = (
     "seconds between consecutive rows of an agent (between consecutive distinct frame values "
@@ -1928,6 +1931,9 @@ def _predict_meta(args, ds, samples: int, scorer, overlap, sampling: dict, devic
 def _check_plot_args(args) -> None:
     """plot's own options, before any model or data is read: --out's format, --dpi, --width,
     --limits (parsed into ``args.limits``), --draw-samples and --scene."""
+    from trajpref.viz import plot  # matplotlib: imported only by the commands that draw
+    from trajpref.viz.plot import FORMATS, check_limits
+
     path = check_output_file(args.out)
     if path.suffix.lower() not in FORMATS:
         raise ConfigError(f"--out {path}: the output must be a .png file, or .pdf or .svg "
@@ -2091,6 +2097,8 @@ def _plot_kept(args) -> str:
 
 
 def cmd_plot(args) -> int:
+    from trajpref.viz import plot as figures  # matplotlib: only the commands that draw
+
     _check_model_args(args)
     _check_plot_args(args)
     _check_fold_overlap(args)  # a warning
@@ -2116,11 +2124,11 @@ def cmd_plot(args) -> int:
         scores = scorer.score(batch, pred).agent_ats.cpu().numpy()  # [K, P]
         top = min(args.draw_samples or 2, count)
         order = np.argsort(-scores, axis=0, kind="stable")[:top]  # [top, P] as drawn
-        plot_scene_scored(scene.history, scene.future, samples, scores, args.out,
+        figures.plot_scene_scored(scene.history, scene.future, samples, scores, args.out,
                           ds.info.units, title, top, agent_type=scene.agent_type,
                           **style)  # fmt: skip
     else:
-        plot_scene(scene.history, scene.future, samples, args.out, ds.info.units, title,
+        figures.plot_scene(scene.history, scene.future, samples, args.out, ds.info.units, title,
                    scene.agent_type, max_samples=args.draw_samples, **style)  # fmt: skip
     print(f"wrote {args.out}")
     _print_scene_metrics(args, scene, pred, ds.info.units, order, scores)

@@ -924,3 +924,44 @@ def test_a_validation_whose_samples_diverge_scores_inf_and_the_run_goes_on(folde
     res = _leapfrog_validation(Diverged(), val, 3, 256, torch.device("cpu"))()
     assert res["score"] == float("inf") and res["min_ade"] != res["min_ade"]  # NaN
     assert "scored as never the best" in capsys.readouterr().out
+
+
+def test_validation_skips_the_collision_metrics_it_does_not_report(folder, monkeypatch):
+    """A generator's (and fine-tuning's) validation returns minADE, minFDE (and the scorer's
+    keys), never Col-I / Col-II: it evaluates with the collision metrics off, so that no batch
+    computes their flags, and its numbers are those of an evaluation with them on."""
+    from torch import nn
+
+    import trajpref.evaluation as evaluation
+    from trajpref.train import stages
+
+    class Walker(nn.Module):  # each agent's last step, repeated with seeded noise
+        def predict(self, batch, num_samples, generator=None):
+            step = batch.history[:, -1] - batch.history[:, -2]  # [N, 2]
+            t_f = batch.future.shape[1]
+            ahead = torch.arange(1, t_f + 1, dtype=step.dtype)[:, None] * step[:, None]
+            noise = torch.randn((num_samples, batch.num_agents, t_f, 2), generator=generator)
+            return batch.history[:, -1, None] + ahead + 0.3 * noise.cumsum(2)
+
+    calls = []
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return flags(*args, **kwargs)
+
+    flags = evaluation.collision_flags
+    monkeypatch.setattr(evaluation, "collision_flags", counted)
+    val = load_dataset(str(folder), "val", units="m")  # in metres: collisions are counted
+    validate = stages._leapfrog_validation(Walker(), val, 5, 256, torch.device("cpu"))
+
+    def with_collisions(*args, **kwargs):  # the evaluation as its default (auto) runs it
+        kwargs.pop("collision_radius", None)
+        return evaluate(*args, **kwargs)
+
+    with monkeypatch.context() as patch:
+        patch.setattr(stages, "evaluate", with_collisions)
+        expected = validate()
+    assert calls, "the data is in metres: an evaluation with collisions computes their flags"
+    calls.clear()
+    assert validate() == expected and set(expected) == {"min_ade", "min_fde", "score"}
+    assert calls == []

@@ -11,12 +11,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 from trajpref.errors import ConfigError
-from trajpref.survey.analyze import run_analysis
-from trajpref.survey.build import BuildConfig, build_study
-from trajpref.survey.export import export_csv
-from trajpref.survey.manifest import DATABASE, load_study
-from trajpref.survey.simulate import SimulateConfig, simulate
-from trajpref.survey.store import AnswerStore
+
+# The survey's modules are imported by the commands that use them, not here: ``trajpref.cli``
+# imports this module to build its parser, and analyze (scipy) and build (matplotlib, torch)
+# would otherwise slow every command's start.
 
 
 def add_parser(
@@ -166,6 +164,8 @@ def read_consent(path: str | None) -> str:
 
 def cmd_build(args, check_data_args: Callable[[argparse.Namespace], None],
               warn_if_trained_otherwise: Callable[..., None]) -> int:  # fmt: skip
+    from trajpref.survey.build import BuildConfig, build_study
+
     check_data_args(args)  # fills in --frame-interval and --units, checks the read options
     cfg = BuildConfig(
         dataset=args.dataset, models=parse_models(args.models), split=args.split,
@@ -201,6 +201,7 @@ def cmd_serve(args) -> int:
 
 
 def cmd_analyze(args) -> int:
+    from trajpref.survey.analyze import run_analysis
 
     result, paths = run_analysis(args.study, args.db, args.out, args.raters, args.exclude_rater)
     if args.json:
@@ -212,6 +213,7 @@ def cmd_analyze(args) -> int:
 
 
 def cmd_export(args) -> int:
+    from trajpref.survey.export import export_csv
 
     done = export_csv(args.study, args.csv, args.db, args.raters, args.exclude_rater)
     label = " SYNTHETIC raters or study: not human data;" if done["synthetic"] else ""
@@ -225,6 +227,9 @@ def cmd_export(args) -> int:
 
 
 def cmd_simulate(args) -> int:
+    from trajpref.survey.manifest import DATABASE, load_study
+    from trajpref.survey.simulate import SimulateConfig, simulate
+    from trajpref.survey.store import AnswerStore
 
     cfg = SimulateConfig(raters=args.raters, seed=args.seed, prefix=args.prefix)
     study = load_study(args.study)

@@ -145,8 +145,9 @@ def _leapfrog_validation(predictor: DiffusionPredictor, val: TrajectoryDataset, 
         modes = [(m, m.training) for m in predictor.modules()]
         predictor.eval()
         try:
+            # collision metrics off: none of them is among what validation returns
             res = evaluate(predictor, val, samples, seed=0, device=device, max_agents=max_agents,
-                           progress=progress, scorer=scorer)  # fmt: skip
+                           progress=progress, scorer=scorer, collision_radius=None)  # fmt: skip
         except NonFinitePrediction as err:  # a diverged epoch: never kept, the run goes on
             tqdm.write(f"[validation] {err}: scored as never the best")
             return dict.fromkeys(keys, math.nan) | {"score": math.inf}
