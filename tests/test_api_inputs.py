@@ -8,6 +8,7 @@ IndexError or AttributeError (or was silently accepted) before."""
 from __future__ import annotations
 
 import inspect
+import json
 import math
 import subprocess
 import sys
@@ -108,15 +109,46 @@ def test_plot_scene_draws_predict_scenes_output_without_ground_truth(cv, tmp_pat
     assert "ground truth" not in out.read_text()  # nor named in the legend
 
 
-def test_plots_take_lists_and_tensors(cv, tmp_path):
+def _drawn(fig) -> str:
+    """What a figure shows, axis by axis: its lines' points, its markers' positions and where
+    its texts are (as JSON text, which compares NaN, a break in a line, as equal)."""
+    return json.dumps([([line.get_xydata().tolist() for line in ax.lines],
+                        [np.asarray(c.get_offsets()).tolist() for c in ax.collections],
+                        [(t.get_text(), list(t.get_position())) for t in ax.texts])
+                       for ax in fig.axes])  # fmt: skip
+
+
+def test_plots_take_lists_and_tensors(cv, tmp_path, monkeypatch):
+    """Lists and (bf16) tensors draw what the same numbers as numpy arrays draw."""
+    import trajpref.viz.plot as plot
+
+    figures, save = [], plot._save
+
+    def keep(fig, out, *args, **kwargs):
+        figures.append(_drawn(fig))
+        return save(fig, out, *args, **kwargs)
+
+    monkeypatch.setattr(plot, "_save", keep)
     h = _scene()
     futures = predict_scene(cv, h, 5)
+    futures[:, 1] += np.linspace(-0.3, 0.3, 5)[:, None, None]  # five different samples
     fut = futures[0]
+    scores = np.array([[0.1, 0.5], [0.4, -0.2], [0.3, 0.0], [-0.1, 0.2], [0.2, 0.1]])  # [K, P]
+    plot_scene(h, fut, futures, tmp_path / "n.png", agent_type=np.array([0, 1]))
     plot_scene(h.tolist(), fut.tolist(), futures.tolist(), tmp_path / "l.png", agent_type=[0, 1])
+    assert figures[1] == figures[0]
+    plot_scene_scored(h, fut, futures, scores, tmp_path / "n2.png")
+    plot_scene_scored(h.tolist(), fut, futures, scores.tolist(), tmp_path / "s2.png")
+    assert figures[3] == figures[2]
     tensors = [torch.as_tensor(x, dtype=torch.bfloat16) for x in (h, fut, futures)]
+    rounded = [t.float().numpy() for t in tensors]  # the same numbers, as numpy arrays
+    plot_scene(*rounded, tmp_path / "n3.png", agent_type=np.array([0, 0]))
     plot_scene(*tensors, tmp_path / "t.png", agent_type=torch.tensor([0, 0]))
-    plot_scene_scored(*tensors, torch.zeros(5, 2), tmp_path / "s.png")
-    plot_scene_scored(h.tolist(), fut, futures, np.zeros((5, 2)).tolist(), tmp_path / "s2.png")
+    assert figures[5] == figures[4]
+    plot_scene_scored(*rounded, scores, tmp_path / "n4.png")
+    plot_scene_scored(*tensors, torch.as_tensor(scores), tmp_path / "s.png")
+    assert figures[7] == figures[6]
+    assert figures[0] != figures[4] and figures[2] != figures[6]  # the bf16 rounding shows
 
 
 def test_plot_shapes_that_do_not_fit_are_data_errors(cv, tmp_path):

@@ -147,15 +147,12 @@ def test_a_folder_of_a_folds_sgan_files_is_that_fold(capsys, zara2_model, tmp_pa
     assert json.loads(out)["overlap"] == f"zara2 model on zara1 ({folder})"
 
 
-def test_the_real_zara1_folder_given_as_a_path_is_the_zara1_fold(capsys, zara2_model):
-    from trajpref.data.registry import SGAN_TEST_FILES, resolve_data_root, sgan_folds
+@pytest.mark.realdata
+def test_the_real_zara1_folder_given_as_a_path_is_the_zara1_fold(capsys, zara2_model, data_root):
+    from trajpref.data.registry import SGAN_TEST_FILES, sgan_folds
 
-    try:
-        root = resolve_data_root() / "eth_ucy"
-    except Exception:  # noqa: BLE001 - no data root here
-        pytest.skip("needs TRAJPREF_DATA")
-    if not (root / "zara1" / "test").is_dir():
-        pytest.skip("needs the ETH/UCY folds")
+    root = data_root / "eth_ucy"
+    assert (root / "zara1" / "test").is_dir(), f"the data root {data_root} has no ETH/UCY folds"
     for fold, names in SGAN_TEST_FILES.items():  # the release's test file names
         assert sorted(p.stem for p in (root / fold / "test").glob("*.txt")) == list(names)
         assert sgan_folds(root / fold) == (fold,)

@@ -258,11 +258,25 @@ def test_a_model_on_another_device_is_one_line_before_any_work(zara1):
         evaluate(zara1, data, progress=False, scorer=scorer)
 
 
-def test_the_default_device_is_the_models_own(zara1):
+def test_the_default_device_is_the_models_own(zara1, monkeypatch):
+    from types import SimpleNamespace
+
+    from trajpref.evaluation import pass_device
+
     data = _data("zara1")
     assert evaluate(zara1, data, progress=False) == evaluate(zara1, data, device="cpu",
                                                              progress=False)  # fmt: skip
     assert evaluate(ConstantVelocity(), data, 2, progress=False)["agents"] == 4
+    # on this CPU machine the CPU is every model's device: pretend to have two GPUs, and a
+    # model (or, for a model without weights, the scorer) on the second one
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 2)
+    second = torch.device("cuda:1")
+    on_second = ConstantVelocity()
+    on_second.device = second
+    assert pass_device(on_second, None) == second
+    assert pass_device(ConstantVelocity(), None, SimpleNamespace(device="cuda:1")) == second
+    assert pass_device(ConstantVelocity(), None) == torch.device("cpu")  # no weights anywhere
 
 
 # ------------------------------------------------------------ 4: the other arguments

@@ -61,8 +61,25 @@ def test_shuffle_is_seeded_and_changes_with_epoch():
     ]
     loader.set_epoch(1)
     assert a != [b.tolist() for b in loader.batches()]
+    assert a != [
+        b.tolist() for b in SceneLoader(loader.dataset, 20, shuffle=True, seed=2).batches()
+    ]
+
+
+def test_the_seed_decides_which_scenes_share_a_batch():
+    """Equal sizes, four scenes a batch and a pool of one batch: the batches are runs of the
+    shuffled order, so what they hold (not only their order) comes from the seed and epoch."""
+
+    def groups(seed, epoch=0):
+        loader = SceneLoader(_dataset([3] * 12), max_agents=100, max_scenes=4, shuffle=True,
+                             seed=seed, pool=1)  # fmt: skip
+        loader.set_epoch(epoch)
+        return {frozenset(b.tolist()) for b in loader.batches()}
+
+    assert groups(1) == groups(1) and len(groups(1)) == 3
+    assert groups(1) != groups(2) and groups(1) != groups(1, epoch=1)
 
 
 def test_bad_loader_args():
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"^max_agents and max_scenes must be positive$"):
         SceneLoader(_dataset([1]), max_agents=0)

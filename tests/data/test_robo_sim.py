@@ -99,15 +99,17 @@ def test_avoidance_increases_clearance() -> None:
     ],
 )
 def test_bad_config_raises(changes: dict[str, object]) -> None:
-    with pytest.raises(ValueError):
+    (name,) = changes  # the error names the field given
+    with pytest.raises(ValueError, match=rf"^RoboSimConfig\.{name} must "):
         RoboSimConfig(**changes)
 
 
 def test_bad_arguments() -> None:
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"^n_episodes must be an int >= 0, got -1$"):
         simulate(-1)
     cfg = RoboSimConfig()
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"^RoboSimConfig\.accel must be a finite number > 0\.0 "
+                       r"and <= inf, got 0\.0$"):  # fmt: skip
         dataclasses.replace(cfg, accel=0.0)
 
 

@@ -184,6 +184,8 @@ def test_dropping_agents_is_seeded_and_off_at_zero():
     a = drop_agents_at_random(batch, 0.3, torch.Generator().manual_seed(1))
     b = drop_agents_at_random(batch, 0.3, torch.Generator().manual_seed(1))
     assert torch.equal(a.history, b.history) and a.num_agents < batch.num_agents
+    c = drop_agents_at_random(batch, 0.3, torch.Generator().manual_seed(3))
+    assert not torch.equal(c.history, a.history)  # another seed leaves out other agents
     gen = torch.Generator().manual_seed(2)
     plain = augment(batch, torch.Generator().manual_seed(2), flip=True)
     same = augment(batch, gen, flip=True, drop_agents=0.0)

@@ -27,9 +27,9 @@ def test_timesteps():
     s = DDPMSchedule()
     assert s.timesteps(5) == [4, 3, 2, 1, 0]
     assert s.timesteps() == list(range(99, -1, -1))
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"^start must lie in 1\.\.100$"):
         s.timesteps(0)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"^start must lie in 1\.\.100$"):
         s.timesteps(101)
 
 
@@ -41,7 +41,7 @@ def test_add_noise_broadcasts_per_sample_steps():
     out = s.add_noise(y0, z, steps)
     expected = s.sqrt_alphas_cumprod[steps][..., None, None].expand_as(y0)
     torch.testing.assert_close(out, expected)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"^step indices must lie in 0\.\.99$"):
         s.add_noise(y0, z, torch.tensor(100))
 
 
@@ -81,7 +81,7 @@ def test_step_at_zero_adds_no_noise_and_is_seeded_elsewhere():
 
 
 def test_bad_schedule():
-    with pytest.raises(ConfigError):
+    with pytest.raises(ConfigError, match=r"^num_steps must be >= 1$"):
         DDPMSchedule(0)
-    with pytest.raises(ConfigError):
+    with pytest.raises(ConfigError, match=r"^need 0 < beta_start <= beta_end < 1$"):
         DDPMSchedule(100, 0.1, 0.01)

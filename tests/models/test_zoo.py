@@ -269,9 +269,10 @@ def test_both_load_predictor_functions_take_sampler_and_device_by_keyword(fake_z
     from trajpref.models import registry
 
     path = fake_zoo / "walks" / "generator.safetensors"
-    with pytest.raises(TypeError):
+    positional = r"load_predictor\(\) takes 1 positional argument but 3 were given"
+    with pytest.raises(TypeError, match=positional):
         checkpoint.load_predictor(path, "leapfrog", "cpu")
-    with pytest.raises(TypeError):
+    with pytest.raises(TypeError, match=positional):
         registry.load_predictor(str(path), "cpu", "leapfrog")
     a = registry.load_predictor("walks/generator", device="cpu", sampler="full")
     b = checkpoint.load_predictor(path, sampler="full", device="cpu")

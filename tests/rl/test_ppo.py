@@ -102,7 +102,7 @@ def test_value_loss_matches_a_plain_loop():
 def test_kl_is_zero_when_policy_equals_reference(form):
     logp = torch.randn(4, 3, 12)
     assert torch.equal(ppo.kl_penalty(logp, logp.clone(), 0.5, form), torch.zeros_like(logp))
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"^unknown KL form 'other'; use 'paper' or 'logratio'$"):
         ppo.kl_penalty(logp, logp, 0.5, "other")
 
 

@@ -218,12 +218,20 @@ def test_score_and_selection_options_that_nothing_reads_say_so(tiny_run, walks, 
         assert err == (f"trajpref: warning: {warning}\n" if warning else ""), flags
 
 
-def test_cli_plot_with_scorer(tiny_run, walks, tmp_path):
+def test_cli_plot_with_scorer(tiny_run, walks, tmp_path, scorer, plot_calls):
     out = tmp_path / "fig2.png"
-    model, scorer = str(tiny_run / "generator.safetensors"), str(tiny_run / "denoiser.safetensors")
+    model, path = str(tiny_run / "generator.safetensors"), str(tiny_run / "denoiser.safetensors")
     code = main(["plot", "--dataset", str(walks), "--model", model, "--samples", "4",
-                 "--scorer", scorer, "--out", str(out)])  # fmt: skip
+                 "--scorer", path, "--out", str(out)])  # fmt: skip
     assert code == 0 and out.read_bytes()[:4] == b"\x89PNG"
+    # the ranked figure, given the scorer's ATS of each drawn sample of each agent
+    ((name, args, _),) = plot_calls
+    history, future, samples, scores = args[:4]
+    assert name == "plot_scene_scored" and scores.shape == samples.shape[:2] == (4, len(future))
+    scene = collate(load_dataset(str(walks), "test").scenes[:1])
+    assert torch.equal(torch.as_tensor(history), scene.history)
+    want = scorer.score(scene, torch.as_tensor(samples)).agent_ats.numpy()  # [K, P]
+    assert scores == pytest.approx(want, rel=1e-5, abs=1e-6)
 
 
 def test_speed_normalisation_leaves_slow_scenes_alone_and_rescales_fast_ones(tiny_run, batch):

@@ -81,6 +81,9 @@ def test_without_a_generator_the_object_keeps_its_own_stream():
     fresh.predict(batch, 2)
     assert torch.equal(first, fresh.last_kept)  # seeded with cfg.seed at construction
     assert not torch.equal(first, sel.last_kept)  # and going on from call to call, as before
+    seeded = _random(seed=1)
+    seeded.predict(batch, 2)
+    assert not torch.equal(first, seeded.last_kept)  # another cfg.seed, another stream
 
 
 class Still(ConstantVelocity):

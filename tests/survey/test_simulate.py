@@ -37,6 +37,10 @@ def test_simulation_is_seeded(store, synthetic_study, tmp_path):
     simulate(other.study, other, SimulateConfig(raters=3, seed=7))
     assert [r[3:] for r in _answers(store.path)] == [r[3:] for r in _answers(other.path)]
     other.close()
+    third = AnswerStore(tmp_path / "c.sqlite", load_study(synthetic_study))
+    simulate(third.study, third, SimulateConfig(raters=3, seed=8))  # another seed, other ratings
+    assert [r[3:] for r in _answers(store.path)] != [r[3:] for r in _answers(third.path)]
+    third.close()
 
 
 def test_synthetic_raters_prefer_small_errors(store):

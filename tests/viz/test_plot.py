@@ -41,12 +41,45 @@ def test_plot_panel_gives_every_panel_of_a_scene_the_same_frame(tmp_path):
     assert Image.open(a).size[0] > Image.open(a).size[1]
 
 
-def test_plot_survey_summary_skips_missing_values(tmp_path):
+def _bars(ax) -> dict[float, float]:
+    """The horizontal bars an axis of ``plot_survey_summary`` draws: row (y) -> length."""
+    return {round(b.get_y() + b.get_height() / 2, 6): b.get_width() for b in ax.patches}
+
+
+def test_plot_survey_summary_skips_missing_values(tmp_path, drawn):
     mean, sd = np.array([3.5, 2.0, np.nan]), np.array([0.5, np.nan, np.nan])
     out = plot_survey_summary(["a", "b", "c"], {"human": (mean, sd), "ATS": (mean - 3, sd)},
                               {"human": ["", "**", "ns"]}, tmp_path / "s.png", "t",
                               xlims={"human": (0, 5)})  # fmt: skip
     assert out.read_bytes()[:8] == PNG
+    (fig,) = drawn
+    human, ats = fig.axes
+    # row c (NaN) draws no bar on either axis, and its mark "ns" is not placed
+    assert _bars(human) == {0: 3.5, 1: 2.0} and _bars(ats) == {0: 0.5, 1: -1.0}
+    assert [(t.get_text(), t.xy) for t in human.texts] == [("**", (2.0, 1))]  # sd NaN: 0
+    assert len(ats.texts) == 0 and human.get_xlim() == (0, 5)
+
+
+def test_the_ground_truth_draws_no_ats_fts_or_ade_bar(tmp_path, drawn):
+    from trajpref.survey.analyze import Analysis, MethodRow, figure_data
+    from trajpref.survey.manifest import GROUND_TRUTH
+
+    def row(method, human, score, ade):
+        return MethodRow(method, 12, human, 0.5, human, 0.5, human, 0.5, score, 0.1, score - 1,
+                         0.2, ade=ade, ade_sd=0.3, marks={"human": "*"})  # fmt: skip
+
+    rows = [row("A", 4.0, 0.4, 1.5), row(GROUND_TRUTH, 4.5, 0.0, 0.0)]
+    result = Analysis("t", {}, "human", False, 2, 2, 2, 4, "A", rows, [], {}, units="m")
+    names, columns, marks, xlims = figure_data(result)
+    assert names == ["A", GROUND_TRUTH]
+    human, ats, fts, ade = columns.values()
+    assert human[0].tolist() == [4.0, 4.5]  # the ground truth is rated like any method
+    for (mean, _), value in zip((ats, fts, ade), (0.4, 0.4 - 1, 1.5), strict=True):
+        assert mean[0] == pytest.approx(value) and np.isnan(mean[1])
+    plot_survey_summary(names, columns, marks, tmp_path / "s.png", xlims=xlims)
+    bars = [_bars(ax) for ax in drawn[0].axes]
+    assert bars[0] == {0: 4.0, 1: 4.5}
+    assert [list(b) for b in bars[1:]] == [[0], [0], [0]]  # no bar in the ground truth's row
 
 
 def test_plot_curves_lays_panels_in_a_grid_and_refuses_none(tmp_path):
