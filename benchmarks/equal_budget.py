@@ -40,10 +40,27 @@ validation interval) is read from its ``command``, which holds finetune.py's ``-
 arguments (``row_budget``; a row whose command names none has the published budget,
 ``PUBLISHED_BUDGET``). One table compares one budget per start: jobs whose dataset and start
 already have rows (or run folders) of another budget are refused before anything runs, and so
-is a report of such rows (to measure another budget, move those rows and folders away, e.g.
-in a copy of the repository made for it). The table (mean +- std over seeds, the change of
-minFDE20 against the start and against the control) is printed, each start's budget after it,
-and written to ``benchmarks/results/meta/equal_budget.md``.
+is a report of such rows (to measure another budget, measure it in folders of its own, below).
+The table (mean +- std over seeds, the change of minFDE20 against the start and against the
+control) is printed, each start's budget after it, written to
+``benchmarks/results/meta/equal_budget.md`` and put in ``docs/rlhf.md``'s generated block.
+
+``--runs DIR --results DIR --models DIR`` (all three or none, as finetune.py's:
+``benchmarks/paths.py``) measure out of the repository, leaving it as it is::
+
+    python benchmarks/equal_budget.py --datasets zara1 --seeds 0 --minutes 1 \
+        --runs ~/eb/runs --results ~/eb/results --models ~/eb/models --data-root ../shared/data
+
+Every job's finetune.py is given the same three options: the run folders and their logs
+(``<runs>/logs/``) are there, the rows and their ``meta/`` (the start records
+``meta/finetune_start_*.json``, the table ``meta/equal_budget.md``) are read and written in
+``<results>``, and the jobs start from ``<models>/<D>/<START>.safetensors`` (refused before
+anything runs when it is missing: copy or link the published ones). The table is printed and
+written to ``<results>/meta/equal_budget.md``; ``docs/rlhf.md`` is not touched. The start rows
+(``pretrained``, ``pretrained-long``) and the start records are read from ``<results>`` too: for
+the columns against the start, copy the repository's ``pretrained_<D>[_long].json`` there and
+validate the start there first (finetune.py ``--start-only`` with the same three options).
+``--report`` with the three options reports that folder's rows.
 """
 
 from __future__ import annotations
@@ -61,8 +78,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import yaml
+from paths import ELSEWHERE, add_elsewhere_options, require_all_or_none, shown
 from tqdm import tqdm
 
+from trajpref.models.checkpoint import SUFFIX
 from trajpref.results import (
     RUNNABLE_STARTS,
     finetune_start,
@@ -101,6 +120,54 @@ METHODS = {
     ],
 }
 """Each table method and the finetune.py arguments that produce its rows."""
+
+
+@dataclass(frozen=True)
+class Where:
+    """The folders a table is measured in: the run folders (with the jobs' ``logs/``), the rows
+    (with their ``meta/``: the start records and the table) and the published models the jobs
+    start from. ``in_repo``: the repository's own (no ``--runs``, ``--results`` and
+    ``--models``), the only case in which ``docs/rlhf.md`` is updated."""
+
+    runs: Path
+    results: Path
+    models: Path
+    in_repo: bool = True
+
+    @property
+    def logs(self) -> Path:
+        """The jobs' logs, one file per job."""
+        return self.runs / "logs"
+
+    @property
+    def table(self) -> Path:
+        """``meta/equal_budget.md``: the table this script writes, and reads back next time."""
+        return self.results / "meta" / "equal_budget.md"
+
+    def options(self) -> list[str]:
+        """finetune.py's arguments that send a job here ([] for the repository's folders)."""
+        if self.in_repo:
+            return []
+        return ["--runs", str(self.runs), "--results", str(self.results),
+                "--models", str(self.models)]  # fmt: skip
+
+    def start(self, dataset: str, start: str) -> Path:
+        """The published model a job of ``dataset`` starts from (finetune.py's ``--start``)."""
+        return self.models / dataset / f"{start}{SUFFIX}"
+
+
+def where_of(args: argparse.Namespace | None = None) -> Where:
+    """The folders that ``args``' ``--runs``, ``--results`` and ``--models`` name (made
+    absolute, as finetune.py does: its jobs run from the same working folder); the repository's
+    (under ``ROOT`` as it is now) when they name none, or without ``args``. Some but not all
+    are refused earlier (``paths.require_all_or_none``)."""
+    runs, results, models = (getattr(args, name, None) for name in ELSEWHERE)
+    if runs is None and results is None and models is None:
+        return Where(ROOT / "runs", ROOT / "benchmarks" / "results", ROOT / "models")
+    if runs is None or results is None or models is None:
+        raise ValueError("--runs, --results and --models go together: all or none")
+    return Where(Path(runs).absolute(), Path(results).absolute(), Path(models).absolute(),
+                 in_repo=False)  # fmt: skip
 
 
 def main() -> None:
@@ -145,33 +212,54 @@ def main() -> None:
         "--start",
         default="generator",
         choices=list(RUNNABLE_STARTS),
-        help="the published generator every method starts from (models/<D>/<START>); another "
-        "than the default names its rows <method>-<variant>, e.g. generator-long: control-long",
+        help="the published generator every method starts from (models/<D>/<START>, or under "
+        "--models); another than the default names its rows <method>-<variant>, e.g. "
+        "generator-long: control-long",
     )
     parser.add_argument("--data-root", default=None)
+    add_elsewhere_options(
+        parser,
+        runs="the folder of the jobs' run folders and of their logs/ (default: the repository's "
+        "runs/); given to every job's finetune.py",
+        results="where the rows and meta/ (the start records, the table equal_budget.md) are "
+        "read and written (default: the repository's benchmarks/results/); given to every "
+        "job's finetune.py",
+        models="the published models the jobs start from, DIR/<dataset>/<START>.safetensors "
+        "(default: the repository's models/); given to every job's finetune.py. With the three, "
+        "docs/rlhf.md is left as it is",
+    )
     parser.add_argument("--report", action="store_true", help="only print the table")
     args = parser.parse_args()
+    require_all_or_none(parser, args)
+    where = where_of(args)
+    if args.report and not where.in_repo and not where.results.is_dir():
+        parser.error(f"--results {args.results}: no such folder, no rows to report")
     if not args.report:
-        run_jobs(args)
+        run_jobs(args, where)
     # the table always shows every method with rows, from every start: the control chosen on
     # validation is chosen among all controls of a start, whichever methods this invocation ran;
     # and every dataset the previous table showed, so that a run on one dataset keeps the others
-    before = previous_table(table_path())
-    shown = previous_datasets(before)
-    table = report(shown + [d for d in args.datasets if d not in shown], list(METHODS), before)
+    before = previous_table(where.table)
+    datasets = previous_datasets(before)
+    datasets += [d for d in args.datasets if d not in datasets]
+    table = report(datasets, list(METHODS), before, where)
     if len(table.splitlines()) == 2:  # the header alone
         table = "_No equal-budget rows from the current generators yet._"
-    table_path().write_text(table + "\n")
-    budgets = table_budgets(shown + [d for d in args.datasets if d not in shown], list(METHODS))
-    note = (
-        "\n\n_Generated by `python benchmarks/equal_budget.py --report` "
-        "from `benchmarks/results/` (every method with rows); mean ± std over the seeds "
-        "listed; changes are of the mean minFDE20._"
-    )
-    update_readme(ROOT / "docs" / "rlhf.md", "equal-budget", table + note)
+    where.table.parent.mkdir(parents=True, exist_ok=True)
+    where.table.write_text(table + "\n")
+    budgets = table_budgets(datasets, list(METHODS), where)
+    if where.in_repo:
+        note = (
+            "\n\n_Generated by `python benchmarks/equal_budget.py --report` "
+            "from `benchmarks/results/` (every method with rows); mean ± std over the seeds "
+            "listed; changes are of the mean minFDE20._"
+        )
+        update_readme(ROOT / "docs" / "rlhf.md", "equal-budget", table + note)
     print(table)
     for (dataset, start), budget in budgets.items():
         print(f"{dataset} from {start}: {budget}")
+    if not where.in_repo:
+        print(f"written to {where.table} (docs/rlhf.md, the repository's table, is left as it is)")
 
 
 def _arg(method: str, flag: str) -> str:
@@ -301,30 +389,32 @@ def folder_budget(run: Path) -> Budget | None:
                   ft.get("eval_every") if every is None else None)  # fmt: skip
 
 
-def run_folder(dataset: str, name: str, seed: int) -> Path:
-    """The run folder of a table row (``name``: its method, e.g. ``control-lr3e-5-long``)."""
+def run_folder(dataset: str, name: str, seed: int, where: Where | None = None) -> Path:
+    """The run folder of a table row (``name``: its method, e.g. ``control-lr3e-5-long``),
+    under ``where.runs`` (default: the repository's runs/)."""
     method, var = _split(name)
     tag = _tag(method, var)
     suffix = f"-{tag}" if tag else ""
-    return ROOT / "runs" / f"{dataset}-{_arg(method, '--methods')}-s{seed}{suffix}"
+    runs = (where or where_of()).runs
+    return runs / f"{dataset}-{_arg(method, '--methods')}-s{seed}{suffix}"
 
 
-def _best_val(dataset: str, name: str, seed: int) -> float | None:
+def _best_val(dataset: str, name: str, seed: int, where: Where | None = None) -> float | None:
     """The run's best validation score (lower is better); None without its run folder."""
-    log = read_metrics(run_folder(dataset, name, seed), "finetune")
+    log = read_metrics(run_folder(dataset, name, seed, where), "finetune")
     if not log:
         return None
     scores = [epoch.get("val_score") for epoch in log]
     return min((v for v in scores if v is not None), default=None)
 
 
-def _beats_start(dataset: str, method: str, seed: int) -> bool | None:
+def _beats_start(dataset: str, method: str, seed: int, where: Where | None = None) -> bool | None:
     """Whether the run's best validation score beats the start's (the fine-tuning stage's
     own validation of the untouched start, meta/finetune_start_<D>[_<start>].json); None when
     the run folder or the start's record is missing (e.g. in a fresh checkout)."""
-    start = ROOT / "benchmarks" / "results" / "meta"
-    start = start / start_record(dataset, VARIANTS[_split(method)[1]])
-    best = _best_val(dataset, method, seed)
+    where = where or where_of()
+    start = where.results / "meta" / start_record(dataset, VARIANTS[_split(method)[1]])
+    best = _best_val(dataset, method, seed, where)
     if best is None or not start.is_file():
         return None
     return best < json.loads(start.read_text())["val"]["score"]
@@ -335,7 +425,7 @@ NOT_CHOSEN = "control not chosen on validation"
 several controls have rows, and no seed has a run folder of each (a fresh checkout)."""
 
 
-def _chosen_control(dataset: str, rows: list[dict], methods: list[str]) -> str | None:
+def _chosen_control(dataset: str, rows: list[dict], methods: list[str], where: Where) -> str | None:
     """Of the control variants with rows in the table, the one with the best mean validation
     score over the seeds whose run folders every one of them still has (a seed's folders can
     be lost with a checkout while later seeds are run in another); the only one when there is
@@ -345,8 +435,8 @@ def _chosen_control(dataset: str, rows: list[dict], methods: list[str]) -> str |
                 if m.startswith("control") and any(r["method"] == m for r in rows)]  # fmt: skip
     if len(controls) < 2:
         return controls[0] if controls else None
-    vals = {m: {r["seed"]: _best_val(dataset, m, r["seed"]) for r in rows if r["method"] == m}
-            for m in controls}  # fmt: skip
+    vals = {m: {r["seed"]: _best_val(dataset, m, r["seed"], where)
+                for r in rows if r["method"] == m} for m in controls}  # fmt: skip
     validated = [{s for s, v in by_seed.items() if v is not None} for by_seed in vals.values()]
     common = set.intersection(*validated)
     if not common:
@@ -365,28 +455,28 @@ def _suffixed(method: str, var: str) -> str:
     return f"{method}-{var}" if var else method
 
 
-def _done(dataset: str, method: str, seed: int, start: str, budget: Budget) -> bool:
+def _done(dataset: str, method: str, seed: int, start: str, budget: Budget, where: Where) -> bool:
     """Whether the job's row is stored, measured under ``budget`` (``_one_budget`` has refused
     a row of the same method and seed under another)."""
-    return any(row_budget(r) == budget for r in _stored(dataset, method, seed, start))
+    return any(row_budget(r) == budget for r in _stored(dataset, method, seed, start, where))
 
 
-def _stored(dataset: str, method: str, seed: int, start: str) -> list[dict]:
+def _stored(dataset: str, method: str, seed: int, start: str, where: Where) -> list[dict]:
     """The stored rows of a job (its results file's rows of its method name and seed)."""
     tag = _tag(method, variant(start))
     name = f"finetune_{dataset}{'_' + tag if tag else ''}.json"
-    path = ROOT / "benchmarks" / "results" / name
+    path = where.results / name
     rows = json.loads(path.read_text()) if path.is_file() else []
     return [r for r in rows if (r["method"], r["seed"]) == (row_name(method, start), seed)]
 
 
-def _one_budget(jobs: list[tuple[str, str, int]], start: str, budget: Budget) -> None:
+def _one_budget(jobs: list[tuple[str, str, int]], start: str, budget: Budget, where: Where) -> None:
     """Refuse jobs that would put rows of two budgets in one table: their dataset has rows of
     a table method from ``start`` measured under another budget (finetune.py keys its rows on
     method and seed alone, so it would overwrite them, and the table would compare methods
     given different budgets), or a job's run folder was started with another budget
     (finetune.py would resume it, or take its finished run as this one)."""
-    rows = merge_rows(read_rows(ROOT / "benchmarks" / "results", protocol="all"))
+    rows = merge_rows(read_rows(where.results, protocol="all"))
     names = {row_name(m, start) for m in METHODS}
     problems = []
     for dataset in dict.fromkeys(d for d, _, _ in jobs):
@@ -397,16 +487,16 @@ def _one_budget(jobs: list[tuple[str, str, int]], start: str, budget: Budget) ->
         problems += [f"{dataset} from {start} has rows measured under {b}: {_which(which)}"
                      for b, which in other.items()]  # fmt: skip
     for dataset, method, seed in jobs:
-        run = run_folder(dataset, row_name(method, start), seed)
+        run = run_folder(dataset, row_name(method, start), seed, where)
         have = folder_budget(run)
         if have is not None and have != budget:
-            problems.append(f"{run.relative_to(ROOT)} was started under {have}")
+            problems.append(f"{shown(run, ROOT)} was started under {have}")
     if problems:
         sys.exit(
             f"these jobs ask for {budget}, but\n  " + "\n  ".join(problems) + "\none table "
-            "compares one budget: to measure another, move those rows out of "
-            "benchmarks/results/ (and those folders out of runs/) first, e.g. in a copy of "
-            "the repository made for it"
+            f"compares one budget: to measure another, move those rows out of "
+            f"{shown(where.results, ROOT)}/ (and those folders out of {shown(where.runs, ROOT)}/) "
+            "first, or measure it in folders of its own (--runs, --results and --models)"
         )
 
 
@@ -422,11 +512,11 @@ DEFAULT_MINUTES = 4.0
 """``--minutes`` when no budget is given and the start has no stored rows."""
 
 
-def stored_budget(datasets: list[str], start: str) -> Budget | None:
-    """The one budget of the stored rows of ``start``'s table methods in ``datasets``; None
-    when there are none. Rows of several budgets: an error naming them (``_one_budget`` would
-    refuse any of them)."""
-    rows = merge_rows(read_rows(ROOT / "benchmarks" / "results", protocol="all"))
+def stored_budget(datasets: list[str], start: str, where: Where | None = None) -> Budget | None:
+    """The one budget of the stored rows (in ``where.results``, default the repository's) of
+    ``start``'s table methods in ``datasets``; None when there are none. Rows of several
+    budgets: an error naming them (``_one_budget`` would refuse any of them)."""
+    rows = merge_rows(read_rows((where or where_of()).results, protocol="all"))
     names = {row_name(m, start) for m in METHODS}
     found: dict[Budget, list[dict]] = {}
     for r in rows:
@@ -440,7 +530,7 @@ def stored_budget(datasets: list[str], start: str) -> Budget | None:
     return next(iter(found), None)
 
 
-def job_budget(args: argparse.Namespace) -> Budget:
+def job_budget(args: argparse.Namespace, where: Where | None = None) -> Budget:
     """The budget of this invocation's jobs: the options given (``--eval-epochs`` N:
     validation every N epochs), the others at their defaults; none given, the budget the
     start's stored rows of these datasets have (``stored_budget``), else the defaults (4 CPU
@@ -448,7 +538,7 @@ def job_budget(args: argparse.Namespace) -> Budget:
     epochs = getattr(args, "eval_epochs", None)
     given = (args.minutes, args.warmup, args.eval_minutes, epochs)
     if all(v is None for v in given):
-        stored = stored_budget(list(args.datasets), args.start)
+        stored = stored_budget(list(args.datasets), args.start, where)
         if stored is not None:
             return stored
     if epochs is not None and args.eval_minutes is not None:
@@ -485,14 +575,24 @@ def budget_args(budget: Budget) -> list[str]:
     return out
 
 
-def run_jobs(args: argparse.Namespace) -> None:
+def run_jobs(args: argparse.Namespace, where: Where | None = None) -> None:
+    """Run the jobs of ``args`` not yet measured, one finetune.py process each, in ``where``
+    (default: the folders of ``args``' --runs, --results and --models, ``where_of``)."""
+    where = where or where_of(args)
     jobs = [(d, m, s) for s in args.seeds for d in args.datasets for m in args.methods]
-    budget = job_budget(args)
-    _one_budget(jobs, args.start, budget)
-    todo = [j for j in jobs if not _done(*j, args.start, budget)]
+    budget = job_budget(args, where)
+    _one_budget(jobs, args.start, budget, where)
+    todo = [j for j in jobs if not _done(*j, args.start, budget, where)]
     print(f"{len(jobs) - len(todo)} of {len(jobs)} rows already measured under {budget}; "
           f"{len(todo)} to run")  # fmt: skip
-    logs = ROOT / "runs" / "logs"
+    if not where.in_repo:  # finetune.py would refuse each job, after its log is opened
+        missing = [str(where.start(d, args.start)) for d in dict.fromkeys(d for d, _, _ in todo)
+                   if not where.start(d, args.start).is_file()]  # fmt: skip
+        if missing:
+            sys.exit(f"no published {args.start} in --models {where.models}: "
+                     f"{', '.join(missing)} (copy or link the repository's "
+                     "models/<dataset>/)")  # fmt: skip
+    logs = where.logs
     logs.mkdir(parents=True, exist_ok=True)
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     sets = budget_args(budget)
@@ -503,7 +603,7 @@ def run_jobs(args: argparse.Namespace) -> None:
         cmd = [sys.executable, str(ROOT / "benchmarks" / "finetune.py"), "--dataset", dataset,
                *job_args(method, args.start), "--seeds", str(seed), "--skip-done",
                "--no-start-validation",
-               *sets, *data]  # fmt: skip
+               *sets, *data, *where.options()]  # fmt: skip
         t0 = time.perf_counter()
         name = row_name(method, args.start)
         with open(logs / f"equal_budget-{dataset}-{name}-s{seed}.log", "a") as log:
@@ -519,7 +619,7 @@ def run_jobs(args: argparse.Namespace) -> None:
             if code != 0:
                 failed.append((dataset, method, seed))
     if failed:
-        sys.exit(f"{len(failed)} jobs failed (logs in runs/logs/): {failed}")
+        sys.exit(f"{len(failed)} jobs failed (logs in {shown(logs, ROOT)}/): {failed}")
 
 
 def _fmt(x: float | None) -> str:
@@ -532,9 +632,10 @@ def _ms(xs: list[float]) -> str:
     return f"{statistics.mean(xs):.3f} ± {statistics.stdev(xs):.3f}"
 
 
-def table_path() -> Path:
-    """``meta/equal_budget.md``: the table this script writes, and reads back the next time."""
-    return ROOT / "benchmarks" / "results" / "meta" / "equal_budget.md"
+def table_path(where: Where | None = None) -> Path:
+    """``meta/equal_budget.md``: the table this script writes, and reads back the next time
+    (``where.table``; default: the repository's)."""
+    return (where or where_of()).table
 
 
 def previous_table(path: Path) -> dict[tuple[str, str], str]:
@@ -576,7 +677,9 @@ def _table_groups(
     return out
 
 
-def _group_budget(dataset: str, var: str, pick: list[dict], names: list[str]) -> Budget:
+def _group_budget(
+    dataset: str, var: str, pick: list[dict], names: list[str], where: Where
+) -> Budget:
     """The one budget of a start's rows; refuses rows of several (their methods would be
     compared as if given the same compute)."""
     budgets: dict[Budget, list[dict]] = {}
@@ -584,24 +687,31 @@ def _group_budget(dataset: str, var: str, pick: list[dict], names: list[str]) ->
         if r["method"] in names:
             budgets.setdefault(row_budget(r), []).append(r)
     if len(budgets) > 1:
+        results = shown(where.results, ROOT)
         sys.exit(
-            f"{dataset} from {VARIANTS[var]}: the rows of benchmarks/results/ were measured "
+            f"{dataset} from {VARIANTS[var]}: the rows of {results}/ were measured "
             "under different budgets, which one table cannot compare:\n  "
             + "\n  ".join(f"{b}: {_which(which)}" for b, which in budgets.items())
-            + "\nmove the rows of all but one budget out of benchmarks/results/"
+            + f"\nmove the rows of all but one budget out of {results}/"
         )
     return next(iter(budgets))
 
 
-def table_budgets(datasets: list[str], methods: list[str]) -> dict[tuple[str, str], Budget]:
+def table_budgets(
+    datasets: list[str], methods: list[str], where: Where | None = None
+) -> dict[tuple[str, str], Budget]:
     """The budget of each (dataset, start) of the table (refusing mixed ones, as ``report``)."""
-    rows = merge_rows(read_rows(ROOT / "benchmarks" / "results", protocol="all"))
-    return {(dataset, VARIANTS[var]): _group_budget(dataset, var, pick, names)
+    where = where or where_of()
+    rows = merge_rows(read_rows(where.results, protocol="all"))
+    return {(dataset, VARIANTS[var]): _group_budget(dataset, var, pick, names, where)
             for dataset, var, names, pick, _ in _table_groups(datasets, methods, rows)}  # fmt: skip
 
 
 def report(
-    datasets: list[str], methods: list[str], before: dict[tuple[str, str], str] | None = None
+    datasets: list[str],
+    methods: list[str],
+    before: dict[tuple[str, str], str] | None = None,
+    where: Where | None = None,
 ) -> str:
     """Mean +- std over seeds of each method's test rows, against the start and the control.
     A start's rows must share one budget (``row_budget``): rows of several are refused. Where
@@ -609,23 +719,25 @@ def report(
     method lines are the previous table's when every cell that the rows give is still today's
     (the rows are the same runs'): the validation that chose its control and counted the runs
     beating the start lives in those folders. The start's own line is always today's.
-    ``before`` is that table's lines (read from ``table_path()`` when not given)."""
-    before = previous_table(table_path()) if before is None else before
-    rows = merge_rows(read_rows(ROOT / "benchmarks" / "results", protocol="all"))
+    ``before`` is that table's lines (read from ``where.table`` when not given); ``where``:
+    the folders of the rows and run folders (default: the repository's)."""
+    where = where or where_of()
+    before = previous_table(where.table) if before is None else before
+    rows = merge_rows(read_rows(where.results, protocol="all"))
     lines = [
         "| " + " | ".join(HEADER) + " |",
         "|" + "---|" * len(HEADER),
     ]
     for dataset, var, names, pick, start in _table_groups(datasets, methods, rows):
-        _group_budget(dataset, var, pick, names)
-        group = _rows(dataset, pick, names, start)
-        lines += group if _all_runs_here(dataset, pick, names) else _kept(group, before)
+        _group_budget(dataset, var, pick, names, where)
+        group = _rows(dataset, pick, names, start, where)
+        lines += group if _all_runs_here(dataset, pick, names, where) else _kept(group, before)
     return "\n".join(lines)
 
 
-def _all_runs_here(dataset: str, pick: list[dict], names: list[str]) -> bool:
+def _all_runs_here(dataset: str, pick: list[dict], names: list[str], where: Where) -> bool:
     """Whether every row of a start's methods has its run folder's validation here."""
-    return all(_best_val(dataset, r["method"], r["seed"]) is not None
+    return all(_best_val(dataset, r["method"], r["seed"], where) is not None
                for r in pick if r["method"] in names)  # fmt: skip
 
 
@@ -656,10 +768,12 @@ def _kept(group: list[str], before: dict[tuple[str, str], str]) -> list[str]:
     return [kept.get(line, line) for line in group]
 
 
-def _rows(dataset: str, pick: list[dict], names: list[str], start: dict | None) -> list[str]:
+def _rows(
+    dataset: str, pick: list[dict], names: list[str], start: dict | None, where: Where
+) -> list[str]:
     """One start's lines of the table: the start, then each method with rows."""
     lines = []
-    chosen = _chosen_control(dataset, pick, names)
+    chosen = _chosen_control(dataset, pick, names, where)
     control = [r["min_fde"] for r in pick if r["method"] == chosen]
     controls = any(r["method"].startswith("control") for r in pick if r["method"] in names)
     if start is not None:
@@ -673,7 +787,7 @@ def _rows(dataset: str, pick: list[dict], names: list[str], start: dict | None) 
         if not own:
             continue
         fde = [r["min_fde"] for r in own]
-        beats = [_beats_start(dataset, method, r["seed"]) for r in own]
+        beats = [_beats_start(dataset, method, r["seed"], where) for r in own]
         known = [b for b in beats if b is not None]
         beat = f"{sum(known)} of {len(known)}" if known else "–"
         vs_start = f"{100 * (statistics.mean(fde) / start['min_fde'] - 1):+.1f} %" if start else "–"

@@ -2,6 +2,7 @@
 folders, start row and control, and never mix with the default start's."""
 
 import json
+import re
 import subprocess
 from argparse import Namespace
 from pathlib import Path
@@ -487,3 +488,172 @@ def test_stored_rows_of_several_budgets_need_the_budget_named(eb, tmp_path, monk
     (results / "finetune_walks_long.json").write_text(json.dumps(rows))
     with pytest.raises(SystemExit, match=r"(?s)several budgets.*every 3 epochs.*name the "):
         eb.stored_budget(["walks"], "generator-long")
+
+
+# ---- --runs, --results and --models: a table measured out of the repository ----------------
+
+
+def _repository(eb, tmp_path: Path, monkeypatch) -> Path:
+    """A repository (the script's ROOT) with rows, a table, a start record, a run folder and
+    docs/rlhf.md's block, none of which a run kept out of it may touch."""
+    repo = tmp_path / "repo"
+    monkeypatch.setattr(eb, "ROOT", repo)
+    results = repo / "benchmarks" / "results"
+    _published_rows(results)
+    (results / "meta").mkdir()
+    (results / "meta" / "finetune_start_walks.json").write_text(json.dumps({"val": {"score": 0.5}}))
+    (results / "meta" / "equal_budget.md").write_text("the repository's table\n")
+    _validated(repo, "walks-control-s0", 0.9)  # does not beat the repository's start
+    (repo / "models" / "walks").mkdir(parents=True)
+    (repo / "models" / "walks" / "generator.safetensors").write_bytes(b"the repository's")
+    (repo / "docs").mkdir()
+    (repo / "docs" / "rlhf.md").write_text("<!-- equal-budget:start -->\nthe published table\n"
+                                           "<!-- equal-budget:end -->\n")  # fmt: skip
+    return repo
+
+
+def _snapshot(root: Path) -> dict[str, tuple[bytes | None, int]]:
+    """Every file and folder under ``root``: its content (files) and modification time."""
+    return {str(p.relative_to(root)): (p.read_bytes() if p.is_file() else None,
+                                       p.stat().st_mtime_ns)
+            for p in sorted(root.rglob("*"))}  # fmt: skip
+
+
+def _elsewhere(mine: Path) -> list[str]:
+    return ["--runs", str(mine / "runs"), "--results", str(mine / "results"),
+            "--models", str(mine / "models")]  # fmt: skip
+
+
+def _finetune_py(seen: list[list[str]], fde: float):
+    """subprocess.call as finetune.py: records the command, writes its row into the results
+    folder it was given and a line into the log it was given."""
+
+    def call(cmd: list[str], **kw) -> int:
+        seen.append(cmd)
+        results = Path(cmd[cmd.index("--results") + 1])
+        seed = int(cmd[cmd.index("--seeds") + 1])
+        row = _row(cmd[cmd.index("--methods") + 1], seed, fde, command=" ".join(cmd[1:]))
+        results.mkdir(parents=True, exist_ok=True)
+        (results / "finetune_walks.json").write_text(json.dumps([row]))
+        print("finetune.py ran", file=kw["stdout"])
+        return 0
+
+    return call
+
+
+def test_a_run_elsewhere_writes_there_and_leaves_the_repository_as_it_is(
+    eb, tmp_path, monkeypatch, capsys
+):
+    """equal_budget.py had no --runs, --results and --models: its jobs, logs, rows, table and
+    docs/rlhf.md were the repository's, and its docstring advised measuring another budget in
+    a copy of the repository. Given the three, every job's finetune.py gets them, and the
+    repository is left as it is (another budget than its rows' is no longer refused)."""
+    repo = _repository(eb, tmp_path, monkeypatch)
+    mine = tmp_path / "mine"
+    (mine / "models" / "walks").mkdir(parents=True)
+    (mine / "models" / "walks" / "generator.safetensors").write_bytes(b"mine")
+    before = _snapshot(repo)
+    seen = []
+    monkeypatch.setattr(subprocess, "call", _finetune_py(seen, 0.5))
+    monkeypatch.chdir(tmp_path)  # relative folders are given to the jobs as absolute ones
+    monkeypatch.setattr("sys.argv", ["equal_budget.py", "--datasets", "walks", "--methods",
+                                     "control", "--seeds", "0", "--minutes", "1", "--runs",
+                                     "mine/runs", "--results", "mine/results", "--models",
+                                     "mine/models"])  # fmt: skip
+    eb.main()
+    assert len(seen) == 1
+    cmd = seen[0]
+    for option, folder in (("--runs", "runs"), ("--results", "results"), ("--models", "models")):
+        assert cmd[cmd.index(option) + 1] == str(mine / folder)
+    assert "finetune.max_minutes=1.0" in cmd  # not refused for the repository's 4-minute rows
+    log = mine / "runs" / "logs" / "equal_budget-walks-control-s0.log"
+    assert log.read_text() == "finetune.py ran\n"
+    table = (mine / "results" / "meta" / "equal_budget.md").read_text()
+    assert "| walks | control | 0 | 0.250 | 0.500 |" in table
+    out = capsys.readouterr().out
+    assert table in out + "\n"  # printed, not put in docs/rlhf.md
+    assert f"written to {mine / 'results' / 'meta' / 'equal_budget.md'}" in out
+    assert _snapshot(repo) == before
+
+
+def test_some_of_runs_results_and_models_are_refused(eb, tmp_path, monkeypatch, capsys):
+    """The ones left out would be the repository's: all three or none (exit 2, before any job)."""
+    repo = _repository(eb, tmp_path, monkeypatch)
+    before = _snapshot(repo)
+    seen = []
+    monkeypatch.setattr(subprocess, "call", lambda cmd, **kw: seen.append(cmd) or 0)
+    given = _elsewhere(tmp_path / "mine")
+    for keep in ((0,), (2,), (4,), (0, 2), (0, 4), (2, 4)):
+        argv = [a for i in keep for a in given[i : i + 2]]
+        for report in ([], ["--report"]):
+            monkeypatch.setattr("sys.argv", ["equal_budget.py", "--datasets", "walks",
+                                             "--methods", "control", *report, *argv])  # fmt: skip
+            with pytest.raises(SystemExit) as exit:
+                eb.main()
+            assert exit.value.code == 2
+            err = capsys.readouterr().err
+            assert "--runs, --results and --models go together" in err
+            missing = [given[i] for i in (0, 2, 4) if i not in keep]
+            assert " and ".join(missing) + " missing" in err
+    assert seen == [] and _snapshot(repo) == before
+    assert not (tmp_path / "mine").exists()
+
+
+def test_report_elsewhere_reads_the_rows_run_folders_and_start_records_there(
+    eb, tmp_path, monkeypatch, capsys
+):
+    """``--report`` with the three: the table of the rows, run folders and start records there
+    (the repository's rows, run folders and start record say otherwise), written there."""
+    repo = _repository(eb, tmp_path, monkeypatch)
+    mine = tmp_path / "mine"
+    results = mine / "results"
+    (results / "meta").mkdir(parents=True)
+    rows = [_row("pretrained", 0, 0.40), _row("control", 0, 0.50, command=_command(1.0, 4, None))]
+    (results / "finetune_walks.json").write_text(json.dumps(rows))
+    (results / "meta" / "finetune_start_walks.json").write_text(json.dumps({"val": {"score": 0.5}}))
+    _validated(mine, "walks-control-s0", 0.4)  # beats its start (the repository's run: 0.9)
+    before = _snapshot(repo)
+    monkeypatch.setattr("sys.argv", ["equal_budget.py", "--datasets", "walks", "--report",
+                                     *_elsewhere(mine)])  # fmt: skip
+    eb.main()
+    out = capsys.readouterr().out
+    lines = {line.split(" | ")[1]: line for line in out.splitlines() if line.startswith("| walks")}
+    assert set(lines) == {"start (pretrained)", "control"}  # not the repository's other methods
+    assert "| 0.500 | +25.0 % |" in lines["control"]  # its rows, not the repository's 0.44
+    assert lines["control"].endswith("| 1 of 1 |")  # its run folder and start record
+    assert "walks from generator: 1 CPU min, warm-up 4, validation every 0.25 CPU min" in out
+    assert lines["control"] in (results / "meta" / "equal_budget.md").read_text()
+    assert _snapshot(repo) == before
+    # a results folder that is not there has no rows to report
+    monkeypatch.setattr("sys.argv", ["equal_budget.py", "--report", *_elsewhere(tmp_path / "no")])
+    with pytest.raises(SystemExit) as exit:
+        eb.main()
+    assert exit.value.code == 2 and "no such folder" in capsys.readouterr().err
+    assert not (tmp_path / "no").exists()
+
+
+def test_a_run_elsewhere_needs_its_start_in_its_models_folder(eb, tmp_path, monkeypatch):
+    """The jobs start from <models>/<D>/<START>.safetensors: missing there (the repository's
+    does not count), nothing runs; a run folder there of another budget is named by its path."""
+    repo = _repository(eb, tmp_path, monkeypatch)
+    mine = tmp_path / "mine"
+    before = _snapshot(repo)
+    seen = []
+    monkeypatch.setattr(subprocess, "call", _finetune_py(seen, 0.5))
+    args = _jobs(minutes=1.0, runs=mine / "runs", results=mine / "results", models=mine / "models")
+    with pytest.raises(SystemExit, match=r"no published generator in --models .*mine/models: "
+                       r".*mine/models/walks/generator\.safetensors"):  # fmt: skip
+        eb.run_jobs(args)
+    assert seen == [] and not (mine / "runs").exists()
+    (mine / "models" / "walks").mkdir(parents=True)
+    (mine / "models" / "walks" / "generator.safetensors").write_bytes(b"mine")
+    eb.run_jobs(args)
+    assert len(seen) == 1 and "--models" in seen[0]
+    (mine / "runs" / "walks-control-s0").mkdir()
+    (mine / "runs" / "walks-control-s0" / "finetune_config.yaml").write_text(
+        "finetune:\n  max_minutes: 0.05\n  warmup_steps: 4\n  eval_every_minutes: 0.0125\n"
+    )
+    folder = re.escape(str(mine / "runs" / "walks-control-s0"))
+    with pytest.raises(SystemExit, match=f"{folder} was started under 0.05 CPU min"):
+        eb.run_jobs(Namespace(**{**vars(args), "minutes": 2.0}))
+    assert _snapshot(repo) == before
