@@ -180,7 +180,8 @@ def test_seeded_runs_are_identical(tmp_path, cfg):
     assert summaries[0] == summaries[1]
 
 
-def test_seeded_generator_runs_with_the_pedestrian_recipe_are_identical(tmp_path, folder, trained):
+def test_seeded_generator_runs_with_the_pedestrian_recipe_are_identical(tmp_path, folder, trained,
+                                                                        monkeypatch):  # fmt: skip
     # the published pedestrian folds train with mirrored and rotated scenes, dropout, a weight
     # average, bf16 steps and the heading frame: every random draw must come from the seed
     recipe = [
@@ -190,15 +191,29 @@ def test_seeded_generator_runs_with_the_pedestrian_recipe_are_identical(tmp_path
     ]  # fmt: skip
     denoiser = str(trained / "denoiser.safetensors")
     options = {"device": "cpu", "progress": False, "denoiser": denoiser}
+    import trajpref.data.transforms as transforms
+
+    played_backwards = []  # per run: how many training scenes reverse_time turned round
+    original = transforms.reverse_time
+
+    def counting(batch, scenes, *args, **kwargs):
+        played_backwards[-1] += int(scenes.sum())
+        return original(batch, scenes, *args, **kwargs)
+
+    monkeypatch.setattr(transforms, "reverse_time", counting)
     hashes = []
     runs = (("a", 0, []), ("b", 0, []), ("c", 1, []), ("d", 0, ["data.reverse=true"]))
     for run, seed, extra in runs:
         cfg = load_config(None, [*recipe, f"seed={seed}", *extra])
+        played_backwards.append(0)
         train_stage("generator", cfg, tmp_path / run, **options)
         hashes.append(ckpt.load(tmp_path / run / "generator.safetensors")["hash"])
     assert hashes[0] == hashes[1]  # same seed, same weights
     assert hashes[2] != hashes[0]  # and the seed matters
-    assert hashes[3] != hashes[0]  # the loop plays scenes backwards when the config says so
+    assert hashes[3] != hashes[0]
+    # the loop plays scenes backwards when the config says so, and only then (a different
+    # hash alone would not show it: the coin's draws move the other draws' stream too)
+    assert played_backwards[:3] == [0, 0, 0] and played_backwards[3] > 0
 
 
 def test_resume_continues_to_the_same_result(tmp_path, cfg):
