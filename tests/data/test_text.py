@@ -260,6 +260,22 @@ def test_the_bound_message_leaves_out_unknown_units(tmp_path):
         read_tracks(path)
 
 
+def test_a_coordinate_just_beyond_the_bound_reads_differently_from_it(tmp_path):
+    # 1,000,000.5 m and the bound of 1e6 m both printed as 1e+06 ("1e+06 m is beyond 1e+06 m")
+    path = tmp_path / "big.txt"
+    path.write_text("0 1 2 3\n10 1 1000000.5 3\n")
+    with pytest.raises(DataError, match=r"coordinate 1000000\.5 m is beyond the sane bound of "
+                                        r"1000000 m \("):  # fmt: skip
+        read_tracks(path, units="m")
+    path.write_text("0 1 2 3\n10 1 3 -1000000.5\n")
+    with pytest.raises(DataError, match=r"coordinate -1000000\.5 m is beyond .* of 1000000 m"):
+        read_tracks(path, units="m")
+    # a bound float32 cannot hold: 0.1 in the file is 0.100000001 in float32, beyond 0.1
+    path.write_text("0 1 0 0\n10 1 0.1 0\n")
+    with pytest.raises(DataError, match=r"coordinate 0\.100000001 m is beyond .* of 0\.1 m"):
+        read_tracks(path, units="m", options=ReadOptions(max_coord=np.float64(0.1)))
+
+
 def test_text_that_is_not_utf8_names_the_line(tmp_path):
     path = tmp_path / "bin.txt"
     path.write_bytes(b"0 1 2 3\n10 1 \xff\xfe 3\n")

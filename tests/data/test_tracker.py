@@ -205,3 +205,48 @@ def test_input_on_the_time_grid_and_agents_long_gone_give_no_warning():
         tracks_to_history(*_rows(_walk(1, 0.0, 3.0, y=0.0), _walk(2, 0.0, 2.9, y=2.0)),
                           now=T0 + 3.0, step=0.4)  # agent 2 gone one 10 Hz cycle ago  # fmt: skip
         assert tracks_to_history(*_jittered(), now=T0 + 3.9, step=0.4, hold=0.1).left_out_ids == []
+
+
+def test_a_now_a_day_after_every_observation_is_an_error_naming_two_clocks():
+    # a tracker on simulation time, now on wall-clock time: every agent was left out, no word
+    t = np.arange(0, 3.2, 0.4)  # [8] 0.0 .. 2.8 s
+    rows = (t, np.ones(8, int), np.c_[t, 0 * t])
+    with pytest.raises(
+        DataError, match=r"now \(1700000000\.0\) is after every observation by more than a day"
+    ) as info:
+        tracks_to_history(*rows, now=1.7e9, step=0.4)
+    assert "the newest is at 2.8" in str(info.value) and "two clocks" in str(info.value)
+    # a view empty for a while (its old rows still passed, as a planner's buffer does): an
+    # empty scene, not an error, up to a day
+    for later in (5.0, 3600.0, 86_000.0):
+        res = tracks_to_history(*rows, now=2.8 + later, step=0.4)
+        assert res.history.shape == (0, 8, 2) and res.left_out_ids == [1]
+    # a hold longer than the window reaches that far: the agent is held
+    held = tracks_to_history(*rows, now=2.8 + 5.0, step=0.4, hold=6.0)
+    assert held.ids == [1]
+    np.testing.assert_allclose(held.history[0], [[2.8, 0.0]] * 8)
+    # one stale agent beside a current one is left out, as before
+    both = _rows(_walk(1, 0.0, 3.0, y=0.0), (np.array([T0 - 100.0]), [2], np.zeros((1, 2))))
+    assert tracks_to_history(*both, now=T0 + 3.0, step=0.4).left_out_ids == [2]
+
+
+@pytest.mark.parametrize(
+    ("dtype", "origin", "spacing"), [(np.float32, T0, "128"), (np.float16, 1000.0, "0.5")]
+)
+def test_unix_times_in_a_narrow_float_type_are_an_error_not_two_clashing_rows(
+    dtype, origin, spacing
+):
+    # float32 Unix seconds are 128 s apart and were blamed as "two rows at time 1700000000.0
+    # with different positions"; float16 (up to 65504) is 0.5 s apart from 512 s
+    unix, ids, xy = _walk(1, 0.0, 3.0, y=0.0)  # 10 Hz from T0
+    narrow = (rf"times: {np.dtype(dtype).name} holds times as large as .* only to the nearest "
+              rf"{spacing} s, coarser than step=0\.4 s")  # fmt: skip
+    with pytest.raises(DataError, match=narrow) as info:
+        tracks_to_history((unix - T0 + origin).astype(dtype), ids, xy, now=origin + 3.0, step=0.4)
+    assert "pass float64 times" in str(info.value) and "subtract a start time" in str(info.value)
+    with pytest.raises(DataError, match=r"now: float32 holds times as large as 1\.7e\+09 s"):
+        tracks_to_history(unix, ids, xy, now=np.float32(T0 + 3.0), step=0.4)
+    # times from a start: float32 resolves them to well within a step, read as in float64
+    local = (unix - T0).astype(np.float32)
+    res = tracks_to_history(local, ids, xy, now=np.float32(3.0), step=0.4)
+    np.testing.assert_allclose(res.history[0, :, 0], 1.3 * FRAMES, atol=1e-5)

@@ -629,15 +629,29 @@ def _checked_xy(values, scale, max_coord, units, path, line_of) -> tuple[np.ndar
     big = float(v[np.argmax(np.abs(v))])
     if not fits[r]:
         raise DataError(f"coordinate {big:g} does not fit float32 (|value| > 3.4e38)", path, line)
+    if abs(big) <= max_coord:  # only float32's rounding put it beyond: show that value
+        big = float(xy[r, int(np.argmax(np.abs(xy[r])))])
+    shown, bound = _apart(big, max_coord)
     unit = f" {units}" if units and units != "unknown" else ""
     raise DataError(
-        f"coordinate {big:g}{unit} is beyond the sane bound of {max_coord:g}{unit} "
+        f"coordinate {shown}{unit} is beyond the sane bound of {bound}{unit} "
         "(map coordinates such as UTM: subtract an origin from x and y, since every model "
         "computes in float32; raise it with --max-coord only if the data really spans that "
         "far)",
         path,
         line,
     )
+
+
+def _apart(value: float, bound: float) -> tuple[str, str]:
+    """``value`` and ``bound`` as text (``:g``) with the fewest significant digits, 6 or more,
+    at which the magnitude of ``value`` reads differently from ``bound``: ``1000000.5`` and
+    ``1000000``, not ``1e+06`` twice."""
+    for digits in range(6, 18):
+        shown, limit = f"{value:.{digits}g}", f"{bound:.{digits}g}"
+        if shown.lstrip("-") != limit:
+            return shown, limit
+    return repr(value), repr(bound)
 
 
 PRECISION_SHARE = 0.01

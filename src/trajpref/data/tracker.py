@@ -22,6 +22,10 @@ from trajpref.errors import ConfigError, DataError
 EPS_STEPS = 1e-3
 """Times within this share of ``step`` of each other count as equal (float rounding of frame
 times such as ``now - 3 * 0.4``): 0.4 ms at a 0.4 s step."""
+CLOCKS_APART = 86_400.0
+"""Seconds after every observation beyond which ``now`` is refused as on another clock than the
+rows (a tracker on simulation time from 0, ``now`` in Unix seconds, 1.7e9): a day. Closer than
+that, rows that are all too old give an empty scene, a view that has been empty for a while."""
 CYCLE_SLACK = 1.5
 """With ``hold=``, an agent whose last observation at or before ``now`` is at most this many of
 its own observation intervals old (the median gap between its times: seen in the tracker's
@@ -122,12 +126,18 @@ def tracks_to_history(times: Any, ids: Sequence[Hashable] | np.ndarray, xy: Any,
     - The same (id, time) twice with the same position counts once; with different positions
       it is a ``DataError``.
 
-    No rows (an empty view) give empty arrays ([0, T_h, 2]). Wrong shapes, non-finite times
-    or positions, conflicting duplicate rows, ids that do not sort, or a ``now`` before every
-    observation raise ``DataError``; ``step``, ``t_hist``, ``max_gap`` or ``hold`` out of range
-    raise ``ConfigError``.
+    No rows (an empty view) give empty arrays ([0, T_h, 2]); so do rows whose agents are all
+    left out (a view that has been empty for a while, its old rows still passed). Wrong shapes,
+    non-finite times or positions, conflicting duplicate rows, ids that do not sort, a ``now``
+    before every observation, a ``now`` after every observation by more than
+    ``CLOCKS_APART`` (a day: two clocks, not an empty view), or float32 /
+    float16 ``times`` or ``now`` too large for that type to resolve ``step`` (Unix seconds in
+    float32 are 128 s apart) raise ``DataError``; ``step``, ``t_hist``, ``max_gap`` or
+    ``hold`` out of range raise ``ConfigError``.
     """
     step, max_gap, hold = _check_settings(step, t_hist, max_gap, hold)
+    _check_resolution("times", times, step)
+    _check_resolution("now", now, step)
     t, agent, pos = _check_rows(times, ids, xy)
     now = _finite_number("now", now, DataError)
     if len(t) and now < t.min() - EPS_STEPS * step:
@@ -136,6 +146,12 @@ def tracks_to_history(times: Any, ids: Sequence[Hashable] | np.ndarray, xy: Any,
                         "clock")  # fmt: skip
     frames = now - (t_hist - 1 - np.arange(t_hist)) * step  # [T_h], oldest first
     eps = EPS_STEPS * step
+    if len(t) and now - t.max() > CLOCKS_APART:
+        raise DataError(f"now ({now!r}) is after every observation by more than a day (the "
+                        f"newest is at {float(t.max())!r}, {now - float(t.max()):.6g} s before "
+                        "now): the times and now are likely on two clocks (e.g. a tracker on "
+                        "simulation time, now on wall-clock time); pass the present time in "
+                        "the tracker's clock")  # fmt: skip
     groups: dict[Hashable, list[int]] = {}
     for row, key in enumerate(agent):
         groups.setdefault(key, []).append(row)
@@ -300,6 +316,30 @@ def _check_settings(step, t_hist, max_gap, hold) -> tuple[float, float, float]:
     if hold < 0:
         raise ConfigError(f"hold must be >= 0 seconds, got {hold!r}")
     return step, max_gap, hold
+
+
+def _check_resolution(name: str, value, step: float) -> None:
+    """``DataError`` when ``value`` (``times`` or ``now``) is a float type narrower than float64
+    (float32, float16) whose resolution at its largest magnitude is coarser than ``step``: its
+    times are rounded to a coarser grid than the frames (Unix seconds in float32: 128 s)."""
+    try:
+        arr = np.asarray(value)  # an array, a list of numpy floats, a CPU tensor, a scalar
+    except (TypeError, ValueError):
+        return  # not numbers: _check_rows or _finite_number says so
+    dtype = arr.dtype
+    if dtype.kind != "f" or dtype.itemsize >= 8:
+        return
+    finite = np.abs(arr[np.isfinite(arr)])  # the non-finite ones get their own error
+    if not finite.size:
+        return
+    top = finite.max()
+    spacing = float(np.spacing(top))  # in value's own type: the gap to the next number
+    if spacing > step:
+        raise DataError(f"{name}: {dtype.name} holds times as large as {float(top):.6g} s "
+                        f"only to the nearest {spacing:g} s, coarser than step={step:g} s, so "
+                        "stamps a step apart collapse into one: pass float64 times (and now), "
+                        f"or subtract a start time in float64 before converting to "
+                        f"{dtype.name}")  # fmt: skip
 
 
 def _check_rows(times, ids, xy) -> tuple[np.ndarray, list, np.ndarray]:
