@@ -169,6 +169,9 @@ CASES: dict[str, tuple[list[str], str]] = {
         [*TRAIN, "--set", "data.delimiter=,", "--out", "{out}/run"],
         r"--set data\.delimiter=,: not valid YAML \(ParserError\); a text holding YAML's own "
         r"characters goes in quotes: --set 'data\.delimiter=\",\"'"),
+    "--dataset path with a YAML comment sign": (
+        [*TRAIN, "--dataset", "{in}/no such #2", "--out", "{out}/run"],
+        r"no such #2: no such folder"),
     "--set text YAML reads as empty": (
         [*TRAIN, "--set", "data.delimiter=|", "--out", "{out}/run"],
         r"--set data\.delimiter=\|: YAML reads '\|' as the empty text; to mean those "

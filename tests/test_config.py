@@ -50,6 +50,11 @@ def test_an_override_of_yaml_characters_is_refused_with_the_quoting_that_means_t
     assert quoted.data.delimiter == value
 
 
+def test_an_override_with_a_yaml_tag_is_a_config_error_not_a_traceback():
+    with pytest.raises(ConfigError, match=r"--set data\.dataset=!foo: not valid YAML"):
+        load_config(None, ["data.dataset=!foo"])
+
+
 @pytest.mark.parametrize("value", ["null", "~", ""])
 def test_an_override_that_spells_null_on_purpose_is_taken(value):
     assert load_config(None, [f"finetune.reward_clip={value}"]).finetune.reward_clip is None

@@ -2146,7 +2146,7 @@ def cmd_train(args) -> int:
         _check_checkpoint("--denoiser", args.denoiser)
     overrides = list(args.overrides)
     if args.dataset is not None:
-        overrides.append(f"data.dataset={args.dataset}")
+        overrides.append(f"data.dataset={json.dumps(args.dataset)}")  # a path as it is
     for key in ("frame_interval", "units", "time_step"):  # shortcuts for --set, as --dataset
         value = getattr(args, key)
         if value is not None:

@@ -1193,7 +1193,11 @@ def read_yaml(path: str | Path | None, text: str | None = None, name: str = "",
                     f"be dropped without a word: write one {key}: section holding all its "
                     "keys")  # fmt: skip
         raise ConfigError(f"{where}{key} is given twice{lines}; {what}")
-    return yaml.safe_load(text)
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:  # well-formed, but not plain data (a !tag)
+        more = f"; {hint}" if hint else ""
+        raise ConfigError(f"{shown}: not valid YAML ({exc.__class__.__name__}){more}") from None
 
 
 def load_config(

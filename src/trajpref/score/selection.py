@@ -76,7 +76,7 @@ class SelectionConfig:
     keep: int = 5
     """K', the samples kept per agent (or per scene). The defaults below are an early choice
     on zara1's and eth's validation splits, and the CLI's (``--keep`` selects with them); the
-    settings chosen since for each published generator are ``chosen_selection(name)`` (and
+    settings chosen since for each published generator are ``chosen_selection(model)`` (and
     ``cheap=True`` for its cheap setting), as ``benchmarks/selection_chosen.json`` and the
     README's selection table name them (zara1's: ``drop=0.2, bandwidth=1.0,
     trust_speed=0.445, score_every=3``, 34 score steps)."""
