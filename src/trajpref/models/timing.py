@@ -483,6 +483,182 @@ def jump_problem(obj: Any, history: Any, name: str = "this model",
             "and how many")  # fmt: skip
 
 
+FAST_LIMIT = 1.0
+"""``fast_problem`` (``check_observed_steps``) warns when the ``PACE_QUANTILE`` of the observed
+steps of the agents handed over at once (balls left out) exceeds this many model units per step
+and the model has no input speed clamp (``speed_clamp``): its futures, or a scorer's scores, then
+extrapolate past its training (robo's generator gave walkers at 10 times robo's median pace
+steps of up to 39 m). 1.0 model unit is 1.47 m per 0.4 s step at zara1's scale, 1.73 m per
+0.5 s at robo's, 59 px at SDD's; the training splits' 99th percentile is at most
+``PACE_REFERENCE``. Chosen as the lowest of the candidates 1.0, 1.5, 2.0 and 2.5 at which no
+published model's test split warns on more than 1 % of its scenes: the share of scenes (windows)
+whose ``PACE_QUANTILE`` of its agents' pace, in that model's units, exceeds each candidate
+(2026-12-06, walkthrough 68; eth's generator-pace reads eth's split as eth's generator; the
+training splits' largest scene: 0.54-0.66 on ETH/UCY's, 0.63 nba, 0.32 robo-sim, 0.37
+robo-mix, 2.39 SDD, 6 of whose 5,487 scenes exceed 1.0)::
+
+    test split (scenes)   scene max   > 1.0       > 1.5       > 2.0   > 2.5
+    eth (253)             0.734       0           0           0       0
+    hotel (445)           0.449       0           0           0       0
+    univ (947)            0.322       0           0           0       0
+    zara1 (705)           0.463       0           0           0       0
+    zara2 (998)           0.514       0           0           0       0
+    nba (5,126)           0.578       0           0           0       0
+    robo (578)            0.427       0           0           0       0
+    robo-mix (578)        0.422       0           0           0       0
+    sdd (1,951)           1.689       0.05 % (1)  0.05 % (1)  0       0
+"""
+WIDE_LIMIT = 25.0
+"""``wide_problem`` (``check_observed_steps``) warns when two agents of one scene lie more than
+this many model units apart at its last observed frame (positions / the model's data scale:
+36.8 m at zara1's scale, 30.2 m at nba's, 1,475 px at SDD's) and the model has no neighbour
+radius (``model.neighbour_radius``, ``scorer.neighbour_radius``): every agent then attends to
+every other, however far, and one far agent moves the others' futures and scores. The lowest
+round limit (a multiple of 5) that no training scene of any published model exceeds: the
+largest distance between two agents (targets; context-only neighbours seen at the last frame
+in brackets) at the last observed frame of any scene, per split, in that model's units
+(2026-12-06, walkthrough 68); NBA's court sets it, the pedestrian models never saw two agents
+more than 11.1 model units (16 m) apart, 13.5 (20 m) with their context::
+
+    model (train / test data)   train max     test max      test scenes above 10 / 15 / 20 / 25
+    eth                         10.74 (13.07)  7.43 (12.96)  0 / 0 / 0 / 0 of 253
+    hotel                       10.72 (13.04)  7.73 (9.45)   0 / 0 / 0 / 0 of 445
+    univ                         7.25 (10.47)  8.68 (10.56)  0 / 0 / 0 / 0 of 947
+    zara1                       11.09 (13.50)  7.92 (11.33)  0 / 0 / 0 / 0 of 705
+    zara2                       10.85 (13.21)  9.02 (11.38)  0 / 0 / 0 / 0 of 998
+    nba                         21.39          18.16         44.2 % / 0.57 % / 0 / 0 of 5,126
+    robo (robo-sim / robo)       7.93           6.50         0 / 0 / 0 / 0 of 578
+    robo-mix                     7.83           6.42         0 / 0 / 0 / 0 of 578
+    sdd                          9.25           6.51         0 / 0 / 0 / 0 of 1,951
+"""
+WIDE_CHUNK = 4096
+"""Agents per block of ``scene_widths``' distance matrix (a block of 4,096 x N float64)."""
+
+
+def _model_scale(obj: Any) -> float | None:
+    """``obj.scale`` (data units per model unit) as a float, None where it has none (the
+    constant-velocity baseline) or it is not a number > 0."""
+    scale = getattr(obj, "scale", None)
+    if isinstance(scale, bool) or not isinstance(scale, numbers.Real) or not scale > 0:
+        return None
+    return float(scale)
+
+
+def speed_clamp(obj: Any) -> float | None:
+    """The input speed clamp ``obj`` applies, in model units per step: a leapfrog predictor's
+    ``model.max_speed`` (``obj.generator.cfg.max_speed``, ``ModelConfig.max_speed``) where it
+    is > 0; None for none: 0 (off, as robo's, robo-mix's, nba's and SDD's published generators),
+    the full sampler (no generator runs), a scorer and the constant-velocity baseline."""
+    generator = getattr(obj, "generator", None)
+    if generator is None or getattr(obj, "sampler", "leapfrog") != "leapfrog":
+        return None
+    clamp = getattr(getattr(generator, "cfg", None), "max_speed", None)
+    if isinstance(clamp, bool) or not isinstance(clamp, numbers.Real) or not clamp > 0:
+        return None
+    return float(clamp)
+
+
+def _people(history: Any, agent_type: Any) -> torch.Tensor:
+    """The agents of ``history`` [N, T_h, 2] not typed ``AGENT_BALL`` in ``agent_type`` [N]
+    (None, or flags of another length: all of them), as a float64 CPU tensor."""
+    hist = _cpu_float64(history)
+    if agent_type is None or hist.ndim != 3:
+        return hist
+    kinds = torch.as_tensor(
+        agent_type.detach().cpu() if isinstance(agent_type, torch.Tensor) else agent_type
+    ).reshape(-1)  # [N]
+    return hist[kinds != AGENT_BALL] if len(kinds) == len(hist) else hist
+
+
+def fast_problem(obj: Any, history: Any, name: str = "this model",
+                 agent_type: Any = None) -> str | None:  # fmt: skip
+    """The warning text when the ``PACE_QUANTILE`` of the observed steps of ``history``
+    [N, T_h, 2] (balls in ``agent_type`` [N] left out) exceeds ``FAST_LIMIT`` model units of
+    ``obj`` (a predictor or scorer; positions divided by ``obj.scale``) and ``obj`` has no
+    input speed clamp (``speed_clamp``); None otherwise, and for an object without a scale
+    (the constant-velocity baseline). Agents this fast are in the model's units but faster
+    than its training data (far faster, above ``PACE_LIMIT``, is ``pace_problem``'s other
+    units). The text is the same at every call, so that a planner's loop is warned once."""
+    scale = _model_scale(obj)
+    if scale is None or speed_clamp(obj) is not None:
+        return None
+    found = pace_quantile(_people(history, agent_type), scale)
+    if found is None or not found[0] > FAST_LIMIT:
+        return None
+    units = getattr(obj, "units", None) or "data units"
+    head = (f"{name} is given agents faster than its training data: the {PACE_QUANTILE:.0%} "
+            f"quantile of their observed step is above {FAST_LIMIT:.1f} model units "
+            f"({FAST_LIMIT * scale:.4g} {units} at the model's data scale {scale:g}), where "
+            f"the 99th percentile of any published model's training data is at most "
+            f"{PACE_REFERENCE} and no published test split has 1 % of its scenes above it, "
+            "and it has no input speed clamp (model.max_speed; docs/pretraining.md, 'An input "
+            "speed clamp for agents faster than training'): ")  # fmt: skip
+    if getattr(obj, "generator", None) is not None and getattr(obj, "sampler", None) == "leapfrog":
+        return head + (
+            "its futures for them extrapolate (robo's generator gave walkers at 10 times "
+            "robo's median pace steps of up to 39 m). Set one, in model units per step: in "
+            "Python model.generator.cfg.max_speed = its training split's 99th percentile of "
+            "the pace (0.280 for robo and robo-mix, 0.529 for SDD, 0.582 for NBA), "
+            "--max-speed on the command line; faster agents are then predicted as scaled-up "
+            "copies of the fastest it was trained on. If they are not this fast, check the "
+            "positions' units and step")  # fmt: skip
+    what = "its scores of their samples" if not hasattr(obj, "generator") else "its futures"
+    return head + (
+        f"{what} extrapolate (the clamp acts on a leapfrog generator's inputs; a scorer's "
+        "denoiser and the full sampler have none). If they are not this fast, check the "
+        "positions' units and step; for predictions, a leapfrog generator with "
+        "model.generator.cfg.max_speed set (--max-speed on the command line) keeps them in "
+        "its training range")  # fmt: skip
+
+
+def scene_widths(history: Any, scenes: Any = None) -> torch.Tensor:
+    """[B] float64: per scene, the largest distance between two of its agents at the last
+    observed frame of ``history`` [N, T_h, 2] (numpy or torch, the data's units; agents not
+    finite there left out; 0 for fewer than two), its N agents split into consecutive scenes
+    of ``scenes`` [B] sizes (None: one scene)."""
+    hist = _cpu_float64(history)
+    if hist.ndim != 3 or not hist.shape[1]:
+        return torch.zeros(0, dtype=torch.float64)
+    last = hist[:, -1]  # [N, 2]
+    sizes = [len(last)] if scenes is None else [int(n) for n in scenes]
+    out = []
+    for part in last.split(sizes):  # [P_b, 2]
+        part = part[part.isfinite().all(dim=-1)]
+        widest = 0.0
+        for rows in part.split(WIDE_CHUNK) if len(part) > 1 else ():
+            widest = max(widest, float(torch.cdist(rows, part).max()))
+        out.append(widest)
+    return torch.tensor(out, dtype=torch.float64)
+
+
+def wide_problem(obj: Any, history: Any, name: str = "this model",
+                 scenes: Any = None) -> str | None:  # fmt: skip
+    """The warning text when two agents of one scene of ``history`` [N, T_h, 2] (split into
+    ``scenes`` [B] consecutive sizes; None: one scene) lie more than ``WIDE_LIMIT`` model units
+    of ``obj`` apart at the last observed frame (``scene_widths``, divided by ``obj.scale``)
+    and ``obj`` (a predictor or scorer) has no ``neighbour_radius``; None otherwise, and for
+    an object without a scale (the constant-velocity baseline). The text is the same at
+    every call, so that a planner's loop is warned once."""
+    scale = _model_scale(obj)
+    if scale is None or getattr(obj, "neighbour_radius", None) is not None:
+        return None
+    widths = scene_widths(history, scenes)
+    if not bool((widths > WIDE_LIMIT * scale).any()):
+        return None
+    units = getattr(obj, "units", None) or "data units"
+    return (f"{name} is given a scene with two agents more than {WIDE_LIMIT:g} model units "
+            f"apart at its last observed frame ({WIDE_LIMIT * scale:.4g} {units} at the "
+            f"model's data scale {scale:g}), farther than any two agents of a published "
+            "model's training scenes (21.4 on NBA's court; 11.1, about 16 m, on ETH/UCY's), "
+            "and it has no neighbour radius: every agent attends to every other however far, "
+            "and a far agent moves the others' futures and scores (one walker 1 km to the "
+            "side bent a straight walker's futures by metres). Set model.neighbour_radius "
+            "(and scorer.neighbour_radius; --neighbour-radius on the command line), in the "
+            "data's units, e.g. 12 for the pedestrian models in metres (README, 'Scenes "
+            "wider than the training scenes: set a neighbour radius'); "
+            "trajpref.models.timing.scene_widths gives the distances")  # fmt: skip
+
+
 def observed_problem(obj: Any, history: Any, name: str = "this model",
                      agent_type: Any = None) -> str | None:  # fmt: skip
     """What is wrong with the observed steps of ``history`` [N, T_h, 2] for ``obj`` (a
@@ -494,10 +670,21 @@ def observed_problem(obj: Any, history: Any, name: str = "this model",
 
 
 def check_observed_steps(obj: Any, history: Any, name: str = "this model",
-                         stacklevel: int = 3, agent_type: Any = None) -> bool:  # fmt: skip
-    """Warn (``UserWarning``, once) with ``observed_problem``'s text; returns whether it
-    warned. The same text at every call, so that a planner's loop is warned once."""
-    problem = observed_problem(obj, history, name, agent_type)
-    if problem is not None:
-        warnings.warn(problem, stacklevel=stacklevel)
-    return problem is not None
+                         stacklevel: int = 3, agent_type: Any = None,
+                         scenes: Any = None) -> bool:  # fmt: skip
+    """Warn (``UserWarning``) of what is wrong with the agents ``history`` [N, T_h, 2] hands
+    to ``obj`` (a predictor or scorer; ``scenes`` [B]: the sizes of the consecutive scenes it
+    joins, None: one scene), each cause once: data in other units (``pace_problem``) alone,
+    since it moves and spreads every agent; else one agent's jump (``jump_problem``) or, where
+    none, agents faster than training for a model without a speed clamp (``fast_problem``),
+    and beside either a scene wider than training for a model without a neighbour radius
+    (``wide_problem``). Returns whether it warned. The same texts at every call, so that a
+    planner's loop is warned once."""
+    found = [pace_problem(obj, history, name)]  # other units: every distance off, it alone
+    if found[0] is None:
+        steps = jump_problem(obj, history, name, agent_type)
+        steps = steps or fast_problem(obj, history, name, agent_type)
+        found = [p for p in (steps, wide_problem(obj, history, name, scenes)) if p is not None]
+    for text in found:
+        warnings.warn(text, stacklevel=stacklevel)
+    return bool(found)

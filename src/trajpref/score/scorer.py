@@ -409,19 +409,53 @@ ArrayLike = np.ndarray | torch.Tensor
 """What the public API accepts: a numpy array (or anything ``np.asarray`` reads) or a tensor."""
 
 
+HALF_PRECISION = (
+    "half precision ({dtype}) rounds positions too coarsely for trajectories: its 8 "
+    "(bfloat16) or 11 (float16) significant bits hold positions near 100 m only to 0.5 m "
+    "or 0.06 m, so a walker's 0.5 m steps read as 0 or 1 m and the futures move by metres; "
+    "pass float32 or float64 (x.float(), np.asarray(x, np.float32))"
+)
+"""Why ``_float_tensor`` refuses float16 and bfloat16 input (``{dtype}``: the input's)."""
+
+
+def _input_dtype_problem(dtype) -> str | None:
+    """Why positions of ``dtype`` (a torch or numpy dtype) cannot be read as coordinates,
+    None when they can: booleans (True would read as 1), complex numbers (the imaginary part
+    would be dropped), half precision (``HALF_PRECISION``). The same for tensors and arrays."""
+    if isinstance(dtype, torch.dtype):
+        if dtype == torch.bool or dtype.is_complex:
+            return f"expected real numbers, got a {dtype} tensor"
+        half = dtype in (torch.float16, torch.bfloat16)
+        return HALF_PRECISION.format(dtype=dtype) if half else None
+    if dtype.kind in "bc":
+        return f"expected real numbers, got a numpy {dtype} array"
+    half = dtype.kind == "f" and dtype.itemsize < 4
+    return HALF_PRECISION.format(dtype=f"numpy {dtype}") if half else None
+
+
 def _float_tensor(name: str, value, device: torch.device, unseen: bool = False) -> torch.Tensor:
-    """``value`` as float32 on ``device``; DataError for non-numbers and for values that are
-    not finite after the float32 conversion (NaN, inf, or beyond float32's range; with
-    ``unseen``, NaN is let through: a frame where a neighbour was not seen). Any numpy view
-    (reversed, strided) is read as its values."""
+    """``value`` as float32 on ``device``; DataError for non-numbers, booleans, complex numbers
+    and half precision (float16, bfloat16: ``_input_dtype_problem``; a tensor's dtype or the
+    dtype numpy reads a list or array as), and for values that are not finite after the
+    float32 conversion (NaN, inf, or beyond float32's range; with ``unseen``, NaN is let
+    through: a frame where a neighbour was not seen). Any numpy view (reversed, strided) is
+    read as its values."""
     if isinstance(value, torch.Tensor):
-        if value.is_complex() or value.dtype == torch.bool:
-            raise DataError(f"{name}: expected real numbers, got a {value.dtype} tensor")
+        problem = _input_dtype_problem(value.dtype)
+    else:
+        try:
+            value = np.asarray(value)  # its own dtype, judged before the conversion
+        except (TypeError, ValueError) as exc:
+            raise DataError(f"{name}: expected an array of numbers ({exc})") from None
+        problem = _input_dtype_problem(value.dtype)
+    if problem is not None:
+        raise DataError(f"{name}: {problem}")
+    if isinstance(value, torch.Tensor):
         tensor = value.detach().to(device=device, dtype=torch.float32)
     else:
         try:
             with np.errstate(over="ignore"):  # overflow becomes inf, reported below
-                array = np.asarray(value, dtype=np.float32)
+                array = value.astype(np.float32, copy=False)
         except (TypeError, ValueError) as exc:
             raise DataError(f"{name}: expected an array of numbers ({exc})") from None
         if any(stride < 0 for stride in array.strides):  # h[::-1]: torch cannot wrap it
@@ -810,8 +844,10 @@ def _predict(model, histories: list, num_samples, agent_types: list, seed, frame
     pred = None
     if present:  # one warning per call: cm for m (the speed clamp would hide it)
         joined = torch.cat([h for h, _, _ in present])  # [N, T_h, 2]
-        check_observed_steps(model, joined, stacklevel=4,  # other units, or an id switch
-                             agent_type=torch.cat([t for _, t, _ in present]))  # fmt: skip
+        # other units, an id switch, agents faster or a scene wider than training
+        check_observed_steps(model, joined, stacklevel=4,
+                             agent_type=torch.cat([t for _, t, _ in present]),
+                             scenes=[len(h) for h, _, _ in present])  # fmt: skip
         batch = _join(present, t_f)
         pred = model.predict(batch, count, torch.Generator().manual_seed(seed))  # [K, N, T_f, 2]
     elif callable(getattr(model, "check_samples", None)):  # predict's refusal, without a pass
@@ -840,7 +876,7 @@ def _warn_fixed_set(model, count: int) -> None:
                       f"{fixed}), and num_samples={count} takes its first {count}, an "
                       f"arbitrary subset: to keep {count} chosen from all {fixed}, predict "
                       f"all {fixed} and keep {count} with trajpref.score.selection."
-                      f"select_for_scene (chosen_selection(name, keep={count}) gives the "
+                      f"select_for_scene (chosen_selection(model, keep={count}) gives the "
                       "published models' score-guided setting; docs/selection.md), or load "
                       "it with sampler='full' for independent draws", stacklevel=4)  # fmt: skip
 
@@ -903,7 +939,8 @@ def scene_batch(scorer: TrajectoryScorer, history: ArrayLike, samples: ArrayLike
     # map coordinates rank differently in float32: predict's rule, at the scorer's scale
     check_coordinates(hist, scorer.scale)
     types = _agent_types(agent_type, p, device)
-    if p:  # cm given to a metre scorer scrambles its ranking without an error; or an id switch
+    if p:  # cm given to a metre scorer scrambles its ranking without an error; or an id
+        # switch, agents faster or a scene wider than training (one scene: scenes=None)
         check_observed_steps(scorer, hist, name="this scorer", stacklevel=4, agent_type=types)
         check_samples_continue(scorer, hist, futs, types)
     return _join([(hist, types, None)], t_f), futs
