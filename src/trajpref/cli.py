@@ -1128,8 +1128,9 @@ def _warn_untyped_data(args, model, scorer, ds) -> None:
 def _warn_observed_pace(args, model, scorer, ds) -> None:
     """``evaluation.warn_observed_pace`` for the command's model (a selecting predictor's
     generator), else its ``--scorer`` (the constant-velocity baseline reads any units): one
-    warning per run when the split's observed steps are far from the model's training (data
-    in other units, or a tracker's id switch)."""
+    warning per cause and run when the split is far from the model's training (data in other
+    units, a tracker's id switch, agents faster than training without a speed clamp, a window
+    wider than any training scene without a neighbour radius)."""
     warn_observed_pace(_checked_objects(args, model, scorer), ds)
 
 

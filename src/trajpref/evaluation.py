@@ -47,7 +47,7 @@ from trajpref.models.timing import (
     UNKNOWN_UNITS,
     VIA,
     lineage_others,
-    observed_problem,
+    observed_problems,
     shared_files,
     timing_problems,
     trained_otherwise,
@@ -870,24 +870,32 @@ def role_notes(role: str, note: str) -> str:
 
 def warn_observed_pace(checked: list[tuple[str, object]], dataset: TrajectoryDataset,
                        tail: str = "") -> bool:  # fmt: skip
-    """One warning per pass, for the first of ``checked`` (``(name, predictor or scorer)``,
-    the model before its scorer; the constant-velocity baseline reads any units) where the
-    split's observed steps are far from its training (``models.timing.observed_problem``):
-    the 90th percentile of its agents' pace above ``timing.PACE_LIMIT`` model units (data in
-    other units, e.g. centimetres for a metre model, which the generator's speed clamp hides
-    and the score does not), else one agent jumping more than ``timing.JUMP_LIMIT`` in one
-    step (a tracker id switch). ``tail`` ends the text (``check_trained_on``'s); returns
-    whether it warned."""
+    """Warn once per pass of each cause ``models.timing.observed_problems`` finds in the
+    split's observed steps, for the first of ``checked`` (``(name, predictor or scorer)``, the
+    model before its scorer; the constant-velocity baseline reads any units) that has it, as
+    ``predict_scenes`` warns of a call's scenes: the 90th percentile of all its agents' pace
+    above ``timing.PACE_LIMIT`` model units (data in other units, e.g. centimetres for a
+    metre model, which the generator's speed clamp hides and the score does not), alone;
+    else one agent jumping more than ``timing.JUMP_LIMIT`` in one step (a tracker id switch)
+    or, where none, that percentile above ``timing.FAST_LIMIT`` for one without an input
+    speed clamp (agents faster than training), and beside either, two agents of one window
+    more than ``timing.WIDE_LIMIT`` apart at its last observed frame for one without a
+    neighbour radius (a scene wider than training). ``tail`` ends each text
+    (``check_trained_on``'s); returns whether it warned."""
     if not len(dataset) or not checked:
         return False
     history = np.concatenate([s.history for s in dataset.scenes])  # [N, T_h, 2]
     types = np.concatenate([s.agent_type for s in dataset.scenes])  # [N]
+    sizes = [len(s.history) for s in dataset.scenes]  # [B] agents per window, in that order
+    found: dict[str, str] = {}  # cause -> the text of the first that has it
     for name, obj in checked:
-        problem = observed_problem(obj, history, name, types)
-        if problem is not None:
-            warnings.warn(problem + tail, stacklevel=_user_level())
-            return True
-    return False
+        for cause, text in observed_problems(obj, history, name, types, sizes).items():
+            found.setdefault(cause, text)
+    if "units" in found:  # every distance off: the others would only repeat it
+        found = {"units": found["units"]}
+    for text in found.values():
+        warnings.warn(text + tail, stacklevel=_user_level())
+    return bool(found)
 
 
 def warn_untyped_data(checked: list[tuple[str, object]], dataset: TrajectoryDataset,

@@ -669,22 +669,38 @@ def observed_problem(obj: Any, history: Any, name: str = "this model",
     return pace_problem(obj, history, name) or jump_problem(obj, history, name, agent_type)
 
 
+def observed_problems(obj: Any, history: Any, name: str = "this model",
+                      agent_type: Any = None, scenes: Any = None) -> dict[str, str]:  # fmt: skip
+    """The warning texts that apply to the agents ``history`` [N, T_h, 2] hands to ``obj`` (a
+    predictor or scorer; ``agent_type`` [N]: balls are not checked for jumps or pace;
+    ``scenes`` [B]: the sizes of the consecutive scenes it joins, None: one scene), keyed by
+    cause, what ``check_observed_steps`` (Python's calls) and ``evaluation.warn_observed_pace``
+    (the CLI's and ``evaluate``'s runs over a split) both warn of: ``units``, data in other
+    units (``pace_problem``), alone, since it moves and spreads every agent; else ``steps``,
+    one agent's jump (``jump_problem``) or, where none, agents faster than training for a
+    model without a speed clamp (``fast_problem``), and ``wide``, a scene wider than training
+    for a model without a neighbour radius (``wide_problem``). Empty when none applies."""
+    units = pace_problem(obj, history, name)
+    if units is not None:  # other units: every distance off, it alone
+        return {"units": units}
+    steps = jump_problem(obj, history, name, agent_type)
+    found = {"steps": steps or fast_problem(obj, history, name, agent_type),
+             "wide": wide_problem(obj, history, name, scenes)}  # fmt: skip
+    return {cause: text for cause, text in found.items() if text is not None}
+
+
 def check_observed_steps(obj: Any, history: Any, name: str = "this model",
                          stacklevel: int = 3, agent_type: Any = None,
                          scenes: Any = None) -> bool:  # fmt: skip
     """Warn (``UserWarning``) of what is wrong with the agents ``history`` [N, T_h, 2] hands
     to ``obj`` (a predictor or scorer; ``scenes`` [B]: the sizes of the consecutive scenes it
-    joins, None: one scene), each cause once: data in other units (``pace_problem``) alone,
-    since it moves and spreads every agent; else one agent's jump (``jump_problem``) or, where
-    none, agents faster than training for a model without a speed clamp (``fast_problem``),
-    and beside either a scene wider than training for a model without a neighbour radius
-    (``wide_problem``). Returns whether it warned. The same texts at every call, so that a
-    planner's loop is warned once."""
-    found = [pace_problem(obj, history, name)]  # other units: every distance off, it alone
-    if found[0] is None:
-        steps = jump_problem(obj, history, name, agent_type)
-        steps = steps or fast_problem(obj, history, name, agent_type)
-        found = [p for p in (steps, wide_problem(obj, history, name, scenes)) if p is not None]
-    for text in found:
+    joins, None: one scene), each cause once (``observed_problems``): data in other units
+    (``pace_problem``) alone, since it moves and spreads every agent; else one agent's jump
+    (``jump_problem``) or, where none, agents faster than training for a model without a
+    speed clamp (``fast_problem``), and beside either a scene wider than training for a model
+    without a neighbour radius (``wide_problem``). Returns whether it warned. The same texts
+    at every call, so that a planner's loop is warned once."""
+    found = observed_problems(obj, history, name, agent_type, scenes)
+    for text in found.values():
         warnings.warn(text, stacklevel=stacklevel)
     return bool(found)

@@ -687,7 +687,12 @@ def predict_scene(model, history: ArrayLike, num_samples: int = 20,
     check): a model trained on 0.5 s steps reads 0.4 s tracks as slower agents, and its 12
     steps then span 6 s, not 4.8. Positions in other units than the model's (centimetres for
     metres) get a ``UserWarning`` too, once per call, when the scene's agents move far faster
-    than its training data (``models.timing.check_observed_steps``).
+    than its training data (``models.timing.check_observed_steps``); so do agents faster than
+    training on a model without an input speed clamp (``timing.FAST_LIMIT``: set
+    ``model.generator.cfg.max_speed``) and a scene wider than any training scene on a model
+    without a neighbour radius (``timing.WIDE_LIMIT``: set ``model.neighbour_radius``).
+    float16 / bfloat16, bool and complex positions are a ``DataError`` (half precision holds a
+    position of 100 m only to 0.06-0.5 m).
 
     Agent order: a model with agent roles (``model.agent_roles`` > 0: robo/generator and
     robo-mix/generator, 3 roles) reads each agent's place in ``history`` as its role, so the
