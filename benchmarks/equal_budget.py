@@ -632,12 +632,6 @@ def _ms(xs: list[float]) -> str:
     return f"{statistics.mean(xs):.3f} ± {statistics.stdev(xs):.3f}"
 
 
-def table_path(where: Where | None = None) -> Path:
-    """``meta/equal_budget.md``: the table this script writes, and reads back the next time
-    (``where.table``; default: the repository's)."""
-    return (where or where_of()).table
-
-
 def previous_table(path: Path) -> dict[tuple[str, str], str]:
     """The lines of an earlier table (``meta/equal_budget.md``) by their first two cells."""
     return table_lines(path.read_text() if path.is_file() else "")

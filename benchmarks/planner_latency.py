@@ -34,7 +34,8 @@ from trajpref.score.selection import SelectionConfig, chosen_selection, select_f
 ROOT = Path(__file__).resolve().parent.parent
 CALLS = ("predict_scene", "rank_34", "rank_1", "select_default", "chosen", "chosen_cheap",
          "facility")  # fmt: skip
-"""The timed calls, in the README table's column order."""
+"""The timed calls, in the README table's column order: the keys of ``timed_calls`` and of each
+record row, and the columns ``update_readme.py`` reads (``PLANNER_COLUMNS``)."""
 
 
 def scene_histories(dataset, sizes: list[int]) -> dict[int, np.ndarray]:
@@ -56,15 +57,16 @@ def timed_calls(model, scorer, history: np.ndarray, dataset: str) -> dict:
     chosen = chosen_selection(f"{dataset}/generator", keep=5)
     cheap = chosen_selection(f"{dataset}/generator", keep=5, cheap=True)
     facility = SelectionConfig(keep=5, method="facility")
-    return {
-        "predict_scene": lambda: predict_scene(model, history, 20),
-        "rank_34": lambda: rank_samples(scorer, history, samples),
-        "rank_1": lambda: rank_samples(one_step, history, samples),
-        "select_default": lambda: select_for_scene(scorer, history, samples, default),
-        "chosen": lambda: select_for_scene(scorer, history, samples, chosen),
-        "chosen_cheap": lambda: select_for_scene(scorer, history, samples, cheap),
-        "facility": lambda: select_for_scene(scorer, history, samples, facility),
-    }
+    calls = (  # in CALLS order
+        lambda: predict_scene(model, history, 20),
+        lambda: rank_samples(scorer, history, samples),  # 34 steps
+        lambda: rank_samples(one_step, history, samples),  # 1 step
+        lambda: select_for_scene(scorer, history, samples, default),
+        lambda: select_for_scene(scorer, history, samples, chosen),
+        lambda: select_for_scene(scorer, history, samples, cheap),
+        lambda: select_for_scene(scorer, history, samples, facility),
+    )
+    return dict(zip(CALLS, calls, strict=True))
 
 
 def median_ms(calls: dict, rounds: int) -> dict[str, float]:

@@ -14,6 +14,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+from planner_latency import CALLS
 from row_hashes import timed_weights, untraceable
 from zoo_index import portable_command
 
@@ -186,16 +187,19 @@ def regenerate(readme: Path, show: bool = True) -> None:
         out(planner)
 
 
-PLANNER_COLUMNS = (
-    ("predict_scene", "`predict_scene`"),
-    ("rank_34", "`rank_samples`, 34 steps"),
-    ("rank_1", "rank, `with_steps([0])`"),
-    ("select_default", "`select_for_scene`, default (12 steps)"),
-    ("chosen", "`chosen_selection` (34)"),
-    ("chosen_cheap", "`chosen_selection(cheap=True)` (1)"),
-    ("facility", '`method="facility"` (no score)'),
+PLANNER_HEADERS = (
+    "`predict_scene`",
+    "`rank_samples`, 34 steps",
+    "rank, `with_steps([0])`",
+    "`select_for_scene`, default (12 steps)",
+    "`chosen_selection` (34)",
+    "`chosen_selection(cheap=True)` (1)",
+    '`method="facility"` (no score)',
 )
-"""The planner calls' columns: the record's key and the README's header."""
+"""The README's header of each planner call, in ``planner_latency.CALLS`` order."""
+PLANNER_COLUMNS = tuple(zip(CALLS, PLANNER_HEADERS, strict=True))
+"""The planner calls' columns: the record's key (``planner_latency.CALLS``) and the README's
+header."""
 
 
 def planner_table(path: Path) -> str | None:

@@ -50,3 +50,30 @@ def test_the_readme_table_gives_each_call_and_the_ratios(tmp_path):
     assert lines[3].startswith("| 7 | 3.0 | 30.0 |")
     assert "costs 10-15x the prediction" in table  # 30 / 3 and 30 / 2
     assert "cheap chosen setting 1.0-1.5x" in table
+
+
+def test_the_calls_and_the_readme_columns_are_the_ones_of_calls(monkeypatch):
+    """``timed_calls`` keys each call by ``CALLS`` (the one list of keys), in its order, each
+    key on the call it names, and the README's columns read those keys."""
+    latency = load_benchmark("planner_latency")
+    monkeypatch.setattr(latency, "predict_scene", lambda model, history, k: ("predict", k))
+    monkeypatch.setattr(latency, "rank_samples", lambda scorer, h, s: ("rank", scorer))
+    monkeypatch.setattr(latency, "select_for_scene", lambda scorer, h, s, cfg: ("select", cfg))
+    monkeypatch.setattr(latency, "chosen_selection", lambda name, keep, cheap=False:
+                        ("cheap" if cheap else "chosen", name))  # fmt: skip
+    monkeypatch.setattr(latency, "SelectionConfig", lambda **kw: kw)
+    scorer = SimpleNamespace(with_steps=lambda steps: ("scorer", steps))
+    calls = latency.timed_calls("model", scorer, np.zeros((1, 8, 2)), "zara1")
+    assert tuple(calls) == latency.CALLS
+    got = {name: call() for name, call in calls.items()}
+    assert got == {
+        "predict_scene": ("predict", 20),
+        "rank_34": ("rank", scorer),
+        "rank_1": ("rank", ("scorer", [0])),
+        "select_default": ("select", {"keep": 5}),
+        "chosen": ("select", ("chosen", "zara1/generator")),
+        "chosen_cheap": ("select", ("cheap", "zara1/generator")),
+        "facility": ("select", {"keep": 5, "method": "facility"}),
+    }
+    update = load_benchmark("update_readme")
+    assert tuple(key for key, _ in update.PLANNER_COLUMNS) == latency.CALLS

@@ -85,3 +85,28 @@ def test_agent_ids_are_checked_against_the_agents():
             dataclasses.replace(scene, agent_id=bad)
     with pytest.raises(DataError, match="agent_id must hold numbers or strings, got bool"):
         dataclasses.replace(scene, agent_id=np.array([True, False, True]))
+
+
+def test_dataset_info_refuses_an_interval_source_it_does_not_know():
+    import dataclasses
+
+    from trajpref.types import INTERVAL_SOURCES, DatasetInfo
+
+    for source in INTERVAL_SOURCES:
+        assert DatasetInfo("x", "test", "m", 0.4, interval_from=source).interval_from == source
+    info = DatasetInfo("x", "test", "m", 0.4)  # "given" by default
+    with pytest.raises(ValueError, match="interval_from must be one of dataset, .*'guessed'"):
+        DatasetInfo("x", "test", "m", 0.4, interval_from="guessed")
+    with pytest.raises(ValueError, match="got None"):
+        dataclasses.replace(info, interval_from=None)
+
+
+def test_every_interval_source_is_worded_where_it_is_shown():
+    """``data stats``, a training run's split lines and a checkpoint's card say where a frame
+    interval comes from: each wording table covers exactly ``INTERVAL_SOURCES``."""
+    from trajpref.models.zoo import INTERVAL_FROM
+    from trajpref.train.run import INTERVAL_NOTES
+    from trajpref.types import INTERVAL_SOURCES
+
+    assert set(INTERVAL_NOTES) == set(INTERVAL_SOURCES)
+    assert set(INTERVAL_FROM) == set(INTERVAL_SOURCES)

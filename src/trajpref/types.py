@@ -116,7 +116,8 @@ def _checked_ids(agent_id, agents: int, scene_id: str) -> np.ndarray:
 
 
 INTERVAL_SOURCES = ("dataset", "given", "declared", "timestamps", "default")
-"""Where a split's frame interval comes from (``DatasetInfo.interval_from``)."""
+"""Where a split's frame interval comes from (``DatasetInfo.interval_from``, which refuses any
+other); ``train.run.INTERVAL_NOTES`` and ``models.zoo.INTERVAL_FROM`` word each of them."""
 
 
 @dataclass
@@ -154,6 +155,12 @@ class DatasetInfo:
     text_tracks: bool = False
     """Read from text track files, which ``--time-step`` can resample (ETH/UCY, NBA, a folder
     of text files); windows cut already (SDD, Robo, TrajNet++ scenes, simulations) cannot be."""
+
+    def __post_init__(self) -> None:
+        if self.interval_from not in INTERVAL_SOURCES:
+            known = ", ".join(INTERVAL_SOURCES)
+            raise ValueError(f"DatasetInfo.interval_from must be one of {known}, "
+                             f"got {self.interval_from!r}")  # fmt: skip
 
 
 @dataclass

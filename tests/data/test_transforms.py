@@ -9,12 +9,12 @@ from trajpref.data.transforms import (
     augment,
     backward_velocity,
     drop_agents_at_random,
-    from_relative,
+    from_model_frame,
     observed_pace,
     reverse_time,
     scene_speeds,
     speed_normaliser,
-    to_relative,
+    to_model_frame,
     transform_scenes,
 )
 from trajpref.types import Batch, collate
@@ -30,11 +30,17 @@ def test_backward_velocity_never_looks_ahead():
     assert torch.equal(backward_velocity(y)[:-1], v[:-1])
 
 
-def test_relative_roundtrip():
+def test_model_frame_is_relative_to_the_last_observed_position_and_roundtrips():
     batch = collate([make_scene(3), make_scene(2, seed=1)])
-    hist_rel, fut_rel = to_relative(batch)
-    assert torch.equal(hist_rel[:, -1], torch.zeros(5, 2))
-    torch.testing.assert_close(from_relative(fut_rel, batch), batch.future)
+    for scale in (1.0, 2.5):
+        hist_rel = to_model_frame(batch.history, batch, scale)  # [N, T_h, 2]
+        fut_rel = to_model_frame(batch.future, batch, scale)  # [N, T_f, 2]
+        assert torch.equal(hist_rel[:, -1], torch.zeros(5, 2))
+        origin = batch.history[:, -1:]  # [N, 1, 2]
+        torch.testing.assert_close(fut_rel, (batch.future - origin) / scale)
+        torch.testing.assert_close(from_model_frame(fut_rel, batch, scale), batch.future)
+    samples = to_model_frame(batch.future, batch, 2.0).expand(4, -1, -1, -1)  # [K, N, T_f, 2]
+    torch.testing.assert_close(from_model_frame(samples, batch, 2.0)[3], batch.future)
 
 
 def _pairwise(x):  # [N, T, 2] -> [N, N, T]

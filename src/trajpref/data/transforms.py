@@ -32,20 +32,6 @@ def observed_pace(history: torch.Tensor, scale: float = 1.0) -> torch.Tensor:
     return moved.norm(dim=-1) / (history.shape[-2] - 1) / scale  # [..., N]
 
 
-def to_relative(batch: Batch) -> tuple[torch.Tensor, torch.Tensor]:
-    """History and future relative to each agent's last observed position.
-
-    Returns hist_rel [N, T_h, 2] (last row is zero) and fut_rel [N, T_f, 2].
-    """
-    origin = batch.origin[:, None, :]  # [N, 1, 2]
-    return batch.history - origin, batch.future - origin
-
-
-def from_relative(pred_rel: torch.Tensor, batch: Batch) -> torch.Tensor:
-    """Absolute positions from relative ones: [..., N, T_f, 2] -> same shape."""
-    return pred_rel + batch.origin[:, None, :]
-
-
 def to_model_frame(positions: torch.Tensor, batch: Batch, scale: float) -> torch.Tensor:
     """The networks' frame: relative to each agent's last observed position, divided by the
     data scale. Absolute positions [..., N, T, 2] -> same shape."""
