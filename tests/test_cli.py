@@ -1,14 +1,27 @@
 """The command line: JSON interfaces, and bad input giving one line and a non-zero status."""
 
+import argparse
+import csv
+import dataclasses
 import json
 import subprocess
 import sys
+import typing
+import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 from synthetic import straight_rows, write_tracks
 
-from trajpref.cli import main
+from trajpref import cli, config
+from trajpref.cli import build_parser, main
+from trajpref.config import ExperimentConfig, FinetuneConfig, builtin_configs, load_config, to_dict
+from trajpref.data import hold_out_scene, load_dataset
+from trajpref.models import checkpoint as ckpt
+from trajpref.models import zoo
+from trajpref.rl.presets import PRESETS
 
 
 @pytest.fixture
@@ -537,3 +550,480 @@ def test_a_scorer_trained_on_other_units_is_warned_of_as_plot_warns(capsys, walk
     assert code == 0
     assert ("trajpref: warning: zara1/denoiser was trained on the zara1 fold (leave-one-out: "
             "the other four scenes): this data is in px, the model's in m") in err  # fmt: skip
+
+
+# One table of fine-tuning methods (config.FinetuneMethod, config.USES_RL,
+# rl.objective.LOSS_SAMPLES): the CLI offers its names, and a name that reaches a dispatch
+# without an entry there is an error, never trained as RLHF-ReS (the walkthrough's finding: a
+# new method's name took the k* path of ``RLObjective.selection``).
+
+
+def _finetune_parser() -> argparse.ArgumentParser:
+    from trajpref.cli import build_parser
+
+    for action in build_parser()._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return action.choices["finetune"]
+    raise AssertionError("no finetune command")
+
+
+def test_the_cli_offers_the_tables_methods():
+    method = next(a for a in _finetune_parser()._actions if a.dest == "method")
+    assert list(method.choices) == list(config.FINETUNE_METHODS)
+    assert config.FINETUNE_METHODS == typing.get_args(config.FinetuneMethod)
+    hints = typing.get_type_hints(FinetuneConfig)
+    assert typing.get_args(hints["method"]) == config.FINETUNE_METHODS
+
+
+# Walkthroughs 63-A and 63-B, the command line: the pace and units check on data that leave
+# their interval or units unsaid, a folder without split sub-folders read as the model's own
+# training windows, ``n/a`` collision rates, the data's reading in ``evaluate --out``, what
+# ``--frame-interval`` means, and a legacy ``.pt`` checkpoint in the pace check.
+
+
+ZARA1 = "zara1/generator was trained on the zara1 fold (leave-one-out: the other four scenes)"
+
+
+ASSUMED = "this data's frame interval is only assumed (0.4 s between rows, none given)"
+
+
+GIVE_INTERVAL = "--frame-interval (the seconds between an agent's consecutive rows)"
+
+
+def _pretend(monkeypatch, header: dict) -> None:
+    """Every checkpoint's header is ``header`` (the file itself is never read)."""
+    monkeypatch.setattr(cli, "read_checkpoint_header", lambda path: header)
+    monkeypatch.setattr(cli.ckpt, "resolve_path", lambda spec: spec)
+
+
+def _warned(ds, spec: str = "m.safetensors") -> tuple[list[str], str | None]:
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        note = cli._warn_if_trained_otherwise(spec, ds)
+    return [str(w.message) for w in seen], note
+
+
+def _timing(step: float, origin: str, every: float, units: str) -> dict:
+    return {"frame_interval": step, "interval_from": origin, "time_step": every, "units": units}
+
+
+# ---------------------------------------------------------------- 1: what the data leave unsaid
+
+
+def test_a_published_model_on_data_of_assumed_interval_or_unknown_units_says_so(monkeypatch,
+                                                                                walks):  # fmt: skip
+    # walks' frames are numbered 10 apart: 0.4 s assumed, which equals zara1's step, so the
+    # known values agree and nothing was said (10 Hz data read so looked healthy)
+    _pretend(monkeypatch, {"config": {"data": {"dataset": "zara1", "time_step": 1.0}}})
+    model = "the model's step is 0.4 s, its units m"
+    (message,), _ = _warned(load_dataset(str(walks), "test"))
+    assert message == (f"m.safetensors was trained on the zara1 fold (leave-one-out: the other "
+                       f"four scenes): {ASSUMED} and its units are unknown, while {model}: "
+                       f"give this data's with {GIVE_INTERVAL} and --units")  # fmt: skip
+    (message,), _ = _warned(load_dataset(str(walks), "test", units="m"))
+    assert message.endswith(f": {ASSUMED}, while {model}: give this data's with {GIVE_INTERVAL}")
+    (message,), _ = _warned(load_dataset(str(walks), "test", frame_interval=0.4))
+    assert message.endswith(": this data's units are unknown, while the model's step is 0.4 s, "
+                            "its units m: give this data's with --units")  # fmt: skip
+    # both said: silent, as before
+    assert _warned(load_dataset(str(walks), "test", frame_interval=0.4, units="m")) == ([], None)
+
+
+def test_a_folder_model_names_the_flags_that_read_data_as_it_did(monkeypatch, walks):
+    # trained with --frame-interval 0.1 --time-step 4 --units m (0.4 s per step), evaluated
+    # on frame-numbered files without the flags: the same 0.4 s, assumed
+    data = {"dataset": "/elsewhere/lab_m", "time_step": 4.0}
+    _pretend(monkeypatch, {"config": {"data": data},
+                           "meta": {"data_timing": _timing(0.4, "given", 4.0, "m")}})  # fmt: skip
+    (message,), _ = _warned(load_dataset(str(walks), "test"))
+    assert message == ("m.safetensors was trained on /elsewhere/lab_m: "
+                       f"{ASSUMED} and its units are unknown, while the model read its data "
+                       "with --frame-interval 0.1 --time-step 4 --units m (0.4 s per step): "
+                       f"give this data's with {GIVE_INTERVAL} and --units")  # fmt: skip
+    # an interval read from a time column: no --frame-interval flag, the column's step said
+    timing = _timing(0.4, "timestamps", 4.0, "m")
+    _pretend(monkeypatch, {"config": {"data": data}, "meta": {"data_timing": timing}})
+    (message,), _ = _warned(load_dataset(str(walks), "test", units="m"))
+    assert message.endswith(f"{ASSUMED}, while the model read its data with --time-step 4 "
+                            "--units m (0.4 s per step; its files' time column gave 0.1 s "
+                            f"between rows): give this data's with {GIVE_INTERVAL}")  # fmt: skip
+    # a model that recorded nothing known (its interval assumed too, its units unknown): silent
+    _pretend(monkeypatch, {"config": {"data": {"dataset": "/elsewhere", "time_step": 1.0}},
+                           "meta": {"data_timing": _timing(0.4, "default", 1.0,
+                                                           "unknown")}})  # fmt: skip
+    assert _warned(load_dataset(str(walks), "test")) == ([], None)
+
+
+def test_pixels_by_any_name_are_the_same_units(monkeypatch, walks):
+    timing = _timing(0.4, "default", 1.0, "px")
+    _pretend(monkeypatch, {"config": {"data": {"dataset": "/elsewhere", "time_step": 1.0}},
+                           "meta": {"data_timing": timing}})  # fmt: skip
+    assert _warned(load_dataset(str(walks), "test", units="pixels")) == ([], None)
+    (message,), _ = _warned(load_dataset(str(walks), "test", units="m"))
+    assert message.endswith("this data is in m, the model's in px")
+
+
+def test_evaluate_and_survey_build_say_it_for_a_published_model(capsys, walks, tmp_path):
+    code, _, err = _run(capsys, "evaluate", "--dataset", walks, "--model", "zara1/generator",
+                        "--samples", "20", "--no-progress", "--units", "m")  # fmt: skip
+    assert (code, err) == (0, f"trajpref: warning: {ZARA1}: {ASSUMED}, while the model's step "
+                              f"is 0.4 s, its units m: give this data's with "
+                              f"{GIVE_INTERVAL}\n")  # fmt: skip
+    # survey build reads its data through the same check (raters would see the wrong pace)
+    code, _, err = _run(capsys, "survey", "build", "--dataset", walks, "--units", "m",
+                        "--models", "cv", "gen=zara1/generator", "--scenes", "1", "--samples",
+                        "2", "--min-gap", "0", "--device", "cpu", "--no-progress", "--out",
+                        tmp_path / "study")  # fmt: skip
+    assert code == 0
+    assert f"trajpref: warning: {ZARA1}: {ASSUMED}, while the model's step" in err
+
+
+# ------------------------------------------------------- 2: a model's own flat training folder
+
+
+@pytest.fixture
+def flat(tmp_path) -> Path:
+    """A folder of two recordings without train/ val/ test/ sub-folders."""
+    write_tracks(tmp_path / "flat" / "cam0.txt", straight_rows(30, agents=2))
+    write_tracks(tmp_path / "flat" / "cam1.txt", straight_rows(30, agents=3))
+    return tmp_path / "flat"
+
+
+def test_a_folder_without_splits_is_named_as_the_models_training_windows(monkeypatch, flat,
+                                                                         walks):  # fmt: skip
+    _pretend(monkeypatch, {"config": {"data": {"dataset": str(flat), "time_step": 1.0}}})
+    (message,), note = _warned(load_dataset(str(flat), "test"))
+    assert message == (f"m.safetensors was trained on {flat}, which has no train/, val/ or "
+                       "test/ sub-folders: whatever --split says, this data is the windows it "
+                       "trained on, so numbers on it are training numbers, not a test (give the "
+                       "folder train/ val/ test/ sub-folders and train on train/, or use files "
+                       "it did not train on)")  # fmt: skip
+    assert note == f"trained on these windows ({flat} has no split sub-folders)"
+    # a model of another folder, or a folder with split sub-folders: nothing of the kind
+    assert _warned(load_dataset(str(walks), "test")) == ([], None)
+    _pretend(monkeypatch, {"config": {"data": {"dataset": str(walks), "time_step": 1.0}}})
+    assert _warned(load_dataset(str(walks), "test")) == ([], None)
+    # a model that held a scene out: the advice names it, and that scene read alone is fine
+    data = {"dataset": str(flat), "time_step": 1.0, "holdout_scene": "cam1"}
+    _pretend(monkeypatch, {"config": {"data": data}})
+    (message,), _ = _warned(load_dataset(str(flat), "test"))
+    assert "trained on (all but its held-out scene cam1*, which --split val --holdout-scene " \
+           "cam1 reads alone), so numbers" in message  # fmt: skip
+    held = hold_out_scene(load_dataset(str(flat), "train"), load_dataset(str(flat), "val"),
+                          "cam1")[1]  # fmt: skip
+    assert _warned(held) == ([], None)
+
+
+def test_evaluate_records_training_windows_in_overlap(capsys, monkeypatch, flat):
+    # the published file predicts; its header says it was trained on ``flat``
+    real = zoo.header(zoo.resolve("zara1/generator"))
+    data = {**real["config"]["data"], "dataset": str(flat)}
+    header = {**real, "config": {**real["config"], "data": data}}
+    monkeypatch.setattr(cli, "_checkpoint_header", lambda spec: header)
+    code, out, err = _run(capsys, "evaluate", "--dataset", flat, "--model", "zara1/generator",
+                          "--samples", "20", "--no-progress", "--json")  # fmt: skip
+    assert code == 0 and err.count("\n") == 1
+    assert err.startswith(f"trajpref: warning: zara1/generator was trained on {flat}, which "
+                          "has no train/, val/ or test/ sub-folders")  # fmt: skip
+    assert json.loads(out)["overlap"] == (f"model trained on these windows ({flat} has no split "
+                                          "sub-folders)")  # fmt: skip
+
+
+# ------------------------------------------------------------------ 3, 4: evaluate's outputs
+
+
+def test_collision_rates_without_a_neighbour_print_as_n_a(capsys, tmp_path):
+    write_tracks(tmp_path / "alone" / "a.txt", straight_rows(24, agents=1))
+    code, out, _ = _run(capsys, "evaluate", "--dataset", tmp_path / "alone", "--model", "cv",
+                        "--units", "m", "--no-progress")  # fmt: skip
+    assert code == 0 and "nan" not in out
+    assert "  Col-I n/a  Col-II n/a   ground truth n/a   (no agent has a neighbour; radius " \
+           "0.1 m)" in out.splitlines()  # fmt: skip
+
+
+def test_evaluate_out_records_the_datas_pace_and_notes_a_replaced_file(capsys, walks, tmp_path):
+    base = ["evaluate", "--dataset", walks, "--model", "cv", "--samples", "2", "--no-progress",
+            "--time-step", "0.5", "--units", "m"]  # fmt: skip
+    result = tmp_path / "r.json"
+    code, _, err = _run(capsys, *base, "--out", result)
+    assert code == 0 and "note" not in err
+    out = json.loads(result.read_text())
+    read = (out["frame_interval"], out["time_step"], out["interval_from"])
+    assert read == (0.2, 0.5, "default")
+    code, _, err = _run(capsys, *base, "--out", result)
+    assert code == 0 and err == (f"trajpref: note: --out {result} existed and is replaced by "
+                                 "this result (one result per file: give each run its own --out "
+                                 "to keep both)\n")  # fmt: skip
+    table = tmp_path / "r.csv"
+    code, _, _ = _run(capsys, *base, "--frame-interval", "0.1", "--out", table)
+    (record,) = csv.DictReader(table.read_text().splitlines())
+    assert (record["frame_interval"], record["time_step"], record["interval_from"]) == (
+        "0.05", "0.5", "given")  # fmt: skip
+
+
+# ------------------------------------------------------------------------- 5: --frame-interval
+
+
+@pytest.mark.parametrize("command", [["evaluate"], ["predict"], ["train", "generator"],
+                                     ["survey", "build"]])  # fmt: skip
+def test_frame_interval_help_says_what_it_counts(capsys, command):
+    code, out, _ = _run(capsys, *command, "--help")
+    text = " ".join(out.split())
+    assert code == 0
+    assert "seconds between consecutive rows of an agent" in text
+    assert "not per frame number nor per video frame" in text
+    assert "--time-step then reads every n-th" in text
+
+
+# ------------------------------------------------------------------- 7b: a legacy .pt header
+
+
+def test_a_legacy_pt_checkpoint_is_checked_too(walks, tmp_path):
+    cfg = ExperimentConfig()
+    cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, dataset="zara1"))
+    state = {"w": torch.zeros(2)}
+    legacy = {"format": ckpt.LEGACY_FORMAT, "kind": "denoiser", "config": to_dict(cfg),
+              "scale": 1.0, "state_dict": state, "hash": ckpt.state_hash(state),
+              "meta": {}}  # fmt: skip
+    torch.save(legacy, tmp_path / "old.pt")
+    messages, _ = _warned(load_dataset(str(walks), "test", frame_interval=0.1, units="m"),
+                          str(tmp_path / "old.pt"))  # fmt: skip
+    assert messages == [f"{tmp_path / 'old.pt'} was trained on the zara1 fold (leave-one-out: "
+                        "the other four scenes): this data steps 0.1 s, the model's 0.4 s "
+                        "(--time-step 4 reads it at the model's step)"]  # fmt: skip
+    # a file that cannot be read (a folder named like a checkpoint): no check, no crash
+    (tmp_path / "dir.pt").mkdir()
+    assert _warned(load_dataset(str(walks), "test"), str(tmp_path / "dir.pt")) == ([], None)
+
+
+@pytest.mark.parametrize(("command", "name", "what"), [
+    (["predict", "--model", "cv", "--samples", "2"], "p.npz", "prediction"),
+    (["plot", "--model", "cv", "--samples", "2", "--scene", "0"], "f.png", "figure"),
+])  # fmt: skip
+def test_predict_and_plot_note_a_replaced_file_as_evaluate_does(capsys, walks, tmp_path,
+                                                                  command, name, what):  # fmt: skip
+    """evaluate said so when --out replaced a file; predict and plot replaced theirs silently
+    (a CLI walkthrough of 2026-12-06)."""
+    out = tmp_path / name
+    argv = [*command, "--dataset", walks, "--no-progress", "--out", out]
+    code, _, err = _run(capsys, *argv)
+    assert code == 0 and "existed and is replaced" not in err
+    code, _, err = _run(capsys, *argv)
+    assert code == 0
+    assert f"trajpref: note: --out {out} existed and is replaced by this {what}" in err
+
+
+# The command line's finding of the library-extension walkthrough: the folder a config
+# file's relative data path is read from (tests/test_own_data_training.py tests a path of one
+# part, where the file's folder and the path's parent are the same).
+
+
+def test_a_relative_dataset_of_two_parts_is_pointed_to_the_config_files_folder(
+    tmp_path, monkeypatch, capsys, walks
+):
+    """``dataset: data/mall`` in project/rel.yaml, run elsewhere: the advice is to run from
+    project/ (where data/mall resolves), not project/data/ (where it does not)."""
+    home = tmp_path / "project"
+    (home / "data").mkdir(parents=True)
+    (home / "data" / "mall").symlink_to(walks)
+    cfg = home / "rel.yaml"
+    cfg.write_text("data:\n  dataset: data/mall\n")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    code = main(["train", "diffusion", "--config", str(cfg), "--out", str(tmp_path / "o"),
+                 "--device", "cpu", "--no-progress"])  # fmt: skip
+    err = " ".join(capsys.readouterr().err.split())
+    assert code != 0
+    assert f"beside which {home / 'data' / 'mall'} is" in err
+    assert err.rstrip().endswith(f"or run trajpref from {home.resolve()}"), err
+    assert f"run trajpref from {(home / 'data').resolve()}" not in err
+    # the advice holds: from there, the path is the folder
+    assert (home.resolve() / "data" / "mall" / "train").is_dir()
+    assert not (tmp_path / "o").exists()
+
+
+# The installed user's walkthrough (67): a shipped config written out as a YAML file to edit
+# (``config show --yaml``), where a built-in dataset lies under an empty data root, the
+# fine-tuning presets offered by the CLI, and the question on milliseconds in the CLI's advice
+# on a frame interval above 10 s.
+
+
+def _yaml_out(capsys, *argv: str) -> str:
+    code = main(["config", "show", *argv, "--yaml"])
+    out = capsys.readouterr().out
+    assert code == 0
+    return out
+
+
+@pytest.mark.parametrize("name", builtin_configs())
+def test_config_show_yaml_reads_back_to_the_same_config(name, tmp_path, capsys):
+    """Every shipped config, printed as YAML, is read back by --config FILE to an equal
+    config; the file starts with a comment saying what it was resolved from."""
+    text = _yaml_out(capsys, "--config", name)
+    assert text.startswith(f"# trajpref config show --config {name} --yaml ")
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(text)
+    assert load_config(str(path)) == load_config(name)
+
+
+def test_config_show_yaml_applies_set_and_defaults(tmp_path, capsys):
+    text = _yaml_out(capsys, "--config", "zara1", "--set", "seed=3",
+                     "--set", "denoiser.epochs=7")  # fmt: skip
+    path = tmp_path / "mine.yaml"
+    path.write_text(text)
+    cfg = load_config(str(path))
+    assert cfg == load_config("zara1", ["seed=3", "denoiser.epochs=7"])
+    assert (cfg.seed, cfg.denoiser.epochs) == (3, 7)
+    assert "--set seed=3 --set denoiser.epochs=7 --yaml" in text.splitlines()[0]
+    defaults = tmp_path / "defaults.yaml"
+    defaults.write_text(_yaml_out(capsys))
+    assert load_config(str(defaults)) == load_config(None)
+
+
+def test_config_show_without_yaml_is_unchanged(capsys):
+    assert main(["config", "show", "--config", "zara1"]) == 0
+    out = capsys.readouterr().out
+    assert "data.dataset = zara1\n" in out and "  dataset: zara1" not in out
+
+
+def test_the_cli_error_on_an_empty_data_root(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("TRAJPREF_DATA", str(tmp_path))
+    code = main(["data", "stats", "--dataset", "zara1", "--split", "test"])
+    err = capsys.readouterr().err
+    assert code != 0
+    assert f"{tmp_path / 'eth_ucy' / 'zara1' / 'test'}: no such folder; zara1 is read" in err
+
+
+def _option(parser, *path: str, flag: str):
+    for name in path:
+        sub = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
+        parser = sub.choices[name]
+    return next(a for a in parser._actions if flag in a.option_strings)
+
+
+def test_finetune_preset_choices_come_from_presets():
+    assert _option(build_parser(), "finetune", flag="--preset").choices == list(PRESETS)
+
+
+def test_the_cli_warning_asks_milliseconds(tmp_path, capsys, monkeypatch):
+    """--frame-interval 400 is not refused (any number > 0 is a frame interval): the
+    warning that the data steps otherwise asks whether it is in milliseconds."""
+    test = tmp_path / "ds" / "test"
+    test.mkdir(parents=True)
+    rows = [f"{10 * f}\t{a}\t{0.4 * f + a:.2f}\t{a:.2f}" for f in range(24) for a in (1, 2)]
+    (test / "a.txt").write_text("\n".join(rows) + "\n")
+    code = main(["evaluate", "--model", "zara1/generator", "--dataset", str(tmp_path / "ds"),
+                 "--frame-interval", "400", "--units", "m", "--samples", "4", "--device",
+                 "cpu", "--no-progress"])  # fmt: skip
+    err = " ".join(capsys.readouterr().err.split())
+    assert code == 0, err
+    assert (
+        "this data steps 400 s, the model's 0.4 s (milliseconds? pass seconds, "
+        "--frame-interval 0.4; else no --time-step reads it"
+    ) in err, err
+
+
+# A sports analyst's walkthrough of the NBA models (walkthrough 67): the cards say which axes
+# and inputs the models read; feet given to a metre model are told the factor; a scene with no
+# ball or two balls is said, in Python and on a split; float agent types from pandas (0.0 / 1.0)
+# are types.
+
+
+def _scene(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """A rebound-like scene: 10 players and the ball (agent 0), 8 steps of 0.12 s, metres,
+    x along the court's 28.65 m length. Returns history [11, 8, 2] and agent_type [11]."""
+    rng = np.random.default_rng(seed)
+    start = rng.uniform([2.0, 2.0], [12.0, 13.0], size=(11, 2))  # [11, 2] one half-court
+    velocity = rng.normal(0.0, 0.1, size=(11, 2))  # [11, 2] metres per step
+    velocity[0] *= 3  # the ball moves faster
+    history = start[:, None] + velocity[:, None] * np.arange(8)[None, :, None]  # [11, 8, 2]
+    types = np.zeros(11, np.int64)
+    types[0] = 1
+    return history, types
+
+
+def test_evaluate_says_a_folder_scene_with_two_balls(capsys, tmp_path):
+    history, types = _scene()
+    xy = history[:, :1] + (history[:, 1:2] - history[:, :1]) * np.arange(20)[None, :, None]
+    rows = ["time,agent,x,y,type"]
+    for t in range(20):
+        for i in range(11):
+            rows.append(f"{t * 0.12:.2f},{i},{xy[i, t, 0]:.4f},{xy[i, t, 1]:.4f},"
+                        f"{'BALL' if types[i] else 'PLAYER'}")  # fmt: skip
+        rows.append(f"{t * 0.12:.2f},99,{xy[0, t, 0] + 2:.4f},{xy[0, t, 1] + 2:.4f},BALL")
+    (tmp_path / "test").mkdir()
+    (tmp_path / "test" / "game.csv").write_text("\n".join(rows) + "\n")
+    code = main(["evaluate", "--dataset", str(tmp_path), "--model", "nba/generator", "--units",
+                 "m", "--samples", "20", "--no-progress", "--device", "cpu"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 0
+    assert "of this data's 1 scene, 1 flags two or more (up to 2)" in err, err
+
+
+# A paper author's review of `trajpref plot` (walkthrough 67): the ball hidden under its own
+# ground truth and coloured as a player, no --keep, a ranked legend of twenty entries that
+# did not say which way the score ranks, a standing agent's samples under its marker, agents
+# numbered in one figure and not the other (their numbers on their paths), and SVG text drawn
+# as outlines.
+
+
+def _predicted(capsys, walks, tmp_path, flags, scene=0):
+    """predict's samples of ``scene`` with ``flags`` [K', P, T_f, 2]."""
+    npz = tmp_path / "p.npz"
+    code, _, err = _run(capsys, "predict", "--dataset", walks, "--device", "cpu", "--no-progress",
+                        *flags, "--out", npz)  # fmt: skip
+    assert code == 0, err
+    z = np.load(npz)
+    return z["pred"][:, z["scene"] == scene]
+
+
+def test_plot_keeps_k_prime_as_predict_keeps_them_and_says_so(capsys, walks, tmp_path, plot_calls):
+    """plot had no --keep: a figure of the samples a selection keeps could not be made."""
+    flags = ["--samples", "4", "--keep", "2", "--select", "facility", "--seed", "3"]
+    want = _predicted(capsys, walks, tmp_path, flags)  # [2, P, T_f, 2]
+    code, out, err = _run(capsys, "plot", "--dataset", walks, "--device", "cpu", "--no-progress",
+                          *flags, "--out", tmp_path / "f.png")  # fmt: skip
+    assert (code, err) == (0, ""), err
+    name, args, kwargs = plot_calls[-1]
+    assert name == "plot_scene"
+    np.testing.assert_allclose(args[2], want, atol=1e-6)
+    assert "kept 2 of 4 by facility" in args[5]  # the title
+    assert kwargs["selection"] == "kept 2 of 4 by facility"  # the legend's samples entry
+    assert "minADE_2" in out
+    # with --scorer: the kept samples ranked, at most K' of them
+    code, _, err = _run(capsys, "plot", "--dataset", walks, "--device", "cpu", "--no-progress",
+                        *flags, "--scorer", "zara1/denoiser", "--draw-samples", "5",
+                        "--out", tmp_path / "g.png")  # fmt: skip
+    assert code == 0, err
+    name, args, kwargs = plot_calls[-1]
+    assert name == "plot_scene_scored" and args[2].shape[0] == 2 and args[7] == 2
+    assert kwargs["selection"] == "kept 2 of 4 by facility"
+    # the selection's checks are predict's
+    code, _, err = _run(capsys, "plot", "--dataset", walks, "--device", "cpu", "--samples", "4",
+                        "--keep", "5", "--out", tmp_path / "h.png")  # fmt: skip
+    assert code == 2 and "--keep must lie in 1..--samples (4)" in err
+    code, _, err = _run(capsys, "plot", "--dataset", walks, "--device", "cpu", "--samples", "4",
+                        "--drop", "0.5", "--no-progress", "--out", tmp_path / "h.png")  # fmt: skip
+    assert code == 0 and "--drop only applies with --keep" in err
+
+
+@pytest.mark.skipif("zara1/generator" not in zoo.published(),
+                    reason="the package was built without its models")  # fmt: skip
+def test_plot_keep_chosen_draws_predicts_chosen_samples(capsys, walks, tmp_path, plot_calls):
+    flags = ["--model", "zara1/generator", "--keep", "3", "--chosen"]
+    want = _predicted(capsys, walks, tmp_path, [*flags, "--max-scenes", "2"])
+    code, _, err = _run(capsys, "plot", "--dataset", walks, "--device", "cpu", "--no-progress",
+                        *flags, "--out", tmp_path / "f.png")  # fmt: skip
+    assert code == 0, err  # (a warning: the synthetic data has no units)
+    _, args, kwargs = plot_calls[-1]
+    np.testing.assert_allclose(args[2], want, atol=1e-5)
+    assert kwargs["selection"] == "kept 3 of 20 by score-facility (chosen)"
+    assert "kept 3 of 20 by score-facility (chosen)" in args[5]
+
+
+def test_plot_no_numbers(capsys, walks, tmp_path, plot_calls):
+    code, _, err = _run(capsys, "plot", "--dataset", walks, "--device", "cpu", "--samples", "2",
+                        "--no-progress", "--no-numbers", "--out", tmp_path / "f.png")  # fmt: skip
+    assert code == 0, err
+    assert plot_calls[-1][2]["numbers"] is False

@@ -1,9 +1,11 @@
 import dataclasses
 import re
+import typing
 
 import pytest
 import yaml
 
+from trajpref import config
 from trajpref.config import (
     ExperimentConfig,
     FinetuneConfig,
@@ -296,3 +298,48 @@ def test_partial_future_targets_and_a_held_out_scene_are_refused_together():
     both = DataConfig(dataset="zara1", partial_future=4, holdout_scene="students")  # loads
     with pytest.raises(ConfigError, match="partial_future and data.holdout_scene exclude"):
         run_splits(both, root="/nonexistent")  # before any file is read
+
+
+# One table of fine-tuning methods (config.FinetuneMethod, config.USES_RL,
+# rl.objective.LOSS_SAMPLES): the CLI offers its names, and a name that reaches a dispatch
+# without an entry there is an error, never trained as RLHF-ReS (the walkthrough's finding: a
+# new method's name took the k* path of ``RLObjective.selection``).
+
+
+NEW = "rlhf-new"
+"""A method's name as a contributor adds it to the list, before its dispatch entries."""
+
+
+def test_a_method_added_to_the_literal_alone_is_refused(monkeypatch):
+    """Added to ``FinetuneMethod`` (the config takes it) but not to ``USES_RL``: asking
+    whether it is an RL method is an error that names the table."""
+    monkeypatch.setattr(config, "FinetuneMethod", typing.Literal[(*config.FINETUNE_METHODS, NEW)])
+    monkeypatch.setattr(config, "FINETUNE_METHODS", (*config.FINETUNE_METHODS, NEW))
+    cfg = FinetuneConfig(method=NEW)  # the config's check reads the Literal
+    with pytest.raises(ConfigError, match=r"'rlhf-new'.*USES_RL"):
+        config.uses_rl(cfg.method)
+
+
+# A security review's findings on config values (walkthrough 67-M): a string, integer or
+# float setting took any YAML value (``--set 'data.dataset=[zara1]'`` read as the dataset
+# ``"['zara1']"``), and an error named the value it got in full, which a few hundred bytes of
+# YAML aliases make megabytes long.
+
+
+@pytest.mark.parametrize("value", ["[zara1]", "{a: 1}"])
+def test_a_list_or_mapping_for_a_scalar_setting_is_refused(value):
+    with pytest.raises(ConfigError, match=r"config data.dataset must be str, got a (list|dict)"):
+        load_config(None, [f"data.dataset={value}"])
+
+
+def test_an_error_names_a_long_value_in_brief(tmp_path):
+    """6 levels of 9 aliases in the value itself: a file of a few hundred bytes whose value
+    is about 4 MB of text when written out."""
+    levels = ["&a0 [1, 1, 1, 1, 1, 1, 1, 1, 1]"]
+    levels += [f"&a{i} [{', '.join([f'*a{i - 1}'] * 9)}]" for i in range(1, 6)]
+    path = tmp_path / "bomb.yaml"
+    path.write_text(f"data:\n  max_agents: [{', '.join(levels)}]\n")
+    assert path.stat().st_size < 600
+    with pytest.raises(ConfigError, match="config data.max_agents must be int") as err:
+        load_config(str(path))
+    assert len(str(err.value)) < 400

@@ -1,13 +1,29 @@
 """Tests of the side-by-side timing helper (trajpref.evaluation.time_predictors); the
 evaluation pass itself is tested through its callers (train, CLI, reproduce)."""
 
+import dataclasses
+import warnings
+from pathlib import Path
+
+import numpy as np
 import pytest
 import torch
 from synthetic import make_scene
 
+from trajpref.data import load_dataset
+from trajpref.data.registry import SECONDS_STEPS
 from trajpref.errors import ConfigError
-from trajpref.evaluation import time_predictors
-from trajpref.types import TrajectoryDataset
+from trajpref.evaluation import (
+    CLI_WORDS,
+    PYTHON_WORDS,
+    step_hint,
+    time_predictors,
+    warn_untyped_data,
+)
+from trajpref.models.registry import load_predictor
+from trajpref.models.timing import model_timing
+from trajpref.score import TrajectoryScorer
+from trajpref.types import DatasetInfo, TrajectoryDataset
 
 
 class Recorder:
@@ -127,3 +143,85 @@ def test_sync_waits_for_a_cuda_device_only(monkeypatch):
     assert calls == []
     evaluation._sync(torch.device("cuda:1"))
     assert calls == [torch.device("cuda:1")]
+
+
+# The installed user's walkthrough (67): a shipped config written out as a YAML file to edit
+# (``config show --yaml``), where a built-in dataset lies under an empty data root, the
+# fine-tuning presets offered by the CLI, and the question on milliseconds in the CLI's advice
+# on a frame interval above 10 s.
+
+
+def _folder_info(frame: float, every: float = 1.0, given: bool = True) -> DatasetInfo:
+    return DatasetInfo("/data/mine", "test", "m", frame * every, source="/data/mine/test",
+                       interval_from="given" if given else "default", time_step=every,
+                       text_tracks=True)  # fmt: skip
+
+
+ZARA1 = model_timing({"config": {"data": {"dataset": "zara1"}}})
+
+
+@pytest.mark.parametrize("every", [1.0, 4.0])
+def test_the_step_hint_asks_milliseconds_above_ten_seconds(every):
+    hint = step_hint(_folder_info(400, every), ZARA1)
+    assert hint.startswith("milliseconds? pass seconds, --frame-interval 0.4; else "), hint
+    python = step_hint(_folder_info(400, every), ZARA1, PYTHON_WORDS)
+    assert python.startswith("milliseconds? pass seconds, frame_interval=0.4; else "), python
+
+
+def test_the_step_hint_does_not_ask_at_or_below_ten_seconds():
+    assert SECONDS_STEPS[1] == 10.0
+    for frame in (0.1, 2.0, SECONDS_STEPS[1]):
+        assert "milliseconds" not in step_hint(_folder_info(frame), ZARA1, CLI_WORDS)
+    assert "milliseconds" not in step_hint(_folder_info(400, given=False), ZARA1)
+
+
+# A sports analyst's walkthrough of the NBA models (walkthrough 67): the cards say which axes
+# and inputs the models read; feet given to a metre model are told the factor; a scene with no
+# ball or two balls is said, in Python and on a split; float agent types from pandas (0.0 / 1.0)
+# are types.
+
+
+@pytest.fixture(scope="module")
+def nba():
+    return load_predictor("nba/generator", device="cpu")
+
+
+def _messages(call) -> list[str]:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        call()
+    return [str(w.message) for w in caught]
+
+
+def _typed(walks: Path, balls: list[int]) -> TrajectoryDataset:
+    """The walks' test scenes with ``balls[i]`` of scene i's agents flagged as the ball."""
+    data = load_dataset(str(walks), "test")
+    scenes = []
+    for scene, n in zip(data.scenes, balls, strict=False):
+        flags = np.zeros(len(scene.history), np.int64)
+        flags[:n] = 1
+        scenes.append(dataclasses.replace(scene, agent_type=flags))
+    assert len(scenes) == len(balls) and all(len(s.history) >= 2 for s in scenes)
+    return TrajectoryDataset(scenes, data.info)
+
+
+def test_a_split_with_scenes_of_no_ball_or_two_says_how_many(nba, walks):
+    checked = [("nba/generator", nba)]
+    assert not _messages(lambda: warn_untyped_data(checked, _typed(walks, [1, 1, 1, 1])))
+    got = _messages(lambda: warn_untyped_data(checked, _typed(walks, [1, 0, 2, 0])))
+    assert got == ["nba/generator was trained with the ball flagged (agent_type 1; one in every "
+                   "scene of NBA's splits), and of this data's 4 scenes, 2 flag no ball and 1 "
+                   "flags two or more (up to 2): it reads each as flagged, a scene it never saw; "
+                   "the ball is one agent, flagged BALL in a 5th column and seen in every frame "
+                   "of a window (docs/data_format.md)"]  # fmt: skip
+    got = _messages(lambda: warn_untyped_data(checked, _typed(walks, [0, 0, 0, 0])))
+    assert len(got) == 1 and "this data flag no ball: every agent is read as a person" in got[0]
+    zara1 = load_predictor("zara1/generator", device="cpu")
+    assert not _messages(lambda: warn_untyped_data([("z", zara1)], _typed(walks, [1, 0, 2, 0])))
+
+
+def test_the_published_nba_splits_have_one_ball_a_scene(nba, data_root):
+    scorer = TrajectoryScorer.from_checkpoint("nba/denoiser")
+    for split in ("test", "val"):
+        data = load_dataset("nba", split, data_root)
+        assert not _messages(lambda d=data: warn_untyped_data([("g", nba), ("s", scorer)], d))

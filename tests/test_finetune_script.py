@@ -1,11 +1,13 @@
 """benchmarks/finetune.py: a run folder is never resumed or reused from another start."""
 
 import json
+import shutil
 from pathlib import Path
 
 import pytest
 from bench import load_benchmark
 
+from trajpref.models import checkpoint
 from trajpref.rl.presets import equal_budget_args
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -177,3 +179,164 @@ def test_a_run_folder_of_the_sda_reward_is_its_own_settings(tmp_path):
                                                               "finetune.lr=1e-5"], 0)  # fmt: skip
     with pytest.raises(SystemExit, match=r"finetune\.lr"):
         ft.check_settings(run, other)
+
+
+# Walkthrough 67, fixer F9: ``reproduce.py --out DIR`` in full mode left its training in the
+# repository (finetune.py and pretrain.py wrote ``runs/``, ``benchmarks/results/`` and
+# ``models/`` of the repository whatever the folder). Both scripts now take ``--runs``,
+# ``--results`` and ``--models``, and reproduce.py passes them under ``--out``.
+
+
+METRICS = dict.fromkeys(("min_ade", "min_fde", "joint_min_ade", "joint_min_fde", "max_ats",
+                         "max_fts", "top1_recall_ats", "top5_recall_ats"), 0.5)  # fmt: skip
+
+
+def _files(*folders: Path) -> dict[Path, bytes]:
+    return {p: p.read_bytes() for f in folders if f.is_dir() for p in f.rglob("*") if p.is_file()}
+
+
+@pytest.fixture
+def repo(tiny_run, tmp_path):
+    """A repository of one published dataset, ``walks`` (the tiny run's generator)."""
+    root = tmp_path / "repo"
+    checkpoint.publish(tiny_run / "generator.safetensors",
+                       root / "models" / "walks" / "generator.safetensors")  # fmt: skip
+    (root / "benchmarks" / "results").mkdir(parents=True)
+    return root
+
+
+# ----------------------------------------------------------------------------- finetune.py
+
+
+def _finetune(monkeypatch, root: Path, tiny_run: Path, *argv: str):
+    """finetune.py under ``root`` posing as the repository; the training, the test split and
+    the evaluation stand in (the run's model is the tiny run's generator)."""
+    ft = load_benchmark("finetune")
+    monkeypatch.setattr(ft, "ROOT", root)
+
+    def fake_finetune(cfg, start, run, *args, **kwargs):
+        shutil.copy(tiny_run / "generator.safetensors", run / "finetune.safetensors")
+        return {"train_seconds": 1.0, "steps": 2}
+
+    class Stage:
+        def validate(self):
+            return {"min_ade": 0.5}
+
+    monkeypatch.setattr(ft, "finetune", fake_finetune)
+    monkeypatch.setattr(ft, "load_dataset", lambda *a, **k: None)
+    monkeypatch.setattr(ft, "build_finetune_stage", lambda *a, **k: Stage())
+    monkeypatch.setattr(ft.TrajectoryScorer, "from_checkpoint", lambda *a, **k: None)
+    monkeypatch.setattr(ft.ckpt, "load_predictor", lambda *a, **k: None)
+    monkeypatch.setattr(ft, "evaluate", lambda *a, **k: METRICS)
+    monkeypatch.setattr("sys.argv", ["finetune.py", "--dataset", "walks", "--methods", "rlhf",
+                                     "--seeds", "0", *argv])  # fmt: skip
+    ft.main()
+    return ft
+
+
+def test_finetune_writes_its_run_rows_and_start_record_where_it_is_told(
+    repo, tiny_run, tmp_path, monkeypatch
+):
+    """HEAD's finetune.py has no --runs/--results (argparse exits): its runs and rows always
+    went into the repository."""
+    before = _files(repo)
+    out = tmp_path / "out"
+    _finetune(monkeypatch, repo, tiny_run, "--runs", str(out / "runs"), "--results",
+              str(out / "results"), "--models", str(repo / "models"))  # fmt: skip
+    assert _files(repo) == before  # the repository as it was
+    assert not (repo / "runs").exists()
+    run = out / "runs" / "walks-rlhf-s0"
+    (row,) = json.loads((out / "results" / "finetune_walks.json").read_text())
+    assert row["checkpoint"] == str(run / "finetune.safetensors")  # outside: absolute
+    assert (repo / row["checkpoint"]).is_file()  # as readers join it to the root
+    assert json.loads((run / "start.json").read_text())["start"] == (
+        "models/walks/generator.safetensors")  # fmt: skip
+    meta = json.loads((out / "results" / "meta" / "finetune_start_walks.json").read_text())
+    assert meta["start"] == "models/walks/generator.safetensors"
+
+
+def test_finetune_without_the_options_writes_todays_rows_in_the_repository(
+    repo, tiny_run, monkeypatch
+):
+    _finetune(monkeypatch, repo, tiny_run, "--no-start-validation")
+    (row,) = json.loads((repo / "benchmarks" / "results" / "finetune_walks.json").read_text())
+    assert row["checkpoint"] == "runs/walks-rlhf-s0/finetune.safetensors"  # as before
+    assert (repo / "runs" / "walks-rlhf-s0" / "start.json").is_file()
+
+
+def test_finetune_reads_its_start_from_models_and_publishes_only_where_told(
+    repo, tiny_run, tmp_path, monkeypatch, capsys
+):
+    out = tmp_path / "out"
+    elsewhere = ["--runs", str(out / "runs"), "--results", str(out / "results")]
+    with pytest.raises(SystemExit):  # would publish into the repository's models/
+        _finetune(monkeypatch, repo, tiny_run, *elsewhere, "--publish", "--no-start-validation")
+    assert "--models missing" in capsys.readouterr().err
+    models = out / "models"
+    shutil.copytree(repo / "models", models)
+    (repo / "models" / "walks" / "generator.safetensors").unlink()  # read from --models only
+    _finetune(monkeypatch, repo, tiny_run, *elsewhere, "--models", str(models), "--publish",
+              "--no-start-validation")  # fmt: skip
+    assert (models / "walks" / "rlhf.safetensors").is_file()
+    assert not (repo / "models" / "walks" / "rlhf.safetensors").exists()
+
+
+# ----------------------------------------------------------------------------- pretrain.py
+
+
+def _pretrain(monkeypatch, root: Path, *argv: str):
+    pre = load_benchmark("pretrain")
+    monkeypatch.setattr(pre, "ROOT", root)
+    monkeypatch.setattr(pre, "load_dataset", lambda *a, **k: None)
+    monkeypatch.setattr(pre, "time_predictors", lambda *a, **k: {"leapfrog": 1.0, "full": 9.0})
+    monkeypatch.setattr(pre, "evaluate", lambda *a, **k: METRICS)
+    monkeypatch.setattr("sys.argv", ["pretrain.py", "--dataset", "walks", "--no-full-eval",
+                                     *argv])  # fmt: skip
+    pre.main()
+
+
+# ----------------------------------------------------- --runs, --results, --models: all or none
+# (walkthrough 67 review: ``--models`` alone still wrote the repository's rows and start
+# records, naming a start or a checkpoint outside it)
+
+
+SOME_BUT_NOT_ALL = [("models",), ("runs",), ("results",), ("runs", "models"), ("results", "models")]
+
+
+def _options(out: Path, names: tuple[str, ...]) -> list[str]:
+    return [arg for name in names for arg in (f"--{name}", str(out / name))]
+
+
+@pytest.mark.parametrize("names", SOME_BUT_NOT_ALL, ids="+".join)
+@pytest.mark.parametrize("script", ["finetune", "pretrain"])
+def test_some_but_not_all_of_the_three_is_refused_naming_the_missing(
+    script, names, repo, tiny_run, tmp_path, monkeypatch, capsys
+):
+    """HEAD's finetune.py with ``--models`` alone read the start from there and wrote the
+    repository's meta/finetune_start_walks.json (an absolute start) and finetune_walks.json
+    (rows trained from an unpublished start); with ``--runs`` or ``--results`` alone it read
+    the repository's models (refused now too: one rule, the three or none)."""
+    out = tmp_path / "out"
+    shutil.copytree(tiny_run, out / "runs" / "walks")
+    shutil.copytree(repo / "models", out / "models")
+    before = _files(repo)
+    with pytest.raises(SystemExit) as exit_:
+        if script == "finetune":
+            _finetune(monkeypatch, repo, tiny_run, *_options(out, names))
+        else:
+            _pretrain(monkeypatch, repo, *_options(out, names))
+    assert exit_.value.code == 2
+    missing = [f"--{n}" for n in ("runs", "results", "models") if n not in names]
+    assert f"{' and '.join(missing)} missing" in capsys.readouterr().err
+    assert _files(repo) == before
+
+
+def test_a_folder_reached_through_dotdot_is_recorded_absolute(repo, tiny_run, monkeypatch):
+    """``shown`` (now benchmarks/paths.py, once a copy in each script) took ``repo/../out`` for
+    a path inside the repository and recorded ``../out/...``."""
+    out = repo / ".." / "out"
+    _finetune(monkeypatch, repo, tiny_run, "--runs", str(out / "runs"), "--results",
+              str(out / "results"), "--models", str(repo / "models"))  # fmt: skip
+    (row,) = json.loads((out / "results" / "finetune_walks.json").read_text())
+    assert row["checkpoint"] == str(repo.parent / "out" / "runs" / "walks-rlhf-s0"
+                                    / "finetune.safetensors")  # fmt: skip

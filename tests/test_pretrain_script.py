@@ -2,11 +2,14 @@
 name, pointing at the commit that holds the weights it measured."""
 
 import json
+import shutil
 import subprocess
+from pathlib import Path
 
 import pytest
 from bench import load_benchmark
 
+from trajpref.models import checkpoint
 from trajpref.results import FIELDS
 
 
@@ -96,3 +99,85 @@ def test_training_again_skips_the_stages_that_have_finished(tiny_cfg, tmp_path, 
     pretrain._train(args, tmp_path)  # a resume of a finished stage would be refused
     assert "the generator stage has finished" in capsys.readouterr().out
     assert (tmp_path / "generator.safetensors").read_bytes() == before
+
+
+# Walkthrough 67, fixer F9: ``reproduce.py --out DIR`` in full mode left its training in the
+# repository (finetune.py and pretrain.py wrote ``runs/``, ``benchmarks/results/`` and
+# ``models/`` of the repository whatever the folder). Both scripts now take ``--runs``,
+# ``--results`` and ``--models``, and reproduce.py passes them under ``--out``.
+
+
+METRICS = dict.fromkeys(("min_ade", "min_fde", "joint_min_ade", "joint_min_fde", "max_ats",
+                         "max_fts", "top1_recall_ats", "top5_recall_ats"), 0.5)  # fmt: skip
+
+
+def _files(*folders: Path) -> dict[Path, bytes]:
+    return {p: p.read_bytes() for f in folders if f.is_dir() for p in f.rglob("*") if p.is_file()}
+
+
+@pytest.fixture
+def repo(tiny_run, tmp_path):
+    """A repository of one published dataset, ``walks`` (the tiny run's generator)."""
+    root = tmp_path / "repo"
+    checkpoint.publish(tiny_run / "generator.safetensors",
+                       root / "models" / "walks" / "generator.safetensors")  # fmt: skip
+    (root / "benchmarks" / "results").mkdir(parents=True)
+    return root
+
+
+# ----------------------------------------------------------------------------- pretrain.py
+
+
+def _pretrain(monkeypatch, root: Path, *argv: str):
+    pre = load_benchmark("pretrain")
+    monkeypatch.setattr(pre, "ROOT", root)
+    monkeypatch.setattr(pre, "load_dataset", lambda *a, **k: None)
+    monkeypatch.setattr(pre, "time_predictors", lambda *a, **k: {"leapfrog": 1.0, "full": 9.0})
+    monkeypatch.setattr(pre, "evaluate", lambda *a, **k: METRICS)
+    monkeypatch.setattr("sys.argv", ["pretrain.py", "--dataset", "walks", "--no-full-eval",
+                                     *argv])  # fmt: skip
+    pre.main()
+
+
+def test_pretrain_writes_its_rows_meta_and_models_where_it_is_told(
+    repo, tiny_run, tmp_path, monkeypatch, capsys
+):
+    """HEAD's pretrain.py has no --runs/--results/--models: it published into the
+    repository's models/ and wrote its rows there."""
+    out = tmp_path / "out"
+    shutil.copytree(tiny_run, out / "runs" / "walks")
+    before = _files(repo)
+    elsewhere = ["--runs", str(out / "runs"), "--results", str(out / "results")]
+    with pytest.raises(SystemExit):  # it publishes: not into the repository's models/
+        _pretrain(monkeypatch, repo, *elsewhere)
+    assert "--models missing" in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # names the repository's commits
+        _pretrain(monkeypatch, repo, *elsewhere, "--models", str(out / "models"),
+                  "--keep-replaced", "old")  # fmt: skip
+    assert "--keep-replaced keeps a row of the repository's" in capsys.readouterr().err
+    _pretrain(monkeypatch, repo, *elsewhere, "--models", str(out / "models"))
+    assert _files(repo) == before
+    published = out / "models" / "walks" / "generator.safetensors"
+    assert published.is_file() and (published.parent / "denoiser.safetensors").is_file()
+    (row,) = json.loads((out / "results" / "pretrained_walks.json").read_text())
+    assert row["checkpoint"] == str(published)
+    assert (out / "results" / "meta" / "pretrained_walks.json").is_file()
+
+
+def test_pretrain_with_models_alone_is_refused_and_leaves_the_repository_as_it_is(
+    repo, tiny_run, tmp_path, monkeypatch, capsys
+):
+    """The review's reproducer (``--run-dir /tmp/fr --models /tmp/m``): HEAD's pretrain.py
+    published into /tmp/m and replaced the repository's ``pretrained`` row with that
+    checkpoint, and its meta/pretrained_walks.json."""
+    out = tmp_path / "out"
+    shutil.copytree(tiny_run, out / "fr")
+    before = _files(repo)
+    with pytest.raises(SystemExit) as exit_:
+        _pretrain(monkeypatch, repo, "--run-dir", str(out / "fr"), "--models", str(out / "m"))
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert "--runs, --results and --models go together" in err
+    assert "--runs and --results missing" in err
+    assert _files(repo) == before
+    assert not (out / "m").exists()

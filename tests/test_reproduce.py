@@ -441,7 +441,7 @@ def test_out_sends_the_scripts_own_files_elsewhere_and_leaves_the_repository_alo
     calls = _counting(monkeypatch)
     reproduce.main([*args, "--out", str(elsewhere)], setup)
     assert calls == []  # resumes from the folder
-    # full mode: the training logs go there too (and the training, test_out_dirs_walk67.py)
+    # full mode: the training logs go there too (and the training: test_full_mode_with_out_*)
     logs = []
     monkeypatch.setattr(reproduce, "run_command", lambda cmd, log: logs.append(log) or 1)
     reproduce.main(["--datasets", "walks", *SAMPLES, "--out", str(elsewhere)], setup)
@@ -505,3 +505,126 @@ def test_the_notes_name_the_departures_that_bear_on_the_rlhf_columns(setup):
         headings = [x.lstrip("#").strip() for x in (ROOT / name).read_text().splitlines()
                     if x.startswith("#")]  # fmt: skip
         assert any(h.startswith(section) for h in headings), (name, section)
+
+
+# Walkthrough 67, fixer F9: ``reproduce.py --out DIR`` in full mode left its training in the
+# repository (finetune.py and pretrain.py wrote ``runs/``, ``benchmarks/results/`` and
+# ``models/`` of the repository whatever the folder). Both scripts now take ``--runs``,
+# ``--results`` and ``--models``, and reproduce.py passes them under ``--out``.
+
+
+@pytest.fixture
+def repo(tiny_run, tmp_path):
+    """A repository of one published dataset, ``walks`` (the tiny run's generator)."""
+    root = tmp_path / "repo"
+    checkpoint.publish(tiny_run / "generator.safetensors",
+                       root / "models" / "walks" / "generator.safetensors")  # fmt: skip
+    (root / "benchmarks" / "results").mkdir(parents=True)
+    return root
+
+
+@pytest.fixture
+def repo_setup(repo, walks, tmp_path):
+    (tmp_path / "configs").mkdir()
+    return reproduce.Setup(
+        models=repo / "models", results=repo / "benchmarks" / "results",
+        configs=tmp_path / "configs", doc=repo / "docs" / "reproduce.md",
+        logs=repo / "runs" / "logs", sources={"walks": str(walks), "bare": str(walks)},
+    )  # fmt: skip
+
+
+def _option(cmd: list[str], name: str) -> str | None:
+    return cmd[cmd.index(name) + 1] if name in cmd else None
+
+
+def test_full_mode_with_out_trains_into_the_folder_and_reads_its_rows_from_there(
+    repo_setup, repo, tmp_path, monkeypatch
+):
+    """HEAD passed no folders: the fine-tuning wrote runs/ and rows in the repository, and
+    the tables read the repository's rows only."""
+    out = tmp_path / "elsewhere"
+    commands = []
+
+    def fake_run(cmd, log):
+        """Stand in for finetune.py: write its row where the command says."""
+        commands.append(cmd)
+        assert cmd[1].endswith("finetune.py")
+        method, tag = _option(cmd, "--methods"), _option(cmd, "--tag")
+        path = Path(_option(cmd, "--results")) / f"finetune_walks{'_' + tag if tag else ''}.json"
+        rows = json.loads(path.read_text()) if path.is_file() else []
+        row = make_row(dataset="walks", split="test", method=f"{method}-{tag}" if tag else method,
+                       seed=0, samples=4, min_ade=0.4, min_fde=0.8, date="2026-12-07")  # fmt: skip
+        write_rows(path, [*rows, row])
+        return 0
+
+    monkeypatch.setattr(reproduce, "run_command", fake_run)
+    before = _files(repo)
+    args = ["--datasets", "walks", "--samples", "4", "--out", str(out)]
+    summary = reproduce.main(args, repo_setup)
+    assert len(commands) == 3
+    for cmd in commands:
+        assert _option(cmd, "--runs") == str(out / "runs")
+        assert _option(cmd, "--results") == str(out / "results")
+        assert _option(cmd, "--models") == str(repo_setup.models)  # the start the tables evaluate
+    assert _files(repo) == before
+    cell = summary["cells"]["walks"]["rlhf"]
+    assert cell["source"] == "rows" and cell["min_fde"] == 0.8
+    assert str(out / "results" / "finetune_walks.json") in cell["detail"]
+    commands.clear()
+    assert reproduce.main(args, repo_setup)["jobs"]["run"] == [] and commands == []  # read back
+    # without --out nothing changes: the rows of the repository, the commands of before
+    opts = reproduce.parse_args(["--datasets", "walks"], repo_setup)
+    cmd = reproduce.training_command(reproduce.Job("finetune", "walks", "rlhf"), opts, repo_setup)
+    assert "--runs" not in cmd and "--results" not in cmd and "--models" not in cmd
+
+
+def test_full_mode_with_out_pretrains_into_the_folder_and_evaluates_that_generator(
+    repo_setup, tiny_run, tmp_path
+):
+    (repo_setup.configs / "bare.yaml").write_text("{}\n")
+    out = tmp_path / "elsewhere"
+    trained = reproduce.replace(repo_setup, out=out, trained=out)
+    opts = reproduce.parse_args(["--datasets", "bare", "--out", str(out)], trained)
+    job = reproduce.plan(opts, trained)[0]
+    assert job.label == "pretrain bare pretrained"
+    cmd = reproduce.training_command(job, opts, trained)
+    assert cmd[1].endswith("pretrain.py") and cmd[cmd.index("--device") + 2:] == [
+        "--runs", str(out / "runs"), "--results", str(out / "results"),
+        "--models", str(out / "models")]  # fmt: skip
+    # what the pretraining publishes there is the dataset's generator from then on
+    gen = out / "models" / "bare" / "generator.safetensors"
+    checkpoint.publish(tiny_run / "generator.safetensors", gen)
+    assert reproduce.is_done(job, opts, trained, [])
+    assert reproduce.generator_path(trained, "bare") == gen
+    assert reproduce.denoiser_path(trained, "bare") == gen.parent / "denoiser.safetensors"
+    tune = reproduce.Job("finetune", "bare", "rlhf")
+    assert _option(reproduce.training_command(tune, opts, trained), "--models") == str(
+        out / "models")  # fmt: skip
+    assert not (repo_setup.models / "bare").exists()
+
+
+def test_the_reports_row_sources_read_as_before_without_out(repo_setup):
+    write_rows(repo_setup.results / "finetune_walks.json", [make_row(
+        dataset="walks", split="test", method="rlhf", seed=0, samples=4, min_ade=0.4,
+        min_fde=0.8, date="2026-12-07")])  # fmt: skip
+    summary = reproduce.main(["--report", "--datasets", "walks", "--samples", "4"], repo_setup)
+    assert "method `rlhf` in `benchmarks/results/finetune_walks.json`, mean over 1 seed (0)" in (
+        summary["cells"]["walks"]["rlhf"]["detail"])  # fmt: skip
+
+
+def test_a_row_of_the_out_folder_replaces_the_repositorys_of_the_same_measurement(
+    repo_setup, tmp_path
+):
+    def row(method: str, min_fde: float) -> dict:
+        return make_row(dataset="walks", split="test", method=method, seed=0, samples=4,
+                        min_ade=0.4, min_fde=min_fde, date="2026-12-07")  # fmt: skip
+
+    write_rows(repo_setup.results / "finetune_walks.json", [row("rlhf", 0.9), row("rlhf-res", 0.7)])
+    out = tmp_path / "elsewhere"
+    write_rows(out / "results" / "finetune_walks.json", [row("rlhf", 0.8)])
+    assert [r["min_fde"] for r in reproduce.result_rows(repo_setup)] == [0.9, 0.7]  # no --out
+    rows = reproduce.result_rows(reproduce.replace(repo_setup, trained=out))
+    assert sorted((r["method"], r["min_fde"], r["_file"]) for r in rows) == [
+        ("rlhf", 0.8, str(out / "results" / "finetune_walks.json")),
+        ("rlhf-res", 0.7, "benchmarks/results/finetune_walks.json"),
+    ]

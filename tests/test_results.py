@@ -13,6 +13,7 @@ from trajpref.results import (
     PEER_HEADERS,
     RUNNABLE_STARTS,
     SECONDARY_MARK,
+    SELECTION_FREE,
     START_SUFFIXES,
     ResultConflict,
     accuracy_table,
@@ -32,6 +33,7 @@ from trajpref.results import (
     write_meta,
     write_rows,
 )
+from trajpref.score.selection import METHODS, USES_SCORE
 
 ROOT = Path(__file__).resolve().parent.parent
 FOLDS = ("eth", "hotel", "univ", "zara1", "zara2")
@@ -376,3 +378,15 @@ def test_table_lines_keys_data_lines_by_their_first_two_cells_under_a_heading():
     assert table_lines(text) == {("eth", "rlhf"): "| eth | rlhf | 1 |",
                                  ("zara1", "control"): "| zara1 | control | 3 |"}  # fmt: skip
     assert table_lines(text, "## B") == {("zara1", "control"): "| zara1 | control | 3 |"}
+
+
+# ``results.SELECTION_FREE`` (the selection table's columns) is a copy of the score-free
+# selection methods that ``results`` may not import (``score`` is above it in the layers):
+# this test is what keeps the two the same when a selection method is added.
+
+
+def test_the_selection_tables_columns_are_the_score_free_methods():
+    assert len(set(SELECTION_FREE)) == len(SELECTION_FREE)
+    assert set(SELECTION_FREE) == {m for m in METHODS if not USES_SCORE[m]}
+    # in the order of score.selection.Method, as --select lists them
+    assert list(SELECTION_FREE) == [m for m in METHODS if not USES_SCORE[m]]

@@ -82,3 +82,29 @@ def test_published_rows_measured_the_weights_the_repository_ships():
             stale.append((row["dataset"], row["method"], row["protocol"]))
     assert not stale, f"rows measured other weights than their checkpoint holds: {stale}"
     assert not untraced, f"published rows without a model_hash: {untraced}"
+
+
+# Which weights a published number measured (the reproducibility audit of walk 67): a card's
+# test row must name its file's digest, rows without one whose file is gone are counted, and
+# the README's latencies are checked against the files they timed.
+
+
+def test_rows_without_a_digest_whose_file_is_gone_are_counted(tmp_path, monkeypatch, capsys):
+    """row_hashes.py skipped them and printed "0 rows whose checkpoint file has changed"."""
+    rh = load_benchmark("row_hashes")
+    results = tmp_path / "benchmarks" / "results"
+    results.mkdir(parents=True)
+    monkeypatch.setattr(rh, "ROOT", tmp_path)
+    monkeypatch.setattr(rh, "RESULTS", results)
+    rows = [make_row(dataset="d", split="test", method="full-sampler", seed=0, samples=20,
+                     checkpoint="models/d/generator.pt", date="2026-11-22", machine="m",
+                     command="c"),
+            make_row(dataset="d", split="test", method="control", seed=0, samples=20,
+                     checkpoint="runs/x/finetune.safetensors", date="2026-11-22", machine="m",
+                     command="c")]  # fmt: skip
+    (results / "r.json").write_text(json.dumps(rows))
+    assert rh.check() == 0
+    out = capsys.readouterr().out
+    assert "d full-sampler seed 0 (2026-11-22) names no model_hash" in out
+    assert "2 rows without a model_hash whose checkpoint file is gone" in out
+    assert "(1 of a published file, listed; 1 of a run folder)" in out

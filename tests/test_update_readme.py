@@ -1,8 +1,14 @@
 """benchmarks/update_readme.py: which rows the README's results table keeps."""
 
+import json
+import re
+import shutil
+import subprocess
 from pathlib import Path
 
+import pytest
 from bench import load_benchmark
+from synthetic import tiny_generator_file
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -129,3 +135,118 @@ def test_check_says_whether_the_readme_would_change_and_writes_nothing(tmp_path)
     assert done.returncode == 1
     assert "-an old line" in done.stdout and "would change" in done.stdout
     assert readme.read_text() == stale  # nothing written
+
+
+# Which weights a published number measured (the reproducibility audit of walk 67): a card's
+# test row must name its file's digest, rows without one whose file is gone are counted, and
+# the README's latencies are checked against the files they timed.
+
+
+def _row(method, checkpoint, date, model_hash=None, **fields):
+    return {"dataset": "zara2", "method": method, "seed": 0, "split": "test", "samples": 20,
+            "protocol": "all", "checkpoint": checkpoint, "model_hash": model_hash,
+            "machine": "m, 2 CPU cores, 2 threads", "min_ade": 0.1, "min_fde": 0.2,
+            "joint_min_ade": 0.3, "joint_min_fde": 0.4, "date": date,
+            "command": "python benchmarks/x.py", **fields}  # fmt: skip
+
+
+def test_the_readme_drops_an_undigested_row_of_a_gone_file_beside_a_re_measurement():
+    """eth's full-sampler line merged the minADE of 2026-11-22 (``generator.pt``, no digest)
+    with the maxATS of 2026-12-06 (the re-measurement that names the digest)."""
+    update = load_benchmark("update_readme")
+    old = _row("full-sampler", "models/zara2/generator.pt", "2026-11-22", min_ade=0.17)
+    new = _row("full-sampler", "models/zara2/generator.safetensors", "2026-12-06",
+               "c3d1512d2041", min_ade=0.18)  # fmt: skip
+    alone = _row("full-sampler", "models/zara2/generator.pt", "2026-11-22")
+    alone["dataset"] = "hotel"  # no re-measurement: it stays
+    kept = update.without_superseded([old, new, alone])
+    assert kept == [new, alone]
+    present = _row("cv", None, "2026-11-22")  # no checkpoint at all: never dropped
+    assert update.without_superseded([present, new]) == [present, new]
+
+
+def _speed_record(meta: Path, entry: dict) -> None:
+    meta.mkdir(parents=True, exist_ok=True)
+    record = {"machine": "m", "threads": 1, "date": "2026-12-03", "command": "speed.py",
+              "samples": 20, "models": {"d/generator": {
+                  "dataset": "d", "scenes": 10, "leapfrog_ms_per_scene": 2.0,
+                  "full_ms_per_scene": 80.0, "full_over_leapfrog": 40.0, **entry}}}  # fmt: skip
+    (meta / "speed.json").write_text(json.dumps(record))
+
+
+def test_the_latency_table_marks_a_file_that_changed_since_it_was_timed(tmp_path):
+    update = load_benchmark("update_readme")
+    zoo_dir, meta = tmp_path / "zoo", tmp_path / "meta"
+    now = tiny_generator_file(zoo_dir / "d" / "generator.safetensors", seed=1)
+    _speed_record(meta, {"model_hash": now})
+    table = update.speed_table(meta, zoo_dir=zoo_dir)
+    assert "| 2.0 | 80.0 | 40.0x |" in table and "†" not in table
+    assert "each is its file's today" in table
+    _speed_record(meta, {"model_hash": "0123456789ab"})
+    table = update.speed_table(meta, zoo_dir=zoo_dir)
+    assert "| 2.0† | 80.0† | 40.0x† |" in table
+    assert f"`d/generator` (timed 0123456789ab, now {now})" in table
+    _speed_record(meta, {})  # no hash, and no git repository to trace one: unknown, said so
+    table = update.speed_table(meta, zoo_dir=zoo_dir)
+    assert "| 2.0 | 80.0 | 40.0x |" in table
+    assert "unknown for `d/generator` (no hash recorded, and git cannot trace one)" in table
+
+
+def _repository(repo: Path):
+    """A new git repository at ``repo`` and a function that commits everything in it."""
+    subprocess.run(["git", "init", "-q", str(repo)], check=True)
+    git = ["git", "-C", str(repo), "-c", "user.name=t", "-c", "user.email=t@t"]
+
+    def commit(message: str) -> None:
+        subprocess.run([*git, "add", "-A"], check=True, capture_output=True)
+        subprocess.run([*git, "commit", "-qm", message], check=True, capture_output=True)
+
+    return repo, commit
+
+
+@pytest.mark.skipif(shutil.which("git") is None, reason="needs git")
+def test_a_record_without_hashes_is_traced_to_the_files_committed_with_it(tmp_path):
+    update = load_benchmark("update_readme")
+    repo, commit = _repository(tmp_path / "repo")
+    zoo_dir, meta = repo / "zoo", repo / "meta"
+    first = tiny_generator_file(zoo_dir / "d" / "generator.safetensors", seed=1)
+    _speed_record(meta, {})
+    commit("weights and their timing")
+    assert "| 2.0 | 80.0 | 40.0x |" in update.speed_table(meta, zoo_dir=zoo_dir)
+    second = tiny_generator_file(zoo_dir / "d" / "generator.safetensors", seed=2)
+    commit("new weights, not timed")
+    table = update.speed_table(meta, zoo_dir=zoo_dir)
+    assert "| 2.0† | 80.0† | 40.0x† |" in table
+    assert f"({first} in " in table and f"now {second})" in table
+
+
+@pytest.mark.skipif(shutil.which("git") is None, reason="needs git")
+def test_a_shallow_clone_does_not_trace_a_record_to_its_graft(tmp_path):
+    """The review of 622c5ae: in a clone of depth 1 the record's last commit is the graft,
+    which holds today's files, so an old timing read as today's weights' (the † marks went
+    away without a word). A shallow clone now cannot trace: unknown, said so."""
+    update = load_benchmark("update_readme")
+    repo, commit = _repository(tmp_path / "repo")
+    zoo_dir, meta = repo / "zoo", repo / "meta"
+    tiny_generator_file(zoo_dir / "d" / "generator.safetensors", seed=1)
+    _speed_record(meta, {})
+    commit("weights and their timing")
+    tiny_generator_file(zoo_dir / "d" / "generator.safetensors", seed=2)
+    commit("new weights, not timed")
+    shallow = tmp_path / "shallow"
+    subprocess.run(["git", "clone", "-q", "--depth", "1", f"file://{repo}", str(shallow)],
+                   check=True, capture_output=True)  # fmt: skip
+    table = update.speed_table(shallow / "meta", zoo_dir=shallow / "zoo")
+    assert "| 2.0 | 80.0 | 40.0x |" in table  # not marked as today's either: unknown
+    assert "unknown for `d/generator` (no hash recorded, and git cannot trace one)" in table
+
+
+# benchmarks/zoo_index.py: a card's test-row command names no machine's data path
+# (walkthrough 67, F6).
+
+
+def test_the_readme_shows_no_machine_specific_data_root():
+    """The README's generated footnotes showed the measuring machine's --data-root
+    (/work/shared/data); update_readme.py now shows each command as the cards do."""
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    assert not re.search(r"--data-root[ =]/", readme)

@@ -8,6 +8,8 @@ from pathlib import Path
 import pytest
 from bench import load_benchmark
 
+from trajpref.models import checkpoint as ckpt
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -346,3 +348,126 @@ def test_cards_train_with_the_shipped_configs_name_and_place_what_they_cite(monk
         assert "are in the source repository" in text, name
         stored = path.with_suffix(".md").read_text()  # the cards the package ships
         assert "--config configs/" not in stored and "are in the source repository" in stored
+
+
+# Which weights a published number measured (the reproducibility audit of walk 67): a card's
+# test row must name its file's digest, rows without one whose file is gone are counted, and
+# the README's latencies are checked against the files they timed.
+
+
+ZARA2 = ROOT / "models" / "zara2"
+
+
+def _row(method, checkpoint, date, model_hash=None, **fields):
+    return {"dataset": "zara2", "method": method, "seed": 0, "split": "test", "samples": 20,
+            "protocol": "all", "checkpoint": checkpoint, "model_hash": model_hash,
+            "machine": "m, 2 CPU cores, 2 threads", "min_ade": 0.1, "min_fde": 0.2,
+            "joint_min_ade": 0.3, "joint_min_fde": 0.4, "date": date,
+            "command": "python benchmarks/x.py", **fields}  # fmt: skip
+
+
+def test_a_denoiser_card_shows_the_row_that_names_its_files_digest(monkeypatch):
+    """zara2/denoiser's card showed the full-sampler row of 2026-11-22, which names
+    ``generator.pt`` (replaced by fp16 .safetensors on 2026-11-23) and no digest: the first
+    row of that path won, whatever its hash. A row naming the file's digest is preferred,
+    even when an undigested row is newer."""
+    zoo = load_benchmark("zoo_index")
+    monkeypatch.setattr(zoo, "_meta", lambda dataset, variant: {})
+    digest = ckpt.model_hash(ZARA2 / "denoiser.safetensors", "full")
+    old = _row("full-sampler", "models/zara2/generator.pt", "2026-11-22", min_fde=0.325)
+    new = _row("full-sampler", "models/zara2/generator.safetensors", "2026-12-06", digest,
+               min_fde=0.326)  # fmt: skip
+    later = _row("full-sampler", "models/zara2/generator.safetensors", "2026-12-07",
+                 min_fde=0.999)  # fmt: skip
+    entry = zoo.describe("zara2/denoiser", ZARA2 / "denoiser.safetensors", [old, new, later])
+    assert entry["test"]["min_fde"] == 0.326
+    assert "_unverified" not in entry
+
+
+def test_a_card_whose_rows_name_none_of_its_files_digest_is_reported(monkeypatch):
+    zoo = load_benchmark("zoo_index")
+    monkeypatch.setattr(zoo, "_meta", lambda dataset, variant: {})
+    old = _row("full-sampler", "models/zara2/generator.pt", "2026-11-22")
+    entry = zoo.describe("zara2/denoiser", ZARA2 / "denoiser.safetensors", [old])
+    assert entry["test"]["date"] == "2026-11-22"  # still shown, but reported
+    assert "names no model_hash" in entry.get("_unverified", "")
+    # a generator's newest row of other weights does not stand for the file either
+    path = ZARA2 / "generator.safetensors"
+    digest = ckpt.model_hash(path)
+    rows = [_row("pretrained", "models/zara2/generator.safetensors", "2026-12-01", digest,
+                 min_fde=0.21),
+            _row("pretrained", "models/zara2/generator.safetensors", "2026-12-05",
+                 "0123456789ab", min_fde=0.5)]  # fmt: skip
+    assert zoo.describe("zara2/generator", path, rows)["test"]["min_fde"] == 0.21
+    entry = zoo.describe("zara2/generator", path, rows[1:])
+    assert "measured 0123456789ab" in entry.get("_unverified", "")
+
+
+def test_the_zoo_check_says_when_everything_is_up_to_date(tmp_path, monkeypatch, capsys):
+    """``--check`` printed nothing when it passed."""
+    zoo = load_benchmark("zoo_index")
+    (tmp_path / "zoo").mkdir()
+    (tmp_path / "README.md").write_text("x\n<!-- models:start -->\n<!-- models:end -->\n")
+    monkeypatch.setattr(zoo.zoo, "ZOO_DIR", tmp_path / "zoo")
+    monkeypatch.setattr(zoo, "ROOT", tmp_path)
+    monkeypatch.setattr("sys.argv", ["zoo_index.py"])
+    zoo.main()
+    capsys.readouterr()
+    monkeypatch.setattr("sys.argv", ["zoo_index.py", "--check"])
+    with pytest.raises(SystemExit) as done:
+        zoo.main()
+    assert done.value.code == 0
+    assert "models/index.json and 0 cards are up to date" in capsys.readouterr().out
+
+
+def test_a_denoiser_card_says_its_generators_ratio_was_timed_before_the_file_changed():
+    """eth/denoiser's card quoted 26.1x beside `eth/generator`, timed on 2026-12-03 before
+    the file changed (2026-12-06)."""
+    zoo = load_benchmark("zoo_index")
+    speed = {"date": "2026-12-03", "models": {"eth/generator": {"full_over_leapfrog": 26.07}}}
+    assert "as it was then" not in zoo.speed_note(speed, "eth")
+    text = zoo.speed_note(speed, "eth", changed=True)
+    assert "26.1x beside `eth/generator` as it was then (its file has changed since" in text
+
+
+# benchmarks/zoo_index.py: a card's test-row command names no machine's data path
+# (walkthrough 67, F6).
+
+
+def test_an_absolute_data_root_becomes_the_portable_one():
+    zoo = load_benchmark("zoo_index")
+    cmd = (
+        "python benchmarks/pretrain.py --dataset sdd --run-dir runs/x --data-root /work/shared/data"
+    )
+    assert zoo.portable_command(cmd) == (
+        "python benchmarks/pretrain.py --dataset sdd --run-dir runs/x --data-root ../shared/data"
+    )
+    assert zoo.portable_command("score.py --data-root=/home/me/data --x 1") == (
+        "score.py --data-root=../shared/data --x 1"
+    )
+    relative = "python benchmarks/score.py --dataset eth --data-root ../shared/data"
+    assert zoo.portable_command(relative) == relative
+    assert zoo.portable_command("trajpref evaluate --dataset data/x") == (
+        "trajpref evaluate --dataset data/x"
+    )
+    assert zoo.portable_command(None) is None
+
+
+def test_the_card_and_index_show_the_portable_command_and_the_row_keeps_its_own():
+    zoo = load_benchmark("zoo_index")
+    cmd = "python benchmarks/score.py --dataset zara2 --data-root /work/shared/data"
+    row = {"dataset": "zara2", "method": "pretrained", "seed": 0, "split": "test",
+           "samples": 20, "min_ade": 0.1, "min_fde": 0.2, "joint_min_ade": 0.3,
+           "joint_min_fde": 0.4, "date": "2026-12-06", "machine": "m", "command": cmd}  # fmt: skip
+    test = zoo._test_row(row)
+    assert (
+        test["command"] == "python benchmarks/score.py --dataset zara2 --data-root ../shared/data"
+    )
+    assert row["command"] == cmd  # the results row is not rewritten
+
+
+def test_no_published_card_or_index_names_an_absolute_data_root():
+    zoo_dir = ROOT / "src" / "trajpref" / "zoo"
+    for path in [zoo_dir / "index.json", *sorted(zoo_dir.glob("*/*.md"))]:
+        text = path.read_text()
+        assert "--data-root /" not in text and "--data-root=/" not in text, path

@@ -299,7 +299,7 @@ def _variant(checkpoint: str | None) -> str:
 SELECTION_FREE = ("first", "random", "kmeans", "fps", "facility", "medoids")
 """The score-free selections, the selection table's columns: ``score.selection``'s methods
 whose ``USES_SCORE`` is False, in its order, written out here (``results`` is below ``score``
-in the layers; tests/test_results_walk67.py compares the two)."""
+in the layers; tests/test_results.py compares the two)."""
 
 
 def selection_table(rows: list[dict[str, Any]], split: str = "test",

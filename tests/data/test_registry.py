@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from synthetic import make_scene, straight_rows, write_tracks
+from synthetic import make_scene, straight_rows, write_dataset, write_tracks
 
 from trajpref.config import DataConfig
 from trajpref.data import (
@@ -13,9 +13,11 @@ from trajpref.data import (
     hold_out_scene,
     load_dataset,
     mean_speed,
+    registry,
     resolve_data_root,
     run_splits,
     split_validation_in_time,
+    text,
     with_paced_copy,
 )
 from trajpref.data.registry import (
@@ -692,3 +694,125 @@ def test_sgan_folds_finds_a_folds_test_files_by_name(tmp_path):
     assert sgan_folds(tmp_path / "c") == ()
     assert sgan_folds(tmp_path / "d") == ("eth", "hotel")
     assert sgan_folds(tmp_path / "missing") == () and sgan_folds("zara1") == ()
+
+
+# A built-in dataset of text tracks takes what a folder of its files takes (the library
+# extension walkthrough: a contributor's ``mall``, built in, lost ``data.partial_future`` and
+# ``--protocol sgan``, which were keyed on ETH/UCY membership), while every built-in dataset
+# of today refuses what it refused before.
+
+
+NEW = "mall"
+
+
+@pytest.fixture
+def mall_root(tmp_path, monkeypatch) -> Path:
+    """A data root with ``mall/<split>/*.csv`` and ``mall`` registered as docs/data.md's
+    "Adding a built-in dataset" says: its name, its SPECS entry of text tracks, its branch
+    (reading CSV files as a user folder does, ``pattern=USER_TEXT``)."""
+    root = tmp_path / "root"
+    write_dataset(root / NEW, frames=44)
+    for path in sorted((root / NEW).rglob("*.txt")):
+        path.rename(path.with_suffix(".csv"))
+    monkeypatch.setattr(registry, "NAMES", (*registry.NAMES, NEW))
+    monkeypatch.setattr(registry, "BRANCHES", (*registry.BRANCHES, NEW))
+    monkeypatch.setitem(registry.SPECS, NEW, registry.SourceSpec("m", 0.4, text_tracks=True))
+    built_in = registry._built_in
+
+    def branch(name, split, root_, options):
+        if name != NEW:
+            return built_in(name, split, root_, options)
+        spec = registry.SPECS[name]
+        folder = registry.resolve_data_root(root_) / NEW / split
+        scenes = text.read_folder(folder, spec.t_hist, spec.t_fut, pattern=registry.USER_TEXT,
+                                  options=options, units=spec.units)  # fmt: skip
+        info = DatasetInfo(name, split, spec.units, spec.frame_interval, spec.t_hist,
+                           spec.t_fut, str(folder))  # fmt: skip
+        return TrajectoryDataset(scenes, info)
+
+    monkeypatch.setattr(registry, "_built_in", branch)
+    return root
+
+
+def test_a_built_in_text_track_dataset_takes_its_folders_options(mall_root):
+    plain = load_dataset(NEW, "train", mall_root)
+    assert plain.info.text_tracks  # from its SPECS entry, not a tuple of names in _load
+    partial = load_dataset(NEW, "train", mall_root, options=ReadOptions(partial_future=4))
+    assert partial.num_agents >= plain.num_agents
+    registry.check_protocol_for(NEW, "sgan")
+    assert load_dataset(NEW, "test", mall_root, protocol="sgan").info.protocol == "sgan"
+    paced = load_dataset(NEW, "train", mall_root, options=ReadOptions(time_step=2))
+    assert paced.info.frame_interval == pytest.approx(0.8)
+
+
+def test_sgans_refusal_names_the_datasets_that_take_it(mall_root):
+    with pytest.raises(ConfigError, match=rf"ETH/UCY folds \({', '.join(ETH_UCY)}\) and "
+                       rf"{NEW} only"):  # fmt: skip
+        registry.check_protocol_for("sdd", "sgan")
+
+
+def test_a_text_track_dataset_can_keep_the_folder_options_out(monkeypatch):
+    """NBA's case: text tracks (``text_tracks``), its own benchmark's counting."""
+    monkeypatch.setattr(registry, "NAMES", (*registry.NAMES, NEW))
+    spec = registry.SourceSpec("m", 0.4, text_tracks=True, folder_options=False)
+    monkeypatch.setitem(registry.SPECS, NEW, spec)
+    with pytest.raises(ConfigError, match=r"for the ETH/UCY folds .* only"):
+        registry.check_protocol_for(NEW, "sgan")
+    with pytest.raises(ConfigError, match=r"partial_future cuts windows .* SPECS entry"):
+        load_dataset(NEW, "train", "/nowhere", options=ReadOptions(partial_future=4))
+
+
+def test_todays_built_ins_refuse_what_they_refused():
+    specs = registry.SPECS
+    assert {n for n in registry.NAMES if specs[n].text_tracks} == {*ETH_UCY, "nba"}
+    assert {n for n in registry.NAMES if specs[n].takes_folder_options} == set(ETH_UCY)
+    for name in ("sdd", "nba", "robo", "robo-sim", "robo-mix"):
+        with pytest.raises(ConfigError, match="partial_future cuts windows from text track"):
+            load_dataset(name, "train", "/nowhere", options=ReadOptions(partial_future=4))
+        with pytest.raises(ConfigError, match=r"--protocol sgan is Social-GAN's ETH/UCY"):
+            registry.check_protocol_for(name, "sgan")
+    for name in ("sdd", "robo", "robo-sim", "robo-mix"):
+        with pytest.raises(ConfigError, match="time_step resamples text track files"):
+            load_dataset(name, "train", "/nowhere", options=ReadOptions(time_step=2))
+
+
+# The installed user's walkthrough (67): a shipped config written out as a YAML file to edit
+# (``config show --yaml``), where a built-in dataset lies under an empty data root, the
+# fine-tuning presets offered by the CLI, and the question on milliseconds in the CLI's advice
+# on a frame interval above 10 s.
+
+
+README = Path(__file__).resolve().parents[2] / "README.md"
+
+
+DATA_SECTION = "Data: where each dataset comes from"
+
+
+ROOT_DATASETS = ["eth", "hotel", "univ", "zara1", "zara2", "sdd", "nba", "robo", "robo-mix"]
+
+
+LAYOUT = {"sdd": "sdd/{train,test}.npz", "nba": "nba/rebound/{train,test}/*.txt",
+          "robo": "robo/{val,test}.npz", "robo-mix": "robo/{val,test}.npz"}  # fmt: skip
+
+
+@pytest.mark.parametrize("name", ROOT_DATASETS)
+def test_a_built_in_dataset_missing_under_the_root_says_where_it_lies(name, tmp_path):
+    layout = LAYOUT.get(name, f"eth_ucy/{name}/{{train,val,test}}/*.txt")
+    with pytest.raises(DataError) as caught:
+        load_dataset(name, "test", tmp_path)
+    message = str(caught.value)
+    assert re.search(r": no such (folder|file); ", message), message
+    assert f"{name} is read from {layout} under the data root ({tmp_path};" in message
+    assert f'"{DATA_SECTION}"' in message
+    assert "\n" not in message
+
+
+def test_the_readme_has_the_section_the_error_names():
+    assert f"## {DATA_SECTION}\n" in README.read_text()
+
+
+def test_a_users_missing_folder_keeps_its_message(tmp_path, capsys):
+    missing = tmp_path / "nope"
+    with pytest.raises(DataError) as caught:
+        load_dataset(str(missing), "test")
+    assert str(caught.value) == f"{missing}: no such folder"

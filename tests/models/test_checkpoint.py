@@ -574,3 +574,22 @@ def test_load_predictor_takes_auto_and_says_when_the_gpu_is_missing(tmp_path, cf
     assert pred.predict(collate([make_scene(2)]), 3).shape == (3, 2, 12, 2)
     with pytest.raises(ConfigError, match="device 'cuda' requested but no CUDA GPU"):
         ckpt.load_predictor(path, device="cuda")
+
+
+# One table of fine-tuning methods (config.FinetuneMethod, config.USES_RL,
+# rl.objective.LOSS_SAMPLES): the CLI offers its names, and a name that reaches a dispatch
+# without an entry there is an error, never trained as RLHF-ReS (the walkthrough's finding: a
+# new method's name took the k* path of ``RLObjective.selection``).
+
+
+def test_a_checkpoint_of_a_new_supervised_method_records_no_reward(monkeypatch):
+    """A fine-tuned checkpoint's reward came from ``method == "control"``: a new supervised
+    method (no RL) recorded the config's reward as if it had trained with it."""
+    from trajpref import config
+    from trajpref.models import checkpoint
+
+    monkeypatch.setitem(config.USES_RL, "control-ema", False)
+    assert checkpoint._run_reward("control-ema", "score") is None
+    assert checkpoint._run_reward("control", "score") is None
+    assert checkpoint._run_reward("rlhf-res", "set") == "set"
+    assert checkpoint._run_reward("rlhf-old-name", "score") == "score"  # an older file's name

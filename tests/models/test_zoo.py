@@ -284,3 +284,30 @@ def test_a_published_name_given_with_its_suffix_is_named_without_it(fake_zoo):
 
     with pytest.raises(TrajprefError, match="the published model is named walks/generator"):
         registry.load_predictor("walks/generator.safetensors")
+
+
+# A sports analyst's walkthrough of the NBA models (walkthrough 67): the cards say which axes
+# and inputs the models read; feet given to a metre model are told the factor; a scene with no
+# ball or two balls is said, in Python and on a split; float agent types from pandas (0.0 / 1.0)
+# are types.
+
+
+CARDS = ROOT / "src" / "trajpref" / "zoo" / "nba"
+
+
+# 1. what the cards say
+
+
+def test_the_nba_cards_say_the_axes_and_the_inputs():
+    generator = (CARDS / "generator.md").read_text(encoding="utf-8")
+    for said in ("x along the court's 94 ft (28.65 m) length", "any origin", "`agent_type` (1 "
+                 "the ball, 0 a player); no team, no court or basket position",
+                 "`data.rotate: false`", "(+57 %)", "--agents persons",
+                 "0.180 / 0.322 m (0.59 / 1.06 ft)"):  # fmt: skip
+        assert said in generator, said
+    denoiser = (CARDS / "denoiser.md").read_text(encoding="utf-8")
+    assert "94 ft length" in denoiser and "changed in 50 of 50" in denoiser
+    index = json.loads((CARDS.parent / "index.json").read_text())
+    limits = {row["name"]: " ".join(row["limits"]) for row in index["models"]
+              if row["dataset"] == "nba"}  # fmt: skip
+    assert all("94 ft" in text for text in limits.values()), limits

@@ -9,10 +9,12 @@ from types import SimpleNamespace
 import pytest
 import torch
 
+from trajpref import config
 from trajpref.config import FinetuneConfig, load_config
 from trajpref.data import load_dataset
+from trajpref.errors import ConfigError
 from trajpref.models import checkpoint as ckpt
-from trajpref.rl.objective import Actions
+from trajpref.rl.objective import Actions, RLObjective
 from trajpref.rl.ppo import whiten_per_group
 from trajpref.train.stages import build_finetune_stage
 from trajpref.types import collate
@@ -91,3 +93,32 @@ def test_the_value_loss_is_clipped_around_the_references_value(tiny_run, walks, 
     memo.values_ref = memo.select(memo.v_target) + 100.0
     _, logs = obj.update(batch, memo, gen)
     assert logs["value_loss"] == pytest.approx(99.8**2, rel=1e-4)
+
+
+# One table of fine-tuning methods (config.FinetuneMethod, config.USES_RL,
+# rl.objective.LOSS_SAMPLES): the CLI offers its names, and a name that reaches a dispatch
+# without an entry there is an error, never trained as RLHF-ReS (the walkthrough's finding: a
+# new method's name took the k* path of ``RLObjective.selection``).
+
+
+NEW = "rlhf-new"
+"""A method's name as a contributor adds it to the list, before its dispatch entries."""
+
+
+def test_every_method_has_its_entries():
+    from trajpref.rl.objective import LOSS_SAMPLES
+
+    assert set(config.USES_RL) == set(config.FINETUNE_METHODS)
+    assert set(LOSS_SAMPLES) == {m for m in config.FINETUNE_METHODS if config.USES_RL[m]}
+
+
+def test_an_rl_method_without_its_loss_samples_is_refused_by_selection(monkeypatch):
+    """``RLObjective.selection`` (the walkthrough's case): a name other than ``rlhf`` got
+    k* whatever it was; now a method without a ``LOSS_SAMPLES`` entry is an error."""
+    monkeypatch.setitem(config.USES_RL, NEW, True)
+    rl = FinetuneConfig()
+    object.__setattr__(rl, "method", NEW)
+    batch = SimpleNamespace(scene=torch.tensor([0, 0, 1]), num_scenes=2)
+    score = torch.zeros(3, 3, 2)  # [K, N, T]
+    with pytest.raises(ConfigError, match=r"'rlhf-new'.*LOSS_SAMPLES"):
+        RLObjective.selection(SimpleNamespace(rl=rl), score, batch)

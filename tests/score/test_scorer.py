@@ -1,5 +1,7 @@
 import json
+import warnings
 
+import numpy as np
 import pytest
 import torch
 from synthetic import make_scene
@@ -7,10 +9,21 @@ from synthetic import make_scene
 from trajpref.cli import main
 from trajpref.data import load_dataset
 from trajpref.data.transforms import to_model_frame
-from trajpref.errors import ConfigError
+from trajpref.errors import ConfigError, DataError
 from trajpref.models.encoder import scene_features
-from trajpref.score import TrajectoryScorer, rank_samples, score_timesteps
-from trajpref.types import collate
+from trajpref.models.registry import load_predictor
+from trajpref.score import (
+    TrajectoryScorer,
+    predict_scene,
+    predict_scenes,
+    rank_samples,
+    score_timesteps,
+)
+from trajpref.score.selection import (
+    chosen_selection,
+    select_for_scene,
+)
+from trajpref.types import AGENT_BALL, AGENT_PERSON, collate
 
 
 @pytest.fixture(scope="module")
@@ -313,3 +326,204 @@ def test_predict_scene_samples_one_scene_from_arrays_as_the_batched_path_does(ti
         predict_scene(model, scenes[1].history + 5e6)
     cv = predict_scene(load_predictor("cv"), scenes[1].history, 1)  # any T_h, T_f 12
     assert cv.shape == (1, p, 12, 2)
+
+
+# Walkthrough 67 (a robotics engineer's planning loop): samples that do not continue the
+# history (another frame, offsets) are refused instead of ranked; ``select_for_scene`` can return
+# the residuals and the pace gate it used; the selection's pace helper has its own name.
+
+
+@pytest.fixture(scope="module")
+def zara1_scorer():
+    """conftest.py's ``scorer`` (zara1's published denoiser at score steps 0 and 3), which this
+    module's own ``scorer`` (the tiny run's) hides."""
+    return TrajectoryScorer.from_checkpoint("zara1/denoiser").with_steps([0, 3])
+
+
+FRAME = "samples do not continue the history.*another frame.*offsets"
+
+
+def _scene(fast: float = 1.4) -> np.ndarray:
+    """[3, 8, 2] three walkers in a map frame (50, 20) m from its origin; agent 2 at ``fast``
+    m/s."""
+    t = np.arange(8) * 0.4
+    walkers = [np.stack([t * 1.2, 0 * t], -1), np.stack([5 - t, 3 + 0 * t], -1),
+               np.stack([2 + 0 * t, -2 + fast * t], -1)]  # fmt: skip
+    return (np.stack(walkers) + np.array([50.0, 20.0])).astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def scene(zara1):
+    history = _scene()
+    return history, predict_scene(zara1, history)  # [3, 8, 2], [20, 3, 12, 2]
+
+
+# ----------------------------------------------------------------------------- finding 1
+
+
+def test_samples_in_another_frame_or_as_offsets_are_refused(zara1_scorer, scene):
+    history, samples = scene
+    cfg = chosen_selection("zara1/generator", keep=3)
+    offsets = samples - history[None, :, -1:]  # each from its agent's last position
+    for wrong in (offsets, samples + 100.0, samples - np.array([50.0, 20.0])):  # robot frame
+        with pytest.raises(DataError, match=FRAME):
+            rank_samples(zara1_scorer, history, wrong)
+        with pytest.raises(DataError, match=FRAME):
+            select_for_scene(zara1_scorer, history, wrong, cfg)
+        with pytest.raises(DataError, match=FRAME):  # tensors alike
+            rank_samples(zara1_scorer, torch.from_numpy(history), torch.from_numpy(wrong))
+    with pytest.raises(DataError, match=r"agent\(s\) 0 \(\d.*1 \(.*2 \(.*7\.36 m"):
+        rank_samples(zara1_scorer, history, samples + 100.0)
+    # the fix the message names gives the absolute samples back
+    order, _ = rank_samples(zara1_scorer, history, history[None, :, -1:] + offsets)
+    np.testing.assert_array_equal(order, rank_samples(zara1_scorer, history, samples)[0])
+
+
+def test_the_models_own_samples_pass_without_a_warning(zara1, zara1_scorer, scene):
+    history, samples = scene
+    cfg = chosen_selection("zara1/generator", keep=3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rank_samples(zara1_scorer, history, samples)
+        select_for_scene(zara1_scorer, history, samples, cfg)
+        far = history + 1e3  # a map frame km off: both in it, nothing to say
+        rank_samples(zara1_scorer, far, predict_scene(zara1, far))
+
+
+def test_only_every_sample_of_an_agent_far_off_is_refused(zara1_scorer, scene):
+    history, samples = scene
+    stray = samples.copy()
+    stray[:19, 1] += 100.0  # one of agent 1's 20 samples still starts where it is
+    rank_samples(zara1_scorer, history, stray)
+    one = samples.copy()
+    one[:, 1] += 100.0  # every sample of one agent: refused, naming it alone
+    with pytest.raises(DataError, match=r"agent\(s\) 1 \(") as caught:
+        rank_samples(zara1_scorer, history, one)
+    assert "agent(s) 1 (" in str(caught.value) and " 0 (" not in str(caught.value)
+    # a ball may be that fast; an agent whose history jumps is the jump warning's
+    ball = np.array([AGENT_PERSON, AGENT_BALL, AGENT_PERSON])
+    rank_samples(zara1_scorer, history, one, ball)
+    jumped = history.copy()
+    jumped[1, 4:] += 10.0  # a 10 m step: an id switch, already warned of
+    with pytest.warns(UserWarning, match="jumps more than"):
+        rank_samples(zara1_scorer, jumped, one)
+
+
+# Two bugs a static type sweep found (walkthrough 67-G): a score selection given no scorer
+# raised AttributeError from deep inside instead of the module's one-line ConfigError, and a
+# scorer's ``with_steps`` copy lost the file name the data checks' warnings give.
+
+
+def test_with_steps_keeps_the_scorers_file_name(zara1_scorer):
+    assert zara1_scorer.checkpoint is not None and zara1_scorer.checkpoint.endswith("denoiser")
+    assert zara1_scorer.with_steps([0]).checkpoint == zara1_scorer.checkpoint
+    fresh = TrajectoryScorer(zara1_scorer.denoiser, zara1_scorer.schedule, zara1_scorer.scale, [0])
+    assert fresh.checkpoint is None  # built in code
+
+
+# A sports analyst's walkthrough of the NBA models (walkthrough 67): the cards say which axes
+# and inputs the models read; feet given to a metre model are told the factor; a scene with no
+# ball or two balls is said, in Python and on a split; float agent types from pandas (0.0 / 1.0)
+# are types.
+
+
+@pytest.fixture(scope="module")
+def nba():
+    return load_predictor("nba/generator", device="cpu")
+
+
+@pytest.fixture(scope="module")
+def nba_scorer():
+    return TrajectoryScorer.from_checkpoint("nba/denoiser").with_steps([0])
+
+
+def _nba_scene(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """A rebound-like scene: 10 players and the ball (agent 0), 8 steps of 0.12 s, metres,
+    x along the court's 28.65 m length. Returns history [11, 8, 2] and agent_type [11]."""
+    rng = np.random.default_rng(seed)
+    start = rng.uniform([2.0, 2.0], [12.0, 13.0], size=(11, 2))  # [11, 2] one half-court
+    velocity = rng.normal(0.0, 0.1, size=(11, 2))  # [11, 2] metres per step
+    velocity[0] *= 3  # the ball moves faster
+    history = start[:, None] + velocity[:, None] * np.arange(8)[None, :, None]  # [11, 8, 2]
+    types = np.zeros(11, np.int64)
+    types[0] = 1
+    return history, types
+
+
+def _messages(call) -> list[str]:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        call()
+    return [str(w.message) for w in caught]
+
+
+# 4. float agent types
+
+
+def test_float_flags_from_pandas_are_types(nba, nba_scorer):
+    history, types = _nba_scene()
+    as_ints = predict_scene(nba, history, 20, agent_type=types)
+    for floats in (types.astype(np.float64), types.astype(np.float32).tolist(),
+                   torch.tensor(types, dtype=torch.float64)):  # fmt: skip
+        np.testing.assert_array_equal(predict_scene(nba, history, 20, agent_type=floats), as_ints)
+    order, residual = rank_samples(nba_scorer, history, as_ints, agent_type=types)
+    order_f, residual_f = rank_samples(nba_scorer, history, as_ints, types.astype(np.float64))
+    np.testing.assert_array_equal(order_f, order)
+    np.testing.assert_array_equal(residual_f, residual)
+
+
+@pytest.mark.parametrize(
+    "value, message",
+    [
+        (np.r_[0.5, np.zeros(10)], r"got float64 values that are not whole numbers \(the first, "
+                                   r"0.5, at index 0\)"),
+        (np.r_[np.zeros(10), np.nan], r"float64 values .*the first, nan, at index 10"),
+        (np.r_[2.0, np.zeros(10)], r"flags must be 0 \(person\) or 1 \(ball\), got \[0.0, 2"),
+        (np.zeros((11, 1)), r"expected 11 integer flags \[P\], got \[11, 1\] of float64"),
+        (torch.full((11,), 0.25), r"got torch.float32 values that are not whole numbers"),
+    ],
+)  # fmt: skip
+def test_other_floats_are_refused_naming_their_dtype(nba, value, message):
+    history, _ = _nba_scene()
+    with pytest.raises(DataError, match=message) as raised:
+        predict_scene(nba, history, 20, agent_type=value)
+    whole = "flags must be" in message  # a whole number that is no flag
+    assert str(raised.value).startswith("agent_type: " + ("" if whole else "expected 11 "))
+
+
+# 3. a scene with no ball or two balls
+
+
+def test_predict_and_rank_say_a_scene_without_one_ball(nba, nba_scorer):
+    history, types = _nba_scene()
+    samples = predict_scene(nba, history, 20, agent_type=types)
+    assert not _messages(lambda: predict_scene(nba, history, 20, agent_type=types))
+    assert not _messages(lambda: rank_samples(nba_scorer, history, samples, types))
+    two = types.copy()
+    two[5] = 1
+    for flags, found in ((np.zeros(11, np.int64), "no ball"), (two, "2 balls")):
+        got = _messages(lambda f=flags: predict_scene(nba, history, 20, agent_type=f))
+        assert got == [f"predict_scene: agent_type flags {found} (agent_type 1) in this scene; "
+                       "this model was trained on nba with the ball flagged (agent_type 1; one "
+                       "in every scene of NBA's splits), so its futures of such a scene are of "
+                       "one it never saw: flag the ball 1 and each player 0"]  # fmt: skip
+        got = _messages(lambda f=flags: rank_samples(nba_scorer, history, samples, f))
+        assert len(got) == 1 and got[0].startswith(f"rank_samples: agent_type flags {found}")
+        assert "this scorer was trained on nba" in got[0] and "its scores of" in got[0]
+    scenes = [history, history, history, history[:0]]
+    flags = [types, two, np.zeros(11), None]
+    got = _messages(lambda: predict_scenes(nba, scenes, 20, agent_types=flags))
+    assert len(got) == 1
+    assert got[0].startswith(
+        "predict_scenes: agent_types flag no ball in 1 and two or more "
+        "balls in 1 of the 3 scenes given types (histories[1], "
+        "histories[2]); this model was trained on nba"
+    )
+
+
+def test_a_model_trained_without_types_says_nothing_of_balls():
+    zara1 = load_predictor("zara1/generator", device="cpu")
+    history, _ = _nba_scene()
+    assert not [m for m in _messages(lambda: predict_scene(zara1, history, 20,
+                                                           agent_type=np.zeros(11, np.int64)))
+                if "ball" in m]  # fmt: skip

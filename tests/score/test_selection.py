@@ -4,6 +4,7 @@ ground truth is never read."""
 import dataclasses
 import itertools
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -11,17 +12,28 @@ import torch
 from synthetic import make_scene
 
 from trajpref.cli import main
+from trajpref.data import load_dataset
 from trajpref.errors import ConfigError
 from trajpref.models import checkpoint as ckpt
-from trajpref.score import TrajectoryScorer, score_timesteps
+from trajpref.models.registry import load_predictor
+from trajpref.score import (
+    TrajectoryScorer,
+    predict_scene,
+    rank_samples,
+    score_timesteps,
+    selection,
+)
 from trajpref.score.selection import (
     MEDOID_PASSES,
     SelectingPredictor,
     SelectionConfig,
     _medoids,
+    chosen_selection,
     gather,
+    select_for_scene,
     select_indices,
     select_samples,
+    select_with_scorer,
     within_pace,
 )
 from trajpref.types import collate
@@ -369,3 +381,114 @@ def test_score_steps_are_checked_and_unread_without_the_score():
 def test_keep_must_be_a_positive_integer(keep):
     with pytest.raises(ConfigError, match="keep must be an integer >= 1"):
         SelectionConfig(keep=keep)
+
+
+# Walkthrough 67 (a robotics engineer's planning loop): samples that do not continue the
+# history (another frame, offsets) are refused instead of ranked; ``select_for_scene`` can return
+# the residuals and the pace gate it used; the selection's pace helper has its own name.
+
+
+def _scene(fast: float = 1.4) -> np.ndarray:
+    """[3, 8, 2] three walkers in a map frame (50, 20) m from its origin; agent 2 at ``fast``
+    m/s."""
+    t = np.arange(8) * 0.4
+    walkers = [np.stack([t * 1.2, 0 * t], -1), np.stack([5 - t, 3 + 0 * t], -1),
+               np.stack([2 + 0 * t, -2 + fast * t], -1)]  # fmt: skip
+    return (np.stack(walkers) + np.array([50.0, 20.0])).astype(np.float32)
+
+
+# ----------------------------------------------------------------------------- finding 2
+
+
+def test_return_info_gives_the_residual_and_the_gate_of_the_same_pass(
+    scorer, zara1, monkeypatch
+):  # fmt: skip
+    history = _scene(fast=2.0)  # agent 2: 0.8 m per step, above zara1's trust_speed 0.445
+    samples = predict_scene(zara1, history)
+    cfg = chosen_selection("zara1/generator", keep=3)
+    idx = select_for_scene(scorer, history, samples, cfg)
+    calls = []
+    real = TrajectoryScorer.residual
+    monkeypatch.setattr(TrajectoryScorer, "residual",
+                        lambda self, *a, **k: calls.append(1) or real(self, *a, **k))  # fmt: skip
+    info = select_for_scene(scorer, history, samples, cfg, return_info=True)
+    assert len(calls) == 1  # one scoring pass
+    got, residual, trusted = info  # a named tuple
+    assert isinstance(info, selection.SceneSelection) and info.idx is got
+    np.testing.assert_array_equal(got, idx)  # the default's indices
+    assert residual.shape == (20, 3) and residual.dtype == np.float32
+    assert trusted.dtype == np.bool_ and trusted.tolist() == [True, True, False]
+    # the per-agent numbers rank_samples sums, at the selection's score steps
+    _, total = rank_samples(selection.score_steps(scorer, cfg), history, samples)
+    np.testing.assert_allclose(residual.sum(1), total, rtol=1e-5)
+    kept = residual[got, np.arange(3)]  # the docstring's take: [K', P]
+    assert kept.shape == (3, 3)
+    # one scene: every agent falls back when any does
+    scene_cfg = chosen_selection("zara1/generator", keep=3, per="scene")
+    assert select_for_scene(scorer, history, samples, scene_cfg,
+                            return_info=True).trusted.tolist() == [False] * 3  # fmt: skip
+    # no gate: all trusted; a score-free method: nothing scored, nothing trusted
+    plain = select_for_scene(scorer, history, samples, SelectionConfig(keep=3), return_info=True)
+    assert plain.trusted.tolist() == [True] * 3
+    free = select_for_scene(scorer, history, samples, SelectionConfig(keep=3, method="fps"),
+                            return_info=True)  # fmt: skip
+    assert free.residual is None and free.trusted.tolist() == [False] * 3
+    # tensors in, tensors out
+    out = select_for_scene(scorer, torch.from_numpy(history), samples, cfg, return_info=True)
+    assert all(isinstance(t, torch.Tensor) for t in out)
+    empty = select_for_scene(scorer, np.zeros((0, 8, 2)), np.zeros((20, 0, 12, 2)), cfg,
+                             return_info=True)  # fmt: skip
+    assert empty.idx.shape == (3, 0) and empty.residual.shape == (20, 0)
+    assert empty.trusted.shape == (0,)
+
+
+# ----------------------------------------------------------------------------- finding 4
+
+
+def test_the_selections_pace_helper_is_not_a_twin_of_the_transforms_one():
+    from trajpref.data import transforms
+
+    assert not hasattr(selection, "observed_pace")  # one name, one argument
+    batch = selection.Batch(history=torch.tensor([[[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]]]),
+                            future=torch.zeros(1, 12, 2), scene=torch.zeros(1, dtype=torch.int64),
+                            agent_type=torch.zeros(1, dtype=torch.int64),
+                            num_scenes=1)  # fmt: skip
+    torch.testing.assert_close(selection.batch_observed_pace(batch, 2.0),
+                               transforms.observed_pace(batch.history, 2.0))  # fmt: skip
+
+
+# Two bugs a static type sweep found (walkthrough 67-G): a score selection given no scorer
+# raised AttributeError from deep inside instead of the module's one-line ConfigError, and a
+# scorer's ``with_steps`` copy lost the file name the data checks' warnings give.
+
+
+def test_a_score_selection_without_a_scorer_is_a_config_error():
+    batch = collate([make_scene(3)])
+    pred = torch.from_numpy(np.random.default_rng(0).normal(size=(20, 3, 12, 2))).float()
+    with pytest.raises(ConfigError, match="needs the diffusion score"):
+        select_with_scorer(pred, SelectionConfig(keep=5, method="score-facility"), batch, None)
+
+
+# A sports analyst's walkthrough of the NBA models (walkthrough 67): the cards say which axes
+# and inputs the models read; feet given to a metre model are told the factor; a scene with no
+# ball or two balls is said, in Python and on a split; float agent types from pandas (0.0 / 1.0)
+# are types.
+
+
+def test_select_for_scene_warns_of_a_scene_without_its_ball():
+    """select_for_scene reads the same NBA scorer as rank_samples, which warns of a scene
+    whose agent types flag no ball; it said nothing (the fixer's open item)."""
+    from trajpref.score.scorer import TrajectoryScorer, predict_scene
+    from trajpref.score.selection import SelectionConfig, select_for_scene
+
+    scene = load_dataset("nba", "test").scenes[0]
+    model = load_predictor("nba/generator")
+    scorer = TrajectoryScorer.from_checkpoint("nba/denoiser").with_steps([0])
+    samples = predict_scene(model, scene.history, 20, agent_type=scene.agent_type)  # [K, P, T_f, 2]
+    cfg = SelectionConfig(keep=5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        select_for_scene(scorer, scene.history, samples, cfg, agent_type=scene.agent_type)
+    with pytest.warns(UserWarning, match="select_for_scene: agent_type flags no ball"):
+        select_for_scene(scorer, scene.history, samples, cfg,
+                         agent_type=np.zeros_like(scene.agent_type))  # fmt: skip

@@ -1,15 +1,37 @@
 """survey analyze: means, the Wilcoxon tests and their stars, agreement, the written report."""
 
+import csv
+import dataclasses
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy import stats
 
+from trajpref.cli import main
 from trajpref.errors import ConfigError, DataError
+from trajpref.survey import analyze as analyze_module
 from trajpref.survey.analyze import analyze, holm, run_analysis, spearman, stars, wilcoxon
-from trajpref.survey.manifest import GROUND_TRUTH, Panel, PanelKey, Study, StudyScene
+from trajpref.survey.manifest import (
+    DATABASE,
+    GROUND_TRUTH,
+    Panel,
+    PanelKey,
+    Study,
+    StudyScene,
+    load_study,
+)
+from trajpref.survey.simulate import SimulateConfig, simulate
+from trajpref.survey.store import AnswerStore
+from trajpref.survey.study import (
+    SceneData,
+    ground_truth_panel,
+    make_synthetic_study,
+    shown_predictions,
+    write_study,
+)
 
 ATS = {"A": (0.5, 0.3), "B": (0.2, 0.1), "C": (-0.1, -0.4)}
 """ATS per method in scenes s1, s2; FTS is ATS - 1."""
@@ -353,3 +375,299 @@ def test_run_analysis_finds_excluded_raters_in_any_case_and_refuses_unknown_ones
         f"--exclude-rater synthetic-2: no such rater in {store.path} (did you mean "
         "synthetic-02?); its raters: synthetic-01, synthetic-02, synthetic-03"
     )
+
+
+# Walkthrough 63-B's survey findings: the analysis of an unfinished pilot, the ground truth
+# above the best method, unknown units, the study's reproducibility record, consent, rater ids
+# in the access log, and the export's details.
+
+
+def _run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _study_with_truth(methods=("A", "B", GROUND_TRUTH), scenes=("s1", "s2")) -> Study:
+    """Scenes whose panels X, Y, Z show the methods in order; ATS 0.5 (A), 0.2 (B)."""
+    ats = {"A": 0.5, "B": 0.2, GROUND_TRUTH: 0.0}
+    out = []
+    for sid in scenes:
+        panels = tuple(Panel("XYZ"[i], f"{sid}-{i}.png", PanelKey(m, ats[m], ats[m], 0.0, 0.0))
+                       for i, m in enumerate(methods))  # fmt: skip
+        out.append(StudyScene(sid, panels))
+    return Study(folder=None, title="t", instructions="", methods=tuple(methods),
+                 scenes=tuple(out))  # fmt: skip
+
+
+def _complete(study: Study, rater: str, kind: str, score: dict[str, int]) -> list[tuple]:
+    """Every panel of ``study`` answered by ``rater`` with ``score[method]`` on both."""
+    return [(rater, kind, s.id, p.id, score[p.key.method], score[p.key.method], True)
+            for s in study.scenes for p in s.panels]  # fmt: skip
+
+
+# ---- finding 4: an unfinished pilot names no best method --------------------------------
+
+
+def test_a_pilots_single_answer_names_no_best_method_and_says_which_raters_are_unused():
+    study = _study_with_truth()
+    rows = [("pilot", "human", "s1", "X", 3, 4, False)]  # one answer, to method A
+    for i in range(10):
+        rows += _complete(study, f"synthetic-{i:02d}", "synthetic", {"A": 2, "B": 3,
+                                                                   GROUND_TRUTH: 4})  # fmt: skip
+    res = analyze(study, rows)  # --raters auto: the one human rater
+    assert res.rater_kind == "human" and res.complete_raters == 0
+    assert res.best is None and res.tests == [] and res.no_best == "no rater answered every panel"
+    md = res.markdown()
+    assert "Best method" not in md and "**A**" not in md and "**" not in res.table()
+    assert "No best method is named and no tests are run: no rater answered every panel." in md
+    assert "| A | 3.50 ± n/a |" in res.table()  # the sd of one value is not 0.00
+    assert ("Not used: 10 synthetic raters (`--raters auto` uses the human raters when there "
+            "are any; `--raters synthetic` or `--raters all` includes them).") in md  # fmt: skip
+    assert res.to_dict()["best"] is None and res.to_dict()["rows"][0]["human_sd"] is None
+    # --raters synthetic: complete raters, a best method again, nothing left unused
+    res = analyze(study, rows, "synthetic")
+    assert res.best == "B" and res.unused_synthetic == 0 and "Not used" not in res.markdown()
+
+
+def test_methods_without_answers_are_listed_after_those_with_answers():
+    study = _study_with_truth(methods=("B", "A", GROUND_TRUTH))
+    res = analyze(study, [("pilot", "human", "s1", "Y", 3, 4, False)])  # Y: method A
+    assert [r.method for r in res.rows] == ["A", "B", GROUND_TRUTH]
+
+
+def test_a_method_with_fewer_than_two_answers_names_no_best_method():
+    study = _study_with_truth(
+        scenes=("s1",)
+    )  # one scene: one complete rater gives one answer a method
+    res = analyze(study, _complete(study, "r1", "human", {"A": 4, "B": 2, GROUND_TRUTH: 5}))
+    assert res.complete_raters == 1 and res.best is None and res.tests == []
+    assert res.no_best == "A, B, ground truth have fewer than 2 answers"
+    assert "Best method" not in res.markdown()
+
+
+def test_excluding_the_only_human_rater_suggests_the_synthetic_ones(capsys, synthetic_study):
+    store = AnswerStore(synthetic_study / DATABASE, load_study(synthetic_study))
+    store.save("pilot", "s01", "A", {"social": 3, "kinetics": 4})
+    simulate(store.study, store, SimulateConfig(raters=3))
+    store.close()
+    code, _, err = _run(capsys, "survey", "analyze", synthetic_study, "--exclude-rater", "pilot")
+    assert code == 2 and ("no answers from human raters left after --exclude-rater pilot; there "
+                          "are 3 synthetic raters: use --raters synthetic (or --raters all)"
+                          ) in err  # fmt: skip
+
+
+# ---- finding 5: the ground truth is not ranked; marks above the best say so -------------
+
+
+def test_the_ground_truth_above_the_best_method_is_marked_and_not_ranked(tmp_path, monkeypatch):
+    from trajpref.survey.analyze import ABOVE
+
+    study = _study_with_truth()
+    rows = []
+    for i in range(8):  # A a little above B, the ground truth far above both
+        rows += _complete(study, f"r{i}", "human", {"A": 3 + (i % 2), "B": 2, GROUND_TRUTH: 5})
+    res = analyze(study, rows)
+    assert res.best == "A" and res.rows[-1].method == GROUND_TRUTH
+    gt, b = res.rows[-1], res.rows[1]
+    assert gt.marks["human"].endswith(f" {ABOVE}") and not b.marks["human"].endswith(ABOVE)
+    assert f"| ground truth | 5.00 ± 0.00 {gt.marks['human']} |" in res.table()
+    legend = res.legend()
+    assert ("Rows by human score (the ground truth is not ranked: it is listed last); **A** "
+            "has the highest of the methods.") in legend  # fmt: skip
+    assert f"A {ABOVE} after a mark: the row scores *higher* than A" in legend
+    # the figure's title names the reference of its marks
+    titles = []
+    monkeypatch.setattr(
+        analyze_module,
+        "plot_survey_summary",
+        lambda *a, **k: titles.append(a[4]) or Path(a[3]).write_bytes(b""),
+    )
+    folder = tmp_path / "study"
+    _write(folder, units="m")
+    store = AnswerStore(folder / DATABASE, load_study(folder))
+    simulate(store.study, store, SimulateConfig(raters=4))
+    store.close()
+    result, _ = run_analysis(folder)
+    assert f"marks: Wilcoxon test against {result.best} ({ABOVE}: the row is higher)" in titles[0]
+
+
+# ---- finding 6: unknown units ---------------------------------------------------------
+
+
+def _write(folder: Path, units: str = "m", consent: str = "", **build) -> Study:
+    """A one-scene study of two agents: the method 'alpha' and the rated ground truth."""
+    rng = np.random.default_rng(0)
+    track = rng.normal(0, 1, (2, 1, 2)) + 0.4 * np.arange(20)[None, :, None]  # [2, 20, 2]
+    history, future = track[:, :8], track[:, 8:]
+    pred = future[None] + rng.normal(0, 0.3, (4, 2, 12, 2))  # [K, P, 12, 2]
+    panels = {"alpha": shown_predictions(pred, 1 + rng.random((4, 2, 12)), np.ones((2, 12)),
+                                         future),
+              GROUND_TRUTH: ground_truth_panel(future)}  # fmt: skip
+    scenes = [
+        SceneData(history, future, panels, "f@0", 0, 0),
+        SceneData(history + 1, future + 1, panels, "f@20", 20, 0),
+    ]
+    more = {"consent": consent} if consent else {}
+    return write_study(folder, scenes, [GROUND_TRUTH, "alpha"], units=units,
+                       dataset={"name": "d", "split": "test", "units": units}, build=build,
+                       **more)  # fmt: skip
+
+
+# ---- finding 7: the study id, versions and hashes in analysis.json and the CSV -----------
+
+
+def test_analysis_json_and_the_csv_record_the_study_id_versions_and_hashes(capsys, tmp_path):
+    hashes = {"methods": {"alpha": {"weights_hash": "w" * 16, "model_hash": "m" * 12}},
+              "scorer": {"weights_hash": "s" * 16, "model_hash": "t" * 12}}  # fmt: skip
+    folder = tmp_path / "study"
+    study = _write(folder, trajpref_version="9.9", torch_version="8.8", hashes=hashes)
+    store = AnswerStore(folder / DATABASE, study)
+    simulate(study, store, SimulateConfig(raters=3))
+    store.close()
+    result, paths = run_analysis(folder)
+    saved = json.loads(paths["json"].read_text())
+    assert saved["study_id"] == study.study_id
+    assert saved["provenance"]["build"] == {"trajpref_version": "9.9", "torch_version": "8.8",
+                                            "hashes": hashes}  # fmt: skip
+    assert saved["provenance"]["trajpref"]
+    path = tmp_path / "answers.csv"
+    code, out, _ = _run(capsys, "survey", "export", folder, "--csv", path, "--raters", "all")
+    assert code == 0 and f"wrote 12 answers of 3 raters (all) to {path}" in out
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert {r["study_id"] for r in rows} == {study.study_id}
+    made = {(r["method"], r["weights_hash"], r["model_hash"], r["trajpref_version"],
+             r["torch_version"]) for r in rows}  # fmt: skip
+    assert made == {("alpha", "w" * 16, "m" * 12, "9.9", "8.8"),
+                    (GROUND_TRUTH, "", "", "9.9", "8.8")}  # fmt: skip
+    # finding 12: the ground truth's ATS/FTS are not measured: empty (NA), not 0.0
+    gt = [r for r in rows if r["method"] == GROUND_TRUTH]
+    assert gt and all(r["ats"] == r["fts"] == "" for r in gt)
+    assert all(float(r["ats"]) != 0 for r in rows if r["method"] == "alpha")
+
+
+def test_select_rows_error_without_other_raters_has_no_hint():
+    study = _study_with_truth()
+    rows = _complete(study, "r1", "human", {"A": 3, "B": 3, GROUND_TRUTH: 3})
+    with pytest.raises(ConfigError) as err:
+        analyze(study, rows, exclude=["r1"])
+    assert str(err.value) == "no answers from human raters left after --exclude-rater r1"
+
+
+# Walkthrough 65's survey findings: a SIGTERM stop, a study in a read-only folder, rater ids
+# with a trailing newline, the study folder deleted while serving, a database write that fails,
+# the docs against the code, and the page's resumed session on a shared machine.
+
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+DOCS = ROOT / "docs" / "survey.md"
+
+
+# ---- 6. the docs against the code -----------------------------------------------------------
+
+
+def test_the_docs_ground_truth_rows_carry_the_mark_analyze_prints():
+    rows = [line for line in DOCS.read_text().splitlines() if line.startswith("| ground truth |")]
+    assert len(rows) == 2
+    assert all("*** ↑ |" in row for row in rows), rows
+
+
+# Walkthrough 66's survey findings: every rater saw the scenes and panels in one order (a
+# position effect fell on the same method for every rater), and the ground truth's PNG was the
+# smallest of its scene (a rater comparing image sizes could find it). Now each rater sees an
+# order of their own, each answer is stored with where it was shown, analyze checks for a
+# position effect, and the pictures of a scene have one byte size.
+
+
+# ---- 5. analyze: the position-effect check -------------------------------------------------
+
+
+def test_analyze_checks_for_a_position_effect_with_friedmans_test(synthetic_study):
+    study = load_study(synthetic_study)
+    rows, blocks = [], {}
+    for i in range(6):
+        rater = f"r{i}"
+        where = study.positions(rater)
+        for s in study.scenes:
+            for p in s.panels:
+                place = where[(s.id, p.id)][1]
+                score = {1: 5, 2: 3, 3: 2}[place] if i % 2 else {1: 4, 2: 4, 3: 1}[place]
+                rows.append((rater, "human", s.id, p.id, score, score, True))
+                blocks.setdefault(rater, {})[place] = score  # the same in each of its scenes
+    result = analyze(study, rows)
+    check = result.position_effect
+    assert check.order == "rater" and check.test == "Friedman"
+    assert check.blocks == 6 and check.scenes == 18  # the raters are the blocks
+    expected = stats.friedmanchisquare(*[[b[j] for b in blocks.values()] for j in (1, 2, 3)])
+    assert check.statistic == pytest.approx(expected.statistic)
+    assert check.p == pytest.approx(expected.pvalue) and check.p < 0.01
+    assert [(r["position"], r["answers"], r["mean"]) for r in check.positions] == [
+        (1, 18, 4.5), (2, 18, 3.5), (3, 18, 1.5)]  # fmt: skip
+    md = result.markdown()
+    assert "## Position effect" in md and "| 1 | 18 | 4.50 ± 0.51 |" in md
+    assert "Friedman test over 6 raters (each one block" in md and "position effect" in md
+    assert "18 (rater, scene) pairs in all" in md and "raters are independent" in md
+    js = result.to_dict()["position_effect"]
+    assert js["test"] == "Friedman" and js["blocks"] == 6 and js["scenes"] == 18
+    # a fixed-order study: the report says that place and method cannot be told apart
+    fixed = analyze(dataclasses.replace(study, order="fixed"), rows)
+    assert "cannot be told from a difference between methods" in fixed.markdown()
+
+
+def test_the_position_test_takes_raters_as_blocks_a_hand_made_case(synthetic_study):
+    """Review of walkthrough 66: the test took every (rater, scene) pair as an independent
+    block, so a rater's many scenes counted as many raters. Three raters, three scenes of three
+    pictures; each rater's mean score per place (over the scenes in which they answered every
+    picture) is one block: ranks (3, 2, 1), (3, 2, 1), (1, 3, 2), rank sums 7, 7, 4, so
+    chi2 = 12 / (3 * 3 * 4) * (49 + 49 + 16) - 3 * 3 * 4 = 2 and p = exp(-1). Taken over the
+    8 complete (rater, scene) pairs, the same answers gave p = 0.053, a seventh of it."""
+    study = load_study(synthetic_study)
+    # per rater: place -> (social, kinetics) in every scene; the human score is their mean
+    plan = {"r0": {1: (5, 4), 2: (3, 3), 3: (2, 2)},  # 4.5, 3, 2
+            "r1": {1: (4, 4), 2: (4, 3), 3: (1, 1)},  # 4, 3.5, 1
+            "r2": {1: (2, 2), 2: (5, 5), 3: (3, 3)}}  # 2, 5, 3  # fmt: skip
+    rows, pairs = [], {}
+    for rater, scores in plan.items():
+        where = study.positions(rater)
+        for n, s in enumerate(study.scenes):
+            for p in s.panels:
+                place = where[(s.id, p.id)][1]
+                social, kinetics = scores[place]
+                if rater == "r2" and n < 2:  # r2's first two scenes: other scores, same means
+                    social = kinetics = ((1, 5, 3), (3, 5, 3))[n][place - 1]
+                if rater == "r1" and n == 2:  # r1 left a picture out: not in r1's means
+                    if place == 3:
+                        continue
+                    social = kinetics = 1 if place == 1 else 5
+                else:
+                    pairs.setdefault((rater, s.id), {})[place] = (social + kinetics) / 2
+                rows.append((rater, "human", s.id, p.id, social, kinetics, True))
+    where = study.positions("r3")  # a rater without one complete scene: no block
+    rows += [("r3", "human", s.id, p.id, 5, 5, True) for s in study.scenes for p in s.panels
+             if where[(s.id, p.id)][1] != 2]  # fmt: skip
+    check = analyze(study, rows).position_effect
+    assert (check.test, check.blocks, check.scenes) == ("Friedman", 3, 3 + 2 + 3)
+    assert check.statistic == pytest.approx(2.0)
+    assert check.p == pytest.approx(np.exp(-1.0))
+    # the (rater, scene) pairs as blocks, as before: one rater counted many times
+    assert len(pairs) == 8
+    old = stats.friedmanchisquare(*[[b[j] for b in pairs.values()] for j in (1, 2, 3)])
+    assert old.pvalue == pytest.approx(0.0531, abs=1e-4) and old.pvalue < check.p / 5
+
+
+def test_the_position_check_uses_wilcoxon_for_two_pictures_per_scene(tmp_path):
+    study = make_synthetic_study(tmp_path / "two", scenes=3, methods=("a", "b"),
+                                 ground_truth="reference")  # fmt: skip
+    rows = []
+    for i in range(5):
+        where = study.positions(f"r{i}")
+        rows += [(f"r{i}", "human", s.id, p.id, 5 - where[(s.id, p.id)][1], 3, True)
+                 for s in study.scenes for p in s.panels]  # fmt: skip
+    check = analyze(study, rows).position_effect
+    assert check.test == "Wilcoxon signed-rank" and (check.blocks, check.scenes) == (5, 15)
+    # five raters (not 15 pairs), each rating the first picture one point higher
+    assert check.p == pytest.approx(wilcoxon(np.full(5, 4.0), np.full(5, 3.0))[1])
+    assert check.p > 0.01

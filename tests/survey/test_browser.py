@@ -10,14 +10,19 @@ how docs/survey-page.png is made).
 
 from __future__ import annotations
 
+import json
 import os
+import re
 import shutil
 import sqlite3
+import subprocess
 from pathlib import Path
 
 import pytest
 
-from trajpref.survey.manifest import load_study
+from trajpref.survey.manifest import (
+    load_study,
+)
 from trajpref.survey.server import running
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
@@ -246,3 +251,100 @@ def test_the_consent_step_comes_before_the_first_picture_and_keeps_line_breaks(
         answers = db.execute("SELECT rater, social, kinetics FROM answers").fetchall()
     text_hash = load_study(synthetic_study).consent_hash  # the text the page showed
     assert consents == [("judge-2", 1, text_hash)] and answers == [("judge-2", 4, 2)]
+
+
+# Walkthrough 63-B's survey findings: the analysis of an unfinished pilot, the ground truth
+# above the best method, unknown units, the study's reproducibility record, consent, rater ids
+# in the access log, and the export's details.
+
+
+def test_the_page_keeps_the_line_breaks_of_the_instructions_and_the_consent():
+    from importlib import resources
+
+    css = (resources.files("trajpref.survey") / "static" / "style.css").read_text()
+    assert "#instructions, #consent-text { white-space: pre-line; }" in css
+
+
+# Walkthrough 65's survey findings: a SIGTERM stop, a study in a read-only folder, rater ids
+# with a trailing newline, the study folder deleted while serving, a database write that fails,
+# the docs against the code, and the page's resumed session on a shared machine.
+
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+STATIC = ROOT / "src" / "trajpref" / "survey" / "static"
+
+
+# ---- 7. the page says whose session it resumed ----------------------------------------------
+
+PAGE_HARNESS = r"""
+const fs = require("fs"), vm = require("vm");
+const elements = new Map(), listeners = new Map(), store = new Map();
+function element(id) {
+  const el = { id, hidden: false, textContent: "", value: "", dataset: {}, children: [],
+    classList: { toggle() {}, add() {}, remove() {} }, setAttribute() {}, focus() {},
+    checkValidity: () => true, append(...c) { this.children.push(...c); }, after() {},
+    querySelectorAll: () => [],
+    addEventListener(type, f) { listeners.set(`${id}:${type}`, f); } };
+  return el;
+}
+const document = {
+  body: element("body"),
+  getElementById(id) {
+    if (!elements.has(id)) elements.set(id, element(id));
+    return elements.get(id);
+  },
+  createElement: () => element(""), querySelectorAll: () => [], addEventListener() {},
+};
+const study = { title: "t", instructions: "", consent: null, scale: [1, 5],
+  criteria: [{ id: "social", label: "S", help: "" }, { id: "kinetics", label: "K", help: "" }],
+  scenes: [{ id: "s01", reference: null, panels: [{ id: "A", image: "images/s01-A.png" }] }] };
+const progress = (rater) => ({ rater, answers: {}, answered: 0, total: 1, submitted: false,
+  consent_required: false, consented: false, order: [{ scene: "s01", panels: ["A"] }] });
+const fetch = async (path) => ({ ok: true, status: 200, json: async () =>
+  path === "api/study" ? study : progress(decodeURIComponent(path.split("/").pop())) });
+const localStorage = { getItem: (k) => store.has(k) ? store.get(k) : null,
+  setItem: (k, v) => store.set(k, String(v)), removeItem: (k) => store.delete(k) };
+store.set("trajpref-survey-rater", "alice");
+const context = { document, fetch, localStorage, Image: class {}, console, Promise, Object,
+  Number, String, Math, Error, encodeURIComponent, decodeURIComponent, setTimeout };
+vm.createContext(context);
+vm.runInContext(fs.readFileSync(process.argv[2], "utf8"), context);
+const $ = (id) => document.getElementById(id);
+const report = (label) => console.log(JSON.stringify({ label, view: document.body.dataset.view,
+  note: !$("resume-note").hidden, who: $("resume-rater").textContent,
+  saved: localStorage.getItem("trajpref-survey-rater") }));
+setTimeout(async () => {
+  report("resumed");
+  listeners.get("not-me:click")();
+  report("not me");
+  $("rater").value = "bob";
+  listeners.get("login-form:submit")({ preventDefault() {} });
+  await new Promise((r) => setTimeout(r, 20));
+  report("typed");
+}, 50);
+"""
+
+
+def test_a_session_resumed_from_the_browser_says_whose_it_is_with_a_not_you_control(tmp_path):
+    """A shared lab machine: the page resumes the last rater of the browser, and says so with
+    a visible "not you?" control that starts as a new rater; a typed id shows no such note."""
+    page = (STATIC / "index.html").read_text()
+    assert 'id="resume-note"' in page and 'id="not-me"' in page
+    assert re.search(r'id="not-me"[^>]*>\s*Not you\? Start as a new rater', page)
+    node = shutil.which("node") or shutil.which("nodejs")
+    if node is None:
+        pytest.skip("node is not installed: the page's script is checked in the browser test")
+    harness = tmp_path / "harness.js"
+    harness.write_text(PAGE_HARNESS)
+    done = subprocess.run([node, str(harness), str(STATIC / "app.js")], capture_output=True,
+                          text=True, timeout=30)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    states = [json.loads(line) for line in done.stdout.splitlines()]
+    assert states[0] == {"label": "resumed", "view": "rate", "note": True, "who": "alice",
+                         "saved": "alice"}  # fmt: skip
+    assert [(s["label"], s["view"], s["note"], s["saved"]) for s in states[1:]] == [
+        ("not me", "login", False, None),
+        ("typed", "rate", False, "bob"),
+    ]

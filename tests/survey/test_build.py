@@ -3,16 +3,24 @@
 import hashlib
 import json
 
+import matplotlib.figure
 import numpy as np
 import pytest
 from starlette.testclient import TestClient
 
+from trajpref.cli import main
 from trajpref.errors import ConfigError, DataError, TrajprefError
 from trajpref.survey.build import BuildConfig, build_study, select_scenes
-from trajpref.survey.manifest import GROUND_TRUTH, load_study
+from trajpref.survey.manifest import (
+    GROUND_TRUTH,
+    MANIFEST,
+    load_study,
+)
 from trajpref.survey.server import create_app
 from trajpref.survey.store import AnswerStore
-from trajpref.survey.study import shown_predictions
+from trajpref.survey.study import (
+    shown_predictions,
+)
 
 METHODS = ("methodalpha", "methodbeta")  # as in conftest.py: never to reach the page
 
@@ -251,3 +259,78 @@ def test_survey_build_warns_once_of_a_built_in_datasets_ignored_options(
     assert code == 0, err
     assert err.count("describe a folder dataset") == 1, err
     assert "--frame-interval and --units describe a folder dataset" in err
+
+
+# Walkthrough 63-B's survey findings: the analysis of an unfinished pilot, the ground truth
+# above the best method, unknown units, the study's reproducibility record, consent, rater ids
+# in the access log, and the export's details.
+
+
+def _run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture
+def saved_labels(monkeypatch):
+    """The axis titles every saved figure shows: (text, colour) of each x and y label."""
+    labels: list[tuple[str, str]] = []
+    original = matplotlib.figure.Figure.savefig
+
+    def savefig(fig, *args, **kwargs):
+        for ax in fig.axes:
+            for label in (ax.xaxis.label, ax.yaxis.label):
+                labels.append((label.get_text(), str(label.get_color())))
+        return original(fig, *args, **kwargs)
+
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", savefig)
+    return labels
+
+
+def test_build_warns_of_unknown_units_names_the_models_units_and_records_hashes(
+    capsys, walks, tmp_path, saved_labels
+):
+    consent = tmp_path / "consent.txt"
+    consent.write_text("I agree to take part.\n\nMy answers are kept for a year.\n")
+    out = tmp_path / "study"
+    code, _, err = _run(capsys, "survey", "build", "--dataset", walks, "--models", "c=cv",
+                        "gen=zara1/generator", "--scorer", "zara1/denoiser", "--scenes", "1",
+                        "--samples", "2", "--min-gap", "0", "--device", "cpu", "--no-progress",
+                        "--consent", consent, "--out", out)  # fmt: skip
+    assert code == 0
+    assert (f"trajpref: warning: {walks}: the data's units are unknown (no --units): the raters' "
+            "pictures show axes without a unit and the analysis gives ADE/FDE in unknown units; "
+            "the models recorded units m (zara1/generator, zara1/denoiser): pass --units m"
+            ) in err  # fmt: skip
+    assert saved_labels and {t for t, _ in saved_labels} == {"x", "y"}  # no "x [unknown]"
+    study = load_study(out)
+    build = json.loads((out / MANIFEST).read_text())["build"]
+    assert build["study_id"] == study.study_id
+    assert build["trajpref_version"] and build["torch_version"]
+    methods = build["hashes"]["methods"]
+    assert methods["c"] == {"weights_hash": None, "model_hash": None}
+    assert len(methods["gen"]["weights_hash"]) == 16 and len(methods["gen"]["model_hash"]) == 12
+    assert build["hashes"]["scorer"]["weights_hash"]
+    assert "consent" not in build  # the text is the manifest's own key
+    assert study.consent == "I agree to take part.\n\nMy answers are kept for a year."
+
+
+# Walkthrough 66's survey findings: every rater saw the scenes and panels in one order (a
+# position effect fell on the same method for every rater), and the ground truth's PNG was the
+# smallest of its scene (a rater comparing image sizes could find it). Now each rater sees an
+# order of their own, each answer is stored with where it was shown, analyze checks for a
+# position effect, and the pictures of a scene have one byte size.
+
+
+def test_build_fixed_order_writes_a_fixed_study(tmp_path, tiny_run, walks, capsys):
+    out = tmp_path / "fixed"
+    code = main(["survey", "build", "--dataset", str(walks), "--units", "m", "--models",
+                 "a=cv", f"b={tiny_run / 'generator.safetensors'}", "--scenes", "2",
+                 "--samples", "2", "--min-gap", "0", "--device", "cpu", "--no-progress",
+                 "--fixed-order", "--out", str(out)])  # fmt: skip
+    assert code == 0
+    study = load_study(out)
+    assert study.order == "fixed" and study.build["fixed_order"] is True
+    assert json.loads((out / MANIFEST).read_text())["order"] == "fixed"
+    assert study.rater_order("x") == study.rater_order("y")

@@ -1,16 +1,36 @@
 """The web application: answers through HTTP, 4xx for bad requests with nothing written,
 no path traversal, the body limit, the Host check, and durability when the server is killed."""
 
+import contextlib
 import json
+import logging
+import shutil
 import signal
 import sqlite3
 import urllib.request
+from pathlib import Path
 
+import numpy as np
 import pytest
 from starlette.testclient import TestClient
 
-from trajpref.survey.manifest import load_study
+from trajpref.survey import server as server_module
+from trajpref.survey.manifest import (
+    DATABASE,
+    GROUND_TRUTH,
+    MANIFEST,
+    Study,
+    load_study,
+)
 from trajpref.survey.server import LOOPBACK_NAMES, create_app, serve_subprocess
+from trajpref.survey.simulate import SimulateConfig, simulate
+from trajpref.survey.store import AnswerError, AnswerStore
+from trajpref.survey.study import (
+    SceneData,
+    ground_truth_panel,
+    shown_predictions,
+    write_study,
+)
 
 PUT = "/api/raters/r1/answers/s01/A"
 SUBMIT = {"submit": True}
@@ -281,3 +301,380 @@ def test_a_rater_id_typed_with_other_capitals_resumes_the_same_rater(client, sto
     got = client.get("/api/raters/ALICE").json()
     assert got["rater"] == "alice" and got["answered"] == 2
     assert store.raters() == {"alice": "human"}
+
+
+# A security review (walkthrough 67-M): a JSON body nested past Python's recursion limit
+# (4,000 bytes, under the default body limit) got a plain-text 500 and a traceback in the log
+# instead of the JSON 400 every other bad body gets.
+
+
+def test_a_deeply_nested_body_is_a_400_with_nothing_written(store):
+    study = load_study(store.study.folder)
+    with TestClient(create_app(study, store), raise_server_exceptions=False) as client:
+        body = "[" * 2000 + "]" * 2000
+        r = client.put(PUT, content=body, headers={"content-type": "application/json"})
+    assert r.status_code == 400 and "not valid JSON" in r.json()["error"]
+    with sqlite3.connect(store.path) as db:
+        assert db.execute("SELECT COUNT(*) FROM answers").fetchone()[0] == 0
+
+
+# Walkthrough 63-B's survey findings: the analysis of an unfinished pilot, the ground truth
+# above the best method, unknown units, the study's reproducibility record, consent, rater ids
+# in the access log, and the export's details.
+
+
+# ---- finding 6: unknown units ---------------------------------------------------------
+
+
+def _write(folder: Path, units: str = "m", consent: str = "", **build) -> Study:
+    """A one-scene study of two agents: the method 'alpha' and the rated ground truth."""
+    rng = np.random.default_rng(0)
+    track = rng.normal(0, 1, (2, 1, 2)) + 0.4 * np.arange(20)[None, :, None]  # [2, 20, 2]
+    history, future = track[:, :8], track[:, 8:]
+    pred = future[None] + rng.normal(0, 0.3, (4, 2, 12, 2))  # [K, P, 12, 2]
+    panels = {"alpha": shown_predictions(pred, 1 + rng.random((4, 2, 12)), np.ones((2, 12)),
+                                         future),
+              GROUND_TRUTH: ground_truth_panel(future)}  # fmt: skip
+    scenes = [
+        SceneData(history, future, panels, "f@0", 0, 0),
+        SceneData(history + 1, future + 1, panels, "f@20", 20, 0),
+    ]
+    more = {"consent": consent} if consent else {}
+    return write_study(folder, scenes, [GROUND_TRUTH, "alpha"], units=units,
+                       dataset={"name": "d", "split": "test", "units": units}, build=build,
+                       **more)  # fmt: skip
+
+
+# ---- finding 8: consent ---------------------------------------------------------------
+
+
+CONSENT = "I agree to take part.\n\nMy answers are kept for a year."
+
+
+def _agree(client, rater: str, text_hash: str):
+    """What the page's *I agree* sends."""
+    return client.post(f"/api/raters/{rater}/consent", json={"agree": True,
+                                                             "text_hash": text_hash})  # fmt: skip
+
+
+def _consents(db: Path) -> list[tuple]:
+    import sqlite3
+
+    with sqlite3.connect(db) as con:
+        return con.execute("SELECT rater, text_hash, agreed_at FROM consents "
+                           "ORDER BY agreed_at").fetchall()  # fmt: skip
+
+
+def test_answers_are_refused_until_the_rater_agreed_and_the_agreement_is_recorded(tmp_path):
+    study = _write(tmp_path / "study", consent=CONSENT)
+    assert load_study(tmp_path / "study").consent == CONSENT
+    assert study.public()["consent"] == CONSENT
+    first = study.consent_hash
+    store = AnswerStore(tmp_path / "study" / DATABASE, study)
+    try:
+        with TestClient(create_app(study, store)) as c:
+            assert c.get("/api/study").json()["consent_hash"] == first  # what the page sends
+            put = "/api/raters/Alice/answers/s01/A"
+            r = c.put(put, json={"social": 3, "kinetics": 4})
+            assert (
+                r.status_code == 403
+                and "has not agreed to the study's consent text" in (r.json()["error"])
+            )
+            assert c.get("/api/raters/alice").json()["consented"] is False
+            r = _agree(c, "ALICE", first)
+            assert r.status_code == 200 and r.json()["consented"] is True
+            agreed = r.json()["agreed_at"]
+            assert _agree(c, "alice", first).json()["agreed_at"] == agreed  # kept
+            progress = c.get("/api/raters/alice").json()
+            assert progress["consent_required"] and progress["consented"]
+            assert c.put(put, json={"social": 3, "kinetics": 4}).status_code == 200
+        simulate(study, store, SimulateConfig(raters=1))  # synthetic raters are not asked
+        records = {r["rater"]: r["consented_at"] for r in store.records()}
+        assert records == {"alice": agreed, "synthetic-01": None}
+    finally:
+        store.close()
+    # a changed consent text must be agreed to again; the first agreement stays recorded
+    manifest = json.loads((tmp_path / "study" / MANIFEST).read_text())
+    manifest["consent"] = CONSENT + "\n\nAnd a new paragraph."
+    (tmp_path / "study" / MANIFEST).write_text(json.dumps(manifest))
+    study = load_study(tmp_path / "study")
+    store = AnswerStore(tmp_path / "study" / DATABASE, study)
+    try:
+        with pytest.raises(AnswerError, match="has not agreed") as err:
+            store.save("alice", "s01", "B", {"social": 3, "kinetics": 4})
+        assert err.value.status == 403 and not store.progress("alice")["consented"]
+        with TestClient(create_app(study, store)) as c:
+            put = "/api/raters/alice/answers/s01/B"
+            assert c.put(put, json={"social": 3, "kinetics": 4}).status_code == 403
+            r = _agree(c, "alice", first)  # a page that still shows the old text
+            assert r.status_code == 409 and "consent text has changed" in r.json()["error"]
+            assert c.put(put, json={"social": 3, "kinetics": 4}).status_code == 403
+            r = _agree(c, "alice", study.consent_hash)
+            assert r.status_code == 200 and r.json()["agreed_at"] != agreed
+            assert c.put(put, json={"social": 3, "kinetics": 4}).status_code == 200
+        assert _consents(tmp_path / "study" / DATABASE) == [
+            ("alice", first, agreed),  # the audit trail: the older text's agreement is kept
+            ("alice", study.consent_hash, r.json()["agreed_at"]),
+        ]
+        assert {r["rater"]: r["consented_at"] for r in store.records()}["alice"] == (
+            r.json()["agreed_at"])  # fmt: skip
+    finally:
+        store.close()
+
+
+def test_a_cross_site_form_post_cannot_record_an_agreement(tmp_path):
+    """A page elsewhere can make the browser send an HTML form (urlencoded, or text/plain)
+    to the server, not a JSON request: consent takes JSON only, like answers."""
+    study = _write(tmp_path / "study", consent=CONSENT)
+    store = AnswerStore(tmp_path / "study" / DATABASE, study)
+    try:
+        with TestClient(create_app(study, store)) as c:
+            for ctype, body in [
+                ("application/x-www-form-urlencoded", f"agree=true&text_hash={study.consent_hash}"),
+                ("text/plain", json.dumps({"agree": True, "text_hash": study.consent_hash})),
+                ("multipart/form-data; boundary=x", "--x--"),
+            ]:
+                headers = {"Content-Type": ctype, "Origin": "http://evil.example"}
+                r = c.post("/api/raters/bob/consent", content=body.encode(), headers=headers)
+                assert r.status_code == 415 and "JSON" in r.json()["error"], ctype
+            r = c.post("/api/raters/bob/consent")  # no body at all
+            assert r.status_code == 415
+            assert c.get("/api/raters/bob").json()["consented"] is False
+        assert _consents(tmp_path / "study" / DATABASE) == []
+    finally:
+        store.close()
+
+
+@pytest.mark.parametrize(
+    ("body", "status", "message"),
+    [
+        ({"agree": True, "text_hash": "0123456789abcdef"}, 409, "consent text has changed"),
+        ({"agree": True, "text_hash": ""}, 409, "consent text has changed"),
+        ({"agree": False, "text_hash": "HASH"}, 422, "agree"),
+        ({"agree": 1, "text_hash": "HASH"}, 422, "agree"),
+        ({"agree": True}, 422, "text_hash"),
+        ({"agree": True, "text_hash": 7}, 422, "text_hash"),
+        ({"agree": True, "text_hash": "HASH", "extra": 1}, 422, "extra"),
+        ([True, "HASH"], 422, "JSON object"),
+    ],
+)
+def test_an_agreement_to_another_text_or_a_malformed_one_records_nothing(
+    tmp_path, body, status, message
+):
+    study = _write(tmp_path / "study", consent=CONSENT)
+    body = json.loads(json.dumps(body).replace("HASH", study.consent_hash))
+    store = AnswerStore(tmp_path / "study" / DATABASE, study)
+    try:
+        with TestClient(create_app(study, store)) as c:
+            r = c.post("/api/raters/bob/consent", json=body)
+            assert r.status_code == status and message in r.json()["error"]
+            assert c.get("/api/raters/bob").json()["consented"] is False
+            assert c.put("/api/raters/bob/answers/s01/A",
+                         json={"social": 3, "kinetics": 4}).status_code == 403  # fmt: skip
+        assert _consents(tmp_path / "study" / DATABASE) == []
+    finally:
+        store.close()
+
+
+def test_a_study_without_consent_text_refuses_an_agreement(tmp_path):
+    study = _write(tmp_path / "study")
+    store = AnswerStore(tmp_path / "study" / DATABASE, study)
+    try:
+        with TestClient(create_app(study, store)) as c:
+            assert c.get("/api/study").json()["consent_hash"] is None
+            r = _agree(c, "bob", study.consent_hash)
+            assert r.status_code == 404 and "no consent text" in r.json()["error"]
+    finally:
+        store.close()
+
+
+# ---- finding 9: rater ids in the access log ---------------------------------------------
+
+
+def test_the_access_log_filter_masks_rater_ids():
+    from trajpref.survey.server import RaterIdMask
+
+    record = logging.LogRecord("uvicorn.access", logging.INFO, "", 0, '%s - "%s %s HTTP/%s" %d',
+                               ("127.0.0.1:5", "PUT", "/api/raters/Alice.Smith@x.org/answers/"
+                                "s01/A", "1.1", 200), None)  # fmt: skip
+    assert RaterIdMask().filter(record)
+    assert record.getMessage() == '127.0.0.1:5 - "PUT /api/raters/<id>/answers/s01/A HTTP/1.1" 200'
+
+
+def test_serve_logs_requests_without_the_rater_id(synthetic_study):
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-m", "trajpref.cli", "survey", "serve",
+                             str(synthetic_study), "--port", "0"], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)  # fmt: skip
+    try:
+        line = proc.stdout.readline()
+        url = line.split(" at ")[1].split(";")[0].strip()
+        with urllib.request.urlopen(f"{url}api/raters/Secret.Person") as r:
+            assert json.loads(r.read())["rater"] == "secret.person"
+    finally:
+        proc.send_signal(signal.SIGINT)
+        log = proc.communicate(timeout=20)[0]
+    assert "GET /api/raters/<id> HTTP/1.1" in log and "secret" not in log.lower()
+
+
+def test_a_json_agreement_from_another_origin_is_refused_and_records_nothing(tmp_path):
+    """Even as JSON (a page elsewhere could send it after a CORS preflight it then ignores),
+    an agreement whose Origin is not the server's own is refused (403) and not stored."""
+    study = _write(tmp_path / "study", consent=CONSENT)
+    store = AnswerStore(tmp_path / "study" / DATABASE, study)
+    try:
+        with TestClient(create_app(study, store)) as c:
+            body = {"agree": True, "text_hash": study.consent_hash}
+            r = c.post("/api/raters/alice/consent", json=body,
+                       headers={"Origin": "http://evil.example"})  # fmt: skip
+            assert r.status_code == 403 and "origin" in r.json()["error"]
+            assert not c.get("/api/raters/alice").json().get("consented")
+            r = c.post("/api/raters/alice/consent", json=body,
+                       headers={"Origin": "http://testserver"})  # fmt: skip
+            assert r.status_code == 200
+    finally:
+        store.close()
+    assert [row[0] for row in _consents(tmp_path / "study" / DATABASE)] == ["alice"]
+
+
+# Walkthrough 65's survey findings: a SIGTERM stop, a study in a read-only folder, rater ids
+# with a trailing newline, the study folder deleted while serving, a database write that fails,
+# the docs against the code, and the page's resumed session on a shared machine.
+
+
+OK = {"social": 4, "kinetics": 2}
+
+
+def _answers(path: Path) -> list[tuple]:
+    with contextlib.closing(sqlite3.connect(path)) as db:
+        return db.execute("SELECT rater, scene, panel, social, kinetics FROM answers").fetchall()
+
+
+@contextlib.contextmanager
+def _log_lines():
+    """The messages the server logs (its logger, whatever handlers uvicorn set up)."""
+    lines: list[str] = []
+
+    class Collect(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            lines.append(self.format(record))
+
+    handler = Collect(logging.ERROR)
+    server_module.LOG.addHandler(handler)
+    try:
+        yield lines
+    finally:
+        server_module.LOG.removeHandler(handler)
+
+
+# ---- 1. SIGTERM stops as cleanly as Ctrl-C ------------------------------------------------
+
+
+def _put(url: str, path: str, body: dict) -> dict:
+    req = urllib.request.Request(url + path, data=json.dumps(body).encode(), method="PUT",
+                                 headers={"Content-Type": "application/json"})  # fmt: skip
+    with urllib.request.urlopen(req, timeout=10) as r:
+        return json.loads(r.read())
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+def test_a_sigterm_or_ctrl_c_leaves_every_answer_in_the_database_file_alone(
+    synthetic_study, tmp_path, sig
+):
+    """The real command: after SIGTERM (kill, timeout, docker/systemd stop) as after Ctrl-C,
+    no -wal or -shm is left and a copy of answers.sqlite alone holds the answers."""
+    proc, url = serve_subprocess(synthetic_study)
+    try:
+        assert _put(url, "api/raters/bo/answers/s01/A", OK)["saved"]
+        assert _put(url, "api/raters/bo/answers/s02/B", OK)["saved"]
+    finally:
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=30)
+    assert "Traceback" not in err
+    left = sorted(p.name for p in synthetic_study.iterdir())
+    assert left == ["answers.sqlite", "images", "manifest.json"], left
+    (tmp_path / "copy").mkdir()
+    copy = Path(shutil.copy(synthetic_study / DATABASE, tmp_path / "copy" / DATABASE))
+    assert sorted(_answers(copy)) == [("bo", "s01", "A", 4, 2), ("bo", "s02", "B", 4, 2)]
+
+
+# ---- 4. the study folder deleted while serving; 5. a write that fails ------------------------
+
+
+def test_answers_after_the_study_folder_is_deleted_or_replaced_get_503(synthetic_study, tmp_path):
+    copy = shutil.copytree(synthetic_study, tmp_path / "copy")
+    study = load_study(synthetic_study)
+    store = AnswerStore(synthetic_study / DATABASE, study)
+    try:
+        with _log_lines() as lines, TestClient(create_app(study, store)) as c:
+            assert c.put("/api/raters/zed/answers/s01/A", json=OK).status_code == 200
+            shutil.rmtree(synthetic_study)
+            r = c.put("/api/raters/zed/answers/s01/B", json=OK)
+            assert r.status_code == 503, r.text
+            assert "study folder is gone" in r.json()["error"]
+            assert "not saved" in r.json()["error"]
+            shutil.copytree(copy, synthetic_study)  # another folder in its place
+            r = c.put("/api/raters/zed/answers/s01/B", json=OK)
+            assert r.status_code == 503 and "study folder is gone" in r.json()["error"]
+            assert c.post("/api/raters/zed/submit", json={"submit": True}).status_code == 503
+    finally:
+        store.close()
+    assert len(lines) == 3 and all("\n" not in line for line in lines), lines
+    assert all(str(synthetic_study / DATABASE) in line and "zed" not in line for line in lines)
+    assert sorted(p.name for p in synthetic_study.iterdir()) == ["images", MANIFEST]  # untouched
+
+
+class _FailingCommit:
+    """A connection whose COMMIT fails as a full disk or an unwritable -wal makes it fail."""
+
+    def __init__(self, db: sqlite3.Connection):
+        self._db = db
+
+    def execute(self, sql: str, *args):
+        if sql.strip().upper() == "COMMIT":
+            raise sqlite3.OperationalError("disk I/O error")
+        return self._db.execute(sql, *args)
+
+    def __getattr__(self, name: str):
+        return getattr(self._db, name)
+
+
+def test_a_write_that_fails_is_a_json_503_logged_once_and_nothing_is_kept(store):
+    real = store.db
+    with _log_lines() as lines, TestClient(create_app(load_study(store.study.folder), store)) as c:
+        store.db = _FailingCommit(real)
+        try:
+            r = c.put("/api/raters/ann/answers/s01/A", json=OK)
+        finally:
+            store.db = real
+        assert r.status_code == 503 and r.headers["content-type"] == "application/json"
+        assert r.json() == {"error": "the answer was not saved: disk I/O error"}
+        # the failed transaction was rolled back: the next answer is saved, as the first
+        r = c.put("/api/raters/ann/answers/s01/A", json=OK)
+        assert r.status_code == 200 and r.json()["revision"] == 1
+    assert len(lines) == 1 and "the answer was not saved: disk I/O error" in lines[0]
+    assert _answers(store.path) == [("ann", "s01", "A", 4, 2)]
+
+
+# Walkthrough 66's survey findings: every rater saw the scenes and panels in one order (a
+# position effect fell on the same method for every rater), and the ground truth's PNG was the
+# smallest of its scene (a rater comparing image sizes could find it). Now each rater sees an
+# order of their own, each answer is stored with where it was shown, analyze checks for a
+# position effect, and the pictures of a scene have one byte size.
+
+
+METHODS = ("methodalpha", "methodbeta")  # as in conftest.py
+
+
+def test_the_served_pictures_name_no_method(tiny_study, tmp_path):
+    study = load_study(tiny_study)
+    store = AnswerStore(tmp_path / "a.sqlite", study)
+    with TestClient(create_app(study, store)) as client:
+        images = [client.get(f"/images/{name}").content for name in study.image_files()]
+        progress = client.get("/api/raters/r1").content
+    store.close()
+    for body in (*images, progress):
+        for name in (*METHODS, GROUND_TRUTH, "generator", "truth", "method"):
+            assert name.encode() not in body.lower()

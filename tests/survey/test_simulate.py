@@ -1,13 +1,17 @@
 """survey simulate: synthetic raters, labelled as such, seeded, and following the error."""
 
+import contextlib
+import json
 import sqlite3
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from trajpref.errors import ConfigError
-from trajpref.survey.manifest import GROUND_TRUTH
+from trajpref.survey.manifest import DATABASE, GROUND_TRUTH, MANIFEST, load_study
 from trajpref.survey.simulate import SimulateConfig, simulate
+from trajpref.survey.store import AnswerStore
 
 
 def _answers(path):
@@ -70,3 +74,49 @@ def test_a_prefix_in_capitals_gives_lower_case_ids_and_meets_existing_ones(store
     assert ids == ["pilot-01", "pilot-02"] and set(store.raters()) == set(ids)
     with pytest.raises(ConfigError, match="pilot-01, pilot-02 already exist"):
         simulate(store.study, store, SimulateConfig(raters=2, prefix="PILOT"))
+
+
+# Walkthrough 66's survey findings: every rater saw the scenes and panels in one order (a
+# position effect fell on the same method for every rater), and the ground truth's PNG was the
+# smallest of its scene (a rater comparing image sizes could find it). Now each rater sees an
+# order of their own, each answer is stored with where it was shown, analyze checks for a
+# position effect, and the pictures of a scene have one byte size.
+
+
+def _positions(path: Path) -> dict[tuple[str, str, str], tuple]:
+    with contextlib.closing(sqlite3.connect(path)) as db:
+        rows = db.execute("SELECT rater, scene, panel, scene_position, panel_position "
+                          "FROM answers").fetchall()  # fmt: skip
+    return {r[:3]: r[3:] for r in rows}
+
+
+def _fixed(folder: Path) -> None:
+    """Make ``folder``'s manifest one of a study built before per-rater orders (no
+    ``order``): what every rater of it saw was the manifest's order."""
+    manifest = json.loads((folder / MANIFEST).read_text())
+    del manifest["order"]
+    (folder / MANIFEST).write_text(json.dumps(manifest))
+
+
+def test_simulate_answers_in_each_raters_order_with_the_same_ratings_as_a_fixed_order(
+    synthetic_study, tmp_path
+):
+    import shutil
+
+    fixed = Path(shutil.copytree(synthetic_study, tmp_path / "fixed"))
+    _fixed(fixed)
+    ratings = {}
+    for folder in (synthetic_study, fixed):
+        study = load_study(folder)
+        store = AnswerStore(folder / DATABASE, study)
+        simulate(study, store, SimulateConfig(raters=3))
+        store.close()
+        for (rater, scene, panel), where in _positions(folder / DATABASE).items():
+            assert where == study.positions(rater)[(scene, panel)][:2]
+        with contextlib.closing(sqlite3.connect(folder / DATABASE)) as db:
+            ratings[folder] = sorted(db.execute("SELECT rater, scene, panel, social, kinetics "
+                                                "FROM answers").fetchall())  # fmt: skip
+    assert ratings[synthetic_study] == ratings[fixed]  # no position effect in these raters
+    per_rater = _positions(synthetic_study / DATABASE)
+    assert len({per_rater[(r, "s01", "A")] for r in ("synthetic-01", "synthetic-02",
+                                                    "synthetic-03")}) > 1  # fmt: skip

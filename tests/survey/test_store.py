@@ -1,13 +1,39 @@
 """The answers database: WAL, upsert without duplicates, validation, durability, submission."""
 
+import contextlib
+import csv
+import json
+import os
+import shutil
 import sqlite3
+import subprocess
+import sys
 import threading
+from pathlib import Path
 
+import numpy as np
 import pytest
+from starlette.testclient import TestClient
 
 from trajpref.errors import ConfigError
-from trajpref.survey.manifest import DATABASE, load_study
-from trajpref.survey.store import SCHEMA, AnswerError, AnswerStore, StoreError
+from trajpref.survey.analyze import run_analysis
+from trajpref.survey.export import export_csv
+from trajpref.survey.manifest import (
+    DATABASE,
+    GROUND_TRUTH,
+    MANIFEST,
+    Study,
+    load_study,
+)
+from trajpref.survey.server import create_app
+from trajpref.survey.simulate import SimulateConfig, simulate
+from trajpref.survey.store import SCHEMA, AnswerError, AnswerStore, StoreError, check_rater
+from trajpref.survey.study import (
+    SceneData,
+    ground_truth_panel,
+    shown_predictions,
+    write_study,
+)
 
 OK = {"social": 4, "kinetics": 2}
 COLUMNS = "(rater, scene, panel, social, kinetics, revision, created_at, updated_at)"
@@ -426,3 +452,366 @@ def test_opening_a_database_others_can_read_warns(synthetic_study, tmp_path):
     path.chmod(0o644)
     with pytest.warns(UserWarning, match=r"other users have access to it \(mode 644\).*chmod 600"):
         AnswerStore(path, load_study(synthetic_study)).close()
+
+
+# Walkthrough 63-B's survey findings: the analysis of an unfinished pilot, the ground truth
+# above the best method, unknown units, the study's reproducibility record, consent, rater ids
+# in the access log, and the export's details.
+
+
+# ---- finding 6: unknown units ---------------------------------------------------------
+
+
+def _write(folder: Path, units: str = "m", consent: str = "", **build) -> Study:
+    """A one-scene study of two agents: the method 'alpha' and the rated ground truth."""
+    rng = np.random.default_rng(0)
+    track = rng.normal(0, 1, (2, 1, 2)) + 0.4 * np.arange(20)[None, :, None]  # [2, 20, 2]
+    history, future = track[:, :8], track[:, 8:]
+    pred = future[None] + rng.normal(0, 0.3, (4, 2, 12, 2))  # [K, P, 12, 2]
+    panels = {"alpha": shown_predictions(pred, 1 + rng.random((4, 2, 12)), np.ones((2, 12)),
+                                         future),
+              GROUND_TRUTH: ground_truth_panel(future)}  # fmt: skip
+    scenes = [
+        SceneData(history, future, panels, "f@0", 0, 0),
+        SceneData(history + 1, future + 1, panels, "f@20", 20, 0),
+    ]
+    more = {"consent": consent} if consent else {}
+    return write_study(folder, scenes, [GROUND_TRUTH, "alpha"], units=units,
+                       dataset={"name": "d", "split": "test", "units": units}, build=build,
+                       **more)  # fmt: skip
+
+
+# ---- finding 8: consent ---------------------------------------------------------------
+
+
+CONSENT = "I agree to take part.\n\nMy answers are kept for a year."
+
+
+def test_a_study_without_consent_writes_no_key_and_needs_no_agreement(tmp_path):
+    study = _write(tmp_path / "study")
+    assert "consent" not in json.loads((tmp_path / "study" / MANIFEST).read_text())
+    store = AnswerStore(tmp_path / "study" / DATABASE, study)
+    try:
+        store.save("alice", "s01", "A", {"social": 3, "kinetics": 3})  # as before
+        assert store.progress("alice")["consent_required"] is False
+    finally:
+        store.close()
+
+
+def _old_consents_table(db: Path, rows: list[tuple]) -> None:
+    """Make ``db``'s consents table as the code of e1862a9 wrote it (rater PRIMARY KEY)."""
+    import sqlite3
+
+    with sqlite3.connect(db) as con:
+        con.execute("DROP TABLE consents")
+        con.execute("CREATE TABLE consents (rater TEXT PRIMARY KEY REFERENCES raters (rater), "
+                    "agreed_at TEXT NOT NULL, text_hash TEXT NOT NULL)")  # fmt: skip
+        con.executemany("INSERT INTO consents VALUES (?, ?, ?)", rows)
+
+
+def test_a_database_with_the_first_consents_table_is_migrated_keeping_its_agreements(tmp_path):
+    import sqlite3
+
+    study = _write(tmp_path / "study", consent=CONSENT)
+    db = tmp_path / "study" / DATABASE
+    AnswerStore(db, study).close()
+    with sqlite3.connect(db) as con:  # the raters, for the foreign key
+        made = "2000-01-01T07:59:00.000+00:00"
+        con.executemany("INSERT INTO raters VALUES (?, 'human', ?, NULL)",
+                        [(r, made) for r in ("alice", "bob")])  # fmt: skip
+    old = [("alice", "2000-01-01T08:00:00.000+00:00", study.consent_hash),
+           ("bob", "2000-01-01T08:01:00.000+00:00", "an-older-text")]  # fmt: skip
+    _old_consents_table(db, old)
+    store = AnswerStore(db, study, readonly=True)  # analyze: read as it is, nothing written
+    try:
+        assert store.progress("alice")["consented"] and not store.progress("bob")["consented"]
+    finally:
+        store.close()
+    with sqlite3.connect(db) as con:
+        pk = [r[1] for r in con.execute("PRAGMA table_info(consents)") if r[5]]
+    assert pk == ["rater"]
+    store = AnswerStore(db, study)  # serve: migrated to one row per (rater, text)
+    try:
+        assert store.progress("alice")["consented"]
+        assert store.consent("bob", study.consent_hash)["consented"]  # was a UNIQUE error
+        store.save("bob", "s01", "A", {"social": 3, "kinetics": 4})
+    finally:
+        store.close()
+    with sqlite3.connect(db) as con:
+        pk = sorted(r[1] for r in con.execute("PRAGMA table_info(consents)") if r[5])
+        rows = con.execute("SELECT rater, agreed_at, text_hash FROM consents "
+                           "ORDER BY rater, agreed_at").fetchall()  # fmt: skip
+    assert pk == ["rater", "text_hash"]
+    assert rows[:2] == old and rows[2][0] == "bob" and rows[2][2] == study.consent_hash
+    AnswerStore(db, study).close()  # opening it again changes nothing
+    with sqlite3.connect(db) as con:
+        assert con.execute("SELECT count(*) FROM consents").fetchone()[0] == 3
+
+
+def test_a_database_of_an_older_version_gets_the_consents_table(synthetic_study):
+    import sqlite3
+
+    db = synthetic_study / DATABASE
+    AnswerStore(db, load_study(synthetic_study)).close()
+    with sqlite3.connect(db) as con:
+        con.execute("DROP TABLE consents")
+    store = AnswerStore(db, load_study(synthetic_study), readonly=True)
+    assert store.records() == []  # read-only: read without the table
+    store.close()
+    AnswerStore(db, load_study(synthetic_study)).close()
+    with sqlite3.connect(db) as con:
+        assert con.execute("SELECT name FROM sqlite_master WHERE name = 'consents'").fetchone()
+
+
+# Walkthrough 65's survey findings: a SIGTERM stop, a study in a read-only folder, rater ids
+# with a trailing newline, the study folder deleted while serving, a database write that fails,
+# the docs against the code, and the page's resumed session on a shared machine.
+
+
+@contextlib.contextmanager
+def _read_only(folder: Path):
+    """``folder`` read-only for this process, restored afterwards: ``chattr +i`` as root (who
+    ignores modes), else mode 0555."""
+    if getattr(os, "geteuid", lambda: 1)() == 0:
+        if shutil.which("chattr") is None:
+            pytest.skip("root without chattr: cannot make a folder read-only")
+        done = subprocess.run(["chattr", "+i", str(folder)], capture_output=True, text=True)
+        if done.returncode:
+            pytest.skip(f"chattr +i is not supported here: {done.stderr.strip()}")
+        try:
+            yield
+        finally:
+            subprocess.run(["chattr", "-i", str(folder)], check=True)
+    else:
+        mode = folder.stat().st_mode & 0o777
+        folder.chmod(0o555)
+        try:
+            yield
+        finally:
+            folder.chmod(mode)
+
+
+# ---- 2. a study in a read-only folder -------------------------------------------------------
+
+
+def _simulated(folder: Path) -> None:
+    study = load_study(folder)
+    store = AnswerStore(folder / DATABASE, study)
+    try:
+        simulate(study, store, SimulateConfig(raters=3))
+    finally:
+        store.close()
+
+
+def test_a_wal_database_of_an_older_version_is_read_in_a_read_only_folder(synthetic_study):
+    """A file left in WAL mode (closed by an older version: no -wal beside it) is read as it
+    is (immutable): nobody can write into a folder nobody can write to."""
+    _simulated(synthetic_study)
+    db = synthetic_study / DATABASE
+    with contextlib.closing(sqlite3.connect(db)) as con:
+        assert con.execute("PRAGMA journal_mode=WAL").fetchone()[0] == "wal"
+    assert not Path(f"{db}-wal").exists()
+    with _read_only(synthetic_study):
+        store = AnswerStore(db, load_study(synthetic_study), readonly=True)
+        try:
+            assert len(store.rows()) == 27
+        finally:
+            store.close()
+
+
+def test_answers_still_in_the_wal_of_a_read_only_folder_are_one_clear_error(synthetic_study):
+    """A killed server left answers in -wal, and the -shm is gone: SQLite cannot read them
+    without creating one, and reading the main file alone would silently miss them."""
+    db = synthetic_study / DATABASE
+    AnswerStore(db, load_study(synthetic_study)).close()  # schema and study id
+    code = ("import sqlite3, os, sys\n"
+            "db = sqlite3.connect(sys.argv[1], isolation_level=None)\n"
+            "db.execute('PRAGMA journal_mode=WAL')\n"
+            "db.execute(\"INSERT INTO raters VALUES ('kim', 'human', 'now', NULL)\")\n"
+            "os._exit(0)\n")  # fmt: skip
+    subprocess.run([sys.executable, "-c", code, str(db)], check=True)
+    assert Path(f"{db}-wal").stat().st_size > 0
+    Path(f"{db}-shm").unlink()
+    with _read_only(synthetic_study):
+        with pytest.raises(ConfigError) as err:
+            AnswerStore(db, load_study(synthetic_study), readonly=True)
+    message = str(err.value)
+    assert "read-only" in message and "answers.sqlite-wal" in message and "copy" in message
+    assert "not a usable answers database" not in message
+
+
+def test_a_live_servers_files_beside_the_database_are_not_read_as_immutable(
+    synthetic_study, monkeypatch
+):
+    """A server run by another user keeps its -wal (empty after a checkpoint) and its -shm,
+    which this reader may not open, so ``mode=ro`` cannot open the file: reading it as
+    immutable could then show a state the server is changing, so the reader refuses with the
+    same clear error (the other user is played by a ``mode=ro`` that cannot open, as
+    SQLite's own error)."""
+    _simulated(synthetic_study)
+    db = synthetic_study / DATABASE
+    Path(f"{db}-wal").write_bytes(b"")  # what a live writer's checkpointed -wal looks like
+    Path(f"{db}-shm").write_bytes(b"\0" * 32768)
+    connect = AnswerStore._connect
+
+    def other_users_shm(self, query):
+        if query == "mode=ro":
+            raise sqlite3.OperationalError("unable to open database file")
+        return connect(self, query)
+
+    monkeypatch.setattr(AnswerStore, "_connect", other_users_shm)
+    with pytest.raises(ConfigError) as err:
+        AnswerStore(db, load_study(synthetic_study), readonly=True)
+    assert "answers.sqlite-wal and answers.sqlite-shm" in str(err.value)
+    assert "stop the server" in str(err.value)
+
+
+@pytest.mark.parametrize("existing", [True, False])
+def test_serve_in_a_read_only_folder_says_the_folder_is_read_only(synthetic_study, existing):
+    db = synthetic_study / DATABASE
+    if existing:
+        AnswerStore(db, load_study(synthetic_study)).close()
+    with _read_only(synthetic_study):
+        with pytest.raises(ConfigError) as err:
+            AnswerStore(db, load_study(synthetic_study))
+    message = str(err.value)
+    assert f"the folder {synthetic_study} is read-only" in message, message
+    assert "not a usable answers database" not in message
+    assert sorted(p.name for p in synthetic_study.iterdir()) == sorted(
+        ["images", MANIFEST, *([DATABASE] if existing else [])]
+    )
+
+
+# ---- 3. rater ids (and other names) with a trailing newline ---------------------------------
+
+
+def test_a_rater_id_with_a_trailing_newline_is_refused(store):
+    for bad in ("eve\n", "eve\r\n", "eve\n\n"):
+        with pytest.raises(AnswerError):
+            check_rater(bad)
+    with TestClient(create_app(load_study(store.study.folder), store)) as c:
+        assert c.put("/api/raters/eve/answers/s01/A", json=OK).status_code == 200
+        r = c.put("/api/raters/eve%0A/answers/s01/A", json=OK)
+        assert r.status_code == 422 and "rater id" in r.json()["error"]
+        assert c.get("/api/raters/eve%0A").status_code == 422
+    assert store.raters() == {"eve": "human"}
+
+
+# Walkthrough 66's survey findings: every rater saw the scenes and panels in one order (a
+# position effect fell on the same method for every rater), and the ground truth's PNG was the
+# smallest of its scene (a rater comparing image sizes could find it). Now each rater sees an
+# order of their own, each answer is stored with where it was shown, analyze checks for a
+# position effect, and the pictures of a scene have one byte size.
+
+
+def _order(got: dict) -> list[tuple[str, tuple[str, ...]]]:
+    """``progress()["order"]`` as ``[(scene, (panel, ...)), ...]``."""
+    return [(o["scene"], tuple(o["panels"])) for o in got["order"]]
+
+
+def _positions(path: Path) -> dict[tuple[str, str, str], tuple]:
+    with contextlib.closing(sqlite3.connect(path)) as db:
+        rows = db.execute("SELECT rater, scene, panel, scene_position, panel_position "
+                          "FROM answers").fetchall()  # fmt: skip
+    return {r[:3]: r[3:] for r in rows}
+
+
+def _fixed(folder: Path) -> None:
+    """Make ``folder``'s manifest one of a study built before per-rater orders (no
+    ``order``): what every rater of it saw was the manifest's order."""
+    manifest = json.loads((folder / MANIFEST).read_text())
+    del manifest["order"]
+    (folder / MANIFEST).write_text(json.dumps(manifest))
+
+
+# ---- 2. answers are stored with where they were shown ------------------------------------
+
+
+def test_answers_are_stored_with_the_position_the_rater_was_shown(synthetic_study):
+    study = load_study(synthetic_study)
+    store = AnswerStore(synthetic_study / DATABASE, study)
+    with TestClient(create_app(study, store)) as client:
+        for rater in ("Alice", "bob"):
+            for scene, panels in _order(client.get(f"/api/raters/{rater}").json()):
+                for panel in panels:
+                    r = client.put(f"/api/raters/{rater}/answers/{scene}/{panel}", json=OK)
+                    assert r.status_code == 200
+        client.put("/api/raters/ALICE/answers/s02/B", json={"social": 1, "kinetics": 1})
+    store.close()
+    stored = _positions(synthetic_study / DATABASE)
+    assert len(stored) == 2 * study.num_panels
+    for (rater, scene, panel), where in stored.items():
+        assert where == study.positions(rater)[(scene, panel)][:2]
+    # the same panel at different places for the two raters
+    assert any(stored[("alice", s, p)] != stored[("bob", s, p)] for _, s, p in stored)
+
+
+# ---- 3. a database of the previous version -------------------------------------------------
+
+OLD_SCHEMA = """
+CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE raters (rater TEXT PRIMARY KEY,
+    kind TEXT NOT NULL CHECK (kind IN ('human', 'synthetic')),
+    created_at TEXT NOT NULL, submitted_at TEXT);
+CREATE TABLE answers (rater TEXT NOT NULL REFERENCES raters (rater),
+    scene TEXT NOT NULL, panel TEXT NOT NULL,
+    social INTEGER NOT NULL CHECK (social BETWEEN 1 AND 5),
+    kinetics INTEGER NOT NULL CHECK (kinetics BETWEEN 1 AND 5),
+    revision INTEGER NOT NULL DEFAULT 1,
+    created_at TEXT NOT NULL, updated_at TEXT NOT NULL,
+    PRIMARY KEY (rater, scene, panel));
+CREATE TABLE consents (rater TEXT NOT NULL REFERENCES raters (rater),
+    agreed_at TEXT NOT NULL, text_hash TEXT NOT NULL, PRIMARY KEY (rater, text_hash));
+"""
+"""The tables the version before 2026-12-06 wrote (no positions)."""
+
+
+def _old_database(folder: Path) -> Path:
+    """An answers database as the previous version left it: two raters who answered every
+    panel of the study (in the manifest's order, the only one there was)."""
+    study = load_study(folder)
+    path = folder / DATABASE
+    now = "2026-12-05T00:00:00"
+    with contextlib.closing(sqlite3.connect(path)) as db:
+        db.executescript(OLD_SCHEMA)
+        db.execute("INSERT INTO meta VALUES ('study_id', ?)", (study.study_id,))
+        for i, rater in enumerate(("old1", "old2")):
+            db.execute("INSERT INTO raters VALUES (?, 'human', ?, ?)", (rater, now, now))
+            for s in study.scenes:
+                for j, p in enumerate(s.panels):
+                    db.execute("INSERT INTO answers VALUES (?, ?, ?, ?, ?, 1, ?, ?)",
+                               (rater, s.id, p.id, 1 + (i + j) % 5, 3, now, now))  # fmt: skip
+        db.commit()
+    path.chmod(0o600)
+    return path
+
+
+def test_a_database_of_the_previous_version_is_read_by_analyze_and_export_and_kept_by_serve(
+    synthetic_study, tmp_path
+):
+    _fixed(synthetic_study)  # the previous version's study: no order in its manifest
+    path = _old_database(synthetic_study)
+    study = load_study(synthetic_study)
+    before = path.read_bytes()
+    result, _ = run_analysis(synthetic_study, out=tmp_path / "analysis")
+    check = result.position_effect
+    assert result.raters == 2 and (check.blocks, check.scenes) == (2, 2 * len(study.scenes))
+    done = export_csv(synthetic_study, tmp_path / "a.csv")
+    assert done["answers"] == 2 * study.num_panels
+    assert path.read_bytes() == before  # read-only: no column added by a reader
+    with open(tmp_path / "a.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    manifest = study.positions()  # what every rater of that version saw
+    for r in rows:
+        got = (int(r["scene_position"]), int(r["panel_position"]), int(r["position"]))
+        assert got == manifest[(r["scene"], r["panel"])]
+    # serve (a writer) adds the two columns, keeps every answer, and records new positions
+    store = AnswerStore(path, study)
+    assert store.progress("old1")["answered"] == study.num_panels
+    store.save("new", "s02", "B", OK)
+    store.close()
+    stored = _positions(path)
+    assert len(stored) == 2 * study.num_panels + 1
+    assert stored[("old1", "s01", "A")] == (None, None)
+    assert stored[("new", "s02", "B")] == manifest[("s02", "B")][:2]  # a fixed-order study
+    assert run_analysis(synthetic_study, out=tmp_path / "again")[0].raters == 3

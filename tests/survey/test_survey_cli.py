@@ -1,11 +1,22 @@
 """The survey commands end to end, and bad input as one line on stderr with exit status 2."""
 
+import contextlib
 import json
+import os
+import shutil
 import socket
+import subprocess
+from pathlib import Path
 
 import pytest
 
 from trajpref.cli import main
+from trajpref.survey.manifest import (
+    DATABASE,
+    load_study,
+)
+from trajpref.survey.simulate import SimulateConfig, simulate
+from trajpref.survey.store import AnswerStore
 
 
 def _run(capsys, *argv):
@@ -337,3 +348,116 @@ def test_build_refuses_the_sgan_protocol_on_sdd(capsys, tmp_path):
                         "--models", "cv", "--out", tmp_path / "study")  # fmt: skip
     assert code == 2 and "--protocol sgan is Social-GAN's ETH/UCY counting" in err
     assert not (tmp_path / "study").exists()
+
+
+# Walkthrough 63-B's survey findings: the analysis of an unfinished pilot, the ground truth
+# above the best method, unknown units, the study's reproducibility record, consent, rater ids
+# in the access log, and the export's details.
+
+
+def test_build_refuses_an_empty_or_missing_consent_file(capsys, walks, tmp_path):
+    empty = tmp_path / "empty.txt"
+    empty.write_text("  \n")
+    for path, text in ((empty, "the file is empty"), (tmp_path / "no.txt", "cannot read it")):
+        code, _, err = _run(capsys, "survey", "build", "--dataset", walks, "--models", "cv",
+                            "--scorer", "zara1/denoiser", "--consent", path, "--out",
+                            tmp_path / "study")  # fmt: skip
+        assert code == 2 and f"--consent {path}: {text}" in err
+        assert not (tmp_path / "study").exists()
+
+
+# ---- finding 12: the docs' --frame-interval default -------------------------------------
+
+
+def test_the_docs_give_the_frame_interval_default_as_the_code_takes_it():
+    docs = (Path(__file__).resolve().parents[2] / "docs" / "survey.md").read_text()
+    row = next(line for line in docs.splitlines() if line.startswith("| `--frame-interval`"))
+    assert "| 0.4, unknown |" not in row
+    assert "`time` or `timestamp`" in row and "else 0.4 (assumed)" in row
+
+
+# Walkthrough 65's survey findings: a SIGTERM stop, a study in a read-only folder, rater ids
+# with a trailing newline, the study folder deleted while serving, a database write that fails,
+# the docs against the code, and the page's resumed session on a shared machine.
+
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+DOCS = ROOT / "docs" / "survey.md"
+
+
+@contextlib.contextmanager
+def _read_only(folder: Path):
+    """``folder`` read-only for this process, restored afterwards: ``chattr +i`` as root (who
+    ignores modes), else mode 0555."""
+    if getattr(os, "geteuid", lambda: 1)() == 0:
+        if shutil.which("chattr") is None:
+            pytest.skip("root without chattr: cannot make a folder read-only")
+        done = subprocess.run(["chattr", "+i", str(folder)], capture_output=True, text=True)
+        if done.returncode:
+            pytest.skip(f"chattr +i is not supported here: {done.stderr.strip()}")
+        try:
+            yield
+        finally:
+            subprocess.run(["chattr", "-i", str(folder)], check=True)
+    else:
+        mode = folder.stat().st_mode & 0o777
+        folder.chmod(0o555)
+        try:
+            yield
+        finally:
+            folder.chmod(mode)
+
+
+# ---- 2. a study in a read-only folder -------------------------------------------------------
+
+
+def _simulated(folder: Path) -> None:
+    study = load_study(folder)
+    store = AnswerStore(folder / DATABASE, study)
+    try:
+        simulate(study, store, SimulateConfig(raters=3))
+    finally:
+        store.close()
+
+
+def test_analyze_and_export_read_a_study_in_a_read_only_folder(capsys, synthetic_study, tmp_path):
+    _simulated(synthetic_study)
+    before = {p.name: p.read_bytes() for p in synthetic_study.iterdir() if p.is_file()}
+    with _read_only(synthetic_study):
+        code, out, err = _run(capsys, "survey", "analyze", synthetic_study, "--out",
+                              tmp_path)  # fmt: skip
+        assert code == 0, err
+        assert "raters: 3 synthetic" in out
+        code, out, err = _run(capsys, "survey", "export", synthetic_study, "--csv",
+                              tmp_path / "answers.csv")  # fmt: skip
+        assert code == 0, err
+    assert (tmp_path / "answers.csv").read_text().count("synthetic-0") == 27
+    assert {p.name: p.read_bytes() for p in synthetic_study.iterdir() if p.is_file()} == before
+
+
+def _option_help(help_text: str, option: str) -> str:
+    """The help of ``option`` in argparse's ``--help`` output, on one line."""
+    lines = help_text.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.strip().startswith(option + " "))
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].strip().startswith("-")),
+               len(lines))  # fmt: skip
+    return " ".join(" ".join(lines[start:end]).split())
+
+
+def test_the_help_gives_the_defaults_of_seed_and_title(capsys):
+    with contextlib.suppress(SystemExit):
+        main(["survey", "build", "--help"])
+    out = capsys.readouterr().out
+    assert _option_help(out, "--seed").endswith("(default 0)")
+    assert _option_help(out, "--title").endswith("(default 'Which predicted paths look human?')")
+
+
+def test_the_docs_name_simulate_db_sigterm_line_breaks_and_the_blinding_limits():
+    text = " ".join(DOCS.read_text().split())
+    assert "`survey simulate study/ --raters 20 [--seed 0 --prefix synthetic --db PATH]`" in text
+    assert "a blank line starts a new paragraph" not in text
+    assert "SIGTERM" in text and "SIGKILL" in text
+    assert "drawn differently" in text  # the one limit of the blinding left
+    assert "an order of their own" in text and "one byte size" in text  # the two lifted

@@ -2,7 +2,11 @@
 parameters (the generator's with a time budget that sets its learning rate), and rank 0 alone
 writes the run files."""
 
+import dataclasses
 import importlib.util
+import json
+import os
+import signal
 import socket
 import subprocess
 import sys
@@ -10,9 +14,15 @@ from pathlib import Path
 
 import pytest
 import torch
-from synthetic import write_dataset
+from synthetic import TINY_OVERRIDES, write_dataset
+from tqdm.auto import tqdm
 
+from trajpref import cli
+from trajpref.config import OptimConfig
 from trajpref.models import checkpoint as ckpt
+from trajpref.train import loop
+from trajpref.train.distributed import DistInfo, RankBatches, split_batch
+from trajpref.train.run import finished, train_stage
 
 
 def _free_port() -> int:
@@ -228,3 +238,281 @@ def test_the_fine_tuning_control_trains_on_two_processes(runs):
     assert all(torch.equal(r0[k], v) for k, v in fresh_state.items() if k.startswith("critic."))
     assert not all(torch.equal(r0[k], v) for k, v in fresh_state.items() if k.startswith("policy."))
     assert _last(runs["two"] / "control", "finetune")["step"] == 2
+
+
+# Several processes, from a walkthrough of torchrun training (gloo on the CPU):
+#
+# - a time budget is the busiest rank's everywhere: the stop, the log, the resume state, the
+#   "budget ended" line and a resume's check read one number (they read rank 0's own, while the
+#   stop took the largest: a run stopped by its budget recorded less than it and resumed again
+#   and again);
+# - ``--equal-budget`` is refused under torchrun, and a CPU-time budget says its clock is each
+#   process's own;
+# - SIGTERM (``Terminated``) is kept when it lands in a finalizer, as Ctrl-C is, and no
+#   ``except Exception`` takes it for an error of its own;
+# - the ranks compare their config, data, seed and batches before any step (another dataset on
+#   rank 1 hung until the timeout; ``--seed $RANK`` trained without a word);
+# - an error that one rank alone meets is printed by that rank (only rank 0 printed);
+# - smaller notes: no thread count below 1 advised, the idle batches' epoch, dropout among the
+#   draws a resume on another process count changes, no collective per step without a limit.
+
+
+def _torchrun(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node=2",
+           "--master_addr=127.0.0.1", f"--master_port={_free_port()}", *args]  # fmt: skip
+    env = {**os.environ, "OMP_NUM_THREADS": "1", **(env or {})}
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=env)
+
+
+def _sets(folder) -> list[str]:
+    return [a for o in [*TINY_OVERRIDES, f"data.dataset={folder}"] for a in ("--set", o)]
+
+
+# --- one torchrun launch (ddp_rank_worker.py): the budget, and the ranks' facts compared
+
+
+@pytest.fixture(scope="module")
+def launch(tmp_path_factory, walks):
+    out = tmp_path_factory.mktemp("walk66")
+    other = write_dataset(tmp_path_factory.mktemp("other"), seed=1)
+    worker = Path(__file__).with_name("ddp_rank_worker.py")
+    proc = _torchrun(str(worker), str(walks), str(other), str(out))
+    return {"out": out, "proc": proc}
+
+
+def _read(launch, name):
+    path = launch["out"] / name
+    assert path.is_file(), launch["proc"].stderr[-3000:]
+    return json.loads(path.read_text())
+
+
+def test_a_time_budget_records_the_busiest_ranks_seconds(launch):
+    """Rank 1 alone spends the budget (its clock runs fast): the ranks stop together, and the
+    seconds that every rank returns, the log's and the resume state's are rank 1's, at least
+    the budget: the stage says that its budget ended it, and a resume is refused (rank 0's own
+    seconds, below the budget, were recorded, and the state was resumed three times more)."""
+    budget = 60 * 0.02
+    ranks = [_read(launch, f"budget_rank{r}.json") for r in (0, 1)]
+    assert ranks[0] == ranks[1]  # one number: seconds, steps, and whether the budget ended it
+    assert ranks[0]["spent"] >= budget and ranks[0]["reached"]
+    folder = launch["out"] / "budget"
+    state = torch.load(folder / "denoiser_last.pt", weights_only=True)
+    assert state["spent"] == ranks[0]["spent"] and state["step"] == ranks[0]["steps"]
+    row = json.loads((folder / "denoiser_metrics.jsonl").read_text().splitlines()[-1])
+    assert row["budget_cpu_seconds"] >= budget
+    assert "the time budget of 0.02 min (cpu clock) ended the stage" in launch["proc"].stdout
+    optim = OptimConfig(epochs=3, max_minutes=0.02)
+    assert finished(folder / "denoiser_last.pt", optim)
+
+
+def test_ranks_that_agree_pass_the_check(launch):
+    assert _read(launch, "check_same_rank0.json") is None
+    assert _read(launch, "check_same_rank1.json") is None
+
+
+@pytest.mark.parametrize(("case", "named"), [
+    ("data", "data_files.train.walk0.txt: "),
+    ("seed", "config.seed: 0 -> 1"),
+])  # fmt: skip
+def test_a_rank_with_other_data_or_its_own_seed_is_refused_on_every_rank(launch, case, named):
+    """Every rank raises the same error (rank 0 alone prints it), which names rank 1 and what
+    differs, before any step."""
+    found = [_read(launch, f"check_{case}_rank{r}.json") for r in (0, 1)]
+    assert found[0] == found[1] and found[0]["type"] == "EveryRankError"
+    assert "rank 1 differs from rank 0" in found[0]["message"]
+    assert named in found[0]["message"]
+
+
+def test_a_per_rank_seed_is_refused_through_the_cli_before_anything_is_written(tmp_path, walks):
+    """``--seed $RANK`` (a wrapper giving each process its own): the launch fails at once,
+    rank 0 alone says which rank differs and how, and no run file is written (it trained,
+    each rank on its own shuffle, without a word)."""
+    wrapper = tmp_path / "per_rank_seed.py"
+    wrapper.write_text("import os, sys\nfrom trajpref.cli import main\n"
+                       "seed = ['--seed', os.environ['RANK']]\n"
+                       "sys.exit(main([*sys.argv[1:], *seed]))\n")  # fmt: skip
+    out = tmp_path / "run"
+    proc = _torchrun(str(wrapper), "train", "diffusion", "--out", str(out), "--device", "cpu",
+                     "--no-progress", *_sets(walks))  # fmt: skip
+    assert proc.returncode != 0, proc.stderr[-3000:]
+    errors = [line for line in proc.stderr.splitlines() if line.startswith("trajpref: error:")]
+    assert len(errors) == 1, proc.stderr[-3000:]
+    assert "rank 1 differs from rank 0" in errors[0] and "config.seed: 0 -> 1" in errors[0]
+    assert not out.exists()
+
+
+# --- errors under torchrun: printed by the rank that meets them
+
+
+def _as_rank(monkeypatch, rank: int) -> None:
+    for key, value in (("WORLD_SIZE", "2"), ("LOCAL_WORLD_SIZE", "2"), ("RANK", str(rank)),
+                       ("LOCAL_RANK", str(rank))):  # fmt: skip
+        monkeypatch.setenv(key, value)
+    for key in ("MASTER_ADDR", "MASTER_PORT"):  # no group can be joined: nothing waits
+        monkeypatch.delenv(key, raising=False)
+
+
+def test_an_error_of_rank_1_alone_is_printed_by_rank_1(tmp_path, walks, monkeypatch, capsys):
+    """A --denoiser missing on rank 1's machine: rank 1 says so, prefixed with its rank
+    (only torchrun's exit code was seen)."""
+    _as_rank(monkeypatch, 1)
+    missing = tmp_path / "missing" / "denoiser.safetensors"
+    code = cli.main(["train", "generator", "--denoiser", str(missing), "--out",
+                     str(tmp_path / "run"), "--device", "cpu", *_sets(walks)])  # fmt: skip
+    assert code == 2
+    err = capsys.readouterr().err
+    assert f"trajpref: error: [rank 1] {missing}: no such checkpoint" in err
+
+
+@pytest.mark.parametrize("rank", [0, 1])
+def test_equal_budget_is_refused_under_torchrun_and_said_once(tmp_path, tiny_run, monkeypatch,
+                                                             capsys, rank):  # fmt: skip
+    """Its budget is one process's CPU time: N processes spent N times the protocol's. Every
+    rank refuses it alike, rank 0 alone prints it."""
+    _as_rank(monkeypatch, rank)
+    code = cli.main(["finetune", "--method", "control", "--from",
+                     str(tiny_run / "generator.safetensors"), "--out", str(tmp_path / "ft"),
+                     "--device", "cpu", "--equal-budget", "0.1"])  # fmt: skip
+    assert code == 2
+    err = capsys.readouterr().err
+    if rank == 0:
+        assert "the equal-budget protocol is one process on one thread" in err
+    else:
+        assert "trajpref: error" not in err
+    assert not (tmp_path / "ft").exists()
+
+
+def test_a_cpu_budget_on_several_processes_is_said_to_be_per_process():
+    from trajpref.train.run import cpu_budget_note
+
+    cpu = OptimConfig(max_minutes=5, budget_clock="cpu")
+    note = cpu_budget_note("generator", cpu, DistInfo(0, 2))
+    assert note is not None and "each process's own CPU time" in note
+    assert cpu_budget_note("generator", cpu, DistInfo()) is None
+    wall = dataclasses.replace(cpu, budget_clock="wall")
+    assert cpu_budget_note("generator", wall, DistInfo(0, 2)) is None
+
+
+# --- SIGTERM: kept where it lands in a finalizer, and never taken for an error
+
+
+class _RaisesWhenFreed:
+    def __init__(self, error):
+        self.error = error
+
+    def __del__(self):
+        raise self.error
+
+
+def test_a_sigterm_raised_in_a_finalizer_stops_the_run():
+    """The CLI's ``Terminated`` was an Exception, which the loop's hook passed on to Python's:
+    printed as "Exception ignored" and dropped, the run trained on."""
+
+    def body():
+        _RaisesWhenFreed(cli.Terminated())
+        return "trained on"
+
+    with pytest.raises(cli.Terminated):
+        loop.keeps_interrupts(body)()
+    assert not issubclass(cli.Terminated, Exception)
+
+
+def test_sigterm_in_a_bars_finalizer_ends_the_cli_run_with_143(tmp_path, walks, monkeypatch,
+                                                               capsys):  # fmt: skip
+    """As seen under torchrun: the signal's handler ran while the first epoch's bar was
+    freed; the run trained its second epoch and exited 0."""
+    fired = []
+
+    class Terminating(tqdm):
+        def __del__(self):
+            if not fired:
+                fired.append(True)
+                signal.raise_signal(signal.SIGTERM)  # the handler runs here, in the finalizer
+            super().__del__()
+
+    monkeypatch.setattr(loop, "tqdm", Terminating)
+    out = tmp_path / "run"
+    code = cli.main(["train", "diffusion", "--out", str(out), "--device", "cpu",
+                     "--no-progress", *_sets(walks)])  # fmt: skip
+    assert fired and code == 143
+    assert "trajpref: terminated (SIGTERM)" in capsys.readouterr().err
+    assert torch.load(out / "denoiser_last.pt", weights_only=True)["epoch"] == 0
+
+
+def test_sigterm_while_a_resume_state_is_read_is_no_config_error(tmp_path, monkeypatch):
+    """``load_resume_state`` turns any Exception of torch's reader into "not a resume
+    state"; a SIGTERM landing there was reported so."""
+    path = tmp_path / "denoiser_last.pt"
+    path.write_bytes(b"\x80\x02not a safetensors file")
+
+    def terminated(path):
+        raise cli.Terminated
+
+    monkeypatch.setattr(loop, "load_tensors", terminated)
+    with pytest.raises(cli.Terminated):
+        loop.load_resume_state(path, "denoiser")
+
+
+# --- notes
+
+
+def test_the_thread_warning_never_advises_fewer_than_one(monkeypatch):
+    from trajpref.train.run import set_threads
+
+    before = torch.get_num_threads()
+    monkeypatch.setattr("os.sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    try:
+        torch.set_num_threads(1)
+        with pytest.warns(UserWarning, match="4 processes of 1 thread") as seen:
+            set_threads(DistInfo(0, 4, 0, 4))
+        message = str(seen[0].message)
+        assert "OMP_NUM_THREADS" not in message and "start at most 2 processes" in message
+        monkeypatch.setenv("OMP_NUM_THREADS", "2")
+        torch.set_num_threads(2)
+        with pytest.warns(UserWarning, match="set OMP_NUM_THREADS=1"):
+            set_threads(DistInfo(0, 2, 0, 2))
+    finally:
+        torch.set_num_threads(before)
+
+
+def test_idle_batches_are_counted_in_the_epoch_and_steps_the_stage_takes(walks):
+    """The count was of epoch 0's batches, all of them, whatever epoch a resumed run starts
+    at and however many steps of an epoch the stage takes (``steps_per_epoch``)."""
+    from trajpref.data import load_dataset
+
+    train = load_dataset(str(walks), "train")
+    ranks = RankBatches(train, max_agents=8, seed=0, info=DistInfo(0, 4))
+    sizes = ranks.sizes
+
+    def expected(epoch, limit=None):
+        ranks.loader.set_epoch(epoch)
+        batches = ranks.loader.batches()[:limit]
+        return sum(any(len(s) == 0 for s in split_batch(sizes[b], 4)) for b in batches)
+
+    counts = {(e, k): expected(e, k) for e in range(4) for k in (None, 2)}
+    ranks.loader.set_epoch(0)
+    for (epoch, limit), count in counts.items():
+        assert ranks.idle_batches(epoch, limit) == count
+        assert ranks.loader.epoch == 0  # the loader's own epoch is left as it was
+    note = loop.idle_note("denoiser", 3, 12, 4, 2)
+    assert "3 of the 12 batches of epoch 5" in note and "of an epoch" not in note
+
+
+def test_a_resume_on_another_process_count_names_dropout_among_its_draws(tmp_path, tiny_cfg,
+                                                                         capsys):  # fmt: skip
+    out = tmp_path / "run"
+    train_stage("diffusion", tiny_cfg, out, device="cpu", progress=False, max_steps=1)
+    state = torch.load(out / "denoiser_last.pt", weights_only=True)
+    state["world_size"] = 2  # written on two processes
+    torch.save(state, out / "denoiser_last.pt")
+    capsys.readouterr()
+    train_stage("diffusion", tiny_cfg, out, device="cpu", progress=False,
+                resume=str(out / "denoiser_last.pt"))  # fmt: skip
+    assert "(noise, augmentation, dropout)" in capsys.readouterr().err
+
+
+def test_no_collective_per_step_without_a_step_or_time_limit():
+    """``_should_stop`` all-reduced its flag at every step even when nothing could stop the
+    stage early; with no group joined here, a collective would raise."""
+    assert not loop._should_stop(5, None, 1e9, None, DistInfo(0, 2), torch.device("cpu"))

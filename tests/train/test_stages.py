@@ -9,6 +9,7 @@ import pytest
 import torch
 from synthetic import TINY_OVERRIDES, write_dataset
 
+from trajpref import config
 from trajpref.cli import main
 from trajpref.config import load_config
 from trajpref.data import load_dataset, transforms
@@ -18,7 +19,7 @@ from trajpref.evaluation import evaluate
 from trajpref.models import checkpoint as ckpt
 from trajpref.train import read_metrics
 from trajpref.train.run import train_stage
-from trajpref.train.stages import build_denoiser_stage, build_generator_stage
+from trajpref.train.stages import build_denoiser_stage, build_finetune_stage, build_generator_stage
 from trajpref.types import collate
 
 
@@ -980,3 +981,29 @@ def test_validation_skips_the_collision_metrics_it_does_not_report(folder, monke
     calls.clear()
     assert validate() == expected and set(expected) == {"min_ade", "min_fde", "score"}
     assert calls == []
+
+
+# One table of fine-tuning methods (config.FinetuneMethod, config.USES_RL,
+# rl.objective.LOSS_SAMPLES): the CLI offers its names, and a name that reaches a dispatch
+# without an entry there is an error, never trained as RLHF-ReS (the walkthrough's finding: a
+# new method's name took the k* path of ``RLObjective.selection``).
+
+
+NEW = "rlhf-new"
+"""A method's name as a contributor adds it to the list, before its dispatch entries."""
+
+
+@pytest.mark.parametrize("in_uses_rl", [False, True])
+def test_a_fine_tuning_stage_of_a_method_without_entries_is_refused(
+    tiny_run, walks, monkeypatch, in_uses_rl
+):
+    """Before any step: the stage is not built (HEAD built it and trained RLHF-ReS)."""
+    if in_uses_rl:
+        monkeypatch.setitem(config.USES_RL, NEW, True)
+    start = ckpt.load(tiny_run / "generator.safetensors")
+    cfg = load_config(None, [], base=start["config"])
+    object.__setattr__(cfg.finetune, "method", NEW)  # past the Literal, as if added to it
+    train = load_dataset(str(walks), "train")
+    table = "LOSS_SAMPLES" if in_uses_rl else "USES_RL"
+    with pytest.raises(ConfigError, match=rf"'rlhf-new'.*{table}"):
+        build_finetune_stage(cfg, start, train, torch.device("cpu"))

@@ -1,4 +1,4 @@
-"""Run by ``torchrun`` (2 processes) from test_ddp_walk66.py, each part writing what it found
+"""Run by ``torchrun`` (2 processes) from test_ddp.py, each part writing what it found
 into ``out`` (a part that fails leaves the others' files for their tests):
 
 - ``budget``: the denoiser stage with a 0.02 min CPU-time budget, rank 1's clock made to run
