@@ -37,8 +37,17 @@ its motion since being unknown."""
 class LeftOutWarning(UserWarning):
     """``tracks_to_history`` left out agents that the tracker saw in its current cycle: their
     detections are stamped a little before ``now`` (per-detection timestamps a few ms apart
-    within one cycle) or after it (a nominal cycle time as ``now``); the message gives each
-    one's age at ``now`` and a ``hold=`` that keeps them."""
+    within one cycle) or after it (a nominal cycle time as ``now``). The message suggests a
+    ``hold=`` that keeps them; it names no agent, so that a planner's loop calling every cycle
+    is warned once, not every call (Python shows a warning again only for a new text). The
+    warning raised carries ``ages`` (each such agent's id -> the age in seconds at ``now`` of
+    its latest stamp at or before it, in id order) and ``suggested_hold``; catch it with
+    ``warnings.catch_warnings(record=True)`` to read them."""
+
+    ages: dict
+    """Each left-out agent seen in the current cycle: id -> age at ``now`` (s)."""
+    suggested_hold: float
+    """A ``hold=`` above the oldest of ``ages`` (1.25 times it, rounded up to 10 ms)."""
 
 
 class TrackHistory(NamedTuple):
@@ -181,31 +190,31 @@ def tracks_to_history(times: Any, ids: Sequence[Hashable] | np.ndarray, xy: Any,
             part.append(track)
             part_ids.append(key)
     if current:
-        warnings.warn(_left_out_message(current, hold), LeftOutWarning, stacklevel=2)
+        warnings.warn(_left_out_warning(current, hold), stacklevel=2)
     return TrackHistory(history=_stack(full, t_hist), context=_stack(part, t_hist), ids=full_ids,
                         context_ids=part_ids, left_out_ids=left_out,
                         frame_times=frames)  # fmt: skip
 
 
-SHOWN_AGES = 5
-"""How many left-out agents a ``LeftOutWarning`` names with their age (the others counted)."""
-
-
-def _left_out_message(current: list[tuple[Hashable, float]], hold: float) -> str:
+def _left_out_warning(current: list[tuple[Hashable, float]], hold: float) -> LeftOutWarning:
     """The ``LeftOutWarning`` for the left-out agents ``current`` ((id, age at now of its latest
     observation at or before now), in id order) seen in the tracker's current cycle, under the
-    ``hold`` given."""
+    ``hold`` given: a text that names no agent and no age (the same at every call of a loop
+    but for the suggested hold, a few values), with ``ages`` and ``suggested_hold`` on it."""
     oldest = max(age for _, age in current)
     suggest = math.ceil(round(oldest * 1.25 * 100, 6)) / 100  # above the oldest: 0.111 -> 0.14
-    shown = ", ".join(f"{key!r}: {age:.3f} s" for key, age in current[:SHOWN_AGES])
-    more = f" and {len(current) - SHOWN_AGES} more" if len(current) > SHOWN_AGES else ""
-    return (f"tracks_to_history: {len(current)} agent(s) seen in the tracker's current cycle "
-            "(within half their observation interval of now) have no position at now and are "
-            f"left out (left_out_ids): their latest stamp at or before now is older than "
-            f"hold={hold:g} s (age at now by id: {shown}{more}), their detections being stamped "
-            f"a little before now, or after it. Pass hold={suggest:g} (above the oldest age) to "
-            "place them at now, interpolated toward a stamp within hold after now, else "
-            "extrapolated at their last velocity or held (tracks_to_history's rules)")  # fmt: skip
+    warning = LeftOutWarning(
+        "tracks_to_history: agents seen in the tracker's current cycle (within half their "
+        "observation interval of now) have no position at now and are left out "
+        f"(left_out_ids): their latest stamp at or before now is older than hold={hold:g} s, "
+        "their detections being stamped a little before now, or after it. Pass "
+        f"hold={suggest:g} (above the oldest age) to place them at now, interpolated toward a "
+        "stamp within hold after now, else extrapolated at their last velocity or held "
+        "(tracks_to_history's rules); this warning's .ages gives each one's age at now"
+    )
+    warning.ages = dict(current)
+    warning.suggested_hold = suggest
+    return warning
 
 
 def _seen_this_cycle(t: np.ndarray, now: float, step: float, eps: float) -> bool:
