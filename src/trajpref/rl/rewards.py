@@ -27,9 +27,10 @@ from trajpref.rl import sda
 from trajpref.types import Batch
 
 HandcraftedReward = Callable[[Batch, torch.Tensor, FinetuneConfig], torch.Tensor]
-"""A per-step reward beside the diffusion score, as a plain callable: (the batch with its
+"""A per-step reward in place of the diffusion score, as a plain callable: (the batch with its
 future hidden, futures [M, N, T_f, 2] in absolute coordinates, the fine-tuning config) -> r
-[M, N, T_f], higher is better."""
+[M, N, T_f], higher is better. A run trains on one reward: a registered one is not added to
+the score (docs/rlhf.md, "A reward of your own")."""
 
 SCORE_REWARDS = ("score", "set")
 """The rewards that are the diffusion score (and read ``finetune.score_every``)."""
