@@ -259,9 +259,12 @@ class ModelConfig:
     """Social attention layers in the generator's own encoder (0: ``encoder_layers``, the
     denoiser's depth). Like ``generator_hidden``, it sizes the generator alone."""
     t_hist: int = 8
-    """Observed frames (T_h)."""
+    """Observed frames (T_h). It sizes the networks and must equal the data's windows: every
+    dataset and folder is read as 8 observed + 12 future frames (`trajpref data stats` prints
+    them), and training refuses other values before it starts; other horizons are not
+    supported yet."""
     t_fut: int = 12
-    """Future frames (T_f)."""
+    """Future frames (T_f); as ``t_hist``, it must equal the data's windows (12)."""
     samples: int = 20
     """K, the samples the generator emits per agent (its heads' output size)."""
     tau: int = 5

@@ -485,3 +485,21 @@ def test_a_state_that_processes_wrote_under_the_old_batching_is_refused(tiny_cfg
     run_record_path(out, "denoiser").write_text(json.dumps(record))
     train_stage("diffusion", tiny_cfg, out, device="cpu", progress=False, resume=str(last))
     assert torch.load(last, weights_only=True)["world_size"] == 1
+
+
+@pytest.mark.parametrize(("t_hist", "t_fut"), [(10, 20), (4, 6), (8, 20)])
+def test_horizons_other_than_the_datas_are_refused_before_anything_is_written(
+    tiny_cfg, tmp_path, t_hist, t_fut
+):
+    # the keys size the networks; they do not cut the data (8 + 12 windows): without the check
+    # training failed inside PyTorch, after config.yaml and the run record were written
+    model = dataclasses.replace(tiny_cfg.model, t_hist=t_hist, t_fut=t_fut)
+    cfg = dataclasses.replace(tiny_cfg, model=model)
+    out = tmp_path / "run"
+    said = (
+        rf"model\.t_hist / model\.t_fut are {t_hist} / {t_fut}, but the data's windows are "
+        r"8 observed \+ 12 future frames"
+    )
+    with pytest.raises(ConfigError, match=said):
+        train_stage("diffusion", cfg, out, device="cpu", progress=False, max_steps=1)
+    assert not out.exists() or not any(out.iterdir())
