@@ -93,3 +93,22 @@ def plot_calls(monkeypatch) -> list:
 
         monkeypatch.setattr(figures, name, wrapper)
     return calls
+
+
+@pytest.fixture(scope="module")
+def nba():
+    from trajpref.models.registry import load_predictor
+
+    return load_predictor("nba/generator", device="cpu")
+
+
+@pytest.fixture
+def repo(tiny_run, tmp_path):
+    """A repository of one published dataset, ``walks`` (the tiny run's generator)."""
+    from trajpref.models import checkpoint
+
+    root = tmp_path / "repo"
+    checkpoint.publish(tiny_run / "generator.safetensors",
+                       root / "models" / "walks" / "generator.safetensors")  # fmt: skip
+    (root / "benchmarks" / "results").mkdir(parents=True)
+    return root

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from helpers import ZARA1, _run, _scene
 from synthetic import straight_rows, write_tracks
 
 from trajpref import cli, config
@@ -31,12 +32,6 @@ def folder(tmp_path):
     write_tracks(root / "train" / "a.txt", straight_rows(30, agents=3))
     write_tracks(root / "test" / "b.txt", straight_rows(22, agents=2))
     return root
-
-
-def _run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def test_data_stats_json(capsys, folder):
@@ -581,9 +576,6 @@ def test_the_cli_offers_the_tables_methods():
 # ``--frame-interval`` means, and a legacy ``.pt`` checkpoint in the pace check.
 
 
-ZARA1 = "zara1/generator was trained on the zara1 fold (leave-one-out: the other four scenes)"
-
-
 ASSUMED = "this data's frame interval is only assumed (0.4 s between rows, none given)"
 
 
@@ -928,19 +920,6 @@ def test_the_cli_warning_asks_milliseconds(tmp_path, capsys, monkeypatch):
 # and inputs the models read; feet given to a metre model are told the factor; a scene with no
 # ball or two balls is said, in Python and on a split; float agent types from pandas (0.0 / 1.0)
 # are types.
-
-
-def _scene(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """A rebound-like scene: 10 players and the ball (agent 0), 8 steps of 0.12 s, metres,
-    x along the court's 28.65 m length. Returns history [11, 8, 2] and agent_type [11]."""
-    rng = np.random.default_rng(seed)
-    start = rng.uniform([2.0, 2.0], [12.0, 13.0], size=(11, 2))  # [11, 2] one half-court
-    velocity = rng.normal(0.0, 0.1, size=(11, 2))  # [11, 2] metres per step
-    velocity[0] *= 3  # the ball moves faster
-    history = start[:, None] + velocity[:, None] * np.arange(8)[None, :, None]  # [11, 8, 2]
-    types = np.zeros(11, np.int64)
-    types[0] = 1
-    return history, types
 
 
 def test_evaluate_says_a_folder_scene_with_two_balls(capsys, tmp_path):

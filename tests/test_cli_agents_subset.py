@@ -8,14 +8,7 @@ import json
 
 import numpy as np
 import pytest
-
-from trajpref.cli import main
-
-
-def _run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
+from helpers import _run
 
 
 @pytest.fixture

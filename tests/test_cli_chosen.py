@@ -10,21 +10,15 @@ import json
 import re
 
 import pytest
+from helpers import _run
 
 import trajpref.cli as cli
-from trajpref.cli import main
 from trajpref.models import checkpoint as ckpt
 from trajpref.models import zoo
 from trajpref.score.selection import CHOSEN, SelectingPredictor, chosen_selection
 
 pytestmark = pytest.mark.skipif("zara1/generator" not in zoo.published(),
                                 reason="the package was built without its models")  # fmt: skip
-
-
-def _run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 @pytest.fixture

@@ -10,21 +10,15 @@ import json
 
 import numpy as np
 import pytest
+from helpers import _run
 from synthetic import straight_rows, write_tracks
 
 from trajpref import __version__
-from trajpref.cli import main
 from trajpref.data import load_dataset
 from trajpref.data.registry import ETH_UCY
 from trajpref.models import checkpoint as ckpt
 
 FOLDS = ("zara1", "zara2")
-
-
-def _run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 @pytest.fixture(scope="module")

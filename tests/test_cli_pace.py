@@ -9,6 +9,7 @@ from decimal import Decimal
 from pathlib import Path
 
 import pytest
+from helpers import ZARA1
 from synthetic import TINY_OVERRIDES
 
 from trajpref import cli
@@ -16,7 +17,6 @@ from trajpref.cli import main
 from trajpref.data import load_dataset
 from trajpref.io import read_checkpoint_header
 
-ZARA1 = "zara1/generator was trained on the zara1 fold (leave-one-out: the other four scenes)"
 PACE = "this data steps 0.1 s, the model's 0.4 s (--time-step 4 reads it at the model's step)"
 
 

@@ -9,17 +9,11 @@ import re
 import numpy as np
 import pytest
 import torch
+from helpers import _run
 from PIL import Image
 from synthetic import write_tracks
 
-from trajpref.cli import main
 from trajpref.metrics import min_ade_fde
-
-
-def _run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 @pytest.fixture

@@ -13,17 +13,11 @@ from pathlib import Path
 
 import pytest
 import torch
+from helpers import _run
 
 import trajpref.cli as cli
-from trajpref.cli import main
 from trajpref.config import ExperimentConfig, config_entries
 from trajpref.train.run import train_stage
-
-
-def _run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def test_evaluate_prints_the_score_metrics_in_text_too(capsys, walks, tiny_run):

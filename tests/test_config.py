@@ -4,6 +4,7 @@ import typing
 
 import pytest
 import yaml
+from helpers import NEW
 
 from trajpref import config
 from trajpref.config import (
@@ -304,10 +305,6 @@ def test_partial_future_targets_and_a_held_out_scene_are_refused_together():
 # rl.objective.LOSS_SAMPLES): the CLI offers its names, and a name that reaches a dispatch
 # without an entry there is an error, never trained as RLHF-ReS (the walkthrough's finding: a
 # new method's name took the k* path of ``RLObjective.selection``).
-
-
-NEW = "rlhf-new"
-"""A method's name as a contributor adds it to the list, before its dispatch entries."""
 
 
 def test_a_method_added_to_the_literal_alone_is_refused(monkeypatch):

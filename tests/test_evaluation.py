@@ -2,12 +2,12 @@
 evaluation pass itself is tested through its callers (train, CLI, reproduce)."""
 
 import dataclasses
-import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
+from helpers import _messages
 from synthetic import make_scene
 
 from trajpref.data import load_dataset
@@ -179,18 +179,6 @@ def test_the_step_hint_does_not_ask_at_or_below_ten_seconds():
 # and inputs the models read; feet given to a metre model are told the factor; a scene with no
 # ball or two balls is said, in Python and on a split; float agent types from pandas (0.0 / 1.0)
 # are types.
-
-
-@pytest.fixture(scope="module")
-def nba():
-    return load_predictor("nba/generator", device="cpu")
-
-
-def _messages(call) -> list[str]:
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        call()
-    return [str(w.message) for w in caught]
 
 
 def _typed(walks: Path, balls: list[int]) -> TrajectoryDataset:

@@ -11,6 +11,7 @@ import warnings
 
 import numpy as np
 import pytest
+from helpers import FAST, UNITS, WIDE
 
 from trajpref.cli import main
 from trajpref.data import load_dataset
@@ -18,9 +19,6 @@ from trajpref.evaluation import evaluate, warn_observed_pace
 from trajpref.models.timing import FAST_LIMIT, WIDE_LIMIT
 from trajpref.types import AGENT_PERSON, DatasetInfo, Scene, TrajectoryDataset
 
-FAST = "faster than its training data"
-WIDE = "more than 25 model units apart at its last observed frame"
-UNITS = "looks like it is in other units than the model's"
 JUMP = "jumps more than 5 model units"
 
 

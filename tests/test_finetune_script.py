@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 from bench import load_benchmark
+from helpers import METRICS, _files, _pretrain
 
-from trajpref.models import checkpoint
 from trajpref.rl.presets import equal_budget_args
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -187,24 +187,6 @@ def test_a_run_folder_of_the_sda_reward_is_its_own_settings(tmp_path):
 # ``--results`` and ``--models``, and reproduce.py passes them under ``--out``.
 
 
-METRICS = dict.fromkeys(("min_ade", "min_fde", "joint_min_ade", "joint_min_fde", "max_ats",
-                         "max_fts", "top1_recall_ats", "top5_recall_ats"), 0.5)  # fmt: skip
-
-
-def _files(*folders: Path) -> dict[Path, bytes]:
-    return {p: p.read_bytes() for f in folders if f.is_dir() for p in f.rglob("*") if p.is_file()}
-
-
-@pytest.fixture
-def repo(tiny_run, tmp_path):
-    """A repository of one published dataset, ``walks`` (the tiny run's generator)."""
-    root = tmp_path / "repo"
-    checkpoint.publish(tiny_run / "generator.safetensors",
-                       root / "models" / "walks" / "generator.safetensors")  # fmt: skip
-    (root / "benchmarks" / "results").mkdir(parents=True)
-    return root
-
-
 # ----------------------------------------------------------------------------- finetune.py
 
 
@@ -282,17 +264,6 @@ def test_finetune_reads_its_start_from_models_and_publishes_only_where_told(
 
 
 # ----------------------------------------------------------------------------- pretrain.py
-
-
-def _pretrain(monkeypatch, root: Path, *argv: str):
-    pre = load_benchmark("pretrain")
-    monkeypatch.setattr(pre, "ROOT", root)
-    monkeypatch.setattr(pre, "load_dataset", lambda *a, **k: None)
-    monkeypatch.setattr(pre, "time_predictors", lambda *a, **k: {"leapfrog": 1.0, "full": 9.0})
-    monkeypatch.setattr(pre, "evaluate", lambda *a, **k: METRICS)
-    monkeypatch.setattr("sys.argv", ["pretrain.py", "--dataset", "walks", "--no-full-eval",
-                                     *argv])  # fmt: skip
-    pre.main()
 
 
 # ----------------------------------------------------- --runs, --results, --models: all or none

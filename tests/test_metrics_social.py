@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import torch
 import trajnetplusplustools as tnt
+from helpers import _run
 from synthetic import make_scene
 from trajnetplusplustools.metrics import collision as tnt_collision
 
-from trajpref.cli import main
 from trajpref.data import load_dataset
 from trajpref.evaluation import evaluate, predict_dataset
 from trajpref.metrics import (
@@ -255,12 +255,6 @@ def test_bins_add_up_to_the_whole_split():
 
 
 # ----------------------------------------------------------------------------- evaluate --json
-
-
-def _run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def test_evaluate_json_has_collisions_and_bins(capsys, walks, tiny_run):

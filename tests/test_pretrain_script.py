@@ -4,12 +4,11 @@ name, pointing at the commit that holds the weights it measured."""
 import json
 import shutil
 import subprocess
-from pathlib import Path
 
 import pytest
 from bench import load_benchmark
+from helpers import _files, _pretrain
 
-from trajpref.models import checkpoint
 from trajpref.results import FIELDS
 
 
@@ -107,36 +106,7 @@ def test_training_again_skips_the_stages_that_have_finished(tiny_cfg, tmp_path, 
 # ``--results`` and ``--models``, and reproduce.py passes them under ``--out``.
 
 
-METRICS = dict.fromkeys(("min_ade", "min_fde", "joint_min_ade", "joint_min_fde", "max_ats",
-                         "max_fts", "top1_recall_ats", "top5_recall_ats"), 0.5)  # fmt: skip
-
-
-def _files(*folders: Path) -> dict[Path, bytes]:
-    return {p: p.read_bytes() for f in folders if f.is_dir() for p in f.rglob("*") if p.is_file()}
-
-
-@pytest.fixture
-def repo(tiny_run, tmp_path):
-    """A repository of one published dataset, ``walks`` (the tiny run's generator)."""
-    root = tmp_path / "repo"
-    checkpoint.publish(tiny_run / "generator.safetensors",
-                       root / "models" / "walks" / "generator.safetensors")  # fmt: skip
-    (root / "benchmarks" / "results").mkdir(parents=True)
-    return root
-
-
 # ----------------------------------------------------------------------------- pretrain.py
-
-
-def _pretrain(monkeypatch, root: Path, *argv: str):
-    pre = load_benchmark("pretrain")
-    monkeypatch.setattr(pre, "ROOT", root)
-    monkeypatch.setattr(pre, "load_dataset", lambda *a, **k: None)
-    monkeypatch.setattr(pre, "time_predictors", lambda *a, **k: {"leapfrog": 1.0, "full": 9.0})
-    monkeypatch.setattr(pre, "evaluate", lambda *a, **k: METRICS)
-    monkeypatch.setattr("sys.argv", ["pretrain.py", "--dataset", "walks", "--no-full-eval",
-                                     *argv])  # fmt: skip
-    pre.main()
 
 
 def test_pretrain_writes_its_rows_meta_and_models_where_it_is_told(

@@ -514,16 +514,6 @@ def test_the_notes_name_the_departures_that_bear_on_the_rlhf_columns(setup):
 
 
 @pytest.fixture
-def repo(tiny_run, tmp_path):
-    """A repository of one published dataset, ``walks`` (the tiny run's generator)."""
-    root = tmp_path / "repo"
-    checkpoint.publish(tiny_run / "generator.safetensors",
-                       root / "models" / "walks" / "generator.safetensors")  # fmt: skip
-    (root / "benchmarks" / "results").mkdir(parents=True)
-    return root
-
-
-@pytest.fixture
 def repo_setup(repo, walks, tmp_path):
     (tmp_path / "configs").mkdir()
     return reproduce.Setup(

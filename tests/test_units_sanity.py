@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import UNITS
 from synthetic import write_tracks
 
 from trajpref.cli import main
@@ -18,8 +19,6 @@ from trajpref.models.registry import load_predictor
 from trajpref.models.timing import PACE_LIMIT, pace_problem, pace_quantile
 from trajpref.score import TrajectoryScorer, predict_scene, predict_scenes, rank_samples
 from trajpref.score.selection import SelectionConfig, select_for_scene
-
-UNITS = "looks like it is in other units than the model's"
 
 
 class _Scaled:

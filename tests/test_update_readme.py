@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 from bench import load_benchmark
+from helpers import _row
 from synthetic import tiny_generator_file
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -140,14 +141,6 @@ def test_check_says_whether_the_readme_would_change_and_writes_nothing(tmp_path)
 # Which weights a published number measured (the reproducibility audit of walk 67): a card's
 # test row must name its file's digest, rows without one whose file is gone are counted, and
 # the README's latencies are checked against the files they timed.
-
-
-def _row(method, checkpoint, date, model_hash=None, **fields):
-    return {"dataset": "zara2", "method": method, "seed": 0, "split": "test", "samples": 20,
-            "protocol": "all", "checkpoint": checkpoint, "model_hash": model_hash,
-            "machine": "m, 2 CPU cores, 2 threads", "min_ade": 0.1, "min_fde": 0.2,
-            "joint_min_ade": 0.3, "joint_min_fde": 0.4, "date": date,
-            "command": "python benchmarks/x.py", **fields}  # fmt: skip
 
 
 def test_the_readme_drops_an_undigested_row_of_a_gone_file_beside_a_re_measurement():

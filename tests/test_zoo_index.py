@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 from bench import load_benchmark
+from helpers import _row
 
 from trajpref.models import checkpoint as ckpt
 
@@ -356,14 +357,6 @@ def test_cards_train_with_the_shipped_configs_name_and_place_what_they_cite(monk
 
 
 ZARA2 = ROOT / "models" / "zara2"
-
-
-def _row(method, checkpoint, date, model_hash=None, **fields):
-    return {"dataset": "zara2", "method": method, "seed": 0, "split": "test", "samples": 20,
-            "protocol": "all", "checkpoint": checkpoint, "model_hash": model_hash,
-            "machine": "m, 2 CPU cores, 2 threads", "min_ade": 0.1, "min_fde": 0.2,
-            "joint_min_ade": 0.3, "joint_min_fde": 0.4, "date": date,
-            "command": "python benchmarks/x.py", **fields}  # fmt: skip
 
 
 def test_a_denoiser_card_shows_the_row_that_names_its_files_digest(monkeypatch):

@@ -9,12 +9,12 @@ import warnings
 
 import numpy as np
 import pytest
+from helpers import UNITS
 
 from trajpref.models.timing import JUMP_LIMIT, jump_problem, observed_jumps
 from trajpref.types import AGENT_BALL, AGENT_PERSON
 
 JUMP = "jumps more than"
-UNITS = "looks like it is in other units than the model's"
 
 
 class _Scaled:

@@ -14,6 +14,7 @@ import warnings
 
 import numpy as np
 import pytest
+from helpers import FAST, UNITS, WIDE
 
 from trajpref.models.registry import load_predictor
 from trajpref.models.timing import (
@@ -29,9 +30,6 @@ from trajpref.score import TrajectoryScorer, predict_scene, predict_scenes, rank
 from trajpref.score.selection import SelectionConfig, select_for_scene
 from trajpref.types import AGENT_BALL
 
-FAST = "faster than its training data"
-WIDE = "more than 25 model units apart at its last observed frame"
-UNITS = "looks like it is in other units than the model's"
 T = np.arange(8)[:, None]
 
 

@@ -1,10 +1,10 @@
 """The pace and units check of a model against its data (``models.timing``)."""
 
 import types
-import warnings
 
 import numpy as np
 import pytest
+from helpers import _messages, _scene
 
 from trajpref.models.registry import load_predictor
 from trajpref.models.timing import check_pace, timing_problems
@@ -48,9 +48,7 @@ def test_the_resampling_advice_names_the_public_resampler():
 
 
 def test_predict_scene_gives_the_hint_for_a_published_model():
-    import numpy as np
 
-    from trajpref.models.registry import load_predictor
     from trajpref.score import predict_scene
 
     model = load_predictor("zara1/generator", device="cpu")
@@ -72,31 +70,6 @@ def test_the_pixel_names_are_the_registrys_one_set():
 # and inputs the models read; feet given to a metre model are told the factor; a scene with no
 # ball or two balls is said, in Python and on a split; float agent types from pandas (0.0 / 1.0)
 # are types.
-
-
-@pytest.fixture(scope="module")
-def nba():
-    return load_predictor("nba/generator", device="cpu")
-
-
-def _scene(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """A rebound-like scene: 10 players and the ball (agent 0), 8 steps of 0.12 s, metres,
-    x along the court's 28.65 m length. Returns history [11, 8, 2] and agent_type [11]."""
-    rng = np.random.default_rng(seed)
-    start = rng.uniform([2.0, 2.0], [12.0, 13.0], size=(11, 2))  # [11, 2] one half-court
-    velocity = rng.normal(0.0, 0.1, size=(11, 2))  # [11, 2] metres per step
-    velocity[0] *= 3  # the ball moves faster
-    history = start[:, None] + velocity[:, None] * np.arange(8)[None, :, None]  # [11, 8, 2]
-    types = np.zeros(11, np.int64)
-    types[0] = 1
-    return history, types
-
-
-def _messages(call) -> list[str]:
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        call()
-    return [str(w.message) for w in caught]
 
 
 # 2. feet for a metre model

@@ -8,6 +8,7 @@ from types import SimpleNamespace
 
 import pytest
 import torch
+from helpers import NEW
 
 from trajpref import config
 from trajpref.config import FinetuneConfig, load_config
@@ -99,10 +100,6 @@ def test_the_value_loss_is_clipped_around_the_references_value(tiny_run, walks, 
 # rl.objective.LOSS_SAMPLES): the CLI offers its names, and a name that reaches a dispatch
 # without an entry there is an error, never trained as RLHF-ReS (the walkthrough's finding: a
 # new method's name took the k* path of ``RLObjective.selection``).
-
-
-NEW = "rlhf-new"
-"""A method's name as a contributor adds it to the list, before its dispatch entries."""
 
 
 def test_every_method_has_its_entries():

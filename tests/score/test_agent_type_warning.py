@@ -6,6 +6,7 @@ import warnings
 
 import numpy as np
 import pytest
+from helpers import _messages
 
 from trajpref.data import load_dataset
 from trajpref.models.registry import load_predictor
@@ -41,13 +42,6 @@ def _calls(model, scorer, history, types=None):
     rank_samples(scorer, history, samples, types)
     select_for_scene(scorer, history, samples, SelectionConfig(keep=2), types)
     predict_scenes(model, [history], 4, None if types is None else [types])
-
-
-def _messages(call) -> list[str]:
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        call()
-    return [str(w.message) for w in caught]
 
 
 def test_a_typed_model_given_no_types_says_so_each_call(monkeypatch, model, scorer, scene):

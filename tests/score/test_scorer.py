@@ -4,6 +4,9 @@ import warnings
 import numpy as np
 import pytest
 import torch
+from helpers import _messages
+from helpers import _scene as _nba_scene
+from score.helpers import _scene
 from synthetic import make_scene
 
 from trajpref.cli import main
@@ -343,15 +346,6 @@ def zara1_scorer():
 FRAME = "samples do not continue the history.*another frame.*offsets"
 
 
-def _scene(fast: float = 1.4) -> np.ndarray:
-    """[3, 8, 2] three walkers in a map frame (50, 20) m from its origin; agent 2 at ``fast``
-    m/s."""
-    t = np.arange(8) * 0.4
-    walkers = [np.stack([t * 1.2, 0 * t], -1), np.stack([5 - t, 3 + 0 * t], -1),
-               np.stack([2 + 0 * t, -2 + fast * t], -1)]  # fmt: skip
-    return (np.stack(walkers) + np.array([50.0, 20.0])).astype(np.float32)
-
-
 @pytest.fixture(scope="module")
 def scene(zara1):
     history = _scene()
@@ -428,33 +422,8 @@ def test_with_steps_keeps_the_scorers_file_name(zara1_scorer):
 
 
 @pytest.fixture(scope="module")
-def nba():
-    return load_predictor("nba/generator", device="cpu")
-
-
-@pytest.fixture(scope="module")
 def nba_scorer():
     return TrajectoryScorer.from_checkpoint("nba/denoiser").with_steps([0])
-
-
-def _nba_scene(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """A rebound-like scene: 10 players and the ball (agent 0), 8 steps of 0.12 s, metres,
-    x along the court's 28.65 m length. Returns history [11, 8, 2] and agent_type [11]."""
-    rng = np.random.default_rng(seed)
-    start = rng.uniform([2.0, 2.0], [12.0, 13.0], size=(11, 2))  # [11, 2] one half-court
-    velocity = rng.normal(0.0, 0.1, size=(11, 2))  # [11, 2] metres per step
-    velocity[0] *= 3  # the ball moves faster
-    history = start[:, None] + velocity[:, None] * np.arange(8)[None, :, None]  # [11, 8, 2]
-    types = np.zeros(11, np.int64)
-    types[0] = 1
-    return history, types
-
-
-def _messages(call) -> list[str]:
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        call()
-    return [str(w.message) for w in caught]
 
 
 # 4. float agent types

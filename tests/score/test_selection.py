@@ -9,6 +9,7 @@ import warnings
 import numpy as np
 import pytest
 import torch
+from score.helpers import _scene
 from synthetic import make_scene
 
 from trajpref.cli import main
@@ -386,15 +387,6 @@ def test_keep_must_be_a_positive_integer(keep):
 # Walkthrough 67 (a robotics engineer's planning loop): samples that do not continue the
 # history (another frame, offsets) are refused instead of ranked; ``select_for_scene`` can return
 # the residuals and the pace gate it used; the selection's pace helper has its own name.
-
-
-def _scene(fast: float = 1.4) -> np.ndarray:
-    """[3, 8, 2] three walkers in a map frame (50, 20) m from its origin; agent 2 at ``fast``
-    m/s."""
-    t = np.arange(8) * 0.4
-    walkers = [np.stack([t * 1.2, 0 * t], -1), np.stack([5 - t, 3 + 0 * t], -1),
-               np.stack([2 + 0 * t, -2 + fast * t], -1)]  # fmt: skip
-    return (np.stack(walkers) + np.array([50.0, 20.0])).astype(np.float32)
 
 
 # ----------------------------------------------------------------------------- finding 2

@@ -6,9 +6,7 @@ import shutil
 from pathlib import Path
 
 import pytest
-
-METHODS = ("methodalpha", "methodbeta")
-"""Method names chosen to be easy to search for: they must never reach the page."""
+from survey.helpers import METHODS
 
 
 @pytest.fixture(scope="session")
@@ -71,3 +69,21 @@ def store(synthetic_study):
     s = AnswerStore(synthetic_study / DATABASE, study)
     yield s
     s.close()
+
+
+@pytest.fixture
+def saved_labels(monkeypatch):
+    """The axis titles every saved figure shows: (text, colour) of each x and y label."""
+    import matplotlib.figure
+
+    labels: list[tuple[str, str]] = []
+    original = matplotlib.figure.Figure.savefig
+
+    def savefig(fig, *args, **kwargs):
+        for ax in fig.axes:
+            for label in (ax.xaxis.label, ax.yaxis.label):
+                labels.append((label.get_text(), str(label.get_color())))
+        return original(fig, *args, **kwargs)
+
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", savefig)
+    return labels

@@ -8,9 +8,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import _run
 from scipy import stats
+from survey.helpers import DOCS, _write
 
-from trajpref.cli import main
 from trajpref.errors import ConfigError, DataError
 from trajpref.survey import analyze as analyze_module
 from trajpref.survey.analyze import analyze, holm, run_analysis, spearman, stars, wilcoxon
@@ -26,11 +27,7 @@ from trajpref.survey.manifest import (
 from trajpref.survey.simulate import SimulateConfig, simulate
 from trajpref.survey.store import AnswerStore
 from trajpref.survey.study import (
-    SceneData,
-    ground_truth_panel,
     make_synthetic_study,
-    shown_predictions,
-    write_study,
 )
 
 ATS = {"A": (0.5, 0.3), "B": (0.2, 0.1), "C": (-0.1, -0.4)}
@@ -382,12 +379,6 @@ def test_run_analysis_finds_excluded_raters_in_any_case_and_refuses_unknown_ones
 # in the access log, and the export's details.
 
 
-def _run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
 def _study_with_truth(methods=("A", "B", GROUND_TRUTH), scenes=("s1", "s2")) -> Study:
     """Scenes whose panels X, Y, Z show the methods in order; ATS 0.5 (A), 0.2 (B)."""
     ats = {"A": 0.5, "B": 0.2, GROUND_TRUTH: 0.0}
@@ -495,25 +486,6 @@ def test_the_ground_truth_above_the_best_method_is_marked_and_not_ranked(tmp_pat
 # ---- finding 6: unknown units ---------------------------------------------------------
 
 
-def _write(folder: Path, units: str = "m", consent: str = "", **build) -> Study:
-    """A one-scene study of two agents: the method 'alpha' and the rated ground truth."""
-    rng = np.random.default_rng(0)
-    track = rng.normal(0, 1, (2, 1, 2)) + 0.4 * np.arange(20)[None, :, None]  # [2, 20, 2]
-    history, future = track[:, :8], track[:, 8:]
-    pred = future[None] + rng.normal(0, 0.3, (4, 2, 12, 2))  # [K, P, 12, 2]
-    panels = {"alpha": shown_predictions(pred, 1 + rng.random((4, 2, 12)), np.ones((2, 12)),
-                                         future),
-              GROUND_TRUTH: ground_truth_panel(future)}  # fmt: skip
-    scenes = [
-        SceneData(history, future, panels, "f@0", 0, 0),
-        SceneData(history + 1, future + 1, panels, "f@20", 20, 0),
-    ]
-    more = {"consent": consent} if consent else {}
-    return write_study(folder, scenes, [GROUND_TRUTH, "alpha"], units=units,
-                       dataset={"name": "d", "split": "test", "units": units}, build=build,
-                       **more)  # fmt: skip
-
-
 # ---- finding 7: the study id, versions and hashes in analysis.json and the CSV -----------
 
 
@@ -558,12 +530,6 @@ def test_select_rows_error_without_other_raters_has_no_hint():
 # Walkthrough 65's survey findings: a SIGTERM stop, a study in a read-only folder, rater ids
 # with a trailing newline, the study folder deleted while serving, a database write that fails,
 # the docs against the code, and the page's resumed session on a shared machine.
-
-
-ROOT = Path(__file__).resolve().parents[2]
-
-
-DOCS = ROOT / "docs" / "survey.md"
 
 
 # ---- 6. the docs against the code -----------------------------------------------------------

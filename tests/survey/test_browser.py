@@ -19,6 +19,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
+from survey.helpers import METHODS, ROOT
 
 from trajpref.survey.manifest import (
     load_study,
@@ -40,7 +41,6 @@ FLAGS = [
     "--window-size=1000,1000",
 ]
 """No GPU, no sandbox (root in a container), and nothing that would try to reach out."""
-METHODS = ("methodalpha", "methodbeta")  # as in conftest.py
 
 
 def _need_browser() -> None:
@@ -268,9 +268,6 @@ def test_the_page_keeps_the_line_breaks_of_the_instructions_and_the_consent():
 # Walkthrough 65's survey findings: a SIGTERM stop, a study in a read-only folder, rater ids
 # with a trailing newline, the study folder deleted while serving, a database write that fails,
 # the docs against the code, and the page's resumed session on a shared machine.
-
-
-ROOT = Path(__file__).resolve().parents[2]
 
 
 STATIC = ROOT / "src" / "trajpref" / "survey" / "static"

@@ -3,10 +3,11 @@
 import hashlib
 import json
 
-import matplotlib.figure
 import numpy as np
 import pytest
+from helpers import _run
 from starlette.testclient import TestClient
+from survey.helpers import METHODS
 
 from trajpref.cli import main
 from trajpref.errors import ConfigError, DataError, TrajprefError
@@ -21,8 +22,6 @@ from trajpref.survey.store import AnswerStore
 from trajpref.survey.study import (
     shown_predictions,
 )
-
-METHODS = ("methodalpha", "methodbeta")  # as in conftest.py: never to reach the page
 
 
 def test_select_scenes_is_seeded_and_stratified_by_size():
@@ -264,28 +263,6 @@ def test_survey_build_warns_once_of_a_built_in_datasets_ignored_options(
 # Walkthrough 63-B's survey findings: the analysis of an unfinished pilot, the ground truth
 # above the best method, unknown units, the study's reproducibility record, consent, rater ids
 # in the access log, and the export's details.
-
-
-def _run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-@pytest.fixture
-def saved_labels(monkeypatch):
-    """The axis titles every saved figure shows: (text, colour) of each x and y label."""
-    labels: list[tuple[str, str]] = []
-    original = matplotlib.figure.Figure.savefig
-
-    def savefig(fig, *args, **kwargs):
-        for ax in fig.axes:
-            for label in (ax.xaxis.label, ax.yaxis.label):
-                labels.append((label.get_text(), str(label.get_color())))
-        return original(fig, *args, **kwargs)
-
-    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", savefig)
-    return labels
 
 
 def test_build_warns_of_unknown_units_names_the_models_units_and_records_hashes(

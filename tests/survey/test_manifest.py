@@ -4,10 +4,10 @@ import json
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 from starlette.testclient import TestClient
+from survey.helpers import _fixed, _order
 
 from trajpref.errors import ConfigError, DataError
 from trajpref.survey.build import BuildConfig
@@ -118,19 +118,6 @@ def test_names_with_a_trailing_newline_are_refused_in_the_manifest_and_the_build
 # smallest of its scene (a rater comparing image sizes could find it). Now each rater sees an
 # order of their own, each answer is stored with where it was shown, analyze checks for a
 # position effect, and the pictures of a scene have one byte size.
-
-
-def _order(got: dict) -> list[tuple[str, tuple[str, ...]]]:
-    """``progress()["order"]`` as ``[(scene, (panel, ...)), ...]``."""
-    return [(o["scene"], tuple(o["panels"])) for o in got["order"]]
-
-
-def _fixed(folder: Path) -> None:
-    """Make ``folder``'s manifest one of a study built before per-rater orders (no
-    ``order``): what every rater of it saw was the manifest's order."""
-    manifest = json.loads((folder / MANIFEST).read_text())
-    del manifest["order"]
-    (folder / MANIFEST).write_text(json.dumps(manifest))
 
 
 # ---- 1. a per-rater order, the same at every visit -----------------------------------------

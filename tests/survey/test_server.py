@@ -10,27 +10,20 @@ import sqlite3
 import urllib.request
 from pathlib import Path
 
-import numpy as np
 import pytest
 from starlette.testclient import TestClient
+from survey.helpers import CONSENT, METHODS, OK, _write
 
 from trajpref.survey import server as server_module
 from trajpref.survey.manifest import (
     DATABASE,
     GROUND_TRUTH,
     MANIFEST,
-    Study,
     load_study,
 )
 from trajpref.survey.server import LOOPBACK_NAMES, create_app, serve_subprocess
 from trajpref.survey.simulate import SimulateConfig, simulate
 from trajpref.survey.store import AnswerError, AnswerStore
-from trajpref.survey.study import (
-    SceneData,
-    ground_truth_panel,
-    shown_predictions,
-    write_study,
-)
 
 PUT = "/api/raters/r1/answers/s01/A"
 SUBMIT = {"submit": True}
@@ -326,29 +319,7 @@ def test_a_deeply_nested_body_is_a_400_with_nothing_written(store):
 # ---- finding 6: unknown units ---------------------------------------------------------
 
 
-def _write(folder: Path, units: str = "m", consent: str = "", **build) -> Study:
-    """A one-scene study of two agents: the method 'alpha' and the rated ground truth."""
-    rng = np.random.default_rng(0)
-    track = rng.normal(0, 1, (2, 1, 2)) + 0.4 * np.arange(20)[None, :, None]  # [2, 20, 2]
-    history, future = track[:, :8], track[:, 8:]
-    pred = future[None] + rng.normal(0, 0.3, (4, 2, 12, 2))  # [K, P, 12, 2]
-    panels = {"alpha": shown_predictions(pred, 1 + rng.random((4, 2, 12)), np.ones((2, 12)),
-                                         future),
-              GROUND_TRUTH: ground_truth_panel(future)}  # fmt: skip
-    scenes = [
-        SceneData(history, future, panels, "f@0", 0, 0),
-        SceneData(history + 1, future + 1, panels, "f@20", 20, 0),
-    ]
-    more = {"consent": consent} if consent else {}
-    return write_study(folder, scenes, [GROUND_TRUTH, "alpha"], units=units,
-                       dataset={"name": "d", "split": "test", "units": units}, build=build,
-                       **more)  # fmt: skip
-
-
 # ---- finding 8: consent ---------------------------------------------------------------
-
-
-CONSENT = "I agree to take part.\n\nMy answers are kept for a year."
 
 
 def _agree(client, rater: str, text_hash: str):
@@ -544,9 +515,6 @@ def test_a_json_agreement_from_another_origin_is_refused_and_records_nothing(tmp
 # the docs against the code, and the page's resumed session on a shared machine.
 
 
-OK = {"social": 4, "kinetics": 2}
-
-
 def _answers(path: Path) -> list[tuple]:
     with contextlib.closing(sqlite3.connect(path)) as db:
         return db.execute("SELECT rater, scene, panel, social, kinetics FROM answers").fetchall()
@@ -663,9 +631,6 @@ def test_a_write_that_fails_is_a_json_503_logged_once_and_nothing_is_kept(store)
 # smallest of its scene (a rater comparing image sizes could find it). Now each rater sees an
 # order of their own, each answer is stored with where it was shown, analyze checks for a
 # position effect, and the pictures of a scene have one byte size.
-
-
-METHODS = ("methodalpha", "methodbeta")  # as in conftest.py
 
 
 def test_the_served_pictures_name_no_method(tiny_study, tmp_path):

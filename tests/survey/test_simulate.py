@@ -1,15 +1,15 @@
 """survey simulate: synthetic raters, labelled as such, seeded, and following the error."""
 
 import contextlib
-import json
 import sqlite3
 from pathlib import Path
 
 import numpy as np
 import pytest
+from survey.helpers import _fixed, _positions
 
 from trajpref.errors import ConfigError
-from trajpref.survey.manifest import DATABASE, GROUND_TRUTH, MANIFEST, load_study
+from trajpref.survey.manifest import DATABASE, GROUND_TRUTH, load_study
 from trajpref.survey.simulate import SimulateConfig, simulate
 from trajpref.survey.store import AnswerStore
 
@@ -81,21 +81,6 @@ def test_a_prefix_in_capitals_gives_lower_case_ids_and_meets_existing_ones(store
 # smallest of its scene (a rater comparing image sizes could find it). Now each rater sees an
 # order of their own, each answer is stored with where it was shown, analyze checks for a
 # position effect, and the pictures of a scene have one byte size.
-
-
-def _positions(path: Path) -> dict[tuple[str, str, str], tuple]:
-    with contextlib.closing(sqlite3.connect(path)) as db:
-        rows = db.execute("SELECT rater, scene, panel, scene_position, panel_position "
-                          "FROM answers").fetchall()  # fmt: skip
-    return {r[:3]: r[3:] for r in rows}
-
-
-def _fixed(folder: Path) -> None:
-    """Make ``folder``'s manifest one of a study built before per-rater orders (no
-    ``order``): what every rater of it saw was the manifest's order."""
-    manifest = json.loads((folder / MANIFEST).read_text())
-    del manifest["order"]
-    (folder / MANIFEST).write_text(json.dumps(manifest))
 
 
 def test_simulate_answers_in_each_raters_order_with_the_same_ratings_as_a_fixed_order(

@@ -11,31 +11,21 @@ import sys
 import threading
 from pathlib import Path
 
-import numpy as np
 import pytest
 from starlette.testclient import TestClient
+from survey.helpers import CONSENT, OK, _fixed, _order, _positions, _read_only, _simulated, _write
 
 from trajpref.errors import ConfigError
 from trajpref.survey.analyze import run_analysis
 from trajpref.survey.export import export_csv
 from trajpref.survey.manifest import (
     DATABASE,
-    GROUND_TRUTH,
     MANIFEST,
-    Study,
     load_study,
 )
 from trajpref.survey.server import create_app
-from trajpref.survey.simulate import SimulateConfig, simulate
 from trajpref.survey.store import SCHEMA, AnswerError, AnswerStore, StoreError, check_rater
-from trajpref.survey.study import (
-    SceneData,
-    ground_truth_panel,
-    shown_predictions,
-    write_study,
-)
 
-OK = {"social": 4, "kinetics": 2}
 COLUMNS = "(rater, scene, panel, social, kinetics, revision, created_at, updated_at)"
 """The columns an answer added by hand names (the positions left out: NULL)."""
 
@@ -221,7 +211,6 @@ def _edit_manifest(folder, edit) -> None:
 def test_a_study_of_the_same_structure_from_other_data_or_models_is_refused(
     store, synthetic_study, tmp_path, edit
 ):
-    import shutil
 
     other = shutil.copytree(
         synthetic_study, tmp_path / "other", ignore=lambda d, n: ["answers.sqlite"]
@@ -430,7 +419,6 @@ def test_case_variants_of_one_id_among_the_raters_are_listed(store):
 
 # ---- answers are personal data: owner-only files ------------------------------------------
 def test_a_new_database_and_its_wal_files_are_owner_only(synthetic_study, tmp_path):
-    import os
 
     old = os.umask(0o022)
     try:
@@ -462,29 +450,7 @@ def test_opening_a_database_others_can_read_warns(synthetic_study, tmp_path):
 # ---- finding 6: unknown units ---------------------------------------------------------
 
 
-def _write(folder: Path, units: str = "m", consent: str = "", **build) -> Study:
-    """A one-scene study of two agents: the method 'alpha' and the rated ground truth."""
-    rng = np.random.default_rng(0)
-    track = rng.normal(0, 1, (2, 1, 2)) + 0.4 * np.arange(20)[None, :, None]  # [2, 20, 2]
-    history, future = track[:, :8], track[:, 8:]
-    pred = future[None] + rng.normal(0, 0.3, (4, 2, 12, 2))  # [K, P, 12, 2]
-    panels = {"alpha": shown_predictions(pred, 1 + rng.random((4, 2, 12)), np.ones((2, 12)),
-                                         future),
-              GROUND_TRUTH: ground_truth_panel(future)}  # fmt: skip
-    scenes = [
-        SceneData(history, future, panels, "f@0", 0, 0),
-        SceneData(history + 1, future + 1, panels, "f@20", 20, 0),
-    ]
-    more = {"consent": consent} if consent else {}
-    return write_study(folder, scenes, [GROUND_TRUTH, "alpha"], units=units,
-                       dataset={"name": "d", "split": "test", "units": units}, build=build,
-                       **more)  # fmt: skip
-
-
 # ---- finding 8: consent ---------------------------------------------------------------
-
-
-CONSENT = "I agree to take part.\n\nMy answers are kept for a year."
 
 
 def test_a_study_without_consent_writes_no_key_and_needs_no_agreement(tmp_path):
@@ -568,39 +534,7 @@ def test_a_database_of_an_older_version_gets_the_consents_table(synthetic_study)
 # the docs against the code, and the page's resumed session on a shared machine.
 
 
-@contextlib.contextmanager
-def _read_only(folder: Path):
-    """``folder`` read-only for this process, restored afterwards: ``chattr +i`` as root (who
-    ignores modes), else mode 0555."""
-    if getattr(os, "geteuid", lambda: 1)() == 0:
-        if shutil.which("chattr") is None:
-            pytest.skip("root without chattr: cannot make a folder read-only")
-        done = subprocess.run(["chattr", "+i", str(folder)], capture_output=True, text=True)
-        if done.returncode:
-            pytest.skip(f"chattr +i is not supported here: {done.stderr.strip()}")
-        try:
-            yield
-        finally:
-            subprocess.run(["chattr", "-i", str(folder)], check=True)
-    else:
-        mode = folder.stat().st_mode & 0o777
-        folder.chmod(0o555)
-        try:
-            yield
-        finally:
-            folder.chmod(mode)
-
-
 # ---- 2. a study in a read-only folder -------------------------------------------------------
-
-
-def _simulated(folder: Path) -> None:
-    study = load_study(folder)
-    store = AnswerStore(folder / DATABASE, study)
-    try:
-        simulate(study, store, SimulateConfig(raters=3))
-    finally:
-        store.close()
 
 
 def test_a_wal_database_of_an_older_version_is_read_in_a_read_only_folder(synthetic_study):
@@ -702,26 +636,6 @@ def test_a_rater_id_with_a_trailing_newline_is_refused(store):
 # smallest of its scene (a rater comparing image sizes could find it). Now each rater sees an
 # order of their own, each answer is stored with where it was shown, analyze checks for a
 # position effect, and the pictures of a scene have one byte size.
-
-
-def _order(got: dict) -> list[tuple[str, tuple[str, ...]]]:
-    """``progress()["order"]`` as ``[(scene, (panel, ...)), ...]``."""
-    return [(o["scene"], tuple(o["panels"])) for o in got["order"]]
-
-
-def _positions(path: Path) -> dict[tuple[str, str, str], tuple]:
-    with contextlib.closing(sqlite3.connect(path)) as db:
-        rows = db.execute("SELECT rater, scene, panel, scene_position, panel_position "
-                          "FROM answers").fetchall()  # fmt: skip
-    return {r[:3]: r[3:] for r in rows}
-
-
-def _fixed(folder: Path) -> None:
-    """Make ``folder``'s manifest one of a study built before per-rater orders (no
-    ``order``): what every rater of it saw was the manifest's order."""
-    manifest = json.loads((folder / MANIFEST).read_text())
-    del manifest["order"]
-    (folder / MANIFEST).write_text(json.dumps(manifest))
 
 
 # ---- 2. answers are stored with where they were shown ------------------------------------

@@ -2,16 +2,14 @@
 
 import io
 import zlib
-from pathlib import Path
 
-import matplotlib.figure
 import numpy as np
 import pytest
 from PIL import Image
+from survey.helpers import METHODS, _write
 
 from trajpref.survey.manifest import (
     GROUND_TRUTH,
-    Study,
     load_study,
 )
 from trajpref.survey.study import (
@@ -34,41 +32,6 @@ from trajpref.viz.plot import plot_panel
 # ---- finding 6: unknown units ---------------------------------------------------------
 
 
-def _write(folder: Path, units: str = "m", consent: str = "", **build) -> Study:
-    """A one-scene study of two agents: the method 'alpha' and the rated ground truth."""
-    rng = np.random.default_rng(0)
-    track = rng.normal(0, 1, (2, 1, 2)) + 0.4 * np.arange(20)[None, :, None]  # [2, 20, 2]
-    history, future = track[:, :8], track[:, 8:]
-    pred = future[None] + rng.normal(0, 0.3, (4, 2, 12, 2))  # [K, P, 12, 2]
-    panels = {"alpha": shown_predictions(pred, 1 + rng.random((4, 2, 12)), np.ones((2, 12)),
-                                         future),
-              GROUND_TRUTH: ground_truth_panel(future)}  # fmt: skip
-    scenes = [
-        SceneData(history, future, panels, "f@0", 0, 0),
-        SceneData(history + 1, future + 1, panels, "f@20", 20, 0),
-    ]
-    more = {"consent": consent} if consent else {}
-    return write_study(folder, scenes, [GROUND_TRUTH, "alpha"], units=units,
-                       dataset={"name": "d", "split": "test", "units": units}, build=build,
-                       **more)  # fmt: skip
-
-
-@pytest.fixture
-def saved_labels(monkeypatch):
-    """The axis titles every saved figure shows: (text, colour) of each x and y label."""
-    labels: list[tuple[str, str]] = []
-    original = matplotlib.figure.Figure.savefig
-
-    def savefig(fig, *args, **kwargs):
-        for ax in fig.axes:
-            for label in (ax.xaxis.label, ax.yaxis.label):
-                labels.append((label.get_text(), str(label.get_color())))
-        return original(fig, *args, **kwargs)
-
-    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", savefig)
-    return labels
-
-
 @pytest.mark.parametrize("units", ["unknown", ""])
 def test_the_rater_pictures_of_data_in_unknown_units_show_no_unit(tmp_path, saved_labels, units):
     _write(tmp_path / "study", units=units)
@@ -87,9 +50,6 @@ def test_the_rater_pictures_of_data_in_metres_name_the_unit(tmp_path, saved_labe
 # smallest of its scene (a rater comparing image sizes could find it). Now each rater sees an
 # order of their own, each answer is stored with where it was shown, analyze checks for a
 # position effect, and the pictures of a scene have one byte size.
-
-
-METHODS = ("methodalpha", "methodbeta")  # as in conftest.py
 
 
 # ---- 6. the pictures of a scene have one byte size -----------------------------------------

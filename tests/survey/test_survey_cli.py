@@ -5,24 +5,18 @@ import json
 import os
 import shutil
 import socket
-import subprocess
 from pathlib import Path
 
 import pytest
+from helpers import _run
+from survey.helpers import DOCS, _read_only, _simulated
 
 from trajpref.cli import main
 from trajpref.survey.manifest import (
     DATABASE,
     load_study,
 )
-from trajpref.survey.simulate import SimulateConfig, simulate
 from trajpref.survey.store import AnswerStore
-
-
-def _run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def _one_line_error(code, err, text):
@@ -31,7 +25,6 @@ def _one_line_error(code, err, text):
 
 
 def test_simulate_then_analyze_end_to_end(capsys, tiny_study, tmp_path):
-    import shutil
 
     study = shutil.copytree(tiny_study, tmp_path / "study")
     code, out, _ = _run(capsys, "survey", "simulate", study, "--raters", "5")
@@ -287,10 +280,6 @@ def test_export_writes_one_csv_row_per_answer_with_the_method_behind_each_panel(
     capsys, synthetic_study, tmp_path
 ):
     import csv
-    import os
-
-    from trajpref.survey.manifest import DATABASE, load_study
-    from trajpref.survey.store import AnswerStore
 
     study = load_study(synthetic_study)
     store = AnswerStore(synthetic_study / DATABASE, study)
@@ -381,45 +370,7 @@ def test_the_docs_give_the_frame_interval_default_as_the_code_takes_it():
 # the docs against the code, and the page's resumed session on a shared machine.
 
 
-ROOT = Path(__file__).resolve().parents[2]
-
-
-DOCS = ROOT / "docs" / "survey.md"
-
-
-@contextlib.contextmanager
-def _read_only(folder: Path):
-    """``folder`` read-only for this process, restored afterwards: ``chattr +i`` as root (who
-    ignores modes), else mode 0555."""
-    if getattr(os, "geteuid", lambda: 1)() == 0:
-        if shutil.which("chattr") is None:
-            pytest.skip("root without chattr: cannot make a folder read-only")
-        done = subprocess.run(["chattr", "+i", str(folder)], capture_output=True, text=True)
-        if done.returncode:
-            pytest.skip(f"chattr +i is not supported here: {done.stderr.strip()}")
-        try:
-            yield
-        finally:
-            subprocess.run(["chattr", "-i", str(folder)], check=True)
-    else:
-        mode = folder.stat().st_mode & 0o777
-        folder.chmod(0o555)
-        try:
-            yield
-        finally:
-            folder.chmod(mode)
-
-
 # ---- 2. a study in a read-only folder -------------------------------------------------------
-
-
-def _simulated(folder: Path) -> None:
-    study = load_study(folder)
-    store = AnswerStore(folder / DATABASE, study)
-    try:
-        simulate(study, store, SimulateConfig(raters=3))
-    finally:
-        store.close()
 
 
 def test_analyze_and_export_read_a_study_in_a_read_only_folder(capsys, synthetic_study, tmp_path):

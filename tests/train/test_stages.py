@@ -7,6 +7,7 @@ import re
 
 import pytest
 import torch
+from helpers import NEW
 from synthetic import TINY_OVERRIDES, write_dataset
 
 from trajpref import config
@@ -987,10 +988,6 @@ def test_validation_skips_the_collision_metrics_it_does_not_report(folder, monke
 # rl.objective.LOSS_SAMPLES): the CLI offers its names, and a name that reaches a dispatch
 # without an entry there is an error, never trained as RLHF-ReS (the walkthrough's finding: a
 # new method's name took the k* path of ``RLObjective.selection``).
-
-
-NEW = "rlhf-new"
-"""A method's name as a contributor adds it to the list, before its dispatch entries."""
 
 
 @pytest.mark.parametrize("in_uses_rl", [False, True])
