@@ -659,16 +659,6 @@ def wide_problem(obj: Any, history: Any, name: str = "this model",
             "trajpref.models.timing.scene_widths gives the distances")  # fmt: skip
 
 
-def observed_problem(obj: Any, history: Any, name: str = "this model",
-                     agent_type: Any = None) -> str | None:  # fmt: skip
-    """What is wrong with the observed steps of ``history`` [N, T_h, 2] for ``obj`` (a
-    predictor or scorer), one cause and one text: the pace of all its agents far above the
-    model's training (``pace_problem``: data in other units), else one agent's jump
-    (``jump_problem``: a tracker id switch; balls in ``agent_type`` [N] not checked); None
-    when neither. Data in other units moves every agent far, so the pace comes first."""
-    return pace_problem(obj, history, name) or jump_problem(obj, history, name, agent_type)
-
-
 def observed_problems(obj: Any, history: Any, name: str = "this model",
                       agent_type: Any = None, scenes: Any = None) -> dict[str, str]:  # fmt: skip
     """The warning texts that apply to the agents ``history`` [N, T_h, 2] hands to ``obj`` (a
