@@ -3,6 +3,8 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+# pytest-xdist workers for `make test`: auto (one per core) or a number; 0 runs in one process.
+TEST_WORKERS ?= auto
 export TRAJPREF_DATA ?= $(abspath ../shared/data)
 
 .PHONY: install demo test lint format clean
@@ -22,7 +24,7 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	PYTHONPATH=src $(BIN)/lint-imports
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS)
 	$(BIN)/ruff check .
 
 lint: $(STAMP)

@@ -29,11 +29,29 @@ def trajpref_source_problem(origin: str | None, repo: Path) -> str | None:
     )
 
 
+def threads_per_worker(environ: dict[str, str], cpus: int) -> int | None:
+    """How many threads each pytest-xdist worker should give torch and OpenMP: the machine's
+    ``cpus`` shared among ``PYTEST_XDIST_WORKER_COUNT`` workers, at least one. ``None`` outside
+    a worker, or when the user set ``OMP_NUM_THREADS`` themselves. Without it every worker
+    starts torch with a thread per core, the workers' threads outnumber the cores, and the
+    suite runs slower than in one process (docs/contributing.md has the timings)."""
+    workers = environ.get("PYTEST_XDIST_WORKER_COUNT")
+    if not workers or "OMP_NUM_THREADS" in environ:
+        return None
+    return max(1, cpus // int(workers))
+
+
 def pytest_configure(config):
     spec = importlib.util.find_spec("trajpref")
     problem = trajpref_source_problem(spec and spec.origin, Path(__file__).resolve().parents[1])
     if problem:
         raise pytest.UsageError(problem)
+    threads = threads_per_worker(dict(os.environ), os.cpu_count() or 1)
+    if threads is not None:
+        import torch
+
+        os.environ["OMP_NUM_THREADS"] = str(threads)  # for the subprocesses the tests start
+        torch.set_num_threads(threads)
 
 
 @pytest.fixture

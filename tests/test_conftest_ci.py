@@ -69,3 +69,47 @@ def test_present_data_is_given_under_ci(tmp_path):
     code, out = _pytest(tmp_path, CI="1", TRAJPREF_DATA=str(data))
     assert code == pytest.ExitCode.OK and "1 passed" in out, out
     assert f"DATA_ROOT {data}" in out
+
+
+@pytest.mark.parametrize(
+    ("environ", "cpus", "expected"),
+    [
+        ({}, 2, None),  # one process: torch keeps its default
+        ({"PYTEST_XDIST_WORKER_COUNT": "2"}, 2, 1),
+        ({"PYTEST_XDIST_WORKER_COUNT": "2"}, 16, 8),
+        ({"PYTEST_XDIST_WORKER_COUNT": "3"}, 16, 5),
+        ({"PYTEST_XDIST_WORKER_COUNT": "4"}, 2, 1),  # never fewer than one
+        ({"PYTEST_XDIST_WORKER_COUNT": "2", "OMP_NUM_THREADS": "2"}, 2, None),  # the user's
+    ],
+)
+def test_threads_per_worker_share_the_cores(environ, cpus, expected):
+    from conftest import threads_per_worker
+
+    assert threads_per_worker(environ, cpus) == expected
+
+
+PROJECT_CONFTEST = TESTS / "conftest.py"
+
+
+def test_a_worker_runs_torch_on_its_share_of_the_cores(tmp_path):
+    """Under ``-n 2`` each worker's torch, and the subprocesses it starts, get
+    ``cpu_count // 2`` threads (the hook in ``pytest_configure``)."""
+    (tmp_path / "conftest.py").write_text(
+        "import importlib.util\n"
+        f"spec = importlib.util.spec_from_file_location('project', {str(PROJECT_CONFTEST)!r})\n"
+        "project = importlib.util.module_from_spec(spec)\n"
+        "spec.loader.exec_module(project)\n"
+        "pytest_configure = project.pytest_configure\n"
+    )
+    expected = max(1, (os.cpu_count() or 1) // 2)
+    (tmp_path / "test_threads.py").write_text(
+        "import os, torch\n\n"
+        "def test_threads():\n"
+        f"    assert torch.get_num_threads() == {expected}\n"
+        f"    assert os.environ['OMP_NUM_THREADS'] == '{expected}'\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "OMP_NUM_THREADS"}
+    done = subprocess.run([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q",
+                           "-n", "2", "test_threads.py"], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert done.returncode == 0 and "1 passed" in done.stdout, done.stdout + done.stderr
