@@ -433,6 +433,13 @@ def _input_dtype_problem(dtype) -> str | None:
     return HALF_PRECISION.format(dtype=f"numpy {dtype}") if half else None
 
 
+def _refuse_dtype(name: str, dtype) -> None:
+    """DataError when ``_input_dtype_problem`` finds a problem with ``dtype``."""
+    problem = _input_dtype_problem(dtype)
+    if problem is not None:
+        raise DataError(f"{name}: {problem}")
+
+
 def _float_tensor(name: str, value, device: torch.device, unseen: bool = False) -> torch.Tensor:
     """``value`` as float32 on ``device``; DataError for non-numbers, booleans, complex numbers
     and half precision (float16, bfloat16: ``_input_dtype_problem``; a tensor's dtype or the
@@ -441,18 +448,14 @@ def _float_tensor(name: str, value, device: torch.device, unseen: bool = False) 
     through: a frame where a neighbour was not seen). Any numpy view (reversed, strided) is
     read as its values."""
     if isinstance(value, torch.Tensor):
-        problem = _input_dtype_problem(value.dtype)
+        _refuse_dtype(name, value.dtype)
+        tensor = value.detach().to(device=device, dtype=torch.float32)
     else:
         try:
             value = np.asarray(value)  # its own dtype, judged before the conversion
         except (TypeError, ValueError) as exc:
             raise DataError(f"{name}: expected an array of numbers ({exc})") from None
-        problem = _input_dtype_problem(value.dtype)
-    if problem is not None:
-        raise DataError(f"{name}: {problem}")
-    if isinstance(value, torch.Tensor):
-        tensor = value.detach().to(device=device, dtype=torch.float32)
-    else:
+        _refuse_dtype(name, value.dtype)
         try:
             with np.errstate(over="ignore"):  # overflow becomes inf, reported below
                 array = value.astype(np.float32, copy=False)
