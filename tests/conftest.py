@@ -130,3 +130,19 @@ def repo(tiny_run, tmp_path):
                        root / "models" / "walks" / "generator.safetensors")  # fmt: skip
     (root / "benchmarks" / "results").mkdir(parents=True)
     return root
+
+
+@pytest.fixture(scope="module")
+def zara1():
+    """zara1's published generator (``zara1/generator``) on the CPU, loaded once per module."""
+    from trajpref.models.registry import load_predictor
+
+    return load_predictor("zara1/generator", device="cpu")
+
+
+@pytest.fixture(scope="module")
+def robo():
+    """Robo's published generator (``robo/generator``) on the CPU, loaded once per module."""
+    from trajpref.models.registry import load_predictor
+
+    return load_predictor("robo/generator", device="cpu")

@@ -169,20 +169,6 @@ def _tracks(p: int = 3, dt: float = 0.4, seed: int = 0) -> np.ndarray:
     return (rng.uniform(-3, 3, (p, 1, 2)) + t[None] * v[:, None]).astype(np.float32)
 
 
-@pytest.fixture(scope="module")
-def robo():
-    from trajpref.models.registry import load_predictor
-
-    return load_predictor("robo/generator", device="cpu")
-
-
-@pytest.fixture(scope="module")
-def zara1():
-    from trajpref.models.registry import load_predictor
-
-    return load_predictor("zara1/generator", device="cpu")
-
-
 def test_loaded_models_and_scorers_know_their_training_step_and_units(robo, zara1, scorer):
     from trajpref.models.registry import load_predictor
 

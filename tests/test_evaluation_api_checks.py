@@ -44,11 +44,6 @@ def _logged(root: Path, scale: float = 1.0) -> Path:
     return root
 
 
-@pytest.fixture(scope="module")
-def zara1():
-    return load_predictor("zara1/generator")
-
-
 def _messages(call, *args, **kwargs) -> tuple[list[str], object]:
     with warnings.catch_warnings(record=True) as seen:
         warnings.simplefilter("always")

@@ -61,13 +61,6 @@ def test_check_coordinates_boundary_for_a_standing_crowd_hand_computed():
         check_coordinates(inside)
 
 
-@pytest.fixture(scope="module")
-def zara1():
-    from trajpref.models.registry import load_predictor
-
-    return load_predictor("zara1/generator", device="cpu")
-
-
 @pytest.mark.parametrize("jitter", [0.002, 0.005])
 def test_a_standing_crowd_2km_out_is_predicted_as_walkers_there_are(zara1, jitter):
     from trajpref.score import predict_scene

@@ -176,13 +176,6 @@ def test_a_generator_file_carries_the_radius_to_the_predictor_the_scorer_and_the
         ckpt.set_generator_setting(path, "neighbour_radius", -1.0, "bad")
 
 
-@pytest.fixture(scope="module")
-def zara1():
-    from trajpref.models.registry import load_predictor
-
-    return load_predictor("zara1/generator", device="cpu")
-
-
 def test_a_published_generator_predicts_an_agent_as_alone_beside_a_walker_40_m_away(zara1):
     from trajpref.score import predict_scene
 

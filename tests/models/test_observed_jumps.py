@@ -59,13 +59,6 @@ def test_observed_jumps_boundary_and_balls():
 
 
 @pytest.fixture(scope="module")
-def zara1():
-    from trajpref.models.registry import load_predictor
-
-    return load_predictor("zara1/generator", device="cpu")
-
-
-@pytest.fixture(scope="module")
 def scorer():
     from trajpref.score import TrajectoryScorer
 

@@ -53,16 +53,6 @@ def _record(call) -> list[str]:
 
 
 @pytest.fixture(scope="module")
-def robo():
-    return load_predictor("robo/generator", device="cpu")
-
-
-@pytest.fixture(scope="module")
-def zara1():
-    return load_predictor("zara1/generator", device="cpu")
-
-
-@pytest.fixture(scope="module")
 def robo_scorer():
     return TrajectoryScorer.from_checkpoint("robo/denoiser").with_steps([0])
 

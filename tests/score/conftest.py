@@ -1,16 +1,9 @@
-"""Fixtures of the score tests: zara1's published generator and its denoiser's scorer."""
+"""Fixtures of the score tests: zara1's denoiser's scorer (its generator, ``zara1``, is
+tests/conftest.py's)."""
 
 import pytest
 
 from trajpref.score.scorer import TrajectoryScorer
-
-
-@pytest.fixture(scope="module")
-def zara1():
-    """zara1's published generator on the CPU."""
-    from trajpref.models.registry import load_predictor
-
-    return load_predictor("zara1/generator", device="cpu")
 
 
 @pytest.fixture(scope="module")
