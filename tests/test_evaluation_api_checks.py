@@ -18,7 +18,7 @@ from synthetic import make_scene
 
 from trajpref.cli import main
 from trajpref.data import load_dataset
-from trajpref.errors import ConfigError
+from trajpref.errors import ConfigError, DataError
 from trajpref.evaluation import NotAPredictor, evaluate, predict_dataset, sampled_batches
 from trajpref.metrics import check_bin_edges, slot_labels
 from trajpref.models.baseline import ConstantVelocity
@@ -329,3 +329,19 @@ def test_the_metrics_take_numpy_integers():
     for slots in (2.0, True, np.bool_(True), torch.tensor(True)):
         with pytest.raises(ValueError, match=r"^slots must be an integer >= 1"):
             slot_labels(slots)
+
+
+# ------------------------------------------------------------- walkthrough 69: an empty split
+
+
+@pytest.mark.parametrize("call", [evaluate, predict_dataset, sampled_batches])
+def test_a_dataset_without_scenes_is_one_data_error_before_any_work(call):
+    """``evaluate`` raised the metrics' bare "no agents were evaluated", ``predict_dataset``
+    numpy's concatenate error and ``sampled_batches`` yielded nothing."""
+    empty = TrajectoryDataset([], DatasetInfo("zara1", "test", "m", 0.4))
+    with pytest.raises(DataError, match=r"^the dataset zara1/test holds no agents \(0 scenes\): "
+                       r"nothing to predict; load a split with scenes"):  # fmt: skip
+        out = call(_Counting(), empty, 2, progress=False)
+        if call is sampled_batches:  # a generator: it runs when read
+            next(out)
+    assert _Counting.calls == 0

@@ -1,8 +1,10 @@
 """Tests of the core containers (trajpref.types)."""
 
+import numpy as np
 import pytest
 from synthetic import make_scene
 
+from trajpref.errors import ConfigError
 from trajpref.types import TrajectoryDataset
 
 
@@ -28,6 +30,24 @@ def test_evenly_spaced_returns_the_split_itself_when_it_is_small_enough():
 def test_evenly_spaced_rejects_a_count_below_one():
     with pytest.raises(ValueError, match="at least 1"):
         _dataset(5).evenly_spaced(0)
+
+
+@pytest.mark.parametrize("count", [0, -2, 2.5, True, "3"])
+@pytest.mark.parametrize("scenes", [0, 1, 5])
+def test_evenly_spaced_refuses_a_count_below_one_or_no_integer_as_a_config_error(count, scenes):
+    """A ``ConfigError``, which is a ``ValueError`` as the bare error was (walkthrough 69), and
+    whatever the split's size (a split no bigger than the count was returned whole, so 0 on an
+    empty split or 2.5 on a split of one passed)."""
+    with pytest.raises(ConfigError, match="at least 1") as caught:
+        _dataset(scenes).evenly_spaced(count)
+    assert isinstance(caught.value, ValueError)
+
+
+def test_evenly_spaced_takes_numpy_integers():
+    data = _dataset(10)
+    assert [s.scene_id for s in data.evenly_spaced(np.int64(3)).scenes] == [
+        s.scene_id for s in data.evenly_spaced(3).scenes
+    ]
 
 
 def _with_context(scene, context):

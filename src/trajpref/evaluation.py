@@ -177,7 +177,8 @@ def _shape_hint(shape: tuple, want: tuple) -> str:
 
 def check_inputs(model: object, dataset: object) -> None:
     """``NotAPredictor`` unless ``model`` has a ``predict`` method and ``dataset`` is a
-    ``TrajectoryDataset``: before any work, and saying how to load each from its name."""
+    ``TrajectoryDataset``: before any work, and saying how to load each from its name; a
+    ``DataError`` for a dataset without agents (no scenes), which has nothing to predict."""
     if not callable(getattr(model, "predict", None)):
         hint = ""
         if isinstance(model, str):
@@ -192,6 +193,12 @@ def check_inputs(model: object, dataset: object) -> None:
                     "pass what it returns")  # fmt: skip
         raise NotAPredictor(f"dataset must be a TrajectoryDataset, got "
                             f"{type(dataset).__name__}{hint}")  # fmt: skip
+    if dataset.num_agents == 0:
+        info = dataset.info
+        raise DataError(f"the dataset {info.name}/{info.split} holds no agents ({len(dataset)} "
+                        "scenes): nothing to predict; load a split with scenes "
+                        "(trajpref.data.load_dataset), or keep some in the subset you "
+                        "made")  # fmt: skip
 
 
 def check_scorer(scorer: object, needs: str = "score") -> None:

@@ -7,12 +7,13 @@ K samples, T_h history steps, T_f future steps, D = 2 coordinates.
 from __future__ import annotations
 
 import dataclasses
+import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
 import torch
 
-from trajpref.errors import DataError
+from trajpref.errors import ConfigError, DataError
 
 AGENT_PERSON = 0
 """Agent-type flag: a person, a player or a robot."""
@@ -183,11 +184,17 @@ class TrajectoryDataset:
 
     def evenly_spaced(self, max_scenes: int | None) -> TrajectoryDataset:
         """At most ``max_scenes`` scenes, evenly spread over the split (all when None): the
-        subset that validation during training, timing and the studies' ``--max-scenes`` read."""
-        if max_scenes is None or len(self) <= max_scenes:
+        subset that validation during training, timing and the studies' ``--max-scenes`` read.
+        ``ConfigError`` (a ``ValueError``) for anything but None or an integer >= 1."""
+        if max_scenes is None:
             return self
-        if max_scenes < 1:
-            raise ValueError(f"max_scenes must be at least 1, got {max_scenes}")
+        whole = isinstance(max_scenes, numbers.Integral) and not isinstance(max_scenes, bool)
+        if not whole or max_scenes < 1:
+            raise ConfigError(f"max_scenes, the scenes to keep, must be an integer, at least 1 "
+                              f"(or None for all {len(self)}), got {max_scenes!r}")  # fmt: skip
+        if len(self) <= max_scenes:
+            return self
+        max_scenes = int(max_scenes)
         idx = torch.linspace(0, len(self) - 1, max_scenes).long().tolist()
         return TrajectoryDataset([self.scenes[i] for i in idx], self.info)
 

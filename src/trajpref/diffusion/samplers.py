@@ -41,5 +41,5 @@ def sample_full(
     device: torch.device | str = "cpu",
 ) -> torch.Tensor:
     """All S steps from y_{S-1} ~ N(0, I)."""
-    y = torch.randn(shape, generator=generator).to(device)
+    y = torch.randn(shape, generator=generator, dtype=torch.float32).to(device)
     return denoise(schedule, eps_fn, y, schedule.num_steps, generator)

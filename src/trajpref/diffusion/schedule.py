@@ -118,7 +118,7 @@ class DDPMSchedule(nn.Module):
         if s == 0:
             return StepOutput(mean, x0)
         if noise is None:
-            noise = torch.randn(sample.shape, generator=generator).to(sample)
+            noise = torch.randn(sample.shape, generator=generator, dtype=torch.float32).to(sample)
         return StepOutput(mean + self.posterior_variance[s].sqrt() * noise, x0)
 
     def timesteps(self, start: int | None = None) -> list[int]:

@@ -59,8 +59,12 @@ class ConstantVelocity:
         vel = vel[None].expand(num_samples, -1, -1).clone()  # [K, N, 2]
         if num_samples > 1:
             shape = (num_samples - 1, batch.num_agents)
-            angle = torch.randn(shape, generator=generator) * math.radians(self.heading_std_deg)
-            speed = torch.exp(torch.randn(shape, generator=generator) * self.speed_log_std)
+            angle = torch.randn(shape, generator=generator, dtype=torch.float32) * math.radians(
+                self.heading_std_deg
+            )
+            speed = torch.exp(
+                torch.randn(shape, generator=generator, dtype=torch.float32) * self.speed_log_std
+            )
             angle, speed = angle.to(vel), speed.to(vel)  # [K-1, N]
             cos, sin = torch.cos(angle), torch.sin(angle)
             vx, vy = vel[1:, :, 0], vel[1:, :, 1]  # [K-1, N]

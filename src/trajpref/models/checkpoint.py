@@ -18,6 +18,7 @@ from __future__ import annotations
 import datetime
 import hashlib
 import json
+import os
 import re
 import shutil
 import warnings
@@ -31,7 +32,7 @@ from safetensors.torch import load_file, save_file
 from trajpref.config import USES_RL, ExperimentConfig, experiment_from_dict, to_dict
 from trajpref.device import resolve_device
 from trajpref.diffusion.schedule import DDPMSchedule
-from trajpref.errors import TrajprefError
+from trajpref.errors import ConfigError, TrajprefError
 from trajpref.io import atomic_path, load_tensors, read_checkpoint_header, resume_state_message
 from trajpref.models import zoo
 from trajpref.models.denoiser import Denoiser
@@ -215,10 +216,34 @@ def _rehash(payload: dict[str, Any]) -> None:
         _rehash(payload["denoiser"])
 
 
+MODEL_SPECS = (
+    "a published model such as 'zara1/generator' (`trajpref models` lists them) or a "
+    "checkpoint file"
+)
+"""What names a checkpoint, as ``check_spec``'s message says it."""
+
+
+def check_spec(spec: object, call: str, accepted: str = MODEL_SPECS) -> None:
+    """``ConfigError`` unless ``spec`` is a ``str`` or an ``os.PathLike`` (a ``Path``), saying
+    what ``call`` takes (``accepted``); None or a number would otherwise fail inside
+    ``pathlib`` with a bare ``TypeError``."""
+    if not isinstance(spec, (str, os.PathLike)):
+        shown = "None" if spec is None else type(spec).__name__
+        if isinstance(spec, (int, float, bytes)):
+            shown += f" {spec!r}"[:60]
+        name = getattr(spec, "checkpoint", None)  # a loaded model records what it was loaded by
+        if isinstance(name, str):
+            shown += f", a loaded model: pass its name, {name!r}"
+        raise ConfigError(f"{call}: expected a str or a path (os.PathLike) naming {accepted}; "
+                          f"got {shown}")  # fmt: skip
+
+
 def resolve_path(path: str | Path) -> Path:
     """``path``, the published model it names (``DATASET/NAME``, e.g. ``zara1/generator``:
     see ``trajpref models``), or the ``.safetensors`` file that replaced a legacy ``.pt``
-    path. An existing file wins over a published name."""
+    path. An existing file wins over a published name. ``ConfigError`` for a ``path`` that is
+    no str or path (``check_spec``)."""
+    check_spec(path, "checkpoint")
     spec = path
     path = Path(path)
     if not path.is_file() and zoo.is_name(spec):
@@ -566,6 +591,15 @@ def untouched_rng():
     return torch.random.fork_rng(devices=[])
 
 
+def as_float32(module: torch.nn.Module) -> torch.nn.Module:
+    """``module`` with its floating-point parameters and buffers in float32, the precision the
+    weights are stored and computed in: a host that has set
+    ``torch.set_default_dtype(torch.float64)`` builds modules in float64, which then refuse
+    float32 inputs. The loaded weights are float32 values, so nothing is rounded; the host's
+    default dtype is left as it is (nothing global is changed)."""
+    return module.float()
+
+
 def load_predictor(path: str | Path, *, sampler: Sampler | None = None, device: Any = "cpu"):
     """A ``DiffusionPredictor`` from a checkpoint file, on ``device``, in eval mode.
 
@@ -577,7 +611,8 @@ def load_predictor(path: str | Path, *, sampler: Sampler | None = None, device: 
     ``frame_interval``, ``units``, ``timing``) and the file's ``model.neighbour_radius`` (a
     generator file's own, or a bare denoiser's; training code, which builds its predictors
     from payloads, never applies it). Loading draws nothing from torch's global random stream
-    (``untouched_rng``): ``torch.manual_seed(s)`` gives the same draws after it as before.
+    (``untouched_rng``): ``torch.manual_seed(s)`` gives the same draws after it as before. Its
+    weights are float32 whatever ``torch.get_default_dtype()`` is (``as_float32``).
     """
     from trajpref.models.timing import attach_timing
 
@@ -585,6 +620,6 @@ def load_predictor(path: str | Path, *, sampler: Sampler | None = None, device: 
     payload = load(path)
     with untouched_rng():  # a planner's torch.manual_seed stream is not moved by loading
         predictor = predictor_from_payload(payload, sampler)
-    predictor = predictor.to(device).eval()
+    predictor = as_float32(predictor).to(device).eval()  # float32 under any default dtype
     predictor.neighbour_radius = config_of(payload).model.neighbour_radius
     return attach_timing(predictor, payload)

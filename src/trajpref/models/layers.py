@@ -42,9 +42,11 @@ class ResidualBlock(nn.Module):
 
 
 def timestep_embedding(s: torch.Tensor, dim: int, max_period: float = 1000.0) -> torch.Tensor:
-    """Sinusoidal embedding of integer steps: s [...] -> [..., dim]."""
+    """Sinusoidal embedding of integer steps: s [...] -> [..., dim], in float32 (also where a
+    host has set ``torch.set_default_dtype(torch.float64)``)."""
     half = dim // 2
-    freqs = torch.exp(-math.log(max_period) * torch.arange(half, device=s.device) / half)  # [D/2]
+    steps = torch.arange(half, dtype=torch.float32, device=s.device)  # float32 whatever the default
+    freqs = torch.exp(-math.log(max_period) * steps / half)  # [D/2]
     args = s.float()[..., None] * freqs  # [..., D/2]
     return torch.cat([torch.cos(args), torch.sin(args)], -1)
 

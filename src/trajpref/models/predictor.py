@@ -267,7 +267,7 @@ class DiffusionPredictor(DenoiserShapes, nn.Module):
             explore = explore_sign * explore_noise(initial.shape, generator).to(initial)
             y_tau = initial + explore  # [K, N, T_f, 2]
         elif explore_std > 0:
-            noise = torch.randn(initial.shape, generator=generator).to(initial)
+            noise = torch.randn(initial.shape, generator=generator, dtype=torch.float32).to(initial)
             explore = explore_sign * explore_std * noise  # [K, N, T_f, 2]
             y_tau = initial + explore
         return Rollout(out, initial, y_tau, self.denoise(cond, y_tau, generator), explore)

@@ -26,8 +26,9 @@ def load_predictor(
     ``sampler`` (``leapfrog`` or ``full``) applies to diffusion checkpoints; None picks the
     checkpoint's natural one (leapfrog for a generator, full for a bare denoiser). ``device``:
     ``auto`` (a GPU when there is one), ``cpu`` or ``cuda[:i]``; the baseline computes on its
-    inputs' device.
+    inputs' device. ``spec`` of another type (None, a number) is a ``ConfigError``.
     """
+    checkpoint.check_spec(spec, "load_predictor", f"'cv', {checkpoint.MODEL_SPECS}")
     device = resolve_device(device)  # "auto" as the CLI reads it; a missing GPU in one line
     if spec in BUILTIN:
         return BUILTIN[spec]()

@@ -68,7 +68,8 @@ def slot_noise(rows: int, shape: tuple[int, ...], generator: torch.Generator) ->
     even number of score steps: 24 values a step) the numbers are those of one plain draw."""
     size = math.prod(shape)
     padded = -(-size // 16) * 16  # the row's values, rounded up to a multiple of 16
-    z = torch.randn((rows, padded), generator=generator)  # [rows, padded]
+    # float32 whatever torch's default dtype is: a float64 draw gives other numbers
+    z = torch.randn((rows, padded), generator=generator, dtype=torch.float32)  # [rows, padded]
     return z[:, :size].reshape(rows, *shape)
 
 
@@ -272,11 +273,13 @@ class TrajectoryScorer(DenoiserShapes):
         uses) unless ``neighbour_radius`` is given (None: off). ``device``: ``auto``, ``cpu``,
         ``cuda[:i]`` or a ``torch.device``. The other arguments are ``__init__``'s. Building
         it draws nothing from torch's global random stream (``checkpoint.untouched_rng``)."""
+        checkpoint.check_spec(path, "TrajectoryScorer.from_checkpoint")  # None: ConfigError
         device = resolve_device(device)  # "auto" as the CLI reads it; a missing GPU in one line
         header = checkpoint.load(path)
         payload = checkpoint.denoiser_of(header)
         with checkpoint.untouched_rng():  # torch's global stream as the caller seeded it
             denoiser, cfg = checkpoint.build_denoiser(payload)
+        denoiser = checkpoint.as_float32(denoiser)  # float32 under any default dtype
         schedule = DDPMSchedule.from_config(cfg.diffusion)
         if isinstance(neighbour_radius, str) and neighbour_radius == "checkpoint":
             neighbour_radius = checkpoint.config_of(header).model.neighbour_radius
@@ -440,14 +443,25 @@ def _refuse_dtype(name: str, dtype) -> None:
         raise DataError(f"{name}: {problem}")
 
 
+def _refuse_meta(name: str, value) -> None:
+    """DataError for a tensor on the ``meta`` device (a shape without values, as
+    ``torch.device("meta")`` or deferred module initialisation make): torch cannot copy it
+    anywhere, so there are no positions to read."""
+    if isinstance(value, torch.Tensor) and value.is_meta:
+        raise DataError(f"{name}: a tensor on the meta device holds no values (only a shape "
+                        f"{list(value.shape)}); pass the values themselves, a tensor on the "
+                        "CPU or a GPU or a numpy array")  # fmt: skip
+
+
 def _float_tensor(name: str, value, device: torch.device, unseen: bool = False) -> torch.Tensor:
     """``value`` as float32 on ``device``; DataError for non-numbers, booleans, complex numbers
     and half precision (float16, bfloat16: ``_input_dtype_problem``; a tensor's dtype or the
     dtype numpy reads a list or array as), and for values that are not finite after the
     float32 conversion (NaN, inf, or beyond float32's range; with ``unseen``, NaN is let
     through: a frame where a neighbour was not seen). Any numpy view (reversed, strided) is
-    read as its values."""
+    read as its values. A tensor on the ``meta`` device is a DataError (``_refuse_meta``)."""
     if isinstance(value, torch.Tensor):
+        _refuse_meta(name, value)
         _refuse_dtype(name, value.dtype)
         tensor = value.detach().to(device=device, dtype=torch.float32)
     else:
@@ -495,6 +509,7 @@ def _agent_types(value, p: int, device: torch.device, name: str = "agent_type") 
     if value is None:
         return torch.full((p,), AGENT_PERSON, dtype=torch.int64, device=device)
     flags = f"{AGENT_PERSON} (person) or {AGENT_BALL} (ball)"
+    _refuse_meta(name, value)
     try:
         tensor = isinstance(value, torch.Tensor)
         array = value.detach().cpu().numpy().copy() if tensor else np.array(value)  # a copy

@@ -218,13 +218,31 @@ def _same_file(a: Path, b: Path) -> bool:
         return False
 
 
+def model_spec(model: object, call: str) -> str | os.PathLike:
+    """What names ``model``: a str or a path as given, or for a loaded model (what
+    ``models.registry.load_predictor`` returns, or a scorer from ``from_checkpoint``) the name
+    or path it was loaded by (its ``checkpoint``). ConfigError for anything else, naming
+    ``call``."""
+    if isinstance(model, (str, os.PathLike)):
+        return model
+    spec = getattr(model, "checkpoint", None)
+    if isinstance(spec, (str, os.PathLike)):
+        return spec
+    got = "None" if model is None else type(model).__name__
+    raise ConfigError(f"{call}: model is a published name such as 'zara1/generator', a "
+                      "checkpoint path or a model loaded by name with "
+                      f"trajpref.models.registry.load_predictor; got {got}, which names no "
+                      "checkpoint")  # fmt: skip
+
+
 def published_name(model: str | os.PathLike) -> str:
     """The published name of ``model``: a name as given (``zara1/generator``), or the name of
     the published model a checkpoint path is: the zoo's own file (``.../zoo/zara1/
     generator.safetensors``, or ``models/zara1/generator.safetensors`` in the repository) or
     a copy of it (the same weights hash in the same ``DATASET/NAME.safetensors`` layout).
-    Anything else is returned as given."""
-    text = str(model)
+    Anything else is returned as given. A loaded model stands for the name or path it was
+    loaded by (``model_spec``)."""
+    text = str(model_spec(model, "published_name"))
     path = Path(text).expanduser()
     if zoo.is_name(text) or not path.is_file():
         return text
@@ -250,7 +268,10 @@ def chosen_selection(model: str | os.PathLike, keep: int = 5, cheap: bool = Fals
     score steps, or with ``cheap`` its cheap setting (1 or 2 score steps). ``model`` is a
     published name or the path of a published model's file (``published_name``). ConfigError
     for a model without chosen settings (the list names those with them), and for a ``keep``
-    that is not an integer in 1..K (``CHOSEN_SAMPLES``, the samples the generator emits)."""
+    that is not an integer in 1..K (``CHOSEN_SAMPLES``, the samples the generator emits). A
+    model loaded by ``models.registry.load_predictor`` stands for the name or path it was
+    loaded by (``model_spec``; anything else that is no str or path is a ConfigError)."""
+    model = model_spec(model, "chosen_selection")
     name = published_name(model)
     entry = CHOSEN.get(name)
     if entry is None or (cheap and "cheap" not in entry):
@@ -270,6 +291,19 @@ def chosen_selection(model: str | os.PathLike, keep: int = 5, cheap: bool = Fals
                           f"got {keep!r}")  # fmt: skip
     settings = {**entry["chosen"], **(entry["cheap"] if cheap else {})}
     return SelectionConfig(keep=count, per=per, **settings)
+
+
+def check_selection(cfg: object, call: str) -> SelectionConfig:
+    """``cfg`` when it is a ``SelectionConfig``; else a ConfigError naming ``call`` and how to
+    make one (a dict of its fields: ``SelectionConfig(**fields)``)."""
+    if isinstance(cfg, SelectionConfig):
+        return cfg
+    hint = ("; make one, SelectionConfig(keep=5) or chosen_selection('zara1/generator') for a "
+            "published model's chosen setting")  # fmt: skip
+    if isinstance(cfg, dict):
+        hint = "; make one from the dict of its fields, SelectionConfig(**fields)"
+    got = "None" if cfg is None else type(cfg).__name__
+    raise ConfigError(f"{call}: cfg must be a SelectionConfig, got {got}{hint}")
 
 
 def _pairwise(x: torch.Tensor, centers: torch.Tensor) -> torch.Tensor:
@@ -418,7 +452,7 @@ def _select(features: torch.Tensor, keep: int, cfg: SelectionConfig,
     if method == "first":
         return torch.arange(keep, device=device)[:, None].expand(-1, m_items)
     if method == "random":
-        noise = torch.rand((k, m_items), generator=generator).to(device)
+        noise = torch.rand((k, m_items), generator=generator, dtype=torch.float32).to(device)
         return noise.argsort(0)[:keep]
     if method == "top":
         return residual.argsort(0)[:keep]
@@ -591,7 +625,9 @@ def select_for_scene(scorer: TrajectoryScorer, history, samples, cfg: SelectionC
     sample's residual per agent as the selection read it (None for a method that reads no
     score), and ``trusted`` [P] bool, the agents whose samples were chosen with the score
     (False: chosen by coverage alone, as for an agent observed faster than
-    ``cfg.trust_speed``). The kept samples' residuals: ``residual[idx, np.arange(P)]``."""
+    ``cfg.trust_speed``). The kept samples' residuals: ``residual[idx, np.arange(P)]``. A
+    ``cfg`` that is no ``SelectionConfig`` (None, a dict) is a ``ConfigError``."""
+    cfg = check_selection(cfg, "select_for_scene")
     batch, pred = scene_batch(scorer, history, samples, agent_type, frame_interval=frame_interval,
                               units=units, allow_empty=True)  # pred [K, P, T_f, 2]  # fmt: skip
     if agent_type is None and batch.num_agents and cfg.uses_score and reads_agent_types(scorer):
@@ -641,6 +677,7 @@ class SelectingPredictor:
 
     def __init__(self, base, cfg: SelectionConfig, candidates: int = 20,
                  scorer: TrajectoryScorer | None = None):  # fmt: skip
+        cfg = check_selection(cfg, "SelectingPredictor")
         if cfg.uses_score and scorer is None:
             raise ConfigError(f"selection {cfg.method!r} needs a scorer")
         if cfg.keep > candidates:
