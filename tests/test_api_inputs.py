@@ -322,7 +322,9 @@ def test_the_lazy_names_are_every_module_and_help_names_the_entry_points():
     here = {p.stem for p in SRC.glob("*.py")} | {p.parent.name for p in SRC.glob("*/__init__.py")}
     named = set(trajpref.SUBPACKAGES) | set(trajpref.ENTRY_MODULES)
     assert named == here - {"__init__", "__main__"}
-    assert set(trajpref.__all__) | named <= set(dir(trajpref))
+    # viz, cli, demo and survey are left out of dir() until imported, so that help() and
+    # inspect.getmembers do not import them (tests/test_package_namespace.py)
+    assert set(trajpref.__all__) | (named - set(trajpref.UNLISTED)) <= set(dir(trajpref))
     for entry in ("load_predictor", "predict_scene", "rank_samples", "select_for_scene",
                   "load_dataset", "evaluate", "load_config", "train_stage", "register_reward",
                   "finetune_config", "plot_scene"):  # fmt: skip
@@ -343,7 +345,8 @@ def test_a_star_import_loads_no_subpackage_and_keeps_matplotlibs_backend():
         "assert ONEDNN_CACHE_CAPACITY and TrajprefError and __version__\n"
         "import trajpref\n"
         "assert callable(trajpref.evaluation.evaluate)\n"  # still served on first use
-        "assert {'evaluation', 'viz', 'cli'} <= set(dir(trajpref))\n"
+        "assert 'evaluation' in dir(trajpref)\n"
+        "assert not {'viz', 'cli'} & set(dir(trajpref))\n"  # listed once imported
     )
     subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
 

@@ -24,7 +24,7 @@ Shape vocabulary used in comments throughout the package:
     T time (T_h history, T_f future), D = 2 coordinates.
 """
 
-import os
+import os as _os
 
 from trajpref.errors import TrajprefError
 
@@ -36,7 +36,7 @@ from trajpref.errors import TrajprefError
 # "oneDNN's kernel cache"). It has to be set before the process's first oneDNN product; a
 # value the user set is kept.
 ONEDNN_CACHE_CAPACITY = 16384
-os.environ.setdefault("ONEDNN_PRIMITIVE_CACHE_CAPACITY", str(ONEDNN_CACHE_CAPACITY))
+_os.environ.setdefault("ONEDNN_PRIMITIVE_CACHE_CAPACITY", str(ONEDNN_CACHE_CAPACITY))
 
 __version__ = "0.1.0"
 
@@ -44,14 +44,21 @@ SUBPACKAGES = ("adapt", "config", "data", "device", "diffusion", "errors", "eval
                "metrics", "models", "results", "rl", "score", "survey", "train", "types",
                "viz")  # fmt: skip
 """The library's modules and packages, read as attributes of ``trajpref`` on first use
-(``__getattr__``) and listed by ``dir(trajpref)``; a test checks that they are every module
-under ``trajpref`` but the entry points (``ENTRY_MODULES``) and ``__main__``."""
+(``__getattr__``) and listed by ``dir(trajpref)`` (but ``UNLISTED``); a test checks that they
+are every module under ``trajpref`` but the entry points (``ENTRY_MODULES``) and
+``__main__``."""
 ENTRY_MODULES = ("cli", "demo")
 """The command line and ``make demo``: read as attributes too."""
+UNLISTED = ("cli", "demo", "survey", "viz")
+"""Read as attributes but left out of ``dir(trajpref)`` until they are imported:
+``help(trajpref)`` and ``inspect.getmembers(trajpref)`` read every name that ``dir`` lists,
+and would load matplotlib (``viz``, ``demo``) and the whole command line (``cli``) for it:
+1,393 modules with them, 1,203 (torch, no matplotlib) without, 62 for ``import trajpref``.
+``survey`` loads nothing itself, but it is the study tool's, with its own command line."""
 
 __all__ = ["ONEDNN_CACHE_CAPACITY", "TrajprefError", "__version__"]
 """What ``from trajpref import *`` gives: the names defined here, no subpackage (a star import
-would otherwise load every one, ``viz`` among them, which sets matplotlib's backend)."""
+would otherwise load every one, ``viz`` and matplotlib among them)."""
 
 
 def __getattr__(name: str):
@@ -65,4 +72,7 @@ def __getattr__(name: str):
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(SUBPACKAGES) | set(ENTRY_MODULES))
+    """The names defined here, the modules imported so far (an import sets its module as an
+    attribute here) and the others but ``UNLISTED``."""
+    lazy = (set(SUBPACKAGES) | set(ENTRY_MODULES)) - set(UNLISTED)
+    return sorted(set(globals()) | lazy)

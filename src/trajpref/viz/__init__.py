@@ -1,4 +1,7 @@
-"""Figures from numpy arrays (matplotlib, headless), in the format a file's suffix names."""
+"""Figures from numpy arrays (matplotlib, headless), in the format a file's suffix names.
+
+Each is drawn on its own canvas: importing this package or drawing leaves matplotlib's
+backend and pyplot's figures as they were (``plot.new_figure``)."""
 
 from trajpref.viz.plot import (
     FORMATS,

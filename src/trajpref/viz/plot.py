@@ -11,7 +11,12 @@ their legend, in a neutral colour, explains the line styles and markers. By defa
 axes hold every history and ground truth and the bulk of the samples, not a sample that runs
 far out (``scene_limits``). They are exactly ``width`` inches wide (a PDF's or SVG's page, a
 PNG's ``width * dpi`` pixels), their height what their panels take at that width: a title or
-legend wider than that is wrapped onto more lines, not cut off and not widening the page."""
+legend wider than that is wrapped onto more lines, not cut off and not widening the page.
+
+Figures are drawn headless on their own canvas (``new_figure``): this module neither chooses
+nor switches matplotlib's backend and leaves pyplot alone (none of its figures is in pyplot's
+list), so that importing it and plotting from an application, a notebook or another thread
+changes nothing there."""
 
 from __future__ import annotations
 
@@ -19,21 +24,21 @@ import math
 import numbers
 import operator
 import re
-import warnings
-from collections.abc import Sequence
+import threading
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import matplotlib
+import numpy as np
+from matplotlib import patheffects
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib import patheffects  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
-
-from trajpref.errors import ConfigError, DataError  # noqa: E402
-from trajpref.io import atomic_path  # noqa: E402
+from trajpref.errors import ConfigError, DataError
+from trajpref.io import atomic_path
 
 FORMATS = {".png": "png", ".pdf": "pdf", ".svg": "svg"}
 """The file suffixes a figure may have, and the format each writes (not EPS: PostScript has
@@ -65,15 +70,44 @@ SCORED_WIDTH = 7.0
 EDGE = 0.1
 """Inches that a scene figure's title and legend keep clear of each side of the page (their
 lines are wrapped to the width less twice this)."""
-_STYLE = {"font.size": 8, "axes.titlesize": 9, "axes.labelsize": 8, "xtick.labelsize": 7,
-          "ytick.labelsize": 7, "legend.fontsize": 7, "pdf.fonttype": 42,
-          "svg.fonttype": "none", "text.hinting": "none"}  # fmt: skip
-"""Text in points at the printed size (a scene figure is ``width`` inches wide: printed at
-that width, it shows them so), TrueType fonts embedded in PDF files (as journals ask), an
-SVG's text kept as text (editable, not drawn as outlines), and text not hinted to a PNG's
-pixels: it takes the same width at every dpi as in a PDF or SVG, so that the layout (the
-legend's columns, the title's lines) is the same in each (hinted text at 120 dpi is up to
-5 % wider than at 300)."""
+TITLE_SIZE, LABEL_SIZE, TICK_SIZE = 9, 8, 7
+"""A scene figure's text in points at the printed size (a scene figure is ``width`` inches
+wide: printed at that width, it shows them so): the figure's and the panels' titles, the axes'
+titles, and the tick labels, the legend and the agents' numbers. Each is given to the text
+it sizes, not set in matplotlib's ``rcParams``, which the whole process shares."""
+RENDERING = {"pdf.fonttype": 42, "svg.fonttype": "none", "text.hinting": "none"}
+"""What only matplotlib's renderers read, from its ``rcParams`` (no figure or text takes them
+itself), so set there while a scene figure is drawn and saved (``rendering``): TrueType fonts
+embedded in PDF files (as journals ask), an SVG's text kept as text (editable, not drawn as
+outlines), and text not hinted to a PNG's pixels: it takes the same width at every dpi as in a
+PDF or SVG, so that the layout (the legend's columns, the title's lines) is the same in each
+(hinted text at 120 dpi is up to 5 % wider than at 300)."""
+_RENDERING_LOCK = threading.RLock()
+
+
+@contextmanager
+def rendering() -> Iterator[None]:
+    """``RENDERING`` in matplotlib's ``rcParams`` within, and those three keys as they were
+    after (any other key, which another thread may set meanwhile, is left alone; matplotlib's
+    ``rc_context`` would put every key back). One figure at a time holds them: two threads
+    drawing scene figures do not put back each other's values."""
+    with _RENDERING_LOCK:
+        before = {key: matplotlib.rcParams[key] for key in RENDERING}
+        matplotlib.rcParams.update(RENDERING)
+        try:
+            yield
+        finally:
+            matplotlib.rcParams.update(before)
+
+
+def new_figure(size: tuple[float, float], dpi: float, layout: str | None = None) -> Figure:
+    """A figure of ``size`` inches on its own Agg canvas: drawn and saved headless whatever
+    matplotlib's backend, which it neither needs nor changes, and not pyplot's (no figure
+    manager, nothing to close; it is freed when no longer used). In a notebook it shows as
+    any figure does."""
+    fig = Figure(figsize=size, dpi=dpi, layout=layout)
+    FigureCanvasAgg(fig)  # the canvas sets itself as fig.canvas
+    return fig
 
 
 def figure_format(out: str | Path) -> str:
@@ -435,9 +469,9 @@ def _draw_agent(ax, i: int, history: np.ndarray, future: np.ndarray | None,
                 path_effects=_halo(3.0), gid=f"truth-end-{i}")  # fmt: skip
     if label and np.isfinite(history[-1]).all():
         offset, ha, va = label_offset(history, down, box)
-        ax.annotate(str(i), history[-1], xytext=offset, textcoords="offset points", fontsize=7,
-                    color=c, fontweight="bold", ha=ha, va=va, zorder=7, clip_on=True,
-                    path_effects=_halo(2.0), gid=f"number-{i}")  # fmt: skip
+        ax.annotate(str(i), history[-1], xytext=offset, textcoords="offset points",
+                    fontsize=TICK_SIZE, color=c, fontweight="bold", ha=ha, va=va, zorder=7,
+                    clip_on=True, path_effects=_halo(2.0), gid=f"number-{i}")  # fmt: skip
 
 
 NO_UNITS = (None, "", "unknown")
@@ -468,9 +502,12 @@ def _set_axes(ax, box: tuple[float, float, float, float], units: str | None,
     ax.set_xlim(box[0], box[1])
     ax.set_ylim(*((box[3], box[2]) if y_down(units) else (box[2], box[3])))  # image rows down
     ax.set_aspect("equal", adjustable="box")
-    ax.set_xlabel(axis_label("x", units))
+    ax.set_xlabel(axis_label("x", units), fontsize=LABEL_SIZE)
     if ylabel:
-        ax.set_ylabel(axis_label("y", units))
+        ax.set_ylabel(axis_label("y", units), fontsize=LABEL_SIZE)
+    ax.tick_params(labelsize=TICK_SIZE)
+    for axis in (ax.xaxis, ax.yaxis):  # an offset or scale beside the tick labels ("1e3")
+        axis.get_offset_text().set_fontsize(TICK_SIZE)
     ax.grid(alpha=0.3)
 
 
@@ -536,8 +573,9 @@ def _legend_below(fig, handles: list[Line2D], title: str, width: float) -> None:
     most = len(handles) if width >= 8 else 4 if width >= 6 else 2
     for ncols in range(min(most, len(handles)), 0, -1):
         legend = fig.legend(handles=handles, loc="outside lower center", ncols=ncols,
-                            frameon=False, title=title, title_fontsize=7,
-                            columnspacing=1.2, handlelength=2.2)  # fmt: skip
+                            frameon=False, title=title, fontsize=TICK_SIZE,
+                            title_fontsize=TICK_SIZE, columnspacing=1.2,
+                            handlelength=2.2)  # fmt: skip
         wide = legend.get_window_extent(renderer).width / fig.dpi
         if wide <= room or ncols == 1:
             break
@@ -546,31 +584,67 @@ def _legend_below(fig, handles: list[Line2D], title: str, width: float) -> None:
         texts = legend.get_texts()
         label = max(t.get_window_extent(renderer).width for t in texts) / fig.dpi
         for t in texts:
-            t.set_text(_wrap(fig, t.get_text(), max(room - (wide - label), 0.1), 7))
-        legend.get_title().set_text(_wrap(fig, title, room, 7))
+            t.set_text(_wrap(fig, t.get_text(), max(room - (wide - label), 0.1), TICK_SIZE))
+        legend.get_title().set_text(_wrap(fig, title, room, TICK_SIZE))
 
 
 def _title(fig, title: str, width: float) -> None:
     """``title`` centred at the top of the figure, above the panels and their own titles,
     wrapped to ``width`` inches less ``EDGE`` a side (none when empty)."""
     if title:
-        fig.suptitle(_wrap(fig, title, width - 2 * EDGE, 9), fontsize=9).set_gid("suptitle")
+        fig.suptitle(_wrap(fig, title, width - 2 * EDGE, TITLE_SIZE),
+                     fontsize=TITLE_SIZE).set_gid("suptitle")  # fmt: skip
+
+
+NUDGE = 1e-9
+"""How far (a share of its height) ``_laid_out`` moves each axes before a layout: a layout
+that is applied moves it elsewhere."""
 
 
 def _laid_out(fig) -> bool:
-    """Lay ``fig`` out (its constrained layout); False where the layout found no room for the
-    axes (the figure too short for its titles, labels and legend) and left them as they were.
-    Other warnings are passed on."""
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        fig.draw_without_rendering()
-    ok = True
-    for w in caught:
-        if "constrained_layout not applied" in str(w.message):
-            ok = False
-        else:
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    return ok
+    """Lay ``fig`` out (its constrained layout, drawn without rendering); False where the
+    layout found no room for the axes (the figure too short for its titles, labels and
+    legend) and left them where they were. Told by where the axes are, not by the warning
+    that matplotlib gives then: each axes is first made shorter by a hair (``NUDGE``), and
+    one that the layout has not moved from there was not laid out. (Catching the warning
+    took ``warnings.catch_warnings``, which before Python 3.14 holds for every thread: it
+    caught other threads' warnings, to be shown again each time, and made every warning
+    shown "once" show again.) ``_fit_height`` keeps the figure tall enough for its text
+    (``_text_height``), so that the layout is not expected to give up."""
+    nudged = []
+    for ax in fig.axes:
+        x0, y0, width, height = ax.get_position(original=True).bounds
+        ax.set_position((x0, y0, width, height * (1 - NUDGE)))
+        ax.set_in_layout(True)  # set_position takes it out of the layout: back in
+        nudged.append(ax.get_position(original=True).bounds)
+    fig.draw_without_rendering()
+    return any(ax.get_position(original=True).bounds != at
+               for ax, at in zip(fig.axes, nudged, strict=True))  # fmt: skip
+
+
+PAD = 0.1
+"""Inches that ``_text_height`` adds to each text for the layout's pads (3 points on each
+side of it) and to spare."""
+ROOM = 0.5
+"""Inches of height that ``_fit_height`` leaves each row of panels, at least, before a
+layout (the layout then finds the height they take)."""
+
+
+def _text_height(fig, axes) -> float:
+    """Inches of ``fig``'s height that its text takes: its title and legend, and for each row
+    of ``axes`` the most that one of them has above and below it (its title, tick labels and
+    axis titles), each with ``PAD`` to spare: more than its constrained layout keeps clear
+    of the panels, so that a figure taller than this is laid out (the layout gives up, and
+    warns, where the text leaves the panels no height)."""
+    renderer = fig.canvas.get_renderer()
+    texts = [t for t in (*fig.texts, *fig.legends) if t.get_visible() and t.get_in_layout()]
+    inches = sum(t.get_window_extent(renderer).height / fig.dpi + PAD for t in texts)
+    rows: dict[int, float] = {}
+    for ax in axes:
+        outer, own = ax.get_tightbbox(renderer), ax.get_window_extent(renderer)  # pixels
+        row = ax.get_subplotspec().rowspan.start
+        rows[row] = max(rows.get(row, 0.0), (outer.height - own.height) / fig.dpi + 2 * PAD)
+    return inches + sum(rows.values())
 
 
 def _fit_height(fig, axes, dpi: float) -> None:
@@ -580,16 +654,26 @@ def _fit_height(fig, axes, dpi: float) -> None:
     (the constrained layout leaves bands it cannot use around an axes of fixed aspect), each
     step making them as tall as their x and y scales then need; a panel's title wider than
     its panel is wrapped to its width (the layout makes no room beside a panel for its
-    title). ``dpi``: the PNG's, checked against ``MAX_PIXELS``."""
+    title). Before the first layout, and after titles are wrapped, the figure is made at
+    least as tall as its text and ``ROOM`` a row of panels (``_text_height``), so that the
+    layout does not give up (a narrow figure's wrapped title and legend can be taller than
+    the height it starts from). ``dpi``: the PNG's, checked against ``MAX_PIXELS``."""
     w = fig.get_figwidth()
     titles = [ax.title.get_text() for ax in axes]
     aspects = [ax.get_aspect() for ax in axes]  # 1.0: x and y at one scale
     renderer = fig.canvas.get_renderer()
     for ax in axes:
         ax.set_aspect("auto")
+    n_rows = len({ax.get_subplotspec().rowspan.start for ax in axes})
+    check = True  # whether the text may have outgrown the figure since the last layout
     for _ in range(12):
+        if check:  # room for the text and the panels, else the layout would give up
+            need = _text_height(fig, axes) + ROOM * n_rows
+            if fig.get_figheight() < need:
+                fig.set_size_inches(w, need)
+            check = False
         h = fig.get_figheight()
-        if not _laid_out(fig):  # too short for its text: taller, then fitted
+        if not _laid_out(fig):  # too short for its text all the same: taller, then fitted
             fig.set_size_inches(w, 1.5 * h + 1.0)
             continue
         wrapped = False
@@ -599,7 +683,8 @@ def _fit_height(fig, axes, dpi: float) -> None:
             if ax.title.get_window_extent(renderer).width > room * fig.dpi:
                 ax.title.set_text(_wrap(fig, title, room, ax.title.get_fontsize()))
             wrapped |= ax.title.get_text() != shown
-        if wrapped:  # laid out again with the titles' new lines
+        if wrapped:  # laid out again with the titles' new lines (room for them first)
+            check = True
             continue
         rows: dict[int, float] = {}
         for ax, aspect in zip(axes, aspects, strict=True):
@@ -667,12 +752,12 @@ def plot_scene(
     ball = any(s[2] for s in styles)
     aspect = (box[3] - box[2]) / (box[1] - box[0])
     w = SCENE_WIDTH if width is None else width
-    with plt.rc_context(_STYLE):
+    with rendering():
         # the width is fixed; the axes' aspect sets the height (_fit_height), laid out with
         # room for the labels, the title and the legend (from a height with room to spare)
         _check_pixels((w, (w - 0.7) * aspect + 0.8), dpi or DPI)
-        fig, ax = plt.subplots(figsize=(w, (w - 0.7) * aspect + 2.5), dpi=dpi or DPI,
-                               layout="constrained")  # fmt: skip
+        fig = new_figure((w, (w - 0.7) * aspect + 2.5), dpi or DPI, "constrained")
+        ax = fig.subplots()
         for i in range(p):
             if pred is not None:
                 start = np.repeat(history[None, i, -1:], len(pred), 0)  # [K', 1, 2]
@@ -822,7 +907,7 @@ def plot_scene_scored(
     down = y_down(units)
     w = SCORED_WIDTH if width is None else width
     stacked = w < 5
-    with plt.rc_context(_STYLE):
+    with rendering():
         # the width is fixed; the panels' aspect sets the height (_fit_height), laid out with
         # room for the labels, the titles and the legend (from a height with room to spare)
         if stacked:
@@ -830,9 +915,8 @@ def plot_scene_scored(
         else:
             size = (w, (w - 1.0) / 2 * aspect + 1.0)
         _check_pixels(size, dpi or DPI)
-        fig, axes = plt.subplots(2 if stacked else 1, 1 if stacked else 2,
-                                 figsize=(size[0], size[1] + 2.5), dpi=dpi or DPI,
-                                 sharex=True, sharey=True, layout="constrained")  # fmt: skip
+        fig = new_figure((size[0], size[1] + 2.5), dpi or DPI, "constrained")
+        axes = fig.subplots(2 if stacked else 1, 1 if stacked else 2, sharex=True, sharey=True)
         for i in range(p):
             c = styles[i][0]
             for rank in range(top):
@@ -843,8 +927,8 @@ def plot_scene_scored(
             _draw_agent(axes[0], i, history[i], future[i], styles[i], label=numbers, down=down,
                         box=box)  # fmt: skip
             _draw_agent(axes[1], i, history[i], None, styles[i], hollow=True)
-        axes[0].set_title("ground truth", fontsize=9)
-        axes[1].set_title(scored_title(k, top, score_name), fontsize=9)
+        axes[0].set_title("ground truth", fontsize=TITLE_SIZE)
+        axes[1].set_title(scored_title(k, top, score_name), fontsize=TITLE_SIZE)
         for j, ax in enumerate(axes):
             _set_axes(ax, box, units, ylabel=j == 0 or stacked)
             if stacked and j == 0:
@@ -882,9 +966,10 @@ def plot_panel(
     """
     figure_format(out)
     p = history.shape[0]
-    colours = plt.get_cmap("tab10" if p <= 10 else "tab20")
+    colours = matplotlib.colormaps["tab10" if p <= 10 else "tab20"]
     aspect = (limits[3] - limits[2]) / max(limits[1] - limits[0], 1e-9)
-    fig, ax = plt.subplots(figsize=(5.6, 0.9 + 4.4 * float(np.clip(aspect, 0.35, 1.2))), dpi=100)
+    fig = new_figure((5.6, 0.9 + 4.4 * float(np.clip(aspect, 0.35, 1.2))), 100)
+    ax = fig.subplots()
     for i in range(p):
         c = colours(i % colours.N)
         for rank in range(paths.shape[0]):
@@ -919,8 +1004,8 @@ def plot_survey_summary(
     """
     figure_format(out)
     m = len(names)
-    fig, axes = plt.subplots(1, len(columns), figsize=(3.6 * len(columns), 0.9 + 0.55 * m),
-                             dpi=120, sharey=True, squeeze=False)  # fmt: skip
+    fig = new_figure((3.6 * len(columns), 0.9 + 0.55 * m), 120)
+    axes = fig.subplots(1, len(columns), sharey=True, squeeze=False)
     y = np.arange(m)
     for ax, (label, (mean, sd)) in zip(axes[0], columns.items(), strict=True):
         mean = np.asarray(mean, dtype=float)  # [M]
@@ -962,8 +1047,8 @@ def plot_curves(
     n = len(panels)
     cols = min(columns, n)
     rows = -(-n // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 2.8 * rows), dpi=120,
-                             squeeze=False)  # fmt: skip
+    fig = new_figure((3.6 * cols, 2.8 * rows), 120)
+    axes = fig.subplots(rows, cols, squeeze=False)
     for ax, (name, lines) in zip(axes.flat, panels.items(), strict=False):
         for x, y, style in lines:
             ax.plot(np.asarray(x, dtype=float), np.asarray(y, dtype=float), lw=1.2, **style)
@@ -986,21 +1071,18 @@ NO_DATE = {"pdf": {"CreationDate": None}, "svg": {"Date": None}}
 
 def _save(fig, out: str | Path, dpi: float | None = None, sized: bool = False) -> Path:
     """Lay out, write in the format ``out``'s suffix names (``figure_format``) through a
-    temporary file, close. ``dpi``: a PNG's pixels per inch (default: the figure's own).
-    ``sized``: the figure is written at its own size (the scene figures: their width is
-    the one asked for, and their layout holds every title, label and legend); otherwise
-    the saved canvas grows or shrinks to hold every title and label (``bbox_inches="tight"``,
-    the study's and the benchmarks' figures), so nothing is clipped however long the title
-    or however tall the axes' aspect."""
+    temporary file (``fig`` is not pyplot's: there is nothing to close). ``dpi``: a PNG's
+    pixels per inch (default: the figure's own). ``sized``: the figure is written at its own
+    size (the scene figures: their width is the one asked for, and their layout holds every
+    title, label and legend); otherwise the saved canvas grows or shrinks to hold every title
+    and label (``bbox_inches="tight"``, the study's and the benchmarks' figures), so nothing
+    is clipped however long the title or however tall the axes' aspect."""
     out = Path(out)
-    try:
-        fmt = figure_format(out)
-        if fig.get_layout_engine() is None:  # a figure with its own layout engine keeps it
-            fig.tight_layout()
-        tight = {} if sized else {"bbox_inches": "tight", "pad_inches": 0.1}
-        with atomic_path(out) as tmp:
-            fig.savefig(tmp, format=fmt, dpi=dpi or fig.dpi, metadata=NO_DATE.get(fmt),
-                        **tight)  # fmt: skip
-    finally:
-        plt.close(fig)
+    fmt = figure_format(out)
+    if fig.get_layout_engine() is None:  # a figure with its own layout engine keeps it
+        fig.tight_layout()
+    tight = {} if sized else {"bbox_inches": "tight", "pad_inches": 0.1}
+    with atomic_path(out) as tmp:
+        fig.savefig(tmp, format=fmt, dpi=dpi or fig.dpi, metadata=NO_DATE.get(fmt),
+                    **tight)  # fmt: skip
     return out
