@@ -19,7 +19,7 @@ from typing import Any, Literal
 
 import yaml
 
-from trajpref.errors import ConfigError
+from trajpref.errors import ConfigError, ConfigNotFound, TrajprefDeprecationWarning
 from trajpref.io import atomic_path
 
 
@@ -1100,7 +1100,7 @@ def upgrade_config_dict(data: dict[str, Any]) -> dict[str, Any]:
         section = data.get(old_sec)
         if isinstance(section, dict) and old_key in section:
             warnings.warn(f"config key {old_sec}.{old_key} is now {new_sec}.{new_key}",
-                          FutureWarning, stacklevel=3)  # fmt: skip
+                          TrajprefDeprecationWarning, stacklevel=3)  # fmt: skip
             target = data.setdefault(new_sec, {})
             if not isinstance(target, dict):
                 raise ConfigError(f"config section {new_sec} must be a mapping")
@@ -1136,8 +1136,8 @@ def resolve_config(path: str | Path) -> Path:
         shipped = BUILTIN_CONFIGS / f"{given.stem}.yaml"
         if shipped.is_file():
             return shipped
-    raise ConfigError(f"{path}: no such config file (the shipped configs: "
-                      f"{', '.join(builtin_configs())}, e.g. --config zara1)")  # fmt: skip
+    raise ConfigNotFound(f"{path}: no such config file (the shipped configs: "
+                         f"{', '.join(builtin_configs())}, e.g. --config zara1)")  # fmt: skip
 
 
 def _repeated_keys(node: yaml.Node, prefix: str = "",

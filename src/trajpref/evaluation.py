@@ -29,7 +29,18 @@ from trajpref.data.registry import (
 )
 from trajpref.data.trajnet import from_trajnet, require_future
 from trajpref.device import resolve_device
-from trajpref.errors import ConfigError, DataError, TrajprefError
+from trajpref.errors import (
+    ConfigError,
+    DataError,
+    NonFinitePrediction,
+    NotADataset,
+    NotAPredictor,
+    NotAScorer,
+    OutOfRangeWarning,
+    OverlapWarning,
+    PredictionError,
+    TrajprefError,
+)
 from trajpref.io import bar_options
 from trajpref.metrics import (
     BinnedMetrics,
@@ -96,22 +107,6 @@ class Predictor(Protocol):
     ) -> torch.Tensor: ...
 
 
-class NotAPredictor(TrajprefError, TypeError):
-    """What the evaluation loop was handed is not a loaded predictor, dataset or scorer (a
-    model's name, a dataset's name, a denoiser checkpoint's name)."""
-
-
-class PredictionError(DataError):
-    """A predictor's ``predict`` returned something the evaluation cannot score: not a torch
-    tensor, not floating point, not [K, N, T_f, 2] for the batch and the K asked, on another
-    device than the batch's, or holding NaN / infinite values (``check_prediction``)."""
-
-
-class NonFinitePrediction(PredictionError):
-    """A predictor returned NaN or infinite positions (``check_prediction``): a model that
-    diverged, not a wrong interface; training's validation scores it as never the best."""
-
-
 def check_prediction(model: object, pred: object, batch: Batch, num_samples: int) -> None:
     """``PredictionError`` (a ``DataError``) naming the predictor's class unless ``pred``,
     what ``model.predict(batch, num_samples, generator)`` returned, is a floating-point torch
@@ -176,9 +171,10 @@ def _shape_hint(shape: tuple, want: tuple) -> str:
 
 
 def check_inputs(model: object, dataset: object) -> None:
-    """``NotAPredictor`` unless ``model`` has a ``predict`` method and ``dataset`` is a
-    ``TrajectoryDataset``: before any work, and saying how to load each from its name; a
-    ``DataError`` for a dataset without agents (no scenes), which has nothing to predict."""
+    """``NotAPredictor`` unless ``model`` has a ``predict`` method, ``NotADataset`` (a
+    ``NotAPredictor`` too) unless ``dataset`` is a ``TrajectoryDataset``: before any work,
+    and saying how to load each from its name; a ``DataError`` for a dataset without agents
+    (no scenes), which has nothing to predict."""
     if not callable(getattr(model, "predict", None)):
         hint = ""
         if isinstance(model, str):
@@ -191,8 +187,8 @@ def check_inputs(model: object, dataset: object) -> None:
         if isinstance(dataset, str):
             hint = (f": load it first, trajpref.data.load_dataset({dataset!r}, split), and "
                     "pass what it returns")  # fmt: skip
-        raise NotAPredictor(f"dataset must be a TrajectoryDataset, got "
-                            f"{type(dataset).__name__}{hint}")  # fmt: skip
+        raise NotADataset(f"dataset must be a TrajectoryDataset, got "
+                          f"{type(dataset).__name__}{hint}")  # fmt: skip
     if dataset.num_agents == 0:
         info = dataset.info
         raise DataError(f"the dataset {info.name}/{info.split} holds no agents ({len(dataset)} "
@@ -202,24 +198,24 @@ def check_inputs(model: object, dataset: object) -> None:
 
 
 def check_scorer(scorer: object, needs: str = "score") -> None:
-    """``NotAPredictor`` (a ``TypeError``) unless ``scorer`` is None or a scorer (a
-    ``TrajectoryScorer``, or an object with its method ``needs``): a checkpoint's name or a
-    predictor in its place says how to build one, before any work."""
+    """``NotAScorer`` (a ``NotAPredictor``, a ``TypeError``) unless ``scorer`` is None or a
+    scorer (a ``TrajectoryScorer``, or an object with its method ``needs``): a checkpoint's
+    name or a predictor in its place says how to build one, before any work."""
     if scorer is None or isinstance(scorer, TrajectoryScorer):
         return
     if isinstance(scorer, (str, os.PathLike)):
-        raise NotAPredictor(f"scorer must be a TrajectoryScorer, got the name {str(scorer)!r}: "
-                            f"build it first, TrajectoryScorer.from_checkpoint({str(scorer)!r}), "
-                            "and pass what it returns")  # fmt: skip
+        raise NotAScorer(f"scorer must be a TrajectoryScorer, got the name {str(scorer)!r}: "
+                         f"build it first, TrajectoryScorer.from_checkpoint({str(scorer)!r}), "
+                         "and pass what it returns")  # fmt: skip
     if callable(getattr(scorer, needs, None)):
         return
     if callable(getattr(scorer, "predict", None)):
-        raise NotAPredictor(f"scorer must be a TrajectoryScorer, got a predictor "
-                            f"({type(scorer).__name__}), which samples futures: build the "
-                            "scorer with TrajectoryScorer.from_checkpoint('DATASET/denoiser') "
-                            "(or from the model's own checkpoint)")  # fmt: skip
-    raise NotAPredictor(f"scorer must be a TrajectoryScorer (TrajectoryScorer.from_checkpoint("
-                        f"'DATASET/denoiser')), got {type(scorer).__name__}")  # fmt: skip
+        raise NotAScorer(f"scorer must be a TrajectoryScorer, got a predictor "
+                         f"({type(scorer).__name__}), which samples futures: build the "
+                         "scorer with TrajectoryScorer.from_checkpoint('DATASET/denoiser') "
+                         "(or from the model's own checkpoint)")  # fmt: skip
+    raise NotAScorer(f"scorer must be a TrajectoryScorer (TrajectoryScorer.from_checkpoint("
+                     f"'DATASET/denoiser')), got {type(scorer).__name__}")  # fmt: skip
 
 
 def check_num_samples(num_samples: object) -> int:
@@ -817,8 +813,9 @@ def check_trained_on(name: str, model: dict, data: dict | None, info: DatasetInf
     """The checks of one model (``name``; ``model``: ``models.timing.model_timing``'s record
     of its checkpoint; ``data``: the checkpoint's ``config.data``, None where unknown) against
     the data it is given (``info``), what the CLI's ``evaluate``, ``predict`` and ``plot`` and
-    Python's ``evaluate`` and ``predict_dataset`` check: one ``UserWarning`` when its training
-    data's units or pace differ from this data's (``timing_warning``), and a second when this
+    Python's ``evaluate`` and ``predict_dataset`` check: one ``OutOfRangeWarning`` when its
+    training data's units or pace differ from this data's (``timing_warning``), and a second,
+    an ``OverlapWarning`` (both ``TrajprefWarning``s), when this
     data is the model's own training folder read whole (``training_windows``), or a split it
     trained or chose its epoch on (``own_split``, ``shared_split``; ``root``: the data root,
     for a fold's split folder given as a path), or with ``holdout`` (a held-out scene's
@@ -836,7 +833,7 @@ def check_trained_on(name: str, model: dict, data: dict | None, info: DatasetInf
     elsewhere), for the roles the path checks above have not found."""
     text = timing_warning(name, model, info, words)
     if text is not None:
-        warnings.warn(text + tail, stacklevel=_user_level())
+        warnings.warn(text + tail, OutOfRangeWarning, stacklevel=_user_level())
     if data is None:
         return None
     runs: list[tuple[dict, str | None, bool]] = [(data, None, val_known)]
@@ -849,7 +846,7 @@ def check_trained_on(name: str, model: dict, data: dict | None, info: DatasetInf
         if found is None or found[1] in seen:  # the same windows, named through another run
             continue
         seen.add(found[1])
-        warnings.warn(found[0] + tail, stacklevel=_user_level())
+        warnings.warn(found[0] + tail, OverlapWarning, stacklevel=_user_level())
         notes.append(found[1] if via is None else f"{found[1][:-1]}, through {via})")
     lineage = model.get("lineage") if isinstance(model, dict) else None
     recorded = isinstance(lineage, list) and any(
@@ -864,7 +861,7 @@ def check_trained_on(name: str, model: dict, data: dict | None, info: DatasetInf
                 continue
             who = name if via is None else f"{name} (through {via})"
             text, record = _content_text(who, via, split, shown, whole, len(digests))
-            warnings.warn(text + tail, stacklevel=_user_level())
+            warnings.warn(text + tail, OverlapWarning, stacklevel=_user_level())
             notes.append(record if via is None else f"{record[:-1]}, through {via})")
     return "; ".join(notes) or None
 
@@ -901,7 +898,7 @@ def warn_observed_pace(checked: list[tuple[str, object]], dataset: TrajectoryDat
     if "units" in found:  # every distance off: the others would only repeat it
         found = {"units": found["units"]}
     for text in found.values():
-        warnings.warn(text + tail, stacklevel=_user_level())
+        warnings.warn(text + tail, OutOfRangeWarning, stacklevel=_user_level())
     return bool(found)
 
 
@@ -923,7 +920,7 @@ def warn_untyped_data(checked: list[tuple[str, object]], dataset: TrajectoryData
         warnings.warn(f"{reader} was trained with agent types (the ball flagged "
                       f"{AGENT_BALL}), and this data flag no ball: every agent is read as "
                       "a person; if a ball is among them, a 5th column of BALL / PLAYER "
-                      f"flags it (docs/data_format.md){tail}",
+                      f"flags it (docs/data_format.md){tail}", OutOfRangeWarning,
                       stacklevel=_user_level())  # fmt: skip
         return True
     balls = np.array([int((s.agent_type == AGENT_BALL).sum()) for s in dataset.scenes])
@@ -939,7 +936,7 @@ def warn_untyped_data(checked: list[tuple[str, object]], dataset: TrajectoryData
                   f"one in every scene of NBA's splits), and of this data's {scenes}, "
                   f"{' and '.join(f for f in found if f)}: it reads each as flagged, a scene "
                   "it never saw; the ball is one agent, flagged BALL in a 5th column and seen "
-                  f"in every frame of a window (docs/data_format.md){tail}",
+                  f"in every frame of a window (docs/data_format.md){tail}", OutOfRangeWarning,
                   stacklevel=_user_level())  # fmt: skip
     return True
 
@@ -1004,7 +1001,7 @@ def check_against_training(model: object, dataset: TrajectoryDataset,
     what the model and scorer were trained on, as the CLI's ``evaluate`` and ``predict`` do:
     for each that carries its checkpoint's record (``timing``: ``load_predictor``,
     ``TrajectoryScorer.from_checkpoint``; models built in code and ``cv`` have none), a
-    ``UserWarning`` when its training data's units or step differ from this data's
+    ``TrajprefWarning`` when its training data's units or step differ from this data's
     (``check_trained_on``: e.g. 10 Hz tracks, 0.1 s, given to a 0.4 s model, or centimetres
     to a metre one), or when this data is a split it trained on or chose its epoch on (e.g.
     ``zara1/generator`` on zara1's train split); one when this data's observed pace is far
@@ -1194,7 +1191,7 @@ def evaluate(
 
     ``check_data`` (default True): before any work, the data are checked against what the
     model and the scorer were trained on, as the CLI checks them (``check_against_training``:
-    a ``UserWarning`` for another time step or other units than the model's training data,
+    a ``TrajprefWarning`` for another time step or other units than the model's training data,
     an observed pace far from it, or a split it trained or chose its epoch on), and the result
     holds ``overlap``: what this data shares with the model's (or scorer's) training or
     validation data (``model trained on these windows (train split of zara1)``; with
@@ -1320,7 +1317,7 @@ def predict_dataset(
 
     The arguments are checked before any work as ``evaluate`` checks them (``device`` None:
     the model's own); with ``check_data`` (default True) the data too, against what the model
-    and the scorer were trained on (``check_against_training``: ``UserWarning``s, as the CLI's
+    and the scorer were trained on (``check_against_training``: ``TrajprefWarning``s, as the CLI's
     ``predict`` gives); the CLI, which has made its own, passes False.
     """
     check_inputs(model, dataset)

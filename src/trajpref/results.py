@@ -14,7 +14,7 @@ from typing import Any
 
 import torch
 
-from trajpref.errors import TrajprefError
+from trajpref.errors import ResultConflict
 from trajpref.io import write_json
 
 FIELDS = (
@@ -215,11 +215,6 @@ def _fmt(x: Any, digits: int = 3) -> str:
     if isinstance(x, float):
         return f"{x:.{digits}f}"
     return str(x)
-
-
-class ResultConflict(TrajprefError):
-    """Two rows of one measurement were taken on different checkpoints (``model_hash``): one
-    of them is stale and must be measured again before the rows can be merged."""
 
 
 def merge_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:

@@ -11,7 +11,7 @@ import yaml
 
 from trajpref.config import FinetuneConfig, OptimConfig, load_config, to_dict
 from trajpref.data import load_dataset
-from trajpref.errors import ConfigError
+from trajpref.errors import ConfigError, IgnoredWarning
 from trajpref.models import checkpoint as ckpt
 from trajpref.rl.presets import (
     CONTROL_READS,
@@ -310,7 +310,7 @@ def test_a_yaml_value_that_the_preset_would_replace_is_refused(tiny_run, tmp_pat
     own = tmp_path / "finetune_config.yaml"
     own.write_text(yaml.safe_dump(to_dict(finetune_config(start, "rlhf", "paper"))))
     assert finetune_config(start, "rlhf", "paper", config=own).finetune.kl_form == "paper"
-    with pytest.warns(UserWarning, match=r"not read: finetune\.method=rlhf \(--method rlhf-res "
+    with pytest.warns(IgnoredWarning, match=r"not read: finetune\.method=rlhf \(--method rlhf-res "
                       r"chooses the method\)$"):  # fmt: skip
         res = finetune_config(start, "rlhf-res", "paper", config=own, overrides=[
             "finetune.policy_weight=1.0", "finetune.value_weight=5.0"]).finetune  # fmt: skip

@@ -12,7 +12,7 @@ from helpers import _run
 from scipy import stats
 from survey.helpers import DOCS, _write
 
-from trajpref.errors import ConfigError, DataError
+from trajpref.errors import ConfigError, DataError, DataWarning
 from trajpref.survey import analyze as analyze_module
 from trajpref.survey.analyze import analyze, holm, run_analysis, spearman, stars, wilcoxon
 from trajpref.survey.manifest import (
@@ -224,7 +224,7 @@ def test_answers_the_analysis_cannot_use_are_counted_in_a_warning_and_the_report
             ("ghost", "s01", "A"))  # fmt: skip
     text = ("ignored: 3 answers (2 to scenes or panels this study does not have, 1 from "
             "raters not in the raters table)")  # fmt: skip
-    with pytest.warns(UserWarning) as seen:
+    with pytest.warns(DataWarning) as seen:
         result, paths = run_analysis(synthetic_study)
     assert [str(w.message) for w in seen] == [f"{store.path}: {text}"]
     assert result.raters == 3 and result.rows[0].answers == 9  # 3 raters x 3 scenes

@@ -15,7 +15,7 @@ import pytest
 from starlette.testclient import TestClient
 from survey.helpers import CONSENT, OK, _fixed, _order, _positions, _read_only, _simulated, _write
 
-from trajpref.errors import ConfigError
+from trajpref.errors import ConfigError, TrajprefWarning
 from trajpref.survey.analyze import run_analysis
 from trajpref.survey.export import export_csv
 from trajpref.survey.manifest import (
@@ -438,7 +438,8 @@ def test_opening_a_database_others_can_read_warns(synthetic_study, tmp_path):
     path = tmp_path / "shared.sqlite"
     AnswerStore(path, load_study(synthetic_study)).close()
     path.chmod(0o644)
-    with pytest.warns(UserWarning, match=r"other users have access to it \(mode 644\).*chmod 600"):
+    shared = r"other users have access to it \(mode 644\).*chmod 600"
+    with pytest.warns(TrajprefWarning, match=shared):
         AnswerStore(path, load_study(synthetic_study)).close()
 
 

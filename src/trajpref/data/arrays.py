@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from trajpref.data.text import DEFAULT_MAX_COORD
-from trajpref.errors import DataError
+from trajpref.errors import DataError, DataNotFound
 from trajpref.types import Scene
 
 
@@ -16,7 +16,7 @@ def load_npz(path: str | Path, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
     """Load ``keys`` from an ``.npz`` file without executing code (``allow_pickle=False``)."""
     path = Path(path)
     if not path.is_file():
-        raise DataError("no such file", path)
+        raise DataNotFound("no such file", path)
     try:
         with np.load(path, allow_pickle=False) as data:
             missing = [k for k in keys if k not in data]

@@ -25,7 +25,15 @@ from trajpref.config import BUILTIN_DATASETS
 from trajpref.data import arrays, text, trajnet
 from trajpref.data.robo_sim import simulate
 from trajpref.data.stats import METRES_PER_UNIT
-from trajpref.errors import ConfigError, DataError, TrajprefError
+from trajpref.errors import (
+    ConfigError,
+    DataError,
+    DataNotFound,
+    DataWarning,
+    FrameRateWarning,
+    IgnoredWarning,
+    TrajprefError,
+)
 from trajpref.types import DatasetInfo, Scene, TrajectoryDataset
 
 if TYPE_CHECKING:
@@ -125,12 +133,14 @@ def resolve_data_root(root: str | Path | None = None) -> Path:
     """The data root: the argument, else ``$TRAJPREF_DATA``. Raises if neither is usable."""
     value = root if root is not None else os.environ.get("TRAJPREF_DATA")
     if not value:
-        raise TrajprefError(
+        raise ConfigError(
             "no data root: give it (the CLI's --data-root, or root= in Python, "
             "e.g. load_dataset(name, split, root=...)) or set TRAJPREF_DATA"
         )
     path = Path(value).expanduser()
     if not path.is_dir():
+        if not path.exists():
+            raise DataNotFound("data root is not a folder", path)
         raise DataError("data root is not a folder", path)
     return path
 
@@ -177,13 +187,13 @@ def check_units(units: str | None) -> str:
         warnings.warn(f"units {units!r} is none of the names trajpref knows ({known}, or "
                       f"{UNKNOWN}): kept as given, but no speed is read in metres, collision "
                       "metrics need a radius in these units, and a model's units are compared "
-                      "by name", stacklevel=3)  # fmt: skip
+                      "by name", DataWarning, stacklevel=3)  # fmt: skip
     return units
 
 
 def _check_split(split: str) -> None:
     if split not in SPLITS:
-        raise TrajprefError(f"unknown split {split!r}; choose one of {', '.join(SPLITS)}")
+        raise ConfigError(f"unknown split {split!r}; choose one of {', '.join(SPLITS)}")
 
 
 def load_dataset(
@@ -220,7 +230,7 @@ def load_dataset(
     if name in NAMES and given:  # as the CLI's --frame-interval and --units
         ignored = f"{' and '.join(given)} {'is' if len(given) == 1 else 'are'} ignored"
         warnings.warn(own_reading_note(name, "frame_interval and units", ignored),
-                      stacklevel=2)  # fmt: skip
+                      IgnoredWarning, stacklevel=2)  # fmt: skip
     data = _load(name, split, root, frame_interval, units, options)
     step = options.time_step if options is not None else 1.0
     if step != 1.0:  # read every ``step`` frame steps: each window step spans that much more
@@ -242,7 +252,7 @@ def own_reading_note(name: str, options: str, ignored: str) -> str:
 def check_protocol(protocol: str) -> None:
     """Raise a clear error unless ``protocol`` is one of ``PROTOCOLS``."""
     if protocol not in PROTOCOLS:
-        raise TrajprefError(f"unknown protocol {protocol!r}; choose one of {', '.join(PROTOCOLS)}")
+        raise ConfigError(f"unknown protocol {protocol!r}; choose one of {', '.join(PROTOCOLS)}")
 
 
 def _takes_folder_options(name: str) -> bool:
@@ -504,7 +514,7 @@ def _load(
     path = Path(name).expanduser()
     if path.exists() or path.is_symlink() or os.sep in name or name.startswith("."):
         return _user_folder(path, split, frame_interval, units, options)
-    raise TrajprefError(
+    raise DataNotFound(
         f"unknown dataset {name!r}; choose one of {', '.join(NAMES)} or pass a folder path"
     )
 
@@ -576,7 +586,7 @@ def _layout_on_missing(name: str, base: Path) -> Iterator[None]:
         if not missing:
             raise
         said = str(exc).removeprefix(f"{exc.path}: ")
-        raise DataError(
+        raise DataNotFound(
             f"{said}; {name} is read from {_LAYOUTS[name]} under the data root "
             f'({base}; the README\'s "Data: where each dataset comes from" says '
             "where each dataset's files come from)",
@@ -597,7 +607,7 @@ def _user_folder(
             raise DataError(f"a file, where a folder of track files is needed (with its own "
                             f"train/val/test sub-folders or not): pass {path.parent} or a "
                             "folder holding just this file", path)  # fmt: skip
-        raise DataError("no such folder", path)
+        raise DataNotFound("no such folder", path)
     splits = split_folders(path)
     folder = splits.get(split, path)
     if splits and split not in splits:
@@ -617,7 +627,7 @@ def _user_folder(
                 f"folders: only train/, val/ and test/ are"
                 + (f"; rename {' and '.join(renames)}" if renames else "")
             )
-        raise DataError(f"no {split}/ sub-folder (found {', '.join(present)}){remedy}", path)
+        raise DataNotFound(f"no {split}/ sub-folder (found {', '.join(present)}){remedy}", path)
     has_text = bool(text.matching_files(folder, USER_TEXT))
     if text.matching_files(folder, ("*.ndjson",)):
         if has_text:
@@ -680,7 +690,7 @@ def text_interval(steps: dict[Path, tuple[str | None, float]], given: float | No
     if why is not None:
         warnings.warn(f"{source}: {why}: {DEFAULT_FRAME_INTERVAL:g} s between frames is "
                       "assumed; pass the files' own with --frame-interval (data.frame_interval "
-                      "in training)", trajnet.FrameRateWarning, stacklevel=4)  # fmt: skip
+                      "in training)", FrameRateWarning, stacklevel=4)  # fmt: skip
         return DEFAULT_FRAME_INTERVAL, "default"
     return float(f"{first:.9g}"), "timestamps"
 
@@ -798,7 +808,7 @@ def trajnet_interval(rates: dict[float, str], given: float | None,
                             "interval", source)  # fmt: skip
         warnings.warn(f"{source}: the TrajNet++ scenes declare different frame rates "
                       f"({where}); all are read at the frame interval given, {given:g} s",
-                      trajnet.FrameRateWarning, stacklevel=3)  # fmt: skip
+                      FrameRateWarning, stacklevel=3)  # fmt: skip
         return given, "given"
     if not rates:
         return (DEFAULT_FRAME_INTERVAL, "default") if given is None else (given, "given")
@@ -807,7 +817,7 @@ def trajnet_interval(rates: dict[float, str], given: float | None,
     if given is not None and not math.isclose(given, own, rel_tol=1e-6):
         warnings.warn(f"{source}: the TrajNet++ scenes declare {where} ({own:g} s between "
                       f"frames), which is used: the frame interval given ({given:g} s, "
-                      "--frame-interval) is ignored", trajnet.FrameRateWarning,
+                      "--frame-interval) is ignored", FrameRateWarning,
                       stacklevel=3)  # fmt: skip
     return own, "declared"
 
@@ -855,9 +865,7 @@ def _nba(
 
 def _robo(base: Path, split: str, options: text.ReadOptions) -> tuple[list[Scene], Path]:
     if split == "train":
-        raise TrajprefError(
-            "the official Robo set has no public training split; train on 'robo-sim'"
-        )
+        raise ConfigError("the official Robo set has no public training split; train on 'robo-sim'")
     path = base / "robo" / f"{split}.npz"
     data = arrays.load_npz(path, ("obs_traj", "pred_traj", "seq_start_end"))
     scenes = arrays.scenes_from_arrays(

@@ -33,7 +33,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from trajpref.errors import ConfigError, DataError
+from trajpref.errors import ConfigError, DataError, DataNotFound, GapWarning
 from trajpref.types import AGENT_BALL, AGENT_PERSON, Scene
 
 DEFAULT_MAX_COORD = 1e6
@@ -52,10 +52,6 @@ _TYPE_LIST = "BALL, PLAYER or PERSON"
 _TYPED = np.dtype([("frame", "f8"), ("agent", "f8"), ("x", "f8"), ("y", "f8"), ("kind", "U16")])
 _CHUNK = 1 << 16
 """Windows gathered per step when the window arrays are filled."""
-
-
-class GapWarning(UserWarning):
-    """Some windows span frames missing from a file (a jump in its frame numbers)."""
 
 
 @dataclass(frozen=True)
@@ -198,7 +194,7 @@ def _link_error(path: Path) -> DataError:
             target = os.readlink(path)
         except OSError:
             target = "?"
-        return DataError(f"broken symlink (points to {target}, which does not exist)", path)
+        return DataNotFound(f"broken symlink (points to {target}, which does not exist)", path)
     return DataError("cannot follow symlink", path)
 
 
@@ -209,7 +205,7 @@ def check_file(path: Path) -> None:
         return
     if path.is_symlink():
         raise _link_error(path)
-    raise DataError("no such file", path)
+    raise DataNotFound("no such file", path)
 
 
 SECONDS_COLUMNS = ("time", "timestamp", "time_s", "timestamp_s", "seconds")
@@ -1145,13 +1141,15 @@ def track_files(folder: str | Path, pattern: str | tuple[str, ...] = "*.txt") ->
         if not folder.is_dir():
             if folder.is_symlink():
                 raise _link_error(folder)
-            raise DataError("no such folder", folder)
+            raise DataNotFound("no such folder", folder)
         files = []
         for path in matching_files(folder, patterns):
             if path.is_file():
                 files.append(path)
             elif path.is_symlink() and not path.exists():
                 raise _link_error(path)
+    except DataError:  # its own (DataNotFound is an OSError too): passed on as it is
+        raise
     except OSError as exc:  # a folder on the way that cannot be searched
         raise folder_error(folder, exc) from None
     if not files:

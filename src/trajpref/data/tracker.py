@@ -17,7 +17,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from trajpref.errors import ConfigError, DataError
+from trajpref.errors import ConfigError, DataError, LeftOutWarning
 
 EPS_STEPS = 1e-3
 """Times within this share of ``step`` of each other count as equal (float rounding of frame
@@ -32,22 +32,6 @@ its own observation intervals old (the median gap between its times: seen in the
 latest cycle, its stamp a little late or jittered) is extrapolated to ``now`` at its last
 velocity; one unseen for longer (missed detections, occlusion) is held where it was last seen,
 its motion since being unknown."""
-
-
-class LeftOutWarning(UserWarning):
-    """``tracks_to_history`` left out agents that the tracker saw in its current cycle: their
-    detections are stamped a little before ``now`` (per-detection timestamps a few ms apart
-    within one cycle) or after it (a nominal cycle time as ``now``). The message suggests a
-    ``hold=`` that keeps them; it names no agent, so that a planner's loop calling every cycle
-    is warned once, not every call (Python shows a warning again only for a new text). The
-    warning raised carries ``ages`` (each such agent's id -> the age in seconds at ``now`` of
-    its latest stamp at or before it, in id order) and ``suggested_hold``; catch it with
-    ``warnings.catch_warnings(record=True)`` to read them."""
-
-    ages: dict
-    """Each left-out agent seen in the current cycle: id -> age at ``now`` (s)."""
-    suggested_hold: float
-    """A ``hold=`` above the oldest of ``ages`` (1.25 times it, rounded up to 10 ms)."""
 
 
 class TrackHistory(NamedTuple):

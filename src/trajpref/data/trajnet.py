@@ -28,27 +28,15 @@ import numpy as np
 from trajpref.data.text import (
     DEFAULT_MAX_COORD,
     EXACT_ID_LIMIT,
-    GapWarning,
     check_file,
     file_lines,
     open_data_file,
     source_ids,
 )
-from trajpref.errors import ConfigError, DataError
+from trajpref.errors import ConfigError, DataError, GapWarning, ObservedOnlyWarning
+from trajpref.errors import FrameRateWarning as FrameRateWarning  # its older place
 from trajpref.io import atomic_path
 from trajpref.types import Scene
-
-
-class FrameRateWarning(UserWarning):
-    """TrajNet++ scenes declare frame rates that disagree with each other or with the frame
-    interval the user gave (``registry.trajnet_interval`` says which one is used), or the time
-    columns of text files do not give one interval (``registry.text_interval``)."""
-
-
-class ObservedOnlyWarning(UserWarning):
-    """A TrajNet++ file holds both complete scenes and observation-only ones (their primary
-    agent's observed frames alone, the future hidden: ``read_trajnet``). TrajNet++'s test files
-    can (overlapping scenes show a scene's whole future); a complete file cut short can too."""
 
 
 @dataclass

@@ -32,7 +32,14 @@ from safetensors.torch import load_file, save_file
 from trajpref.config import USES_RL, ExperimentConfig, experiment_from_dict, to_dict
 from trajpref.device import resolve_device
 from trajpref.diffusion.schedule import DDPMSchedule
-from trajpref.errors import ConfigError, TrajprefError
+from trajpref.errors import (
+    ConfigError,
+    DenoiserConflict,
+    ModelNotFound,
+    TrajprefDeprecationWarning,
+    TrajprefError,
+    WeightsConflict,
+)
 from trajpref.io import atomic_path, load_tensors, read_checkpoint_header, resume_state_message
 from trajpref.models import zoo
 from trajpref.models.denoiser import Denoiser
@@ -48,14 +55,6 @@ DENOISER_NAME = "denoiser" + SUFFIX
 """File name of a published dataset's default denoiser, beside its generators."""
 _GROUPS = {"state_dict": "model", "critic": "critic"}
 """Payload entries holding tensors -> their prefix in the file."""
-
-
-class DenoiserConflict(TrajprefError):
-    """Publishing would replace a different denoiser that other checkpoints may name."""
-
-
-class WeightsConflict(TrajprefError):
-    """Publishing would replace the weights that settings-only variants beside it name."""
 
 
 def state_hash(state: dict[str, torch.Tensor]) -> str:
@@ -251,10 +250,10 @@ def resolve_path(path: str | Path) -> Path:
     if not path.is_file() and path.suffix == LEGACY_SUFFIX:
         new = path.with_suffix(SUFFIX)
         if new.is_file():
-            warnings.warn(f"{path} is now {new}", FutureWarning, stacklevel=3)
+            warnings.warn(f"{path} is now {new}", TrajprefDeprecationWarning, stacklevel=3)
             return new
     if not path.is_file():  # a published model's repository path names it, as the CLI does
-        raise TrajprefError(zoo.not_here_message(spec) or f"{path}: no such checkpoint")
+        raise ModelNotFound(zoo.not_here_message(spec) or f"{path}: no such checkpoint")
     return path
 
 
@@ -292,7 +291,7 @@ def _read_legacy(path: Path) -> dict[str, Any]:
     warnings.warn(
         f"{path}: a legacy .pt checkpoint; it still loads, but new files are {SUFFIX} "
         "(benchmarks/convert_models.py converts)",
-        FutureWarning,
+        TrajprefDeprecationWarning,
         stacklevel=4,
     )
     return payload
@@ -329,7 +328,7 @@ def load(path: str | Path) -> dict[str, Any]:
         try:  # an older file may name denoiser.pt, now converted to .safetensors
             den_path = resolve_path(path.parent / ref["path"])
         except TrajprefError:
-            raise TrajprefError(
+            raise ModelNotFound(
                 f"{path}: this generator names its denoiser instead of embedding it (a "
                 f"published file): it needs {ref['path']} (hash {ref['hash']}) beside it, in "
                 f"{path.parent}; copy the denoiser it was published with there (`trajpref "

@@ -8,7 +8,7 @@ from pathlib import Path
 import torch
 
 from trajpref.device import resolve_device
-from trajpref.errors import TrajprefError
+from trajpref.errors import ModelNotFound, TrajprefError
 from trajpref.models import checkpoint, zoo
 from trajpref.models.baseline import ConstantVelocity
 from trajpref.models.predictor import Sampler
@@ -26,7 +26,9 @@ def load_predictor(
     ``sampler`` (``leapfrog`` or ``full``) applies to diffusion checkpoints; None picks the
     checkpoint's natural one (leapfrog for a generator, full for a bare denoiser). ``device``:
     ``auto`` (a GPU when there is one), ``cpu`` or ``cuda[:i]``; the baseline computes on its
-    inputs' device. ``spec`` of another type (None, a number) is a ``ConfigError``.
+    inputs' device. ``spec`` of another type (None, a number) is a ``ConfigError``; one that
+    names no checkpoint file or published model is a ``ModelNotFound`` (a ``TrajprefError``
+    and a ``FileNotFoundError``).
     """
     checkpoint.check_spec(spec, "load_predictor", f"'cv', {checkpoint.MODEL_SPECS}")
     device = resolve_device(device)  # "auto" as the CLI reads it; a missing GPU in one line
@@ -44,11 +46,11 @@ def load_predictor(
             found = [folder / f"{n}{checkpoint.SUFFIX}" for n in ("finetune", "generator")]
             found = [str(p) for p in found if p.is_file()]
             hint = f": pass {' or '.join(found)}" if found else ""
-            raise TrajprefError(f"{spec}: a folder, not a checkpoint file{hint}") from None
+            raise ModelNotFound(f"{spec}: a folder, not a checkpoint file{hint}") from None
         message = zoo.not_here_message(spec)  # models/zara1/generator.safetensors elsewhere
         if message is not None:
-            raise TrajprefError(message) from None
-        raise TrajprefError(
+            raise ModelNotFound(message) from None
+        raise ModelNotFound(
             f"{spec}: no such model (use 'cv', a published name such as zara1/generator "
             "(`trajpref models` lists them) or a checkpoint file)"
         ) from None

@@ -23,7 +23,7 @@ import torch
 from trajpref.data.registry import PIXEL_NAMES, SECONDS_STEPS, SPECS, check_frame_interval
 from trajpref.data.stats import METRES_PER_UNIT
 from trajpref.data.transforms import observed_pace
-from trajpref.errors import ConfigError
+from trajpref.errors import ConfigError, OutOfRangeWarning
 from trajpref.metrics import METRE_UNITS
 from trajpref.types import AGENT_BALL, TrajectoryDataset
 
@@ -341,11 +341,12 @@ def check_pace(
     name: str = "this model",
     stacklevel: int = 3,
 ) -> None:
-    """Warn (``UserWarning``) when ``frame_interval`` (seconds between the positions handed
-    to ``obj``) or ``units`` differ from what ``obj`` (a predictor or scorer carrying
-    ``attach_timing``'s record) was trained on: the Python side of the CLI's warning. Only
-    what both sides know is compared: ``frame_interval`` against a recorded, known step; units
-    against recorded units. ConfigError for a ``frame_interval`` that is not a number > 0."""
+    """Warn (``OutOfRangeWarning``, a ``UserWarning``) when ``frame_interval`` (seconds
+    between the positions handed to ``obj``) or ``units`` differ from what ``obj`` (a
+    predictor or scorer carrying ``attach_timing``'s record) was trained on: the Python side
+    of the CLI's warning. Only what both sides know is compared: ``frame_interval`` against a
+    recorded, known step; units against recorded units. ConfigError for a ``frame_interval``
+    that is not a number > 0."""
     frame_interval = check_frame_interval(frame_interval, "seconds between the history's positions")
     if units is not None and not isinstance(units, str):
         raise ConfigError(f"units: a unit name such as 'm' or 'px', got {units!r}")
@@ -356,7 +357,8 @@ def check_pace(
     problems = timing_problems(known, frame_interval, units,
                                lambda m: _resample_hint(m, frame_interval))  # fmt: skip
     if problems:
-        warnings.warn(trained_otherwise(name, timing, problems), stacklevel=stacklevel)
+        warnings.warn(trained_otherwise(name, timing, problems), OutOfRangeWarning,
+                      stacklevel=stacklevel)  # fmt: skip
 
 
 PACE_REFERENCE = 0.582
@@ -682,15 +684,16 @@ def observed_problems(obj: Any, history: Any, name: str = "this model",
 def check_observed_steps(obj: Any, history: Any, name: str = "this model",
                          stacklevel: int = 3, agent_type: Any = None,
                          scenes: Any = None) -> bool:  # fmt: skip
-    """Warn (``UserWarning``) of what is wrong with the agents ``history`` [N, T_h, 2] hands
-    to ``obj`` (a predictor or scorer; ``scenes`` [B]: the sizes of the consecutive scenes it
-    joins, None: one scene), each cause once (``observed_problems``): data in other units
-    (``pace_problem``) alone, since it moves and spreads every agent; else one agent's jump
-    (``jump_problem``) or, where none, agents faster than training for a model without a
-    speed clamp (``fast_problem``), and beside either a scene wider than training for a model
-    without a neighbour radius (``wide_problem``). Returns whether it warned. The same texts
-    at every call, so that a planner's loop is warned once."""
+    """Warn (``OutOfRangeWarning``, a ``UserWarning``) of what is wrong with the agents
+    ``history`` [N, T_h, 2] hands to ``obj`` (a predictor or scorer; ``scenes`` [B]: the sizes
+    of the consecutive scenes it joins, None: one scene), each cause once
+    (``observed_problems``): data in other units (``pace_problem``) alone, since it moves and
+    spreads every agent; else one agent's jump (``jump_problem``) or, where none, agents faster
+    than training for a model without a speed clamp (``fast_problem``), and beside either a
+    scene wider than training for a model without a neighbour radius (``wide_problem``).
+    Returns whether it warned. The same texts at every call, so that a planner's loop is
+    warned once."""
     found = observed_problems(obj, history, name, agent_type, scenes)
     for text in found.values():
-        warnings.warn(text, stacklevel=stacklevel)
+        warnings.warn(text, OutOfRangeWarning, stacklevel=stacklevel)
     return bool(found)

@@ -18,7 +18,7 @@ import re
 from pathlib import Path
 from typing import Any
 
-from trajpref.errors import TrajprefError
+from trajpref.errors import ModelNotFound, TrajprefError
 from trajpref.io import read_checkpoint_header
 from trajpref.models.timing import UNKNOWN_UNITS, model_timing
 
@@ -97,7 +97,7 @@ def resolve(name: str, root: Path | None = None) -> Path:
         return Path(name)
     known = ", ".join(models) or "none (the package was built without its models)"
     folder = " (a folder: name a checkpoint file in it)" if Path(name).is_dir() else ""
-    raise TrajprefError(
+    raise ModelNotFound(
         f"{name}: neither a checkpoint file nor a published model{folder}; published: {known} "
         "(`trajpref models` describes them)"
     )

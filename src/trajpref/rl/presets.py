@@ -24,7 +24,7 @@ from trajpref.config import (
     to_dict,
     uses_rl,
 )
-from trajpref.errors import ConfigError
+from trajpref.errors import ConfigError, IgnoredWarning
 from trajpref.models import checkpoint
 from trajpref.rl.objective import loss_samples
 from trajpref.rl.rewards import BUILTIN_REWARDS, SCORE_REWARDS, check_reward
@@ -446,5 +446,5 @@ def finetune_config(
     if config is not None and os.environ.get("RANK", "0") == "0":
         note = unread_file_note(config, cfg, method, overrides or [])
         if note is not None:
-            warnings.warn(note, stacklevel=2)
+            warnings.warn(note, IgnoredWarning, stacklevel=2)
     return cfg

@@ -33,7 +33,13 @@ from trajpref.data.transforms import (
 )
 from trajpref.device import resolve_device
 from trajpref.diffusion.schedule import DDPMSchedule
-from trajpref.errors import ConfigError, DataError
+from trajpref.errors import (
+    ConfigError,
+    DataError,
+    IgnoredWarning,
+    OutOfRangeWarning,
+    TrajprefWarning,
+)
 from trajpref.metrics import ade_fde, scene_sum
 from trajpref.models import checkpoint
 from trajpref.models.denoiser import Denoiser, DenoiserShapes
@@ -557,7 +563,7 @@ def reads_agent_types(obj) -> bool:
 
 
 def warn_untyped(obj, call: str, stacklevel: int) -> None:
-    """A ``UserWarning`` that ``call`` (``predict_scene``, ``predict_scenes``,
+    """An ``OutOfRangeWarning`` that ``call`` (``predict_scene``, ``predict_scenes``,
     ``rank_samples``, ``select_for_scene``) got no agent types for a model or scorer trained
     with typed agents (``reads_agent_types``). Its text is the same at every call, so Python
     shows it once per call site."""
@@ -571,11 +577,11 @@ def warn_untyped(obj, call: str, stacklevel: int) -> None:
                   f"{obj.timing['trained_on']} with the ball flagged (agent_type {AGENT_BALL}) "
                   f"and its {'futures' if model else 'scores'} change with the flags: pass "
                   f"{how}, {AGENT_BALL} for the ball, {AGENT_PERSON} for a player",
-                  stacklevel=stacklevel)  # fmt: skip
+                  OutOfRangeWarning, stacklevel=stacklevel)  # fmt: skip
 
 
 def warn_ball_count(obj, call: str, counts: list[tuple[int, int]], stacklevel: int) -> None:
-    """A ``UserWarning`` that ``call`` (``predict_scene``, ``predict_scenes``,
+    """An ``OutOfRangeWarning`` that ``call`` (``predict_scene``, ``predict_scenes``,
     ``rank_samples``, ``select_for_scene``) was given agent types that flag no ball, or more
     than one, in a scene, for a model or scorer trained with the ball flagged
     (``reads_agent_types``: every scene of NBA's splits flags exactly one). ``counts``:
@@ -594,7 +600,7 @@ def warn_ball_count(obj, call: str, counts: list[tuple[int, int]], stacklevel: i
         n = odd[0][1]
         found = "no ball" if n == 0 else f"{n} balls"
         warnings.warn(f"{call}: agent_type flags {found} (agent_type {AGENT_BALL}) in this "
-                      f"scene; {tail}", stacklevel=stacklevel)  # fmt: skip
+                      f"scene; {tail}", OutOfRangeWarning, stacklevel=stacklevel)  # fmt: skip
         return
     none = [i for i, n in odd if n == 0]
     many = [i for i, n in odd if n > 1]
@@ -602,7 +608,7 @@ def warn_ball_count(obj, call: str, counts: list[tuple[int, int]], stacklevel: i
              f"two or more balls in {len(many)}" if many else ""]  # fmt: skip
     first = ", ".join(f"histories[{i}]" for i, _ in odd[:3]) + (", ..." if len(odd) > 3 else "")
     warnings.warn(f"{call}: agent_types flag {' and '.join(p for p in parts if p)} of the "
-                  f"{len(counts)} scenes given types ({first}); {tail}",
+                  f"{len(counts)} scenes given types ({first}); {tail}", OutOfRangeWarning,
                   stacklevel=stacklevel)  # fmt: skip
 
 
@@ -860,7 +866,8 @@ def _predict(model, histories: list, num_samples, agent_types: list, seed, frame
             model, "reads_context", False):  # fmt: skip
         warnings.warn("this model reads no context-only neighbours (model.reads_context is "
                       "False): the context changes nothing; a neighbour seen over the whole "
-                      "history can be listed as an agent instead", stacklevel=3)  # fmt: skip
+                      "history can be listed as an agent instead", IgnoredWarning,
+                      stacklevel=3)  # fmt: skip
     elif getattr(model, "reads_context", False):
         _warn_unread_context(model, [c for h, _, c in scenes if len(h)])
     present = [scene for scene in scenes if len(scene[0])]  # a scene without agents: no pass
@@ -901,7 +908,8 @@ def _warn_fixed_set(model, count: int) -> None:
                       f"all {fixed} and keep {count} with trajpref.score.selection."
                       f"select_for_scene (chosen_selection(model, keep={count}) gives the "
                       "published models' score-guided setting; docs/selection.md), or load "
-                      "it with sampler='full' for independent draws", stacklevel=4)  # fmt: skip
+                      "it with sampler='full' for independent draws", TrajprefWarning,
+                      stacklevel=4)  # fmt: skip
 
 
 def _warn_unread_context(model, contexts: list) -> None:
@@ -918,7 +926,8 @@ def _warn_unread_context(model, contexts: list) -> None:
                       f"context-only neighbour only if it was seen in each of the last "
                       f"{frames} frames (model.context_frames), and these were seen in fewer "
                       "(a NaN among them); fill in their missing frames (e.g. the first seen "
-                      "position held) for the model to read them", stacklevel=4)  # fmt: skip
+                      "position held) for the model to read them", IgnoredWarning,
+                      stacklevel=4)  # fmt: skip
 
 
 def scene_batch(scorer: TrajectoryScorer, history: ArrayLike, samples: ArrayLike,

@@ -46,7 +46,7 @@ import numpy as np
 from scipy import stats
 
 from trajpref import __version__
-from trajpref.errors import ConfigError
+from trajpref.errors import ConfigError, DataWarning
 from trajpref.io import atomic_path, check_output_dir, check_output_file, dumps_json
 from trajpref.survey.manifest import DATABASE, GROUND_TRUTH, Study, load_study
 from trajpref.survey.store import AnswerStore, case_variants, private_output
@@ -774,9 +774,10 @@ def run_analysis(
         store.close()
     result = analyze(study, rows, rater_kind, ignored, excluded, positions)
     if ignored["answers"]:
-        warnings.warn(f"{store.path}: {ignored_text(ignored)}", stacklevel=2)
+        warnings.warn(f"{store.path}: {ignored_text(ignored)}", DataWarning, stacklevel=2)
     if result.case_variants:
-        warnings.warn(f"{store.path}: {case_variants_text(result.case_variants)}", stacklevel=2)
+        warnings.warn(f"{store.path}: {case_variants_text(result.case_variants)}", DataWarning,
+                      stacklevel=2)  # fmt: skip
     names, columns, marks, xlims = figure_data(result)
     label = "SYNTHETIC raters - not human data. " if result.synthetic else ""
     reference = (f"; marks: Wilcoxon test against {result.best} ({ABOVE}: the row is higher)"

@@ -19,7 +19,7 @@ from trajpref.data import ReadOptions, hold_out_scene, load_dataset
 from trajpref.data.registry import SPECS, check_protocol
 from trajpref.data.text import DEFAULT_MAX_COORD
 from trajpref.device import resolve_device
-from trajpref.errors import ConfigError, TrajprefError
+from trajpref.errors import ConfigError, DataWarning, TrajprefError
 from trajpref.io import bar_options, read_checkpoint_header
 from trajpref.models import checkpoint as ckpt
 from trajpref.models.registry import BUILTIN, load_predictor
@@ -312,7 +312,7 @@ def build_study(cfg: BuildConfig, out: str | Path, progress: bool = True,
         on_data(ds)
     if ds.info.units in UNKNOWN_UNITS:
         units = recorded_units([*cfg.models.values(), _scorer_path(cfg)])
-        warnings.warn(units_warning(ds.info.name, units), stacklevel=2)
+        warnings.warn(units_warning(ds.info.name, units), DataWarning, stacklevel=2)
     sizes = np.array([s.num_agents for s in ds.scenes])  # [B]
     picks = select_scenes(sizes, cfg.scenes, cfg.seed, cfg.strata, cfg.min_agents,
                           cfg.max_agents, cfg.min_gap)  # fmt: skip

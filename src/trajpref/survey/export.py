@@ -15,7 +15,7 @@ import csv
 import warnings
 from pathlib import Path
 
-from trajpref.errors import ConfigError
+from trajpref.errors import ConfigError, DataWarning
 from trajpref.io import check_output_file
 from trajpref.survey.analyze import RaterKind, case_variants_text, select_rows
 from trajpref.survey.manifest import DATABASE, GROUND_TRUTH, load_study
@@ -64,7 +64,8 @@ def export_csv(folder: str | Path, path: str | Path, db: str | Path | None = Non
     chosen, kind = select_rows(keyed, rater_kind, excluded)
     raters = sorted({r[0] for r in chosen})
     if case_variants(raters):
-        warnings.warn(f"{store.path}: {case_variants_text(case_variants(raters))}", stacklevel=2)
+        warnings.warn(f"{store.path}: {case_variants_text(case_variants(raters))}", DataWarning,
+                      stacklevel=2)  # fmt: skip
     units = str(study.dataset.get("units") or "unknown")
     build = study.build or {}
     hashes = (build.get("hashes") or {}).get("methods") or {}

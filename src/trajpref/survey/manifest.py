@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from trajpref.errors import ConfigError, DataError
+from trajpref.errors import ConfigError, ConfigNotFound, DataError
 
 FORMAT = "trajpref-survey/1"
 """The manifest's ``format`` value."""
@@ -394,7 +394,8 @@ def load_study(folder: str | Path) -> Study:
     """
     folder = Path(folder)
     if not folder.is_dir():
-        raise ConfigError(f"{folder}: no such study folder (make one with `trajpref survey build`)")
+        raise ConfigNotFound(f"{folder}: no such study folder (make one with `trajpref survey "
+                             "build`)")  # fmt: skip
     path = folder / MANIFEST
     if not path.is_file():
         raise ConfigError(f"{folder}: not a study folder (no {MANIFEST})")

@@ -65,7 +65,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from trajpref.errors import ConfigError, TrajprefError
+from trajpref.errors import AnswerError, ConfigError, StoreError, TrajprefWarning
 from trajpref.io import atomic_path, write_probe
 from trajpref.survey.manifest import CRITERIA, RATING_MAX, RATING_MIN, Study
 
@@ -123,26 +123,6 @@ TABLES = {
 opened (``POSITION_COLUMNS`` may be missing: a file written before them)."""
 POSITION_COLUMNS = ("scene_position", "panel_position")
 """The columns of ``answers`` that record where the picture was shown (added 2026-12-06)."""
-
-
-class AnswerError(TrajprefError, ValueError):
-    """An answer the store refuses; ``status`` is the HTTP status the server answers with
-    (400 malformed, 403 consent not given, 404 unknown scene or panel, 409 conflict, 422
-    invalid value)."""
-
-    def __init__(self, message: str, status: int = 422):
-        super().__init__(message)
-        self.status = status
-
-
-class StoreError(AnswerError):
-    """The database could not take or give an answer (a disk error, a file locked for too
-    long, the study folder deleted while serving): status 503. ``str()`` is for the rater (no
-    path); ``log`` is the line for the researcher's log (with the database's path)."""
-
-    def __init__(self, message: str, log: str):
-        super().__init__(message, 503)
-        self.log = log
 
 
 GONE = ("the study folder is gone (deleted, moved or replaced while the server ran); tell "
@@ -257,7 +237,7 @@ def _warn_if_shared(path: Path) -> None:
     if mode & 0o077:
         warnings.warn(f"{path}: other users have access to it (mode {mode:o}); the answers "
                       f"are personal data: make it owner-only with `chmod 600 {path}` (its "
-                      "-wal and -shm files follow)", stacklevel=3)  # fmt: skip
+                      "-wal and -shm files follow)", TrajprefWarning, stacklevel=3)  # fmt: skip
 
 
 def check_ratings(ratings: Any) -> tuple[int, int]:
@@ -551,7 +531,7 @@ class AnswerStore:
         warnings.warn(f"{self.path}: an older answers database: its study id ({row[0]}) covers "
                       "only the scene, panel and method structure, which this study shares; it "
                       "cannot tell this study from another of that structure built from other "
-                      "data or models", stacklevel=3)  # fmt: skip
+                      "data or models", TrajprefWarning, stacklevel=3)  # fmt: skip
 
     @contextlib.contextmanager
     def _tx(self, what: str | None = None) -> Iterator[None]:
