@@ -183,7 +183,9 @@ def test_zero_adaptation_steps_report_before_and_after_as_equal(model, long_walk
     assert adapted["before"] == out["before"]
 
 
-def test_cli_in_context_shows_progress_unless_told_not_to(tmp_path, tiny_run, capsys):
+def test_cli_in_context_shows_progress_unless_told_not_to(tmp_path, tiny_run, capsys,
+                                                         monkeypatch):  # fmt: skip
+    monkeypatch.setattr("trajpref.io._is_terminal", lambda stream: True)  # bars as on a terminal
     root = write_dataset(tmp_path / "data", frames=40)
     argv = ["evaluate", "--dataset", root, "--model", tiny_run / "generator.safetensors",
             "--samples", "2", "--device", "cpu", "--in-context", "40", "--adapt-steps",

@@ -146,10 +146,6 @@ CASES: dict[str, tuple[list[str], str]] = {
     "resume into another folder": (
         [*TRAIN, "--out", "{out}/run", "--resume", "{run}/denoiser_last.pt"],
         r"a run resumes in its own folder \(--out .*\), not in .*run"),
-    "resume with no epochs left": (
-        [*TRAIN, "--set", "denoiser.epochs=1", "--out", "{run}", "--resume",
-         "{run}/denoiser_last.pt"],
-        r"the state has finished \d+ epochs and this run has 1: nothing left to train"),
     "unknown --set key": ([*TRAIN, "--set", "data.max_agent=8", "--out", "{out}/run"],
                           r"unknown config key data\.max_agent \(did you mean data\.max_agents\?"
                           r"\); valid keys of section data: dataset, val_dataset, max_agents"),
@@ -365,3 +361,26 @@ def test_a_published_models_repository_path_names_it_outside_the_repository(
         assert err == (f"trajpref: error: {flag} {path}: no such checkpoint here; the published "
                        f"model is named {name} ({flag} {name} works in any folder)\n")  # fmt: skip
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_resume_with_nothing_left_to_train_is_a_note_and_status_0(
+    capsys, tmp_path, walks, tiny_run
+):
+    """Batch walkthrough 2026-12-06: a job requeued after its run had finished (``--resume``
+    of a state whose epochs are done) failed with status 2; it succeeds now, with the note on
+    stderr, nothing on stdout and nothing written. From Python it is still a ConfigError."""
+    from trajpref.errors import ConfigError
+    from trajpref.train.run import NothingLeftToTrain
+
+    argv = [a.format(walks=walks) for a in TRAIN]
+    argv += ["--set", "denoiser.epochs=1", "--out", str(tiny_run), "--resume",
+             str(tiny_run / "denoiser_last.pt")]  # fmt: skip
+    before = _snapshot(tiny_run, walks)
+    code = main(argv)
+    out, err = capsys.readouterr()
+    assert (code, out) == (0, ""), err
+    assert re.fullmatch(r"trajpref: note: --resume .*denoiser_last\.pt: the state has finished "
+                        r"\d+ epochs and this run has 1: nothing left to train \(raise "
+                        r"denoiser\.epochs to train longer\)\n", err), err  # fmt: skip
+    assert _snapshot(tiny_run, walks) == before
+    assert issubclass(NothingLeftToTrain, ConfigError)

@@ -308,3 +308,56 @@ def test_the_denoiser_stage_answers_to_its_file_name_and_subcommands_are_named(
     monkeypatch.setattr(cli, "cmd_train", lambda args: seen.append(args.stage) or 0)
     code, _, _ = _run(capsys, "train", "denoiser", "--out", tmp_path / "r")
     assert code == 0 and seen == ["diffusion"]
+
+
+def _state_then_signal(signum):
+    """A stand-in for train_stage: an epoch's state is written, then ``signum`` arrives."""
+    import signal
+
+    def fake(stage, cfg, out, *args, **kwargs):
+        Path(out).mkdir(parents=True, exist_ok=True)
+        torch.save({"stage": "denoiser"}, Path(out) / "denoiser_last.pt")
+        if signum == signal.SIGINT:
+            raise KeyboardInterrupt
+        os.kill(os.getpid(), signum)  # its handler raises before the next line
+        raise AssertionError("the signal did not stop training")
+
+    return fake
+
+
+@pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM"])
+def test_the_resume_advice_starts_trajpref_as_this_process_was_started(
+    capsys, monkeypatch, tmp_path, signame
+):
+    """Batch walkthrough 2026-12-06: the advice always began `trajpref ...`, which fails under
+    an un-activated /path/.venv/bin/trajpref (not on PATH) and where `python -m trajpref` ran
+    it. It starts the program as it was started now, after Ctrl-C and SIGTERM alike."""
+    import signal
+    import sys
+
+    signum = getattr(signal, signame)
+    code_wanted = {"SIGINT": 130, "SIGTERM": 143}[signame]
+    monkeypatch.setattr(cli, "train_stage", _state_then_signal(signum))
+    empty = tmp_path / "bin"
+    empty.mkdir()
+    monkeypatch.setenv("PATH", str(empty))  # neither trajpref nor python found by name
+    run = tmp_path / "run"
+    tail = [*TRAIN_ARGS, "--out", str(run), "--resume", str(run / "denoiser_last.pt")]
+    script = tmp_path / "venv" / "bin" / "trajpref"
+    module = tmp_path / "site-packages" / "trajpref" / "__main__.py"
+    for argv0, launcher in ((str(script), [str(script)]),
+                            (str(module), [sys.executable, "-m", "trajpref"]),
+                            (str(module.with_name("cli.py")),
+                             [sys.executable, "-m", "trajpref.cli"])):  # fmt: skip
+        monkeypatch.setattr(sys, "argv", [argv0, *TRAIN_ARGS, "--out", str(run)])
+        code, _, err = _run(capsys, *TRAIN_ARGS, "--out", run)
+        assert code == code_wanted
+        assert shlex.split(err.strip().splitlines()[1]) == [*launcher, *tail], err
+    # the trajpref script that PATH finds is `trajpref`, as typed
+    script.parent.mkdir(parents=True)
+    script.write_text("#!/bin/sh\n")
+    script.chmod(0o755)
+    monkeypatch.setenv("PATH", str(script.parent))
+    monkeypatch.setattr(sys, "argv", [str(script), *TRAIN_ARGS, "--out", str(run)])
+    code, _, err = _run(capsys, *TRAIN_ARGS, "--out", run)
+    assert shlex.split(err.strip().splitlines()[1]) == ["trajpref", *tail]

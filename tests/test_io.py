@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import torch
 
+from trajpref import io
 from trajpref.errors import ConfigError, TrajprefError
 from trajpref.io import (
     atomic_path,
@@ -41,6 +42,57 @@ def test_written_files_get_the_umask_mode(tmp_path, umask, mask, mode):
     for name in ("a.json", "b.pt"):
         assert stat.S_IMODE((tmp_path / name).stat().st_mode) == mode
     assert os.umask(mask) == mask  # file_mode read the umask without changing it
+
+
+def _refuse_umask(*args):
+    raise AssertionError("file_mode set the umask to read it")
+
+
+def _proc_states_umask() -> bool:
+    try:
+        with open("/proc/self/status") as status:
+            return any(line.startswith("Umask:") for line in status)
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not _proc_states_umask(), reason="no Umask line in /proc/self/status")
+@pytest.mark.parametrize(("mask", "mode"), [(0o022, 0o644), (0o077, 0o600)])
+def test_file_mode_reads_the_umask_without_setting_it(monkeypatch, mask, mode):
+    """Setting the umask to read it gave, for that moment, another thread's new files the
+    wrong mode (walkthrough 69: a host with umask 077 got 0644 files)."""
+    old = os.umask(mask)
+    try:
+        with monkeypatch.context() as patch:
+            patch.setattr(os, "umask", _refuse_umask)
+            assert file_mode() == mode
+    finally:
+        os.umask(old)
+
+
+def test_file_mode_reads_the_umask_the_status_file_states(tmp_path, monkeypatch):
+    status = tmp_path / "status"
+    status.write_text("Name:\tpython\nUmask:\t0027\nState:\tR (running)\n")
+    monkeypatch.setattr(io, "PROC_STATUS", str(status))
+    monkeypatch.setattr(os, "umask", _refuse_umask)
+    assert file_mode() == 0o640
+
+
+@pytest.mark.parametrize("status", ["missing", "no-line", "garbled"])
+@pytest.mark.parametrize(("mask", "mode"), [(0o022, 0o644), (0o077, 0o600), (0o002, 0o664)])
+def test_file_mode_without_a_stated_umask_sets_and_restores_it(tmp_path, monkeypatch, umask,
+                                                               status, mask, mode):  # fmt: skip
+    """Where there is no /proc (not Linux), or no ``Umask:`` line (an older kernel), the
+    umask is read by setting it and putting it back."""
+    path = tmp_path / "status"
+    if status == "no-line":
+        path.write_text("Name:\tpython\nState:\tR (running)\n")
+    elif status == "garbled":
+        path.write_text("Umask:\tnot-octal\n")
+    monkeypatch.setattr(io, "PROC_STATUS", str(path))
+    umask(mask)
+    assert file_mode() == mode
+    assert os.umask(mask) == mask  # put back as it was
 
 
 def test_a_failed_write_leaves_no_file_and_no_new_folders(tmp_path):
@@ -145,3 +197,85 @@ def test_progress_bars_keep_tqdms_pace_in_a_notebook(monkeypatch):
     monkeypatch.setitem(sys.modules, "ipykernel", types.ModuleType("ipykernel"))
     assert bar_options(True) == {"disable": False}
     assert bar_options(False) == {"disable": True}  # --no-progress / progress=False still hide
+
+
+def test_a_full_disk_inside_atomic_path_names_the_file(tmp_path, monkeypatch):
+    """Batch walkthrough 2026-12-06: an OSError raised while the body wrote (ENOSPC, which
+    names no file) reached the CLI as `trajpref: error: No space left on device`. It names the
+    file now; an OSError of another file (one the body reads) is passed on as it was."""
+    import errno
+    from pathlib import Path
+
+    target = tmp_path / "new" / "o.json"
+    with pytest.raises(TrajprefError) as caught, atomic_path(target) as tmp:
+        tmp.write_text("{")
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    assert str(caught.value) == f"{target}: cannot write (No space left on device)"
+    assert not (tmp_path / "new").exists()  # no temporary file, no new folder
+    other = tmp_path / "in.txt"
+    with pytest.raises(FileNotFoundError) as caught, atomic_path(target) as tmp:
+        tmp.write_text(other.read_text())
+    assert caught.value.filename == str(other)
+    real = Path.write_text
+
+    def full(self, *args, **kwargs):
+        if self.name.startswith(".o.json."):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "write_text", full)
+    with pytest.raises(TrajprefError, match=rf"^{target}: cannot write \(No space left"):
+        write_json(target, {"a": 1})
+
+
+def test_the_environment_hides_the_progress_bars(monkeypatch):
+    """TQDM_DISABLE=1 was overridden by the bars' explicit disable=False; TRAJPREF_NO_PROGRESS
+    is trajpref's own. Both hide every bar, on a terminal too; 0 (or empty) hides none."""
+    import sys
+    from io import StringIO
+
+    from trajpref.io import bar_options
+
+    class Terminal(StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    monkeypatch.setattr(sys, "stderr", Terminal())
+    for name in ("TQDM_DISABLE", "TRAJPREF_NO_PROGRESS"):
+        monkeypatch.delenv("TQDM_DISABLE", raising=False)
+        monkeypatch.delenv("TRAJPREF_NO_PROGRESS", raising=False)
+        assert bar_options(True) == {"disable": False}
+        monkeypatch.setenv(name, "1")
+        assert bar_options(True) == {"disable": True}, name
+        monkeypatch.setenv(name, "0")
+        assert bar_options(True) == {"disable": False}, name
+
+
+def test_a_bar_in_a_log_writes_whole_lines_and_what_follows_starts_a_line(monkeypatch):
+    """A bar's carriage-return redraws and its clearing at the end left a log's last line
+    open: `trajpref: error: ...` printed after it did not start a line (`grep '^trajpref:
+    error'` found nothing). Where stderr is a log, a bar writes nothing for its first
+    LOG_REDRAW_SECONDS, then whole lines; here the minute is shortened to 20 ms."""
+    import re
+    import sys
+    import time
+    from io import StringIO
+
+    from tqdm.auto import tqdm
+
+    log = StringIO()  # not a terminal
+    monkeypatch.setattr(sys, "stderr", log)
+    monkeypatch.delitem(sys.modules, "ipykernel", raising=False)
+    monkeypatch.delenv("TQDM_DISABLE", raising=False)
+    monkeypatch.delenv("TRAJPREF_NO_PROGRESS", raising=False)
+    monkeypatch.setattr(io, "LOG_REDRAW_SECONDS", 0.02)
+    for _ in tqdm(range(12), desc="epoch", leave=False, **io.bar_options(True)):
+        time.sleep(0.01)
+    for _ in tqdm(range(3), desc="short", leave=False, **io.bar_options(True)):
+        pass  # shorter than the wait: nothing written
+    print("trajpref: error: boom", file=sys.stderr)
+    text = log.getvalue()
+    assert "\r" not in text and "short" not in text
+    lines = text.splitlines()
+    assert lines[-1] == "trajpref: error: boom" and re.search("^trajpref: error", text, re.M)
+    assert lines[:-1] and all(re.match(r"epoch: +\d+%\|", line) for line in lines[:-1]), lines

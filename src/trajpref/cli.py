@@ -134,6 +134,7 @@ from trajpref.train.distributed import (
 from trajpref.train.loop import Terminated
 from trajpref.train.run import (
     STAGE_NAMES,
+    NothingLeftToTrain,
     cli_resume_command,
     finetune,
     interval_note,
@@ -2436,6 +2437,19 @@ TRAINING = ("train", "finetune")
 """The commands that run under torchrun (each process a rank); the others run in one."""
 
 
+def _close_bars() -> None:
+    """Close the progress bars an exception left open (a bar over a loop, not a ``with``,
+    is closed only when it is freed): on a terminal each clears its line, so that the
+    message after it starts one (``io.bar_options``: where stderr is no terminal, bars write
+    whole lines)."""
+    bars = sys.modules.get("tqdm.std")
+    if bars is None:  # no bar was ever drawn
+        return
+    for bar in list(getattr(bars.tqdm, "_instances", ())):
+        with contextlib.suppress(Exception):
+            bar.close()
+
+
 def _raise_terminated(signum, frame) -> None:
     """SIGTERM during training: ``Terminated`` (``train.loop``; a BaseException, as Ctrl-C's
     KeyboardInterrupt, so that neither an ``except Exception`` nor a finalizer drops it)."""
@@ -2456,7 +2470,13 @@ def _refuse_under_torchrun(args) -> str | None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command. Everything a user can get wrong ends in one line on stderr,
-    ``trajpref: error: ...``, and exit status 2 (argparse's own usage errors included)."""
+    ``trajpref: error: ...``, and exit status 2 (argparse's own usage errors included).
+
+    Exit statuses: 0 success (a ``--resume`` with nothing left to train included: a note on
+    stderr, so that a requeued job of a finished run succeeds), 2 an error of the input or
+    the options (or a file that could not be read or written), 130 Ctrl-C (SIGINT), 143
+    SIGTERM (both with the resume advice of a training run), 141 stdout closed early (a
+    broken pipe, ``| head``); 1 is a bug (a Python traceback)."""
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
     parser = build_parser()
     try:
@@ -2483,7 +2503,12 @@ def main(argv: list[str] | None = None) -> int:
         with warnings.catch_warnings():
             warnings.showwarning = _one_line_warning  # restored when the command ends
             return args.func(args)
+    except NothingLeftToTrain as exc:  # every rank alike: rank 0 says it
+        if main_rank:
+            print(f"trajpref: note: {exc}", file=sys.stderr)
+        return 0
     except TrajprefError as exc:
+        _close_bars()
         # under torchrun each rank says what it met (one rank's own: a file missing on its
         # machine), prefixed with its rank; what every rank raises alike, rank 0 alone
         if main_rank:
@@ -2492,11 +2517,13 @@ def main(argv: list[str] | None = None) -> int:
             print(f"trajpref: error: [rank {os.environ.get('RANK')}] {exc}", file=sys.stderr)
         return 2
     except Terminated:
+        _close_bars()
         if main_rank:
             print(f"trajpref: terminated (SIGTERM){_resume_hint(args, argv, before)}",
                   file=sys.stderr)  # fmt: skip
         return 143
     except RuntimeError:
+        _close_bars()
         # under torchrun, a rank that died (killed, out of memory) fails the others in their
         # next collective: say how to continue, then torch's own traceback
         if training and env_info().enabled and main_rank:
@@ -2508,11 +2535,13 @@ def main(argv: list[str] | None = None) -> int:
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
     except OSError as exc:  # a file the command could not read or write
+        _close_bars()
         where = f"{exc.filename}: " if exc.filename else ""
         rank = "" if main_rank else f"[rank {os.environ.get('RANK')}] "  # may be its own
         print(f"trajpref: error: {rank}{where}{exc.strerror or exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        _close_bars()
         if main_rank:
             print(f"trajpref: interrupted{_resume_hint(args, argv, before)}", file=sys.stderr)
         return 130

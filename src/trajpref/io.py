@@ -17,12 +17,34 @@ from typing import Any
 
 from trajpref.errors import ConfigError, TrajprefError
 
+PROC_STATUS = "/proc/self/status"
+"""Where Linux (4.7 and later) states this process's umask (its ``Umask:`` line), read by
+``file_mode`` without changing the umask."""
+
+
+def _stated_umask() -> int | None:
+    """The umask on ``PROC_STATUS``'s ``Umask:`` line (octal), None where there is no such
+    file or line (not Linux, an older kernel, no /proc)."""
+    try:
+        with open(PROC_STATUS, encoding="ascii", errors="replace") as status:
+            for line in status:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
 
 def file_mode() -> int:
     """The mode a new file gets from ``open()`` under this process's umask (0644 under the
-    usual 022). ``tempfile.mkstemp`` always creates 0600, so renamed files need this."""
-    mask = os.umask(0o022)  # the only portable way to read the umask is to set it
-    os.umask(mask)
+    usual 022). ``tempfile.mkstemp`` always creates 0600, so renamed files need this. The
+    umask is read from ``/proc/self/status`` where there is one (Linux): setting it to read it
+    would, for that moment, give the files another thread creates the wrong mode. Elsewhere
+    it is set and put back at once (the only portable way to read it)."""
+    mask = _stated_umask()
+    if mask is None:
+        mask = os.umask(0o022)
+        os.umask(mask)
     return 0o666 & ~mask
 
 
@@ -92,7 +114,10 @@ def atomic_path(path: str | Path, mode: int | None = None) -> Iterator[Path]:
 
     The file gets ``mode``, or with None the umask's mode (as ``open()`` would give it).
     Folders created for it are removed again when the write fails; an ``OSError`` becomes a
-    one-line ``TrajprefError``."""
+    one-line ``TrajprefError`` naming ``path``: creating the file, renaming it, and one raised
+    in the ``with`` body while writing the temporary file (a full disk's ENOSPC, a quota's
+    EDQUOT, which name no file). An ``OSError`` of the body that names another file (one the
+    body reads) is passed on as it is."""
     path = Path(path)
     existing = _nearest_existing(path.parent)
     try:
@@ -105,17 +130,26 @@ def atomic_path(path: str | Path, mode: int | None = None) -> Iterator[Path]:
     tmp_path = Path(tmp)
     done = False
     try:
-        yield tmp_path
-        os.chmod(tmp_path, file_mode() if mode is None else mode)
         try:
+            yield tmp_path
+            os.chmod(tmp_path, file_mode() if mode is None else mode)
             os.replace(tmp_path, path)
         except OSError as exc:
+            if not _about(exc, (tmp_path, path)):
+                raise  # another file's (one the body reads): its own message names it
             raise TrajprefError(f"{path}: cannot write ({exc.strerror or exc})") from None
         done = True
     finally:
         tmp_path.unlink(missing_ok=True)
         if not done:
             _remove_new_folders(path.parent, existing)
+
+
+def _about(exc: OSError, paths: tuple[Path, ...]) -> bool:
+    """Whether ``exc`` concerns one of ``paths``: it names one of them, or no file at all (a
+    write's or a flush's ``OSError``, ENOSPC, carries no file name)."""
+    names = [n for n in (exc.filename, exc.filename2) if isinstance(n, (str, bytes, os.PathLike))]
+    return not names or any(Path(os.fsdecode(n)) in paths for n in names)
 
 
 def _remove_new_folders(folder: Path, existing: Path) -> None:
@@ -207,10 +241,42 @@ def load_tensors(path: str | Path) -> Any:
 
 
 LOG_REDRAW_SECONDS = 60.0
-"""How often at most a progress bar is redrawn when stderr is not a terminal (a log file,
-``nohup``, a pipe): tqdm's own 0.1 s writes ten carriage-return updates a second into a log
-(36,000 in an hour of training). The lines a run prints (per epoch, summaries, warnings) are
-lines either way."""
+"""How often at most a progress bar writes a line when stderr is not a terminal (a log file,
+``nohup``, a pipe), and how long it waits before its first (``bar_options``): tqdm's own 0.1 s
+wrote ten carriage-return updates a second into a log (36,000 in an hour of training). The
+lines a run prints (per epoch, summaries, warnings) are lines either way."""
+
+NO_PROGRESS_VARIABLES = ("TRAJPREF_NO_PROGRESS", "TQDM_DISABLE")
+"""Environment variables that hide every progress bar, as ``--no-progress`` (or
+``progress=False``) does, when set to anything but empty, ``0``, ``false``, ``no`` or ``off``:
+trajpref's own, and tqdm's, which the bars' explicit options would otherwise override."""
+
+
+def progress_hidden_by_environment() -> str | None:
+    """The first of ``NO_PROGRESS_VARIABLES`` set to hide the bars, or None."""
+    for name in NO_PROGRESS_VARIABLES:
+        value = os.environ.get(name, "").strip().lower()
+        if value not in ("", "0", "false", "no", "off"):
+            return name
+    return None
+
+
+class LogLines:
+    r"""The stream a progress bar writes to where stderr is not a terminal: each redraw (tqdm
+    writes ``\r`` + the bar, never a newline) becomes one whole line on the current
+    ``sys.stderr``, and the writes that clear a finished bar (``\r`` + spaces) are dropped,
+    so that a log holds lines only and every line after a bar (``trajpref: error: ...``)
+    starts one. No ``encoding``: tqdm then draws the bar in ASCII."""
+
+    def write(self, text: str) -> int:
+        line = text.replace("\x1b[A", "").replace("\r", "").strip()
+        if line:
+            sys.stderr.write(line + "\n")
+        return len(text)
+
+    def flush(self) -> None:
+        with contextlib.suppress(AttributeError, ValueError, OSError):
+            sys.stderr.flush()
 
 
 def _is_terminal(stream: Any) -> bool:
@@ -230,15 +296,19 @@ def in_notebook() -> bool:
 
 
 def bar_options(show: bool) -> dict[str, Any]:
-    """The options of every progress bar (``tqdm(..., **bar_options(progress))``): hidden
-    unless ``show`` (the commands' ``--no-progress``); on a stderr that is not a terminal,
-    redrawn at most every ``LOG_REDRAW_SECONDS`` (the first state and the end are still
-    drawn), except in a notebook (``in_notebook``), where a bar throttled to a minute would
-    sit at 0 % and vanish at the end of a pass shorter than that."""
-    if not show:
+    """The options of every progress bar (``tqdm(..., **bar_options(progress))``, the Python
+    API's ``progress=True`` included): hidden unless ``show`` (the commands' ``--no-progress``)
+    or where the environment hides them (``TRAJPREF_NO_PROGRESS=1`` or ``TQDM_DISABLE=1``,
+    ``progress_hidden_by_environment``). On a terminal, and in a notebook (``in_notebook``:
+    stderr is no terminal there, but a bar is watched live), tqdm's own. Elsewhere (a log file,
+    ``nohup``, a pipe, a batch job) a bar writes nothing for its first ``LOG_REDRAW_SECONDS``
+    (a shorter pass leaves no trace), then one plain line at most every ``LOG_REDRAW_SECONDS``
+    (``LogLines``: newline-ended, ASCII, nothing written to clear it at the end)."""
+    if not show or progress_hidden_by_environment() is not None:
         return {"disable": True}
     if _is_terminal(sys.stderr) or in_notebook():
         return {"disable": False}
     # maxinterval too: tqdm's monitor thread would otherwise redraw every maxinterval (10 s)
     return {"disable": False, "mininterval": LOG_REDRAW_SECONDS,
-            "maxinterval": LOG_REDRAW_SECONDS}  # fmt: skip
+            "maxinterval": LOG_REDRAW_SECONDS, "delay": LOG_REDRAW_SECONDS,
+            "file": LogLines()}  # fmt: skip

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import re
 import shlex
 import sys
+from pathlib import Path
 
 import pytest
 import torch
@@ -112,12 +114,13 @@ def test_the_resume_advice_keeps_the_seed_and_the_launcher_it_ran_with(tmp_path)
     # a run without --seed ran with the seed it recorded (once the start's): the advice says it
     _record(out, "finetune", "python /venv/bin/trajpref finetune --method rlhf --out o",
             seed=1, world_size=1)  # fmt: skip
+    # (the recorded /venv/bin/trajpref is no script PATH finds: the advice names its path)
     assert resume_command(out, "finetune", last) == (
-        f"trajpref finetune --method rlhf --out o --seed 1 --resume {last}"
+        f"/venv/bin/trajpref finetune --method rlhf --out o --seed 1 --resume {last}"
     )
     _record(out, "finetune", "python /venv/bin/trajpref finetune --seed=4 --out o", seed=4)
     assert resume_command(out, "finetune", last) == (
-        f"trajpref finetune --seed=4 --out o --resume {last}"
+        f"/venv/bin/trajpref finetune --seed=4 --out o --resume {last}"
     )
     # torchrun (and python -m trajpref.cli) record the module's file: the advice resumes it,
     # with the same number of processes
@@ -145,8 +148,9 @@ def test_a_refused_resume_gives_the_command_that_started_the_run(tiny_cfg, tmp_p
         check_resume(state, run_identity(other, "finetune", "abc"), 9, out, last, "finetune")
     _record(out, "finetune", "python /venv/bin/trajpref finetune --method rlhf --from 'a b' "
             f"--out {out} --set data.max_agents=6 --resume {out}/old.pt")  # fmt: skip
-    want = (f"as the command that started it did: trajpref finetune --method rlhf --from 'a b' "
-            f"--out {out} --set data.max_agents=6 --resume {last}; only finetune.")  # fmt: skip
+    want = (f"as the command that started it did: /venv/bin/trajpref finetune --method rlhf "
+            f"--from 'a b' --out {out} --set data.max_agents=6 --resume {last}; only "
+            "finetune.")  # fmt: skip
     with pytest.raises(ConfigError, match=re.escape(want)):
         check_resume(state, run_identity(other, "finetune", "abc"), 9, out, last, "finetune")
     # a script that resumes by itself is named as it ran
@@ -157,8 +161,8 @@ def test_a_refused_resume_gives_the_command_that_started_the_run(tiny_cfg, tmp_p
     state = {"epoch": 0, "identity": run_identity(tiny_cfg, "denoiser")}
     _record(out, "denoiser", "python /venv/bin/trajpref train diffusion --out x --seed 3")
     want = (f"resume with its config as it was (--config {out / 'denoiser_config.yaml'}) or as "
-            f"the command that started it did: trajpref train diffusion --out x --seed 3 --resume "
-            f"{out / 'denoiser_last.pt'}; only denoiser.")  # fmt: skip
+            f"the command that started it did: /venv/bin/trajpref train diffusion --out x --seed 3 "
+            f"--resume {out / 'denoiser_last.pt'}; only denoiser.")  # fmt: skip
     with pytest.raises(ConfigError, match=re.escape(want)):
         check_resume(state, run_identity(other, "denoiser"), 9, out, out / "denoiser_last.pt",
                      "denoiser")  # fmt: skip
@@ -187,7 +191,8 @@ def test_following_the_refusals_advice_resumes_the_fine_tuning_run(
     assert "(data.max_agents: 6 -> 8; seed: 4 -> " in err
     command = err.split("as the command that started it did: ", 1)[1].split("; only ")[0]
     args = shlex.split(command)
-    assert args[0] == "trajpref" and args[-2:] == ["--resume", str(out / "finetune_last.pt")]
+    assert args[0] == "/venv/bin/trajpref"  # the recorded script (not on PATH), by its path
+    assert args[-2:] == ["--resume", str(out / "finetune_last.pt")]
     assert main([*args[1:], "--set", "finetune.epochs=2"]) == 0  # a longer schedule may change
     assert [s["resumed"] for s in json.loads((out / "finetune_run.json").read_text())] == [
         False, True]  # fmt: skip
@@ -503,3 +508,32 @@ def test_horizons_other_than_the_datas_are_refused_before_anything_is_written(
     with pytest.raises(ConfigError, match=said):
         train_stage("diffusion", cfg, out, device="cpu", progress=False, max_steps=1)
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_the_advice_starts_trajpref_as_it_was_started(tmp_path, monkeypatch):
+    """``program_launcher``: the trajpref script by name only where PATH finds it (else by its
+    path), a module run with its interpreter (by name where PATH finds that one), anything
+    else as ``trajpref``; the run record's advice alike, ``python -m trajpref`` included."""
+    from trajpref.train.run import program_launcher, resume_command
+
+    python = sys.executable
+    script = tmp_path / "venv" / "bin" / "trajpref"
+    script.parent.mkdir(parents=True)
+    script.write_text("#!/bin/sh\n")
+    script.chmod(0o755)
+    main_py = "/x/site-packages/trajpref/__main__.py"
+    monkeypatch.setenv("PATH", str(tmp_path))  # neither found
+    assert program_launcher(str(script), python) == [str(script)]
+    assert program_launcher(main_py, python) == [python, "-m", "trajpref"]
+    assert program_launcher("/x/trajpref/cli.py", python) == [python, "-m", "trajpref.cli"]
+    assert program_launcher("/venv/bin/pytest", python) == ["trajpref"]  # cli.main from Python
+    monkeypatch.setenv("PATH", os.pathsep.join([str(script.parent), str(Path(python).parent)]))
+    assert program_launcher(str(script), python) == ["trajpref"]
+    assert program_launcher(main_py, python) == [Path(python).name, "-m", "trajpref"]
+    out, last = tmp_path / "d", tmp_path / "d" / "denoiser_last.pt"
+    _record(out, "denoiser", f"python {main_py} train diffusion --out o", seed=0, world_size=1)
+    assert resume_command(out, "denoiser", last) == (
+        f"python -m trajpref train diffusion --out o --seed 0 --resume {last}"
+    )
+    _record(out, "denoiser", f"python {script} train diffusion --out o", seed=0)
+    assert resume_command(out, "denoiser", last).startswith("trajpref train diffusion")

@@ -901,8 +901,9 @@ def test_the_epoch_line_keeps_a_small_learning_rate_readable(tmp_path, cfg, caps
 
 
 def test_validation_shows_a_bar_and_a_budgeted_stage_the_share_of_its_budget(
-    tmp_path, cfg, trained, capsys
+    tmp_path, cfg, trained, capsys, monkeypatch
 ):
+    monkeypatch.setattr("trajpref.io._is_terminal", lambda stream: True)  # bars as on a terminal
     # a time budget ends the stage, not its epochs: the bar says the budget and its share
     denoiser = dataclasses.replace(cfg.denoiser, epochs=50, max_minutes=1e-6)
     train_stage("diffusion", dataclasses.replace(cfg, denoiser=denoiser), tmp_path / "a",

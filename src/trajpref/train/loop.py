@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from safetensors import SafetensorError
 from torch import nn
 from torch.nn.parallel import DistributedDataParallel
 from tqdm.auto import tqdm
@@ -165,8 +166,11 @@ class MetricLog:
     def write(self, record: dict[str, Any]) -> None:
         if not self.enabled:
             return
-        with self.path.open("a") as fh:
-            fh.write(dumps_json(record) + "\n")
+        try:
+            with self.path.open("a") as fh:
+                fh.write(dumps_json(record) + "\n")
+        except OSError as exc:  # a full disk's ENOSPC names no file
+            raise write_failed(self.path, "the metrics log", exc) from None
         if self.tb is not None:
             for key, value in record.items():
                 number = isinstance(value, (int, float)) and not isinstance(value, bool)
@@ -277,11 +281,44 @@ def _budget_share(seconds: float, cfg: OptimConfig, dist_info: DistInfo,
     return largest(seconds / (60 * cfg.max_minutes), dist_info, device)
 
 
+def write_failed(path: Path, what: str, exc: BaseException) -> TrajprefError:
+    """The one-line error for a file of a run that could not be written (``what``: the resume
+    state, a checkpoint, the metrics log): the file, the reason (an ``OSError``'s, or the
+    first line of torch's or safetensors' message less its source location) and the space
+    left on its disk, which a full disk shows as 0. The file written before (an earlier
+    epoch's) is left as it was."""
+    why = exc.strerror if isinstance(exc, OSError) and exc.strerror else None
+    if why is None:
+        lines = str(exc).strip().splitlines()
+        why = re.sub(r"^\[enforce fail at [^\]]*\]\s*\.?\s*", "", lines[0]) if lines else ""
+        said = re.search(r'message: "([^"]+)"', why)  # safetensors: IoError(Os { .. message })
+        why = said.group(1) if said else why or exc.__class__.__name__
+    free = ""
+    with contextlib.suppress(OSError):
+        free = f"; {shutil.disk_usage(path.parent).free / 1e6:,.0f} MB free there"
+    return TrajprefError(f"{path}: cannot write {what} ({why}{free})")
+
+
 def save_resume_state(path: Path, state: dict[str, Any]) -> None:
     """The state a run resumes from (weights, optimiser, schedules, random generators):
-    tensors and plain values only, so it loads with ``torch.load(weights_only=True)``."""
+    tensors and plain values only, so it loads with ``torch.load(weights_only=True)``. A
+    failed write (torch's ``RuntimeError`` on a full disk, an ``OSError``) is a one-line
+    ``TrajprefError`` naming the file (``write_failed``); the state written before stays."""
     with atomic_path(path) as tmp:
-        torch.save(state, tmp)
+        try:
+            torch.save(state, tmp)
+        except RuntimeError as exc:
+            raise write_failed(path, "the resume state", exc) from None
+
+
+def save_checkpoint(path: Path, payload: dict[str, Any]) -> None:
+    """``checkpoint.save`` for the loop's checkpoints, a failed write (safetensors'
+    ``SafetensorError`` on a full disk, an ``OSError``) made a one-line
+    ``TrajprefError`` naming the file (``write_failed``)."""
+    try:
+        ckpt.save(path, payload)
+    except (SafetensorError, OSError) as exc:
+        raise write_failed(path, "the checkpoint", exc) from None
 
 
 RESUME_KEYS = ("stage", "trainable", "optimizer", "scheduler", "noise_gen", "aug_gen", "epoch",
@@ -837,7 +874,8 @@ def fit(
                     best_raw = {**raw, "epoch": epoch + 1}
                     meta = {**at, "val": raw, "weights": "raw (this run's best averaged "
                             f"weights are {stage.name}{ckpt.SUFFIX})"}  # fmt: skip
-                    ckpt.save(out_dir / f"{stage.name}_raw{ckpt.SUFFIX}", stage.payload(meta))
+                    save_checkpoint(out_dir / f"{stage.name}_raw{ckpt.SUFFIX}",
+                                    stage.payload(meta))  # fmt: skip
             with _averaged(average):
                 val = stage.validate(progress=show)
                 record.update({f"val_{k}": v for k, v in val.items()})
@@ -846,11 +884,11 @@ def fit(
                     meta = {**at, "val": val}
                     if average is not None:
                         meta["ema_epochs"] = optim_cfg.ema_epochs
-                    ckpt.save(out_dir / f"{stage.name}{ckpt.SUFFIX}", stage.payload(meta))
+                    save_checkpoint(out_dir / f"{stage.name}{ckpt.SUFFIX}", stage.payload(meta))
                     record["best"] = True
                 if optim_cfg.keep_checkpoints:  # what was validated: the average, if any
                     name = f"{stage.name}_epoch{epoch + 1:03d}{ckpt.SUFFIX}"
-                    ckpt.save(out_dir / name, stage.payload({**at, "val": val}))
+                    save_checkpoint(out_dir / name, stage.payload({**at, "val": val}))
             stage.objective.train()
             # 4 decimals: at 0.01 s a small validation pass on a fast host was logged as 0
             record["val_seconds"] = round(time.perf_counter() - v0, 4)

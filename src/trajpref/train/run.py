@@ -9,6 +9,8 @@ import json
 import os
 import re
 import shlex
+import shutil
+import socket
 import sys
 import time
 import typing
@@ -324,6 +326,37 @@ def _shown(changes: list[str]) -> str:
     return "; ".join(changes[:3]) + (f" (and {len(changes) - 3} more)" if len(changes) > 3 else "")
 
 
+def _same_file(a: str | Path, b: str | Path) -> bool:
+    """Whether two paths name one file (False when either is missing)."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def program_launcher(program: str | None = None, python: str | None = None) -> list[str]:
+    """How the resume advice starts trajpref again, as this process was started (``program``:
+    ``sys.argv[0]``, ``python``: ``sys.executable``, by default): the ``trajpref`` script as
+    ``trajpref`` when it is the one ``PATH`` finds, else by its path as it was given (an
+    un-activated ``/path/.venv/bin/trajpref``, on which ``trajpref`` fails); ``python -m
+    trajpref`` (``-m trajpref.cli`` for ``cli.py``) when it ran as a module, with ``python``'s
+    path unless it is the one ``PATH`` finds by its name; ``trajpref`` for anything else
+    (``cli.main`` called from Python, a test)."""
+    program = sys.argv[0] if program is None else program
+    python = sys.executable if python is None else python
+    path = Path(program)
+    if path.name in ("trajpref", "trajpref.exe"):
+        found = shutil.which("trajpref")
+        return ["trajpref"] if found is not None and _same_file(found, program) else [program]
+    if path.parent.name == "trajpref" and path.name in ("__main__.py", "cli.py"):
+        module = "trajpref" if path.name == "__main__.py" else "trajpref.cli"
+        shown = Path(python).name
+        if shutil.which(shown) != python and python != shown:  # not the one PATH finds
+            shown = python
+        return [shown or "python", "-m", module]
+    return ["trajpref"]
+
+
 def cli_resume_command(argv: list[str], resume: str | Path, world_size: int = 1,
                        seed: int | None = None,
                        launcher: list[str] | None = None) -> str:  # fmt: skip
@@ -331,10 +364,12 @@ def cli_resume_command(argv: list[str], resume: str | Path, world_size: int = 1,
     from ``resume``: its ``--resume`` replaced, started by ``launcher`` when given (the
     torchrun command line before ``argv``, as the run was launched:
     ``train.distributed.launcher_command``), else by ``torchrun`` with ``world_size``
-    processes when ``world_size`` > 1, and with ``--seed seed`` added when ``argv`` gives none
-    (a run without ``--seed`` records the seed it ran with, which another default would not
-    restore). The same process count repeats the run's random draws; another continues the
-    same schedule with other draws (``train.loop.fit``)."""
+    processes when ``world_size`` > 1, else as this process was started
+    (``program_launcher``: ``trajpref``, the script's path, or ``python -m trajpref``), and
+    with ``--seed seed`` added when ``argv`` gives none (a run without ``--seed`` records the
+    seed it ran with, which another default would not restore). The same process count
+    repeats the run's random draws; another continues the same schedule with other draws
+    (``train.loop.fit``)."""
     rest, skip = [], False
     for arg in argv:  # the same options, --resume replaced
         if skip:
@@ -347,7 +382,7 @@ def cli_resume_command(argv: list[str], resume: str | Path, world_size: int = 1,
         rest += ["--seed", str(seed)]
     if launcher is None:
         launcher = (["torchrun", f"--nproc_per_node={world_size}", "-m", "trajpref.cli"]
-                    if world_size > 1 else ["trajpref"])  # fmt: skip
+                    if world_size > 1 else program_launcher())  # fmt: skip
     return shlex.join([*launcher, *rest, "--resume", str(resume)])
 
 
@@ -356,8 +391,10 @@ def resume_command(out_dir: str | Path, name: str, resume: str | Path) -> str | 
     made to resume from ``resume`` (``cli_resume_command``, with the session's launcher, or
     its process count, and seed) when it ran the ``trajpref`` command (``python
     .../bin/trajpref``, or ``.../trajpref/cli.py`` under ``torchrun`` or ``python -m
-    trajpref.cli``); another command (a script that resumes by itself) is given as it was.
-    None without a record."""
+    trajpref.cli``, or ``.../trajpref/__main__.py``: ``python -m trajpref``); one process is
+    started again as it was (``program_launcher`` of the recorded program: ``trajpref`` where
+    ``PATH`` finds that script, else its path). Another command (a script that resumes by
+    itself) is given as it was. None without a record."""
     try:
         session = json.loads(run_record_path(out_dir, name).read_text())[-1]
         command = session["command"]
@@ -366,18 +403,19 @@ def resume_command(out_dir: str | Path, name: str, resume: str | Path) -> str | 
         return None
     program = Path(args[1]) if len(args) > 1 else None
     if program is None or not (program.name == "trajpref" or (
-            program.name == "cli.py" and program.parent.name == "trajpref")):  # fmt: skip
+            program.name in ("cli.py", "__main__.py")
+            and program.parent.name == "trajpref")):  # fmt: skip
         return command
     world = session.get("world_size", 1)
+    world = world if isinstance(world, int) else 1
     seed = session.get("seed")
     launcher = session.get("launcher")
-    command = cli_resume_command(
-        args[2:],
-        resume,
-        world if isinstance(world, int) else 1,
-        seed if isinstance(seed, int) else None,
-        shlex.split(launcher) if isinstance(launcher, str) else None,
-    )
+    if isinstance(launcher, str):
+        started = shlex.split(launcher)
+    else:  # one process: as it was started (several: cli_resume_command's torchrun)
+        started = program_launcher(args[1], args[0]) if world <= 1 else None
+    command = cli_resume_command(args[2:], resume, world, seed if isinstance(seed, int) else None,
+                                 started)  # fmt: skip
     nodes = session.get("nodes", 1)
     if isinstance(nodes, int) and nodes > 1:
         command += (f" (on each of the {nodes} machines, with the launcher options it was "
@@ -435,7 +473,14 @@ def check_resume(state: dict[str, Any], identity: str, epochs: int, out_dir: Pat
                               f"{{{','.join(RESUME_FREE)}}} may change")  # fmt: skip
     why = _nothing_left(state, epochs, max_minutes, name, equal_budget)
     if why is not None:
-        raise ConfigError(f"--resume {resume}: {why}")
+        raise NothingLeftToTrain(f"--resume {resume}: {why}")
+
+
+class NothingLeftToTrain(ConfigError):
+    """A resume whose state has nothing left to train (its epochs done, or its time budget
+    spent), found before anything is written. The CLI prints it as a note and exits with
+    status 0, so that a job requeued after its run finished succeeds; from Python it is the
+    ``ConfigError`` it always was."""
 
 
 START_FLAGS = {"generator": "--denoiser", "finetune": "--from"}
@@ -730,6 +775,121 @@ def cpu_budget_note(name: str, section: OptimConfig, info: DistInfo) -> str | No
             f"(budget_clock=wall counts the launch's elapsed time)")  # fmt: skip
 
 
+def lock_path(out_dir: str | Path, name: str) -> Path:
+    """The file by which a run of stage ``name`` holds its folder: ``<out>/.<name>.lock``."""
+    return Path(out_dir) / f".{name}.lock"
+
+
+@dataclasses.dataclass
+class StageLock:
+    """An exclusive ``flock`` on ``path`` (``take_stage_lock``), held through ``fd``."""
+
+    path: Path
+    fd: int
+
+
+def _lock_holder(fd: int) -> str:
+    """What the lock file open as ``fd`` says of the run that holds it, for the refusal."""
+    try:
+        held = json.loads(os.pread(fd, 4096, 0).decode("utf-8", "replace"))
+        who = f"pid {int(held['pid'])} on host {held['host']}"
+        return who + (f", started {held['started']}" if held.get("started") else "")
+    except (OSError, ValueError, TypeError, KeyError):  # being written, or not ours
+        return "a process that has not said which yet"
+
+
+def take_stage_lock(out_dir: str | Path, name: str) -> StageLock | None:
+    """Hold stage ``name``'s run folder ``out_dir`` (created if need be) for this process:
+    an exclusive, non-blocking ``flock`` on ``lock_path`` (the kernel releases it when the
+    process ends, however it ends: a file left by a killed run blocks nothing), into which
+    this process writes its pid, host, start and command. A run that holds it already is
+    refused with a one-line ``TrajprefError`` naming its pid and host: two jobs given one
+    ``--out`` wrote one metrics log between them, and each moved the other's files aside.
+    None where there are no such locks (Windows; a file system that refuses ``flock``, with a
+    warning): the run goes on unguarded. ``release_stage_lock`` lets it go."""
+    try:
+        import fcntl
+    except ImportError:  # Windows
+        return None
+    path = lock_path(out_dir, name)
+    try:
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise TrajprefError(f"{out_dir}: cannot create ({exc.strerror or exc})") from None
+    for _ in range(20):  # a run that lets the lock go removes its file: take the new one
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        except OSError as exc:
+            raise TrajprefError(f"{path}: cannot write ({exc.strerror or exc})") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = _lock_holder(fd)
+            os.close(fd)
+            raise TrajprefError(
+                f"--out {out_dir}: another run is training {name} there ({holder}; it holds "
+                f"{path.name}): two runs in one folder would mix their logs, checkpoints and "
+                "resume states; wait for it to end, or give this run another --out"
+            ) from None
+        except OSError as exc:  # some NFS or Lustre mounts, a FUSE file system
+            os.close(fd)
+            warnings.warn(f"{path}: cannot lock the run folder ({exc.strerror or exc}): a "
+                          f"second run given --out {out_dir} would not be refused",
+                          stacklevel=3)  # fmt: skip
+            return None
+        try:
+            mine, held = os.stat(path), os.fstat(fd)
+            if (mine.st_dev, mine.st_ino) == (held.st_dev, held.st_ino):
+                break
+        except FileNotFoundError:
+            pass
+        os.close(fd)  # removed (or replaced) while this process opened it: again
+    else:
+        raise TrajprefError(f"{path}: could not take the run folder's lock")
+    record = {"pid": os.getpid(), "host": socket.gethostname(),
+              "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+              "command": command_line()}  # fmt: skip
+    try:
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, (json.dumps(record) + "\n").encode(), 0)
+    except OSError:  # a full disk: the lock holds; a refused run names no pid
+        pass
+    return StageLock(path, fd)
+
+
+def release_stage_lock(lock: StageLock | None) -> None:
+    """Let a ``take_stage_lock`` lock go: its file removed (while it is still held, and only
+    if it is still this lock's), then closed."""
+    if lock is None:
+        return
+    try:
+        mine, held = os.stat(lock.path), os.fstat(lock.fd)
+        if (mine.st_dev, mine.st_ino) == (held.st_dev, held.st_ino):
+            os.unlink(lock.path)
+    except OSError:
+        pass
+    finally:
+        os.close(lock.fd)
+
+
+def hold_stage(out_dir: Path, name: str, info: DistInfo) -> StageLock | None:
+    """``take_stage_lock`` on the first process; under torchrun its refusal is every rank's
+    (a collective: an ``EveryRankError`` on each, rather than ranks left waiting)."""
+    lock, refusal = None, None
+    if info.is_main:
+        try:
+            lock = take_stage_lock(out_dir, name)
+        except TrajprefError as exc:
+            refusal = str(exc)
+    if info.enabled:
+        refusal = gather_objects(refusal, info)[0]
+        if refusal is not None:
+            raise EveryRankError(refusal)
+    if refusal is not None:
+        raise TrajprefError(refusal)
+    return lock
+
+
 def _run(
     cfg: ExperimentConfig,
     out_dir: str | Path,
@@ -751,10 +911,12 @@ def _run(
 
     The run folder and the resume state are checked before any data is read, the data the
     state was trained on once they are read, and all before anything is written (a failed
-    check leaves nothing behind). A new run in a folder that holds another's moves that run's
-    metrics log, run record, resume state and checkpoints of stage ``name`` aside
-    (``loop.set_aside``). ``equal_budget``: the minutes of ``finetune --equal-budget``, for its
-    advice (``fit``) and a note when the process has more than one thread.
+    check leaves nothing behind). Then the first process holds the folder for stage ``name``
+    until the run ends (``hold_stage``): a second run there is refused. A new run in a folder
+    that holds another's moves that run's metrics log, run record, resume state and
+    checkpoints of stage ``name`` aside (``loop.set_aside``). ``equal_budget``: the minutes
+    of ``finetune --equal-budget``, for its advice (``fit``) and a note when the process has
+    more than one thread.
 
     Under torchrun every rank compares what it is about to train with rank 0's once the data
     are read (``check_same_run``, before anything is written), and a CPU-time budget says that
@@ -764,6 +926,7 @@ def _run(
     out_dir = Path(out_dir)
     section = getattr(cfg, name)
     state = None
+    lock = None
     if resume is not None:
         state = load_resume_state(resume, name)
         check_resume(state, run_identity(cfg, name, start), section.epochs, out_dir, resume,
@@ -795,6 +958,8 @@ def _run(
         # every rank trains the run rank 0 does (a collective): before anything is written
         check_same_run(info, run_facts(cfg, name, start, data, train, state, max_steps,
                                        equal_budget))  # fmt: skip
+        # one run of a stage in a folder at a time: held until the run ends, before any write
+        lock = hold_stage(out_dir, name, info)
         if info.is_main:  # once every check that refuses the run has passed
             report_data(name, train, val, cfg.data)
             for note in notes(train) if notes is not None else ():
@@ -827,6 +992,7 @@ def _run(
         summary["rank"] = info.rank  # only rank 0 validates: other ranks' "best" is empty
         return summary
     finally:
+        release_stage_lock(lock)
         cleanup(info)
 
 
