@@ -8,8 +8,9 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-LIMIT = 50 * 2**20
-"""Bytes of tracked files allowed (published weights are half precision)."""
+LIMIT = 52 * 2**20
+"""Bytes of tracked files allowed (published weights are half precision): 64 MiB less the
+3.5 MB a run carries, with 8 MiB to spare (docs/architecture.md, "Size of the tree")."""
 
 
 def test_the_tracked_files_stay_under_the_line():
