@@ -49,6 +49,8 @@ MOVED = [
     ("trajpref.data.trajnet", "ObservedOnlyWarning"),
     ("trajpref.data.text", "GapWarning"),
     ("trajpref.data.tracker", "LeftOutWarning"),
+    ("trajpref.train.run", "NothingLeftToTrain"),
+    ("trajpref.cli", "EveryRankError"),
 ]
 
 
@@ -217,3 +219,41 @@ def test_a_wrong_dataset_or_scorer_argument_has_its_own_class():
     with pytest.raises(NotAPredictor, match="model must be a predictor") as caught:
         check_inputs("zara1/generator", "zara1")
     assert type(caught.value) is NotAPredictor
+
+
+def test_a_checkpoint_path_that_is_not_there_is_model_not_found(tmp_path):
+    from trajpref.io import read_checkpoint_header
+
+    with pytest.raises(errors.ModelNotFound, match="no such checkpoint file"):
+        read_checkpoint_header(tmp_path / "gone.safetensors")
+    with pytest.raises(FileNotFoundError):
+        read_checkpoint_header(tmp_path / "gone.safetensors")
+
+
+def test_a_published_models_repository_path_outside_the_repository_is_model_not_found(
+    tmp_path, monkeypatch
+):
+    from trajpref.cli import _check_checkpoint
+
+    monkeypatch.chdir(tmp_path)  # outside the repository: the path is no file here
+    with pytest.raises(errors.ModelNotFound, match="zara1/generator"):
+        _check_checkpoint("--model", "models/zara1/generator.safetensors")
+
+
+def test_a_checkpoint_write_that_fails_in_safetensors_names_the_file(tmp_path, monkeypatch):
+    """A full disk reaches ``save_file`` as a ``SafetensorError`` (no ``OSError``, no file
+    name): one line naming the checkpoint, and nothing left behind."""
+    from safetensors import SafetensorError
+
+    from trajpref.models import checkpoint
+
+    def full(*args, **kwargs):
+        raise SafetensorError("Error while serializing: I/O error: No space left on device")
+
+    monkeypatch.setattr(checkpoint, "save_file", full)
+    out = tmp_path / "model.safetensors"
+    payload = {"kind": "denoiser", "config": {}, "state_dict": {}}
+    with pytest.raises(TrajprefError, match=r"model\.safetensors: cannot write the checkpoint "
+                       r"\(.*No space left on device; [\d,]+ MB free there\)"):  # fmt: skip
+        checkpoint.save(out, payload)
+    assert list(tmp_path.iterdir()) == []

@@ -31,10 +31,6 @@ from trajpref.errors import (
 
 SRC = Path(trajpref.__file__).parent
 
-PENDING = {"cli.py", "train/compare.py", "train/distributed.py", "train/run.py"}
-"""Files whose ``warnings.warn`` calls do not name a class yet (another change converts
-them): a strict xfail, so the test says when they are done and this entry can go."""
-
 
 def _warn_calls(path: Path) -> list[tuple[int, str | None]]:
     """Each ``warnings.warn`` call of ``path``: its line and its category's source (the
@@ -61,11 +57,7 @@ FILES = sorted(str(p.relative_to(SRC)) for p in SRC.rglob("*.py") if "warnings.w
                p.read_text())  # fmt: skip
 
 
-@pytest.mark.parametrize(
-    "name",
-    [pytest.param(f, marks=pytest.mark.xfail(strict=True, reason="converted by another change"))
-     if f in PENDING else f for f in FILES],
-)  # fmt: skip
+@pytest.mark.parametrize("name", FILES)
 def test_every_warn_call_names_a_trajpref_warning_class(name):
     bad = []
     for line, cat in _warn_calls(SRC / name):

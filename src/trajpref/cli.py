@@ -64,7 +64,18 @@ from trajpref.data.registry import (
 )
 from trajpref.data.trajnet import require_future, write_trajnet, write_trajnet_truth
 from trajpref.device import resolve_device
-from trajpref.errors import ConfigError, TrajprefError
+from trajpref.errors import (
+    ConfigError,
+    ConfigNotFound,
+    DataWarning,
+    EveryRankError,
+    IgnoredWarning,
+    ModelNotFound,
+    NothingLeftToTrain,
+    OverlapWarning,
+    TrajprefError,
+    TrajprefWarning,
+)
 from trajpref.evaluation import (
     AGENT_SETS,
     CLI_WORDS,
@@ -125,7 +136,6 @@ from trajpref.score.selection import (
 from trajpref.survey.cli import add_parser as add_survey_parser
 from trajpref.train import compare
 from trajpref.train.distributed import (
-    EveryRankError,
     env_info,
     fallback_launcher,
     launcher_command,
@@ -134,7 +144,6 @@ from trajpref.train.distributed import (
 from trajpref.train.loop import Terminated
 from trajpref.train.run import (
     STAGE_NAMES,
-    NothingLeftToTrain,
     cli_resume_command,
     finetune,
     interval_note,
@@ -763,7 +772,8 @@ def _check_data_args(args) -> None:
     args._data_checked = True
     if args.dataset in SPECS and given:
         warnings.warn(own_reading_note(args.dataset, "--frame-interval and --units",
-                                       "they are ignored"), stacklevel=2)  # fmt: skip
+                                       "they are ignored"),
+                      category=IgnoredWarning, stacklevel=2)  # fmt: skip
     _read_options(args)  # --delimiter, --max-gap, --max-coord, --time-step
     check_protocol_for(args.dataset, args.protocol)  # sgan is ETH/UCY's (not SDD's, NBA's)
     if args.holdout_scene is not None:
@@ -885,7 +895,7 @@ def cmd_data_stats(args) -> int:
     info = ds.info
     note = speed_note(speed, info.units, info.frame_interval, info.interval_from, info.time_step)
     if note is not None:  # no walking pace in metres: the interval (or the units) may be wrong
-        warnings.warn(f"{info.name}: {note}", stacklevel=2)
+        warnings.warn(f"{info.name}: {note}", category=DataWarning, stacklevel=2)
     if args.reverse_context:  # the same for the windows played backwards (data.reverse_context)
         out["context_agents_reversed"] = sum(
             0 if s.context_reverse is None else len(s.context_reverse) for s in ds.scenes
@@ -919,7 +929,7 @@ def _predictor(args):
         if model.sampler == "leapfrog" and model.tau == 0:
             warnings.warn(f"{args.model} takes no denoising step (model.tau 0): its samples are "
                           f"the generator's own, and {flag} changes nothing",
-                          stacklevel=2)  # fmt: skip
+                          category=IgnoredWarning, stacklevel=2)  # fmt: skip
         model.stochastic = bool(args.stochastic)
     for flag, name in (("--max-speed", "max_speed"), ("--spread-scale", "spread_scale"),
                        ("--max-log-sigma", "max_log_sigma")):  # fmt: skip
@@ -950,14 +960,14 @@ def _warn_fixed_sampling(args, model) -> None:
                       f"subset: to keep {keep} chosen from all {fixed}, give --samples {fixed} "
                       f"--keep {keep} (--select facility without the score, score-facility "
                       "with it; docs/selection.md), or --sampler full for independent "
-                      "draws", stacklevel=2)  # fmt: skip
+                      "draws", category=TrajprefWarning, stacklevel=2)  # fmt: skip
     if args._seed_given and not selects and (model.tau == 0 or not model.stochastic):
         steps = ("no denoising step, model.tau 0" if model.tau == 0
                  else "its denoising steps are the posterior mean")  # fmt: skip
         recorded = "" if args.command == "plot" else " (it is still recorded)"
         warnings.warn(f"{args.model} draws no noise ({steps}): every seed gives the same "
                       f"samples, and --seed {args.seed} changes nothing{recorded}",
-                      stacklevel=2)  # fmt: skip
+                      category=IgnoredWarning, stacklevel=2)  # fmt: skip
 
 
 def _warn_if_trained_otherwise(spec: str, ds, root: str | None = None,
@@ -1098,7 +1108,7 @@ def _check_fold_overlap(args) -> str | None:
     if args.command == "evaluate" and not args.allow_overlap:
         raise ConfigError(f"{problem}; --allow-overlap evaluates it anyway and records the "
                           "overlap in the result")  # fmt: skip
-    warnings.warn(problem, stacklevel=2)
+    warnings.warn(problem, category=OverlapWarning, stacklevel=2)
     tail = f" ({data})" if folder else ""
     return fold_notes([(role, fold, via) for role, _, fold, via in found], folds, tail)
 
@@ -1257,7 +1267,7 @@ def _warn_unread(args, cfg: SelectionConfig, scores: bool) -> None:
         if unread:
             warnings.warn(f"--select {args.select} does not read {', '.join(unread)}: "
                           f"{'it changes' if len(unread) == 1 else 'they change'} nothing",
-                          stacklevel=3)  # fmt: skip
+                          category=IgnoredWarning, stacklevel=3)  # fmt: skip
         return
     selection = [SELECTION_FLAGS[k] for k in given if k in SELECTION_ONLY]
     score = [] if scores else score
@@ -1269,7 +1279,7 @@ def _warn_unread(args, cfg: SelectionConfig, scores: bool) -> None:
     if clauses:
         one = len(selection) + len(score) == 1
         warnings.warn(f"{'; '.join(clauses)}: here {'it changes' if one else 'they change'} "
-                      "nothing", stacklevel=3)  # fmt: skip
+                      "nothing", category=IgnoredWarning, stacklevel=3)  # fmt: skip
 
 
 def _kept_by(args) -> str:
@@ -1618,7 +1628,9 @@ def cmd_evaluate(args) -> int:
         why = " (no agent has a neighbour)" if set(bad) <= collisions else ""
         shown = "printed as n/a" if set(bad) <= collisions else "printed as nan"
         where = "the JSON output holds null" if args.json or args.out else shown
-        warnings.warn(f"{', '.join(bad)} not finite{why}: {where}", stacklevel=1)
+        warnings.warn(
+            f"{', '.join(bad)} not finite{why}: {where}", category=TrajprefWarning, stacklevel=1
+        )
     if args.out:
         _write_result(args.out, out)
     if args.json:
@@ -1911,6 +1923,7 @@ def _warn_trajnet_units(ds) -> None:
         f"--format trajnet writes this data's coordinates as they are, in {units}; "
         "TrajNet++'s tools assume metres (its collision metrics use a 0.1 m radius): "
         "convert them to metres for its evaluator",
+        category=DataWarning,
         stacklevel=2,
     )
 
@@ -2193,7 +2206,7 @@ def _check_folders_beside_config(data, config: str | None) -> None:
         folder = Path(config).resolve().parent  # where the file's relative paths would hold
         beside = folder / Path(value).expanduser()
         if not Path(value).expanduser().exists() and beside.exists():
-            raise ConfigError(
+            raise ConfigNotFound(
                 f"data.{key}: {value}: no such folder in the current folder ({Path.cwd()}); a "
                 f"relative path in a config file is read from the folder trajpref runs in, not "
                 f"the config file's ({config}), beside which {beside} is: write data.{key}: "
@@ -2251,7 +2264,7 @@ def _check_checkpoint(flag: str, spec: str) -> None:
     names the published name, which works in any folder."""
     message = zoo.not_here_message(spec, flag)  # the rule the Python API's errors use too
     if message is not None:
-        raise ConfigError(message)
+        raise ModelNotFound(message)
 
 
 def _warn_if_validation_reads_training(data) -> None:
@@ -2267,7 +2280,8 @@ def _warn_if_validation_reads_training(data) -> None:
                       "the choice of the kept checkpoint) reads the training windows: give it "
                       "train/ and val/ sub-folders, or --set data.val_dataset=FOLDER, or --set "
                       "data.holdout_scene=PREFIX (its files whose names start with PREFIX "
-                      "leave training for validation)", stacklevel=2)  # fmt: skip
+                      "leave training for validation)",
+                      category=OverlapWarning, stacklevel=2)  # fmt: skip
 
 
 def cmd_finetune(args) -> int:
@@ -2313,7 +2327,7 @@ def _warn_if_data_seen_before(flag: str, spec: str, what: str, dataset: str) -> 
                   f"files (the other four scenes') hold most of {own}'s windows: what this "
                   f"run writes has seen most of {own}'s test split, and evaluate refuses it there "
                   f"(--allow-overlap records the overlap); for numbers on {own}, build on "
-                  f"{own}'s own models", stacklevel=2)  # fmt: skip
+                  f"{own}'s own models", category=OverlapWarning, stacklevel=2)  # fmt: skip
 
 
 def _yaml_value(value) -> str:

@@ -104,6 +104,20 @@ class WeightsConflict(TrajprefError):
     """Publishing would replace the weights that settings-only variants beside it name."""
 
 
+class NothingLeftToTrain(ConfigError):
+    """A resume whose state has nothing left to train (its epochs done, or its time budget
+    spent), found before anything is written. The CLI prints it as a note and exits with
+    status 0, so that a job requeued after its run finished succeeds; from Python it is the
+    ``ConfigError`` it always was."""
+
+
+class EveryRankError(ConfigError):
+    """A ``ConfigError`` that every rank of a launch raises alike: from what the ranks share
+    (the launch's process count) or have compared with each other (``gather_objects``:
+    ``train.run.check_same_run``). Rank 0 alone prints it (``cli.main``); a ``ConfigError`` of
+    one rank's own (a file missing on its machine) is printed by that rank."""
+
+
 class ResultConflict(TrajprefError):
     """Two rows of one measurement were taken on different checkpoints (``model_hash``): one
     of them is stale and must be measured again before the rows can be merged."""

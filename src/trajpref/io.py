@@ -8,6 +8,8 @@ import contextlib
 import json
 import math
 import os
+import re
+import shutil
 import sys
 import tempfile
 import warnings
@@ -15,7 +17,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from trajpref.errors import ConfigError, TrajprefError
+from trajpref.errors import ConfigError, ModelNotFound, TrajprefError
 
 PROC_STATUS = "/proc/self/status"
 """Where Linux (4.7 and later) states this process's umask (its ``Umask:`` line), read by
@@ -145,6 +147,24 @@ def atomic_path(path: str | Path, mode: int | None = None) -> Iterator[Path]:
             _remove_new_folders(path.parent, existing)
 
 
+def write_failed(path: Path, what: str, exc: BaseException) -> TrajprefError:
+    """The one-line error for a file of a run that could not be written (``what``: the resume
+    state, a checkpoint, the metrics log): the file, the reason (an ``OSError``'s, or the
+    first line of torch's or safetensors' message less its source location) and the space
+    left on its disk, which a full disk shows as 0. The file written before (an earlier
+    epoch's) is left as it was."""
+    why = exc.strerror if isinstance(exc, OSError) and exc.strerror else None
+    if why is None:
+        lines = str(exc).strip().splitlines()
+        why = re.sub(r"^\[enforce fail at [^\]]*\]\s*\.?\s*", "", lines[0]) if lines else ""
+        said = re.search(r'message: "([^"]+)"', why)  # safetensors: IoError(Os { .. message })
+        why = said.group(1) if said else why or exc.__class__.__name__
+    free = ""
+    with contextlib.suppress(OSError):
+        free = f"; {shutil.disk_usage(path.parent).free / 1e6:,.0f} MB free there"
+    return TrajprefError(f"{path}: cannot write {what} ({why}{free})")
+
+
 def _about(exc: OSError, paths: tuple[Path, ...]) -> bool:
     """Whether ``exc`` concerns one of ``paths``: it names one of them, or no file at all (a
     write's or a flush's ``OSError``, ENOSPC, carries no file name)."""
@@ -219,6 +239,8 @@ def read_checkpoint_header(path: str | Path) -> dict[str, Any]:
             meta = json.loads(fh.read(length)).get("__metadata__") or {}
         out = json.loads(meta["trajpref"])
     except (OSError, ValueError, KeyError, AttributeError) as exc:
+        if isinstance(exc, FileNotFoundError):
+            raise ModelNotFound(f"{path}: no such checkpoint file") from None
         if Path(path).name.endswith("_last.pt"):
             raise TrajprefError(resume_state_message(path)) from None
         raise TrajprefError(

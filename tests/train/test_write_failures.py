@@ -56,7 +56,7 @@ def test_a_checkpoint_and_the_log_that_cannot_be_written_name_their_file(tmp_pat
     target = tmp_path / "denoiser.safetensors"
     with pytest.raises(TrajprefError, match=re.escape(f"{target}: cannot write the checkpoint "
                                                       "(No space left on device; ")):  # fmt: skip
-        loop.save_checkpoint(target, {"kind": "denoiser", "state_dict": {}, "config": {}})
+        ckpt.save(target, {"kind": "denoiser", "state_dict": {}, "config": {}})
     log = loop.MetricLog(tmp_path, "denoiser", enabled=True)
     real_open = Path.open
 

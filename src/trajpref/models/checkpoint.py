@@ -40,7 +40,13 @@ from trajpref.errors import (
     TrajprefError,
     WeightsConflict,
 )
-from trajpref.io import atomic_path, load_tensors, read_checkpoint_header, resume_state_message
+from trajpref.io import (
+    atomic_path,
+    load_tensors,
+    read_checkpoint_header,
+    resume_state_message,
+    write_failed,
+)
 from trajpref.models import zoo
 from trajpref.models.denoiser import Denoiser
 from trajpref.models.generator import Generator
@@ -198,7 +204,10 @@ def save(path: str | Path, payload: dict[str, Any], half: bool = False) -> None:
     tensors, header = _flatten(payload, half)
     header["format"] = FORMAT
     with atomic_path(path) as tmp:
-        save_file(tensors, str(tmp), metadata={"trajpref": json.dumps(header)})
+        try:
+            save_file(tensors, str(tmp), metadata={"trajpref": json.dumps(header)})
+        except SafetensorError as exc:  # a full disk: not an OSError, and it names no file
+            raise write_failed(path, "the checkpoint", exc) from None
 
 
 def _rounded(payload: dict[str, Any]) -> dict[str, Any]:

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from trajpref.config import load_config
-from trajpref.errors import TrajprefError
+from trajpref.errors import TrajprefError, TrajprefWarning
 from trajpref.io import read_checkpoint_header
 from trajpref.models.timing import UNKNOWN_UNITS, model_timing, same_units
 from trajpref.train.loop import read_metrics
@@ -217,13 +217,13 @@ def parse_group(text: str) -> tuple[str, list[str]]:
 
 def summarise(groups: dict[str, list[RunCurve]], metrics: tuple[str, ...]) -> dict[str, Any]:
     """Each group's kept values: mean and sample standard deviation (None for one run) per
-    metric, and the relative change of the mean against the first group's. A ``UserWarning``
+    metric, and the relative change of the mean against the first group's. A ``TrajprefWarning``
     per run validated on other data or settings than the first run (``setting_differences``):
     the numbers are still summarised."""
     if not groups:
         raise TrajprefError("nothing to compare: give at least one run")
     for line in setting_differences(groups):
-        warnings.warn(line, stacklevel=2)
+        warnings.warn(line, category=TrajprefWarning, stacklevel=2)
     out: dict[str, Any] = {}
     first: dict[str, float] | None = None
     for name, curves in groups.items():

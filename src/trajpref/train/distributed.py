@@ -23,7 +23,7 @@ import torch
 import torch.distributed as dist
 
 from trajpref.data.loader import SceneLoader
-from trajpref.errors import ConfigError
+from trajpref.errors import ConfigError, IgnoredWarning
 from trajpref.types import Batch, TrajectoryDataset, collate
 
 TIMEOUT = timedelta(minutes=60)
@@ -32,13 +32,6 @@ and saves; the other ranks wait meanwhile in the next step's all-reduce, and ncc
 (10 min) is shorter than gloo's (30 min). The longest validation pass logged in this
 repository took 47.6 s (a fine-tuning validation on two CPU cores, runs/ac_57), so 60 min
 leaves a 75-fold margin and still ends a hung run within the hour."""
-
-
-class EveryRankError(ConfigError):
-    """A ``ConfigError`` that every rank of a launch raises alike: from what the ranks share
-    (the launch's process count) or have compared with each other (``gather_objects``:
-    ``train.run.check_same_run``). Rank 0 alone prints it (``cli.main``); a ``ConfigError`` of
-    one rank's own (a file missing on its machine) is printed by that rank."""
 
 
 @dataclass
@@ -93,7 +86,7 @@ def init_from_env(device: torch.device) -> tuple[DistInfo, torch.device]:
         if device.index is not None and device.index != info.local_rank and info.is_main:
             warnings.warn(f"--device {device}: under torchrun each process takes the GPU of its "
                           "local rank (cuda:LOCAL_RANK); choose GPUs with CUDA_VISIBLE_DEVICES",
-                          stacklevel=2)  # fmt: skip
+                          category=IgnoredWarning, stacklevel=2)  # fmt: skip
         device = torch.device("cuda", info.local_rank)
         torch.cuda.set_device(device)
     if not dist.is_initialized():

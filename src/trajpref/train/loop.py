@@ -23,7 +23,6 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from safetensors import SafetensorError
 from torch import nn
 from torch.nn.parallel import DistributedDataParallel
 from tqdm.auto import tqdm
@@ -31,7 +30,7 @@ from tqdm.auto import tqdm
 from trajpref.config import DataConfig, OptimConfig
 from trajpref.data.transforms import augment
 from trajpref.errors import ConfigError, TrajprefError
-from trajpref.io import atomic_path, bar_options, dumps_json, load_tensors
+from trajpref.io import atomic_path, bar_options, dumps_json, load_tensors, write_failed
 from trajpref.models import checkpoint as ckpt
 from trajpref.results import machine
 from trajpref.train.distributed import DistInfo, RankBatches, gather_generators, largest
@@ -281,24 +280,6 @@ def _budget_share(seconds: float, cfg: OptimConfig, dist_info: DistInfo,
     return largest(seconds / (60 * cfg.max_minutes), dist_info, device)
 
 
-def write_failed(path: Path, what: str, exc: BaseException) -> TrajprefError:
-    """The one-line error for a file of a run that could not be written (``what``: the resume
-    state, a checkpoint, the metrics log): the file, the reason (an ``OSError``'s, or the
-    first line of torch's or safetensors' message less its source location) and the space
-    left on its disk, which a full disk shows as 0. The file written before (an earlier
-    epoch's) is left as it was."""
-    why = exc.strerror if isinstance(exc, OSError) and exc.strerror else None
-    if why is None:
-        lines = str(exc).strip().splitlines()
-        why = re.sub(r"^\[enforce fail at [^\]]*\]\s*\.?\s*", "", lines[0]) if lines else ""
-        said = re.search(r'message: "([^"]+)"', why)  # safetensors: IoError(Os { .. message })
-        why = said.group(1) if said else why or exc.__class__.__name__
-    free = ""
-    with contextlib.suppress(OSError):
-        free = f"; {shutil.disk_usage(path.parent).free / 1e6:,.0f} MB free there"
-    return TrajprefError(f"{path}: cannot write {what} ({why}{free})")
-
-
 def save_resume_state(path: Path, state: dict[str, Any]) -> None:
     """The state a run resumes from (weights, optimiser, schedules, random generators):
     tensors and plain values only, so it loads with ``torch.load(weights_only=True)``. A
@@ -309,16 +290,6 @@ def save_resume_state(path: Path, state: dict[str, Any]) -> None:
             torch.save(state, tmp)
         except RuntimeError as exc:
             raise write_failed(path, "the resume state", exc) from None
-
-
-def save_checkpoint(path: Path, payload: dict[str, Any]) -> None:
-    """``checkpoint.save`` for the loop's checkpoints, a failed write (safetensors'
-    ``SafetensorError`` on a full disk, an ``OSError``) made a one-line
-    ``TrajprefError`` naming the file (``write_failed``)."""
-    try:
-        ckpt.save(path, payload)
-    except (SafetensorError, OSError) as exc:
-        raise write_failed(path, "the checkpoint", exc) from None
 
 
 RESUME_KEYS = ("stage", "trainable", "optimizer", "scheduler", "noise_gen", "aug_gen", "epoch",
@@ -874,7 +845,7 @@ def fit(
                     best_raw = {**raw, "epoch": epoch + 1}
                     meta = {**at, "val": raw, "weights": "raw (this run's best averaged "
                             f"weights are {stage.name}{ckpt.SUFFIX})"}  # fmt: skip
-                    save_checkpoint(out_dir / f"{stage.name}_raw{ckpt.SUFFIX}",
+                    ckpt.save(out_dir / f"{stage.name}_raw{ckpt.SUFFIX}",
                                     stage.payload(meta))  # fmt: skip
             with _averaged(average):
                 val = stage.validate(progress=show)
@@ -884,11 +855,11 @@ def fit(
                     meta = {**at, "val": val}
                     if average is not None:
                         meta["ema_epochs"] = optim_cfg.ema_epochs
-                    save_checkpoint(out_dir / f"{stage.name}{ckpt.SUFFIX}", stage.payload(meta))
+                    ckpt.save(out_dir / f"{stage.name}{ckpt.SUFFIX}", stage.payload(meta))
                     record["best"] = True
                 if optim_cfg.keep_checkpoints:  # what was validated: the average, if any
                     name = f"{stage.name}_epoch{epoch + 1:03d}{ckpt.SUFFIX}"
-                    save_checkpoint(out_dir / name, stage.payload({**at, "val": val}))
+                    ckpt.save(out_dir / name, stage.payload({**at, "val": val}))
             stage.objective.train()
             # 4 decimals: at 0.01 s a small validation pass on a fast host was logged as 0
             record["val_seconds"] = round(time.perf_counter() - v0, 4)

@@ -28,7 +28,15 @@ from trajpref.data import mean_speed, run_splits, speed_note, text
 from trajpref.data.loader import SceneLoader
 from trajpref.data.registry import NAMES, SECONDS_STEPS, USER_TEXT
 from trajpref.device import resolve_device
-from trajpref.errors import ConfigError, TrajprefError
+from trajpref.errors import (
+    ConfigError,
+    DataWarning,
+    EveryRankError,
+    NothingLeftToTrain,
+    OverlapWarning,
+    TrajprefError,
+    TrajprefWarning,
+)
 from trajpref.io import (
     atomic_path,
     check_output_dir,
@@ -49,7 +57,6 @@ from trajpref.results import command_line, machine
 from trajpref.rl.presets import own_reward_data
 from trajpref.train.distributed import (
     DistInfo,
-    EveryRankError,
     barrier,
     cleanup,
     env_info,
@@ -274,7 +281,7 @@ def report_data(name: str, train: TrajectoryDataset, val: TrajectoryDataset,
     for ds, role in ((train, "train"), (val, "val")):
         print(f"[{name}] {split_line(ds, role)}", file=sys.stderr)
     for message in data_warnings(train, val, data):
-        warnings.warn(message, stacklevel=3)
+        warnings.warn(message, category=DataWarning, stacklevel=3)
 
 
 def data_digest(data: dict[str, dict[str, str]]) -> str:
@@ -476,13 +483,6 @@ def check_resume(state: dict[str, Any], identity: str, epochs: int, out_dir: Pat
         raise NothingLeftToTrain(f"--resume {resume}: {why}")
 
 
-class NothingLeftToTrain(ConfigError):
-    """A resume whose state has nothing left to train (its epochs done, or its time budget
-    spent), found before anything is written. The CLI prints it as a note and exits with
-    status 0, so that a job requeued after its run finished succeeds; from Python it is the
-    ``ConfigError`` it always was."""
-
-
 START_FLAGS = {"generator": "--denoiser", "finetune": "--from"}
 """The option that names the checkpoint a stage starts from (``run_identity``'s ``start``)."""
 
@@ -611,7 +611,11 @@ def record_session(out_dir: str | Path, name: str, seed: int, device: torch.devi
         if isinstance(loaded, list):
             sessions = loaded
         else:  # never stop a run over its log, but say that the earlier entries are gone
-            warnings.warn(f"{path}: not a list of sessions; starting it again", stacklevel=2)
+            warnings.warn(
+                f"{path}: not a list of sessions; starting it again",
+                category=TrajprefWarning,
+                stacklevel=2,
+            )
     entry = {
         "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "resumed": resumed,
@@ -652,7 +656,7 @@ def set_threads(info: DistInfo) -> None:
                f"set OMP_NUM_THREADS={per}, or start fewer processes")  # fmt: skip
         warnings.warn(f"{info.local_world_size} processes of {threads} thread(s) each on this "
                       f"machine's {cores} cores: they wait on each other ({how})",
-                      stacklevel=2)  # fmt: skip
+                      category=TrajprefWarning, stacklevel=2)  # fmt: skip
 
 
 def _note_processes(path: Path, info: DistInfo) -> None:
@@ -835,7 +839,7 @@ def take_stage_lock(out_dir: str | Path, name: str) -> StageLock | None:
             os.close(fd)
             warnings.warn(f"{path}: cannot lock the run folder ({exc.strerror or exc}): a "
                           f"second run given --out {out_dir} would not be refused",
-                          stacklevel=3)  # fmt: skip
+                          category=TrajprefWarning, stacklevel=3)  # fmt: skip
             return None
         try:
             mine, held = os.stat(path), os.fstat(fd)
@@ -945,7 +949,9 @@ def _run(
         check_horizons(cfg, train)
         data = data_fingerprint(train, val)
         if info.is_main and (same := same_content_note(train, val)) is not None:
-            warnings.warn(same, stacklevel=2)  # the epoch would be chosen on training windows
+            warnings.warn(
+                same, category=OverlapWarning, stacklevel=2
+            )  # the epoch would be chosen on training windows
         if state is not None:
             try:
                 check_resume_data(state, data, resume)
@@ -963,7 +969,7 @@ def _run(
         if info.is_main:  # once every check that refuses the run has passed
             report_data(name, train, val, cfg.data)
             for note in notes(train) if notes is not None else ():
-                warnings.warn(note, stacklevel=3)
+                warnings.warn(note, category=TrajprefWarning, stacklevel=3)
         if info.is_main:
             out_dir.mkdir(parents=True, exist_ok=True)
             if state is None:  # another run's log, record, state and checkpoints: not this run's
