@@ -120,3 +120,33 @@ def test_a_stored_png_is_a_function_of_its_pixel_size_alone():
     assert np.array_equal(_decode(b), np.asarray(Image.open(io.BytesIO(b))))
     with pytest.raises(ValueError, match="wrong CRC"):
         png_chunks(a[:-5] + b"\x00" + a[-4:])
+
+
+def test_a_panel_of_unknown_units_hides_its_axis_titles_without_touching_rcparams(
+    tmp_path, monkeypatch
+):
+    """The study's panels of data without a unit keep the axis titles' room but draw them in
+    no colour: the same image as matplotlib's ``axes.labelcolor: none`` gave, now without
+    ``rc_context``, which sets (and puts back) every key for the whole process."""
+    import matplotlib as mpl
+
+    from trajpref.survey.study import _panel_image
+
+    rng = np.random.default_rng(0)
+    history = np.cumsum(rng.normal(0, 0.3, (2, 8, 2)), 1)  # [P, T_h, 2]
+    paths = history[None, :, -1:] + np.cumsum(rng.normal(0, 0.3, (3, 2, 12, 2)), 2)
+    weights = np.linspace(1, 0, 3)[:, None].repeat(2, 1)  # [R, P]
+    limits = (-5.0, 5.0, -5.0, 5.0)
+    with mpl.rc_context({"axes.labelcolor": "none"}):  # how the panel was drawn before
+        before = plot_panel(history, paths, weights, tmp_path / "before.png", limits, "")
+
+    def refused(*args, **kwargs):
+        raise AssertionError("rc_context: process-wide")
+
+    monkeypatch.setattr(mpl, "rc_context", refused)
+    out = tmp_path / "now.png"
+    _panel_image(history, paths, weights, out, limits, "unknown")
+    assert out.read_bytes() == before.read_bytes()
+    shown = tmp_path / "shown.png"
+    _panel_image(history, paths, weights, shown, limits, "m")  # titles drawn where units known
+    assert shown.read_bytes() != out.read_bytes()

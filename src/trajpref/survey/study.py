@@ -19,7 +19,6 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Literal
 
-import matplotlib as mpl
 import numpy as np
 
 from trajpref.errors import ConfigError
@@ -173,11 +172,9 @@ def _panel_image(history: np.ndarray, paths: np.ndarray, weights: np.ndarray, ou
                  dashed: bool = False) -> None:  # fmt: skip
     """``plot_panel``; for data of unknown units without the axis titles, so that no rater
     reads "x [unknown]" (the tick values stay)."""
-    if units not in NO_UNITS:  # the figures' own (models.timing.UNKNOWN_UNITS, None besides)
-        plot_panel(history, paths, weights, out, limits, units, dashed=dashed)
-        return
-    with mpl.rc_context({"axes.labelcolor": "none"}):  # its titles name a unit: not drawn
-        plot_panel(history, paths, weights, out, limits, "", dashed=dashed)
+    known = units not in NO_UNITS  # the figures' own (models.timing.UNKNOWN_UNITS, None besides)
+    plot_panel(history, paths, weights, out, limits, units if known else "", dashed=dashed,
+               axis_titles=known)  # fmt: skip
 
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"

@@ -953,6 +953,7 @@ def plot_panel(
     limits: tuple[float, float, float, float],
     units: str | None = "m",
     dashed: bool = False,
+    axis_titles: bool = True,
 ) -> Path:
     """One panel of a blinded study, drawn as the predictions column of the paper's Fig. 2:
     every agent's history, then its ``R`` shown futures shaded by ``weights`` (darker =
@@ -961,8 +962,10 @@ def plot_panel(
     history [P, T_h, 2], paths [R, P, T_f, 2] (best first), weights [R, P] in [0, 1];
     ``limits`` (x0, x1, y0, y1) are the same for every panel of a scene; ``dashed`` draws
     the paths as the ground truth is drawn in Fig. 2 (the study's reference image); ``units``
-    None (or ``""``, ``unknown``): the axes are titled ``x`` and ``y`` without a unit. (Its
-    look is the study's: a study's panels keep it whatever the scene figures change.)
+    None (or ``""``, ``unknown``): the axes are titled ``x`` and ``y`` without a unit;
+    ``axis_titles=False`` leaves the titles' room but draws them in no colour (the study's
+    panels of data whose unit is unknown, so that no rater reads "x [unknown]"). (Its look is
+    the study's: a study's panels keep it whatever the scene figures change.)
     """
     figure_format(out)
     p = history.shape[0]
@@ -982,8 +985,9 @@ def plot_panel(
     ax.set_xlim(limits[0], limits[1])
     ax.set_ylim(*((limits[3], limits[2]) if y_down(units) else (limits[2], limits[3])))
     ax.set_aspect("equal", adjustable="box")
-    ax.set_xlabel(axis_label("x", units))
-    ax.set_ylabel(axis_label("y", units))
+    shown = {} if axis_titles else {"color": "none"}  # their room kept, the tick values shown
+    ax.set_xlabel(axis_label("x", units), **shown)
+    ax.set_ylabel(axis_label("y", units), **shown)
     ax.grid(alpha=0.3)
     return _save(fig, out)
 
