@@ -41,12 +41,22 @@ def threads_per_worker(environ: dict[str, str], cpus: int) -> int | None:
     return max(1, cpus // int(workers))
 
 
+def usable_cpus() -> int:
+    """The cores this process may run on (a cpuset's, as ``taskset``, a batch job or a
+    container gives it, and as pytest-xdist's ``-n auto`` counts them), else all of them."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
 def pytest_configure(config):
     spec = importlib.util.find_spec("trajpref")
     problem = trajpref_source_problem(spec and spec.origin, Path(__file__).resolve().parents[1])
     if problem:
         raise pytest.UsageError(problem)
-    threads = threads_per_worker(dict(os.environ), os.cpu_count() or 1)
+    if not hasattr(config, "workerinput"):  # the controller, or a run without workers
+        return
+    threads = threads_per_worker(dict(os.environ), usable_cpus())
     if threads is not None:
         import torch
 

@@ -361,3 +361,25 @@ def test_the_resume_advice_starts_trajpref_as_this_process_was_started(
     monkeypatch.setattr(sys, "argv", [str(script), *TRAIN_ARGS, "--out", str(run)])
     code, _, err = _run(capsys, *TRAIN_ARGS, "--out", run)
     assert shlex.split(err.strip().splitlines()[1]) == ["trajpref", *tail]
+
+
+def test_an_error_closes_the_commands_bars_but_not_the_callers(tmp_path, capsys):
+    """``cli.main`` called in-process (a notebook, a wrapper): an error closed every tqdm bar
+    of the process, the caller's own too; now only those the command opened."""
+    from io import StringIO
+
+    from tqdm import tqdm
+
+    from trajpref.cli import _close_bars, _open_bars
+
+    mine = tqdm(total=10, disable=False, file=StringIO())
+    try:
+        earlier = _open_bars()
+        assert mine in earlier
+        theirs = tqdm(total=10, disable=False, file=StringIO())
+        _close_bars(earlier)
+        assert theirs not in _open_bars() and mine in _open_bars()
+        code = cli.main(["evaluate", "--dataset", str(tmp_path / "nothing"), "--model", "cv"])
+        assert code == 2 and mine in _open_bars()
+    finally:
+        mine.close()

@@ -101,14 +101,20 @@ def test_a_worker_runs_torch_on_its_share_of_the_cores(tmp_path):
         "spec.loader.exec_module(project)\n"
         "pytest_configure = project.pytest_configure\n"
     )
-    expected = max(1, (os.cpu_count() or 1) // 2)
+    from conftest import usable_cpus
+
+    expected = max(1, usable_cpus() // 2)
     (tmp_path / "test_threads.py").write_text(
         "import os, torch\n\n"
         "def test_threads():\n"
         f"    assert torch.get_num_threads() == {expected}\n"
         f"    assert os.environ['OMP_NUM_THREADS'] == '{expected}'\n"
     )
-    env = {k: v for k, v in os.environ.items() if k != "OMP_NUM_THREADS"}
+    env = {
+        k: v
+        for k, v in os.environ.items()  # as from a shell, not from an xdist worker
+        if k != "OMP_NUM_THREADS" and not k.startswith("PYTEST_XDIST_")
+    }
     done = subprocess.run([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q",
                            "-n", "2", "test_threads.py"], cwd=tmp_path, env=env,
                           capture_output=True, text=True, timeout=120)  # fmt: skip

@@ -50,7 +50,7 @@ MOVED = [
     ("trajpref.data.text", "GapWarning"),
     ("trajpref.data.tracker", "LeftOutWarning"),
     ("trajpref.train.run", "NothingLeftToTrain"),
-    ("trajpref.cli", "EveryRankError"),
+    ("trajpref.train.distributed", "EveryRankError"),
 ]
 
 
@@ -257,3 +257,13 @@ def test_a_checkpoint_write_that_fails_in_safetensors_names_the_file(tmp_path, m
                        r"\(.*No space left on device; [\d,]+ MB free there\)"):  # fmt: skip
         checkpoint.save(out, payload)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_folder_given_as_a_model_is_a_config_error_not_not_found(tmp_path):
+    """A folder is there, only not a model: no ``NotFound`` (a ``FileNotFoundError``), which
+    a host's "if missing, fetch it" handler would take for a model to download."""
+    from trajpref.models.registry import load_predictor
+
+    with pytest.raises(ConfigError, match="a folder, not a checkpoint file") as caught:
+        load_predictor(str(tmp_path))
+    assert not isinstance(caught.value, FileNotFoundError)

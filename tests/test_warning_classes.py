@@ -3,7 +3,7 @@ embedding application can select them by class (library-hygiene walkthrough 69):
 of ``warnings.warn`` under ``src/trajpref`` names a ``TrajprefWarning`` class (read from the
 source), and a representative warning of each family, issued for real, is one; a filter on
 the class turns them into errors or silences them. Their ``stacklevel`` keeps pointing at the
-caller's line (so ``filterwarnings(module="trajpref")`` cannot select them: the class can)."""
+caller's line (so ``filterwarnings(module="trajpref")`` selects only some: the class all)."""
 
 from __future__ import annotations
 

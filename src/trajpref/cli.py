@@ -2451,15 +2451,19 @@ TRAINING = ("train", "finetune")
 """The commands that run under torchrun (each process a rank); the others run in one."""
 
 
-def _close_bars() -> None:
-    """Close the progress bars an exception left open (a bar over a loop, not a ``with``,
-    is closed only when it is freed): on a terminal each clears its line, so that the
-    message after it starts one (``io.bar_options``: where stderr is no terminal, bars write
-    whole lines)."""
+def _open_bars() -> set:
+    """The progress bars open now (none when tqdm was never imported)."""
     bars = sys.modules.get("tqdm.std")
-    if bars is None:  # no bar was ever drawn
-        return
-    for bar in list(getattr(bars.tqdm, "_instances", ())):
+    return set(getattr(bars.tqdm, "_instances", ())) if bars is not None else set()
+
+
+def _close_bars(earlier: set) -> None:
+    """Close the progress bars an exception left open (a bar over a loop, not a ``with``,
+    is closed only when it is freed), but not those open before the command (``earlier``:
+    an application's own, when it calls ``main`` in-process): on a terminal each clears its
+    line, so that the message after it starts one (``io.bar_options``: where stderr is no
+    terminal, bars write whole lines)."""
+    for bar in _open_bars() - earlier:
         with contextlib.suppress(Exception):
             bar.close()
 
@@ -2513,6 +2517,7 @@ def main(argv: list[str] | None = None) -> int:
     on_term = training and threading.current_thread() is threading.main_thread()
     if on_term:
         previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    bars_before = _open_bars()  # an application's own bars, which an error leaves open
     try:
         with warnings.catch_warnings():
             warnings.showwarning = _one_line_warning  # restored when the command ends
@@ -2522,7 +2527,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"trajpref: note: {exc}", file=sys.stderr)
         return 0
     except TrajprefError as exc:
-        _close_bars()
+        _close_bars(bars_before)
         # under torchrun each rank says what it met (one rank's own: a file missing on its
         # machine), prefixed with its rank; what every rank raises alike, rank 0 alone
         if main_rank:
@@ -2531,13 +2536,13 @@ def main(argv: list[str] | None = None) -> int:
             print(f"trajpref: error: [rank {os.environ.get('RANK')}] {exc}", file=sys.stderr)
         return 2
     except Terminated:
-        _close_bars()
+        _close_bars(bars_before)
         if main_rank:
             print(f"trajpref: terminated (SIGTERM){_resume_hint(args, argv, before)}",
                   file=sys.stderr)  # fmt: skip
         return 143
     except RuntimeError:
-        _close_bars()
+        _close_bars(bars_before)
         # under torchrun, a rank that died (killed, out of memory) fails the others in their
         # next collective: say how to continue, then torch's own traceback
         if training and env_info().enabled and main_rank:
@@ -2549,13 +2554,13 @@ def main(argv: list[str] | None = None) -> int:
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
     except OSError as exc:  # a file the command could not read or write
-        _close_bars()
+        _close_bars(bars_before)
         where = f"{exc.filename}: " if exc.filename else ""
         rank = "" if main_rank else f"[rank {os.environ.get('RANK')}] "  # may be its own
         print(f"trajpref: error: {rank}{where}{exc.strerror or exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        _close_bars()
+        _close_bars(bars_before)
         if main_rank:
             print(f"trajpref: interrupted{_resume_hint(args, argv, before)}", file=sys.stderr)
         return 130

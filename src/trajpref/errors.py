@@ -9,9 +9,9 @@ would catch for the same mistake (``ValueError`` for a bad value, ``TypeError`` 
 argument of the wrong kind, ``FileNotFoundError`` for a named file, folder, model or dataset
 that is not there). Warnings: every class is a ``TrajprefWarning`` (a ``UserWarning``), so
 that ``warnings.filterwarnings("ignore", category=TrajprefWarning)`` selects all of them, and
-the families below select a part; a warning's ``stacklevel`` points at the caller's line, so
-``filterwarnings(module="trajpref")`` does not select them. This module imports nothing of
-trajpref (the bottom layer of the import contracts)."""
+the families below select a part; a warning's ``stacklevel`` mostly points at the caller's
+line, so ``filterwarnings(module="trajpref")`` selects only some of them. This module
+imports nothing of trajpref (the bottom layer of the import contracts)."""
 
 from __future__ import annotations
 

@@ -118,3 +118,70 @@ def test_the_python_api_is_refused_alike(tmp_path, tiny_cfg):
     finally:
         release_stage_lock(lock)
     assert list(out.iterdir()) == []
+
+
+def _held_by_another(path, command: str = "trajpref train diffusion") -> int:
+    """An open file holding ``path``'s lock, recorded as pid 4242's on node7 (as a run of
+    another process writes it), for the caller to close."""
+    fd = os.open(path, os.O_RDWR | os.O_CREAT)
+    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    record = {"pid": 4242, "host": "node7", "started": "then", "command": command}
+    os.write(fd, (json.dumps(record) + "\n").encode())
+    return fd
+
+
+def test_a_holder_with_a_long_command_is_still_named(tmp_path):
+    """The record ends with the holder's command; one over 4 KB (many --set with long paths)
+    hid its pid and host behind "a process that has not said which yet"."""
+    out = tmp_path / "run"
+    out.mkdir()
+    fd = _held_by_another(lock_path(out, "denoiser"), "trajpref train " + "--set x=y " * 900)
+    try:
+        with pytest.raises(TrajprefError, match=r"\(pid 4242 on host node7, started then;"):
+            take_stage_lock(out, "denoiser")
+    finally:
+        os.close(fd)
+
+
+def _as_another_users_file(monkeypatch, path) -> None:
+    """Opening ``path`` to write fails as for another user's 0644 file while it holds pid
+    4242's record (these tests may run as root, whom permissions do not stop)."""
+    real = os.open
+
+    def opened(name, flags, *args, **kwargs):
+        if (os.fspath(name) == os.fspath(path) and flags & (os.O_RDWR | os.O_WRONLY)
+                and path.exists() and '"pid": 4242' in path.read_text()):  # fmt: skip
+            raise PermissionError(13, "Permission denied", os.fspath(name))
+        return real(name, flags, *args, **kwargs)
+
+    monkeypatch.setattr(os, "open", opened)
+
+
+def test_a_lock_file_left_by_another_users_killed_run_blocks_nothing(tmp_path, monkeypatch):
+    """In a shared folder a killed run of another user leaves a file this user may not write:
+    it was "cannot write (Permission denied)"; now, its lock being free, it is replaced."""
+    out = tmp_path / "run"
+    out.mkdir()
+    stale = lock_path(out, "denoiser")
+    stale.write_text(json.dumps({"pid": 4242, "host": "node7"}) + "\n")
+    _as_another_users_file(monkeypatch, stale)
+    lock = take_stage_lock(out, "denoiser")
+    try:
+        assert json.loads(stale.read_text())["pid"] == os.getpid()
+    finally:
+        release_stage_lock(lock)
+
+
+def test_another_users_run_that_holds_the_folder_is_named(tmp_path, monkeypatch):
+    out = tmp_path / "run"
+    out.mkdir()
+    held = lock_path(out, "denoiser")
+    fd = _held_by_another(held)
+    try:
+        _as_another_users_file(monkeypatch, held)
+        with pytest.raises(TrajprefError, match=r"another run is training denoiser there \(pid "
+                                                r"4242 on host node7"):  # fmt: skip
+            take_stage_lock(out, "denoiser")
+        assert held.exists()  # its run's file is left alone
+    finally:
+        os.close(fd)

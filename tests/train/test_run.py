@@ -533,7 +533,12 @@ def test_the_advice_starts_trajpref_as_it_was_started(tmp_path, monkeypatch):
     out, last = tmp_path / "d", tmp_path / "d" / "denoiser_last.pt"
     _record(out, "denoiser", f"python {main_py} train diffusion --out o", seed=0, world_size=1)
     assert resume_command(out, "denoiser", last) == (
-        f"python -m trajpref train diffusion --out o --seed 0 --resume {last}"
+        f"{Path(python).name} -m trajpref train diffusion --out o --seed 0 --resume {last}"
     )
+    monkeypatch.setenv("PATH", str(tmp_path))  # the record's "python" is not the one PATH finds
+    assert resume_command(out, "denoiser", last) == (
+        f"{python} -m trajpref train diffusion --out o --seed 0 --resume {last}"
+    )
+    monkeypatch.setenv("PATH", os.pathsep.join([str(script.parent), str(Path(python).parent)]))
     _record(out, "denoiser", f"python {script} train diffusion --out o", seed=0)
     assert resume_command(out, "denoiser", last).startswith("trajpref train diffusion")

@@ -8,7 +8,7 @@ from pathlib import Path
 import torch
 
 from trajpref.device import resolve_device
-from trajpref.errors import ModelNotFound, TrajprefError
+from trajpref.errors import ConfigError, ModelNotFound, TrajprefError
 from trajpref.models import checkpoint, zoo
 from trajpref.models.baseline import ConstantVelocity
 from trajpref.models.predictor import Sampler
@@ -46,7 +46,8 @@ def load_predictor(
             found = [folder / f"{n}{checkpoint.SUFFIX}" for n in ("finetune", "generator")]
             found = [str(p) for p in found if p.is_file()]
             hint = f": pass {' or '.join(found)}" if found else ""
-            raise ModelNotFound(f"{spec}: a folder, not a checkpoint file{hint}") from None
+            # there, but not a model: no NotFound, which an "if missing, fetch it" handler takes
+            raise ConfigError(f"{spec}: a folder, not a checkpoint file{hint}") from None
         message = zoo.not_here_message(spec)  # models/zara1/generator.safetensors elsewhere
         if message is not None:
             raise ModelNotFound(message) from None

@@ -24,6 +24,7 @@ import torch.distributed as dist
 
 from trajpref.data.loader import SceneLoader
 from trajpref.errors import ConfigError, IgnoredWarning
+from trajpref.errors import EveryRankError as EveryRankError  # its older place
 from trajpref.types import Batch, TrajectoryDataset, collate
 
 TIMEOUT = timedelta(minutes=60)

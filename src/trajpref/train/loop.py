@@ -845,8 +845,7 @@ def fit(
                     best_raw = {**raw, "epoch": epoch + 1}
                     meta = {**at, "val": raw, "weights": "raw (this run's best averaged "
                             f"weights are {stage.name}{ckpt.SUFFIX})"}  # fmt: skip
-                    ckpt.save(out_dir / f"{stage.name}_raw{ckpt.SUFFIX}",
-                                    stage.payload(meta))  # fmt: skip
+                    ckpt.save(out_dir / f"{stage.name}_raw{ckpt.SUFFIX}", stage.payload(meta))
             with _averaged(average):
                 val = stage.validate(progress=show)
                 record.update({f"val_{k}": v for k, v in val.items()})

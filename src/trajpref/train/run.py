@@ -420,7 +420,10 @@ def resume_command(out_dir: str | Path, name: str, resume: str | Path) -> str | 
     if isinstance(launcher, str):
         started = shlex.split(launcher)
     else:  # one process: as it was started (several: cli_resume_command's torchrun)
-        started = program_launcher(args[1], args[0]) if world <= 1 else None
+        # the record says "python" (results.command_line): this interpreter's path instead,
+        # so that an un-activated .venv's python -m trajpref is advised by its path
+        python = sys.executable if args[0] == "python" else args[0]
+        started = program_launcher(args[1], python) if world <= 1 else None
     command = cli_resume_command(args[2:], resume, world, seed if isinstance(seed, int) else None,
                                  started)  # fmt: skip
     nodes = session.get("nodes", 1)
@@ -795,11 +798,51 @@ class StageLock:
 def _lock_holder(fd: int) -> str:
     """What the lock file open as ``fd`` says of the run that holds it, for the refusal."""
     try:
-        held = json.loads(os.pread(fd, 4096, 0).decode("utf-8", "replace"))
+        size = os.fstat(fd).st_size  # the record ends with the command, however long
+        held = json.loads(os.pread(fd, size, 0).decode("utf-8", "replace"))
         who = f"pid {int(held['pid'])} on host {held['host']}"
         return who + (f", started {held['started']}" if held.get("started") else "")
     except (OSError, ValueError, TypeError, KeyError):  # being written, or not ours
         return "a process that has not said which yet"
+
+
+def _held(out_dir: str | Path, name: str, path: Path, holder: str) -> TrajprefError:
+    """The refusal of a run whose folder another run holds (``holder``: ``_lock_holder``)."""
+    return TrajprefError(
+        f"--out {out_dir}: another run is training {name} there ({holder}; it holds "
+        f"{path.name}): two runs in one folder would mix their logs, checkpoints and "
+        "resume states; wait for it to end, or give this run another --out"
+    )
+
+
+def _remove_stale_lock(path: Path, out_dir: str | Path, name: str) -> None:
+    """A lock file this process may not write (another user's, left by a run of theirs):
+    refused as ``take_stage_lock`` refuses when a run holds it, else removed, so that a
+    killed run's file blocks nothing in a shared folder either."""
+    import fcntl
+
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except FileNotFoundError:  # let go meanwhile
+        return
+    except OSError as exc:
+        raise TrajprefError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = _lock_holder(fd)
+        os.close(fd)
+        raise _held(out_dir, name, path, holder) from None
+    except OSError:
+        pass  # no locks here: the file is as stale as any
+    os.close(fd)
+    try:
+        path.unlink()
+    except FileNotFoundError:
+        pass
+    except OSError as exc:
+        raise TrajprefError(f"{path}: a lock file left by another user's run, which this "
+                            f"user cannot remove ({exc.strerror or exc})") from None  # fmt: skip
 
 
 def take_stage_lock(out_dir: str | Path, name: str) -> StageLock | None:
@@ -823,18 +866,19 @@ def take_stage_lock(out_dir: str | Path, name: str) -> StageLock | None:
     for _ in range(20):  # a run that lets the lock go removes its file: take the new one
         try:
             fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        except PermissionError:  # another user's file (0644): held by a run, or left behind
+            fd = None
         except OSError as exc:
             raise TrajprefError(f"{path}: cannot write ({exc.strerror or exc})") from None
+        if fd is None:
+            _remove_stale_lock(path, out_dir, name)  # or refused, when its run holds it
+            continue
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             holder = _lock_holder(fd)
             os.close(fd)
-            raise TrajprefError(
-                f"--out {out_dir}: another run is training {name} there ({holder}; it holds "
-                f"{path.name}): two runs in one folder would mix their logs, checkpoints and "
-                "resume states; wait for it to end, or give this run another --out"
-            ) from None
+            raise _held(out_dir, name, path, holder) from None
         except OSError as exc:  # some NFS or Lustre mounts, a FUSE file system
             os.close(fd)
             warnings.warn(f"{path}: cannot lock the run folder ({exc.strerror or exc}): a "
