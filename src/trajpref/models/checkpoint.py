@@ -549,24 +549,82 @@ def config_of(payload: dict[str, Any]) -> ExperimentConfig:
     return experiment_from_dict(config, stored="a checkpoint's config")
 
 
-def build_denoiser(payload: dict[str, Any]) -> tuple[Denoiser, ExperimentConfig]:
+def build_denoiser(payload: dict[str, Any], *,
+                   loading: bool = False) -> tuple[Denoiser, ExperimentConfig]:  # fmt: skip
+    """The denoiser of a denoiser payload and its config. Training (the default) builds it
+    with its random initialisation, which draws from torch's global stream (a seeded stage
+    relies on those draws), then copies the weights in; ``loading=True`` builds it without
+    any (``built_for_loading``): nothing is drawn, so it is safe beside other threads."""
     if payload["kind"] != "denoiser":
         raise TrajprefError(f"expected a denoiser checkpoint, got a {payload['kind']}")
     if state_hash(payload["state_dict"]) != payload["hash"]:
         raise TrajprefError("denoiser weights do not match their recorded hash")
     cfg = config_of(payload)
+    if loading:
+        return built_for_loading(Denoiser, cfg.model, payload["state_dict"]), cfg
     model = Denoiser(cfg.model)
     model.load_state_dict(payload["state_dict"])
     return model, cfg
 
 
-def build_generator(payload: dict[str, Any]) -> tuple[Generator, ExperimentConfig]:
+def build_generator(payload: dict[str, Any], *,
+                    loading: bool = False) -> tuple[Generator, ExperimentConfig]:  # fmt: skip
+    """The generator of a generator payload and its config; ``loading`` as
+    ``build_denoiser``'s."""
     if payload["kind"] != "generator":
         raise TrajprefError(f"expected a generator checkpoint, got a {payload['kind']}")
     cfg = config_of(payload)
+    if loading:
+        return built_for_loading(Generator, cfg.model, payload["state_dict"]), cfg
     model = Generator(cfg.model)
     model.load_state_dict(payload["state_dict"])
     return model, cfg
+
+
+def built_for_loading(cls: type[torch.nn.Module], cfg: Any,
+                      state: dict[str, torch.Tensor]) -> torch.nn.Module:  # fmt: skip
+    """``cls(cfg)`` holding the weights ``state``, built without random initialisation.
+
+    The module is built on the meta device (shapes only: its initialisers run on no data and
+    draw nothing from torch's global generator; ``torch.device("meta")`` holds in this thread
+    alone), then takes a float32 copy of each weight (``load_state_dict(assign=True)``, the
+    same strict check of names and shapes). Shared parameters are shared again, and buffers
+    that are no part of the state dict are rebuilt on the CPU by the module's
+    ``config_buffers()``; a tensor left on the meta device is a ``TrajprefError``."""
+    with torch.device("meta"):
+        model = cls(cfg)
+    shared = _shared_parameters(model)
+    model.load_state_dict({name: _owned(value) for name, value in state.items()}, assign=True)
+    for first, *others in shared:
+        tied = model.get_parameter(first)
+        for name in others:
+            owner, _, attr = name.rpartition(".")
+            setattr(model.get_submodule(owner), attr, tied)
+    for module in model.modules():
+        rebuild = getattr(module, "config_buffers", None)
+        for name, value in (rebuild() if callable(rebuild) else {}).items():
+            setattr(module, name, value)
+    left = [name for name, t in [*model.named_parameters(), *model.named_buffers()] if t.is_meta]
+    if left:
+        raise TrajprefError(f"{cls.__name__}: {', '.join(left)} not loaded (no weights in the "
+                            "checkpoint, and not rebuilt by config_buffers())")  # fmt: skip
+    return model
+
+
+def _owned(value: torch.Tensor) -> torch.Tensor:
+    """A contiguous copy of a weight (float32 if floating), as ``load_state_dict`` copies into
+    a float32 parameter: the module shares no memory with the payload (or a mapped file)."""
+    dtype = torch.float32 if value.is_floating_point() else value.dtype
+    out = torch.empty(value.shape, dtype=dtype, device=value.device)
+    return out.copy_(value.detach())
+
+
+def _shared_parameters(model: torch.nn.Module) -> list[list[str]]:
+    """The names of each parameter that a module holds under several names."""
+    names: dict[int, list[str]] = {}
+    for name, param in model.named_parameters(remove_duplicate=False):
+        names.setdefault(id(param), []).append(name)
+    return [group for group in names.values() if len(group) > 1]
 
 
 def denoiser_of(payload: dict[str, Any]) -> dict[str, Any]:
@@ -574,29 +632,21 @@ def denoiser_of(payload: dict[str, Any]) -> dict[str, Any]:
     return payload if payload["kind"] == "denoiser" else payload["denoiser"]
 
 
-def predictor_from_payload(payload: dict[str, Any], sampler: Sampler | None = None):
+def predictor_from_payload(payload: dict[str, Any], sampler: Sampler | None = None, *,
+                           loading: bool = False) -> DiffusionPredictor:  # fmt: skip
     """A ``DiffusionPredictor`` from a denoiser (full sampler only) or generator payload, in
     eval mode (a generator trained with dropout predicts without it; training code sets its
-    own mode)."""
-    denoiser, cfg = build_denoiser(denoiser_of(payload))
+    own mode). ``loading`` as ``build_denoiser``'s: training builds with the random
+    initialisation it seeded (the default), the loading calls with none."""
+    denoiser, cfg = build_denoiser(denoiser_of(payload), loading=loading)
     generator = None
     if payload["kind"] == "generator":
-        generator, cfg = build_generator(payload)
+        generator, cfg = build_generator(payload, loading=loading)
     sampler = sampler or ("leapfrog" if generator is not None else "full")
     schedule = DDPMSchedule.from_config(cfg.diffusion)
     predictor = DiffusionPredictor(denoiser, schedule, payload["scale"], generator,
                                    cfg.model.tau, sampler, cfg.model.stochastic_steps)  # fmt: skip
     return predictor.eval()
-
-
-def untouched_rng():
-    """A context in which building modules (their random initialisation, overwritten by the
-    loaded weights) leaves torch's global CPU random stream where it was: the loading calls
-    (``load_predictor``, ``TrajectoryScorer.from_checkpoint``) draw nothing from a caller's
-    ``torch.manual_seed``. Modules are built on the CPU, so the GPUs' streams are not forked
-    (nor initialised). Training builds from payloads without it: its stages seed, build and
-    go on drawing from one stream (``train.stages``), as its published runs did."""
-    return torch.random.fork_rng(devices=[])
 
 
 def as_float32(module: torch.nn.Module) -> torch.nn.Module:
@@ -618,16 +668,17 @@ def load_predictor(path: str | Path, *, sampler: Sampler | None = None, device: 
     carries its training data's step and units (``models.timing.attach_timing``:
     ``frame_interval``, ``units``, ``timing``) and the file's ``model.neighbour_radius`` (a
     generator file's own, or a bare denoiser's; training code, which builds its predictors
-    from payloads, never applies it). Loading draws nothing from torch's global random stream
-    (``untouched_rng``): ``torch.manual_seed(s)`` gives the same draws after it as before. Its
+    from payloads, never applies it). Loading draws nothing from torch's global random stream,
+    nor saves and restores it: the modules are built without random initialisation
+    (``built_for_loading``), so ``torch.manual_seed(s)`` gives the same draws after it as
+    before, and another thread drawing from that stream meanwhile is not disturbed. Its
     weights are float32 whatever ``torch.get_default_dtype()`` is (``as_float32``).
     """
     from trajpref.models.timing import attach_timing
 
     device = resolve_device(device)  # "auto" as the CLI reads it; a missing GPU in one line
     payload = load(path)
-    with untouched_rng():  # a planner's torch.manual_seed stream is not moved by loading
-        predictor = predictor_from_payload(payload, sampler)
+    predictor = predictor_from_payload(payload, sampler, loading=True)  # no random init
     predictor = as_float32(predictor).to(device).eval()  # float32 under any default dtype
     predictor.neighbour_radius = config_of(payload).model.neighbour_radius
     return attach_timing(predictor, payload)

@@ -89,10 +89,15 @@ class Generator(nn.Module):
         else:
             self.sigma_head = mlp([h + tf * 2, w, samples], dropout=p)
             self.shift_head = mlp([h + tf * 2, w, w, samples * tf * 2], dropout=p)
-        # [T_f, T_f] projection onto smooth paths (identity when future_rank is 0); rebuilt
-        # from the config, so it is not part of the state dict
-        self.register_buffer("time_projection", time_projection(tf, cfg.future_rank),
-                             persistent=False)  # fmt: skip
+        for name, value in self.config_buffers().items():  # no part of the state dict
+            self.register_buffer(name, value, persistent=False)
+
+    def config_buffers(self) -> dict[str, torch.Tensor]:
+        """The buffers computed from the config, not stored in the state dict: the [T_f, T_f]
+        ``time_projection`` onto smooth paths (the identity when ``future_rank`` is 0).
+        Loading (``checkpoint.built_for_loading``), which builds the module on the meta
+        device, sets them again from this."""
+        return {"time_projection": time_projection(self.cfg.t_fut, self.cfg.future_rank)}
 
     def forward(self, features: SceneFeatures) -> GeneratorOutput:
         rot = None

@@ -278,13 +278,14 @@ class TrajectoryScorer(DenoiserShapes):
         ``model.neighbour_radius`` (a generator file's own, as the predictor loaded from it
         uses) unless ``neighbour_radius`` is given (None: off). ``device``: ``auto``, ``cpu``,
         ``cuda[:i]`` or a ``torch.device``. The other arguments are ``__init__``'s. Building
-        it draws nothing from torch's global random stream (``checkpoint.untouched_rng``)."""
+        it draws nothing from torch's global random stream, nor saves and restores it (the
+        denoiser is built without random initialisation: ``checkpoint.built_for_loading``),
+        so it is safe beside threads that draw from that stream."""
         checkpoint.check_spec(path, "TrajectoryScorer.from_checkpoint")  # None: ConfigError
         device = resolve_device(device)  # "auto" as the CLI reads it; a missing GPU in one line
         header = checkpoint.load(path)
         payload = checkpoint.denoiser_of(header)
-        with checkpoint.untouched_rng():  # torch's global stream as the caller seeded it
-            denoiser, cfg = checkpoint.build_denoiser(payload)
+        denoiser, cfg = checkpoint.build_denoiser(payload, loading=True)  # no random init
         denoiser = checkpoint.as_float32(denoiser)  # float32 under any default dtype
         schedule = DDPMSchedule.from_config(cfg.diffusion)
         if isinstance(neighbour_radius, str) and neighbour_radius == "checkpoint":
