@@ -27,7 +27,7 @@ ZARA1 = "zara1/generator was trained on the zara1 fold (leave-one-out: the other
 
 
 FAST = "faster than its training data"
-WIDE = "more than 25 model units apart at its last observed frame"
+WIDE = "model units apart at its last observed frame"  # each model's own limit before it
 UNITS = "looks like it is in other units than the model's"
 
 

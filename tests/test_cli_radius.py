@@ -44,9 +44,9 @@ def _predict(capsys, tmp_path, folder, *flags) -> tuple[np.ndarray, dict]:
     out = tmp_path / f"p{len(list(tmp_path.iterdir()))}.npz"
     code, _, err = _run(capsys, "predict", "--dataset", folder, "--model", "zara1/generator",
                         *READ, "--out", out, *flags)  # fmt: skip
-    # without a radius, the pair 50 m (34 model units) apart is warned of (timing.WIDE_LIMIT)
+    # without a radius, the pair 50 m (34 model units) apart is warned of (zara1's limit, 15)
     wide = folder.name == "pair" and "--neighbour-radius" not in flags
-    assert code == 0 and err.count("more than 25 model units apart") == wide
+    assert code == 0 and err.count("more than 15 model units apart") == wide
     assert err == "" or (wide and err.count("trajpref: warning:") == 1)
     with np.load(out) as f:
         return f["pred"], json.loads(str(f["meta"]))  # pred [K, N, T_f, 2]

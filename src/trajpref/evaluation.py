@@ -883,9 +883,9 @@ def warn_observed_pace(checked: list[tuple[str, object]], dataset: TrajectoryDat
     else one agent jumping more than ``timing.JUMP_LIMIT`` in one step (a tracker id switch)
     or, where none, that percentile above ``timing.FAST_LIMIT`` for one without an input
     speed clamp (agents faster than training), and beside either, two agents of one window
-    more than ``timing.WIDE_LIMIT`` apart at its last observed frame for one without a
-    neighbour radius (a scene wider than training). ``tail`` ends each text
-    (``check_trained_on``'s); returns whether it warned."""
+    farther apart at its last observed frame than the model's own limit (``timing.wide_limit``
+    of its training width) for one without a neighbour radius (a scene wider than training).
+    ``tail`` ends each text (``check_trained_on``'s); returns whether it warned."""
     if not len(dataset) or not checked:
         return False
     history = np.concatenate([s.history for s in dataset.scenes])  # [N, T_h, 2]

@@ -3,10 +3,10 @@ planner hands them over (``models.timing.check_observed_steps``: ``predict_scene
 ``predict_scenes``, ``rank_samples``, ``select_for_scene``; walkthrough 68, findings 2-3):
 agents faster than training for a model without an input speed clamp (``FAST_LIMIT``: robo's
 generator gave walkers at 10 times robo's median pace steps of 39 m, silently), and a scene
-wider than training for a model without a neighbour radius (``WIDE_LIMIT``: a walker 1 km to
-the side bent zara1's futures of a straight walker by metres). The texts are fixed, the data
-in other units (``PACE_LIMIT``) keeps its own warning alone, and no published test split warns
-on more than 1 % of its scenes."""
+wider than training for a model without a neighbour radius (``wide_limit``, each model's own:
+a walker 1 km to the side bent zara1's futures of a straight walker by metres). The texts are
+fixed, the data in other units (``PACE_LIMIT``) keeps its own warning alone, and no published
+test split warns on more than 1 % of its scenes."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import warnings
 
 import numpy as np
 import pytest
-from helpers import FAST, UNITS, WIDE
+from helpers import FAST, UNITS
 
 from trajpref.models.registry import load_predictor
 from trajpref.models.timing import (
@@ -25,12 +25,14 @@ from trajpref.models.timing import (
     pace_quantile,
     scene_widths,
     speed_clamp,
+    wide_limit,
 )
 from trajpref.score import TrajectoryScorer, predict_scene, predict_scenes, rank_samples
 from trajpref.score.selection import SelectionConfig, select_for_scene
 from trajpref.types import AGENT_BALL
 
 T = np.arange(8)[:, None]
+WIDE = "model units apart at its last observed frame"  # each model's own limit before it
 
 
 def _convoy(pace: float) -> np.ndarray:
@@ -149,7 +151,7 @@ def test_a_walker_one_kilometre_to_the_side_warns_with_the_radius_remedy(zara1):
 
 def test_a_scene_as_wide_as_training_does_not_warn(zara1):
     assert _record(lambda: predict_scene(zara1, _walker_and_far(3.0))) == []
-    below = 0.99 * WIDE_LIMIT * zara1.scale
+    below = 0.99 * wide_limit(zara1.training_width) * zara1.scale  # its own: 15, 22.1 m
     assert _record(lambda: predict_scene(zara1, _walker_and_far(below))) == []
 
 

@@ -665,8 +665,9 @@ def load_predictor(path: str | Path, *, sampler: Sampler | None = None, device: 
     else the CPU; a device this machine lacks is a ``ConfigError`` before the file is read).
     ``sampler`` and ``device`` are keyword-only, as in ``registry.load_predictor``, so that the
     two functions cannot be called with their arguments in different orders. The predictor
-    carries its training data's step and units (``models.timing.attach_timing``:
-    ``frame_interval``, ``units``, ``timing``) and the file's ``model.neighbour_radius`` (a
+    carries its training data's step, units and scene width (``models.timing.attach_timing``:
+    ``frame_interval``, ``units``, ``training_width``, ``timing``; the full sampler's width is
+    its denoiser's) and the file's ``model.neighbour_radius`` (a
     generator file's own, or a bare denoiser's; training code, which builds its predictors
     from payloads, never applies it). Loading draws nothing from torch's global random stream,
     nor saves and restores it: the modules are built without random initialisation
@@ -681,4 +682,6 @@ def load_predictor(path: str | Path, *, sampler: Sampler | None = None, device: 
     predictor = predictor_from_payload(payload, sampler, loading=True)  # no random init
     predictor = as_float32(predictor).to(device).eval()  # float32 under any default dtype
     predictor.neighbour_radius = config_of(payload).model.neighbour_radius
-    return attach_timing(predictor, payload)
+    # the training width of the network that reads the scene: the full sampler runs the denoiser
+    runs_denoiser = predictor.sampler != "leapfrog"
+    return attach_timing(predictor, payload, denoiser_of(payload) if runs_denoiser else None)

@@ -22,7 +22,7 @@ import torch
 
 from trajpref.data.registry import PIXEL_NAMES, SECONDS_STEPS, SPECS, check_frame_interval
 from trajpref.data.stats import METRES_PER_UNIT
-from trajpref.data.transforms import observed_pace
+from trajpref.data.transforms import observed_pace, seen_run
 from trajpref.errors import ConfigError, OutOfRangeWarning
 from trajpref.metrics import METRE_UNITS
 from trajpref.types import AGENT_BALL, TrajectoryDataset
@@ -247,16 +247,23 @@ def model_timing(header: dict) -> dict:
     return out
 
 
-def attach_timing(obj: Any, header: dict) -> Any:
+def attach_timing(obj: Any, header: dict, width_from: dict | None = None) -> Any:
     """Give a loaded predictor or scorer what its checkpoint says of its training data:
     ``timing`` (``model_timing``'s record, None when the header has none that it reads),
-    ``frame_interval`` (seconds per step, None unless known) and ``units`` (None unless
-    known). Returns ``obj``."""
+    ``frame_interval`` (seconds per step, None unless known), ``units`` (None unless
+    known), ``training_width`` (``training_width``'s width, in model units, of ``width_from``,
+    by default ``header``: a scorer's is its denoiser's payload; None where not known, and
+    ``wide_limit`` falls back to ``WIDE_LIMIT``) and ``training_width_from`` (where that width
+    comes from: ``checkpoint`` or a built-in dataset's name; None). ``timing`` stays
+    ``model_timing``'s record alone (``evaluate`` compares the records of a model and its
+    scorer to check a shared one once). Returns ``obj``."""
     try:
         timing = model_timing(header)
     except (KeyError, TypeError, ValueError, AttributeError):
         timing = None  # a header without the data section: nothing is known
     obj.timing = timing
+    width = training_width(header if width_from is None else width_from)
+    obj.training_width, obj.training_width_from = width or (None, None)
     obj.frame_interval = timing["step"] if timing and timing["known"] else None
     units = timing["units"] if timing else "unknown"
     obj.units = None if units in UNKNOWN_UNITS else units
@@ -511,28 +518,104 @@ robo-mix, 2.39 SDD, 6 of whose 5,487 scenes exceed 1.0)::
     sdd (1,951)           1.689       0.05 % (1)  0.05 % (1)  0       0
 """
 WIDE_LIMIT = 25.0
-"""``wide_problem`` (``check_observed_steps``) warns when two agents of one scene lie more than
-this many model units apart at its last observed frame (positions / the model's data scale:
-36.8 m at zara1's scale, 30.2 m at nba's, 1,475 px at SDD's) and the model has no neighbour
-radius (``model.neighbour_radius``, ``scorer.neighbour_radius``): every agent then attends to
-every other, however far, and one far agent moves the others' futures and scores. The lowest
-round limit (a multiple of 5) that no training scene of any published model exceeds: the
-largest distance between two agents (targets; context-only neighbours seen at the last frame
-in brackets) at the last observed frame of any scene, per split, in that model's units
-(2026-12-06, walkthrough 68); NBA's court sets it, the pedestrian models never saw two agents
-more than 11.1 model units (16 m) apart, 13.5 (20 m) with their context::
+"""The wide-scene limit of a model whose training width is not known (``wide_limit``): one built in
+code, or loaded from a checkpoint that records none (written before the record, 2026-12-06) and
+trained on data other than a built-in dataset (``TRAINING_WIDTHS``). ``wide_problem``
+(``check_observed_steps``) warns when two agents of one scene lie more than its model's limit
+apart at the scene's last observed frame (in model units: positions / the model's data scale)
+and the model has no neighbour radius (``model.neighbour_radius``, ``scorer.neighbour_radius``):
+every agent then attends to every other, however far, and one far agent moves the others'
+futures and scores. Each model's own limit is the lowest multiple of ``WIDTH_STEP`` above its
+training width (``wide_limit``: the farthest two agents of its training scenes were apart); this
+one is that of the widest, NBA's court (21.39 -> 25: 36.8 m at zara1's scale, 1,475 px at
+SDD's). The largest distance between two agents (targets; the context-only neighbours seen at
+the last frame in brackets) at the last observed frame of any scene, per split, in each model's
+units (2026-12-06, walkthrough 68), and each published model's own limit: no scene of any
+published test split lies above it (recounted 2026-12-06 as ``check_observed_steps`` measures a
+split's windows, their targets: 0 scenes of every split for each of the 19 published models)::
 
-    model (train / test data)   train max     test max      test scenes above 10 / 15 / 20 / 25
-    eth                         10.74 (13.07)  7.43 (12.96)  0 / 0 / 0 / 0 of 253
-    hotel                       10.72 (13.04)  7.73 (9.45)   0 / 0 / 0 / 0 of 445
-    univ                         7.25 (10.47)  8.68 (10.56)  0 / 0 / 0 / 0 of 947
-    zara1                       11.09 (13.50)  7.92 (11.33)  0 / 0 / 0 / 0 of 705
-    zara2                       10.85 (13.21)  9.02 (11.38)  0 / 0 / 0 / 0 of 998
-    nba                         21.39          18.16         44.2 % / 0.57 % / 0 / 0 of 5,126
-    robo (robo-sim / robo)       7.93           6.50         0 / 0 / 0 / 0 of 578
-    robo-mix                     7.83           6.42         0 / 0 / 0 / 0 of 578
-    sdd                          9.25           6.51         0 / 0 / 0 / 0 of 1,951
+    model (train / test data)   train max     test max      above 10 / 15 / 20 / 25  limit
+    eth                         10.74 (13.07)  7.43 (12.96)  0 / 0 / 0 / 0 of 253    15
+    hotel                       10.72 (13.04)  7.73 (9.45)   0 / 0 / 0 / 0 of 445    15
+    univ                         7.25 (10.47)  8.68 (10.56)  0 / 0 / 0 / 0 of 947    15
+    zara1                       11.09 (13.50)  7.92 (11.33)  0 / 0 / 0 / 0 of 705    15
+    zara2                       10.85 (13.21)  9.02 (11.38)  0 / 0 / 0 / 0 of 998    15
+    nba                         21.39          18.16         44.2 % / 0.57 % / 0 / 0   25
+                                                             of 5,126
+    robo (robo-sim / robo)       7.93           6.50         0 / 0 / 0 / 0 of 578    10
+    robo-mix                     7.83           6.42         0 / 0 / 0 / 0 of 578    10
+    sdd                          9.25           6.51         0 / 0 / 0 / 0 of 1,951  10
 """
+WIDTH_STEP = 5.0
+"""A model's wide-scene limit (``wide_limit``) is the lowest multiple of this, in model units,
+above its training width (``dataset_width``): 21.39 on NBA's court -> 25, 13.39 on zara1's ->
+15, 9.25 on SDD's -> 10; a width of exactly 15 -> 20. Round numbers a planner can remember,
+that leave every published test split unwarned (0 scenes: ``WIDE_LIMIT``'s table)."""
+TRAINING_WIDTHS = {"eth": 12.96, "hotel": 10.72, "univ": 10.47, "zara1": 13.39, "zara2": 13.10,
+                   "nba": 21.39, "robo-sim": 7.93, "robo-mix": 7.83, "sdd": 9.25}  # fmt: skip
+"""The training width (``dataset_width``, in the published model's units) of each built-in
+dataset's training split, for a checkpoint that records none (the published files, any file
+written before the record, 2026-12-06) and whose ``data.dataset`` names the dataset: what its
+published generator reads, the targets and, for the context-reading ones (eth, univ, zara1, zara2:
+``model.context_agents``, their context-only agents seen over the whole history), those
+(measured 2026-12-06 on each published config's own training split; ``WIDE_LIMIT``'s table
+counts every context-only agent at the last frame, 0.1 more). The published denoisers read no
+context (targets 10.74 eth, 7.25 univ, 11.09 zara1, 10.85 zara2): univ's denoiser is then given
+univ's generator's 15, not its own 10, a limit no test scene of univ reaches either way.
+``robo`` has no training split (``robo-sim`` trains the published robo models)."""
+TRAINING_WIDTH_KEY = "training_width"
+"""The key of a checkpoint's meta that records its training width (``dataset_width``, model
+units), written by every training stage since 2026-12-06 (``train.stages``)."""
+
+
+def _width_number(value: Any) -> float | None:
+    """``value`` as a float where it is a finite number >= 0 (a training width), else None."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        return None
+    value = float(value)
+    return value if math.isfinite(value) and value >= 0 else None
+
+
+def training_width(header: Any) -> tuple[float, str] | None:
+    """A checkpoint's training width in model units (``dataset_width``) and where it comes
+    from, read from its header or payload: its meta's ``TRAINING_WIDTH_KEY`` (``checkpoint``),
+    else, where its ``data.dataset`` is a built-in dataset that ``TRAINING_WIDTHS`` holds, that
+    entry (the dataset's name); None otherwise (``wide_limit`` then gives ``WIDE_LIMIT``)."""
+    meta = header.get("meta") if isinstance(header, dict) else None
+    width = _width_number(meta.get(TRAINING_WIDTH_KEY)) if isinstance(meta, dict) else None
+    if width is not None:
+        return width, "checkpoint"
+    try:
+        dataset = header["config"]["data"]["dataset"]
+    except (KeyError, TypeError, IndexError):
+        return None
+    if isinstance(dataset, str) and dataset in TRAINING_WIDTHS:
+        return TRAINING_WIDTHS[dataset], dataset
+    return None
+
+
+def wide_limit(width: Any) -> float:
+    """The wide-scene limit, in model units, of a model whose training width is ``width``
+    (model units): the lowest multiple of ``WIDTH_STEP`` above it (21.39 -> 25, 13.39 -> 15,
+    15 -> 20, 0 -> 5); ``WIDE_LIMIT`` where ``width`` is None or not a number >= 0."""
+    width = _width_number(width)
+    if width is None:
+        return WIDE_LIMIT
+    return WIDTH_STEP * (math.floor(width / WIDTH_STEP) + 1)
+
+
+def model_width(obj: Any) -> tuple[float, str] | None:
+    """The training width of ``obj`` (a predictor or scorer; ``attach_timing``'s
+    ``training_width``) and where it comes from (``training_width_from``: ``checkpoint``, a
+    built-in dataset's name, or ``set`` for a number set by hand without one); None where it
+    has none (built in code, or a checkpoint ``training_width`` finds nothing for)."""
+    width = _width_number(getattr(obj, "training_width", None))
+    if width is None:
+        return None
+    source = getattr(obj, "training_width_from", None)
+    return width, source if isinstance(source, str) and source else "set"
+
+
 WIDE_CHUNK = 4096
 """Agents per block of ``scene_widths``' distance matrix (a block of 4,096 x N float64)."""
 
@@ -633,29 +716,72 @@ def scene_widths(history: Any, scenes: Any = None) -> torch.Tensor:
     return torch.tensor(out, dtype=torch.float64)
 
 
+def dataset_width(dataset: TrajectoryDataset, scale: float, context: bool = False,
+                  context_frames: int = 0) -> float:  # fmt: skip
+    """A model's training width: the largest distance between two agents at the last observed
+    frame of any scene of ``dataset`` (``scene_widths``), in model units (divided by
+    ``scale``), over what the model reads: the targets and, with ``context`` (a generator
+    built with ``ModelConfig.context_agents``), the context-only agents it reads, those seen
+    in at least the last ``context_frames`` history frames without a break (0: all of them;
+    ``data.transforms.observed_context``'s rule). 0.0 for data without a scene of two agents.
+    Arithmetic on the arrays alone: nothing is drawn from any random stream."""
+    rows, sizes = [], []
+    for scene in dataset.scenes:
+        last = np.asarray(scene.history[:, -1], dtype=np.float64)  # [P, 2]
+        ctx = scene.context if context else None
+        if ctx is not None and len(ctx):
+            frames = context_frames or ctx.shape[1]
+            read = (seen_run(torch.as_tensor(ctx)) >= frames).numpy()  # [C]
+            last = np.concatenate([last, np.asarray(ctx[read, -1], dtype=np.float64)])
+        rows.append(last)
+        sizes.append(len(last))
+    if not rows:
+        return 0.0
+    widths = scene_widths(np.concatenate(rows)[:, None], sizes)  # [B]
+    return float(widths.max()) / float(scale) if len(widths) else 0.0
+
+
+def _width_origin(found: tuple[float, str] | None) -> str:
+    """How ``wide_problem``'s text says where a model's limit comes from (``model_width``)."""
+    if found is None:
+        return ("the limit of a model whose training width is not known (its checkpoint "
+                "records none and its data is no built-in dataset), above the widest "
+                "training scene of any published model (21.4 model units, NBA's "
+                "court)")  # fmt: skip
+    width, source = found
+    where = {"checkpoint": "recorded in its checkpoint",
+             "set": "its training_width as set"}.get(source,
+             f"{source}'s training split, timing.TRAINING_WIDTHS")  # fmt: skip
+    return (f"its limit, the lowest multiple of {WIDTH_STEP:g} above the widest of its "
+            f"training scenes, {width:.2f} model units ({where})")  # fmt: skip
+
+
 def wide_problem(obj: Any, history: Any, name: str = "this model",
                  scenes: Any = None) -> str | None:  # fmt: skip
     """The warning text when two agents of one scene of ``history`` [N, T_h, 2] (split into
-    ``scenes`` [B] consecutive sizes; None: one scene) lie more than ``WIDE_LIMIT`` model units
-    of ``obj`` apart at the last observed frame (``scene_widths``, divided by ``obj.scale``)
-    and ``obj`` (a predictor or scorer) has no ``neighbour_radius``; None otherwise, and for
-    an object without a scale (the constant-velocity baseline). The text is the same at
-    every call, so that a planner's loop is warned once."""
+    ``scenes`` [B] consecutive sizes; None: one scene) lie more than ``obj``'s own limit
+    (``wide_limit`` of its training width, ``model_width``: ``WIDE_LIMIT`` where that is not
+    known) in its model units apart at the last observed frame (``scene_widths``, divided by
+    ``obj.scale``) and ``obj`` (a predictor or scorer) has no ``neighbour_radius``; None
+    otherwise, and for an object without a scale (the constant-velocity baseline). The text
+    names the limit and where it comes from, the same at every call, so that a planner's loop
+    is warned once."""
     scale = _model_scale(obj)
     if scale is None or getattr(obj, "neighbour_radius", None) is not None:
         return None
+    found = model_width(obj)
+    limit = wide_limit(None if found is None else found[0])
     widths = scene_widths(history, scenes)
-    if not bool((widths > WIDE_LIMIT * scale).any()):
+    if not bool((widths > limit * scale).any()):
         return None
     units = getattr(obj, "units", None) or "data units"
-    return (f"{name} is given a scene with two agents more than {WIDE_LIMIT:g} model units "
-            f"apart at its last observed frame ({WIDE_LIMIT * scale:.4g} {units} at the "
-            f"model's data scale {scale:g}), farther than any two agents of a published "
-            "model's training scenes (21.4 on NBA's court; 11.1, about 16 m, on ETH/UCY's), "
-            "and it has no neighbour radius: every agent attends to every other however far, "
-            "and a far agent moves the others' futures and scores (one walker 1 km to the "
-            "side bent a straight walker's futures by metres). Set model.neighbour_radius "
-            "(and scorer.neighbour_radius; --neighbour-radius on the command line), in the "
+    return (f"{name} is given a scene with two agents more than {limit:g} model units "
+            f"apart at its last observed frame ({limit * scale:.4g} {units} at the model's "
+            f"data scale {scale:g}; {_width_origin(found)}), and it has no neighbour "
+            "radius: every agent attends to every other however far, and a far agent moves the "
+            "others' futures and scores (one walker 40 m to the side moved zara1's final "
+            "positions of a straight walker by 4.3 m). Set model.neighbour_radius (and "
+            "scorer.neighbour_radius; --neighbour-radius on the command line), in the "
             "data's units, e.g. 12 for the pedestrian models in metres (README, 'Scenes "
             "wider than the training scenes: set a neighbour radius'); "
             "trajpref.models.timing.scene_widths gives the distances")  # fmt: skip

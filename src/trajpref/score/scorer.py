@@ -293,7 +293,7 @@ class TrajectoryScorer(DenoiserShapes):
         scorer = cls(denoiser.to(device), schedule.to(device), payload["scale"], steps, seed,
                      shared_noise, speed_ref, precision, neighbour_radius)  # fmt: skip
         scorer.checkpoint = str(path)  # named by the data checks' warnings
-        return attach_timing(scorer, header)
+        return attach_timing(scorer, header, payload)  # the training width: its denoiser's
 
     def with_steps(self, steps: Sequence[int], precision: str | None = None) -> TrajectoryScorer:
         """This scorer at other score steps (and ``precision``; None: its own), sharing its
@@ -308,6 +308,8 @@ class TrajectoryScorer(DenoiserShapes):
                                  precision, self.neighbour_radius)  # fmt: skip
         other.timing, other.frame_interval, other.units = (self.timing, self.frame_interval,
                                                            self.units)  # fmt: skip
+        other.training_width = getattr(self, "training_width", None)  # attach_timing's too
+        other.training_width_from = getattr(self, "training_width_from", None)
         other.checkpoint = self.checkpoint  # the warnings name the same file
         return other
 
@@ -708,14 +710,15 @@ def predict_scene(model, history: ArrayLike, num_samples: int = 20,
     each agent's attention to the agents within it.
 
     ``frame_interval`` (seconds between the history's positions) and ``units``, when given,
-    are compared with the model's, with a ``UserWarning`` where they differ (the CLI's
+    are compared with the model's, with an ``OutOfRangeWarning`` where they differ (the CLI's
     check): a model trained on 0.5 s steps reads 0.4 s tracks as slower agents, and its 12
     steps then span 6 s, not 4.8. Positions in other units than the model's (centimetres for
-    metres) get a ``UserWarning`` too, once per call, when the scene's agents move far faster
+    metres) get an ``OutOfRangeWarning`` too, once per call, when the scene's agents move far faster
     than its training data (``models.timing.check_observed_steps``); so do agents faster than
     training on a model without an input speed clamp (``timing.FAST_LIMIT``: set
     ``model.generator.cfg.max_speed``) and a scene wider than any training scene on a model
-    without a neighbour radius (``timing.WIDE_LIMIT``: set ``model.neighbour_radius``).
+    without a neighbour radius (``timing.wide_limit`` of the model's training width: set
+    ``model.neighbour_radius``).
     float16 / bfloat16, bool and complex positions are a ``DataError`` (half precision holds a
     position of 100 m only to 0.06-0.5 m).
 

@@ -35,7 +35,14 @@ from trajpref.models.encoder import scene_features
 from trajpref.models.generator import Generator
 from trajpref.models.losses import denoiser_loss, generator_loss, wta_temperature
 from trajpref.models.predictor import DiffusionPredictor
-from trajpref.models.timing import lineage_entry, split_files, training_lineage
+from trajpref.models.timing import (
+    TRAINING_WIDTH_KEY,
+    dataset_width,
+    lineage_entry,
+    split_files,
+    training_lineage,
+    training_width,
+)
 from trajpref.rl.objective import RLObjective
 from trajpref.rl.presets import PAPER_WEIGHTS, PRESETS
 from trajpref.score.scorer import TrajectoryScorer
@@ -112,6 +119,28 @@ def trained_on(cfg: ExperimentConfig, stage: str, before: dict[str, Any] | None 
     earlier = training_lineage(before) if before is not None else []
     files = split_files(train, val) if train is not None and val is not None else None
     return [*earlier, lineage_entry(cfg.data, stage, files)]
+
+
+def width_meta(train: TrajectoryDataset | None, scale: float, model: ModelConfig | None = None,
+               before: dict[str, Any] | None = None) -> dict[str, float]:  # fmt: skip
+    """What a checkpoint's meta records of its training width (``models.timing.dataset_width``:
+    the farthest two agents of one training scene lie apart at its last observed frame, in
+    model units of ``scale``), for the wide-scene warning's limit (``timing.wide_limit``): over
+    ``train``'s targets and, for a generator ``model`` that reads them
+    (``ModelConfig.context_agents``), its context-only agents; with ``before`` (a fine-tune's
+    start) at least the start's (``timing.training_width``: recorded, or its built-in
+    dataset's), whose scenes the weights saw first. Empty where nothing is known (no ``train``
+    and no start's). Computed once per stage from the arrays: nothing is drawn from any random
+    stream."""
+    widths = []
+    if train is not None:
+        context = model is not None and model.context_agents
+        frames = model.context_frames if model is not None else 0
+        widths.append(dataset_width(train, scale, context, frames))
+    earlier = training_width(before) if before is not None else None
+    if earlier is not None:
+        widths.append(earlier[0])
+    return {TRAINING_WIDTH_KEY: max(widths)} if widths else {}
 
 
 def finetune_preset(finetune: Any) -> str | None:
@@ -211,9 +240,11 @@ def build_denoiser_stage(
         return {"denoise_loss": total / agents, "score": total / agents}
 
     lineage = trained_on(cfg, "denoiser", train=train, val=val)
+    width = width_meta(train, scale)  # the denoiser reads no context-only agents
 
     def payload(meta: dict[str, Any]) -> dict[str, Any]:
-        return ckpt.denoiser_payload(denoiser, cfg, scale, {**meta, "trained_on": lineage})
+        return ckpt.denoiser_payload(denoiser, cfg, scale,
+                                     {**meta, "trained_on": lineage, **width})  # fmt: skip
 
     return Stage("denoiser", objective, denoiser, validate, payload,
                  networks=(denoiser,)), scale  # fmt: skip
@@ -308,10 +339,11 @@ def build_generator_stage(
                                     device)  # fmt: skip
 
     lineage = trained_on(cfg, "generator", denoiser_payload, train, val)
+    width = width_meta(train, denoiser_payload["scale"], cfg.model)
 
     def payload(meta: dict[str, Any]) -> dict[str, Any]:
         return ckpt.generator_payload(generator, denoiser_payload, cfg,
-                                      {**meta, "trained_on": lineage})  # fmt: skip
+                                      {**meta, "trained_on": lineage, **width})  # fmt: skip
 
     return Stage("generator", objective, generator, validate, payload,
                  on_progress=objective.set_progress,
@@ -359,11 +391,12 @@ def build_finetune_stage(
                                     device, metric_scorer, keys)  # fmt: skip
 
     lineage = trained_on(cfg, "finetune", start, train, val)
+    width = width_meta(train, sampler.scale, sampler.generator.cfg, start)
     preset = finetune_preset(cfg.finetune)
 
     def payload(meta: dict[str, Any]) -> dict[str, Any]:
         meta = {**meta, "method": cfg.finetune.method, "preset": preset,
-                "from": start.get("hash"), "trained_on": lineage}  # fmt: skip
+                "from": start.get("hash"), "trained_on": lineage, **width}  # fmt: skip
         return ckpt.generator_payload(sampler.generator, start["denoiser"], cfg, meta, critic)
 
     rl_method = uses_rl(cfg.finetune.method)  # an unknown method is refused
