@@ -86,3 +86,10 @@ def _row(method, checkpoint, date, model_hash=None, **fields):
             "machine": "m, 2 CPU cores, 2 threads", "min_ade": 0.1, "min_fde": 0.2,
             "joint_min_ade": 0.3, "joint_min_fde": 0.4, "date": date,
             "command": "python benchmarks/x.py", **fields}  # fmt: skip
+
+
+def walker_and_far(distance: float) -> np.ndarray:
+    """[2, 8, 2] a straight walker (0.5 a step, data units) and one ``distance`` to its side:
+    a scene as wide as ``distance`` at its last observed frame."""
+    walker = np.arange(8)[:, None] * np.array([0.5, 0.0])  # [T_h, 2]
+    return np.stack([walker, walker + [0.0, distance]]).astype(np.float32)

@@ -13,6 +13,7 @@ import warnings
 
 import numpy as np
 import pytest
+from helpers import walker_and_far
 
 from trajpref.config import load_config
 from trajpref.models import checkpoint as ckpt
@@ -33,13 +34,6 @@ from trajpref.score import TrajectoryScorer, predict_scene
 from trajpref.types import DatasetInfo, Scene, TrajectoryDataset
 
 WIDE = "model units apart at its last observed frame"
-T = np.arange(8)[:, None]
-
-
-def _walker_and_far(distance: float) -> np.ndarray:
-    """[2, 8, 2] a straight walker (0.5 a step) and one ``distance`` to its side."""
-    walker = T * np.array([0.5, 0.0])
-    return np.stack([walker, walker + [0.0, distance]]).astype(np.float32)
 
 
 def _warned(call) -> list[str]:
@@ -78,8 +72,8 @@ def test_the_published_datasets_widths_give_the_limits_the_docstring_names():
 def test_zara1_warns_for_a_walker_25_m_to_the_side_not_10_m(zara1):
     assert model_width(zara1) == (TRAINING_WIDTHS["zara1"], "zara1")
     assert zara1.training_width == pytest.approx(13.39)
-    assert _warned(lambda: predict_scene(zara1, _walker_and_far(10.0))) == []
-    shown = _warned(lambda: predict_scene(zara1, _walker_and_far(25.0)))  # 17.0 model units
+    assert _warned(lambda: predict_scene(zara1, walker_and_far(10.0))) == []
+    shown = _warned(lambda: predict_scene(zara1, walker_and_far(25.0)))  # 17.0 model units
     assert len(shown) == 1
     assert "more than 15 model units apart" in shown[0] and "22.08 m" in shown[0]
     assert "13.39" in shown[0] and "zara1's training split" in shown[0]
@@ -90,15 +84,15 @@ def test_zara1_warns_for_a_walker_25_m_to_the_side_not_10_m(zara1):
 
 def test_zara1_is_warned_just_above_its_own_limit_not_just_below(zara1):
     limit = 15.0 * zara1.scale
-    assert _warned(lambda: predict_scene(zara1, _walker_and_far(0.99 * limit))) == []
-    assert len(_warned(lambda: predict_scene(zara1, _walker_and_far(1.01 * limit)))) == 1
+    assert _warned(lambda: predict_scene(zara1, walker_and_far(0.99 * limit))) == []
+    assert len(_warned(lambda: predict_scene(zara1, walker_and_far(1.01 * limit)))) == 1
 
 
 def test_nba_does_not_warn_at_21_units_and_names_its_own_limit_above_25(nba):
     assert model_width(nba) == (21.39, "nba")
-    ok = _walker_and_far(21.0 * nba.scale)
+    ok = walker_and_far(21.0 * nba.scale)
     assert _warned(lambda: predict_scene(nba, ok, agent_type=np.zeros(2, np.int64))) == []
-    far = _walker_and_far(26.0 * nba.scale)
+    far = walker_and_far(26.0 * nba.scale)
     shown = _warned(lambda: predict_scene(nba, far, agent_type=np.zeros(2, np.int64)))
     assert len(shown) == 1 and "more than 25 model units" in shown[0]
     assert "nba's training split" in shown[0] and "21.39" in shown[0]
@@ -109,7 +103,7 @@ def test_a_scorer_keeps_its_limit_at_other_steps():
     assert scorer.training_width == TRAINING_WIDTHS["sdd"]
     other = scorer.with_steps([0])  # a copy: its timing record carries the width
     assert other is not scorer and model_width(other) == (9.25, "sdd")
-    text = wide_problem(other, _walker_and_far(11.0 * scorer.scale), "this scorer")
+    text = wide_problem(other, walker_and_far(11.0 * scorer.scale), "this scorer")
     assert text is not None and "more than 10 model units" in text
 
 
@@ -137,8 +131,8 @@ def test_a_checkpoint_without_a_width_and_an_unknown_dataset_falls_back(tmp_path
     model = load_predictor(path, device="cpu")
     assert model.training_width is None and model_width(model) is None
     assert training_width(ckpt.load(path)) is None
-    assert wide_problem(model, _walker_and_far(24.0)) is None
-    text = wide_problem(model, _walker_and_far(26.0))
+    assert wide_problem(model, walker_and_far(24.0)) is None
+    text = wide_problem(model, walker_and_far(26.0))
     assert text is not None and "more than 25 model units" in text
     assert "training width is not known" in text
 
@@ -152,15 +146,15 @@ def test_a_recorded_width_wins_and_each_network_reads_its_own(tmp_path):
     path = _tiny_files(tmp_path, "nba", 12.0, 3.0)  # recorded beats nba's table (21.39)
     leapfrog = load_predictor(path, device="cpu")
     assert model_width(leapfrog) == (12.0, "checkpoint")
-    text = wide_problem(leapfrog, _walker_and_far(16.0))
+    text = wide_problem(leapfrog, walker_and_far(16.0))
     assert text is not None and "more than 15 model units" in text
     assert "recorded in its checkpoint" in text
     # the full sampler and the scorer run the denoiser: its width (3 -> limit 5)
     assert model_width(load_predictor(path, device="cpu", sampler="full")) == (3.0, "checkpoint")
     scorer = TrajectoryScorer.from_checkpoint(path)
     assert model_width(scorer) == (3.0, "checkpoint")
-    assert wide_problem(scorer, _walker_and_far(4.0)) is None
-    assert "more than 5 model units" in wide_problem(scorer, _walker_and_far(6.0))
+    assert wide_problem(scorer, walker_and_far(4.0)) is None
+    assert "more than 5 model units" in wide_problem(scorer, walker_and_far(6.0))
     # the timing record stays the file's alone: evaluate checks a shared record once
     assert scorer.timing == leapfrog.timing
 
@@ -171,9 +165,9 @@ def test_a_width_set_by_hand_is_used_and_said():
         neighbour_radius = None
         training_width = 30.0
 
-    text = wide_problem(Model(), _walker_and_far(2.0 * 36.0))
+    text = wide_problem(Model(), walker_and_far(2.0 * 36.0))
     assert text is not None and "more than 35 model units" in text and "as set" in text
-    assert wide_problem(Model(), _walker_and_far(2.0 * 34.0)) is None
+    assert wide_problem(Model(), walker_and_far(2.0 * 34.0)) is None
 
 
 # --- the measure -----------------------------------------------------------------------------

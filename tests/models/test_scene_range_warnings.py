@@ -14,7 +14,7 @@ import warnings
 
 import numpy as np
 import pytest
-from helpers import FAST, UNITS
+from helpers import FAST, UNITS, walker_and_far
 
 from trajpref.models.registry import load_predictor
 from trajpref.models.timing import (
@@ -38,12 +38,6 @@ WIDE = "model units apart at its last observed frame"  # each model's own limit 
 def _convoy(pace: float) -> np.ndarray:
     """[3, 8, 2] three agents 2 m apart walking ``pace`` m a step along x (robo's layout)."""
     return np.stack([T * [pace, 0.0] + [0.0, dy] for dy in (0.0, 2.0, 4.0)]).astype(np.float32)
-
-
-def _walker_and_far(distance: float) -> np.ndarray:
-    """[2, 8, 2] a straight walker (0.5 m a step) and one ``distance`` m to its side."""
-    walker = T * np.array([0.5, 0.0])
-    return np.stack([walker, walker + [0.0, distance]]).astype(np.float32)
 
 
 def _record(call) -> list[str]:
@@ -141,37 +135,37 @@ def test_balls_are_left_out_of_the_pace():
 
 
 def test_a_walker_one_kilometre_to_the_side_warns_with_the_radius_remedy(zara1):
-    shown = _record(lambda: predict_scene(zara1, _walker_and_far(1000.0)))
+    shown = _record(lambda: predict_scene(zara1, walker_and_far(1000.0)))
     assert len(shown) == 1 and WIDE in shown[0]
     for remedy in ("model.neighbour_radius", "scorer.neighbour_radius", "--neighbour-radius",
                    "Scenes wider than the training scenes"):  # fmt: skip
         assert remedy in shown[0]
-    assert _record(lambda: predict_scene(zara1, _walker_and_far(500.0))) == shown
+    assert _record(lambda: predict_scene(zara1, walker_and_far(500.0))) == shown
 
 
 def test_a_scene_as_wide_as_training_does_not_warn(zara1):
-    assert _record(lambda: predict_scene(zara1, _walker_and_far(3.0))) == []
+    assert _record(lambda: predict_scene(zara1, walker_and_far(3.0))) == []
     below = 0.99 * wide_limit(zara1.training_width) * zara1.scale  # its own: 15, 22.1 m
-    assert _record(lambda: predict_scene(zara1, _walker_and_far(below))) == []
+    assert _record(lambda: predict_scene(zara1, walker_and_far(below))) == []
 
 
 def test_a_model_with_a_neighbour_radius_is_not_warned(zara1):
     zara1.neighbour_radius = 12.0
     try:
-        assert _record(lambda: predict_scene(zara1, _walker_and_far(1000.0))) == []
+        assert _record(lambda: predict_scene(zara1, walker_and_far(1000.0))) == []
     finally:
         zara1.neighbour_radius = None
 
 
 def test_scenes_of_one_call_are_measured_apart(zara1):
-    near = _walker_and_far(3.0)
+    near = walker_and_far(3.0)
     assert _record(lambda: predict_scenes(zara1, [near, near + 5000.0])) == []
-    shown = _record(lambda: predict_scenes(zara1, [near, _walker_and_far(1000.0)]))
+    shown = _record(lambda: predict_scenes(zara1, [near, walker_and_far(1000.0)]))
     assert len(shown) == 1 and WIDE in shown[0]
 
 
 def test_ranking_and_selection_warn_of_a_wide_scene(zara1, zara1_scorer):
-    wide = _walker_and_far(1000.0)
+    wide = walker_and_far(1000.0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         samples = predict_scene(zara1, wide)
