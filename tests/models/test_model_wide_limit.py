@@ -13,7 +13,7 @@ import warnings
 
 import numpy as np
 import pytest
-from helpers import walker_and_far
+from helpers import WIDE, walker_and_far
 
 from trajpref.config import load_config
 from trajpref.models import checkpoint as ckpt
@@ -32,8 +32,6 @@ from trajpref.models.timing import (
 )
 from trajpref.score import TrajectoryScorer, predict_scene
 from trajpref.types import DatasetInfo, Scene, TrajectoryDataset
-
-WIDE = "model units apart at its last observed frame"
 
 
 def _warned(call) -> list[str]:
