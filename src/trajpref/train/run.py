@@ -815,6 +815,20 @@ def _held(out_dir: str | Path, name: str, path: Path, holder: str) -> TrajprefEr
     )
 
 
+def _flock_or_refuse(fd: int, mode: int, out_dir: str | Path, name: str, path: Path) -> None:
+    """``flock`` ``fd`` in ``mode`` (shared or exclusive) without waiting; where a run holds
+    it, ``fd`` is closed and the run refused (``_held``). Another ``OSError`` (a file system
+    without locks) is the caller's."""
+    import fcntl
+
+    try:
+        fcntl.flock(fd, mode | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = _lock_holder(fd)
+        os.close(fd)
+        raise _held(out_dir, name, path, holder) from None
+
+
 def _remove_stale_lock(path: Path, out_dir: str | Path, name: str) -> None:
     """A lock file this process may not write (another user's, left by a run of theirs):
     refused as ``take_stage_lock`` refuses when a run holds it, else removed, so that a
@@ -828,11 +842,7 @@ def _remove_stale_lock(path: Path, out_dir: str | Path, name: str) -> None:
     except OSError as exc:
         raise TrajprefError(f"{path}: cannot read ({exc.strerror or exc})") from None
     try:
-        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-    except BlockingIOError:
-        holder = _lock_holder(fd)
-        os.close(fd)
-        raise _held(out_dir, name, path, holder) from None
+        _flock_or_refuse(fd, fcntl.LOCK_SH, out_dir, name, path)
     except OSError:
         pass  # no locks here: the file is as stale as any
     os.close(fd)
@@ -874,11 +884,7 @@ def take_stage_lock(out_dir: str | Path, name: str) -> StageLock | None:
             _remove_stale_lock(path, out_dir, name)  # or refused, when its run holds it
             continue
         try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = _lock_holder(fd)
-            os.close(fd)
-            raise _held(out_dir, name, path, holder) from None
+            _flock_or_refuse(fd, fcntl.LOCK_EX, out_dir, name, path)
         except OSError as exc:  # some NFS or Lustre mounts, a FUSE file system
             os.close(fd)
             warnings.warn(f"{path}: cannot lock the run folder ({exc.strerror or exc}): a "
