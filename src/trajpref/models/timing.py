@@ -247,6 +247,20 @@ def model_timing(header: dict) -> dict:
     return out
 
 
+ATTACHED = ("timing", "frame_interval", "units", "training_width", "training_width_from")
+"""The attributes ``attach_timing`` gives a loaded predictor or scorer (``copy_attached``
+copies them to a copy of it)."""
+
+
+def copy_attached(source: Any, target: Any) -> Any:
+    """``target`` given ``source``'s ``ATTACHED`` attributes (None where ``source`` has none):
+    a scorer at other steps (``TrajectoryScorer.with_steps``) keeps its checkpoint's record,
+    and with it its data checks and its wide-scene limit. Returns ``target``."""
+    for name in ATTACHED:
+        setattr(target, name, getattr(source, name, None))
+    return target
+
+
 def attach_timing(obj: Any, header: dict, width_from: dict | None = None) -> Any:
     """Give a loaded predictor or scorer what its checkpoint says of its training data:
     ``timing`` (``model_timing``'s record, None when the header has none that it reads),

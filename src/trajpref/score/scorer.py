@@ -50,6 +50,7 @@ from trajpref.models.timing import (
     attach_timing,
     check_observed_steps,
     check_pace,
+    copy_attached,
     observed_jumps,
 )
 from trajpref.types import AGENT_BALL, AGENT_PERSON, Batch
@@ -216,11 +217,16 @@ class TrajectoryScorer(DenoiserShapes):
         self.precision = precision
         self.timing: dict | None = None
         """What the checkpoint recorded of the training data (``models.timing.model_timing``);
-        None when built in code. ``from_checkpoint`` sets it, with the two below."""
+        None when built in code. ``from_checkpoint`` sets it, with the four below."""
         self.frame_interval: float | None = None
         """Seconds per step of the data the denoiser was trained on; None where unknown."""
         self.units: str | None = None
         """Units of the data the denoiser was trained on (``m``, ``px``); None where unknown."""
+        self.training_width: float | None = None
+        """The widest training scene, in model units (``models.timing.training_width``), which
+        sets the wide-scene warning's limit; None where unknown."""
+        self.training_width_from: str | None = None
+        """Where ``training_width`` comes from (``checkpoint`` or a built-in dataset's name)."""
         self.checkpoint: str | None = None
         """The file it was loaded from (``from_checkpoint``), which the data checks' warnings
         name; None when built in code."""
@@ -306,10 +312,7 @@ class TrajectoryScorer(DenoiserShapes):
         other = TrajectoryScorer(self.denoiser, self.schedule, self.scale, steps,
                                  self.seed, self.shared_noise, self.speed_ref,
                                  precision, self.neighbour_radius)  # fmt: skip
-        other.timing, other.frame_interval, other.units = (self.timing, self.frame_interval,
-                                                           self.units)  # fmt: skip
-        other.training_width = getattr(self, "training_width", None)  # attach_timing's too
-        other.training_width_from = getattr(self, "training_width_from", None)
+        copy_attached(self, other)  # the checkpoint's record: timing, units, training width
         other.checkpoint = self.checkpoint  # the warnings name the same file
         return other
 
