@@ -36,9 +36,12 @@ def _folder(root, pace: float = 0.5, gap: float = 2.0, jump: float = 0.0):
     return str(root)
 
 
-def _run(tmp_path, capsys, command: str, data: str, model: str, interval: str) -> str:
+def _run(tmp_path, capsys, command: str, data: str, model: str, interval: str,
+         *options: str) -> str:  # fmt: skip
+    """``command`` run on ``data`` with ``model`` (and ``options``); it must succeed: its
+    stderr."""
     argv = [command, "--dataset", data, "--model", model, "--units", "m",
-            "--frame-interval", interval, "--no-progress"]  # fmt: skip
+            "--frame-interval", interval, "--no-progress", *options]  # fmt: skip
     if command != "evaluate":
         argv += ["--out", str(tmp_path / ("p.npz" if command == "predict" else "f.png"))]
     capsys.readouterr()
@@ -59,11 +62,9 @@ def test_a_walker_one_kilometre_away_is_warned_of_by_the_cli(tmp_path, capsys, c
 
 def test_a_neighbour_radius_silences_the_wide_warning(tmp_path, capsys):
     data = _folder(tmp_path / "wide", gap=1000.0)
-    argv = ["predict", "--dataset", data, "--model", "zara1/generator", "--units", "m",
-            "--frame-interval", "0.4", "--no-progress", "--out", str(tmp_path / "p.npz"),
-            "--neighbour-radius", "12"]  # fmt: skip
-    assert main(argv) == 0
-    assert WIDE not in capsys.readouterr().err
+    err = _run(tmp_path, capsys, "predict", data, "zara1/generator", "0.4",
+               "--neighbour-radius", "12")  # fmt: skip
+    assert WIDE not in err
 
 
 @pytest.mark.parametrize("command", ["predict", "evaluate"])
@@ -78,11 +79,8 @@ def test_agents_faster_than_training_are_warned_of_for_a_model_without_a_clamp(
 
 def test_the_same_agents_given_max_speed_are_not_warned_of(tmp_path, capsys):
     data = _folder(tmp_path / "fast", pace=3.8)
-    argv = ["predict", "--dataset", data, "--model", "robo/generator", "--units", "m",
-            "--frame-interval", "0.5", "--no-progress", "--out", str(tmp_path / "p.npz"),
-            "--max-speed", "0.280"]  # fmt: skip
-    assert main(argv) == 0
-    assert FAST not in capsys.readouterr().err
+    err = _run(tmp_path, capsys, "predict", data, "robo/generator", "0.5", "--max-speed", "0.280")
+    assert FAST not in err
 
 
 @pytest.mark.parametrize(("model", "interval"), [("zara1/generator", "0.4"),
