@@ -151,7 +151,7 @@ from trajpref.train.run import (
     train_stage,
 )
 from trajpref.train.stages import finetune_preset
-from trajpref.types import AGENT_BALL, collate
+from trajpref.types import AGENT_BALL, WINDOW, collate
 
 # trajpref.viz.plot (matplotlib) is imported inside the commands that draw, not here: every
 # other command would pay for it at start-up (about a second). trajpref.survey.cli imports its
@@ -198,6 +198,13 @@ def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> N
                    "in time (e.g. 4 for 10 Hz data and a 2.5 Hz model; give the files' 0.1 s "
                    "with --frame-interval too, unless their frame column is a time in "
                    "seconds; default 1: as recorded; docs/data_format.md)")  # fmt: skip
+    p.add_argument("--history", type=int, default=None, metavar="FRAMES",
+                   help="observed frames per window that text track files are cut into "
+                   "(default: the model's own, 8 for every published model; 8 without a "
+                   "model; docs/data_format.md, \"Window lengths\")")  # fmt: skip
+    p.add_argument("--future", type=int, default=None, metavar="FRAMES",
+                   help="future frames per window, the horizon (default: the model's own, "
+                   "12 for every published model; 12 without a model)")  # fmt: skip
     p.add_argument("--protocol", default="all", choices=list(PROTOCOLS),
                    help="which windows count: all (default: every window with a fully observed "
                    "agent) or sgan (windows with at least two, as Social-GAN's loader keeps; "
@@ -642,6 +649,13 @@ def build_parser() -> argparse.ArgumentParser:
                     "e.g. 4 for 10 Hz data and a 0.4 s model, with --frame-interval 0.1 "
                     "unless the files' frame column is a time in seconds); the model records "
                     "it")  # fmt: skip
+    tr.add_argument("--history", type=int, default=None, metavar="FRAMES",
+                    help="observed frames per window (--set model.t_hist; default 8): the "
+                    "text track files are cut into windows of --history + --future frames, "
+                    "and the networks sized for them; the model records both")  # fmt: skip
+    tr.add_argument("--future", type=int, default=None, metavar="FRAMES",
+                    help="future frames per window, the horizon (--set model.t_fut; default "
+                    "12)")  # fmt: skip
     tr.add_argument("--denoiser", default=None, help="generator stage: the denoiser "
                     "checkpoint (default OUT/denoiser.safetensors)")  # fmt: skip
     _add_run_args(
@@ -785,9 +799,56 @@ def _check_data_args(args) -> None:
 
 
 def _read_options(args) -> ReadOptions:
-    return ReadOptions(delimiter=args.delimiter, max_gap=args.max_gap, max_coord=args.max_coord,
-                       time_step=args.time_step,
-                       reverse_context=getattr(args, "reverse_context", False))  # fmt: skip
+    history, future = getattr(args, "history", None), getattr(args, "future", None)
+    try:
+        return ReadOptions(delimiter=args.delimiter, max_gap=args.max_gap,
+                           max_coord=args.max_coord, time_step=args.time_step,
+                           reverse_context=getattr(args, "reverse_context", False),
+                           t_hist=WINDOW[0] if history is None else history,
+                           t_fut=WINDOW[1] if future is None else future)  # fmt: skip
+    except ConfigError as exc:  # in the flags' words
+        said = str(exc)
+        for key, flag in (("t_hist", "--history"), ("t_fut", "--future")):
+            said = said.replace(f"{key} must be", f"{flag} must be")
+        raise ConfigError(said) from None
+
+
+def _checkpoint_windows(spec: str) -> tuple[int, int] | None:
+    """(T_h, T_f) of the checkpoint ``spec`` names, from its header; None for ``cv`` (any
+    lengths) or where it cannot be read (loading it later says why)."""
+    if spec == "cv":
+        return None
+    try:
+        return ckpt.windows_of(spec)
+    except (TrajprefError, OSError, KeyError, TypeError, ValueError, AttributeError):
+        return None
+
+
+def _resolve_windows(args) -> None:
+    """Fill in --history / --future: a checkpoint reads windows of its own lengths
+    (``model.t_hist``, ``model.t_fut``), so the data are cut as --model (or --scorer) needs by
+    default; given, the flags must agree with it, and --model and --scorer with each other.
+    Without a checkpoint (--model cv alone): as given, else 8 + 12."""
+    named = [(flag, spec) for flag, spec in (("--model", args.model),
+                                              ("--scorer", getattr(args, "scorer", None)))
+             if spec]  # fmt: skip
+    own = [(flag, spec, w) for flag, spec in named if (w := _checkpoint_windows(spec))]
+    if len(own) == 2 and own[0][2] != own[1][2]:
+        (f1, s1, w1), (f2, s2, w2) = own
+        raise ConfigError(f"{f1} {s1} reads windows of {w1[0]} observed + {w1[1]} future "
+                          f"frames, {f2} {s2} of {w2[0]} + {w2[1]}: a scorer scores futures "
+                          "of its own length; give one trained on the same window "
+                          "lengths")  # fmt: skip
+    if own:
+        flag, spec, (t_hist, t_fut) = own[0]
+        for given, need, option in ((args.history, t_hist, "--history"),
+                                    (args.future, t_fut, "--future")):  # fmt: skip
+            if given is not None and given != need:
+                raise ConfigError(f"{option} {given}: {flag} {spec} reads windows of {t_hist} "
+                                  f"observed + {t_fut} future frames (its model.t_hist and "
+                                  f"model.t_fut); leave {option} out, and the data are cut "
+                                  "as it needs")  # fmt: skip
+        args.history, args.future = t_hist, t_fut
 
 
 def _interval_given(args) -> bool:
@@ -852,6 +913,7 @@ def _check_model_args(args) -> None:
         _check_checkpoint("--model", args.model)
     if getattr(args, "scorer", None):
         _check_checkpoint("--scorer", args.scorer)
+    _resolve_windows(args)
     _check_chosen(args)
     _number_or_none(args, "max_log_sigma")  # ConfigError for a bad value
     given, _ = _number_or_none(args, "neighbour_radius")  # ConfigError for a bad value
@@ -1406,11 +1468,13 @@ def _check_result_file(path: str) -> None:
 
 def _data_fields(ds) -> dict:
     """What a result records of the data's reading beside its name and split: ``units``,
-    ``frame_interval`` (seconds per window step, ``--time-step`` included), ``time_step``
-    and ``interval_from`` (where the interval comes from: ``default`` when only assumed)."""
+    ``frame_interval`` (seconds per window step, ``--time-step`` included), ``time_step``,
+    ``interval_from`` (where the interval comes from: ``default`` when only assumed), and
+    ``t_hist`` and ``t_fut``, the window's observed and future frames."""
     info = ds.info
     return {"units": info.units, "frame_interval": info.frame_interval,
-            "time_step": info.time_step, "interval_from": info.interval_from}  # fmt: skip
+            "time_step": info.time_step, "interval_from": info.interval_from,
+            "t_hist": info.t_hist, "t_fut": info.t_fut}  # fmt: skip
 
 
 def _note_replaced(path: str, what: str) -> None:
@@ -1514,6 +1578,14 @@ def _protocol_tag(ds, holdout: str | None = None, agents: str = "all") -> str:
     there is one."""
     tag = f" (protocol {ds.info.protocol}{AGENT_SET_TAGS[agents]})"
     return tag + (f" (held-out scene {holdout}*)" if holdout else "")
+
+
+def _windows_tag(ds) -> str:
+    """``, windows of 6 + 16 frames`` in evaluate's header where the data were cut into other
+    windows than the published models' 8 + 12 (a minFDE over 16 future frames is not one
+    over 12)."""
+    windows = (ds.info.t_hist, ds.info.t_fut)
+    return "" if windows == WINDOW else f", windows of {windows[0]} + {windows[1]} frames"
 
 
 def _fmt(value) -> str:
@@ -1642,7 +1714,7 @@ def cmd_evaluate(args) -> int:
             f"{'' if args.sampler is None else f' ({args.sampler} sampler)'}"
             f"  K={samples}  ({out['agents']} {AGENT_SET_NOUNS[args.agents]}"
             f", {out['scenes']} scenes, "
-            f"units {ds.info.units})"
+            f"units {ds.info.units}{_windows_tag(ds)})"
             + ("" if args.keep is None else f", kept by {_kept_by(args)} of {args.samples}")
         )
         print(
@@ -2166,6 +2238,10 @@ def cmd_train(args) -> int:
         value = getattr(args, key)
         if value is not None:
             overrides.append(f"data.{key}={json.dumps(value)}")
+    for flag, key in (("history", "t_hist"), ("future", "t_fut")):
+        value = getattr(args, flag)
+        if value is not None:
+            overrides.append(f"model.{key}={json.dumps(value)}")
     cfg = load_config(args.config, overrides)
     _check_folders_beside_config(cfg.data, args.config)
     if args.seed is not None:

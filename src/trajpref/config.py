@@ -259,12 +259,13 @@ class ModelConfig:
     """Social attention layers in the generator's own encoder (0: ``encoder_layers``, the
     denoiser's depth). Like ``generator_hidden``, it sizes the generator alone."""
     t_hist: int = 8
-    """Observed frames (T_h). It sizes the networks and must equal the data's windows: every
-    dataset and folder is read as 8 observed + 12 future frames (`trajpref data stats` prints
-    them), and training refuses other values before it starts; other horizons are not
-    supported yet."""
+    """Observed frames (T_h), at least 2. It sizes the networks and cuts the data: training,
+    and every command given the model, reads its windows in ``t_hist + t_fut`` frames. Any
+    lengths can be cut from text track files (a folder of your own, ETH/UCY, NBA, TrajNet++
+    files); SDD's and Robo's windows come already cut at 8 + 12, the published models'
+    lengths (docs/data_format.md, "Window lengths")."""
     t_fut: int = 12
-    """Future frames (T_f); as ``t_hist``, it must equal the data's windows (12)."""
+    """Future frames (T_f), the horizon the model predicts; as ``t_hist``, it cuts the data."""
     samples: int = 20
     """K, the samples the generator emits per agent (its heads' output size)."""
     tau: int = 5
@@ -455,6 +456,9 @@ class ModelConfig:
             )
         _positive(self, "hidden", "encoder_layers", "heads", "denoiser_width", "denoiser_blocks",
                   "generator_width", "t_hist", "t_fut", "samples")  # fmt: skip
+        if self.t_hist < 2:
+            raise ConfigError(f"ModelConfig.t_hist must be at least 2 (the encoders read each "
+                              f"agent's velocity), got {self.t_hist}")  # fmt: skip
         if self.tau < 0:
             raise ConfigError(f"ModelConfig.tau must be >= 0 (0: no denoising steps), "
                               f"got {self.tau}")  # fmt: skip
@@ -503,6 +507,11 @@ class ModelConfig:
         """Social attention layers of the generator's encoder (``generator_layers``, else
         ``encoder_layers``)."""
         return self.generator_layers or self.encoder_layers
+
+    @property
+    def windows(self) -> tuple[int, int]:
+        """(T_h, T_f): the observed and future frames of the windows this model reads."""
+        return (self.t_hist, self.t_fut)
 
 
 GENERATOR_ONLY = (

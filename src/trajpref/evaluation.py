@@ -189,12 +189,29 @@ def check_inputs(model: object, dataset: object) -> None:
                     "pass what it returns")  # fmt: skip
         raise NotADataset(f"dataset must be a TrajectoryDataset, got "
                           f"{type(dataset).__name__}{hint}")  # fmt: skip
+    check_windows(model, dataset)
     if dataset.num_agents == 0:
         info = dataset.info
         raise DataError(f"the dataset {info.name}/{info.split} holds no agents ({len(dataset)} "
                         "scenes): nothing to predict; load a split with scenes "
                         "(trajpref.data.load_dataset), or keep some in the subset you "
                         "made")  # fmt: skip
+
+
+def check_windows(obj: object, dataset: TrajectoryDataset, role: str = "model") -> None:
+    """``DataError`` before any work when ``dataset``'s windows are not the lengths ``obj`` (a
+    predictor or a scorer) reads, its ``t_hist`` / ``t_fut`` (none: any lengths, as the
+    constant-velocity baseline), saying how to read the data at its lengths."""
+    want = (getattr(obj, "t_hist", None), getattr(obj, "t_fut", None))
+    have = (dataset.info.t_hist, dataset.info.t_fut)
+    if None in want or want == have:
+        return
+    info = dataset.info
+    raise DataError(f"the {role} reads windows of {want[0]} observed + {want[1]} future frames, "
+                    f"but {info.name}/{info.split} was read in windows of {have[0]} + "
+                    f"{have[1]}: read it at the {role}'s lengths, load_dataset(..., "
+                    f"options=ReadOptions(t_hist={want[0]}, t_fut={want[1]})) (the command "
+                    "line does so by itself)")  # fmt: skip
 
 
 def check_scorer(scorer: object, needs: str = "score") -> None:
@@ -1239,6 +1256,8 @@ def evaluate(
     if not allow_overlap:
         check_fold_overlap(model, dataset, scorer)
     check_scorer(scorer)  # (a record of its fold is read first, whatever it is)
+    if scorer is not None:
+        check_windows(scorer, dataset, "scorer")
     overlap = None
     if check_data:  # warnings, as the CLI's; the folds' overlap allowed is recorded first
         folds = fold_overlap_note(model, dataset, scorer) if allow_overlap else None
@@ -1322,6 +1341,8 @@ def predict_dataset(
     """
     check_inputs(model, dataset)
     check_scorer(scorer, "scene_residual")
+    if scorer is not None:
+        check_windows(scorer, dataset, "scorer")
     num_samples, seed = check_num_samples(num_samples), check_seed(seed)
     device = pass_device(model, device, scorer, "predict_dataset")  # before any work
     if check_data:

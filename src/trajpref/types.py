@@ -121,6 +121,12 @@ INTERVAL_SOURCES = ("dataset", "given", "declared", "timestamps", "default")
 other); ``train.run.INTERVAL_NOTES`` and ``models.zoo.INTERVAL_FROM`` word each of them."""
 
 
+WINDOW = (8, 12)
+"""Observed and future frames per window (T_h, T_f) of every built-in dataset and published
+model: what data are read as unless a model or ``ReadOptions`` asks for other lengths (a
+folder of text track files, ETH/UCY, NBA and TrajNet++ files can be cut into any)."""
+
+
 @dataclass
 class DatasetInfo:
     """What a split is and how to read its numbers."""
@@ -133,9 +139,9 @@ class DatasetInfo:
     """Units of the coordinates: ``m`` or ``px`` (or ``unknown`` for user folders)."""
     frame_interval: float
     """Seconds between two consecutive frames of a window."""
-    t_hist: int = 8
+    t_hist: int = WINDOW[0]
     """Observed frames per window (T_h)."""
-    t_fut: int = 12
+    t_fut: int = WINDOW[1]
     """Future frames per window (T_f)."""
     source: str = ""
     """Where the data was read from (path) or how it was made (simulator seed)."""

@@ -24,6 +24,7 @@ def _run(path: Path, **data) -> Path:
     cfg = ExperimentConfig()
     cfg.generator.epochs = 2
     cfg.model.samples = data.pop("samples", cfg.model.samples)
+    cfg.model.t_fut = data.pop("t_fut", cfg.model.t_fut)
     for key, value in data.items():
         setattr(cfg.data, key, value)
     save_config(cfg, path / "generator_config.yaml")
@@ -88,3 +89,12 @@ def test_units_one_run_cannot_tell_are_not_a_difference(tmp_path, capsys):
     assert compare.setting_differences({"a": [with_file], "b": [without]}) == []
     other = curve("c", "ft")
     assert "units m -> ft" in compare.setting_differences({"a": [with_file], "c": [other]})[0]
+
+
+def test_runs_of_other_window_lengths_are_named(tmp_path, capsys):
+    """A minFDE over 16 future frames is not one over 12: the horizons differ in words."""
+    a = _run(tmp_path / "a", dataset="/data/m")
+    b = _run(tmp_path / "b", dataset="/data/m", t_fut=16)
+    code, _, err = _compare(capsys, f"control={a}", f"longer={b}")
+    assert code == 0
+    assert "(windows 8 + 12 frames -> 8 + 16 frames)" in err

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from trajpref.errors import ConfigError
+from trajpref.errors import ConfigError, DataError
 from trajpref.train import read_metrics, run
 from trajpref.train.run import record_session, run_record_path, train_stage
 
@@ -492,22 +492,29 @@ def test_a_state_that_processes_wrote_under_the_old_batching_is_refused(tiny_cfg
     assert torch.load(last, weights_only=True)["world_size"] == 1
 
 
-@pytest.mark.parametrize(("t_hist", "t_fut"), [(10, 20), (4, 6), (8, 20)])
-def test_horizons_other_than_the_datas_are_refused_before_anything_is_written(
+@pytest.mark.parametrize(("t_hist", "t_fut"), [(10, 20), (8, 20)])
+def test_windows_longer_than_the_files_are_refused_before_anything_is_written(
     tiny_cfg, tmp_path, t_hist, t_fut
 ):
-    # the keys size the networks; they do not cut the data (8 + 12 windows): without the check
-    # training failed inside PyTorch, after config.yaml and the run record were written
+    # model.t_hist / model.t_fut cut the data (the walks' files hold 24 frames): a DataError
+    # from the reader, before config.yaml and the run record are written
     model = dataclasses.replace(tiny_cfg.model, t_hist=t_hist, t_fut=t_fut)
     cfg = dataclasses.replace(tiny_cfg, model=model)
     out = tmp_path / "run"
-    said = (
-        rf"model\.t_hist / model\.t_fut are {t_hist} / {t_fut}, but the data's windows are "
-        r"8 observed \+ 12 future frames"
-    )
-    with pytest.raises(ConfigError, match=said):
+    said = rf"too few frames: 24 unique frames, a window needs {t_hist + t_fut}"
+    with pytest.raises(DataError, match=said):
         train_stage("diffusion", cfg, out, device="cpu", progress=False, max_steps=1)
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_shorter_windows_train_and_the_checkpoint_records_them(tiny_cfg, tmp_path):
+    model = dataclasses.replace(tiny_cfg.model, t_hist=4, t_fut=6)
+    out = tmp_path / "run"
+    train_stage("diffusion", dataclasses.replace(tiny_cfg, model=model), out, device="cpu",
+                progress=False, max_steps=1)  # fmt: skip
+    from trajpref.models.checkpoint import windows_of
+
+    assert windows_of(out / "denoiser.safetensors") == (4, 6)
 
 
 def test_the_advice_starts_trajpref_as_it_was_started(tmp_path, monkeypatch):

@@ -34,7 +34,7 @@ from trajpref.errors import (
     IgnoredWarning,
     TrajprefError,
 )
-from trajpref.types import DatasetInfo, Scene, TrajectoryDataset
+from trajpref.types import WINDOW, DatasetInfo, Scene, TrajectoryDataset
 
 if TYPE_CHECKING:
     from trajpref.config import DataConfig
@@ -444,21 +444,24 @@ def split_sources(name: str, split: str) -> frozenset[tuple[str, str]]:
 
 
 def run_splits(
-    data: DataConfig, root: str | Path | None = None
+    data: DataConfig, root: str | Path | None = None, windows: tuple[int, int] = WINDOW
 ) -> tuple[TrajectoryDataset, TrajectoryDataset]:
     """A run's training and validation splits as its data config builds them: both read with
-    its reading options, then its held-out scene, its validation cut in time, and last its
-    paced copy (``extra_time_step``; after the hold-out, so the copy leaves that scene too).
-    ``partial_future`` and ``reverse_context`` apply to the training split (and its paced
-    copy) alone.
+    its reading options in windows of ``windows`` = (T_h, T_f) frames (the run's
+    ``model.t_hist`` and ``model.t_fut``), then its held-out scene, its validation cut in time,
+    and last its paced copy (``extra_time_step``; after the hold-out, so the copy leaves that
+    scene too). ``partial_future`` and ``reverse_context`` apply to the training split (and its
+    paced copy) alone.
     The training loop reads its data this way, and so does anything that must see the windows a
-    checkpoint trained on (``models.checkpoint.config_of(...).data``)."""
+    checkpoint trained on (``models.checkpoint.config_of(...)``: its ``data``, and its
+    ``model``'s two lengths, ``model_windows``)."""
     if data.partial_future and data.holdout_scene:  # here, not in DataConfig: checkpoints load
         raise ConfigError("data.partial_future and data.holdout_scene exclude each other: the "
                           "held-out scene's validation windows would come from the training "
                           "read, whose partial-future agents have no whole future to validate "
                           "on")  # fmt: skip
-    options = text.ReadOptions(data.delimiter, data.max_gap, data.max_coord, data.time_step)
+    options = text.ReadOptions(data.delimiter, data.max_gap, data.max_coord, data.time_step,
+                               t_hist=windows[0], t_fut=windows[1])  # fmt: skip
 
     def described(name: str) -> dict:
         """A folder's frame interval and units (a built-in dataset knows its own: with a
@@ -506,6 +509,13 @@ def _load(
     if options.time_step != 1.0 and name in SPECS and not SPECS[name].text_tracks:
         raise ConfigError(f"time_step resamples text track files; {name} comes as windows "
                           "already cut (or simulated)")  # fmt: skip
+    windows = (options.t_hist, options.t_fut)
+    if windows != WINDOW and name in SPECS and not SPECS[name].text_tracks:
+        raise ConfigError(f"{name} comes as windows already cut (or simulated) at "
+                          f"{SPECS[name].t_hist} observed + {SPECS[name].t_fut} future frames, "
+                          f"not {windows[0]} + {windows[1]}: other window lengths are cut from "
+                          "text track files (ETH/UCY, NBA, TrajNet++ or a folder of your "
+                          "own)")  # fmt: skip
     if name in NAMES:
         data = _built_in(name, split, root, options)
         info = dataclasses.replace(data.info, interval_from="dataset",
@@ -542,7 +552,7 @@ def _built_in(name: str, split: str, root: str | Path | None,
     with _layout_on_missing(name, base):
         if name in ETH_UCY:
             folder = base / "eth_ucy" / name / split
-            scenes = text.read_folder(folder, spec.t_hist, spec.t_fut, options=options,
+            scenes = text.read_folder(folder, options.t_hist, options.t_fut, options=options,
                                       units=spec.units)  # fmt: skip
             source = folder
         elif name == "sdd":
@@ -554,9 +564,10 @@ def _built_in(name: str, split: str, root: str | Path | None,
         else:  # a name added to BRANCHES without its branch here
             raise AssertionError(f"data.registry._built_in: {name!r} is in BRANCHES but has no "
                                  "branch")  # fmt: skip
-    info = DatasetInfo(
-        name, split, spec.units, spec.frame_interval, spec.t_hist, spec.t_fut, str(source)
+    t_hist, t_fut = (
+        (options.t_hist, options.t_fut) if spec.text_tracks else (spec.t_hist, spec.t_fut)
     )
+    info = DatasetInfo(name, split, spec.units, spec.frame_interval, t_hist, t_fut, str(source))
     return TrajectoryDataset(scenes, info)
 
 
@@ -636,11 +647,11 @@ def _user_folder(
         files = text.track_files(folder, "*.ndjson")
         return _trajnet(files, str(path), split, frame_interval, units, options, folder)
     steps: dict[Path, tuple[str | None, float]] = {}
-    scenes = text.read_folder(folder, 8, 12, pattern=USER_TEXT, options=options, units=units,
-                              steps=steps)  # fmt: skip
+    scenes = text.read_folder(folder, options.t_hist, options.t_fut, pattern=USER_TEXT,
+                              options=options, units=units, steps=steps)  # fmt: skip
     interval, source = text_interval(steps, frame_interval, folder)
-    info = DatasetInfo(str(path), split, units, interval, 8, 12, str(folder),
-                       interval_from=source, text_tracks=True)  # fmt: skip
+    info = DatasetInfo(str(path), split, units, interval, options.t_hist, options.t_fut,
+                       str(folder), interval_from=source, text_tracks=True)  # fmt: skip
     return TrajectoryDataset(scenes, info)
 
 
@@ -779,14 +790,16 @@ def _trajnet(
     scenes: list[Scene] = []
     rates: dict[float, str] = {}  # each declared fps -> the first file declaring it
     for path in files:
-        read = trajnet.read_trajnet(path, 8, 12, options.max_coord, units)
+        read = trajnet.read_trajnet(path, options.t_hist, options.t_fut, options.max_coord, units)
         scenes.extend(read.scenes)
         for rate in sorted(read.fps):
             rates.setdefault(rate, path.name)
     if not scenes:
-        raise DataError("no TrajNet++ scene has 20 frames of its primary agent", source)
+        raise DataError(f"no TrajNet++ scene has {options.t_hist + options.t_fut} frames of "
+                        "its primary agent", source)  # fmt: skip
     interval, origin = trajnet_interval(rates, frame_interval, source)
-    info = DatasetInfo(name, split, units, interval, 8, 12, str(source), interval_from=origin)
+    info = DatasetInfo(name, split, units, interval, options.t_hist, options.t_fut, str(source),
+                       interval_from=origin)  # fmt: skip
     return TrajectoryDataset(scenes, info)
 
 
@@ -857,7 +870,7 @@ def _nba(
         is_val = _carve_val(len(files))
         files = [f for f, v in zip(files, is_val, strict=True) if v == (split == "val")]
     scenes = text.read_files(
-        files, spec.t_hist, spec.t_fut, stride=1, scale=FEET_TO_METRES, with_type=True,
+        files, options.t_hist, options.t_fut, stride=1, scale=FEET_TO_METRES, with_type=True,
         options=options, units=spec.units, where=folder,
     )  # fmt: skip
     return scenes, folder

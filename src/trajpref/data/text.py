@@ -34,7 +34,7 @@ from typing import BinaryIO
 import numpy as np
 
 from trajpref.errors import ConfigError, DataError, DataNotFound, GapWarning
-from trajpref.types import AGENT_BALL, AGENT_PERSON, Scene
+from trajpref.types import AGENT_BALL, AGENT_PERSON, WINDOW, Scene
 
 DEFAULT_MAX_COORD = 1e6
 """Largest accepted |x| or |y|, in the dataset's units (after any unit scaling)."""
@@ -85,6 +85,12 @@ class ReadOptions:
     """Also keep each window's context-only agents as seen played backwards
     (``Scene.context_reverse``), read by training with ``DataConfig.reverse_context`` alone;
     off (None), since they add as much memory again as the forward ones (``Scene.context``)."""
+    t_hist: int = WINDOW[0]
+    """Observed frames per window (T_h) that text track files and TrajNet++ scenes are cut
+    into: 8 for every published model. A model reads windows of its own ``model.t_hist``;
+    windows already cut (SDD's, Robo's ``.npz``) and the simulator come at 8 alone."""
+    t_fut: int = WINDOW[1]
+    """Future frames per window (T_f), as ``t_hist``: 12 for every published model."""
 
     def __post_init__(self) -> None:
         if self.delimiter is not None:
@@ -99,6 +105,12 @@ class ReadOptions:
         if isinstance(self.partial_future, bool) or self.partial_future < 0:
             raise ConfigError(f"partial_future must be an integer >= 0 (0: off), "
                               f"got {self.partial_future!r}")  # fmt: skip
+        for key, least in (("t_hist", 2), ("t_fut", 1)):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
+                raise ConfigError(f"{key} must be an integer >= {least} (frames per window), "
+                                  f"got {value!r}")  # fmt: skip
+            object.__setattr__(self, key, int(value))
         if not (np.isfinite(self.time_step) and 0.1 <= self.time_step <= 100):
             raise ConfigError(f"time_step must be a number of frame steps in [0.1, 100], "
                               f"got {self.time_step}")  # fmt: skip

@@ -51,6 +51,7 @@ from trajpref.models import zoo
 from trajpref.models.denoiser import Denoiser
 from trajpref.models.generator import Generator
 from trajpref.models.predictor import DiffusionPredictor, Sampler
+from trajpref.types import WINDOW
 
 FORMAT = "trajpref-checkpoint/2"
 LEGACY_FORMAT = "trajpref-checkpoint/1"
@@ -547,6 +548,17 @@ def config_of(payload: dict[str, Any]) -> ExperimentConfig:
         for (section, name), value in missing.items():
             config.setdefault(section, {})[name] = value
     return experiment_from_dict(config, stored="a checkpoint's config")
+
+
+def windows_of(spec: str | Path) -> tuple[int, int]:
+    """(T_h, T_f), the observed and future frames of the windows a checkpoint reads (its
+    ``model.t_hist`` and ``model.t_fut``; ``spec`` as ``resolve_path`` takes it), read from
+    the file's header without its weights (a legacy ``.pt`` file is read whole). Data for it
+    are cut alike: ``trajpref.data.ReadOptions(t_hist=..., t_fut=...)``."""
+    path = resolve_path(spec)
+    header = _read_legacy(path) if path.suffix == LEGACY_SUFFIX else read_checkpoint_header(path)
+    model = header.get("config", {}).get("model", {})
+    return (int(model.get("t_hist", WINDOW[0])), int(model.get("t_fut", WINDOW[1])))
 
 
 def build_denoiser(payload: dict[str, Any], *,

@@ -21,6 +21,7 @@ from typing import Any
 from trajpref.errors import ModelNotFound, TrajprefError
 from trajpref.io import read_checkpoint_header
 from trajpref.models.timing import UNKNOWN_UNITS, model_timing
+from trajpref.types import WINDOW
 
 ZOO_DIR = Path(__file__).resolve().parent.parent / "zoo"
 """Where the published checkpoints live: inside the installed package."""
@@ -256,6 +257,13 @@ def file_card(path: Path) -> str:
         digest = f" (data hash `{meta['data_hash']}`)" if meta.get("data_hash") else ""
         read = f", read with `{' '.join(flags)}`" if flags else ""
         lines.append(f"- Data: `{dataset}`{digest}{read}" + (f": {pace}." if pace else "."))
+    model = config.get("model") or {}
+    windows = (model.get("t_hist", WINDOW[0]), model.get("t_fut", WINDOW[1]))
+    if windows != WINDOW:  # the published models' lengths go without saying
+        lines.append(f"- Windows: {windows[0]} observed + {windows[1]} future frames "
+                     "(`model.t_hist`, `model.t_fut`): evaluate, predict and plot cut the data "
+                     f"so; `trajpref data stats` takes `--history {windows[0]} --future "
+                     f"{windows[1]}`.")  # fmt: skip
     if timing and timing.get("lineage"):
         lines.append(f"- Lineage: {_lineage_text(timing['lineage'])}.")
     denoiser = head.get("denoiser")

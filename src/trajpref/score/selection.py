@@ -694,6 +694,16 @@ class SelectingPredictor:
         """[K', N] the indices, among the K samples drawn, of those the last ``predict`` kept
         (``trajpref predict --keep`` saves them as ``kept``)."""
 
+    @property
+    def t_hist(self) -> int | None:
+        """The base predictor's T_h (None: any, as the constant-velocity baseline)."""
+        return getattr(self.base, "t_hist", None)
+
+    @property
+    def t_fut(self) -> int | None:
+        """The base predictor's T_f (None: any)."""
+        return getattr(self.base, "t_fut", None)
+
     @torch.no_grad()
     def select(self, batch: Batch, pred: torch.Tensor,
                generator: torch.Generator | None = None) -> torch.Tensor:  # fmt: skip

@@ -33,7 +33,7 @@ from trajpref.survey.study import (
     shown_predictions,
     write_study,
 )
-from trajpref.types import TrajectoryDataset, collate
+from trajpref.types import WINDOW, TrajectoryDataset, collate
 
 
 @dataclass
@@ -62,6 +62,11 @@ class BuildConfig:
     time_step: float = 1.0
     """Read the text files every this many frame steps (``ReadOptions.time_step``: 4 shows
     10 Hz data at a 0.4 s model's step)."""
+    t_hist: int | None = None
+    """Observed frames per window (``ReadOptions.t_hist``); None: the models' own (8 for
+    every published model). Given, it must be theirs."""
+    t_fut: int | None = None
+    """Future frames per window (``ReadOptions.t_fut``), as ``t_hist``."""
     protocol: str = "all"
     """Which windows count (``load_dataset``'s ``protocol``)."""
     holdout_scene: str | None = None
@@ -83,9 +88,10 @@ class BuildConfig:
     """Smallest scene drawn."""
     max_agents: int = 8
     """Largest scene drawn (crowded scenes are hard to read at a glance)."""
-    min_gap: int = 20
+    min_gap: int | None = None
     """Two drawn scenes are at least this many positions apart in the split, so that no two
-    share a window (ETH/UCY windows overlap by up to 19 frames); 0 allows neighbours."""
+    share a window; None: a window's frames, ``t_hist + t_fut`` (20 for the published models,
+    whose ETH/UCY windows overlap by up to 19 frames); 0 allows neighbours."""
     strata: int = 3
     """Size strata: the eligible scenes are cut by agent count into this many groups of
     about equal share, and the scenes are drawn equally from each group."""
@@ -121,7 +127,7 @@ class BuildConfig:
             raise ConfigError(f"--top {self.top} exceeds --samples {self.samples}")
         if self.max_agents < self.min_agents:
             raise ConfigError("--max-agents must be >= --min-agents")
-        if self.min_gap < 0:
+        if self.min_gap is not None and self.min_gap < 0:
             raise ConfigError("--min-gap must be >= 0")
         if self.frame_interval is not None and not (
             math.isfinite(self.frame_interval) and self.frame_interval > 0
@@ -133,28 +139,59 @@ class BuildConfig:
         self.consent = self.consent.strip()
         if self.ground_truth not in ("rated", "reference"):
             raise ConfigError("--ground-truth must be 'rated' or 'reference'")
-        self.read_options()  # ConfigError for a bad delimiter, gap, bound or step
+        given = (self.t_hist, self.t_fut)
+        self.read_options(tuple(w if v is None else v for v, w in zip(given, WINDOW, strict=True)))
+        # (a ConfigError for a bad delimiter, gap, bound, step or window length)
         check_protocol(self.protocol)
         if self.holdout_scene is not None and self.split != "val":
             raise ConfigError(f"--holdout-scene selects a validation split: use it with "
                               f"--split val, not --split {self.split}")  # fmt: skip
 
-    def read_options(self) -> ReadOptions:
-        """How the dataset's text files are read."""
+    def read_options(self, windows: tuple[int, int] = WINDOW) -> ReadOptions:
+        """How the dataset's text files are read, in windows of ``windows`` = (T_h, T_f)
+        frames (the models' own: ``study_windows``)."""
         return ReadOptions(delimiter=self.delimiter, max_gap=self.max_gap,
-                           max_coord=self.max_coord, time_step=self.time_step)  # fmt: skip
+                           max_coord=self.max_coord, time_step=self.time_step,
+                           t_hist=windows[0], t_fut=windows[1])  # fmt: skip
 
 
-def read_data(cfg: BuildConfig) -> TrajectoryDataset:
-    """The split the scenes are drawn from, read as ``trajpref evaluate`` reads it: the frame
-    interval and units go to a folder dataset only (a built-in has its own; the CLI has warned
-    once of options it ignores, and ``load_dataset`` would warn again for every split)."""
+def study_windows(models: dict[str, object], cfg: BuildConfig) -> tuple[int, int]:
+    """(T_h, T_f): the window lengths every model of ``models`` (name -> predictor or scorer)
+    reads, its ``t_hist`` / ``t_fut`` (none: any, the constant-velocity baseline); where none
+    says, ``cfg``'s, else 8 + 12. ``ConfigError`` where two models differ (one study shows one
+    window) or ``cfg`` gives other lengths than theirs."""
+    found = {name: (m.t_hist, m.t_fut) for name, m in models.items()
+             if getattr(m, "t_hist", None) is not None}  # fmt: skip
+    lengths = set(found.values())
+    if len(lengths) > 1:
+        said = ", ".join(f"{name} {h} + {f}" for name, (h, f) in found.items())
+        raise ConfigError(f"the study's models read windows of different lengths (observed + "
+                          f"future frames: {said}): one study shows one window, so give "
+                          "models (and a scorer) trained on the same lengths")  # fmt: skip
+    given = (cfg.t_hist, cfg.t_fut)
+    if not lengths:
+        return (WINDOW[0] if given[0] is None else given[0],
+                WINDOW[1] if given[1] is None else given[1])  # fmt: skip
+    own = lengths.pop()
+    for flag, want, need in (("--history", given[0], own[0]), ("--future", given[1], own[1])):
+        if want is not None and want != need:
+            raise ConfigError(f"{flag} {want}: the study's models read windows of {own[0]} "
+                              f"observed + {own[1]} future frames; leave {flag} out, and the "
+                              "data are cut as they need")  # fmt: skip
+    return own
+
+
+def read_data(cfg: BuildConfig, windows: tuple[int, int] = WINDOW) -> TrajectoryDataset:
+    """The split the scenes are drawn from, read as ``trajpref evaluate`` reads it, in windows
+    of ``windows`` frames: the frame interval and units go to a folder dataset only (a
+    built-in has its own; the CLI has warned once of options it ignores, and
+    ``load_dataset`` would warn again for every split)."""
     folder = cfg.dataset not in SPECS
 
     def split(name: str) -> TrajectoryDataset:
         return load_dataset(cfg.dataset, name, cfg.data_root,
                             cfg.frame_interval if folder else None, cfg.units if folder else None,
-                            options=cfg.read_options(), protocol=cfg.protocol)  # fmt: skip
+                            options=cfg.read_options(windows), protocol=cfg.protocol)  # fmt: skip
 
     if cfg.holdout_scene:  # the held-out scene's windows of both splits
         return hold_out_scene(split("train"), split("val"), cfg.holdout_scene)[1]
@@ -307,15 +344,17 @@ def build_study(cfg: BuildConfig, out: str | Path, progress: bool = True,
     device = resolve_device(cfg.device)
     predictors = {name: load_predictor(spec, device=device) for name, spec in cfg.models.items()}
     scorer = TrajectoryScorer.from_checkpoint(_scorer_path(cfg), device)
-    ds = read_data(cfg)
+    windows = study_windows({**predictors, "the scorer": scorer}, cfg)
+    ds = read_data(cfg, windows)
     if on_data is not None:
         on_data(ds)
     if ds.info.units in UNKNOWN_UNITS:
         units = recorded_units([*cfg.models.values(), _scorer_path(cfg)])
         warnings.warn(units_warning(ds.info.name, units), DataWarning, stacklevel=2)
     sizes = np.array([s.num_agents for s in ds.scenes])  # [B]
+    gap = sum(windows) if cfg.min_gap is None else cfg.min_gap  # no shared frames by default
     picks = select_scenes(sizes, cfg.scenes, cfg.seed, cfg.strata, cfg.min_agents,
-                          cfg.max_agents, cfg.min_gap)  # fmt: skip
+                          cfg.max_agents, gap)  # fmt: skip
     order = np.random.default_rng(cfg.seed + 1).permutation(len(picks))  # presentation order
     scenes = []
     for j in tqdm(order, desc="survey build", unit="scene", leave=False, **bar_options(progress)):
@@ -352,6 +391,7 @@ def build_study(cfg: BuildConfig, out: str | Path, progress: bool = True,
         out, scenes, methods, seed=cfg.seed, title=cfg.title, ground_truth=cfg.ground_truth,
         units=None if ds.info.units in UNKNOWN_UNITS else ds.info.units,  # axes: no unit
         dataset={"name": ds.info.name, "split": ds.info.split, "units": ds.info.units,
-                 "frame_interval": ds.info.frame_interval, "scenes_in_split": len(ds)},
+                 "frame_interval": ds.info.frame_interval, "t_hist": ds.info.t_hist,
+                 "t_fut": ds.info.t_fut, "scenes_in_split": len(ds)},
         build=record, consent=cfg.consent, order="fixed" if cfg.fixed_order else "rater",
     )  # fmt: skip

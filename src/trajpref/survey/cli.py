@@ -51,8 +51,9 @@ def add_parser(
     b.add_argument("--max-agents", type=int, default=8,
                    help="largest scene drawn for the study, in agents (default 8): a "
                    "scene-size filter, not evaluate's batch size")  # fmt: skip
-    b.add_argument("--min-gap", type=int, default=20, help="picked scenes are this many "
-                   "positions apart in the split (default 20: no shared frames)")  # fmt: skip
+    b.add_argument("--min-gap", type=int, default=None, help="picked scenes are this many "
+                   "positions apart in the split (default: a window's frames, 20 for the "
+                   "published models: no shared frames)")  # fmt: skip
     b.add_argument("--strata", type=int, default=3, help="scene-size strata (default 3)")
     b.add_argument("--ground-truth", default="rated", choices=["rated", "reference"],
                    help="rated: the real futures are one more blinded panel (default); "
@@ -172,7 +173,8 @@ def cmd_build(args, check_data_args: Callable[[argparse.Namespace], None],
         data_root=args.data_root, units=args.units,
         frame_interval=args.frame_interval if args._interval_given else None,
         delimiter=args.delimiter, max_gap=args.max_gap, max_coord=args.max_coord,
-        time_step=args.time_step, protocol=args.protocol, holdout_scene=args.holdout_scene,
+        time_step=args.time_step, t_hist=args.history, t_fut=args.future,
+        protocol=args.protocol, holdout_scene=args.holdout_scene,
         scorer=args.scorer, scenes=args.scenes, samples=args.samples, top=args.top,
         seed=args.seed, min_agents=args.min_agents, max_agents=args.max_agents,
         min_gap=args.min_gap, strata=args.strata, ground_truth=args.ground_truth,

@@ -147,8 +147,9 @@ class Study:
     """The scenes, in the manifest's order (the order every rater sees with ``order``
     ``fixed``; ``rater_order`` gives a rater's)."""
     dataset: dict[str, Any] = field(default_factory=dict)
-    """``name``, ``split``, ``units``, ``frame_interval`` (seconds per step, as read) and
-    ``scenes_in_split`` of the data."""
+    """``name``, ``split``, ``units``, ``frame_interval`` (seconds per step, as read),
+    ``t_hist`` and ``t_fut`` (observed and future frames per window; studies built before
+    2026-12-07 lack them: 8 and 12) and ``scenes_in_split`` of the data."""
     build: dict[str, Any] = field(default_factory=dict)
     """The build options (for the record)."""
     synthetic: bool = False

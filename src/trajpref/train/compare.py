@@ -101,7 +101,7 @@ class RunCurve:
 
 
 SETTING_KEYS = ("data.dataset", "validated on", "units", "data.time_step", "seconds per step",
-                "model.samples")  # fmt: skip
+                "windows", "model.samples")  # fmt: skip
 """What ``run_setting`` records of a run, in the order a warning names them."""
 
 
@@ -110,7 +110,9 @@ def run_setting(run_dir: str | Path, stage: str) -> dict[str, Any]:
     (``stage_config_path``) and, where it has one, its checkpoint's header (the units and
     seconds per step its data were read at, ``models.timing.model_timing``): the keys of
     ``SETTING_KEYS`` that it can tell (``validated on``: ``data.val_dataset``'s val split,
-    else the dataset's own, with a held-out scene; ``model.samples`` for the generator's
+    else the dataset's own, with a held-out scene; ``windows``: the observed + future
+    frames its data were cut into, ``model.t_hist`` + ``model.t_fut``; ``model.samples`` for
+    the generator's
     stages only, the denoiser's validation draws none). Empty where neither can be read."""
     out: dict[str, Any] = {}
     config = stage_config_path(run_dir, stage)
@@ -122,7 +124,8 @@ def run_setting(run_dir: str | Path, stage: str) -> dict[str, Any]:
             if data.holdout_scene:
                 val = f"held-out scene {data.holdout_scene}*"
             out = {"data.dataset": data.dataset, "validated on": val,
-                   "units": data.units, "data.time_step": data.time_step}  # fmt: skip
+                   "units": data.units, "data.time_step": data.time_step,
+                   "windows": f"{cfg.model.t_hist} + {cfg.model.t_fut} frames"}  # fmt: skip
             if stage != "denoiser":
                 out["model.samples"] = cfg.model.samples
     with contextlib.suppress(TrajprefError, OSError, ValueError, TypeError, KeyError):

@@ -552,7 +552,7 @@ def _matches_before_exact_labels(state: dict[str, Any], cfg: ExperimentConfig,
     (``227.70000000000002``, now ``227.7``: ``text.frame_labels``): such a state resumes.
     Read again only when the fingerprints differ."""
     with text.exact_frame_labels():
-        before = data_fingerprint(*run_splits(cfg.data, root))
+        before = data_fingerprint(*run_splits(cfg.data, root, cfg.model.windows))
     try:
         check_resume_data(state, before, "")
     except ConfigError:
@@ -718,24 +718,6 @@ def run_facts(cfg: ExperimentConfig, name: str, start: str | None,
     return {"config": shape, "start": start, "data_files": data, "batches_per_epoch": batches,
             "resumed_after": resumed, "max_steps": max_steps,
             "equal_budget": equal_budget}  # fmt: skip
-
-
-def check_horizons(cfg: ExperimentConfig, train: Any) -> None:
-    """``ConfigError`` when the config's ``model.t_hist`` / ``model.t_fut`` differ from the
-    windows the data was read into (``train.info``): every reader cuts windows of its source's
-    own lengths (8 observed + 12 future frames for every dataset and folder today), so the two
-    keys do not change the data, and a network sized for other lengths fails inside PyTorch
-    once training starts. Checked right after the data are read, before anything is written."""
-    have = (getattr(train.info, "t_hist", None), getattr(train.info, "t_fut", None))
-    want = (cfg.model.t_hist, cfg.model.t_fut)
-    if None in have or have == want:
-        return
-    raise ConfigError(f"model.t_hist / model.t_fut are {want[0]} / {want[1]}, but the data's "
-                      f"windows are {have[0]} observed + {have[1]} future frames: the keys "
-                      "size the networks, they do not cut the data (every dataset and folder "
-                      f"is read in windows of {have[0]} + {have[1]}; `trajpref data stats` "
-                      "prints them). Other horizons are not supported yet: leave both keys at "
-                      "the data's")  # fmt: skip
 
 
 def check_same_run(info: DistInfo, facts: dict[str, Any]) -> None:
@@ -995,8 +977,7 @@ def _run(
     if note is not None and info.is_main:
         print(note, file=sys.stderr)
     try:
-        train, val = run_splits(cfg.data, data_root)
-        check_horizons(cfg, train)
+        train, val = run_splits(cfg.data, data_root, cfg.model.windows)
         data = data_fingerprint(train, val)
         if info.is_main and (same := same_content_note(train, val)) is not None:
             warnings.warn(
