@@ -369,7 +369,8 @@ def scorer_training_split(scorer: str, data_root: str | None) -> TrajectoryDatas
     its run built them (``data.run_splits``: reading options, held-out scene, validation cut,
     and the copy at ``data.extra_time_step`` when it had one)."""
     header = read_checkpoint_header(ckpt.resolve_path(scorer))
-    return run_splits(ckpt.config_of(header).data, data_root)[0]
+    cfg = ckpt.config_of(header)
+    return run_splits(cfg.data, data_root, cfg.model.windows)[0]
 
 
 def training_speed(dataset: str, data_root: str | None, quantile: float) -> float:

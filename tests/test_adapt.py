@@ -80,6 +80,24 @@ def test_context_windows_hand_computed(long_walks):
         context_windows(long_walks, AdaptConfig(ctx_frames=19))
 
 
+def test_windows_stamped_in_unix_seconds_find_the_same_context(long_walks):
+    """Frames that are Unix seconds (1.7e9 + 0.4 k) carry float64's rounding between starts
+    (0.39999986 s): a tolerance of 1e-6 step found no context at all (walkthrough 70)."""
+
+    def restamped(scene: Scene) -> Scene:
+        name, frame = window_origin(scene.scene_id)
+        seconds = np.float64(1.7e9) + np.float64(frame / STEP) * 0.4  # as a log stamps them
+        return dataclasses.replace(scene, scene_id=f"{name}@frame={float(seconds)!r}")
+
+    stamped = TrajectoryDataset([restamped(s) for s in long_walks.scenes], long_walks.info)
+    gaps = np.diff([window_origin(s.scene_id)[1] for s in stamped.scenes])
+    assert gaps.min() != gaps.max()  # the rounding the rule must see through
+    for frames in (25, 40):
+        cfg = AdaptConfig(ctx_frames=frames)
+        assert context_windows(stamped, cfg) == context_windows(long_walks, cfg)
+    assert context_windows(stamped, CFG)[20] == list(range(9))
+
+
 def test_bad_config_is_a_config_error():
     with pytest.raises(ConfigError, match="params"):
         AdaptConfig(params="everything")

@@ -584,7 +584,7 @@ GIVE_INTERVAL = "--frame-interval (the seconds between an agent's consecutive ro
 
 def _pretend(monkeypatch, header: dict) -> None:
     """Every checkpoint's header is ``header`` (the file itself is never read)."""
-    monkeypatch.setattr(cli, "read_checkpoint_header", lambda path: header)
+    monkeypatch.setattr(cli.ckpt, "header_of", lambda spec: header)
     monkeypatch.setattr(cli.ckpt, "resolve_path", lambda spec: spec)
 
 
@@ -711,7 +711,7 @@ def test_evaluate_records_training_windows_in_overlap(capsys, monkeypatch, flat)
     real = zoo.header(zoo.resolve("zara1/generator"))
     data = {**real["config"]["data"], "dataset": str(flat)}
     header = {**real, "config": {**real["config"], "data": data}}
-    monkeypatch.setattr(cli, "_checkpoint_header", lambda spec: header)
+    monkeypatch.setattr(cli.ckpt, "header_of", lambda spec: header)
     code, out, err = _run(capsys, "evaluate", "--dataset", flat, "--model", "zara1/generator",
                           "--samples", "20", "--no-progress", "--json")  # fmt: skip
     assert code == 0 and err.count("\n") == 1

@@ -120,7 +120,7 @@ def test_a_published_model_on_timestamped_files_gets_their_interval(capsys, logg
 
 
 def _pretend(monkeypatch, header: dict) -> None:
-    monkeypatch.setattr(cli, "read_checkpoint_header", lambda path: header)
+    monkeypatch.setattr(cli.ckpt, "header_of", lambda spec: header)
     monkeypatch.setattr(cli.ckpt, "resolve_path", lambda spec: spec)
 
 

@@ -79,7 +79,7 @@ def test_a_model_trained_in_other_units_or_at_another_step_is_named_in_one_warni
 def test_the_models_own_read_step_counts_in_the_step_check(capsys, walks, monkeypatch):
     # a model trained on zara1 read every 2 frame steps (data.time_step) predicts 0.8 s steps
     header = {"config": {"data": {"dataset": "zara1", "time_step": 2.0}}}
-    monkeypatch.setattr(cli, "read_checkpoint_header", lambda path: header)
+    monkeypatch.setattr(cli.ckpt, "header_of", lambda spec: header)
     monkeypatch.setattr(cli.ckpt, "resolve_path", lambda spec: spec)
     from trajpref.data import load_dataset
 

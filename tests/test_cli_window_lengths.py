@@ -75,6 +75,8 @@ def test_predict_writes_futures_of_the_models_horizon(capsys, long_run, long_wal
     assert code == 0, err
     arrays = np.load(path)
     assert arrays["history"].shape == (57, 6, 2) and arrays["pred"].shape == (4, 57, 16, 2)
+    meta = json.loads(str(arrays["meta"]))
+    assert (meta["t_hist"], meta["t_fut"]) == WINDOWS
 
 
 def test_plot_and_the_model_card_work_at_the_models_lengths(capsys, long_run, long_walks,
@@ -82,7 +84,8 @@ def test_plot_and_the_model_card_work_at_the_models_lengths(capsys, long_run, lo
     code, _, err = _run(capsys, "plot", "--model", long_run / "generator.safetensors",
                         "--dataset", long_walks, "--samples", "4", "--out",
                         tmp_path / "scene.png")  # fmt: skip
-    assert code == 0, err and (tmp_path / "scene.png").stat().st_size > 0
+    assert code == 0, err
+    assert (tmp_path / "scene.png").stat().st_size > 0
     code, out, _ = _run(capsys, "models", long_run / "generator.safetensors")
     assert code == 0
     assert "- Windows: 6 observed + 16 future frames" in out
@@ -96,7 +99,8 @@ def test_plot_and_the_model_card_work_at_the_models_lengths(capsys, long_run, lo
                          "frames (its model.t_hist and model.t_fut); leave --history out"),
     (["--future", "12"], "--future 12: --model {gen} reads windows of 6 observed + 16 future"),
     (["--scorer", "zara1/generator"], "--model {gen} reads windows of 6 observed + 16 future "
-                                      "frames, --scorer zara1/generator of 8 + 12"),
+                                      "frames, --scorer zara1/generator of 8 + 12: they must "
+                                      "read the same lengths"),
 ])  # fmt: skip
 def test_lengths_that_disagree_with_the_model_are_refused(capsys, long_run, long_walks,
                                                           flags, said):  # fmt: skip
@@ -115,7 +119,8 @@ def test_the_lengths_given_read_the_data_where_no_checkpoint_says(capsys, long_w
     assert (stats["t_hist"], stats["t_fut"]) == WINDOWS and stats["scenes"] == 19
     code, out, err = _run(capsys, "evaluate", "--model", "cv", "--dataset", long_walks,
                           "--future", "16", "--no-progress", "--json")  # fmt: skip
-    assert code == 0, err and json.loads(out)["t_fut"] == 16
+    assert code == 0, err
+    assert (json.loads(out)["t_hist"], json.loads(out)["t_fut"]) == (8, 16)
     code, _, err = _run(capsys, "data", "stats", "--dataset", long_walks, "--history", "1")
     assert code == 2 and "--history must be an integer >= 2" in err
 
@@ -146,17 +151,21 @@ def test_a_study_reads_its_models_lengths_and_refuses_a_mix(long_run, long_walks
         study = build_study(cfg, tmp_path / "study", progress=False)
         assert len(study.scenes) == 3 and study.scenes[0].agents == 3
         assert (study.dataset["t_hist"], study.dataset["t_fut"]) == WINDOWS
+        assert (study.build["min_gap"], study.build["t_hist"], study.build["t_fut"]) == (0, 6, 16)
         # by default no two scenes share a frame: a window's 22 frames apart, not 20
         apart = BuildConfig(dataset=str(long_walks), models={"g": gen}, scenes=3, samples=4,
                             device="cpu")  # fmt: skip
-        with pytest.raises(ConfigError, match="eligible scenes are --min-gap 22 apart"):
+        with pytest.raises(ConfigError, match=r"eligible scenes are --min-gap 22 apart; .* "
+                           r"\(--min-gap 22 by default: a window's 6 \+ 16 frames"):  # fmt: skip
             build_study(apart, tmp_path / "apart", progress=False)
     mixed = BuildConfig(dataset=str(long_walks), models={"g": gen, "z": "zara1/generator"},
                         scenes=3, samples=4, device="cpu")  # fmt: skip
-    with pytest.raises(ConfigError, match=r"read windows of different lengths \(observed \+ "
-                       r"future frames: g 6 \+ 16, z 8 \+ 12, the scorer 6 \+ 16\)"):  # fmt: skip
+    with pytest.raises(ConfigError, match=r"method g reads windows of 6 observed \+ 16 future "
+                       r"frames, method z of 8 \+ 12, the scorer of 6 \+ 16: they must read "
+                       "the same lengths"):  # fmt: skip
         build_study(mixed, tmp_path / "mixed", progress=False)
     told = BuildConfig(dataset=str(long_walks), models={"g": gen}, scenes=3, samples=4,
                        device="cpu", t_fut=12)  # fmt: skip
-    with pytest.raises(ConfigError, match="--future 12: the study's models read windows of 6"):
+    with pytest.raises(ConfigError, match=r"--future 12: method g reads windows of 6 observed "
+                       r"\+ 16 future frames .*; leave --future out"):  # fmt: skip
         build_study(told, tmp_path / "told", progress=False)

@@ -182,3 +182,17 @@ def test_which_methods_sweep_the_drop_follows_dropping_not_their_names(monkeypat
     assert drops == {("facility", 0.2), ("facility", 0.5), ("score-kmeans", 0.0)}
     named = {sel.name_of(c) for c in sel.settings(args)}
     assert "select-facility-d20" in named and "select-score-kmeans" in named
+
+
+def test_a_scorers_gate_reads_its_training_windows_at_its_own_lengths(tmp_path, monkeypatch):
+    """A denoiser trained on 6 + 16 windows: its training split was read at 8 + 12."""
+    from synthetic import write_dataset
+
+    sel = load_benchmark("selection")
+    root = write_dataset(tmp_path / "long", frames=40)
+    header = {"config": {"data": {"dataset": str(root)}, "model": {"t_hist": 6, "t_fut": 16}}}
+    monkeypatch.setattr(sel.ckpt, "resolve_path", lambda p: p)
+    monkeypatch.setattr(sel, "read_checkpoint_header", lambda p: header)
+    split = sel.scorer_training_split("den.safetensors", None)
+    assert (split.info.t_hist, split.info.t_fut) == (6, 16)
+    assert split.scenes[0].future.shape[1] == 16

@@ -145,7 +145,10 @@ def context_windows(dataset: TrajectoryDataset, cfg: AdaptConfig) -> list[list[i
         starts = sorted({f for f, _ in windows})
         gaps = [b - a for a, b in zip(starts[:-1], starts[1:], strict=True)]
         step = cfg.frame_step or (min(gaps) if gaps else 1.0)
-        tol = 1e-6 * step
+        # window starts lie a whole number of steps apart, but frames that are Unix seconds
+        # carry float64's rounding (0.39999986 s for 0.4 at 1.7e9 s): a quarter step of slack
+        # tells the two apart at any magnitude (1e-6 of a step found no context there)
+        tol = 0.25 * step
         for f, i in windows:
             last = f + (t_hist - 1) * step  # the last observed frame
             lo = last - (cfg.ctx_frames - 1) * step

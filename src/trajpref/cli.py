@@ -103,7 +103,6 @@ from trajpref.io import (
     dotted,
     dumps_json,
     json_safe,
-    read_checkpoint_header,
     write_json,
 )
 from trajpref.metrics import SCENE_SIZE_EDGES, check_bin_edges, min_ade_fde
@@ -200,11 +199,11 @@ def _add_data_args(p: argparse.ArgumentParser, split_default: str = "test") -> N
                    "seconds; default 1: as recorded; docs/data_format.md)")  # fmt: skip
     p.add_argument("--history", type=int, default=None, metavar="FRAMES",
                    help="observed frames per window that text track files are cut into "
-                   "(default: the model's own, 8 for every published model; 8 without a "
-                   "model; docs/data_format.md, \"Window lengths\")")  # fmt: skip
+                   "(default 8; with a --model or --scorer checkpoint, its own, which a value "
+                   "given must equal; docs/data_format.md, \"Window lengths\")")  # fmt: skip
     p.add_argument("--future", type=int, default=None, metavar="FRAMES",
-                   help="future frames per window, the horizon (default: the model's own, "
-                   "12 for every published model; 12 without a model)")  # fmt: skip
+                   help="future frames per window, the horizon (default 12; with a "
+                   "checkpoint, its own)")  # fmt: skip
     p.add_argument("--protocol", default="all", choices=list(PROTOCOLS),
                    help="which windows count: all (default: every window with a fully observed "
                    "agent) or sgan (windows with at least two, as Social-GAN's loader keeps; "
@@ -650,12 +649,13 @@ def build_parser() -> argparse.ArgumentParser:
                     "unless the files' frame column is a time in seconds); the model records "
                     "it")  # fmt: skip
     tr.add_argument("--history", type=int, default=None, metavar="FRAMES",
-                    help="observed frames per window (--set model.t_hist; default 8): the "
-                    "text track files are cut into windows of --history + --future frames, "
-                    "and the networks sized for them; the model records both")  # fmt: skip
+                    help="observed frames per window (--set model.t_hist; default: the "
+                    "config's, 8 in the shipped ones): the text track files are cut into "
+                    "windows of --history + --future frames, and the networks sized for them; "
+                    "the model records both")  # fmt: skip
     tr.add_argument("--future", type=int, default=None, metavar="FRAMES",
-                    help="future frames per window, the horizon (--set model.t_fut; default "
-                    "12)")  # fmt: skip
+                    help="future frames per window, the horizon (--set model.t_fut; default: "
+                    "the config's, 12 in the shipped ones)")  # fmt: skip
     tr.add_argument("--denoiser", default=None, help="generator stage: the denoiser "
                     "checkpoint (default OUT/denoiser.safetensors)")  # fmt: skip
     _add_run_args(
@@ -827,28 +827,15 @@ def _checkpoint_windows(spec: str) -> tuple[int, int] | None:
 def _resolve_windows(args) -> None:
     """Fill in --history / --future: a checkpoint reads windows of its own lengths
     (``model.t_hist``, ``model.t_fut``), so the data are cut as --model (or --scorer) needs by
-    default; given, the flags must agree with it, and --model and --scorer with each other.
-    Without a checkpoint (--model cv alone): as given, else 8 + 12."""
-    named = [(flag, spec) for flag, spec in (("--model", args.model),
-                                              ("--scorer", getattr(args, "scorer", None)))
-             if spec]  # fmt: skip
-    own = [(flag, spec, w) for flag, spec in named if (w := _checkpoint_windows(spec))]
-    if len(own) == 2 and own[0][2] != own[1][2]:
-        (f1, s1, w1), (f2, s2, w2) = own
-        raise ConfigError(f"{f1} {s1} reads windows of {w1[0]} observed + {w1[1]} future "
-                          f"frames, {f2} {s2} of {w2[0]} + {w2[1]}: a scorer scores futures "
-                          "of its own length; give one trained on the same window "
-                          "lengths")  # fmt: skip
-    if own:
-        flag, spec, (t_hist, t_fut) = own[0]
-        for given, need, option in ((args.history, t_hist, "--history"),
-                                    (args.future, t_fut, "--future")):  # fmt: skip
-            if given is not None and given != need:
-                raise ConfigError(f"{option} {given}: {flag} {spec} reads windows of {t_hist} "
-                                  f"observed + {t_fut} future frames (its model.t_hist and "
-                                  f"model.t_fut); leave {option} out, and the data are cut "
-                                  "as it needs")  # fmt: skip
-        args.history, args.future = t_hist, t_fut
+    default; given, the flags must agree with it, and --model and --scorer with each other
+    (``checkpoint.agreed_windows``). Without a checkpoint (--model cv alone): as given, else
+    8 + 12. Once per command (a command may check its options twice)."""
+    if getattr(args, "_windows_resolved", False):
+        return
+    args._windows_resolved = True
+    specs = (("--model", args.model), ("--scorer", getattr(args, "scorer", None)))
+    readers = {f"{flag} {spec}": _checkpoint_windows(spec) for flag, spec in specs if spec}
+    args.history, args.future = ckpt.agreed_windows(readers, (args.history, args.future))
 
 
 def _interval_given(args) -> bool:
@@ -1057,24 +1044,12 @@ def _warn_if_trained_otherwise(spec: str, ds, root: str | None = None,
     if spec == "cv":
         return None
     try:
-        header = _checkpoint_header(spec)  # a legacy .pt file too
+        header = ckpt.header_of(spec)  # a legacy .pt file too
         model = model_timing(header)
     except (TrajprefError, KeyError, TypeError, ValueError, AttributeError, OSError):
         return None  # not a checkpoint this check can read: loading it has said what it needed
     data = header["config"]["data"]  # model_timing has read it
     return check_trained_on(spec, model, data, ds.info, root, holdout, CLI_WORDS, dataset=ds)
-
-
-def _checkpoint_header(spec: str) -> dict:
-    """Checkpoint ``spec``'s header (a path or a published name), its weights left unread; a
-    legacy ``.pt`` file is loaded whole, without its state dict (loading the model has warned
-    of the format, so this does not warn again)."""
-    path = Path(ckpt.resolve_path(spec))
-    if path.suffix != ckpt.LEGACY_SUFFIX:
-        return read_checkpoint_header(path)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", FutureWarning)
-        return {k: v for k, v in ckpt.load(path).items() if k != "state_dict"}
 
 
 def _trained_on(spec: str) -> list[tuple[str, str | None]]:
@@ -1086,7 +1061,7 @@ def _trained_on(spec: str) -> list[tuple[str, str | None]]:
     if spec == "cv":
         return []
     try:
-        return lineage_folds(model_timing(_checkpoint_header(spec)))
+        return lineage_folds(model_timing(ckpt.header_of(spec)))
     except (TrajprefError, KeyError, TypeError, ValueError, AttributeError, OSError):
         return []
 
@@ -1288,7 +1263,7 @@ def _check_chosen(args) -> None:
     except ConfigError as err:
         raise ConfigError(f"{flag}: {err}") from None
     if args.scorer is not None:
-        own, other = (_denoiser_hash(_checkpoint_header(s)) for s in (args.model, args.scorer))
+        own, other = (_denoiser_hash(ckpt.header_of(s)) for s in (args.model, args.scorer))
         if own != other:
             raise ConfigError(f"{flag}: the setting was chosen with {args.model}'s own "
                               f"denoiser as the scorer, and --scorer {args.scorer} is another "
@@ -1393,7 +1368,7 @@ def _model_fields(args) -> dict:
     cv."""
     if args.model == "cv":
         return {"model_hash": None, "weights_hash": None}
-    header = _checkpoint_header(args.model)
+    header = ckpt.header_of(args.model)
     header = {**header, "config": {**header["config"], "model": dict(header["config"]["model"])}}
     model = header["config"]["model"]
     for name in MODEL_SETTINGS:
@@ -1775,6 +1750,7 @@ def _evaluate_in_context(args, overlap: str | None = None) -> int:
         f"{ds.info.name}/{ds.info.split}{_protocol_tag(ds, args.holdout_scene)}  "
         f"model={args.model}  K={args.samples}  in-context "
         f"{cfg.ctx_frames} frames, {cfg.steps} steps of {cfg.params} at lr {cfg.lr:g}"
+        f"{_windows_tag(ds)}"
     )
     print(
         f"  minADE {out['min_ade']:.4f}  minFDE {out['min_fde']:.4f}   "
@@ -2002,14 +1978,15 @@ def _warn_trajnet_units(ds) -> None:
 
 def _predict_meta(args, ds, samples: int, scorer, overlap, sampling: dict, device) -> dict:
     """What made a ``predict`` .npz (its ``meta`` array, JSON): the data (dataset, split,
-    protocol), the model and its hashes, K, the seed, the selection and ranking, the sampling
-    settings, and where and how it ran (``_run_fields``)."""
+    protocol, and how it was read: ``_data_fields``), the model and its hashes, K, the seed,
+    the selection and ranking, the sampling settings, and where and how it ran
+    (``_run_fields``)."""
     rank = ({"rank_scorer": args.scorer or args.model, "rank_score_steps": len(scorer.steps),
              "rank_neighbour_radius": scorer.neighbour_radius}
             if scorer is not None else {})  # fmt: skip
     return {"dataset": ds.info.name, "split": ds.info.split, "protocol": ds.info.protocol,
             **({"holdout_scene": args.holdout_scene} if args.holdout_scene else {}),
-            "units": ds.info.units, "frame_interval": ds.info.frame_interval,
+            **_data_fields(ds),
             "model": args.model, **_model_fields(args), "samples": samples, "seed": args.seed,
             **_selection_fields(args), **rank, "overlap": overlap, **sampling,
             **_run_fields(args, device)}  # fmt: skip

@@ -456,9 +456,6 @@ class ModelConfig:
             )
         _positive(self, "hidden", "encoder_layers", "heads", "denoiser_width", "denoiser_blocks",
                   "generator_width", "t_hist", "t_fut", "samples")  # fmt: skip
-        if self.t_hist < 2:
-            raise ConfigError(f"ModelConfig.t_hist must be at least 2 (the encoders read each "
-                              f"agent's velocity), got {self.t_hist}")  # fmt: skip
         if self.tau < 0:
             raise ConfigError(f"ModelConfig.tau must be >= 0 (0: no denoising steps), "
                               f"got {self.tau}")  # fmt: skip

@@ -724,10 +724,10 @@ def mall_root(tmp_path, monkeypatch) -> Path:
             return built_in(name, split, root_, options)
         spec = registry.SPECS[name]
         folder = registry.resolve_data_root(root_) / NEW / split
-        scenes = text.read_folder(folder, spec.t_hist, spec.t_fut, pattern=registry.USER_TEXT,
-                                  options=options, units=spec.units)  # fmt: skip
-        info = DatasetInfo(name, split, spec.units, spec.frame_interval, spec.t_hist,
-                           spec.t_fut, str(folder))  # fmt: skip
+        scenes = text.read_folder(folder, pattern=registry.USER_TEXT, options=options,
+                                  units=spec.units)  # fmt: skip
+        info = DatasetInfo(name, split, spec.units, spec.frame_interval, options.t_hist,
+                           options.t_fut, str(folder))  # fmt: skip
         return TrajectoryDataset(scenes, info)
 
     monkeypatch.setattr(registry, "_built_in", branch)

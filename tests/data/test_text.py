@@ -677,7 +677,7 @@ def test_frame_numbers_beyond_float64_integers_stay_exact(tmp_path):
     assert steps[path] == (None, 100_000_000.0)
     assert frame_step(read_tracks(path).frames) == 100_000_000.0
     # read every 2 steps, the grid's frames are exact too
-    paced = read_files([path], 3, 4, options=ReadOptions(time_step=2))
+    paced = read_files([path], options=ReadOptions(time_step=2, t_hist=3, t_fut=4))
     assert paced[1].scene_id == f"ns.txt@frame={NS + 200_000_000}"
     # frames one apart beyond 2**53: float64 merged neighbours into one frame and called the
     # next row a duplicate

@@ -131,7 +131,8 @@ def test_read_files_is_the_per_file_reader(tmp_path, time_step):
     steps = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", GapWarning)
-        got = read_files(files, 3, 4, options=ReadOptions(time_step=time_step), steps=steps)
+        got = read_files(files, options=ReadOptions(time_step=time_step, t_hist=3, t_fut=4),
+                         steps=steps)  # fmt: skip
         want = []
         for path in files:
             tracks = read_tracks(path)

@@ -134,7 +134,7 @@ def test_an_empty_view_gives_empty_arrays():
         ({"now": float("nan")}, DataError, r"now must be finite"),
         ({"step": 0.0}, ConfigError, r"step must be > 0 seconds"),
         ({"step": -0.4}, ConfigError, r"step must be > 0 seconds"),
-        ({"t_hist": 0}, ConfigError, r"t_hist must be an integer >= 1"),
+        ({"t_hist": 1}, ConfigError, r"t_hist must be an integer >= 2 \(model.t_hist: a model "),
         ({"max_gap": 0.0}, ConfigError, r"max_gap must be > 0 seconds"),
         ({"hold": -0.1}, ConfigError, r"hold must be >= 0 seconds"),
     ],

@@ -78,8 +78,9 @@ def test_generator_width_may_differ_from_the_denoiser_config_but_nothing_else(cf
     longer = dataclasses.replace(
         cfg, model=dataclasses.replace(cfg.model, t_fut=cfg.model.t_fut + 1)
     )
-    with pytest.raises(ConfigError, match="GENERATOR_ONLY"):
+    with pytest.raises(ConfigError, match="GENERATOR_ONLY") as err:
         build_generator_stage(longer, payload, train, torch.device("cpu"))
+    assert "(its window lengths: --history 8 --future 12)" in str(err.value)
     more = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, samples=6, tau=3))
     stage = build_generator_stage(more, payload, train, torch.device("cpu"))  # G-only fields
     assert stage.trainable.samples == 6

@@ -355,6 +355,12 @@ def with_paced_copy(
     if paced.info.name != train.info.name or paced.info.split != train.info.split:
         raise ConfigError(f"a paced copy of {train.info.name}/{train.info.split} cannot come "
                           f"from {paced.info.name}/{paced.info.split}")  # fmt: skip
+    ours, its = (train.info.t_hist, train.info.t_fut), (paced.info.t_hist, paced.info.t_fut)
+    if its != ours:
+        raise ConfigError(f"a paced copy of {train.info.name}/{train.info.split} must be cut "
+                          f"into its windows of {ours[0]} + {ours[1]} frames, not "
+                          f"{its[0]} + {its[1]}: read it with the same ReadOptions t_hist and "
+                          "t_fut")  # fmt: skip
     extra = [s for s in paced.scenes if not (exclude and scene_file(s).startswith(exclude))]
     if not extra:
         raise ConfigError(f"{train.info.name}'s training files give no window at the extra "
@@ -454,7 +460,7 @@ def run_splits(
     paced copy) alone.
     The training loop reads its data this way, and so does anything that must see the windows a
     checkpoint trained on (``models.checkpoint.config_of(...)``: its ``data``, and its
-    ``model``'s two lengths, ``model_windows``)."""
+    ``model.windows``)."""
     if data.partial_future and data.holdout_scene:  # here, not in DataConfig: checkpoints load
         raise ConfigError("data.partial_future and data.holdout_scene exclude each other: the "
                           "held-out scene's validation windows would come from the training "
@@ -512,10 +518,10 @@ def _load(
     windows = (options.t_hist, options.t_fut)
     if windows != WINDOW and name in SPECS and not SPECS[name].text_tracks:
         raise ConfigError(f"{name} comes as windows already cut (or simulated) at "
-                          f"{SPECS[name].t_hist} observed + {SPECS[name].t_fut} future frames, "
-                          f"not {windows[0]} + {windows[1]}: other window lengths are cut from "
-                          "text track files (ETH/UCY, NBA, TrajNet++ or a folder of your "
-                          "own)")  # fmt: skip
+                          f"{SPECS[name].t_hist} observed + {SPECS[name].t_fut} future frames; "
+                          f"windows of {windows[0]} + {windows[1]} (the lengths asked, or a "
+                          "model's own) are cut from text track files alone (ETH/UCY, NBA, "
+                          "TrajNet++ or a folder of your own)")  # fmt: skip
     if name in NAMES:
         data = _built_in(name, split, root, options)
         info = dataclasses.replace(data.info, interval_from="dataset",
@@ -552,8 +558,7 @@ def _built_in(name: str, split: str, root: str | Path | None,
     with _layout_on_missing(name, base):
         if name in ETH_UCY:
             folder = base / "eth_ucy" / name / split
-            scenes = text.read_folder(folder, options.t_hist, options.t_fut, options=options,
-                                      units=spec.units)  # fmt: skip
+            scenes = text.read_folder(folder, options=options, units=spec.units)
             source = folder
         elif name == "sdd":
             scenes, source = _sdd(base, split, options)
@@ -647,8 +652,8 @@ def _user_folder(
         files = text.track_files(folder, "*.ndjson")
         return _trajnet(files, str(path), split, frame_interval, units, options, folder)
     steps: dict[Path, tuple[str | None, float]] = {}
-    scenes = text.read_folder(folder, options.t_hist, options.t_fut, pattern=USER_TEXT,
-                              options=options, units=units, steps=steps)  # fmt: skip
+    scenes = text.read_folder(folder, pattern=USER_TEXT, options=options, units=units,
+                              steps=steps)  # fmt: skip
     interval, source = text_interval(steps, frame_interval, folder)
     info = DatasetInfo(str(path), split, units, interval, options.t_hist, options.t_fut,
                        str(folder), interval_from=source, text_tracks=True)  # fmt: skip
@@ -869,10 +874,8 @@ def _nba(
     if split != "test":
         is_val = _carve_val(len(files))
         files = [f for f, v in zip(files, is_val, strict=True) if v == (split == "val")]
-    scenes = text.read_files(
-        files, options.t_hist, options.t_fut, stride=1, scale=FEET_TO_METRES, with_type=True,
-        options=options, units=spec.units, where=folder,
-    )  # fmt: skip
+    scenes = text.read_files(files, scale=FEET_TO_METRES, with_type=True, options=options,
+                             units=spec.units, where=folder)  # fmt: skip
     return scenes, folder
 
 

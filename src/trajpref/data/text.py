@@ -88,7 +88,7 @@ class ReadOptions:
     t_hist: int = WINDOW[0]
     """Observed frames per window (T_h) that text track files and TrajNet++ scenes are cut
     into: 8 for every published model. A model reads windows of its own ``model.t_hist``;
-    windows already cut (SDD's, Robo's ``.npz``) and the simulator come at 8 alone."""
+    windows already cut (SDD's, Robo's ``.npz``) and the simulator come at 8 + 12 alone."""
     t_fut: int = WINDOW[1]
     """Future frames per window (T_f), as ``t_hist``: 12 for every published model."""
 
@@ -802,7 +802,9 @@ def _window(tracks: Tracks, t_hist: int, t_fut: int, stride: int, max_gap: int |
     n_f = len(frames)
     if n_f < t_total:
         raise DataError(
-            f"too few frames: {n_f} unique frames, a window needs {t_total}", tracks.path
+            f"too few frames: {n_f} unique frames, a window needs {t_total} ({t_hist} observed "
+            f"+ {t_total - t_hist} future)",
+            tracks.path,
         )
     f_idx, a_idx, n_r = tracks.frame_index, tracks.agent_index, tracks.num_rows
     # a row starts a window when the row need-1 further holds the same agent need-1 frames
@@ -1169,10 +1171,26 @@ def track_files(folder: str | Path, pattern: str | tuple[str, ...] = "*.txt") ->
     return files
 
 
+def window_lengths(t_hist: int | None, t_fut: int | None,
+                   options: ReadOptions | None) -> tuple[int, int]:  # fmt: skip
+    """The (T_h, T_f) a reader cuts: ``t_hist`` / ``t_fut`` where given, else ``options``'
+    (8 + 12 without options). ``ConfigError`` where both are given and disagree: the lengths
+    are said once, so that a caller passing a dataset's usual lengths cannot override the
+    ones its ``ReadOptions`` asked for without a word."""
+    asked = options or ReadOptions()
+    own = (asked.t_hist, asked.t_fut)
+    given = (own[0] if t_hist is None else t_hist, own[1] if t_fut is None else t_fut)
+    if options is not None and given != own:
+        raise ConfigError(f"windows of {given[0]} + {given[1]} frames asked, but the "
+                          f"ReadOptions ask {own[0]} + {own[1]}: give the lengths once "
+                          "(ReadOptions(t_hist=..., t_fut=...))")  # fmt: skip
+    return given
+
+
 def read_files(
     files: list[Path],
-    t_hist: int,
-    t_fut: int,
+    t_hist: int | None = None,
+    t_fut: int | None = None,
     stride: int = 1,
     scale: float = 1.0,
     with_type: bool = False,
@@ -1181,10 +1199,12 @@ def read_files(
     where: Path | None = None,
     steps: dict[Path, tuple[str | None, float]] | None = None,
 ) -> list[Scene]:
-    """Read track files into scenes, in the given order. Windows that span missing frames
-    give one ``GapWarning`` for all files (naming ``where``, else the first file). ``steps``
-    (a dict) receives each file's header name of its frame column (None: no header) and its
-    frame step as recorded (``frame_step``, before any resampling)."""
+    """Read track files into scenes of ``t_hist + t_fut`` frames (None: ``options``' lengths,
+    ``window_lengths``), in the given order. Windows that span missing frames give one
+    ``GapWarning`` for all files (naming ``where``, else the first file). ``steps`` (a dict)
+    receives each file's header name of its frame column (None: no header) and its frame
+    step as recorded (``frame_step``, before any resampling)."""
+    t_hist, t_fut = window_lengths(t_hist, t_fut, options)
     options = options or ReadOptions()
     scenes: list[Scene] = []
     gap = [0, 0, 0]  # scenes, agent-windows, largest run of missing frames
@@ -1205,8 +1225,8 @@ def read_files(
 
 def read_folder(
     folder: str | Path,
-    t_hist: int,
-    t_fut: int,
+    t_hist: int | None = None,
+    t_fut: int | None = None,
     stride: int = 1,
     scale: float = 1.0,
     with_type: bool = False,
@@ -1216,8 +1236,9 @@ def read_folder(
     steps: dict[Path, tuple[str | None, float]] | None = None,
 ) -> list[Scene]:
     """Read every track file in ``folder`` matching ``pattern`` (sorted by name) into scenes
-    (``steps`` as ``read_files`` fills it)."""
+    (the lengths and ``steps`` as ``read_files`` takes them)."""
     folder = Path(folder)
+    t_hist, t_fut = window_lengths(t_hist, t_fut, options)
     files = track_files(folder, pattern)
     scenes = read_files(files, t_hist, t_fut, stride, scale, with_type, options, units, folder,
                         steps)  # fmt: skip

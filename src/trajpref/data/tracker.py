@@ -300,8 +300,9 @@ def _check_settings(step, t_hist, max_gap, hold) -> tuple[float, float, float]:
     step = _finite_number("step", step, ConfigError)
     if step <= 0:
         raise ConfigError(f"step must be > 0 seconds (model.frame_interval), got {step!r}")
-    if isinstance(t_hist, bool) or not isinstance(t_hist, (int, np.integer)) or t_hist < 1:
-        raise ConfigError(f"t_hist must be an integer >= 1 (model.t_hist), got {t_hist!r}")
+    if isinstance(t_hist, bool) or not isinstance(t_hist, (int, np.integer)) or t_hist < 2:
+        raise ConfigError(f"t_hist must be an integer >= 2 (model.t_hist: a model reads each "
+                          f"agent's velocity), got {t_hist!r}")  # fmt: skip
     max_gap = 2.0 * step if max_gap is None else _finite_number("max_gap", max_gap, ConfigError)
     if max_gap <= 0:
         raise ConfigError(f"max_gap must be > 0 seconds (or None: 2 * step), got {max_gap!r}")

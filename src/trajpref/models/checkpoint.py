@@ -550,15 +550,52 @@ def config_of(payload: dict[str, Any]) -> ExperimentConfig:
     return experiment_from_dict(config, stored="a checkpoint's config")
 
 
+def header_of(spec: str | Path) -> dict[str, Any]:
+    """Checkpoint ``spec``'s header (``spec`` as ``resolve_path`` takes it), its weights left
+    unread; a legacy ``.pt`` file is loaded whole, without its state dict, and without its
+    deprecation warning (loading the model warns of the format once)."""
+    path = resolve_path(spec)
+    if path.suffix != LEGACY_SUFFIX:
+        return read_checkpoint_header(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", TrajprefDeprecationWarning)
+        return {k: v for k, v in _read_legacy(path).items() if k != "state_dict"}
+
+
 def windows_of(spec: str | Path) -> tuple[int, int]:
     """(T_h, T_f), the observed and future frames of the windows a checkpoint reads (its
-    ``model.t_hist`` and ``model.t_fut``; ``spec`` as ``resolve_path`` takes it), read from
-    the file's header without its weights (a legacy ``.pt`` file is read whole). Data for it
-    are cut alike: ``trajpref.data.ReadOptions(t_hist=..., t_fut=...)``."""
-    path = resolve_path(spec)
-    header = _read_legacy(path) if path.suffix == LEGACY_SUFFIX else read_checkpoint_header(path)
-    model = header.get("config", {}).get("model", {})
+    ``model.t_hist`` and ``model.t_fut``), from its header (``header_of``). Data for it are cut
+    alike: ``trajpref.data.ReadOptions(t_hist=..., t_fut=...)``."""
+    model = header_of(spec).get("config", {}).get("model", {})
     return (int(model.get("t_hist", WINDOW[0])), int(model.get("t_fut", WINDOW[1])))
+
+
+def agreed_windows(
+    readers: dict[str, tuple[int, int] | None],
+    given: tuple[int | None, int | None] = (None, None),
+) -> tuple[int, int]:
+    """(T_h, T_f) to cut data into for ``readers`` (a label such as ``--model run/g`` -> the
+    lengths that model or scorer reads, ``windows_of``; None: any, the constant-velocity
+    baseline) and ``given`` (``--history``, ``--future``; None: not given): the readers' one
+    pair, else ``given``, else 8 + 12. ``ConfigError`` where two readers disagree, or a given
+    length differs from theirs."""
+    found = {label: w for label, w in readers.items() if w is not None}
+    if len(set(found.values())) > 1:
+        (first, own), *rest = found.items()
+        others = ", ".join(f"{label} of {h} + {f}" for label, (h, f) in rest)
+        raise ConfigError(f"{first} reads windows of {own[0]} observed + {own[1]} future "
+                          f"frames, {others}: they must read the same lengths (one cut of the "
+                          "data serves them all), so give ones trained on the same window "
+                          "lengths")  # fmt: skip
+    if not found:
+        return tuple(w if g is None else g for g, w in zip(given, WINDOW, strict=True))
+    label, own = next(iter(found.items()))
+    for flag, want, need in zip(("--history", "--future"), given, own, strict=True):
+        if want is not None and want != need:
+            raise ConfigError(f"{flag} {want}: {label} reads windows of {own[0]} observed + "
+                              f"{own[1]} future frames (its model.t_hist and model.t_fut); "
+                              f"leave {flag} out, and the data are cut as it needs")  # fmt: skip
+    return own
 
 
 def build_denoiser(payload: dict[str, Any], *,

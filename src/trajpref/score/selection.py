@@ -682,6 +682,12 @@ class SelectingPredictor:
             raise ConfigError(f"selection {cfg.method!r} needs a scorer")
         if cfg.keep > candidates:
             raise ConfigError(f"cannot keep {cfg.keep} of {candidates} samples")
+        ours = (getattr(base, "t_hist", None), getattr(base, "t_fut", None))
+        if scorer is not None and None not in ours and ours != (scorer.t_hist, scorer.t_fut):
+            raise ConfigError(f"the model reads windows of {ours[0]} observed + {ours[1]} future "
+                              f"frames, the scorer {scorer.t_hist} + {scorer.t_fut}: a scorer "
+                              "scores futures of its own length; give one trained on the "
+                              "same window lengths")  # fmt: skip
         self.base = base
         self.cfg = cfg
         self.candidates = candidates

@@ -20,7 +20,7 @@ from trajpref.data.registry import SPECS, check_protocol
 from trajpref.data.text import DEFAULT_MAX_COORD
 from trajpref.device import resolve_device
 from trajpref.errors import ConfigError, DataWarning, TrajprefError
-from trajpref.io import bar_options, read_checkpoint_header
+from trajpref.io import bar_options
 from trajpref.models import checkpoint as ckpt
 from trajpref.models.registry import BUILTIN, load_predictor
 from trajpref.models.timing import UNKNOWN_UNITS, model_timing
@@ -155,32 +155,6 @@ class BuildConfig:
                            t_hist=windows[0], t_fut=windows[1])  # fmt: skip
 
 
-def study_windows(models: dict[str, object], cfg: BuildConfig) -> tuple[int, int]:
-    """(T_h, T_f): the window lengths every model of ``models`` (name -> predictor or scorer)
-    reads, its ``t_hist`` / ``t_fut`` (none: any, the constant-velocity baseline); where none
-    says, ``cfg``'s, else 8 + 12. ``ConfigError`` where two models differ (one study shows one
-    window) or ``cfg`` gives other lengths than theirs."""
-    found = {name: (m.t_hist, m.t_fut) for name, m in models.items()
-             if getattr(m, "t_hist", None) is not None}  # fmt: skip
-    lengths = set(found.values())
-    if len(lengths) > 1:
-        said = ", ".join(f"{name} {h} + {f}" for name, (h, f) in found.items())
-        raise ConfigError(f"the study's models read windows of different lengths (observed + "
-                          f"future frames: {said}): one study shows one window, so give "
-                          "models (and a scorer) trained on the same lengths")  # fmt: skip
-    given = (cfg.t_hist, cfg.t_fut)
-    if not lengths:
-        return (WINDOW[0] if given[0] is None else given[0],
-                WINDOW[1] if given[1] is None else given[1])  # fmt: skip
-    own = lengths.pop()
-    for flag, want, need in (("--history", given[0], own[0]), ("--future", given[1], own[1])):
-        if want is not None and want != need:
-            raise ConfigError(f"{flag} {want}: the study's models read windows of {own[0]} "
-                              f"observed + {own[1]} future frames; leave {flag} out, and the "
-                              "data are cut as they need")  # fmt: skip
-    return own
-
-
 def read_data(cfg: BuildConfig, windows: tuple[int, int] = WINDOW) -> TrajectoryDataset:
     """The split the scenes are drawn from, read as ``trajpref evaluate`` reads it, in windows
     of ``windows`` frames: the frame interval and units go to a folder dataset only (a
@@ -259,12 +233,7 @@ def _header(spec: str) -> dict | None:
     if spec in BUILTIN:
         return None
     try:
-        path = ckpt.resolve_path(spec)
-        if path.suffix != ckpt.LEGACY_SUFFIX:
-            return read_checkpoint_header(path)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", FutureWarning)
-            return {k: v for k, v in ckpt.load(path).items() if k != "state_dict"}
+        return ckpt.header_of(spec)
     except (TrajprefError, OSError, KeyError, TypeError, ValueError, AttributeError):
         return None
 
@@ -344,7 +313,10 @@ def build_study(cfg: BuildConfig, out: str | Path, progress: bool = True,
     device = resolve_device(cfg.device)
     predictors = {name: load_predictor(spec, device=device) for name, spec in cfg.models.items()}
     scorer = TrajectoryScorer.from_checkpoint(_scorer_path(cfg), device)
-    windows = study_windows({**predictors, "the scorer": scorer}, cfg)
+    readers = {f"method {name}": (m.t_hist, m.t_fut) if getattr(m, "t_hist", None) else None
+               for name, m in predictors.items()}  # fmt: skip
+    readers["the scorer"] = (scorer.t_hist, scorer.t_fut)
+    windows = ckpt.agreed_windows(readers, (cfg.t_hist, cfg.t_fut))
     ds = read_data(cfg, windows)
     if on_data is not None:
         on_data(ds)
@@ -353,8 +325,16 @@ def build_study(cfg: BuildConfig, out: str | Path, progress: bool = True,
         warnings.warn(units_warning(ds.info.name, units), DataWarning, stacklevel=2)
     sizes = np.array([s.num_agents for s in ds.scenes])  # [B]
     gap = sum(windows) if cfg.min_gap is None else cfg.min_gap  # no shared frames by default
-    picks = select_scenes(sizes, cfg.scenes, cfg.seed, cfg.strata, cfg.min_agents,
-                          cfg.max_agents, gap)  # fmt: skip
+    try:
+        picks = select_scenes(sizes, cfg.scenes, cfg.seed, cfg.strata, cfg.min_agents,
+                              cfg.max_agents, gap)  # fmt: skip
+    except ConfigError as exc:
+        if cfg.min_gap is not None:
+            raise
+        raise ConfigError(
+            f"{exc} (--min-gap {gap} by default: a window's {windows[0]} + "
+            f"{windows[1]} frames, so that no two scenes share one)"
+        ) from None
     order = np.random.default_rng(cfg.seed + 1).permutation(len(picks))  # presentation order
     scenes = []
     for j in tqdm(order, desc="survey build", unit="scene", leave=False, **bar_options(progress)):
@@ -381,6 +361,7 @@ def build_study(cfg: BuildConfig, out: str | Path, progress: bool = True,
     record = dataclasses.asdict(cfg)
     record.pop("consent")  # in the manifest's own ``consent``
     record["scorer"] = _scorer_path(cfg)
+    record.update(min_gap=gap, t_hist=windows[0], t_fut=windows[1])  # as used, not as given
     record["trajpref_version"] = __version__
     record["torch_version"] = torch.__version__
     record["hashes"] = {

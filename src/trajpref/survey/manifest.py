@@ -151,7 +151,8 @@ class Study:
     ``t_hist`` and ``t_fut`` (observed and future frames per window; studies built before
     2026-12-07 lack them: 8 and 12) and ``scenes_in_split`` of the data."""
     build: dict[str, Any] = field(default_factory=dict)
-    """The build options (for the record)."""
+    """The build options (for the record), with ``min_gap``, ``t_hist`` and ``t_fut`` as the
+    build used them (a default filled in)."""
     synthetic: bool = False
     """True for a study of made-up scenes and scores (demos and tests)."""
     created: str = ""

@@ -293,11 +293,14 @@ def _check_matches_denoiser(cfg: ExperimentConfig, denoiser_cfg: ExperimentConfi
                if getattr(ours, f.name) != getattr(theirs, f.name)]  # fmt: skip
     if changed:
         shown = "; ".join(changed[:3]) + ("; ..." if len(changed) > 3 else "")
+        theirs = denoiser_cfg.model.windows
+        windows = ("" if theirs == cfg.model.windows else f" (its window lengths: --history "
+                   f"{theirs[0]} --future {theirs[1]})")  # fmt: skip
         raise ConfigError(
             f"the generator's config differs from its denoiser checkpoint's ({shown}): train it "
             "with the denoiser's config (its run folder's denoiser_config.yaml, or the "
-            "dataset's --config); only the generator's own fields (config.GENERATOR_ONLY) may "
-            "differ"
+            f"dataset's --config{windows}); only the generator's own fields "
+            "(config.GENERATOR_ONLY) may differ"
         )
 
 
