@@ -109,6 +109,10 @@ def test_a_model_without_a_chosen_setting_is_chosen_selections_error(capsys, wal
     assert (code, out) == (2, "")
     assert f"trajpref: error: --chosen: no chosen selection setting for {model!r}" in err
     assert "published generators with one: " + ", ".join(sorted(CHOSEN)) in err
+    # a model of its own K (the tiny run's 4) heard about --samples 20 first (walkthrough 70)
+    code, _, err = _run(capsys, "evaluate", "--dataset", walks, "--model", model, "--keep", "2",
+                        "--samples", "4", "--chosen", "--no-progress")  # fmt: skip
+    assert code == 2 and "no chosen selection setting for" in err and "--samples" not in err
     code, _, err = _run(capsys, "evaluate", "--dataset", walks, "--model", "eth/generator-pace",
                         "--keep", "3", "--chosen", "cheap", "--no-progress")  # fmt: skip
     assert code == 2 and "no chosen cheap selection setting for 'eth/generator-pace'" in err

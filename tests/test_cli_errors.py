@@ -166,7 +166,8 @@ CASES: dict[str, tuple[list[str], str]] = {
         r"--set data\.delimiter=,: not valid YAML \(ParserError\); a text holding YAML's own "
         r"characters goes in quotes: --set 'data\.delimiter=\",\"'"),
     "--dataset path with a YAML comment sign": (
-        [*TRAIN, "--dataset", "{in}/no such #2", "--out", "{out}/run"],
+        ["train", "diffusion", *TINY, "--device", "cpu", "--no-progress", "--dataset",
+         "{in}/no such #2", "--out", "{out}/run"],  # no --set data.dataset: given once
         r"no such #2: no such folder"),
     "--set text YAML reads as empty": (
         [*TRAIN, "--set", "data.delimiter=|", "--out", "{out}/run"],

@@ -180,3 +180,32 @@ def test_the_readme_names_every_key_evaluate_json_prints(capsys, walks, tiny_run
         printed |= set(json.loads(out))
     assert {"candidates", "scorer_score_steps", "top5_recall_fts", "bins", "slots"} <= printed
     assert printed - documented == set()
+
+
+@pytest.mark.parametrize(("flags", "said"), [
+    (["--history", "6", "--set", "model.t_hist=5"],
+     "--history 6 and --set model.t_hist=5 both set model.t_hist: give it once"),
+    (["--time-step", "4", "--set", "data.time_step=2"],
+     "--time-step 4.0 and --set data.time_step=2 both set data.time_step: give it once"),
+    (["--dataset", "a", "--set", "data.dataset=b"],
+     "--dataset a and --set data.dataset=b both set data.dataset: give it once"),
+])  # fmt: skip
+def test_a_train_shortcut_and_a_set_of_another_value_are_refused(capsys, monkeypatch, tmp_path,
+                                                                  flags, said):  # fmt: skip
+    """``train --history 6 --set model.t_hist=5`` trained at 6 without a word (walkthrough
+    70); the same value twice is no conflict."""
+    import trajpref.cli as cli
+    from trajpref.errors import ConfigError
+
+    ran = []
+
+    def stand_in(stage, cfg, *args, **kwargs):  # records the config, trains nothing
+        ran.append(cfg)
+        raise ConfigError("stopped here")
+
+    monkeypatch.setattr(cli, "train_stage", stand_in)
+    code, out, err = _run(capsys, "train", "diffusion", "--out", tmp_path / "r", *flags)
+    assert (code, out, ran) == (2, "", []) and err == f"trajpref: error: {said}\n"
+    _run(capsys, "train", "diffusion", "--out", tmp_path / "s", "--history", "6", "--set",
+         "model.t_hist=6")  # fmt: skip
+    assert [cfg.model.t_hist for cfg in ran] == [6]

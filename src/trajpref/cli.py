@@ -1253,15 +1253,15 @@ def _check_chosen(args) -> None:
         raise ConfigError(f"{flag} sets {', '.join(given)} (the setting chosen for "
                           f"{args.model}): leave {'it' if len(given) == 1 else 'them'} out, or "
                           f"leave out --chosen to set the selection yourself")  # fmt: skip
+    try:  # first: a model without a chosen setting is told so, whatever its --samples
+        chosen_selection(args.model, args.keep, chosen == "cheap", per=args.select_per)
+    except ConfigError as err:
+        raise ConfigError(f"{flag}: {err}") from None
     if args.samples != CHOSEN_SAMPLES:
         raise ConfigError(f"{flag}: the setting was chosen keeping K' of the K = "
                           f"{CHOSEN_SAMPLES} samples a published generator emits; give "
                           f"--samples {CHOSEN_SAMPLES} (the default), not "
                           f"{args.samples}")  # fmt: skip
-    try:
-        chosen_selection(args.model, args.keep, chosen == "cheap", per=args.select_per)
-    except ConfigError as err:
-        raise ConfigError(f"{flag}: {err}") from None
     if args.scorer is not None:
         own, other = (_denoiser_hash(ckpt.header_of(s)) for s in (args.model, args.scorer))
         if own != other:
@@ -2204,21 +2204,41 @@ def _is_main_process() -> bool:
     return os.environ.get("RANK", "0") == "0"
 
 
+TRAIN_SHORTCUTS = (("dataset", "data.dataset"), ("frame_interval", "data.frame_interval"),
+                   ("units", "data.units"), ("time_step", "data.time_step"),
+                   ("history", "model.t_hist"), ("future", "model.t_fut"))  # fmt: skip
+"""``train``'s flags that are shortcuts for ``--set KEY=...``: (``args`` name, config key)."""
+
+
+def _train_shortcuts(args) -> list[str]:
+    """The ``--set`` overrides that ``train``'s shortcut flags stand for (after the user's own,
+    so they apply last). ``ConfigError`` where a ``--set`` gives the same key another value:
+    one of the two would be dropped without a word (``--history 6 --set model.t_hist=5``
+    trained at 6)."""
+    given = {}
+    for text in args.overrides:
+        key, sep, value = text.partition("=")
+        if sep:
+            with contextlib.suppress(yaml.YAMLError):
+                given[key.strip()] = (text, yaml.safe_load(value))
+    out = []
+    for name, key in TRAIN_SHORTCUTS:
+        value = getattr(args, name)
+        if value is None:
+            continue
+        if key in given and given[key][1] != value:
+            flag = "--" + name.replace("_", "-")
+            raise ConfigError(f"{flag} {value} and --set {given[key][0]} both set {key}: give "
+                              "it once")  # fmt: skip
+        out.append(f"{key}={json.dumps(value)}")  # a path as it is
+    return out
+
+
 def cmd_train(args) -> int:
     check_output_dir(args.out)
     if args.denoiser is not None:
         _check_checkpoint("--denoiser", args.denoiser)
-    overrides = list(args.overrides)
-    if args.dataset is not None:
-        overrides.append(f"data.dataset={json.dumps(args.dataset)}")  # a path as it is
-    for key in ("frame_interval", "units", "time_step"):  # shortcuts for --set, as --dataset
-        value = getattr(args, key)
-        if value is not None:
-            overrides.append(f"data.{key}={json.dumps(value)}")
-    for flag, key in (("history", "t_hist"), ("future", "t_fut")):
-        value = getattr(args, flag)
-        if value is not None:
-            overrides.append(f"model.{key}={json.dumps(value)}")
+    overrides = list(args.overrides) + _train_shortcuts(args)
     cfg = load_config(args.config, overrides)
     _check_folders_beside_config(cfg.data, args.config)
     if args.seed is not None:

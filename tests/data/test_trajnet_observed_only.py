@@ -252,3 +252,14 @@ def test_a_test_scene_whose_whole_future_leaked_is_read_as_a_test_scene(tmp_path
     one = read.scenes[0]
     np.testing.assert_array_equal(one.frames, FRAMES[1:21])
     assert one.agent_id.tolist() == [7, 3, 12] and np.isnan(one.future).all()
+
+
+@pytest.mark.parametrize(("t_hist", "t_fut"), [(5, 10), (8, 16)])
+def test_a_test_file_read_at_another_horizon_says_it_hides_12_frames(tmp_path, t_hist, t_fut):
+    """Read at 5 + 10 (a model's own lengths), the cut fell inside the hidden future and the
+    error spoke of missing frames alone (walkthrough 70)."""
+    _write(tmp_path / "a.ndjson")
+    with pytest.raises(DataError, match=rf"TrajNet\+\+ test files hide their last 12 frames, "
+                       rf"and this read cuts {t_fut} future frames"):  # fmt: skip
+        read_trajnet(tmp_path / "a.ndjson", t_hist, t_fut)
+    read_trajnet(tmp_path / "a.ndjson", 5, 12)  # a shorter history reads

@@ -47,3 +47,17 @@ def test_bad_config():
         ConstantVelocity(heading_std_deg=-1)
     with pytest.raises(ConfigError):
         ConstantVelocity().predict(collate([_line_scene()]), 0)
+
+
+def test_cv_extrapolates_its_horizon_where_no_future_gives_one():
+    """``predict_scene(cv, ...)`` always predicted 12 steps (walkthrough 70): a planner of
+    other horizons had no way to ask for another."""
+    from trajpref.score.scorer import predict_scene
+
+    history = np.cumsum(np.ones((2, 5, 2)), 1)  # [P, 5, 2], one unit per step along x and y
+    futures = predict_scene(ConstantVelocity(horizon=10), history, 1)
+    assert futures.shape == (1, 2, 10, 2)
+    np.testing.assert_allclose(futures[0, 0, -1], history[0, -1] + 10)
+    assert predict_scene(ConstantVelocity(), history, 1).shape == (1, 2, 12, 2)
+    with pytest.raises(ConfigError, match="horizon must be an integer >= 1"):
+        ConstantVelocity(horizon=0)

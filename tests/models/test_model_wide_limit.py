@@ -94,6 +94,9 @@ def test_nba_does_not_warn_at_21_units_and_names_its_own_limit_above_25(nba):
     shown = _warned(lambda: predict_scene(nba, far, agent_type=np.zeros(2, np.int64)))
     assert len(shown) == 1 and "more than 25 model units" in shown[0]
     assert "nba's training split" in shown[0] and "21.39" in shown[0]
+    # the width is named as the widest scene's, not as the limit (walkthrough 70)
+    assert ("its limit: the lowest multiple of 5 above the width of its widest training "
+            "scene, which is 21.39 model units") in shown[0]  # fmt: skip
 
 
 def test_a_scorer_keeps_its_limit_at_other_steps():

@@ -36,7 +36,7 @@ from trajpref.data.text import (
 from trajpref.errors import ConfigError, DataError, GapWarning, ObservedOnlyWarning
 from trajpref.errors import FrameRateWarning as FrameRateWarning  # its older place
 from trajpref.io import atomic_path
-from trajpref.types import Scene
+from trajpref.types import WINDOW, Scene
 
 
 @dataclass
@@ -305,9 +305,13 @@ def _observed_frames(own: list[int], sid: int, p: int, s: int, e: int, t_hist: i
     ``DataError`` saying what is missing (``read_trajnet``). ``where``: the file and line."""
     t_total = t_hist + t_fut
     last = e - t_fut * step  # the last observed frame of a test scene
+    # TrajNet++'s test files hide its 12 predicted frames: another T_f misplaces the cut
+    hint = ("" if t_fut == WINDOW[1] else f" (TrajNet++ test files hide their last {WINDOW[1]} "
+            f"frames, and this read cuts {t_fut} future frames, a model's T_f or --future: "
+            f"they are read with {WINDOW[1]})")  # fmt: skip
     if last < s or (last - s) % step or (last - s) // step + 1 < t_hist:
         raise DataError(f"scene {sid}: its primary agent {p} has {len(own)} frames in {s}..{e}; "
-                        f"a window needs {t_total}", *where)  # fmt: skip
+                        f"a window needs {t_total}{hint}", *where)  # fmt: skip
     expected = range(s, last + 1, step)  # lazy: a scene's span may be any size (e = 1e20)
     have = set(own)
     n_missing = (last - s) // step + 1 - sum(1 for f in have if f in expected)
@@ -317,7 +321,7 @@ def _observed_frames(own: list[int], sid: int, p: int, s: int, e: int, t_hist: i
         shown_missing = f"frame{'s' if n_missing > 1 else ''} {', '.join(map(str, first))}{more}"
         raise DataError(f"scene {sid}: its primary agent {p} has {len(own)} frames in {s}..{e}; "
                         f"a window needs {t_total}, and an observation-only scene a row at every "
-                        f"frame {s}..{last} (step {step}): {shown_missing} missing",
+                        f"frame {s}..{last} (step {step}): {shown_missing} missing{hint}",
                         *where)  # fmt: skip
     after = [f for f in own if f > last]
     unshown = [f for f in after if not _is_shown(f, shown)]
@@ -328,7 +332,7 @@ def _observed_frames(own: list[int], sid: int, p: int, s: int, e: int, t_hist: i
                         f"future frames {last + step}..{e} (step {step}; "
                         f"{_frames_text(lost) or 'the others'} missing): a scene needs all "
                         f"{t_total} frames, or its observed frames {s}..{last} alone (a "
-                        "TrajNet++ test file)", *where)  # fmt: skip
+                        f"TrajNet++ test file){hint}", *where)  # fmt: skip
     return list(expected)
 
 

@@ -9,7 +9,7 @@ import torch
 
 from trajpref.errors import ConfigError, DataError
 from trajpref.models.predictor import as_integer
-from trajpref.types import Batch
+from trajpref.types import WINDOW, Batch
 
 
 @dataclass
@@ -26,10 +26,17 @@ class ConstantVelocity:
     """Std of the heading perturbation of samples 1..K-1, in degrees."""
     speed_log_std: float = 0.4
     """Std of the log speed factor of samples 1..K-1."""
+    horizon: int = WINDOW[1]
+    """Future steps ``predict_scene`` / ``predict_scenes`` extrapolate, which have no future
+    to take the length of (12, the published models' T_f); a batch's own future length
+    otherwise (``evaluate`` on data cut into other windows)."""
 
     def __post_init__(self) -> None:
         if self.heading_std_deg < 0 or self.speed_log_std < 0:
             raise ConfigError("heading_std_deg and speed_log_std must be >= 0")
+        if isinstance(self.horizon, bool) or not isinstance(self.horizon, int) or self.horizon < 1:
+            raise ConfigError(f"horizon must be an integer >= 1 (future steps), got "
+                              f"{self.horizon!r}")  # fmt: skip
 
     name = "cv"
     frame_interval = None

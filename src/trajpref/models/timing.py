@@ -766,8 +766,8 @@ def _width_origin(found: tuple[float, str] | None) -> str:
     where = {"checkpoint": "recorded in its checkpoint",
              "set": "its training_width as set"}.get(source,
              f"{source}'s training split, timing.TRAINING_WIDTHS")  # fmt: skip
-    return (f"its limit, the lowest multiple of {WIDTH_STEP:g} above the widest of its "
-            f"training scenes, {width:.2f} model units ({where})")  # fmt: skip
+    return (f"its limit: the lowest multiple of {WIDTH_STEP:g} above the width of its widest "
+            f"training scene, which is {width:.2f} model units ({where})")  # fmt: skip
 
 
 def wide_problem(obj: Any, history: Any, name: str = "this model",

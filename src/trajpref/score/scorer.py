@@ -53,7 +53,7 @@ from trajpref.models.timing import (
     copy_attached,
     observed_jumps,
 )
-from trajpref.types import AGENT_BALL, AGENT_PERSON, Batch
+from trajpref.types import AGENT_BALL, AGENT_PERSON, WINDOW, Batch
 
 NOISE_LAYOUT = "scene-slot"
 """How the residual's noise is assigned to agents: ``scene-slot`` (since 2026-12-05), by each
@@ -831,7 +831,7 @@ def _predict(model, histories: list, num_samples, agent_types: list, seed, frame
     _warn_fixed_set(model, count)
     device = getattr(model, "device", torch.device("cpu"))
     t_h = getattr(model, "t_hist", None)  # None: any length (the constant-velocity baseline)
-    t_f = getattr(model, "t_fut", 12)
+    t_f = getattr(model, "t_fut", None) or getattr(model, "horizon", WINDOW[1])  # cv: horizon
     scenes = []
     given = zip(histories, agent_types, contexts, strict=True)
     for i, (history, agent_type, context) in enumerate(given):
