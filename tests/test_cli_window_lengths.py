@@ -169,3 +169,10 @@ def test_a_study_reads_its_models_lengths_and_refuses_a_mix(long_run, long_walks
     with pytest.raises(ConfigError, match=r"--future 12: method g reads windows of 6 observed "
                        r"\+ 16 future frames .*; leave --future out"):  # fmt: skip
         build_study(told, tmp_path / "told", progress=False)
+
+
+def test_an_export_reads_the_models_own_lengths(capsys, long_run, tmp_path):
+    out = tmp_path / "long.pt2"
+    code, said, err = _run(capsys, "export", long_run / "generator.safetensors", "--out", out)
+    assert code == 0, err
+    assert "history [P, 6, 2]" in said and "futures [4, P, 16, 2]" in said

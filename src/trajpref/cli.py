@@ -107,6 +107,7 @@ from trajpref.io import (
 )
 from trajpref.metrics import SCENE_SIZE_EDGES, check_bin_edges, min_ade_fde
 from trajpref.models import checkpoint as ckpt
+from trajpref.models import export as exporting
 from trajpref.models import zoo
 from trajpref.models.registry import load_predictor
 from trajpref.models.timing import (
@@ -744,6 +745,31 @@ def build_parser() -> argparse.ArgumentParser:
                     help="DATASET/NAME (e.g. zara1/generator): print its model card")  # fmt: skip
     mo.add_argument("--json", action="store_true", help="print the index entries as JSON")
     mo.set_defaults(func=cmd_models)
+
+    ex = sub.add_parser("export", help="one model as a .pt2 file that PyTorch alone runs "
+                        "(torch.export): a planner's or a robot's predictor")  # fmt: skip
+    ex.add_argument("model", help="a generator checkpoint or a published one (DATASET/NAME, "
+                    "e.g. zara1/generator)")  # fmt: skip
+    ex.add_argument("--out", required=True, help="the file to write (.pt2)")
+    ex.add_argument(
+        "--samples",
+        type=int,
+        default=None,
+        metavar="K",
+        help="futures per agent: the first K of the generator's (default all)",
+    )
+    ex.add_argument("--max-agents", type=int, default=exporting.MAX_AGENTS, metavar="N",
+                    help="the most agents of one scene the file takes (default "
+                    f"{exporting.MAX_AGENTS}; "
+                    "a model with agent roles: at most its roles)")  # fmt: skip
+    ex.add_argument(
+        "--neighbour-radius",
+        default=None,
+        metavar="R|none",
+        help="as evaluate's, fixed in the file: agents farther apart than R (the "
+        "data's units) do not attend to each other (default: the checkpoint's)",
+    )
+    ex.set_defaults(func=cmd_export)
 
     co = sub.add_parser("compare", help="validation of training runs side by side: kept "
                         "epochs, seed means and spreads, curves at equal shares of the "
@@ -2444,6 +2470,28 @@ def cmd_config_show(args) -> int:
             current = section
         print(f"{key} = {_yaml_value(value)}")
         print(textwrap.fill(doc, 96, initial_indent="    ", subsequent_indent="    "))
+    return 0
+
+
+def cmd_export(args) -> int:
+    """Write ``args.model`` as an exported program (``models.export``), checked against the
+    model, and say how to run it."""
+    check_output_file(args.out, exporting.EXPORT_SUFFIX)
+    _check_checkpoint("--model", args.model)
+    given, radius = _number_or_none(args, "neighbour_radius")
+    model = load_predictor(args.model, device="cpu")
+    if given:
+        model.neighbour_radius = radius
+    program = exporting.export_predictor(model, args.samples, args.max_agents)
+    bound = exporting.agent_bound(model, args.max_agents)
+    meta = exporting.export_meta(model, program, args.model, bound)
+    exporting.save_exported(program, args.out, meta)
+    pace = f", {model.frame_interval:g} s per step" if model.frame_interval else ""
+    units = f" in {model.units}" if model.units else ""
+    print(f"wrote {args.out}: history [P, {model.t_hist}, 2]{units}{pace} and agent_type [P] "
+          f"-> futures [{meta['samples']}, P, {model.t_fut}, 2], P from 1 to {bound}; checked "
+          "against the model. Run it with PyTorch alone: "
+          f"torch.export.load({str(args.out)!r}).module()(history, agent_type)")  # fmt: skip
     return 0
 
 

@@ -249,7 +249,7 @@ class Batch:
     @property
     def num_agents(self) -> int:
         """N, the agents of every scene packed in the batch (context-only agents not counted)."""
-        return int(self.history.shape[0])
+        return self.history.shape[0]  # an int; symbolic while exporting, so no int()
 
     @property
     def num_context(self) -> int:
@@ -296,7 +296,10 @@ class Batch:
         sizes = self.scene_sizes()  # [B]
         starts = torch.cumsum(sizes, 0) - sizes  # [B]
         slot = torch.arange(self.num_agents, device=self.scene.device) - starts[self.scene]  # [N]
-        p_max = int(sizes.max().item()) if self.num_scenes else 0
+        if self.num_scenes == 1:  # from the shape, not the data: one scene holds them all
+            p_max = self.num_agents  # (an exported one-scene predictor keeps P symbolic)
+        else:
+            p_max = int(sizes.max().item()) if self.num_scenes else 0
         mask = torch.arange(p_max, device=self.scene.device)[None, :] < sizes[:, None]  # [B, P]
         return slot, mask
 
