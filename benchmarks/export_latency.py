@@ -15,12 +15,11 @@ date).
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import numpy as np
 import torch
-from planner_latency import median_ms, scene_histories
+from planner_latency import latency_args, median_ms, scene_histories
 
 from trajpref.data import load_dataset
 from trajpref.models.export import export_predictor
@@ -28,20 +27,10 @@ from trajpref.models.registry import load_predictor
 from trajpref.results import write_meta
 from trajpref.score import predict_scene
 
-ROOT = Path(__file__).resolve().parent.parent
-
 
 @torch.no_grad()
 def main(argv: list[str] | None = None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--dataset", default="zara1", help="a dataset with a published generator")
-    parser.add_argument("--data-root", default=None)
-    parser.add_argument("--sizes", type=int, nargs="+", default=[1, 3, 7, 15])
-    parser.add_argument("--calls", type=int, default=15, help="timed rounds per size")
-    parser.add_argument("--out-dir", default=str(ROOT / "benchmarks" / "results" / "meta"))
-    args = parser.parse_args(argv)
-    if args.calls < 1 or min(args.sizes) < 1:
-        parser.error("--calls and every --sizes must be >= 1")
+    args = latency_args(__doc__, "a dataset with a published generator", argv)
     model = load_predictor(f"{args.dataset}/generator", device="cpu")
     program = export_predictor(model, max_agents=max(2, *args.sizes)).module()
     val = load_dataset(args.dataset, "val", args.data_root)

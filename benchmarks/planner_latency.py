@@ -82,10 +82,11 @@ def median_ms(calls: dict, rounds: int) -> dict[str, float]:
     return {name: round(statistics.median(v), 2) for name, v in times.items()}
 
 
-@torch.no_grad()
-def main(argv: list[str] | None = None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--dataset", default="zara1", help="a dataset with a chosen selection")
+def latency_args(doc: str, dataset_help: str, argv: list[str] | None) -> argparse.Namespace:
+    """The options of the latency scripts (this one and ``export_latency.py``), parsed:
+    --dataset, --data-root, --sizes, --calls and --out-dir."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument("--dataset", default="zara1", help=dataset_help)
     parser.add_argument("--data-root", default=None)
     parser.add_argument("--sizes", type=int, nargs="+", default=[1, 3, 7, 15])
     parser.add_argument("--calls", type=int, default=15, help="timed rounds per size")
@@ -93,6 +94,12 @@ def main(argv: list[str] | None = None) -> dict:
     args = parser.parse_args(argv)
     if args.calls < 1 or min(args.sizes) < 1:
         parser.error("--calls and every --sizes must be >= 1")
+    return args
+
+
+@torch.no_grad()
+def main(argv: list[str] | None = None) -> dict:
+    args = latency_args(__doc__, "a dataset with a chosen selection", argv)
     model = load_predictor(f"{args.dataset}/generator", device="cpu")
     scorer = TrajectoryScorer.from_checkpoint(f"{args.dataset}/denoiser")
     val = load_dataset(args.dataset, "val", args.data_root)

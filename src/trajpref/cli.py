@@ -107,7 +107,7 @@ from trajpref.io import (
 )
 from trajpref.metrics import SCENE_SIZE_EDGES, check_bin_edges, min_ade_fde
 from trajpref.models import checkpoint as ckpt
-from trajpref.models import export as exporting
+from trajpref.models import export as model_export
 from trajpref.models import zoo
 from trajpref.models.registry import load_predictor
 from trajpref.models.timing import (
@@ -256,6 +256,32 @@ def _model_setting(args, name: str) -> tuple[bool, object]:
     return value is not None, value
 
 
+def _add_generator_settings(p: argparse.ArgumentParser) -> None:
+    """A generator file's sampling settings that a command may set without retraining
+    (evaluate, predict, plot, and export, which fixes them in its file)."""
+    p.add_argument("--max-speed", type=float, default=None,
+                   help="generators: see agents faster than this many model units per "
+                   "observed step at that speed and scale their prediction back up (0: off; "
+                   "default: the file's model.max_speed; docs/pretraining.md, 'An input speed "
+                   "clamp')")  # fmt: skip
+    p.add_argument("--spread-scale", type=float, default=None,
+                   help="generators: multiply the spread of the K initial samples about their "
+                   "mean by this (1: as trained; default: the file's model.spread_scale; "
+                   "docs/pretraining.md, 'The samples' spread at prediction time')")  # fmt: skip
+    p.add_argument("--max-log-sigma", default=None, metavar="C|none",
+                   help="generators: cap each sample's log sigma at this (model units); none: "
+                   "no cap (default: the file's model.max_log_sigma, 1 for sdd/generator; "
+                   "docs/pretraining.md, 'A cap on the samples' sigma')")  # fmt: skip
+    p.add_argument("--neighbour-radius", default=None, metavar="R|none",
+                   help="diffusion models and --scorer: agents whose last observed positions "
+                   "lie farther apart than R do not attend to each other, for scenes wider "
+                   "than the training scenes; R is in the data's units: metres for ETH/UCY "
+                   "(their training scenes span about 16 m), pixels for sdd (docs/data.md, "
+                   "'SDD in pixels'); none: every pair of a scene attends (default: the "
+                   "file's model.neighbour_radius, none for the published models; "
+                   "docs/pretraining.md, 'A neighbour radius')")  # fmt: skip
+
+
 def _add_model_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", default="cv", help="'cv' (constant velocity), a published model "
                    "(DATASET/NAME, see `trajpref models`) or a checkpoint path")  # fmt: skip
@@ -280,27 +306,7 @@ def _add_model_args(p: argparse.ArgumentParser) -> None:
                        "steps (how generators published before 2026-11-24 sampled; those "
                        "published since 2026-11-27 have no denoising step, tau 0, so neither "
                        "flag changes them, and it says so)")  # fmt: skip
-    p.add_argument("--max-speed", type=float, default=None,
-                   help="generators: see agents faster than this many model units per "
-                   "observed step at that speed and scale their prediction back up (0: off; "
-                   "default: the file's model.max_speed; docs/pretraining.md, 'An input speed "
-                   "clamp')")  # fmt: skip
-    p.add_argument("--spread-scale", type=float, default=None,
-                   help="generators: multiply the spread of the K initial samples about their "
-                   "mean by this (1: as trained; default: the file's model.spread_scale; "
-                   "docs/pretraining.md, 'The samples' spread at prediction time')")  # fmt: skip
-    p.add_argument("--max-log-sigma", default=None, metavar="C|none",
-                   help="generators: cap each sample's log sigma at this (model units); none: "
-                   "no cap (default: the file's model.max_log_sigma, 1 for sdd/generator; "
-                   "docs/pretraining.md, 'A cap on the samples' sigma')")  # fmt: skip
-    p.add_argument("--neighbour-radius", default=None, metavar="R|none",
-                   help="diffusion models and --scorer: agents whose last observed positions "
-                   "lie farther apart than R do not attend to each other, for scenes wider "
-                   "than the training scenes; R is in the data's units: metres for ETH/UCY "
-                   "(their training scenes span about 16 m), pixels for sdd (docs/data.md, "
-                   "'SDD in pixels'); none: every pair of a scene attends (default: the "
-                   "file's model.neighbour_radius, none for the published models; "
-                   "docs/pretraining.md, 'A neighbour radius')")  # fmt: skip
+    _add_generator_settings(p)
     p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
     p.add_argument("--max-agents", type=int, default=MAX_AGENTS,
                    help="a batch size, not a scene filter: at most this many agents per batch "
@@ -758,17 +764,11 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="K",
         help="futures per agent: the first K of the generator's (default all)",
     )
-    ex.add_argument("--max-agents", type=int, default=exporting.MAX_AGENTS, metavar="N",
+    ex.add_argument("--max-agents", type=int, default=model_export.MAX_AGENTS, metavar="N",
                     help="the most agents of one scene the file takes (default "
-                    f"{exporting.MAX_AGENTS}; "
-                    "a model with agent roles: at most its roles)")  # fmt: skip
-    ex.add_argument(
-        "--neighbour-radius",
-        default=None,
-        metavar="R|none",
-        help="as evaluate's, fixed in the file: agents farther apart than R (the "
-        "data's units) do not attend to each other (default: the checkpoint's)",
-    )
+                    f"{model_export.MAX_AGENTS}; a model with agent roles: at most its "
+                    "roles)")  # fmt: skip
+    _add_generator_settings(ex)  # as evaluate's, fixed in the file
     ex.set_defaults(func=cmd_export)
 
     co = sub.add_parser("compare", help="validation of training runs side by side: kept "
@@ -1006,6 +1006,12 @@ def _predictor(args):
                           f"the generator's own, and {flag} changes nothing",
                           category=IgnoredWarning, stacklevel=2)  # fmt: skip
         model.stochastic = bool(args.stochastic)
+    _apply_generator_settings(args, model)
+    return model, device
+
+
+def _apply_generator_settings(args, model) -> None:
+    """Set the options of ``_add_generator_settings`` that were given on ``model``."""
     for flag, name in (("--max-speed", "max_speed"), ("--spread-scale", "spread_scale"),
                        ("--max-log-sigma", "max_log_sigma")):  # fmt: skip
         given, value = _model_setting(args, name)
@@ -1014,7 +1020,6 @@ def _predictor(args):
     given, radius = _number_or_none(args, "neighbour_radius")
     if given and hasattr(model, "neighbour_radius"):  # cv has none (its --scorer takes it)
         model.neighbour_radius = radius
-    return model, device
 
 
 def _warn_fixed_sampling(args, model) -> None:
@@ -2476,16 +2481,28 @@ def cmd_config_show(args) -> int:
 def cmd_export(args) -> int:
     """Write ``args.model`` as an exported program (``models.export``), checked against the
     model, and say how to run it."""
-    check_output_file(args.out, exporting.EXPORT_SUFFIX)
-    _check_checkpoint("--model", args.model)
-    given, radius = _number_or_none(args, "neighbour_radius")
+    check_output_file(args.out, model_export.EXPORT_SUFFIX)
+    _check_checkpoint("", args.model)  # a positional MODEL: the message names no flag
+    _number_or_none(args, "max_log_sigma")  # a bad value: before the model is read
+    _number_or_none(args, "neighbour_radius")
+    for flag, value in (("--samples", args.samples), ("--max-agents", args.max_agents)):
+        if value is not None and value < 1:
+            raise ConfigError(f"{flag} must be >= 1, got {value}")
     model = load_predictor(args.model, device="cpu")
-    if given:
-        model.neighbour_radius = radius
-    program = exporting.export_predictor(model, args.samples, args.max_agents)
-    bound = exporting.agent_bound(model, args.max_agents)
-    meta = exporting.export_meta(model, program, args.model, bound)
-    exporting.save_exported(program, args.out, meta)
+    _apply_generator_settings(args, model)  # cv: refused by the export itself
+    fixed = getattr(getattr(model, "generator", None), "samples", None)
+    if fixed is not None and args.samples is not None and args.samples > fixed:
+        raise ConfigError(f"--samples {args.samples}: {args.model} emits K = {fixed} samples")
+    if fixed is not None and args.samples is not None and args.samples < fixed:
+        warnings.warn(f"{args.model} emits a set of K = {fixed} samples (trained best-of-"
+                      f"{fixed}), and --samples {args.samples} keeps its first {args.samples}, "
+                      f"an arbitrary subset: to keep {args.samples} chosen from all {fixed}, "
+                      "export all and select outside (trajpref.score.selection, "
+                      "docs/selection.md)", category=TrajprefWarning, stacklevel=2)  # fmt: skip
+    program = model_export.export_predictor(model, args.samples, args.max_agents)
+    meta = model_export.export_meta(model, program, args.model)
+    bound = meta["max_agents"]
+    model_export.save_exported(program, args.out, meta)
     pace = f", {model.frame_interval:g} s per step" if model.frame_interval else ""
     units = f" in {model.units}" if model.units else ""
     print(f"wrote {args.out}: history [P, {model.t_hist}, 2]{units}{pace} and agent_type [P] "

@@ -18,6 +18,7 @@ from trajpref.models.export import (
     export_meta,
     export_predictor,
     load_exported,
+    program_shape,
     save_exported,
 )
 from trajpref.models.registry import load_predictor
@@ -51,15 +52,24 @@ def test_the_program_gives_the_models_own_futures_at_every_scene_size(tiny, tiny
 
 
 def test_a_scene_larger_than_the_bound_is_refused_by_the_program(tiny_program):
-    with pytest.raises(Exception, match="agents|17|16"):  # torch's own guard error
+    with pytest.raises(AssertionError, match="<= 16"):  # torch's own guard, naming the bound
         tiny_program.module()(torch.from_numpy(_scene(17)), torch.zeros(17, dtype=torch.long))
+
+
+def test_the_program_checks_its_inputs_dtypes_before_any_arithmetic(tiny_program):
+    """The README names this message and its remedy (history.float())."""
+    history = torch.from_numpy(_scene(3).astype(np.float64))
+    with pytest.raises(RuntimeError, match="Tensor dtype mismatch! Expected: Float, Got: double"):
+        tiny_program.module()(history, torch.zeros(3, dtype=torch.long))
 
 
 def test_the_file_loads_with_pytorch_alone_and_records_itself(tiny, tiny_program, tmp_path,
                                                               tiny_run):  # fmt: skip
     source = str(tiny_run / "generator.safetensors")
-    meta = export_meta(tiny, tiny_program, source, 16)
+    meta = export_meta(tiny, tiny_program, source)
     path = save_exported(tiny_program, tmp_path / "tiny.pt2", meta)
+    again = save_exported(tiny_program, tmp_path / "again.PT2", meta)  # any case of .pt2
+    assert path.read_bytes() == again.read_bytes()  # no temporary name inside the archive
     plain = torch.export.load(str(path)).module()  # no trajpref call
     history = torch.from_numpy(_scene(3))
     types = torch.zeros(3, dtype=torch.long)
@@ -69,7 +79,8 @@ def test_the_file_loads_with_pytorch_alone_and_records_itself(tiny, tiny_program
     assert recorded == json.loads(json.dumps(meta))
     assert (recorded["t_hist"], recorded["t_fut"], recorded["samples"]) == (8, 12, 4)
     assert recorded["max_agents"] == 16 and recorded["source"] == source
-    assert recorded["model_hash"] is not None and META_FILE == "trajpref.json"
+    assert recorded["checkpoint_hash"] is not None and META_FILE == "trajpref.json"
+    assert recorded["settings"]["tau"] == 2 and recorded["roles"] is None
     assert module(history, types).shape == (4, 3, 12, 2)
 
 
@@ -100,8 +111,8 @@ def test_models_that_draw_noise_and_bad_counts_are_refused(tiny_run, tiny):
     for samples in (0, 5, 2.0):
         with pytest.raises(ConfigError, match=r"samples must be an integer in 1\.\.4"):
             export_predictor(tiny, samples=samples)
-    with pytest.raises(ConfigError, match="max_agents must be an integer >= 2"):
-        export_predictor(tiny, max_agents=1)
+    with pytest.raises(ConfigError, match="max_agents must be an integer >= 1"):
+        export_predictor(tiny, max_agents=0)
 
 
 def test_a_published_generator_exports_exactly_and_roles_bound_the_agents(zara1, robo):
@@ -111,6 +122,9 @@ def test_a_published_generator_exports_exactly_and_roles_bound_the_agents(zara1,
     np.testing.assert_array_equal(got.numpy(), predict_scene(zara1, history, 20))
     assert agent_bound(robo) == 3  # leader, follower, approacher
     robo_program = export_predictor(robo)
+    assert program_shape(robo_program) == (20, 3)
+    meta = export_meta(robo, robo_program, "robo/generator")
+    assert meta["roles"].startswith("agents are read in order as roles")
     three = _scene(3) * 0.3
     got = robo_program.module()(torch.from_numpy(three), torch.zeros(3, dtype=torch.long))
     np.testing.assert_array_equal(got.numpy(), predict_scene(robo, three, 20))
@@ -129,4 +143,7 @@ def test_the_command_writes_a_checked_file_and_refuses_what_it_cannot(capsys, ti
     assert code == 2 and "constant-velocity baseline" in err
     code, _, err = _run(capsys, "export", "zara1/generator", "--out", tmp_path / "z.onnx")
     assert code == 2 and "the output must be a .pt2 file" in err
+    code, _, err = _run(capsys, "export", "zara1/generator", "--out", tmp_path / "z.pt2",
+                        "--samples", "21")  # fmt: skip
+    assert code == 2 and "--samples 21: zara1/generator emits K = 20 samples" in err
     assert not (tmp_path / "cv.pt2").exists() and not (tmp_path / "z.onnx").exists()

@@ -134,13 +134,6 @@ def _features_with_context(batch: Batch, scale: float, radius: float | None) -> 
                          position, targets=n, pairs=_within(geom, radius, scale))  # fmt: skip
 
 
-def exporting() -> bool:
-    """Whether ``torch.export`` is tracing the model (``torch.compiler.is_exporting``; False on
-    a torch without it), so that a check on the data's values is left out of the graph."""
-    check = getattr(torch.compiler, "is_exporting", None)
-    return bool(check is not None and check())
-
-
 class SocialEncoder(nn.Module):
     """Per-agent MLP over the history, then attention across the agents of each scene.
 
@@ -179,10 +172,10 @@ class SocialEncoder(nn.Module):
             h = h + self.site_embed(site)  # [N, H]
         if self.role_embed is not None:
             roles = self.role_embed.num_embeddings
-            # a data-dependent check: while torch.export traces, the exported program's own
-            # bound on the agents (models.export) holds it instead
-            if not exporting() and len(f.slot) and int(f.slot.max()) >= roles:
-                raise DataError(f"a scene has {int(f.slot.max()) + 1} agents, but this model "
+            # the padded width is the largest scene's size, slot.max() + 1: a shape, which
+            # torch.export can prove from its bound on P where the slots' values it cannot
+            if f.mask.shape[1] > roles:
+                raise DataError(f"a scene has {f.mask.shape[1]} agents, but this model "
                                 f"knows {roles} agent roles (ModelConfig.agent_roles): it "
                                 f"predicts scenes of at most {roles} agents, listed in its "
                                 "training data's order")  # fmt: skip

@@ -4,11 +4,15 @@ A planner that ranks futures in a loop of its own, or a robot's process without 
 installed, loads the file with ``torch.export.load(path).module()`` and calls it on one
 scene: ``(history [P, T_h, 2] float32, agent_type [P] int64) -> futures [K, P, T_f, 2]``,
 absolute positions in the model's units, the very numbers ``predict_scene`` gives for the
-same scene without context-only neighbours. The file holds the weights and the graph; loading
-it executes no Python code of ours. What trajpref checks before predicting (finite
-histories, coordinates float32 can hold, a scene no wider or faster than training, the
-steps and units of the data) is the caller's part: the graph does not check values. The
-export is for predictors that draw no noise (a leapfrog generator whose denoising steps,
+same scene without context-only neighbours. The program checks its inputs' dtypes and shapes
+(float32 and int64 tensors: ``Tensor dtype mismatch! Expected: Float, Got: double`` asks for
+``history.float()``; ``Guard failed: history.size()[0] <= 512`` names the bound on P). The
+file holds the graph and the weights (a generator without denoising steps
+leaves its denoiser out). ``torch.export.load`` may unpickle what an archive marks so: load
+only files you made or trust. What trajpref checks before predicting (finite histories,
+coordinates float32 can hold, a scene no wider or faster than training, the steps and units
+of the data, agent types 0 or 1) is the caller's part: the graph checks shapes, not values.
+The export is for predictors that draw no noise (a leapfrog generator whose denoising steps,
 if any, are posterior means: every published generator); a sampler that draws noise would
 bake one draw into the graph, and is refused.
 """
@@ -49,10 +53,25 @@ model's own on the check scenes that ``export_predictor`` accepts (it has been e
 every published generator on this CPU)."""
 
 
+class _NoDenoiser(nn.Module):
+    """Stands in the exported copy for the denoiser of a generator that takes no denoising
+    step (``tau`` 0), which never runs it: its config alone (the window lengths the
+    predictor reads from it), no weights, so the file does not carry them."""
+
+    def __init__(self, cfg: Any):
+        super().__init__()
+        self.cfg = cfg
+
+    def context(self, features: Any) -> torch.Tensor:
+        raise TrajprefError("an exported generator without denoising steps has no denoiser")
+
+
 class OneScene(nn.Module):
     """One scene's K futures from its histories, without context and without checks:
     ``forward(history [P, T_h, 2], agent_type [P]) -> [K, P, T_f, 2]``, as
-    ``DiffusionPredictor.predict`` computes them for a batch of that one scene."""
+    ``DiffusionPredictor.predict`` computes them for a batch of that one scene. The batch is
+    built here from shapes alone (``predict_scene``'s builder reads sizes from the data,
+    which would fix P in the graph)."""
 
     def __init__(self, model: DiffusionPredictor, samples: int):
         super().__init__()
@@ -60,6 +79,10 @@ class OneScene(nn.Module):
         self.samples = samples
 
     def forward(self, history: torch.Tensor, agent_type: torch.Tensor) -> torch.Tensor:
+        # traced at float32 / int64 the casts vanish from the graph, which instead checks the
+        # dtypes first ("Tensor dtype mismatch! Expected: Float, Got: double"), a clearer
+        # message than the matrix product's that would come without them
+        history, agent_type = history.to(torch.float32), agent_type.to(torch.long)
         n = history.shape[0]  # P, symbolic in the exported program
         batch = Batch(history=history, future=history.new_zeros(n, self.model.t_fut, 2),
                       scene=torch.zeros(n, dtype=torch.long, device=history.device),
@@ -93,21 +116,25 @@ def _check_exportable(model: object, samples: int | None) -> int:
     return k
 
 
-def _example(model: DiffusionPredictor, agents: int, seed: int) -> tuple[torch.Tensor, ...]:
+def _example(model: DiffusionPredictor, agents: int, seed: int,
+             ball: bool = False) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
     """A scene of ``agents`` walkers in the model's units times its scale (random walks at
-    a typical step), and their types (all 0): the trace's example and the check's scenes."""
+    a typical step), and their types (0; with ``ball``, the last agent 1): the trace's example
+    and the check's scenes."""
     gen = torch.Generator().manual_seed(seed)
     steps = torch.randn(agents, model.t_hist, 2, generator=gen) * 0.3 + 0.3  # model units
     history = torch.cumsum(steps, 1) * model.scale  # [P, T_h, 2]
-    return history.to(model.device), torch.zeros(agents, dtype=torch.long, device=model.device)
+    types = torch.zeros(agents, dtype=torch.long)
+    types[-1] = int(ball)
+    return history.to(model.device), types.to(model.device)
 
 
 def agent_bound(model: DiffusionPredictor, max_agents: int = MAX_AGENTS) -> int:
     """The most agents of one scene an export of ``model`` takes: ``max_agents`` (an integer
-    >= 2, else a ``ConfigError``), or fewer for a model with agent roles, whose role embedding
+    >= 1, else a ``ConfigError``), or fewer for a model with agent roles, whose role embedding
     knows no more slots."""
-    if isinstance(max_agents, bool) or not isinstance(max_agents, int) or max_agents < 2:
-        raise ConfigError(f"max_agents must be an integer >= 2, got {max_agents!r}")
+    if isinstance(max_agents, bool) or not isinstance(max_agents, int) or max_agents < 1:
+        raise ConfigError(f"max_agents must be an integer >= 1, got {max_agents!r}")
     return min(max_agents, model.agent_roles) if model.agent_roles else max_agents
 
 
@@ -117,22 +144,28 @@ def export_predictor(model: DiffusionPredictor, samples: int | None = None,
     ``max_speed``, ``spread_scale`` ...) as a ``torch.export.ExportedProgram`` of ``OneScene``,
     for scenes of 1 to ``max_agents`` agents (a model with agent roles: at most as many as
     it knows), keeping ``samples`` of its K (default all). The program is checked against the
-    model on two scenes before it is returned: a difference above ``MATCH_TOL`` model units
-    is a ``TrajprefError``. ``ConfigError`` for a model that draws noise (``_check_exportable``)
-    or a bad count."""
+    model on scenes of 1, 3 and up to 64 agents (the last with a ball) before it is returned: a
+    difference above ``MATCH_TOL`` model units is a ``TrajprefError``. ``ConfigError`` for a
+    model that draws noise (``_check_exportable``) or a bad count."""
     k = _check_exportable(model, samples)
     max_agents = agent_bound(model, max_agents)
     # a copy without gradients: the program's futures then need no torch.no_grad() to be
     # read as numbers, and the caller's model keeps its own settings
-    wrapped = OneScene(copy.deepcopy(model).requires_grad_(False), k).eval()
-    example = _example(model, 2 if max_agents >= 2 else 1, seed=0)
-    agents = torch.export.Dim("agents", min=1, max=max_agents)
-    dims = {"history": {0: agents}, "agent_type": {0: agents}}
+    own = copy.deepcopy(model).requires_grad_(False)
+    if own.tau == 0:  # never run: the file need not carry it
+        own.denoiser = _NoDenoiser(own.denoiser.cfg)
+    wrapped = OneScene(own, k).eval()
+    example = _example(model, min(2, max_agents), seed=0)
+    dims = None  # one agent at most (a one-role model): a fixed P
+    if max_agents > 1:
+        agents = torch.export.Dim("agents", min=1, max=max_agents)
+        dims = {"history": {0: agents}, "agent_type": {0: agents}}
     with torch.no_grad(), warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # torch's notes on tracing internals
         program = torch.export.export(wrapped, example, dynamic_shapes=dims, strict=False)
-    for agents_in_scene, seed in ((min(3, max_agents), 1), (min(7, max_agents), 2)):
-        scene = _example(model, agents_in_scene, seed)
+    checks = sorted({1, min(3, max_agents), min(max_agents, 64)})  # the last with a ball
+    for seed, agents_in_scene in enumerate(checks, 1):
+        scene = _example(model, agents_in_scene, seed, ball=agents_in_scene == checks[-1])
         with torch.no_grad():
             want, got = wrapped(*scene), program.module()(*scene)
         worst = float((want - got).abs().max()) / model.scale
@@ -144,41 +177,70 @@ def export_predictor(model: DiffusionPredictor, samples: int | None = None,
 
 
 def _model_hash(source: str) -> str | None:
-    """``checkpoint.model_hash`` of the checkpoint ``source`` names (None where it names none:
-    a model built in code)."""
+    """``checkpoint.model_hash`` of the checkpoint file ``source`` names (None where it names
+    none: a model built in code); the settings changed before the export are not in it."""
     try:
         return checkpoint.model_hash(source)
     except (TrajprefError, OSError, KeyError, TypeError, ValueError):
         return None
 
 
-def export_meta(model: DiffusionPredictor, program: torch.export.ExportedProgram, source: str,
-                max_agents: int) -> dict[str, Any]:  # fmt: skip
+def program_shape(program: torch.export.ExportedProgram) -> tuple[int, int]:
+    """(K, the most agents P) of an exported ``OneScene`` program, read from its graph: the
+    futures' first dimension and the bound on the histories' first."""
+    history = next(n for n in program.graph.nodes if n.op == "placeholder"
+                   and n.name == program.graph_signature.user_inputs[0])  # fmt: skip
+    output = next(n for n in program.graph.nodes if n.op == "output").args[0][0]
+    k, agents = int(output.meta["val"].shape[0]), history.meta["val"].shape[0]
+    if isinstance(agents, int):  # a fixed P
+        return k, agents
+    return k, int(program.range_constraints[agents.node.expr].upper)
+
+
+def export_meta(model: DiffusionPredictor, program: torch.export.ExportedProgram,
+                source: str) -> dict[str, Any]:  # fmt: skip
     """What an exported file records of itself (``META_FILE``): its inputs and output, the
-    most agents it takes (``agent_bound``), the model's pace and units, where it came from
-    (``source``: the checkpoint as named) and the settings baked in."""
-    k = program.module()(*_example(model, 1, 0)).shape[0]
+    most agents it takes, the model's pace and units, where it came from (``source``: the
+    checkpoint as named, and its file's ``checkpoint_hash``) and the settings fixed in it."""
+    k, max_agents = program_shape(program)
+    units = model.units or "the training data's units"
     return {
         "format": "trajpref-export/1",
-        "source": source,
-        "model_hash": _model_hash(source),
+        "source": str(Path(source).resolve()) if Path(source).is_file() else source,
+        "checkpoint_hash": _model_hash(source),
         "inputs": {
-            "history": f"[P, {model.t_hist}, 2] float32, absolute positions, oldest first",
-            "agent_type": "[P] int64 (0 person, 1 ball)",
-        },  # fmt: skip
+            "history": f"[P, {model.t_hist}, 2] float32, absolute positions in {units}, oldest "
+            "first, every one finite (a NaN makes every agent's futures NaN)",
+            "agent_type": "[P] int64: 0 for a person; 1 only for the ball of a model trained "
+            "with one (nba's: one per scene)",
+        },
+        "context": (
+            "not read: the neighbours seen for part of the history, which this model "
+            "reads in trajpref (predict_scene's context=), are left out"
+            if model.reads_context
+            else None
+        ),  # fmt: skip
         "output": f"[{k}, P, {model.t_fut}, 2] float32 futures, absolute positions",
+        "roles": (
+            "agents are read in order as roles (their training data's order)"
+            if model.agent_roles
+            else None
+        ),  # fmt: skip
         "t_hist": model.t_hist,
         "t_fut": model.t_fut,
-        "samples": int(k),
+        "samples": k,
         "max_agents": max_agents,
         "frame_interval": model.frame_interval,
         "units": model.units,
         "scale": model.scale,
-        "settings": {
+        "settings": {  # as exported: the checkpoint's, or as set on the model before
             "tau": model.tau,
             "neighbour_radius": model.neighbour_radius,
+            "max_speed": model.generator.cfg.max_speed,
+            "spread_scale": model.generator.cfg.spread_scale,
+            "max_log_sigma": model.generator.cfg.max_log_sigma,
             "agent_roles": model.agent_roles,
-        },  # fmt: skip
+        },
         "trajpref_version": __version__,
         "torch_version": torch.__version__,
     }
@@ -189,11 +251,11 @@ def save_exported(program: torch.export.ExportedProgram, path: str | Path,
     """Write ``program`` to ``path`` (``.pt2``) with ``meta`` as the archive's ``META_FILE``,
     atomically; a write that fails is a one-line ``TrajprefError`` naming the file."""
     path = Path(path)
-    if path.suffix != EXPORT_SUFFIX:
+    if path.suffix.lower() != EXPORT_SUFFIX:
         raise ConfigError(f"{path}: an exported predictor is a {EXPORT_SUFFIX} file")
-    with atomic_path(path) as tmp:  # an OSError: one line naming the file
-        try:
-            torch.export.save(program, str(tmp), extra_files={META_FILE: json.dumps(meta)})
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:  # an OSError: one line, the file
+        try:  # through a handle: the archive's inner folder is not named after tmp's name
+            torch.export.save(program, fh, extra_files={META_FILE: json.dumps(meta)})
         except RuntimeError as exc:  # torch's archive writer (a full disk)
             raise write_failed(path, "the exported predictor", exc) from None
     return path
@@ -201,7 +263,8 @@ def save_exported(program: torch.export.ExportedProgram, path: str | Path,
 
 def load_exported(path: str | Path) -> tuple[nn.Module, dict[str, Any]]:
     """An exported predictor as a callable module and what it records (``export_meta``);
-    PyTorch alone does the same: ``torch.export.load(path).module()``."""
+    PyTorch alone does the same: ``torch.export.load(path).module()``. Loading may unpickle
+    what the archive marks so (``torch.export.load``): load only files you made or trust."""
     files = {META_FILE: ""}
     program = torch.export.load(str(path), extra_files=files)
     return program.module(), json.loads(files[META_FILE] or "{}")
