@@ -1,4 +1,4 @@
-"""An exported predictor's cost against the model's own call, in ms per scene, side by side.
+"""Exported programs' cost against the library's own calls, in ms per scene, side by side.
 
     OMP_NUM_THREADS=1 python benchmarks/export_latency.py --dataset zara1 --sizes 1 3 7 15 \
         --calls 15 --data-root ../shared/data
@@ -8,7 +8,10 @@ For each scene size P (the first P agents of the first validation scene with at 
 in turn, ``--calls`` rounds after one warm-up round), and keeps each call's median:
 ``predict_scene`` (K = 20, with its checks of the histories and warnings), the exported
 program of the same generator (``trajpref.models.export``: the graph alone, no check), and the
-largest difference between their futures (0 where they agree exactly). Writes
+largest difference between their futures (0 where they agree exactly); then ``rank_samples``
+of those 20 futures by the dataset's denoiser at 2 score steps (every 50th, the cheap
+setting) against the exported scorer (``trajpref.score.export``), with the largest relative
+difference of their residuals and whether the orders agree. Writes
 benchmarks/results/meta/export_latency_<dataset>.json (with machine, threads, command and
 date).
 """
@@ -25,7 +28,9 @@ from trajpref.data import load_dataset
 from trajpref.models.export import export_predictor
 from trajpref.models.registry import load_predictor
 from trajpref.results import write_meta
-from trajpref.score import predict_scene
+from trajpref.score import predict_scene, rank_samples, score_timesteps
+from trajpref.score.export import export_scorer
+from trajpref.score.scorer import TrajectoryScorer
 
 
 @torch.no_grad()
@@ -33,6 +38,9 @@ def main(argv: list[str] | None = None) -> dict:
     args = latency_args(__doc__, "a dataset with a published generator", argv)
     model = load_predictor(f"{args.dataset}/generator", device="cpu")
     program = export_predictor(model, max_agents=max(2, *args.sizes)).module()
+    scorer = TrajectoryScorer.from_checkpoint(f"{args.dataset}/denoiser")
+    scorer = scorer.with_steps(score_timesteps(scorer.schedule.num_steps, 50))  # 2 steps
+    ranker = export_scorer(scorer, max_agents=max(2, *args.sizes)).module()
     val = load_dataset(args.dataset, "val", args.data_root)
     rows = []
     for p, history in scene_histories(val, args.sizes).items():
@@ -40,14 +48,28 @@ def main(argv: list[str] | None = None) -> dict:
         gap = float(
             np.abs(program(tensor, types).numpy() - predict_scene(model, history, 20)).max()
         )
+        samples = predict_scene(model, history, 20)  # [K, P, T_f, 2]
+        order, total = rank_samples(scorer, history, samples)  # [K], [K]
+        futures = torch.from_numpy(samples)
+        exported = ranker(tensor, futures, types).sum((1, 2)).numpy()  # [K]
+        rank_gap = float(np.abs(exported - total).max() / np.abs(total).max())
+        same = bool((exported.argsort() == order).all())
         calls = {"predict_scene": lambda h=history: predict_scene(model, h, 20),
-                 "exported": lambda t=tensor, y=types: program(t, y)}  # fmt: skip
+                 "exported": lambda t=tensor, y=types: program(t, y),
+                 "rank_samples": lambda h=history, s=samples: rank_samples(scorer, h, s),
+                 "rank_exported": lambda t=tensor, s=futures, y=types:
+                     ranker(t, s, y).sum((1, 2)).argsort()}  # fmt: skip
         ms = median_ms(calls, args.calls)
         ratio = ms["predict_scene"] / ms["exported"]
-        rows.append({"agents": p, **ms, "ratio": round(ratio, 2), "max_difference": gap})
+        rank_ratio = ms["rank_samples"] / ms["rank_exported"]
+        rows.append({"agents": p, **ms, "ratio": round(ratio, 2), "max_difference": gap,
+                     "rank_ratio": round(rank_ratio, 2), "rank_max_relative": rank_gap,
+                     "same_order": same})  # fmt: skip
         print(
             f"P={p}: predict_scene {ms['predict_scene']:.1f} ms, exported {ms['exported']:.1f} "
-            f"ms ({ratio:.2f}x), largest difference {gap:.3g}",
+            f"ms ({ratio:.2f}x), largest difference {gap:.3g}; rank_samples "
+            f"{ms['rank_samples']:.1f} ms, exported {ms['rank_exported']:.1f} ms "
+            f"({rank_ratio:.2f}x), relative difference {rank_gap:.2g}, same order {same}",
             flush=True,
         )
     out = Path(args.out_dir) / f"export_latency_{args.dataset}.json"

@@ -769,6 +769,16 @@ def build_parser() -> argparse.ArgumentParser:
                     f"{model_export.MAX_AGENTS}; a model with agent roles: at most its "
                     "roles)")  # fmt: skip
     _add_generator_settings(ex)  # as evaluate's, fixed in the file
+    ex.add_argument("--scorer", action="store_true",
+                    help="export MODEL's diffusion score instead (its denoiser, a generator "
+                    "file's own): (history, samples [K, P, T_f, 2], agent_type) -> residuals "
+                    "[K, P, T_f] to rank the samples by, as rank_samples does")  # fmt: skip
+    ex.add_argument("--score-every", type=int, default=3, metavar="E",
+                    help="with --scorer: score at every E-th of the S diffusion steps "
+                    "(default 3: 34 of 100, as evaluate's scorer; 50 gives 2, the cheap "
+                    "setting)")  # fmt: skip
+    ex.add_argument("--score-from", type=int, default=0, metavar="S",
+                    help="with --scorer: the first score step (default 0)")  # fmt: skip
     ex.set_defaults(func=cmd_export)
 
     co = sub.add_parser("compare", help="validation of training runs side by side: kept "
@@ -2483,6 +2493,10 @@ def cmd_export(args) -> int:
     model, and say how to run it."""
     check_output_file(args.out, model_export.EXPORT_SUFFIX)
     _check_checkpoint("", args.model)  # a positional MODEL: the message names no flag
+    if args.scorer:
+        return _export_scorer(args)
+    if args.score_every != 3 or args.score_from != 0:
+        raise ConfigError("--score-every and --score-from go with --scorer")
     _number_or_none(args, "max_log_sigma")  # a bad value: before the model is read
     _number_or_none(args, "neighbour_radius")
     for flag, value in (("--samples", args.samples), ("--max-agents", args.max_agents)):
@@ -2509,6 +2523,39 @@ def cmd_export(args) -> int:
           f"-> futures [{meta['samples']}, P, {model.t_fut}, 2], P from 1 to {bound}; checked "
           "against the model. Run it with PyTorch alone: "
           f"torch.export.load({str(args.out)!r}).module()(history, agent_type)")  # fmt: skip
+    return 0
+
+
+def _export_scorer(args) -> int:
+    """``export --scorer``: MODEL's diffusion score as an exported program
+    (``score.export``)."""
+    from trajpref.score.export import export_scorer, scorer_meta  # only this command's
+
+    given = [flag for flag, value in (("--samples", args.samples), ("--max-speed", args.max_speed),
+                                      ("--spread-scale", args.spread_scale),
+                                      ("--max-log-sigma", args.max_log_sigma))
+             if value is not None]  # fmt: skip
+    if given:
+        raise ConfigError(f"{', '.join(given)}: a generator's settings; --scorer exports the "
+                          "score, which takes the samples as they come")  # fmt: skip
+    if args.max_agents < 1:
+        raise ConfigError(f"--max-agents must be >= 1, got {args.max_agents}")
+    given_radius, radius = _number_or_none(args, "neighbour_radius")
+    scorer = TrajectoryScorer.from_checkpoint(args.model)
+    steps = score_timesteps(scorer.schedule.num_steps, args.score_every, args.score_from)
+    scorer = scorer.with_steps(steps)
+    if given_radius:
+        scorer.neighbour_radius = radius
+    program = export_scorer(scorer, args.max_agents)
+    meta = scorer_meta(scorer, program, args.model)
+    model_export.save_exported(program, args.out, meta)
+    units = f" in {scorer.units}" if scorer.units else ""
+    print(f"wrote {args.out}: history [P, {scorer.t_hist}, 2]{units}, samples [K, P, "
+          f"{scorer.t_fut}, 2] and agent_type [P] -> residuals [K, P, {scorer.t_fut}] at "
+          f"{len(steps)} score steps, P from 1 to {meta['max_agents']}, K from 1 to "
+          f"{meta['max_samples']}; checked against the scorer. Rank with PyTorch alone: "
+          f"torch.export.load({str(args.out)!r}).module()(history, samples, agent_type)"
+          ".sum((1, 2)).argsort()")  # fmt: skip
     return 0
 
 

@@ -156,10 +156,7 @@ def export_predictor(model: DiffusionPredictor, samples: int | None = None,
         own.denoiser = _NoDenoiser(own.denoiser.cfg)
     wrapped = OneScene(own, k).eval()
     example = _example(model, min(2, max_agents), seed=0)
-    dims = None  # one agent at most (a one-role model): a fixed P
-    if max_agents > 1:
-        agents = torch.export.Dim("agents", min=1, max=max_agents)
-        dims = {"history": {0: agents}, "agent_type": {0: agents}}
+    dims = program_dims(max_agents, {"history": 0, "agent_type": 0})
     with torch.no_grad(), warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # torch's notes on tracing internals
         program = torch.export.export(wrapped, example, dynamic_shapes=dims, strict=False)
@@ -185,16 +182,32 @@ def _model_hash(source: str) -> str | None:
         return None
 
 
+def program_dims(max_agents: int, inputs: dict[str, int]) -> dict[str, dict[int, Any]]:
+    """``torch.export``'s ``dynamic_shapes`` for a one-scene program: each input's agent
+    dimension (``inputs``: name -> that dimension's index) symbolic from 1 to ``max_agents``;
+    left fixed (an empty entry) where ``max_agents`` is 1 (a one-role model)."""
+    if max_agents <= 1:
+        return {name: {} for name in inputs}
+    agents = torch.export.Dim("agents", min=1, max=max_agents)
+    return {name: {dim: agents} for name, dim in inputs.items()}
+
+
+def program_agents(program: torch.export.ExportedProgram) -> int:
+    """The most agents P an exported one-scene program takes: the bound on its first input's
+    first dimension (that dimension itself where it is fixed)."""
+    first = next(n for n in program.graph.nodes if n.op == "placeholder"
+                 and n.name == program.graph_signature.user_inputs[0])  # fmt: skip
+    agents = first.meta["val"].shape[0]
+    if isinstance(agents, int):  # a fixed P
+        return agents
+    return int(program.range_constraints[agents.node.expr].upper)
+
+
 def program_shape(program: torch.export.ExportedProgram) -> tuple[int, int]:
     """(K, the most agents P) of an exported ``OneScene`` program, read from its graph: the
-    futures' first dimension and the bound on the histories' first."""
-    history = next(n for n in program.graph.nodes if n.op == "placeholder"
-                   and n.name == program.graph_signature.user_inputs[0])  # fmt: skip
+    futures' first dimension and ``program_agents``."""
     output = next(n for n in program.graph.nodes if n.op == "output").args[0][0]
-    k, agents = int(output.meta["val"].shape[0]), history.meta["val"].shape[0]
-    if isinstance(agents, int):  # a fixed P
-        return k, agents
-    return k, int(program.range_constraints[agents.node.expr].upper)
+    return int(output.meta["val"].shape[0]), program_agents(program)
 
 
 def export_meta(model: DiffusionPredictor, program: torch.export.ExportedProgram,
