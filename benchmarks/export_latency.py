@@ -51,14 +51,16 @@ def main(argv: list[str] | None = None) -> dict:
         samples = predict_scene(model, history, 20)  # [K, P, T_f, 2]
         order, total = rank_samples(scorer, history, samples)  # [K], [K]
         futures = torch.from_numpy(samples)
-        exported = ranker(tensor, futures, types).sum((1, 2)).numpy()  # [K]
+        exported = (
+            ranker(tensor, futures, types).sum(-1).sum(-1).numpy()
+        )  # [K], as rank_samples adds
         rank_gap = float(np.abs(exported - total).max() / np.abs(total).max())
         same = bool((exported.argsort() == order).all())
         calls = {"predict_scene": lambda h=history: predict_scene(model, h, 20),
                  "exported": lambda t=tensor, y=types: program(t, y),
                  "rank_samples": lambda h=history, s=samples: rank_samples(scorer, h, s),
                  "rank_exported": lambda t=tensor, s=futures, y=types:
-                     ranker(t, s, y).sum((1, 2)).argsort()}  # fmt: skip
+                     ranker(t, s, y).sum(-1).sum(-1).argsort()}  # fmt: skip
         ms = median_ms(calls, args.calls)
         ratio = ms["predict_scene"] / ms["exported"]
         rank_ratio = ms["rank_samples"] / ms["rank_exported"]

@@ -755,7 +755,8 @@ def build_parser() -> argparse.ArgumentParser:
     ex = sub.add_parser("export", help="one model as a .pt2 file that PyTorch alone runs "
                         "(torch.export): a planner's or a robot's predictor")  # fmt: skip
     ex.add_argument("model", help="a generator checkpoint or a published one (DATASET/NAME, "
-                    "e.g. zara1/generator)")  # fmt: skip
+                    "e.g. zara1/generator); with --scorer, a denoiser's (or a generator's, "
+                    "whose own denoiser scores)")  # fmt: skip
     ex.add_argument("--out", required=True, help="the file to write (.pt2)")
     ex.add_argument(
         "--samples",
@@ -773,11 +774,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="export MODEL's diffusion score instead (its denoiser, a generator "
                     "file's own): (history, samples [K, P, T_f, 2], agent_type) -> residuals "
                     "[K, P, T_f] to rank the samples by, as rank_samples does")  # fmt: skip
-    ex.add_argument("--score-every", type=int, default=3, metavar="E",
+    ex.add_argument("--score-every", type=int, default=None, metavar="E",
                     help="with --scorer: score at every E-th of the S diffusion steps "
                     "(default 3: 34 of 100, as evaluate's scorer; 50 gives 2, the cheap "
                     "setting)")  # fmt: skip
-    ex.add_argument("--score-from", type=int, default=0, metavar="S",
+    ex.add_argument("--score-from", type=int, default=None, metavar="S",
                     help="with --scorer: the first score step (default 0)")  # fmt: skip
     ex.set_defaults(func=cmd_export)
 
@@ -2495,7 +2496,7 @@ def cmd_export(args) -> int:
     _check_checkpoint("", args.model)  # a positional MODEL: the message names no flag
     if args.scorer:
         return _export_scorer(args)
-    if args.score_every != 3 or args.score_from != 0:
+    if args.score_every is not None or args.score_from is not None:
         raise ConfigError("--score-every and --score-from go with --scorer")
     _number_or_none(args, "max_log_sigma")  # a bad value: before the model is read
     _number_or_none(args, "neighbour_radius")
@@ -2538,11 +2539,18 @@ def _export_scorer(args) -> int:
     if given:
         raise ConfigError(f"{', '.join(given)}: a generator's settings; --scorer exports the "
                           "score, which takes the samples as they come")  # fmt: skip
-    if args.max_agents < 1:
-        raise ConfigError(f"--max-agents must be >= 1, got {args.max_agents}")
+    every = 3 if args.score_every is None else args.score_every
+    start = 0 if args.score_from is None else args.score_from
+    for flag, value, least in (("--max-agents", args.max_agents, 1), ("--score-every", every, 1),
+                               ("--score-from", start, 0)):  # fmt: skip
+        if value < least:
+            raise ConfigError(f"{flag} must be >= {least}, got {value}")
     given_radius, radius = _number_or_none(args, "neighbour_radius")
     scorer = TrajectoryScorer.from_checkpoint(args.model)
-    steps = score_timesteps(scorer.schedule.num_steps, args.score_every, args.score_from)
+    if start >= scorer.schedule.num_steps:
+        raise ConfigError(f"--score-from {start}: the scorer's steps are 0.."
+                          f"{scorer.schedule.num_steps - 1}")  # fmt: skip
+    steps = score_timesteps(scorer.schedule.num_steps, every, start)
     scorer = scorer.with_steps(steps)
     if given_radius:
         scorer.neighbour_radius = radius
@@ -2555,7 +2563,7 @@ def _export_scorer(args) -> int:
           f"{len(steps)} score steps, P from 1 to {meta['max_agents']}, K from 1 to "
           f"{meta['max_samples']}; checked against the scorer. Rank with PyTorch alone: "
           f"torch.export.load({str(args.out)!r}).module()(history, samples, agent_type)"
-          ".sum((1, 2)).argsort()")  # fmt: skip
+          ".sum(-1).sum(-1).argsort()")  # fmt: skip
     return 0
 
 

@@ -58,9 +58,9 @@ def test_a_published_scorer_ranks_as_rank_samples_and_records_itself(tmp_path):
     samples = predict_scene(model, history, 20)
     order, total = rank_samples(scorer, history, samples)
     got = program.module()(torch.from_numpy(history), torch.from_numpy(samples),
-                           torch.zeros(6, dtype=torch.long)).sum((1, 2))  # fmt: skip
+                           torch.zeros(6, dtype=torch.long)).sum(-1).sum(-1)  # fmt: skip
     np.testing.assert_array_equal(got.argsort().numpy(), order)
-    np.testing.assert_allclose(got.numpy(), total, rtol=1e-5)
+    np.testing.assert_array_equal(got.numpy(), total)  # steps, then agents: the same bits
     meta = scorer_meta(scorer, program, "zara1/denoiser")
     path = save_exported(program, tmp_path / "score.pt2", meta)
     _, recorded = load_exported(path)
@@ -91,6 +91,13 @@ def test_the_command_exports_a_score_and_keeps_generator_flags_to_generators(cap
     code, _, err = _run(capsys, "export", tiny_run / "denoiser.safetensors", "--scorer",
                         "--samples", "3", "--out", tmp_path / "x.pt2")  # fmt: skip
     assert code == 2 and "--samples: a generator's settings" in err
-    code, _, err = _run(capsys, "export", tiny_run / "generator.safetensors", "--score-every",
-                        "5", "--out", tmp_path / "y.pt2")  # fmt: skip
-    assert code == 2 and "--score-every and --score-from go with --scorer" in err
+    for flag, value in (("--score-every", "3"), ("--score-from", "0")):  # the defaults too
+        code, _, err = _run(capsys, "export", tiny_run / "generator.safetensors", flag, value,
+                            "--out", tmp_path / "y.pt2")  # fmt: skip
+        assert code == 2 and "--score-every and --score-from go with --scorer" in err
+    for flag, value, said in (("--score-every", "0", "--score-every must be >= 1, got 0"),
+                              ("--score-from", "10", "--score-from 10: the scorer's steps "
+                               "are 0..9")):  # fmt: skip
+        code, _, err = _run(capsys, "export", tiny_run / "denoiser.safetensors", "--scorer",
+                            flag, value, "--out", tmp_path / "z.pt2")  # fmt: skip
+        assert code == 2 and said in err

@@ -101,8 +101,9 @@ def _check_exportable(model: object, samples: int | None) -> int:
                           "export")  # fmt: skip
     if model.sampler != "leapfrog" or model.generator is None:
         raise ConfigError("export takes a leapfrog generator: the full sampler draws noise "
-                          "at every step, which an exported program would fix to one "
-                          "draw")  # fmt: skip
+                          "at every step, which an exported program would fix to one draw "
+                          "(to export a denoiser's diffusion score: trajpref export --scorer, "
+                          "trajpref.score.export.export_scorer)")  # fmt: skip
     if model.tau > 0 and model.stochastic:
         raise ConfigError(f"this predictor takes {model.tau} denoising steps with ancestral "
                           "noise (stochastic): an exported program would fix it to one draw; "

@@ -3,9 +3,11 @@
 A planner that draws futures (from an exported generator, ``models.export``, or any other
 predictor) ranks them without ground truth by the residual of the denoiser, as
 ``rank_samples`` does: ``(history [P, T_h, 2] float32, samples [K, P, T_f, 2] float32,
-agent_type [P] int64) -> residual [K, P, T_f] float32``, lower is more human-like. The sum
-over agents and steps orders the samples as ``rank_samples`` does (ATS order); the last
-step's alone as its ``final=True`` (FTS order). The scorer's noise, drawn per agent slot from
+agent_type [P] int64) -> residual [K, P, T_f] float32``, lower is more human-like, the very
+numbers of ``TrajectoryScorer.residual``. ``d.sum(-1).sum(-1)`` (steps, then agents, as
+``rank_samples`` adds them) orders the samples exactly as ``rank_samples`` does (ATS order;
+``.sum((1, 2))`` adds in another order and may differ by float rounding); ``d[..., -1].sum(-1)``
+as its ``final=True`` (FTS order). The scorer's noise, drawn per agent slot from
 its seed (``scorer.slot_noise``), is a table in the file for the first ``max_agents`` slots,
 so the program draws nothing and gives the very residuals of the scorer, up to float
 rounding in the sum of the steps. The scorer's checks (finite inputs, samples that continue
@@ -36,9 +38,9 @@ MAX_SAMPLES = 1024
 """The most samples K one call of an exported scorer takes (its symbolic K's bound)."""
 
 MATCH_TOL = 1e-5
-"""The largest relative difference between the exported residuals' sums and the scorer's on
-the check scenes that ``export_scorer`` accepts (float rounding: the program adds the steps in
-another order)."""
+"""The largest relative difference between the exported residuals and the scorer's on the
+check scenes that ``export_scorer`` accepts (they have been equal for every published
+denoiser; a margin for float rounding on other builds)."""
 
 
 class SceneResidual(nn.Module):
@@ -91,11 +93,11 @@ def _check_exportable(scorer: object) -> TrajectoryScorer:
     return scorer
 
 
-def _example(scorer: TrajectoryScorer, agents: int, samples: int,
-             seed: int) -> tuple[torch.Tensor, ...]:  # fmt: skip
+def _example(scorer: TrajectoryScorer, agents: int, samples: int, seed: int,
+             ball: bool = False) -> tuple[torch.Tensor, ...]:  # fmt: skip
     """A scene of ``agents`` walkers and ``samples`` futures continuing each one (random
-    walks in model units times the scale), their types 0: the trace's example and the check's
-    scenes."""
+    walks in model units times the scale), their types 0 (with ``ball``, the last agent 1):
+    the trace's example and the check's scenes."""
     gen = torch.Generator().manual_seed(seed)
     t_h, t_f = scorer.t_hist, scorer.t_fut
     steps = torch.randn(agents, t_h + t_f, 2, generator=gen) * 0.3 + 0.3  # [P, T, 2]
@@ -103,8 +105,9 @@ def _example(scorer: TrajectoryScorer, agents: int, samples: int,
     spread = torch.randn(samples, agents, t_f, 2, generator=gen).cumsum(2) * 0.1 * scorer.scale
     futures = track[None, :, t_h:] + spread  # [K, P, T_f, 2]
     device = scorer.device
-    types = torch.zeros(agents, dtype=torch.long, device=device)
-    return track[:, :t_h].to(device), futures.to(device), types
+    types = torch.zeros(agents, dtype=torch.long)
+    types[-1] = int(ball)
+    return track[:, :t_h].to(device), futures.to(device), types.to(device)
 
 
 def export_scorer(scorer: TrajectoryScorer,
@@ -112,8 +115,8 @@ def export_scorer(scorer: TrajectoryScorer,
     """``scorer`` (with its steps, seed and ``neighbour_radius`` as they are) as a
     ``torch.export.ExportedProgram`` of ``SceneResidual`` for scenes of 1 to ``max_agents``
     agents and 1 to ``MAX_SAMPLES`` samples, checked against the scorer on scenes of 1, 3 and
-    up to 16 agents before it is returned (a relative difference of the residuals' sums above
-    ``MATCH_TOL`` is a ``TrajprefError``)."""
+    up to 64 agents (the last with a ball) before it is returned (a relative difference of the
+    residuals above ``MATCH_TOL`` is a ``TrajprefError``)."""
     scorer = _check_exportable(scorer)
     if isinstance(max_agents, bool) or not isinstance(max_agents, int) or max_agents < 1:
         raise ConfigError(f"max_agents must be an integer >= 1, got {max_agents!r}")
@@ -128,11 +131,12 @@ def export_scorer(scorer: TrajectoryScorer,
     with torch.no_grad(), warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # torch's notes on tracing internals
         program = torch.export.export(wrapped, example, dynamic_shapes=dims, strict=False)
-    for seed, agents in enumerate(sorted({1, min(3, max_agents), min(16, max_agents)}), 1):
-        scene = _example(scorer, agents, 5, seed)
+    checks = sorted({1, min(3, max_agents), min(64, max_agents)})  # the last with a ball
+    for seed, agents in enumerate(checks, 1):
+        scene = _example(scorer, agents, 5, seed, ball=agents == checks[-1])
         with torch.no_grad():
-            want = scorer.residual(_one_scene(*scene), scene[1]).sum((1, 2))  # [K]
-            got = program.module()(*scene).sum((1, 2))  # [K]
+            want = scorer.residual(_one_scene(*scene), scene[1])  # [K, P, T_f]
+            got = program.module()(*scene)  # [K, P, T_f]
         worst = float(((want - got).abs() / want.abs().clamp_min(1e-12)).max())
         if not worst <= MATCH_TOL:
             raise TrajprefError(f"the exported scorer's residuals differ from the scorer's by "
@@ -170,7 +174,13 @@ def scorer_meta(scorer: TrajectoryScorer, program: torch.export.ExportedProgram,
             "trained with one (nba's)",
         },
         "output": f"[K, P, {scorer.t_fut}] float32 residuals, lower is more human-like: "
-        "sum over agents and steps to rank the K (ATS order), the last step's alone for FTS",
+        "d.sum(-1).sum(-1).argsort() ranks the K as rank_samples does (ATS order), "
+        "d[..., -1].sum(-1).argsort() as its final=True (FTS order)",
+        "roles": (
+            "agents are read in order as roles (their training data's order)"
+            if scorer.denoiser.cfg.denoiser_roles
+            else None
+        ),  # fmt: skip
         "t_hist": scorer.t_hist,
         "t_fut": scorer.t_fut,
         "max_agents": bound,
@@ -182,7 +192,8 @@ def scorer_meta(scorer: TrajectoryScorer, program: torch.export.ExportedProgram,
             "steps": list(scorer.steps),
             "seed": scorer.seed,
             "neighbour_radius": scorer.neighbour_radius,
-        },  # fmt: skip
+            "denoiser_roles": scorer.denoiser.cfg.denoiser_roles,
+        },
         "trajpref_version": __version__,
         "torch_version": torch.__version__,
     }
