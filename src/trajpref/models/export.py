@@ -53,6 +53,17 @@ model's own on the check scenes that ``export_predictor`` accepts (it has been e
 every published generator on this CPU)."""
 
 
+def one_scene_batch(history: torch.Tensor, agent_type: torch.Tensor, t_fut: int,
+                    future: torch.Tensor | None = None) -> Batch:  # fmt: skip
+    """The batch of one scene of ``history`` [P, T_h, 2], built from shapes alone (P stays
+    symbolic in an exported program, where ``collate`` reads sizes from the data), its
+    ``future`` given or zeros [P, T_f, 2] (unread by the exported programs)."""
+    n = history.shape[0]  # P
+    future = history.new_zeros(n, t_fut, 2) if future is None else future
+    return Batch(history=history, future=future, agent_type=agent_type, num_scenes=1,
+                 scene=torch.zeros(n, dtype=torch.long, device=history.device))  # fmt: skip
+
+
 class _NoDenoiser(nn.Module):
     """Stands in the exported copy for the denoiser of a generator that takes no denoising
     step (``tau`` 0), which never runs it: its config alone (the window lengths the
@@ -83,10 +94,7 @@ class OneScene(nn.Module):
         # dtypes first ("Tensor dtype mismatch! Expected: Float, Got: double"), a clearer
         # message than the matrix product's that would come without them
         history, agent_type = history.to(torch.float32), agent_type.to(torch.long)
-        n = history.shape[0]  # P, symbolic in the exported program
-        batch = Batch(history=history, future=history.new_zeros(n, self.model.t_fut, 2),
-                      scene=torch.zeros(n, dtype=torch.long, device=history.device),
-                      agent_type=agent_type, num_scenes=1)  # fmt: skip
+        batch = one_scene_batch(history, agent_type, self.model.t_fut)
         y = self.model.sample_normalised(batch, self.samples)  # [K, P, T_f, 2], no noise drawn
         return from_model_frame(y, batch, self.model.scale)  # [K, P, T_f, 2]
 
@@ -131,12 +139,17 @@ def _example(model: DiffusionPredictor, agents: int, seed: int,
 
 
 def agent_bound(model: DiffusionPredictor, max_agents: int = MAX_AGENTS) -> int:
-    """The most agents of one scene an export of ``model`` takes: ``max_agents`` (an integer
-    >= 1, else a ``ConfigError``), or fewer for a model with agent roles, whose role embedding
-    knows no more slots."""
+    """The most agents of one scene an export of ``model`` takes (``bounded_agents`` by its
+    generator's roles)."""
+    return bounded_agents(max_agents, model.agent_roles)
+
+
+def bounded_agents(max_agents: int, roles: int) -> int:
+    """``max_agents`` (an integer >= 1, else a ``ConfigError``), or ``roles`` where a network
+    knows that many agent roles (0: none), whose role embedding knows no more slots."""
     if isinstance(max_agents, bool) or not isinstance(max_agents, int) or max_agents < 1:
         raise ConfigError(f"max_agents must be an integer >= 1, got {max_agents!r}")
-    return min(max_agents, model.agent_roles) if model.agent_roles else max_agents
+    return min(max_agents, roles) if roles else max_agents
 
 
 def export_predictor(model: DiffusionPredictor, samples: int | None = None,
@@ -174,13 +187,18 @@ def export_predictor(model: DiffusionPredictor, samples: int | None = None,
     return program
 
 
-def _model_hash(source: str) -> str | None:
-    """``checkpoint.model_hash`` of the checkpoint file ``source`` names (None where it names
-    none: a model built in code); the settings changed before the export are not in it."""
+def source_fields(source: str) -> dict[str, Any]:
+    """What an exported file records of the checkpoint ``source`` names: ``source`` (a file's
+    path resolved, a published name as it is) and ``checkpoint_hash``, its
+    ``checkpoint.model_hash`` (None where it names none: a model built in code; the settings
+    changed before the export are not in it)."""
     try:
-        return checkpoint.model_hash(source)
+        digest = checkpoint.model_hash(source)
     except (TrajprefError, OSError, KeyError, TypeError, ValueError):
-        return None
+        digest = None
+    path = Path(source)
+    return {"source": str(path.resolve()) if path.is_file() else source,
+            "checkpoint_hash": digest}  # fmt: skip
 
 
 def program_dims(max_agents: int, inputs: dict[str, int]) -> dict[str, dict[int, Any]]:
@@ -220,8 +238,7 @@ def export_meta(model: DiffusionPredictor, program: torch.export.ExportedProgram
     units = model.units or "the training data's units"
     return {
         "format": "trajpref-export/1",
-        "source": str(Path(source).resolve()) if Path(source).is_file() else source,
-        "checkpoint_hash": _model_hash(source),
+        **source_fields(source),
         "inputs": {
             "history": f"[P, {model.t_hist}, 2] float32, absolute positions in {units}, oldest "
             "first, every one finite (a NaN makes every agent's futures NaN)",

@@ -9,17 +9,16 @@ numbers of ``TrajectoryScorer.residual``. ``d.sum(-1).sum(-1)`` (steps, then age
 ``.sum((1, 2))`` adds in another order and may differ by float rounding); ``d[..., -1].sum(-1)``
 as its ``final=True`` (FTS order). The scorer's noise, drawn per agent slot from
 its seed (``scorer.slot_noise``), is a table in the file for the first ``max_agents`` slots,
-so the program draws nothing and gives the very residuals of the scorer, up to float
-rounding in the sum of the steps. The scorer's checks (finite inputs, samples that continue
-the history, the pace and units, the ball's flag) are the caller's part, as for an exported
-generator. Load only files you made or trust (``torch.export.load`` may unpickle).
+so the program draws nothing and gives the very residuals of the scorer. The scorer's checks
+(finite inputs, samples that continue the history, the pace and units, the ball's flag) are
+the caller's part, as for an exported generator. Load only files you made or trust
+(``torch.export.load`` may unpickle).
 """
 
 from __future__ import annotations
 
 import copy
 import warnings
-from pathlib import Path
 from typing import Any
 
 import torch
@@ -28,11 +27,16 @@ from torch import nn
 from trajpref import __version__
 from trajpref.data.transforms import to_model_frame
 from trajpref.errors import ConfigError, TrajprefError
-from trajpref.models import checkpoint
 from trajpref.models.encoder import scene_features
-from trajpref.models.export import MAX_AGENTS, program_agents, program_dims
+from trajpref.models.export import (
+    MAX_AGENTS,
+    bounded_agents,
+    one_scene_batch,
+    program_agents,
+    program_dims,
+    source_fields,
+)
 from trajpref.score.scorer import TrajectoryScorer, slot_noise
-from trajpref.types import Batch
 
 MAX_SAMPLES = 1024
 """The most samples K one call of an exported scorer takes (its symbolic K's bound)."""
@@ -64,9 +68,7 @@ class SceneResidual(nn.Module):
     def forward(self, history: torch.Tensor, samples: torch.Tensor,
                 agent_type: torch.Tensor) -> torch.Tensor:  # fmt: skip
         n = history.shape[0]  # P, symbolic in the exported program
-        batch = Batch(history=history, future=history.new_zeros(n, samples.shape[2], 2),
-                      scene=torch.zeros(n, dtype=torch.long, device=history.device),
-                      agent_type=agent_type, num_scenes=1)  # fmt: skip
+        batch = one_scene_batch(history, agent_type, samples.shape[2])
         features = scene_features(batch, self.scale, radius=self.radius)
         context = self.denoiser.context(features)  # [P, H]
         y = to_model_frame(samples, batch, self.scale)  # [K, P, T_f, 2]
@@ -118,10 +120,7 @@ def export_scorer(scorer: TrajectoryScorer,
     up to 64 agents (the last with a ball) before it is returned (a relative difference of the
     residuals above ``MATCH_TOL`` is a ``TrajprefError``)."""
     scorer = _check_exportable(scorer)
-    if isinstance(max_agents, bool) or not isinstance(max_agents, int) or max_agents < 1:
-        raise ConfigError(f"max_agents must be an integer >= 1, got {max_agents!r}")
-    roles = scorer.denoiser.cfg.denoiser_roles  # its role embedding knows no more slots
-    max_agents = min(max_agents, roles) if roles else max_agents
+    max_agents = bounded_agents(max_agents, scorer.denoiser.cfg.denoiser_roles)
     own = copy.deepcopy(scorer)
     own.denoiser.requires_grad_(False)
     wrapped = SceneResidual(own, max_agents).eval()
@@ -135,7 +134,9 @@ def export_scorer(scorer: TrajectoryScorer,
     for seed, agents in enumerate(checks, 1):
         scene = _example(scorer, agents, 5, seed, ball=agents == checks[-1])
         with torch.no_grad():
-            want = scorer.residual(_one_scene(*scene), scene[1])  # [K, P, T_f]
+            history, samples, types = scene
+            batch = one_scene_batch(history, types, scorer.t_fut, future=samples[0])  # unread
+            want = scorer.residual(batch, samples)  # [K, P, T_f]
             got = program.module()(*scene)  # [K, P, T_f]
         worst = float(((want - got).abs() / want.abs().clamp_min(1e-12)).max())
         if not worst <= MATCH_TOL:
@@ -145,26 +146,14 @@ def export_scorer(scorer: TrajectoryScorer,
     return program
 
 
-def _one_scene(history: torch.Tensor, samples: torch.Tensor, types: torch.Tensor) -> Batch:
-    """The scorer's own batch of one scene (its future unread)."""
-    n = history.shape[0]
-    return Batch(history=history, future=samples[0], scene=torch.zeros(n, dtype=torch.long),
-                 agent_type=types, num_scenes=1)  # fmt: skip
-
-
 def scorer_meta(scorer: TrajectoryScorer, program: torch.export.ExportedProgram,
                 source: str) -> dict[str, Any]:  # fmt: skip
     """What an exported scorer's file records of itself (``models.export.META_FILE``)."""
     bound = program_agents(program)
     units = scorer.units or "the training data's units"
-    try:
-        digest = checkpoint.model_hash(source)
-    except (TrajprefError, OSError, KeyError, TypeError, ValueError):
-        digest = None
     return {
         "format": "trajpref-export-scorer/1",
-        "source": str(Path(source).resolve()) if Path(source).is_file() else source,
-        "checkpoint_hash": digest,
+        **source_fields(source),
         "inputs": {
             "history": f"[P, {scorer.t_hist}, 2] float32, absolute positions in {units}, "
             "oldest first, every one finite",
